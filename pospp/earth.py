@@ -51,6 +51,26 @@ STANDARD_GRAVITY_MPS2 = 9.80665
 """Conventional standard gravity g0 [m/s^2], used only for unit conversions (ug, g)."""
 
 
+def radii_formula(lat):
+    """(R_M, R_N) [m] for latitude [rad]; plain arithmetic so numba can compile it too."""
+    s2 = np.sin(lat) ** 2
+    w = 1.0 - WGS84_E2 * s2
+    r_normal = WGS84_A_M / np.sqrt(w)
+    r_meridian = WGS84_A_M * (1.0 - WGS84_E2) / (w * np.sqrt(w))
+    return r_meridian, r_normal
+
+
+def gravity_formula(lat, height):
+    """Normal gravity [m/s^2] (Somigliana + 2nd-order height); plain arithmetic for numba."""
+    s2 = np.sin(lat) ** 2
+    gamma0 = GAMMA_EQUATOR_MPS2 * (1.0 + SOMIGLIANA_K * s2) / np.sqrt(1.0 - WGS84_E2 * s2)
+    return gamma0 * (
+        1.0
+        - 2.0 / WGS84_A_M * (1.0 + WGS84_F + GRAVITY_M_RATIO - 2.0 * WGS84_F * s2) * height
+        + 3.0 * height**2 / WGS84_A_M**2
+    )
+
+
 def principal_radii_m(lat_rad: ArrayLike) -> tuple[NDArray, NDArray]:
     """Meridian (R_M, north-south) and prime-vertical (R_N, east-west) radii of curvature.
 
@@ -66,11 +86,7 @@ def principal_radii_m(lat_rad: ArrayLike) -> tuple[NDArray, NDArray]:
     r_meridian_m, r_normal_m : ndarray
         Radii [m], shaped like ``lat_rad``.
     """
-    s2 = np.sin(np.asarray(lat_rad, dtype=float)) ** 2
-    w = 1.0 - WGS84_E2 * s2
-    r_normal_m = WGS84_A_M / np.sqrt(w)
-    r_meridian_m = WGS84_A_M * (1.0 - WGS84_E2) / (w * np.sqrt(w))
-    return r_meridian_m, r_normal_m
+    return radii_formula(np.asarray(lat_rad, dtype=float))
 
 
 def normal_gravity_mps2(lat_rad: ArrayLike, height_m: ArrayLike) -> NDArray:
@@ -95,14 +111,7 @@ def normal_gravity_mps2(lat_rad: ArrayLike, height_m: ArrayLike) -> NDArray:
     ndarray
         Normal gravity magnitude [m/s^2].
     """
-    s2 = np.sin(np.asarray(lat_rad, dtype=float)) ** 2
-    h = np.asarray(height_m, dtype=float)
-    gamma0 = GAMMA_EQUATOR_MPS2 * (1.0 + SOMIGLIANA_K * s2) / np.sqrt(1.0 - WGS84_E2 * s2)
-    return gamma0 * (
-        1.0
-        - 2.0 / WGS84_A_M * (1.0 + WGS84_F + GRAVITY_M_RATIO - 2.0 * WGS84_F * s2) * h
-        + 3.0 * h**2 / WGS84_A_M**2
-    )
+    return gravity_formula(np.asarray(lat_rad, dtype=float), np.asarray(height_m, dtype=float))
 
 
 def gravity_n_mps2(lat_rad: ArrayLike, height_m: ArrayLike) -> NDArray:
