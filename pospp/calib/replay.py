@@ -1,0 +1,224 @@
+"""Algorithm B: pure-inertial replay from each leg start, and its error against algorithm A.
+
+At the IMU epoch nearest a leg's start, B takes A's position, velocity and attitude and runs
+the one strapdown kernel (:mod:`pospp.nav.strapdown`) pure-inertial to the leg end, on the raw
+gyro increments (their drift is what the calibration measures) and, by default, the
+accelerometer increments corrected by A's accelerometer-bias estimate (docs/method.md,
+"Why the accelerometer bias drops out"). B minus A over the leg is B's navigation error when A
+is the smoothed solution, whose own error is far below B's.
+
+Outputs per leg, at ``sample_rate_hz`` (default 1 Hz): B minus A in velocity (NED, m/s) and
+position (NED, m), A's velocity sigma (the weight of each sample) and the 15-state transition
+matrices Phi(t, t0) from F(t) along B's actual trajectory (for the calibration's sensitivity
+rows). Frames and units as in :mod:`pospp.nav.error_model`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pospp import earth, rotation
+from pospp.calib.segment import Leg
+from pospp.nav import strapdown
+from pospp.nav.error_model import transition_matrices
+
+
+@dataclass(frozen=True)
+class ImuIncrements:
+    """Raw IMU increments on a common epoch grid (body FRD).
+
+    ``dtheta_b_rad[k]``, ``dv_b_mps[k]`` span (t_s[k], t_s[k+1]].
+    """
+
+    t_s: NDArray
+    dtheta_b_rad: NDArray
+    dv_b_mps: NDArray
+
+
+@dataclass(frozen=True)
+class ReferenceSolution:
+    """Algorithm A's solution as B needs it (any epoch grid covering the legs).
+
+    Attributes
+    ----------
+    trajectory : Trajectory
+        Position, velocity, attitude.
+    v_sigma_n_mps : ndarray, shape (N, 3)
+        Velocity standard deviations, NED [m/s].
+    accel_bias_b_mps2 : ndarray, shape (N, 3)
+        Estimated accelerometer bias, body [m/s^2] (zeros if A has none).
+    """
+
+    trajectory: strapdown.Trajectory
+    v_sigma_n_mps: NDArray
+    accel_bias_b_mps2: NDArray
+
+
+@dataclass(frozen=True)
+class LegReplay:
+    """B minus A over one leg, sampled at ``t_s`` (seconds since the leg start ``t0_s``).
+
+    Attributes
+    ----------
+    leg : Leg
+    t0_s : float
+        Run time of B's initial epoch [s].
+    t_s : ndarray, shape (M,)
+        Time since the leg start [s]; ``t_s[0] == 0``.
+    dv_n_mps, dr_n_m : ndarray, shape (M, 3)
+        B minus A velocity and position, NED.
+    sigma_v_n_mps : ndarray, shape (M, 3)
+        Standard deviation of each velocity sample (A's sigma with a floor).
+    phi : ndarray, shape (M, 15, 15)
+        Transition matrices Phi(t0 + t_s, t0) of the 15-state error model along B.
+    c_nb0 : ndarray, shape (3, 3)
+        B's initial attitude.
+    lat_rad, height_m : float
+        B's initial latitude and height.
+    v_n0_mps : ndarray, shape (3,)
+        B's initial velocity.
+    """
+
+    leg: Leg
+    t0_s: float
+    t_s: NDArray
+    dv_n_mps: NDArray
+    dr_n_m: NDArray
+    sigma_v_n_mps: NDArray
+    phi: NDArray
+    c_nb0: NDArray
+    lat_rad: float
+    height_m: float
+    v_n0_mps: NDArray
+
+
+def interpolate_trajectory(traj: strapdown.Trajectory, t_s: NDArray) -> strapdown.Trajectory:
+    """Trajectory at new times: linear in position and velocity, slerp-free small-step attitude.
+
+    Attitude is interpolated by the rotation vector between the bracketing quaternions, so it
+    is exact for constant-rate rotation between samples.
+    """
+    t_s = np.asarray(t_s, dtype=float)
+    i = np.clip(np.searchsorted(traj.t_s, t_s, side="right") - 1, 0, len(traj) - 2)
+    w = (t_s - traj.t_s[i]) / (traj.t_s[i + 1] - traj.t_s[i])
+    w = np.clip(w, 0.0, 1.0)
+
+    def lin(a: NDArray) -> NDArray:
+        ww = w.reshape((-1,) + (1,) * (a.ndim - 1))
+        return a[i] * (1 - ww) + a[i + 1] * ww
+
+    q0, q1 = traj.q_nb[i], traj.q_nb[i + 1]
+    dq = rotation.quat_multiply(rotation.quat_conjugate(q0), q1)
+    rv = rotation.rotvec_from_quat(dq) * w[:, None]
+    q = rotation.quat_multiply(q0, rotation.quat_from_rotvec(rv))
+    return strapdown.Trajectory(
+        t_s, lin(traj.lat_rad), lin(traj.lon_rad), lin(traj.height_m), lin(traj.v_n_mps), q
+    )
+
+
+def replay_leg(
+    imu: ImuIncrements,
+    reference: ReferenceSolution,
+    leg: Leg,
+    *,
+    gyro_bias_b_radps: NDArray | None = None,
+    attitude_correction_n_rad: NDArray | None = None,
+    accel_compensation: str = "filter",
+    sample_rate_hz: float = 1.0,
+    sigma_floor_mps: float = 0.005,
+    transition_step: int = 10,
+) -> LegReplay:
+    """Run algorithm B over one leg and difference it with A.
+
+    Parameters
+    ----------
+    imu : ImuIncrements
+        The whole flight's raw increments.
+    reference : ReferenceSolution
+        Algorithm A (smoothed by default, see the pipeline config).
+    leg : Leg
+        The leg to replay.
+    gyro_bias_b_radps : ndarray, shape (3,), optional
+        Gyro bias to remove (compensation run); raw gyro when None.
+    attitude_correction_n_rad : ndarray, shape (3,), optional
+        Calibrated misalignment phi of B's initial attitude; the initial attitude becomes
+        exp([phi x]) C_nb_A (undoing C_nb_hat = (I - [phi x]) C_nb).
+    accel_compensation : {"filter", "none"}
+        Remove A's accelerometer-bias estimate at the leg start ("filter"), or use the raw
+        accelerometer as the paper does ("none").
+    sample_rate_hz : float
+        Rate of the B minus A samples [Hz].
+    sigma_floor_mps : float
+        Lower bound of each sample's standard deviation [m/s].
+    transition_step : int
+        IMU intervals per F evaluation for the numerical transition matrices.
+    """
+    t_imu = imu.t_s
+    k0 = int(np.searchsorted(t_imu, leg.start_s))
+    k1 = int(np.searchsorted(t_imu, leg.end_s, side="right")) - 1
+    k0 = max(k0, 1)
+    if k1 - k0 < 10:
+        raise ValueError(f"leg {leg.leg_id}: fewer than 10 IMU epochs between its start and end")
+    ref_traj = reference.trajectory
+    a0 = interpolate_trajectory(ref_traj, np.array([t_imu[k0]]))
+    c_nb0 = rotation.dcm_from_quat(a0.q_nb[0])
+    if attitude_correction_n_rad is not None:
+        c_nb0 = rotation.dcm_from_rotvec(np.asarray(attitude_correction_n_rad)) @ c_nb0
+    x0 = strapdown.NavState(
+        float(a0.lat_rad[0]), float(a0.lon_rad[0]), float(a0.height_m[0]), a0.v_n_mps[0].copy(),
+        rotation.quat_from_dcm(c_nb0),
+    )
+    if accel_compensation == "filter":
+        j = min(int(np.searchsorted(ref_traj.t_s, t_imu[k0])), len(ref_traj) - 1)
+        ba = reference.accel_bias_b_mps2[j]
+    elif accel_compensation == "none":
+        ba = np.zeros(3)
+    else:
+        raise ValueError(
+            f"accel_compensation: expected 'filter' or 'none', got {accel_compensation!r}"
+        )
+    bg = np.zeros(3) if gyro_bias_b_radps is None else np.asarray(gyro_bias_b_radps, dtype=float)
+    b = strapdown.integrate(
+        t_imu[k0 : k1 + 1],
+        imu.dtheta_b_rad[k0:k1],
+        imu.dv_b_mps[k0:k1],
+        x0,
+        gyro_bias_b_radps=bg,
+        accel_bias_b_mps2=ba,
+        previous_increments=(imu.dtheta_b_rad[k0 - 1], imu.dv_b_mps[k0 - 1]),
+    )
+    # sample times: every 1/sample_rate from B's start, within the leg
+    t0 = float(t_imu[k0])
+    ts = np.arange(0.0, t_imu[k1] - t0 + 1e-9, 1.0 / sample_rate_hz)
+    b_s = interpolate_trajectory(b, t0 + ts)
+    a_s = interpolate_trajectory(ref_traj, t0 + ts)
+    dv = b_s.v_n_mps - a_s.v_n_mps
+    dr = earth.llh_difference_ned_m(
+        b_s.lat_rad, b_s.lon_rad, b_s.height_m, a_s.lat_rad, a_s.lon_rad, a_s.height_m
+    )
+    sig = np.empty((ts.size, 3))
+    for c in range(3):
+        sig[:, c] = np.interp(t0 + ts, ref_traj.t_s, reference.v_sigma_n_mps[:, c])
+    sig = np.maximum(sig, sigma_floor_mps)
+    # numerical transition matrices along B's actual trajectory
+    dt = np.diff(b.t_s)
+    f_b = (imu.dv_b_mps[k0:k1] - ba * dt[:, None]) / dt[:, None]
+    phi_all = transition_matrices(b, f_b, step=transition_step)
+    t_phi = b.t_s[:: transition_step][: phi_all.shape[0]] - t0
+    idx = np.clip(np.searchsorted(t_phi, ts - 1e-9), 0, phi_all.shape[0] - 1)
+    return LegReplay(
+        leg=leg,
+        t0_s=t0,
+        t_s=ts,
+        dv_n_mps=dv,
+        dr_n_m=dr,
+        sigma_v_n_mps=sig,
+        phi=phi_all[idx],
+        c_nb0=c_nb0,
+        lat_rad=float(x0.lat_rad),
+        height_m=float(x0.height_m),
+        v_n0_mps=x0.v_n_mps.copy(),
+    )

@@ -1,0 +1,245 @@
+"""Pipeline configuration: TOML -> frozen dataclasses, validated with clear errors.
+
+Every section of a pipeline file (pipelines/*.toml) maps to one frozen dataclass below; every
+key is a field with a unit suffix. Unknown sections or keys, and values of the wrong type,
+raise :class:`ConfigError` naming the file, the key, what was expected and what was found.
+Omitted keys take the documented defaults, so an empty file is a valid configuration.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import tomllib
+import types
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+
+class ConfigError(ValueError):
+    """A pipeline configuration problem (names the file and key)."""
+
+
+@dataclass(frozen=True)
+class InputConfig:
+    """[input]: topics of the MCAP file and the IMU mounting."""
+
+    imu_topic: str = "/imu/data"
+    fix_topic: str = "/gnss/fix"
+    vel_topic: str = "/gnss/vel"
+    sensor_frame: str = "flu"
+    """Axes of the logged IMU: "flu" (ROS REP-103) or "frd"."""
+    mounting_rpy_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """Extra rotation of the IMU case w.r.t. the body (roll, pitch, yaw of sensor in body)."""
+    start_s: float | None = None
+    """Process from this many seconds after the first IMU sample (None: from the start)."""
+    end_s: float | None = None
+
+
+@dataclass(frozen=True)
+class ImuConfig:
+    """[imu]: the IMU grade and optional overrides of its noise model (filter tuning)."""
+
+    grade: str = "flight"
+    """Preset: "flight", "vehicle", "tactical" or "mems"."""
+    gyro_bias_sigma_dph: float | None = None
+    gyro_arw_dpsh: float | None = None
+    gyro_gm_sigma_dph: float | None = None
+    gyro_gm_tau_s: float | None = None
+    accel_bias_sigma_ug: float | None = None
+    accel_vrw_mpsph: float | None = None
+    accel_gm_sigma_ug: float | None = None
+    accel_gm_tau_s: float | None = None
+
+
+@dataclass(frozen=True)
+class GnssConfig:
+    """[gnss]: antenna lever arm and measurement screening."""
+
+    lever_arm_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """Antenna position in the body frame FRD [m]."""
+    estimate_lever_arm: bool = False
+    pos_sigma_floor_m: float = 0.01
+    vel_sigma_floor_mps: float = 0.005
+    use_velocity: bool = True
+    gate_probability: float = 0.9999
+
+
+@dataclass(frozen=True)
+class FilterConfig:
+    """[filter]: algorithm A."""
+
+    output_rate_hz: float = 10.0
+    smoother: bool = True
+    static_alignment_s: float = 120.0
+    """Longest static period used for coarse alignment at the start [s]."""
+
+
+@dataclass(frozen=True)
+class LegsConfig:
+    """[legs]: straight uniform leg thresholds (see pospp.calib.segment.LegThresholds)."""
+
+    min_duration_s: float = 300.0
+    max_duration_s: float = 1800.0
+    max_heading_rate_dps: float = 0.2
+    max_heading_spread_deg: float = 2.0
+    max_speed_std_mps: float = 0.5
+    max_vertical_speed_mps: float = 1.0
+    min_speed_mps: float = 3.0
+    trim_s: float = 5.0
+    smoothing_s: float = 5.0
+
+
+@dataclass(frozen=True)
+class ReplayConfig:
+    """[replay]: algorithm B."""
+
+    reference: str = "smoothed"
+    """A solution B starts from and is compared with: "smoothed" (default) or "forward"."""
+    accel_compensation: str = "filter"
+    """"filter": remove A's accelerometer bias estimate; "none": raw, as the paper."""
+    sample_rate_hz: float = 1.0
+    sigma_floor_mps: float = 0.005
+    horizon_s: float = 300.0
+    transition_step: int = 10
+
+
+@dataclass(frozen=True)
+class PairsConfig:
+    """[pairs]: pairing policy and calibration."""
+
+    mode: str = "adjacent"
+    max_cond_scaled: float = 1.0e4
+    min_dheading_deg: float = 30.0
+    formulation: str = "body"
+    """Formulation used for compensation: "body" or "paper" (both are always reported)."""
+    transition: str = "numerical"
+    """"numerical" (F(t) along B) or "closed_form" (paper Eq. 10/13 with corrected signs)."""
+
+
+@dataclass(frozen=True)
+class CompensationConfig:
+    """[compensation]."""
+
+    rerun_filter: bool = True
+    """Re-run algorithm A with the calibrated gyro bias removed (the compensated trajectory)."""
+
+
+@dataclass(frozen=True)
+class OutputsConfig:
+    """[outputs]."""
+
+    trajectory_rate_hz: float = 10.0
+    mcap: bool = True
+    report: bool = True
+    diagnose: bool = True
+
+
+@dataclass(frozen=True)
+class PipelineConfig:
+    """A whole pipeline configuration."""
+
+    name: str = "default"
+    input: InputConfig = field(default_factory=InputConfig)
+    imu: ImuConfig = field(default_factory=ImuConfig)
+    gnss: GnssConfig = field(default_factory=GnssConfig)
+    filter: FilterConfig = field(default_factory=FilterConfig)
+    legs: LegsConfig = field(default_factory=LegsConfig)
+    replay: ReplayConfig = field(default_factory=ReplayConfig)
+    pairs: PairsConfig = field(default_factory=PairsConfig)
+    compensation: CompensationConfig = field(default_factory=CompensationConfig)
+    outputs: OutputsConfig = field(default_factory=OutputsConfig)
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    def to_json(self) -> str:
+        """Canonical JSON (sorted keys): hashed for caching and stored in output metadata."""
+        return json.dumps(self.to_dict(), sort_keys=True)
+
+
+_CHOICES = {
+    ("input", "sensor_frame"): ("flu", "frd"),
+    ("imu", "grade"): ("flight", "vehicle", "tactical", "mems"),
+    ("replay", "reference"): ("smoothed", "forward"),
+    ("replay", "accel_compensation"): ("filter", "none"),
+    ("pairs", "mode"): ("adjacent", "all"),
+    ("pairs", "formulation"): ("body", "paper"),
+    ("pairs", "transition"): ("numerical", "closed_form"),
+}
+
+
+def _convert(value: Any, tp: Any, where: str) -> Any:
+    origin = typing.get_origin(tp)
+    args = typing.get_args(tp)
+    if origin in (typing.Union, types.UnionType):
+        if value is None and type(None) in args:
+            return None
+        inner = [a for a in args if a is not type(None)]
+        return _convert(value, inner[0], where)
+    if origin is tuple:
+        if not isinstance(value, list | tuple) or len(value) != len(args):
+            raise ConfigError(f"{where}: expected a list of {len(args)} numbers, got {value!r}")
+        pairs = enumerate(zip(value, args, strict=True))
+        return tuple(_convert(v, a, f"{where}[{i}]") for i, (v, a) in pairs)
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{where}: expected true or false, got {value!r}")
+        return value
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ConfigError(f"{where}: expected a number, got {value!r}")
+        return float(value)
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{where}: expected an integer, got {value!r}")
+        return value
+    if tp is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{where}: expected a string, got {value!r}")
+        return value
+    raise ConfigError(f"{where}: unsupported type {tp!r}")
+
+
+def config_from_dict(data: dict[str, Any], *, source: str = "<dict>") -> PipelineConfig:
+    """Build and validate a :class:`PipelineConfig` from parsed TOML."""
+    hints = typing.get_type_hints(PipelineConfig)
+    kwargs: dict[str, Any] = {}
+    for key, value in data.items():
+        if key not in hints:
+            raise ConfigError(
+                f"{source}: unknown section or key {key!r}; expected one of {sorted(hints)}"
+            )
+        if key == "name":
+            kwargs["name"] = _convert(value, str, f"{source}: name")
+            continue
+        cls = hints[key]
+        if not isinstance(value, dict):
+            raise ConfigError(f"{source}: [{key}] must be a table, got {value!r}")
+        sub_hints = typing.get_type_hints(cls)
+        sub: dict[str, Any] = {}
+        for k, v in value.items():
+            where = f"{source}: {key}.{k}"
+            if k not in sub_hints:
+                raise ConfigError(f"{where}: unknown key; expected one of {sorted(sub_hints)}")
+            sub[k] = _convert(v, sub_hints[k], where)
+            choices = _CHOICES.get((key, k))
+            if choices is not None and sub[k] not in choices:
+                raise ConfigError(f"{where}: expected one of {list(choices)}, got {sub[k]!r}")
+        kwargs[key] = cls(**sub)
+    return PipelineConfig(**kwargs)
+
+
+def load_config(path: str | Path) -> PipelineConfig:
+    """Read a pipeline TOML file."""
+    p = Path(path)
+    try:
+        with p.open("rb") as fh:
+            data = tomllib.load(fh)
+    except FileNotFoundError:
+        raise ConfigError(f"{p}: pipeline file not found") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{p}: not valid TOML: {exc}") from None
+    return config_from_dict(data, source=str(p))
