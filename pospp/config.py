@@ -82,13 +82,15 @@ class LegsConfig:
     """[legs]: straight uniform leg thresholds (see pospp.calib.segment.LegThresholds)."""
 
     min_duration_s: float = 300.0
+    duration_tolerance_s: float = 15.0
     max_duration_s: float = 1800.0
     max_heading_rate_dps: float = 0.2
     max_heading_spread_deg: float = 2.0
     max_speed_std_mps: float = 0.5
+    max_acceleration_mps2: float = 0.05
     max_vertical_speed_mps: float = 1.0
     min_speed_mps: float = 3.0
-    trim_s: float = 5.0
+    trim_s: float = 2.0
     smoothing_s: float = 5.0
 
 

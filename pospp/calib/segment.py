@@ -6,9 +6,11 @@ in :class:`LegThresholds` (config section ``[legs]``).
 
 Algorithm: resample to ``rate_hz`` (default 1 Hz), smooth the course (atan2(v_E, v_N)) and
 speed with a centred moving window, mark epochs that are straight (|course rate| below
-threshold), level (|v_D| below threshold) and moving (speed above threshold), take the maximal
-runs of marked epochs, trim a margin at both ends (the roll-out of a turn), then accept runs
-whose course spread, speed standard deviation and duration pass.
+threshold), level (|v_D| below threshold), uniform (|d speed / dt| below threshold) and
+moving (speed above threshold), take the maximal runs of marked epochs, trim a margin at both ends (the roll-out of a turn), then accept runs
+whose course spread, speed standard deviation and duration pass. A leg flown for exactly
+``min_duration_s`` is detected a few seconds shorter (the turn's roll-out and the smoothing
+window eat into it), so durations within ``duration_tolerance_s`` below the minimum pass.
 """
 
 from __future__ import annotations
@@ -24,13 +26,15 @@ class LegThresholds:
     """Leg acceptance thresholds (config ``[legs]``; SI except where the name says)."""
 
     min_duration_s: float = 300.0
+    duration_tolerance_s: float = 15.0
     max_duration_s: float = 1800.0
     max_heading_rate_dps: float = 0.2
     max_heading_spread_deg: float = 2.0
     max_speed_std_mps: float = 0.5
+    max_acceleration_mps2: float = 0.05
     max_vertical_speed_mps: float = 1.0
     min_speed_mps: float = 3.0
-    trim_s: float = 5.0
+    trim_s: float = 2.0
     smoothing_s: float = 5.0
     rate_hz: float = 1.0
 
@@ -112,10 +116,12 @@ def find_legs(
     course = np.unwrap(np.arctan2(ve, vn))
     course_s = _moving_mean(course, width)
     rate = np.gradient(course_s, grid)
+    accel = np.gradient(speed, grid)
     vd_s = _moving_mean(vd, width)
     ok = (
         (np.abs(rate) < np.radians(th.max_heading_rate_dps))
         & (speed > th.min_speed_mps)
+        & (np.abs(accel) < th.max_acceleration_mps2)
         & (np.abs(vd_s) < th.max_vertical_speed_mps)
     )
     legs: list[Leg] = []
@@ -129,7 +135,7 @@ def find_legs(
         for a in range(i, j, n_max):
             b = min(a + n_max, j)
             duration = grid[b - 1] - grid[a]
-            if duration < th.min_duration_s:
+            if duration < th.min_duration_s - th.duration_tolerance_s:
                 continue
             c = course[a:b]
             spread = float(c.max() - c.min())
