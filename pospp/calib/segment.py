@@ -7,10 +7,11 @@ in :class:`LegThresholds` (config section ``[legs]``).
 Algorithm: resample to ``rate_hz`` (default 1 Hz), smooth the course (atan2(v_E, v_N)) and
 speed with a centred moving window, mark epochs that are straight (|course rate| below
 threshold), level (|v_D| below threshold), uniform (|d speed / dt| below threshold) and
-moving (speed above threshold), take the maximal runs of marked epochs, trim a margin at both ends (the roll-out of a turn), then accept runs
-whose course spread, speed standard deviation and duration pass. A leg flown for exactly
-``min_duration_s`` is detected a few seconds shorter (the turn's roll-out and the smoothing
-window eat into it), so durations within ``duration_tolerance_s`` below the minimum pass.
+moving (speed above threshold), take the maximal runs of marked epochs, trim a margin at
+both ends (the roll-out of a turn), then accept runs whose course spread, speed standard
+deviation and duration pass. A leg flown for exactly ``min_duration_s`` is detected a few
+seconds shorter (the turn's roll-out and the smoothing window eat into it), so durations
+within ``duration_tolerance_s`` below the minimum pass.
 """
 
 from __future__ import annotations
