@@ -30,6 +30,7 @@ from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from pospp.earth import EARTH_RATE_RADPS, gravity_formula, radii_formula
+from pospp.nav._kernels import dcm_from_quat_into
 
 _radii = njit(cache=True)(radii_formula)
 _gravity = njit(cache=True)(gravity_formula)
@@ -168,6 +169,105 @@ def f_matrix(
         np.asarray(v_n_mps, dtype=float),
         np.ascontiguousarray(c_nb, dtype=float),
         np.asarray(f_b_mps2, dtype=float),
+        0.0 if math.isinf(gyro_tau_s) else 1.0 / gyro_tau_s,
+        0.0 if math.isinf(accel_tau_s) else 1.0 / accel_tau_s,
+        out,
+    )
+    return out
+
+
+@njit(cache=True)
+def _transition_kernel(t_s, lat, h, v_n, q_nb, f_b, step, inv_tau_g, inv_tau_a, out):
+    """Fill ``out`` (M, 15, 15) with Phi(t_j, t_0) at the nodes t_j = t_s[j * step].
+
+    Each node-to-node step uses F at the segment's middle epoch with the mean specific force of
+    the segment, and Phi_step = exp(F dt) by a 4th-order Taylor series (|F dt| << 1 for the
+    sub-second steps used here; the error is O((F dt)^5)).
+    """
+    n_nodes = out.shape[0]
+    f_mat = np.empty((15, 15))
+    c_nb = np.empty((3, 3))
+    fb = np.empty(3)
+    a = np.empty((15, 15))
+    term = np.empty((15, 15))
+    phi_step = np.empty((15, 15))
+    for i in range(15):
+        for j in range(15):
+            out[0, i, j] = 1.0 if i == j else 0.0
+    for node in range(1, n_nodes):
+        k0 = (node - 1) * step
+        k1 = node * step
+        dt = t_s[k1] - t_s[k0]
+        for j in range(3):
+            acc = 0.0
+            for k in range(k0, k1):
+                acc += f_b[k, j]
+            fb[j] = acc / (k1 - k0)
+        # F at the segment's middle epoch
+        km = (k0 + k1) // 2
+        dcm_from_quat_into(q_nb[km], c_nb)
+        fill_f_matrix(lat[km], h[km], v_n[km], c_nb, fb, inv_tau_g, inv_tau_a, f_mat)
+        # phi_step = I + A + A^2/2 + A^3/6 + A^4/24, A = F dt
+        for i in range(15):
+            for j in range(15):
+                a[i, j] = f_mat[i, j] * dt
+                term[i, j] = a[i, j]
+                phi_step[i, j] = (1.0 if i == j else 0.0) + a[i, j]
+        for order in range(2, 5):
+            nxt = term @ a
+            for i in range(15):
+                for j in range(15):
+                    term[i, j] = nxt[i, j] / order
+                    phi_step[i, j] += term[i, j]
+        out[node] = phi_step @ out[node - 1]
+
+
+def transition_matrices(
+    trajectory,
+    f_b_mps2: ArrayLike,
+    *,
+    step: int = 10,
+    gyro_tau_s: float = math.inf,
+    accel_tau_s: float = math.inf,
+) -> NDArray:
+    """Numerical transition matrices Phi(t_j, t_0) of F(t) along an actual trajectory.
+
+    dx(t_j) = Phi(t_j, t_0) dx(t_0), with dx the 15-state error of the module docstring and
+    F(t) evaluated along the trajectory (this is what lets the calibration follow real,
+    wandering legs rather than the ideal constant-velocity leg of paper Eq. 3-14).
+
+    Parameters
+    ----------
+    trajectory : pospp.nav.strapdown.Trajectory
+        N + 1 epochs (e.g. algorithm B's pure-inertial solution over one leg).
+    f_b_mps2 : array_like, shape (N, 3)
+        Mean specific force of each interval, body FRD [m/s^2].
+    step : int
+        IMU intervals per transition step; the nodes are epochs ``0, step, 2 step, ...``.
+    gyro_tau_s, accel_tau_s : float
+        Bias correlation times [s] (inf: random constants).
+
+    Returns
+    -------
+    ndarray, shape (M, 15, 15)
+        Phi at the M = N // step + 1 nodes, ``Phi[0] = I``.
+    """
+    if step < 1:
+        raise ValueError(f"step: expected an integer >= 1, got {step}")
+    t = np.ascontiguousarray(trajectory.t_s, dtype=float)
+    f_b = np.ascontiguousarray(f_b_mps2, dtype=float)
+    n = t.shape[0] - 1
+    if f_b.shape != (n, 3):
+        raise ValueError(f"f_b_mps2: expected shape ({n}, 3), got {f_b.shape}")
+    out = np.empty((n // step + 1, N_STATES, N_STATES))
+    _transition_kernel(
+        t,
+        np.ascontiguousarray(trajectory.lat_rad, dtype=float),
+        np.ascontiguousarray(trajectory.height_m, dtype=float),
+        np.ascontiguousarray(trajectory.v_n_mps, dtype=float),
+        np.ascontiguousarray(trajectory.q_nb, dtype=float),
+        f_b,
+        int(step),
         0.0 if math.isinf(gyro_tau_s) else 1.0 / gyro_tau_s,
         0.0 if math.isinf(accel_tau_s) else 1.0 / accel_tau_s,
         out,

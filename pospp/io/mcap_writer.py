@@ -1,0 +1,157 @@
+"""Write a flight log to a ROS 2 MCAP file per the data contract (inverse of the reader).
+
+The one way out of pospp into MCAP for flight data: the simulator and the converters of
+measured logs both write through :func:`write_flight_log`, so every file pospp makes is read by
+:func:`pospp.io.mcap_reader.read_flight_log` and by any ROS 2 MCAP tool alike.
+
+Frames and units (the inverse of ``pospp.io.mcap_reader``)
+-----------------------------------------------------------
+- IMU: ``w_ib_b`` [rad/s] and ``f_ib_b`` [m/s^2] in body FRD are rotated into the sensor frame
+  s with ``C_sb = C_bs^T`` (default sensor frame FLU, REP-103) and written as
+  ``angular_velocity`` / ``linear_acceleration``: mean rate and specific force over the
+  interval that ends at ``header.stamp``.
+- GNSS fix: latitude / longitude [deg], altitude above the WGS-84 ellipsoid [m], covariance
+  NED -> ENU (``position_covariance_type`` 3, COVARIANCE_TYPE_KNOWN).
+- GNSS velocity: ``twist.linear`` ENU [m/s], the linear 3x3 block of the 6x6 covariance ENU;
+  the angular block is marked unknown with a large variance.
+- Log time = header stamp. Chunks are zstd-compressed.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from mcap.writer import CompressionType, Writer
+
+from pospp.io import ros_messages as rm
+from pospp.io.mcap_reader import (
+    ENU_TO_NED,
+    FLU_TO_FRD,
+    GnssFixes,
+    GnssVelocities,
+    ImuSamples,
+    apply_rotation,
+    check_dcm,
+)
+from pospp.io.parquet_tables import atomic_path
+
+__all__ = ["write_flight_log"]
+
+_UNKNOWN_VARIANCE = 1.0e6
+"""Variance written where a quantity is not measured (angular block of the GNSS twist)."""
+
+
+def _cov_ned_to_enu(p_ned: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) NED covariance -> ENU, flattened row-major (N, 9)."""
+    t = ENU_TO_NED.T  # ENU_TO_NED is its own inverse, but say what we mean
+    return np.einsum("ij,njk,lk->nil", t, p_ned, t).reshape(-1, 9)
+
+
+def _write_topic(
+    writer: Writer,
+    topic: str,
+    schema_name: str,
+    schema_text: str,
+    fields: tuple[tuple[str, str, int], ...],
+    time_ns: np.ndarray,
+    frame_id: str,
+    values: dict[str, np.ndarray],
+) -> None:
+    schema_id = writer.register_schema(
+        name=schema_name, encoding="ros2msg", data=schema_text.encode("utf-8")
+    )
+    channel_id = writer.register_channel(topic=topic, message_encoding="cdr", schema_id=schema_id)
+    payloads = rm.encode_batch(fields, time_ns, frame_id, values)
+    raw = payloads.tobytes()
+    size = payloads.dtype.itemsize
+    for i, t in enumerate(time_ns.tolist()):
+        writer.add_message(
+            channel_id=channel_id,
+            log_time=t,
+            publish_time=t,
+            sequence=i,
+            data=raw[i * size : (i + 1) * size],
+        )
+
+
+def write_flight_log(
+    path: str | Path,
+    imu: ImuSamples,
+    fix: GnssFixes,
+    vel: GnssVelocities | None = None,
+    *,
+    imu_topic: str = "/imu/data",
+    fix_topic: str = "/gnss/fix",
+    vel_topic: str = "/gnss/vel",
+    c_bs: np.ndarray = FLU_TO_FRD,
+    imu_frame_id: str = "imu_link",
+    gnss_frame_id: str = "gnss_antenna",
+    metadata: dict[str, str] | None = None,
+) -> Path:
+    """Write IMU samples and GNSS fixes / velocities to an MCAP file, atomically.
+
+    Parameters
+    ----------
+    path : path-like
+        Output ``.mcap``; written under a temporary name and renamed when complete.
+    imu : ImuSamples
+        Body-frame (FRD) mean rates and specific forces.
+    fix : GnssFixes
+        Antenna positions with NED covariances.
+    vel : GnssVelocities, optional
+        Antenna velocities (NED) with covariances; no velocity topic when None or empty.
+    c_bs : ndarray, shape (3, 3)
+        Mounting DCM sensor -> body, as given to the reader (default FLU -> FRD).
+    metadata : dict, optional
+        Written as an MCAP metadata record named ``pospp`` (e.g. how the file was made).
+
+    Returns
+    -------
+    Path
+        The written file.
+    """
+    c_sb = check_dcm(c_bs).T
+    out = Path(path)
+    with atomic_path(out) as tmp, open(tmp, "wb") as stream:
+        writer = Writer(stream, compression=CompressionType.ZSTD)
+        writer.start(profile="ros2", library="pospp")
+        _write_topic(
+            writer, imu_topic, rm.IMU_TYPE, rm.IMU_MSGDEF, rm.IMU_FIELDS,
+            np.asarray(imu.time_ns, dtype=np.int64), imu_frame_id,
+            {
+                "orientation_covariance": np.tile([-1.0] + [0.0] * 8, (len(imu), 1)),
+                "angular_velocity": apply_rotation(c_sb, imu.w_ib_b_radps),
+                "linear_acceleration": apply_rotation(c_sb, imu.f_ib_b_mps2),
+            },
+        )
+        _write_topic(
+            writer, fix_topic, rm.NAVSATFIX_TYPE, rm.NAVSATFIX_MSGDEF, rm.NAVSATFIX_FIELDS,
+            np.asarray(fix.time_ns, dtype=np.int64), gnss_frame_id,
+            {
+                "status": np.asarray(fix.status, dtype=np.int8),
+                "service": np.ones(len(fix), dtype=np.uint16),
+                "latitude": np.rad2deg(fix.lat_rad),
+                "longitude": np.rad2deg(fix.lon_rad),
+                "altitude": np.asarray(fix.height_m, dtype=float),
+                "position_covariance": _cov_ned_to_enu(fix.pos_cov_ned_m2),
+                "position_covariance_type": np.full(len(fix), 3, dtype=np.uint8),
+            },
+        )
+        if vel is not None and len(vel):
+            cov6 = np.zeros((len(vel), 6, 6))
+            cov6[:, :3, :3] = _cov_ned_to_enu(vel.vel_cov_ned_m2ps2).reshape(-1, 3, 3)
+            cov6[:, 3, 3] = cov6[:, 4, 4] = cov6[:, 5, 5] = _UNKNOWN_VARIANCE
+            _write_topic(
+                writer, vel_topic, rm.TWIST_COV_STAMPED_TYPE, rm.TWIST_COV_STAMPED_MSGDEF,
+                rm.TWIST_COV_STAMPED_FIELDS, np.asarray(vel.time_ns, dtype=np.int64),
+                gnss_frame_id,
+                {
+                    "linear": apply_rotation(ENU_TO_NED.T, vel.v_n_mps),
+                    "covariance": cov6.reshape(-1, 36),
+                },
+            )
+        if metadata:
+            writer.add_metadata("pospp", {str(k): str(v) for k, v in metadata.items()})
+        writer.finish()
+    return out

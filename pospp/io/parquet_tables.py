@@ -1,0 +1,522 @@
+"""Parquet output tables: one pyarrow schema per table, atomic writes, metadata, hashing.
+
+Every table pospp writes is declared once in ``TABLES`` (name -> list of ``Column``): column
+name, pyarrow type, unit, description, frame. The unit, frame and description go into each
+field's metadata; the table name, ``SCHEMA_VERSION`` and the pospp version go into the file's
+key-value metadata together with the caller's metadata (input hash, pipeline config, ...) as
+JSON. docs/formats.md renders the same dict (``render_schema_markdown``).
+
+Conventions (see ``pospp`` package docstring): NED navigation frame n, FRD body frame b,
+Euler z-y-x [roll, pitch, yaw] of b w.r.t. n with yaw clockwise from north, int64 ``time_ns``
+(UTC nanoseconds, as stamped in the input), errors computed minus true (B minus A for legs).
+
+Writes are atomic: a temporary file in the destination folder, fsync, ``os.replace``; a reader
+never sees half a file and an interrupted run leaves the previous file intact.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import uuid
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from pospp import __version__
+
+__all__ = [
+    "EXTENSIBLE_TABLES",
+    "SCHEMA_VERSION",
+    "TABLES",
+    "Column",
+    "ReferenceTrajectory",
+    "atomic_path",
+    "issues_to_messages",
+    "read_metadata",
+    "read_reference_trajectory",
+    "read_table",
+    "render_all_schemas_markdown",
+    "render_schema_markdown",
+    "schema",
+    "sha256_file",
+    "write_reference_trajectory",
+    "write_table",
+]
+
+SCHEMA_VERSION = "1.0"
+"""Bumped on any incompatible change of a table below (renamed/retyped/removed column)."""
+
+_RESERVED_KEYS = ("pospp_version", "schema_name", "schema_version")
+
+
+class Column(NamedTuple):
+    """One column: name (unit suffix included), pyarrow type, unit, description, frame."""
+
+    name: str
+    type: pa.DataType
+    unit: str
+    description: str
+    frame: str = ""
+    required: bool = True
+
+
+_F = pa.float64()
+_I = pa.int64()
+_S = pa.string()
+_B = pa.bool_()
+_NED = "n (NED)"
+_ATT = "b (FRD) w.r.t. n (NED), z-y-x"
+
+
+def _opt(c: Column) -> Column:
+    return c._replace(required=False)
+
+
+_TIME = Column("time_ns", _I, "ns", "sample time (UTC nanoseconds, as stamped in the input)")
+_NAV = [
+    Column("lat_deg", _F, "deg", "geodetic latitude, WGS-84", "WGS-84"),
+    Column("lon_deg", _F, "deg", "geodetic longitude, WGS-84", "WGS-84"),
+    Column("height_m", _F, "m", "height above the WGS-84 ellipsoid", "WGS-84"),
+    Column("vn_mps", _F, "m/s", "velocity north", _NED),
+    Column("ve_mps", _F, "m/s", "velocity east", _NED),
+    Column("vd_mps", _F, "m/s", "velocity down", _NED),
+    Column("roll_deg", _F, "deg", "roll", _ATT),
+    Column("pitch_deg", _F, "deg", "pitch", _ATT),
+    Column("yaw_deg", _F, "deg", "yaw (heading), clockwise from north, [0, 360)", _ATT),
+]
+
+TABLES: dict[str, list[Column]] = {
+    "trajectory": [
+        _TIME,
+        Column("solution", _S, "", "'forward', 'smoothed' or 'compensated'"),
+        *_NAV,
+        *[
+            _opt(Column(f"{ax}_sigma_m", _F, "m", f"1-sigma position error, {ax}", _NED))
+            for ax in ("north", "east", "down")
+        ],
+        *[
+            _opt(Column(f"v{ax}_sigma_mps", _F, "m/s", f"1-sigma velocity error, v{ax}", _NED))
+            for ax in ("n", "e", "d")
+        ],
+        *[
+            _opt(Column(f"{a}_sigma_deg", _F, "deg", f"1-sigma {a} error (from the "
+                        "misalignment covariance)", _ATT))
+            for a in ("roll", "pitch", "yaw")
+        ],
+    ],
+    "legs": [
+        Column("leg_id", _I, "", "leg number, 0-based in time order"),
+        Column("start_ns", _I, "ns", "leg start time"),
+        Column("end_ns", _I, "ns", "leg end time"),
+        Column("duration_s", _F, "s", "end minus start"),
+        Column("heading_deg", _F, "deg", "mean yaw over the leg, clockwise from north", _ATT),
+        Column("speed_mps", _F, "m/s", "mean horizontal speed", _NED),
+        Column("height_m", _F, "m", "mean ellipsoidal height", "WGS-84"),
+        _opt(Column("heading_spread_deg", _F, "deg", "max minus min yaw over the leg", _ATT)),
+        _opt(Column("speed_std_mps", _F, "m/s", "standard deviation of the horizontal speed")),
+        _opt(Column("vertical_speed_mps", _F, "m/s", "mean vertical speed, down positive",
+                    _NED)),
+        _opt(Column("heading_rate_max_dps", _F, "deg/s", "max |yaw rate| over the leg")),
+    ],
+    "pairs": [
+        Column("pair_id", _I, "", "pair number"),
+        Column("leg_a", _I, "", "leg_id of the first leg"),
+        Column("leg_b", _I, "", "leg_id of the second leg"),
+        Column("dheading_deg", _F, "deg", "heading change from leg a to leg b, in [0, 180]"),
+        Column("dspeed_mps", _F, "m/s", "speed of leg b minus speed of leg a"),
+        Column("cond_raw", _F, "1", "condition number of the stacked matrix (paper Eq. 17)"),
+        Column("cond_scaled", _F, "1", "condition number after column scaling"),
+        Column("used", _B, "", "whether the pair entered the calibration"),
+        Column("reason", _S, "", "why the pair was used or rejected"),
+    ],
+    "calibration": [
+        Column("pair_id", _I, "", "pair the estimate comes from (-1: all pairs combined)"),
+        Column("formulation", _S, "", "'paper' (nav-frame drift) or 'body' (body-frame bias)"),
+        Column("transition", _S, "", "'closed_form' or 'numerical' transition matrix"),
+        Column("parameter", _S, "", "phi_x, phi_y, phi_z (NED), eps_e, eps_n, gyro_bias_x/y/z "
+               "(FRD), ... as mapped in docs/method.md"),
+        Column("value", _F, "see unit", "estimate, in the row's unit"),
+        Column("sigma", _F, "see unit", "1-sigma of the estimate, in the row's unit"),
+        Column("unit", _S, "", "'arcsec' or 'deg_per_h'"),
+    ],
+    "leg_errors": [
+        Column("leg_id", _I, "", "leg"),
+        Column("stage", _S, "", "'before' or 'after' compensation"),
+        Column("t_s", _F, "s", "time since the leg start"),
+        Column("dvn_mps", _F, "m/s", "B minus A velocity error, north", _NED),
+        Column("dve_mps", _F, "m/s", "B minus A velocity error, east", _NED),
+        Column("dpn_m", _F, "m", "B minus A position error, north", _NED),
+        Column("dpe_m", _F, "m", "B minus A position error, east", _NED),
+    ],
+    "summary": [
+        Column("input_file", _S, "", "input MCAP path"),
+        Column("input_sha256", _S, "", "SHA-256 of the input file"),
+        _opt(Column("status", _S, "", "'ok' or 'failed'")),
+        _opt(Column("duration_s", _F, "s", "IMU data span")),
+        _opt(Column("n_imu_samples", _I, "", "IMU samples read")),
+        _opt(Column("n_gnss_fixes", _I, "", "GNSS fixes read")),
+        _opt(Column("imu_rate_hz", _F, "Hz", "nominal IMU rate")),
+        _opt(Column("n_legs", _I, "", "straight uniform legs found")),
+        _opt(Column("n_pairs_used", _I, "", "leg pairs used in the calibration")),
+        _opt(Column("dv_before_mps", _F, "m/s", "B-minus-A horizontal velocity error at the "
+                    "leg end before compensation (RMS over legs)")),
+        _opt(Column("dv_after_mps", _F, "m/s", "same, after compensation")),
+        _opt(Column("dp_before_m", _F, "m", "B-minus-A horizontal position error at the leg "
+                    "end before compensation (RMS over legs)")),
+        _opt(Column("dp_after_m", _F, "m", "same, after compensation")),
+    ],
+    "diagnosis": [
+        Column("step", _I, "", "step of the model-discrepancy workflow"),
+        Column("effect", _S, "", "candidate effect tested"),
+        Column("value", _F, "see unit", "estimated size of the effect"),
+        Column("sigma", _F, "see unit", "1-sigma of the estimate"),
+        Column("unit", _S, "", "unit of value and sigma"),
+        Column("statistic", _F, "1", "test statistic"),
+        Column("p_value", _F, "1", "p-value of the test"),
+        Column("significant", _B, "", "whether the effect is significant"),
+        Column("gap_before_mps", _F, "m/s", "model-data velocity gap before adding the effect"),
+        Column("gap_after_mps", _F, "m/s", "model-data velocity gap after adding the effect"),
+        Column("heldout_gap_before_mps", _F, "m/s", "same on held-out legs, before"),
+        Column("heldout_gap_after_mps", _F, "m/s", "same on held-out legs, after"),
+    ],
+    "messages": [
+        Column("severity", _S, "", "'info', 'warning' or 'error'"),
+        Column("stage", _S, "", "pipeline stage that emitted it (e.g. 'ingest')"),
+        Column("time_ns", _I, "ns", "time the message refers to (null if none)"),
+        Column("text", _S, "", "the message"),
+        _opt(Column("topic", _S, "", "input topic concerned")),
+        _opt(Column("index", _I, "", "message index within the topic (0-based, file order)")),
+        _opt(Column("byte_offset", _I, "bytes", "file offset, for corrupt files")),
+    ],
+    "manifest": [
+        Column("file", _S, "", "input file"),
+        Column("sha256", _S, "", "SHA-256 of the input file"),
+        Column("status", _S, "", "'done', 'failed' or 'skipped'"),
+        Column("duration_s", _F, "s", "processing wall time"),
+        Column("error", _S, "", "error text (null when done)"),
+        _opt(Column("n_legs", _I, "", "legs found")),
+        _opt(Column("dv_after_mps", _F, "m/s", "summary dv_after_mps")),
+        _opt(Column("dp_after_m", _F, "m", "summary dp_after_m")),
+    ],
+    "reference": [_TIME, *_NAV],
+}
+"""Table name -> columns. Add a table or a column here; docs/formats.md renders this dict."""
+
+EXTENSIBLE_TABLES = frozenset({"summary", "manifest"})
+"""Tables that accept extra columns (types inferred, unit from the name suffix)."""
+
+_SUFFIX_UNITS = {"_mps2": "m/s^2", "_mps": "m/s", "_m": "m", "_s": "s", "_ns": "ns",
+                 "_deg": "deg", "_rad": "rad", "_dph": "deg/h", "_ug": "ug", "_hz": "Hz",
+                 "_ppm": "ppm", "_arcsec": "arcsec", "_radps": "rad/s", "_dps": "deg/s"}
+
+
+def _suffix_unit(name: str) -> str:
+    for suf in sorted(_SUFFIX_UNITS, key=len, reverse=True):
+        if name.endswith(suf):
+            return _SUFFIX_UNITS[suf]
+    return ""
+
+
+def _field(c: Column) -> pa.Field:
+    meta = {"unit": c.unit, "frame": c.frame, "description": c.description}
+    return pa.field(c.name, c.type, nullable=True, metadata=meta)
+
+
+def schema(name: str) -> pa.Schema:
+    """The pyarrow schema of table ``name`` (fields carry unit/frame/description metadata)."""
+    if name not in TABLES:
+        raise KeyError(f"unknown table {name!r}; known: {sorted(TABLES)}")
+    return pa.schema([_field(c) for c in TABLES[name]])
+
+
+# --------------------------------------------------------------------------- files
+
+
+@contextmanager
+def atomic_path(path: str | Path) -> Iterator[Path]:
+    """Yield a temporary path next to ``path``; on success fsync it and ``os.replace`` it.
+
+    On any exception the temporary file is removed and ``path`` is left untouched.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
+    try:
+        yield tmp
+        fd = os.open(tmp, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    try:  # make the rename durable; not possible on every platform
+        dfd = os.open(path.parent, os.O_RDONLY)
+        try:
+            os.fsync(dfd)
+        finally:
+            os.close(dfd)
+    except OSError:
+        pass
+
+
+def sha256_file(path: str | Path, *, chunk_bytes: int = 1 << 20) -> str:
+    """SHA-256 hex digest of a file, read in chunks (constant memory)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        while block := f.read(chunk_bytes):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _columns_of(data: pd.DataFrame | Mapping[str, Any]) -> dict[str, Any]:
+    if isinstance(data, pd.DataFrame):
+        return {str(c): data[c] for c in data.columns}
+    cols = dict(data)
+    if cols and all(np.ndim(v) == 0 for v in cols.values()):  # a dict of scalars = one row
+        cols = {k: [v] for k, v in cols.items()}
+    return cols
+
+
+def _to_array(name: str, values: Any, typ: pa.DataType | None) -> pa.Array:
+    if isinstance(values, pd.Series):
+        values = values.to_numpy(dtype=object if values.dtype == object else None)
+    try:
+        if typ is None:
+            return pa.array(values, from_pandas=True)
+        if isinstance(values, np.ndarray) and values.dtype.kind in "fc" and pa.types.is_integer(
+            typ
+        ):
+            if not np.all(np.isnan(values) | (values == np.round(values))):
+                raise ValueError("non-integral values")
+            values = [None if np.isnan(v) else int(v) for v in values]
+        return pa.array(values, type=typ, from_pandas=True)
+    except (pa.ArrowInvalid, pa.ArrowTypeError, ValueError, TypeError) as exc:
+        raise ValueError(f"column {name!r}: cannot convert to {typ}: {exc}") from exc
+
+
+def _build(data: pd.DataFrame | Mapping[str, Any], name: str) -> pa.Table:
+    cols = TABLES[name] if name in TABLES else None
+    if cols is None:
+        raise KeyError(f"unknown table {name!r}; known: {sorted(TABLES)}")
+    given = _columns_of(data)
+    names = [c.name for c in cols]
+    missing = [c.name for c in cols if c.required and c.name not in given]
+    if missing:
+        raise ValueError(
+            f"table {name!r}: missing required column(s) {missing}; expected {names}, "
+            f"got {list(given)}"
+        )
+    extra = [k for k in given if k not in names]
+    if extra and name not in EXTENSIBLE_TABLES:
+        raise ValueError(f"table {name!r}: unexpected column(s) {extra}; schema has {names}")
+    lengths = {k: len(v) for k, v in given.items()}
+    if len(set(lengths.values())) > 1:
+        raise ValueError(f"table {name!r}: columns differ in length: {lengths}")
+    n = next(iter(lengths.values())) if lengths else 0
+    if name == "summary" and n != 1:
+        raise ValueError(f"table 'summary' must have exactly one row, got {n}")
+    arrays, fields = [], []
+    for c in cols:
+        if c.name in given:
+            arrays.append(_to_array(c.name, given[c.name], c.type))
+        else:
+            arrays.append(pa.nulls(n, type=c.type))
+        fields.append(_field(c))
+    for k in extra:
+        arr = _to_array(k, given[k], None)
+        arrays.append(arr)
+        fields.append(pa.field(k, arr.type, metadata={"unit": _suffix_unit(k), "frame": "",
+                                                      "description": "extra column"}))
+    return pa.Table.from_arrays(arrays, schema=pa.schema(fields))
+
+
+def write_table(
+    path: str | Path,
+    data: pd.DataFrame | Mapping[str, Any],
+    schema_name: str,
+    *,
+    metadata: Mapping[str, Any],
+) -> Path:
+    """Validate ``data`` against table ``schema_name`` and write it atomically as Parquet.
+
+    Parameters
+    ----------
+    path : str or Path
+        Destination file (its folder is created if needed).
+    data : pandas.DataFrame or mapping of column -> array-like
+        A mapping of scalars is one row. Required columns must be present (error naming them);
+        optional ones absent become nulls; values are cast to the schema types (error naming
+        the column on failure); extra columns are an error except in ``EXTENSIBLE_TABLES``.
+    schema_name : str
+        A key of ``TABLES``.
+    metadata : mapping
+        JSON-serialisable run metadata stored in the file, e.g. ``{"input_sha256": ...,
+        "config": {...}}``. The pospp version, table name and schema version are added.
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
+    table = _build(data, schema_name)
+    clash = [k for k in metadata if k in _RESERVED_KEYS]
+    if clash:
+        raise ValueError(f"metadata keys {clash} are reserved ({list(_RESERVED_KEYS)})")
+    try:
+        user = json.dumps(dict(metadata), sort_keys=True, allow_nan=True)
+    except TypeError as exc:
+        raise TypeError(f"metadata must be JSON-serialisable: {exc}") from exc
+    kv = {
+        b"pospp.version": __version__.encode(),
+        b"pospp.schema_name": schema_name.encode(),
+        b"pospp.schema_version": SCHEMA_VERSION.encode(),
+        b"pospp.metadata": user.encode(),
+    }
+    table = table.replace_schema_metadata(kv)
+    with atomic_path(path) as tmp:
+        pq.write_table(table, tmp, compression="zstd")
+    return Path(path)
+
+
+def read_table(path: str | Path) -> pd.DataFrame:
+    """Read a pospp Parquet table into a DataFrame (column types as in the schema)."""
+    return pq.read_table(path).to_pandas()
+
+
+def read_metadata(path: str | Path) -> dict[str, Any]:
+    """File metadata: ``pospp_version``, ``schema_name``, ``schema_version`` and the caller's
+    metadata passed to ``write_table`` (e.g. ``input_sha256``, ``config``)."""
+    kv = pq.read_schema(path).metadata or {}
+    out: dict[str, Any] = json.loads(kv.get(b"pospp.metadata", b"{}"))
+    out["pospp_version"] = kv.get(b"pospp.version", b"").decode() or None
+    out["schema_name"] = kv.get(b"pospp.schema_name", b"").decode() or None
+    out["schema_version"] = kv.get(b"pospp.schema_version", b"").decode() or None
+    return out
+
+
+def issues_to_messages(issues: Any, *, stage: str = "ingest") -> dict[str, list]:
+    """``IngestIssue`` records -> columns of the ``messages`` table."""
+    issues = list(issues)
+    return {
+        "severity": [i.severity for i in issues],
+        "stage": [stage] * len(issues),
+        "time_ns": [i.time_ns for i in issues],
+        "text": [(f"{i.file}: " if i.file else "") + i.message for i in issues],
+        "topic": [i.topic for i in issues],
+        "index": [i.index for i in issues],
+        "byte_offset": [i.byte_offset for i in issues],
+    }
+
+
+# --------------------------------------------------------------------------- reference
+
+
+@dataclass(frozen=True)
+class ReferenceTrajectory:
+    """A reference trajectory (simulation truth or a higher-grade system).
+
+    Attributes
+    ----------
+    time_ns : (N,) int64
+    lat_rad, lon_rad, height_m : (N,) float64
+        WGS-84 geodetic position of the IMU [rad, rad, m above the ellipsoid].
+    v_n_mps : (N, 3) float64
+        Velocity in NED [m/s].
+    rpy_rad : (N, 3) float64
+        [roll, pitch, yaw] of b (FRD) w.r.t. n (NED), z-y-x [rad]; yaw as stored.
+    """
+
+    time_ns: np.ndarray
+    lat_rad: np.ndarray
+    lon_rad: np.ndarray
+    height_m: np.ndarray
+    v_n_mps: np.ndarray
+    rpy_rad: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.time_ns.shape[0])
+
+
+def read_reference_trajectory(path: str | Path) -> ReferenceTrajectory:
+    """Read a reference Parquet (columns of ``TABLES["reference"]``; others are ignored)."""
+    names = [c.name for c in TABLES["reference"]]
+    have = pq.read_schema(path).names
+    missing = [n for n in names if n not in have]
+    if missing:
+        raise ValueError(f"{path}: reference trajectory lacks column(s) {missing}; got {have}")
+    t = pq.read_table(path, columns=names)
+    col = {n: t.column(n).to_numpy(zero_copy_only=False) for n in names}
+    time_ns = col["time_ns"].astype(np.int64)
+    bad = np.flatnonzero(np.diff(time_ns) <= 0)
+    if bad.size:
+        raise ValueError(f"{path}: time_ns must increase strictly; row {bad[0] + 1} does not")
+    floats = {n: col[n].astype(float) for n in names[1:]}
+    for n, v in floats.items():
+        if not np.all(np.isfinite(v)):
+            raise ValueError(f"{path}: non-finite {n} at row {int(np.argmin(np.isfinite(v)))}")
+    return ReferenceTrajectory(
+        time_ns=time_ns,
+        lat_rad=np.deg2rad(floats["lat_deg"]),
+        lon_rad=np.deg2rad(floats["lon_deg"]),
+        height_m=floats["height_m"],
+        v_n_mps=np.column_stack([floats["vn_mps"], floats["ve_mps"], floats["vd_mps"]]),
+        rpy_rad=np.deg2rad(
+            np.column_stack([floats["roll_deg"], floats["pitch_deg"], floats["yaw_deg"]])
+        ),
+    )
+
+
+def write_reference_trajectory(
+    path: str | Path, ref: ReferenceTrajectory, *, metadata: Mapping[str, Any] | None = None
+) -> Path:
+    """Write a ReferenceTrajectory in the reference Parquet format (yaw wrapped to [0, 360))."""
+    rpy = np.rad2deg(ref.rpy_rad)
+    data = {
+        "time_ns": ref.time_ns,
+        "lat_deg": np.rad2deg(ref.lat_rad),
+        "lon_deg": np.rad2deg(ref.lon_rad),
+        "height_m": ref.height_m,
+        "vn_mps": ref.v_n_mps[:, 0],
+        "ve_mps": ref.v_n_mps[:, 1],
+        "vd_mps": ref.v_n_mps[:, 2],
+        "roll_deg": rpy[:, 0],
+        "pitch_deg": rpy[:, 1],
+        "yaw_deg": np.mod(rpy[:, 2], 360.0),
+    }
+    return write_table(path, data, "reference", metadata=dict(metadata or {}))
+
+
+# --------------------------------------------------------------------------- docs
+
+
+def render_schema_markdown(name: str) -> str:
+    """A markdown table of one schema: column, type, unit, frame, required, description."""
+    lines = [
+        f"### {name}" + (" (extra columns allowed)" if name in EXTENSIBLE_TABLES else ""),
+        "",
+        "| column | type | unit | frame | required | description |",
+        "|---|---|---|---|---|---|",
+    ]
+    for c in TABLES[name]:
+        lines.append(
+            f"| `{c.name}` | {c.type} | {c.unit} | {c.frame} | "
+            f"{'yes' if c.required else 'no'} | {c.description} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def render_all_schemas_markdown() -> str:
+    """All schemas, in ``TABLES`` order, for docs/formats.md."""
+    return "\n".join(render_schema_markdown(n) for n in TABLES)

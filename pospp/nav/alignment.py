@@ -1,0 +1,328 @@
+"""Initial alignment for the integrated filter: static (levelling + gyrocompassing) or in motion.
+
+Frames: body FRD (b), navigation NED (n); angles in rad, [roll, pitch, yaw] with yaw clockwise
+from north (pospp.rotation). Inputs are the IMU mean rates over the interval ending at each
+epoch, ``w_ib_b`` [rad/s] and ``f_b`` [m/s^2], and screened GNSS fixes and velocities.
+
+Static coarse alignment (Titterton & Weston 2004, Sec. 10.3; Groves 2013, Sec. 5.6.2)
+-------------------------------------------------------------------------------------------
+At rest f_b = C_bn [0, 0, -g] and w_ib_b = C_bn [Omega cos L, 0, -Omega sin L]. With the means
+over the static period::
+
+    roll  = atan2(-f_y, -f_z),   pitch = atan2(f_x, sqrt(f_y^2 + f_z^2))
+    w_h   = R_y(pitch) R_x(roll) w_ib_b           (the rate in the levelled frame)
+    yaw   = atan2(-w_h,y, w_h,x)                  (gyrocompassing)
+
+Error budget used for the initial covariance: a tilt of sigma_ba / g (+ white noise averaged over
+the period) and a heading of sqrt(sigma_bg^2 + ARW^2 / T) / (Omega cos L) (the east gyro bias is
+indistinguishable from a heading error at rest). A 1 deg/h gyro at 40 deg latitude gives about
+5 deg; when the predicted heading sigma exceeds ``max_gyrocompass_sigma_deg`` the gyro cannot
+resolve Earth rate and the in-motion alignment is used instead. Fine alignment is the filter
+itself: it starts at the first IMU epoch with zero-velocity pseudo-measurements over the static
+period and the GNSS updates; heading becomes observable in the turns and accelerations.
+
+In-motion alignment
+-------------------
+Where no usable static period exists the filter starts at the first GNSS velocity epoch with a
+steady horizontal speed above ``min_speed_mps``: yaw = atan2(v_E, v_N) (track; crab/sideslip
+covered by a large sigma), pitch = atan2(-v_D, |v_h|) (flight path), roll = 0.
+
+Static detection: windows of ``window_s`` whose accelerometer and gyro standard deviations and
+|mean f| - g are below thresholds, and whose GNSS speed (where present) is below
+``max_static_speed_mps``; the initial static period is the run of such windows from the start.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from pospp import earth, rotation
+from pospp.nav.tuning import NoiseParameters
+
+
+@dataclass(frozen=True)
+class AlignmentOptions:
+    """Thresholds of the alignment (units in the names)."""
+
+    window_s: float = 1.0
+    max_accel_std_mps2: float = 0.05
+    max_gyro_std_radps: float = math.radians(0.5)
+    max_gravity_mismatch_mps2: float = 0.1
+    max_static_speed_mps: float = 0.1
+    min_static_s: float = 30.0
+    max_static_alignment_s: float = 600.0
+    max_gyrocompass_sigma_deg: float = 10.0
+    min_speed_mps: float = 5.0
+    max_accel_for_motion_mps2: float = 0.5
+    motion_heading_sigma_deg: float = 5.0
+    motion_tilt_sigma_deg: float = 3.0
+    static_velocity_sigma_mps: float = 0.05
+    motion_velocity_sigma_mps: float = 0.5
+
+
+@dataclass(frozen=True)
+class AlignmentResult:
+    """Initial state of the filter and how it was found.
+
+    Attributes
+    ----------
+    method : str
+        "static" (levelling + gyrocompassing) or "motion" (GNSS track).
+    k_start : int
+        IMU epoch index (into the epochs ``t_s`` given to :func:`align`) where the filter starts.
+    t_s : float
+        Time of that epoch [s].
+    lat_rad, lon_rad, height_m : float
+        IMU position at the start (GNSS antenna minus C_nb lever arm).
+    v_n_mps : ndarray, shape (3,)
+    rpy_rad, rpy_sigma_rad : ndarray, shape (3,)
+        Initial attitude and its 1-sigma uncertainty (roll/pitch tilt and heading).
+    pos_sigma_ned_m, vel_sigma_ned_mps : ndarray, shape (3,)
+    static_end_s : float or None
+        End of the initial static period (None if there is none).
+    heading_sigma_gyrocompass_rad : float
+        Predicted gyrocompassing heading sigma (inf when no static period).
+    """
+
+    method: str
+    k_start: int
+    t_s: float
+    lat_rad: float
+    lon_rad: float
+    height_m: float
+    v_n_mps: NDArray
+    rpy_rad: NDArray
+    rpy_sigma_rad: NDArray
+    pos_sigma_ned_m: NDArray
+    vel_sigma_ned_mps: NDArray
+    static_end_s: float | None
+    heading_sigma_gyrocompass_rad: float
+
+
+def static_windows(
+    t_s: ArrayLike,
+    w_ib_b_radps: ArrayLike,
+    f_b_mps2: ArrayLike,
+    *,
+    options: AlignmentOptions = AlignmentOptions(),
+    gnss_vel_t_s: ArrayLike | None = None,
+    gnss_v_n_mps: ArrayLike | None = None,
+) -> tuple[NDArray, NDArray]:
+    """Classify consecutive windows of IMU samples as static or not.
+
+    Returns
+    -------
+    window_end_s : ndarray, shape (W,)
+        End time of each window [s].
+    is_static : ndarray of bool, shape (W,)
+    """
+    t = np.asarray(t_s, dtype=float)
+    w = np.asarray(w_ib_b_radps, dtype=float)
+    f = np.asarray(f_b_mps2, dtype=float)
+    if t.shape[0] < 2:
+        return np.zeros(0), np.zeros(0, dtype=bool)
+    dt = float(np.median(np.diff(t)))
+    m = max(2, int(round(options.window_s / dt)))
+    nw = t.shape[0] // m
+    if nw == 0:
+        return np.zeros(0), np.zeros(0, dtype=bool)
+    fw = f[: nw * m].reshape(nw, m, 3)
+    ww = w[: nw * m].reshape(nw, m, 3)
+    tw = t[: nw * m].reshape(nw, m)
+    lat_g = 9.80665
+    ok = (
+        (fw.std(axis=1).max(axis=1) < options.max_accel_std_mps2)
+        & (ww.std(axis=1).max(axis=1) < options.max_gyro_std_radps)
+        & (np.abs(np.linalg.norm(fw.mean(axis=1), axis=1) - lat_g)
+           < options.max_gravity_mismatch_mps2)
+    )
+    if gnss_vel_t_s is not None and gnss_v_n_mps is not None and len(gnss_vel_t_s):
+        tv = np.asarray(gnss_vel_t_s, dtype=float)
+        speed = np.linalg.norm(np.asarray(gnss_v_n_mps, dtype=float), axis=1)
+        idx = np.searchsorted(tw[:, 0], tv, side="right") - 1
+        inside = (idx >= 0) & (tv <= tw[np.clip(idx, 0, nw - 1), -1])
+        moving = np.zeros(nw, dtype=bool)
+        np.logical_or.at(moving, idx[inside], speed[inside] > options.max_static_speed_mps)
+        ok &= ~moving
+    return tw[:, -1], ok
+
+
+def coarse_static_alignment(
+    w_mean_b_radps: ArrayLike,
+    f_mean_b_mps2: ArrayLike,
+    lat_rad: float,
+    duration_s: float,
+    noise: NoiseParameters,
+) -> tuple[NDArray, NDArray, float]:
+    """Levelling and gyrocompassing from mean sensor outputs at rest (module docstring).
+
+    Returns
+    -------
+    rpy_rad : ndarray, shape (3,)
+    rpy_sigma_rad : ndarray, shape (3,)
+        Predicted 1-sigma errors (tilt from the accelerometer bias, heading from the gyro bias
+        and ARW over ``duration_s``).
+    heading_sigma_rad : float
+        The gyrocompassing heading sigma (also rpy_sigma_rad[2]).
+    """
+    f = np.asarray(f_mean_b_mps2, dtype=float)
+    w = np.asarray(w_mean_b_radps, dtype=float)
+    roll = math.atan2(-f[1], -f[2])
+    pitch = math.atan2(f[0], math.hypot(f[1], f[2]))
+    c_level = rotation.dcm_from_euler([roll, pitch, 0.0])  # C_hb, h = levelled body frame
+    w_h = c_level @ w
+    yaw = math.atan2(-w_h[1], w_h[0]) % (2.0 * math.pi)
+    g = float(np.linalg.norm(f))
+    t = max(duration_s, 1e-3)
+    tilt_sigma = math.hypot(noise.accel_bias_sigma_mps2, noise.accel_vrw_mpspsqrts / math.sqrt(t))
+    tilt_sigma = max(tilt_sigma / g, 1e-5)
+    horiz_rate = earth.EARTH_RATE_RADPS * math.cos(lat_rad)
+    heading_sigma = (
+        math.hypot(noise.gyro_bias_sigma_radps, noise.gyro_arw_radpsqrts / math.sqrt(t)) / horiz_rate
+    )
+    heading_sigma = max(heading_sigma, 1e-4)
+    return (
+        np.array([roll, pitch, yaw]),
+        np.array([tilt_sigma, tilt_sigma, heading_sigma]),
+        heading_sigma,
+    )
+
+
+def motion_attitude(v_n_mps: ArrayLike) -> NDArray:
+    """[roll=0, pitch=flight-path angle, yaw=track] (rad) from a NED velocity."""
+    v = np.asarray(v_n_mps, dtype=float)
+    vh = math.hypot(v[0], v[1])
+    return np.array([0.0, math.atan2(-v[2], vh), math.atan2(v[1], v[0]) % (2.0 * math.pi)])
+
+
+def _nearest(t_grid: NDArray, t: float) -> int:
+    k = int(np.searchsorted(t_grid, t))
+    if k >= t_grid.shape[0]:
+        return t_grid.shape[0] - 1
+    if k > 0 and abs(t_grid[k - 1] - t) <= abs(t_grid[k] - t):
+        return k - 1
+    return k
+
+
+def _imu_position(lat, lon, h, c_nb, lever_b, v_ant_n, dt_s):
+    """IMU position from an antenna fix: subtract C_nb l_b, then move by v * dt_s."""
+    d_ned = -(c_nb @ lever_b) + np.asarray(v_ant_n) * dt_s
+    r_m, r_n = earth.principal_radii_m(lat)
+    return (
+        lat + d_ned[0] / (r_m + h),
+        lon + d_ned[1] / ((r_n + h) * math.cos(lat)),
+        h - d_ned[2],
+    )
+
+
+def align(
+    t_s: ArrayLike,
+    w_ib_b_radps: ArrayLike,
+    f_b_mps2: ArrayLike,
+    fix_t_s: ArrayLike,
+    fix_llh: ArrayLike,
+    fix_cov_ned_m2: ArrayLike,
+    vel_t_s: ArrayLike,
+    vel_n_mps: ArrayLike,
+    noise: NoiseParameters,
+    *,
+    lever_arm_b_m: ArrayLike = (0.0, 0.0, 0.0),
+    options: AlignmentOptions = AlignmentOptions(),
+) -> AlignmentResult:
+    """Choose the alignment (static or in motion) and the filter's initial state.
+
+    Parameters
+    ----------
+    t_s : array_like, shape (N,)
+        IMU epochs [s]; ``w_ib_b_radps[k]``, ``f_b_mps2[k]`` are the mean rates over the interval
+        ending at ``t_s[k]`` (row 0 is ignored).
+    fix_t_s, fix_llh, fix_cov_ned_m2 : array_like, shapes (M,), (M, 3), (M, 3, 3)
+        Screened GNSS antenna fixes: times [s], [lat_rad, lon_rad, height_m], NED covariance.
+    vel_t_s, vel_n_mps : array_like, shapes (V,), (V, 3)
+        Screened GNSS antenna velocities [s], NED [m/s].
+    noise : NoiseParameters
+        IMU noise model (sets the initial covariance).
+    lever_arm_b_m : array_like, shape (3,)
+        Antenna position in the body frame FRD [m].
+
+    Raises
+    ------
+    ValueError
+        When neither a static period nor a steady moving GNSS epoch is found.
+    """
+    t = np.asarray(t_s, dtype=float)
+    w = np.asarray(w_ib_b_radps, dtype=float)
+    f = np.asarray(f_b_mps2, dtype=float)
+    ft = np.asarray(fix_t_s, dtype=float)
+    fllh = np.asarray(fix_llh, dtype=float)
+    fcov = np.asarray(fix_cov_ned_m2, dtype=float)
+    vt = np.asarray(vel_t_s, dtype=float)
+    vv = np.asarray(vel_n_mps, dtype=float)
+    lever = np.asarray(lever_arm_b_m, dtype=float)
+    if ft.shape[0] == 0:
+        raise ValueError("alignment: no usable GNSS fix (expected at least one, got 0)")
+
+    # ---- static period from the start ---------------------------------------------------------
+    w_end, is_static = static_windows(t[1:], w[1:], f[1:], options=options,
+                                      gnss_vel_t_s=vt, gnss_v_n_mps=vv)
+    n_static = int(np.argmin(is_static)) if (~is_static).any() else is_static.shape[0]
+    static_end = float(w_end[n_static - 1]) if n_static > 0 else None
+    static_len = (static_end - t[0]) if static_end is not None else 0.0
+    sigma_gc = math.inf
+    if static_end is not None and static_len >= options.min_static_s and ft[0] <= static_end:
+        t_stop = min(static_end, t[0] + options.max_static_alignment_s)
+        sel = (t > t[0]) & (t <= t_stop)
+        rpy, rpy_sig, sigma_gc = coarse_static_alignment(
+            w[sel].mean(axis=0), f[sel].mean(axis=0), float(fllh[0, 0]), t_stop - t[0], noise
+        )
+        if math.degrees(sigma_gc) <= options.max_gyrocompass_sigma_deg:
+            j = 0
+            c_nb = rotation.dcm_from_euler(rpy)
+            lat, lon, h = _imu_position(*fllh[j], c_nb, lever, np.zeros(3), 0.0)
+            pos_sig = np.sqrt(np.clip(np.diag(fcov[j]), 1e-6, None))
+            return AlignmentResult(
+                method="static", k_start=0, t_s=float(t[0]), lat_rad=float(lat),
+                lon_rad=float(lon), height_m=float(h), v_n_mps=np.zeros(3), rpy_rad=rpy,
+                rpy_sigma_rad=rpy_sig, pos_sigma_ned_m=pos_sig,
+                vel_sigma_ned_mps=np.full(3, options.static_velocity_sigma_mps),
+                static_end_s=static_end, heading_sigma_gyrocompass_rad=sigma_gc,
+            )
+
+    # ---- in motion: first steady GNSS velocity above min speed -------------------------------
+    if vt.shape[0] < 2:
+        raise ValueError("alignment: no static period and fewer than 2 GNSS velocities")
+    speed_h = np.hypot(vv[:, 0], vv[:, 1])
+    acc = np.zeros(vt.shape[0])
+    acc[1:] = np.linalg.norm(np.diff(vv, axis=0), axis=1) / np.maximum(np.diff(vt), 1e-3)
+    acc_next = np.append(acc[1:], np.inf)
+    cand = np.flatnonzero(
+        (speed_h > options.min_speed_mps)
+        & (acc_next < options.max_accel_for_motion_mps2)
+        & (vt >= t[0]) & (vt <= t[-1])
+    )
+    for i in cand:
+        jf = _nearest(ft, vt[i])
+        if abs(ft[jf] - vt[i]) > 0.5:
+            continue
+        k = _nearest(t, vt[i])
+        rpy = motion_attitude(vv[i])
+        c_nb = rotation.dcm_from_euler(rpy)
+        lat, lon, h = _imu_position(*fllh[jf], c_nb, lever, vv[i], t[k] - ft[jf])
+        tilt = math.radians(options.motion_tilt_sigma_deg)
+        return AlignmentResult(
+            method="motion", k_start=k, t_s=float(t[k]), lat_rad=float(lat), lon_rad=float(lon),
+            height_m=float(h), v_n_mps=vv[i].copy(), rpy_rad=rpy,
+            rpy_sigma_rad=np.array([tilt, tilt, math.radians(options.motion_heading_sigma_deg)]),
+            pos_sigma_ned_m=np.sqrt(np.clip(np.diag(fcov[jf]), 1e-6, None)) + 0.5,
+            vel_sigma_ned_mps=np.full(3, options.motion_velocity_sigma_mps),
+            static_end_s=static_end, heading_sigma_gyrocompass_rad=sigma_gc,
+        )
+    raise ValueError(
+        "alignment: no static period of at least "
+        f"{options.min_static_s} s with a resolvable heading and no steady GNSS velocity above "
+        f"{options.min_speed_mps} m/s"
+    )

@@ -1,0 +1,158 @@
+"""Rauch-Tung-Striebel smoother for the closed-loop error-state filter (algorithm A).
+
+Error state (15 or 18, computed minus true; :mod:`pospp.nav.error_model`)::
+
+    dx = [phi_n (3) rad, dv_n (3) m/s, dr_n (3) m, db_g (3) rad/s, db_a (3) m/s^2, dl_b (3) m]
+
+db_g, db_a are the residual sensor errors left after the filter's bias estimates are removed
+(measured - estimate - true), dl_b = lever estimate - true lever.
+
+Closed-loop RTS in error-state form (Rauch, Tung & Striebel 1965; e.g. Groves 2013, Sec. 3.4.2)
+---------------------------------------------------------------------------------------------
+The forward filter stores, at each smoother node k (every GNSS update epoch and at least every
+``node_interval``): the predicted and updated covariances P_k|k-1, P_k|k, the transition matrix
+Phi_k from node k-1 to node k, and the correction dx_k it fed back into the nominal state at k
+(zero when no update). With feedback the filtered error after the reset is 0, so the error of
+the nominal state just before the update is the error after it plus the correction::
+
+    e_k^- = e_k^+ + dx_k
+    A_k   = P_k|k Phi_{k+1}^T P_{k+1|k}^-1
+    e_k^+ = A_k e_{k+1}^-                 (e_N^+ = 0)
+    P^s_k = P_k|k + A_k (P^s_{k+1} - P_{k+1|k}) A_k^T
+
+The smoothed state at node k is the filtered nominal (after feedback) corrected by e_k^+.
+Between nodes (at most ``node_interval`` apart, 1 s by default) the error is interpolated
+linearly from e_k^+ (just after node k) to e_{k+1}^- (just before node k+1); over one second
+the error dynamics are linear to well below the noise (Phi = I + F dt). Smoothed covariances are
+interpolated the same way (an approximation documented in docs/method.md).
+
+Memory: three n x n matrices per node (1 Hz: about 7.8 kB per second of flight for 18 states),
+never per IMU epoch.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+from pospp.nav._kernels import _radii, quat_from_rotvec, quat_mul
+
+
+@njit(cache=True)
+def rts_backward(p_pred, p_upd, phi, dx, e_plus, e_minus, p_smooth):
+    """Backward RTS pass over ``K`` nodes (see the module docstring).
+
+    Parameters
+    ----------
+    p_pred, p_upd, phi : float64[K, n, n]
+        Predicted and updated covariances, and Phi[k] = transition from node k-1 to node k.
+    dx : float64[K, n]
+        Corrections fed back at each node.
+    e_plus, e_minus : float64[K, n]
+        Output: smoothed error just after / just before the feedback at each node.
+    p_smooth : float64[K, n, n]
+        Output: smoothed covariance.
+    """
+    k_last = p_pred.shape[0] - 1
+    e_plus[k_last, :] = 0.0
+    e_minus[k_last, :] = dx[k_last]
+    p_smooth[k_last] = p_upd[k_last]
+    for k in range(k_last - 1, -1, -1):
+        b = np.dot(phi[k + 1], p_upd[k])
+        a_t = np.linalg.solve(p_pred[k + 1], b)  # = P_{k+1|k}^-1 Phi P_k|k = A^T
+        a = np.ascontiguousarray(a_t.T)
+        e_plus[k] = np.dot(a, e_minus[k + 1])
+        for i in range(e_plus.shape[1]):
+            e_minus[k, i] = e_plus[k, i] + dx[k, i]
+        d = p_smooth[k + 1] - p_pred[k + 1]
+        ps = p_upd[k] + np.dot(np.dot(a, d), a_t)
+        p_smooth[k] = 0.5 * (ps + ps.T)
+
+
+def rts_smooth(
+    p_pred: NDArray, p_upd: NDArray, phi: NDArray, dx: NDArray
+) -> tuple[NDArray, NDArray, NDArray]:
+    """Run the backward pass; returns (e_plus, e_minus, p_smooth), shapes (K, n), (K, n),
+    (K, n, n)."""
+    k, n = dx.shape
+    for name, arr in (("p_pred", p_pred), ("p_upd", p_upd), ("phi", phi)):
+        if arr.shape != (k, n, n):
+            raise ValueError(f"{name}: expected shape ({k}, {n}, {n}), got {arr.shape}")
+    e_plus = np.zeros((k, n))
+    e_minus = np.zeros((k, n))
+    p_smooth = np.empty((k, n, n))
+    if k:
+        rts_backward(
+            np.ascontiguousarray(p_pred), np.ascontiguousarray(p_upd), np.ascontiguousarray(phi),
+            np.ascontiguousarray(dx), e_plus, e_minus, p_smooth,
+        )
+    return e_plus, e_minus, p_smooth
+
+
+def interpolation_weights(node_t_s: NDArray, t_s: NDArray) -> tuple[NDArray, NDArray]:
+    """Node index i (last node at or before t) and weight alpha in [0, 1) towards node i + 1."""
+    i = np.clip(np.searchsorted(node_t_s, t_s, side="right") - 1, 0, node_t_s.shape[0] - 1)
+    nxt = np.minimum(i + 1, node_t_s.shape[0] - 1)
+    span = node_t_s[nxt] - node_t_s[i]
+    alpha = np.where(span > 0.0, (t_s - node_t_s[i]) / np.where(span > 0.0, span, 1.0), 0.0)
+    return i, np.clip(alpha, 0.0, 1.0)
+
+
+def interpolate_errors(
+    node_t_s: NDArray, e_plus: NDArray, e_minus: NDArray, t_s: NDArray
+) -> NDArray:
+    """Smoothed error state at times ``t_s``: linear from e_i^+ to e_{i+1}^- (module docstring)."""
+    i, a = interpolation_weights(node_t_s, t_s)
+    nxt = np.minimum(i + 1, node_t_s.shape[0] - 1)
+    return (1.0 - a)[:, None] * e_plus[i] + a[:, None] * e_minus[nxt]
+
+
+def interpolate_covariance_blocks(
+    node_t_s: NDArray, p_smooth: NDArray, t_s: NDArray, blocks: tuple[slice, ...]
+) -> tuple[NDArray, list[NDArray]]:
+    """Diagonal (N, n) and the requested diagonal blocks (N, b, b) of P^s interpolated to t_s."""
+    i, a = interpolation_weights(node_t_s, t_s)
+    nxt = np.minimum(i + 1, node_t_s.shape[0] - 1)
+    diag_nodes = np.diagonal(p_smooth, axis1=1, axis2=2)
+    diag = (1.0 - a)[:, None] * diag_nodes[i] + a[:, None] * diag_nodes[nxt]
+    out = []
+    for s in blocks:
+        blk = p_smooth[:, s, s]
+        out.append((1.0 - a)[:, None, None] * blk[i] + a[:, None, None] * blk[nxt])
+    return diag, out
+
+
+@njit(cache=True)
+def apply_correction(x, dx):
+    """Remove an estimated error ``dx`` (computed minus true) from a kernel state ``x`` in place.
+
+    lat -= dr_N / (R_M + h), lon -= dr_E / ((R_N + h) cos lat), h += dr_D, v -= dv_n and
+    q_nb <- exp(phi) * q_nb, since C_nb,true = (I + [phi x]) C_nb,computed.
+    """
+    lat, h = x[0], x[2]
+    r_m, r_n = _radii(lat)
+    x[0] = lat - dx[6] / (r_m + h)
+    x[1] = x[1] - dx[7] / ((r_n + h) * math.cos(lat))
+    x[2] = h + dx[8]
+    x[3] -= dx[3]
+    x[4] -= dx[4]
+    x[5] -= dx[5]
+    qe = quat_from_rotvec(dx[0], dx[1], dx[2])
+    q = quat_mul(qe[0], qe[1], qe[2], qe[3], x[6], x[7], x[8], x[9])
+    nrm = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    if q[0] < 0.0:
+        nrm = -nrm
+    for i in range(4):
+        x[6 + i] = q[i] / nrm
+
+
+@njit(cache=True)
+def correct_states(states, errors):
+    """Apply :func:`apply_correction` row by row to (N, 10) states with (N, n) errors."""
+    out = states.copy()
+    for k in range(states.shape[0]):
+        apply_correction(out[k], errors[k])
+    return out
