@@ -1,0 +1,128 @@
+"""The ``pospp`` command line: parse, delegate to a stage or the pipeline, print.
+
+Every command is a thin shell over a function of the package (named in its help), so
+everything the CLI does can be done from Python too. Errors from bad input are printed as one
+clear line (file, topic, time, what is wrong) with exit status 2; a run that completes with a
+stage that could not produce a result exits 0 and says why in its summary.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+
+from pospp import __version__
+from pospp.config import ConfigError, PipelineConfig, load_config
+
+
+def _config(path: str | None) -> PipelineConfig:
+    return PipelineConfig() if path is None else load_config(path)
+
+
+def _fail(exc: BaseException) -> None:
+    click.echo(f"pospp: error: {exc}", err=True)
+    sys.exit(2)
+
+
+class _StageBar:
+    """A progress bar over the pipeline's stages (stderr; silent when not a terminal)."""
+
+    def __init__(self) -> None:
+        from tqdm import tqdm
+
+        self._bar = tqdm(total=100, unit="%", file=sys.stderr, leave=False,
+                         disable=not sys.stderr.isatty(), bar_format="{l_bar}{bar}| {desc}")
+
+    def __call__(self, stage: str, fraction: float) -> None:
+        self._bar.set_description_str(stage)
+        self._bar.update(round(100 * fraction) - self._bar.n)
+
+    def close(self) -> None:
+        self._bar.close()
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="pospp")
+def main() -> None:
+    """pospp: POS post-processing with double strapdown online calibration."""
+
+
+@main.command()
+@click.argument("mcap_file", type=click.Path(exists=True, dir_okay=False))
+@click.option("-p", "--pipeline", "pipeline_file", type=click.Path(exists=True, dir_okay=False),
+              help="Pipeline TOML (pipelines/flight.toml, ...); defaults when omitted.")
+@click.option("-o", "--out", "out_dir", required=True, type=click.Path(file_okay=False),
+              help="Run folder for the tables, trajectory MCAP and report.")
+def run(mcap_file: str, pipeline_file: str | None, out_dir: str) -> None:
+    """Process one flight log: A, legs, B, pairs, calibration, compensation, report.
+
+    Calls pospp.pipeline.run.
+    """
+    from pospp import pipeline
+    from pospp.io.report_files import read_run_tables
+    from pospp.report.summary import summary_text
+
+    try:
+        config = _config(pipeline_file)
+    except ConfigError as exc:
+        _fail(exc)
+    bar = _StageBar()
+    try:
+        outcome = pipeline.run(mcap_file, config, out_dir, progress=bar)
+    except (ValueError, FileNotFoundError) as exc:
+        bar.close()
+        _fail(exc)
+    bar.close()
+    click.echo(summary_text(read_run_tables(outcome.out_dir)))
+
+
+@main.command()
+@click.argument("inputs", nargs=-1, required=True, type=click.Path(exists=True))
+@click.option("-p", "--pipeline", "pipeline_file", type=click.Path(exists=True, dir_okay=False))
+@click.option("-o", "--out", "out_root", required=True, type=click.Path(file_okay=False),
+              help="Root folder: one run folder per flight and manifest.parquet.")
+@click.option("-j", "--workers", default=2, show_default=True, help="Local processes.")
+@click.option("--scheduler", default=None,
+              help="Dask distributed scheduler address (tcp://host:8786) instead of local.")
+@click.option("--force", is_flag=True, help="Re-run flights that are already done.")
+def batch(inputs: tuple[str, ...], pipeline_file: str | None, out_root: str, workers: int,
+          scheduler: str | None, force: bool) -> None:
+    """Process an archive: MCAP files and/or folders of them (pospp.batch.run_batch)."""
+    from pospp.batch import run_batch
+
+    files: list[Path] = []
+    for item in map(Path, inputs):
+        files.extend(sorted(item.rglob("*.mcap")) if item.is_dir() else [item])
+    if not files:
+        _fail(ValueError(f"no .mcap files found in {', '.join(inputs)}"))
+    try:
+        config = _config(pipeline_file)
+    except ConfigError as exc:
+        _fail(exc)
+
+    def show(o) -> None:
+        tail = f": {o.error}" if o.error else ""
+        click.echo(f"{o.status:8s} {o.duration_s:7.1f} s  {o.file}{tail}")
+
+    rows = run_batch(files, config, out_root, workers=workers, scheduler=scheduler,
+                     force=force, on_result=show)
+    n_failed = sum(r.status == "failed" for r in rows)
+    click.echo(f"{len(rows)} flights: {len(rows) - n_failed} processed or skipped, "
+               f"{n_failed} failed; manifest: {Path(out_root) / 'manifest.parquet'}")
+    if n_failed:
+        sys.exit(1)
+
+
+@main.command()
+@click.argument("run_dir", type=click.Path(exists=True, file_okay=False))
+def report(run_dir: str) -> None:
+    """Re-render RUN_DIR/report.html from the run's tables (pospp.pipeline.write_report)."""
+    from pospp.pipeline import write_report
+
+    click.echo(str(write_report(run_dir)))
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

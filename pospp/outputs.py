@@ -1,0 +1,117 @@
+"""Stage results -> output table columns (docs/formats.md schemas). No I/O, no printing.
+
+The pipeline turns its frozen stage results into the documented tables here, in one place, so
+the column names and units of ``pospp.io.parquet_tables.TABLES`` meet the numeric results
+once. Angles leave the numeric core in radians and arrive here; degrees, deg/h and arcsec are
+made only here (design.md: units at the edges).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from pospp.rotation import ARCSEC_RAD, DEG_PER_H_RADPS
+
+_NS_PER_S = 1_000_000_000
+
+
+def t_s_to_time_ns(t_s: Any, epoch_ns: int) -> np.ndarray:
+    """Run seconds -> int64 nanoseconds (the one conversion back to file time)."""
+    return np.int64(epoch_ns) + np.round(np.asarray(t_s, dtype=float) * 1e9).astype(np.int64)
+
+
+def trajectory_table(solutions: Mapping[str, Any], epoch_ns: int) -> pd.DataFrame:
+    """trajectory.parquet: one block of rows per solution ("forward", "smoothed", ...).
+
+    Each solution is a :class:`pospp.nav.filter.NavSolution` (NED, rad, SI).
+    """
+    blocks = []
+    for name, sol in solutions.items():
+        rpy = np.degrees(sol.rpy_rad)
+        rpy_sig = np.degrees(sol.rpy_sigma_rad)
+        blocks.append(pd.DataFrame({
+            "time_ns": t_s_to_time_ns(sol.t_s, epoch_ns),
+            "solution": name,
+            "lat_deg": np.degrees(sol.lat_rad),
+            "lon_deg": np.degrees(sol.lon_rad),
+            "height_m": sol.height_m,
+            "vn_mps": sol.v_n_mps[:, 0],
+            "ve_mps": sol.v_n_mps[:, 1],
+            "vd_mps": sol.v_n_mps[:, 2],
+            "roll_deg": rpy[:, 0],
+            "pitch_deg": rpy[:, 1],
+            "yaw_deg": np.mod(rpy[:, 2], 360.0),
+            "north_sigma_m": sol.pos_sigma_ned_m[:, 0],
+            "east_sigma_m": sol.pos_sigma_ned_m[:, 1],
+            "down_sigma_m": sol.pos_sigma_ned_m[:, 2],
+            "vn_sigma_mps": sol.vel_sigma_ned_mps[:, 0],
+            "ve_sigma_mps": sol.vel_sigma_ned_mps[:, 1],
+            "vd_sigma_mps": sol.vel_sigma_ned_mps[:, 2],
+            "roll_sigma_deg": rpy_sig[:, 0],
+            "pitch_sigma_deg": rpy_sig[:, 1],
+            "yaw_sigma_deg": rpy_sig[:, 2],
+        }))
+    return pd.concat(blocks, ignore_index=True)
+
+
+def issue_message(issue: Any) -> dict[str, Any]:
+    """One :class:`pospp.io.errors.IngestIssue` -> a messages row."""
+    return {
+        "severity": issue.severity,
+        "stage": "ingest",
+        "time_ns": issue.time_ns,
+        "text": (f"{issue.file}: " if issue.file else "") + issue.message,
+        "topic": issue.topic,
+        "index": issue.index,
+        "byte_offset": issue.byte_offset,
+    }
+
+
+def rejection_messages(rejections: Iterable[Any], *, limit: int = 200) -> list[dict[str, Any]]:
+    """GNSS measurements algorithm A did not use -> messages rows (at most ``limit``, then one
+    row counting the rest, so a flight with a bad receiver does not flood the table)."""
+    rows = []
+    rejections = list(rejections)
+    for r in rejections[:limit]:
+        rows.append({"severity": "warning", "stage": "navigate", "time_ns": int(r.time_ns),
+                     "text": f"GNSS {r.kind} rejected: {r.reason}"})
+    if len(rejections) > limit:
+        rows.append({"severity": "warning", "stage": "navigate", "time_ns": None,
+                     "text": f"{len(rejections) - limit} more GNSS rejections not listed"})
+    return rows
+
+
+def messages_table(messages: list[dict[str, Any]]) -> pd.DataFrame:
+    """messages.parquet from rows (optional columns may be absent in a row)."""
+    cols = ["severity", "stage", "time_ns", "text", "topic", "index", "byte_offset"]
+    df = pd.DataFrame(messages, columns=cols)
+    for c in ("time_ns", "index", "byte_offset"):
+        df[c] = df[c].astype("Int64")
+    return df
+
+
+def log_summary(log: Any) -> dict[str, Any]:
+    """Summary columns describing the input."""
+    t = log.imu.time_ns
+    dt = np.diff(t)
+    return {
+        "duration_s": float((t[-1] - t[0]) / _NS_PER_S),
+        "n_imu_samples": int(len(log.imu)),
+        "n_gnss_fixes": int(len(log.fix)),
+        "imu_rate_hz": float(_NS_PER_S / np.median(dt)) if dt.size else float("nan"),
+    }
+
+
+def angle_to_report(name: str, value_rad: float, sigma_rad: float) -> tuple[float, float, str]:
+    """Calibration parameter -> (value, sigma, unit) in report units by its kind.
+
+    Misalignments (``phi_*``) in arcsec; drifts and gyro biases (``eps_*``, ``gyro_bias_*``)
+    in deg/h.
+    """
+    if name.startswith("phi"):
+        return value_rad / ARCSEC_RAD, sigma_rad / ARCSEC_RAD, "arcsec"
+    return value_rad / DEG_PER_H_RADPS, sigma_rad / DEG_PER_H_RADPS, "deg_per_h"

@@ -1,0 +1,320 @@
+"""The post-flight pipeline: stage order, stage contracts, outputs of one run.
+
+One way through the data::
+
+    ingest (io) -> algorithm A (nav) -> legs, B replays, pairs, calibration (calib)
+      -> compensation: B re-run, A re-run with the calibrated gyro bias (calib, nav)
+      -> diagnosis (diagnose) -> tables, MCAP trajectory, HTML report (io, report)
+
+Each stage takes the frozen results of the stages before it and returns its own; nothing
+numeric happens here, only orchestration and the translation of results into output tables
+(:mod:`pospp.outputs`). Files are touched only through :mod:`pospp.io`.
+
+Failure policy (design.md "nothing is lost"): ingestion problems that make the file unusable
+raise :class:`pospp.io.errors.IngestError` with file, topic and time; every later stage that
+cannot produce a result (no legs, no admissible pair, ...) records why in the ``messages``
+table and the run goes on, writing every table it can. Tables are written atomically, and the
+summary table is written last, so a folder with a summary is a finished run.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from pospp import outputs, rotation
+from pospp.config import PipelineConfig
+from pospp.io import mcap_reader, parquet_tables, report_files, trajectory_mcap
+from pospp.report.html import render_report
+from pospp.io.errors import IngestError
+from pospp.nav import filter as nav_filter
+from pospp.nav import tuning as nav_tuning
+
+ProgressFn = Callable[[str, float], None]
+"""Progress callback: (stage name, fraction of the whole run done in [0, 1])."""
+
+STAGES = ("ingest", "navigate", "calibrate", "compensate", "diagnose", "write")
+
+
+@dataclass(frozen=True)
+class RunOutcome:
+    """What one ``pospp run`` produced.
+
+    Attributes
+    ----------
+    out_dir : Path
+        The run folder.
+    status : str
+        "ok" (every stage ran), "partial" (a later stage produced nothing, see messages) or
+        "failed" (ingestion or algorithm A failed; only messages and summary are written).
+    summary : dict
+        The one row of summary.parquet.
+    messages : pandas.DataFrame
+        The messages table (warnings and errors with their stage).
+    wall_time_s : float
+    """
+
+    out_dir: Path
+    status: str
+    summary: dict[str, Any]
+    messages: pd.DataFrame
+    wall_time_s: float
+
+
+def sensor_to_body_dcm(sensor_frame: str, mounting_rpy_deg: tuple[float, float, float]) -> Any:
+    """C_bs from the logged axis convention and the extra mounting rotation.
+
+    ``v_b = C_mount @ C_axes @ v_s``: C_axes maps the logged axes (FLU per REP-103, or FRD) to
+    FRD; C_mount (roll, pitch, yaw of the sensor case in the body, z-y-x) is the residual
+    mounting rotation, identity when the IMU is aligned with the body.
+    """
+    axes = {"flu": mcap_reader.FLU_TO_FRD, "frd": np.eye(3)}[sensor_frame]
+    return rotation.dcm_from_euler(np.radians(mounting_rpy_deg)) @ axes
+
+
+def ingest(path: str | Path, config: PipelineConfig) -> mcap_reader.FlightLog:
+    """Read and validate the flight log per the [input] section."""
+    cfg = config.input
+    log = mcap_reader.read_flight_log(
+        path,
+        imu_topic=cfg.imu_topic,
+        fix_topic=cfg.fix_topic,
+        vel_topic=cfg.vel_topic,
+        c_bs=sensor_to_body_dcm(cfg.sensor_frame, cfg.mounting_rpy_deg),
+    )
+    if cfg.start_s is None and cfg.end_s is None:
+        return log
+    first = int(log.imu.time_ns[0])
+    lo = -np.inf if cfg.start_s is None else first + cfg.start_s * 1e9
+    hi = np.inf if cfg.end_s is None else first + cfg.end_s * 1e9
+
+    def keep(obj: Any) -> Any:
+        m = (obj.time_ns >= lo) & (obj.time_ns < hi)
+        return replace(obj, **{k: v[m] for k, v in vars(obj).items()
+                               if isinstance(v, np.ndarray) and v.shape[:1] == m.shape})
+
+    imu = keep(log.imu)
+    if len(imu) < 2:
+        raise IngestError(f"no IMU samples in the window [{cfg.start_s}, {cfg.end_s}) s "
+                          "after the first sample", file=str(path), topic=cfg.imu_topic)
+    return replace(log, imu=imu, fix=keep(log.fix), vel=keep(log.vel))
+
+
+def imu_tuning(config: PipelineConfig) -> nav_tuning.ImuTuning:
+    """The filter's IMU noise model: the grade preset with the [imu] overrides."""
+    overrides = {k: v for k, v in vars(config.imu).items() if k != "grade" and v is not None}
+    return nav_tuning.tuning_preset(config.imu.grade, **overrides)
+
+
+def navigate(
+    log: mcap_reader.FlightLog,
+    config: PipelineConfig,
+    *,
+    gyro_bias_correction_b_radps: Any = None,
+) -> nav_filter.FilterResult:
+    """Algorithm A over the whole log; optionally with a calibrated gyro bias removed first.
+
+    The correction is applied to the IMU samples (measured = true + bias, so the corrected rate
+    is w - b_g), which is exactly what compensating the sensor means; the filter then runs
+    unchanged.
+    """
+    imu = log.imu
+    if gyro_bias_correction_b_radps is not None:
+        imu = replace(imu, w_ib_b_radps=imu.w_ib_b_radps - np.asarray(
+            gyro_bias_correction_b_radps, dtype=float))
+    g, f = config.gnss, config.filter
+    options = replace(
+        nav_filter.FilterOptions(),
+        pos_sigma_floor_m=g.pos_sigma_floor_m,
+        vel_sigma_floor_mps=g.vel_sigma_floor_mps,
+        gate_probability=g.gate_probability,
+        use_velocity=g.use_velocity,
+        smoother=f.smoother,
+    )
+    return nav_filter.run_integrated_navigation(
+        imu,
+        log.fix,
+        log.vel,
+        imu_tuning(config),
+        epoch_ns=int(log.imu.time_ns[0]),
+        lever_arm_b_m=np.asarray(g.lever_arm_m, dtype=float),
+        estimate_lever_arm=g.estimate_lever_arm,
+        output_rate_hz=f.output_rate_hz,
+        options=options,
+    )
+
+
+class _Progress:
+    """Stage bookkeeping: progress callback, wall times, messages."""
+
+    def __init__(self, progress: ProgressFn | None) -> None:
+        self._progress = progress
+        self.timings_s: dict[str, float] = {}
+        self.messages: list[dict[str, Any]] = []
+        self._t0 = time.perf_counter()
+
+    def stage(self, name: str) -> None:
+        now = time.perf_counter()
+        self.timings_s[name] = now
+        if self._progress is not None:
+            self._progress(name, STAGES.index(name) / len(STAGES))
+
+    def done(self) -> None:
+        if self._progress is not None:
+            self._progress("done", 1.0)
+
+    def note(self, severity: str, stage: str, text: str, time_ns: int | None = None) -> None:
+        self.messages.append(
+            {"severity": severity, "stage": stage, "time_ns": time_ns, "text": text}
+        )
+
+    @property
+    def elapsed_s(self) -> float:
+        return time.perf_counter() - self._t0
+
+
+def run(
+    mcap_path: str | Path,
+    config: PipelineConfig,
+    out_dir: str | Path,
+    *,
+    progress: ProgressFn | None = None,
+) -> RunOutcome:
+    """Process one flight log into a run folder (the whole pipeline).
+
+    Parameters
+    ----------
+    mcap_path : path-like
+        ROS 2 MCAP flight log (data contract in docs/formats.md).
+    config : PipelineConfig
+    out_dir : path-like
+        Run folder; created if needed. Existing tables are replaced atomically.
+    progress : callable, optional
+        Called with (stage, fraction done) at each stage start.
+
+    Returns
+    -------
+    RunOutcome
+
+    Raises
+    ------
+    pospp.io.errors.IngestError
+        Only after the messages and summary tables recording the failure are written.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    book = _Progress(progress)
+    meta = {
+        "input_file": str(mcap_path),
+        "input_sha256": parquet_tables.sha256_file(mcap_path) if Path(mcap_path).is_file()
+        else "",
+        "config": config.to_dict(),
+    }
+    summary: dict[str, Any] = {"input_file": meta["input_file"],
+                               "input_sha256": meta["input_sha256"]}
+
+    def write(name: str, data: Any, schema: str | None = None) -> None:
+        parquet_tables.write_table(out / f"{name}.parquet", data, schema or name, metadata=meta)
+
+    def finish(status: str) -> RunOutcome:
+        summary["status"] = status
+        summary["wall_time_s"] = book.elapsed_s
+        msgs = pd.DataFrame(book.messages, columns=["severity", "stage", "time_ns", "text"])
+        write("messages", outputs.messages_table(book.messages))
+        write("summary", summary)  # last: a folder with a summary is a finished run
+        book.done()
+        return RunOutcome(out, status, summary, msgs, book.elapsed_s)
+
+    # --- ingest -------------------------------------------------------------------------------
+    book.stage("ingest")
+    try:
+        log = ingest(mcap_path, config)
+    except (IngestError, FileNotFoundError, ValueError) as exc:
+        book.note("error", "ingest", str(exc))
+        finish("failed")
+        raise
+    for issue in log.issues:
+        book.messages.append(outputs.issue_message(issue))
+    summary.update(outputs.log_summary(log))
+
+    # --- algorithm A --------------------------------------------------------------------------
+    book.stage("navigate")
+    try:
+        nav = navigate(log, config)
+    except ValueError as exc:
+        book.note("error", "navigate", f"algorithm A failed: {exc}")
+        finish("failed")
+        raise
+    book.messages.extend(outputs.rejection_messages(nav.rejections))
+    epoch_ns = int(log.imu.time_ns[0])
+    solutions = {"forward": nav.forward}
+    if nav.smoothed is not None:
+        solutions["smoothed"] = nav.smoothed
+
+    # --- calibration: legs, B, pairs, least squares -------------------------------------------
+    book.stage("calibrate")
+    calib_run = calibrate(log, nav, config)
+    for text in calib_run.reasons:
+        book.note("warning", "calibrate", text)
+    status = "ok" if calib_run.calibration is not None else "partial"
+
+    # --- compensation: A re-run with the calibrated gyro bias ---------------------------------
+    book.stage("compensate")
+    if calib_run.calibration is not None and config.compensation.rerun_filter:
+        comp = navigate(log, config,
+                        gyro_bias_correction_b_radps=calib_run.gyro_bias_b_radps)
+        solutions["compensated"] = comp.smoothed if comp.smoothed is not None else comp.forward
+
+    # --- diagnosis -----------------------------------------------------------------------------
+    book.stage("diagnose")
+    diagnosis = None
+    if config.outputs.diagnose and calib_run.calibration is not None:
+        diagnosis = diagnose(calib_run, config)
+
+    # --- outputs -------------------------------------------------------------------------------
+    book.stage("write")
+    tables = {
+        "trajectory": outputs.trajectory_table(solutions, epoch_ns),
+        "legs": outputs.legs_table(calib_run, epoch_ns),
+        "pairs": outputs.pairs_table(calib_run),
+        "calibration": outputs.calibration_table(calib_run),
+        "leg_errors": outputs.leg_errors_table(calib_run),
+    }
+    if diagnosis is not None:
+        tables["diagnosis"] = outputs.diagnosis_table(diagnosis)
+    for name, table in tables.items():
+        write(name, table)
+    summary.update(outputs.calibration_summary(calib_run))
+    if config.outputs.mcap:
+        best = solutions.get("compensated") or solutions.get("smoothed") or nav.forward
+        trajectory_mcap.write_trajectory_mcap(out / "trajectory.mcap", best, epoch_ns)
+    outcome = finish(status)
+    if config.outputs.report:
+        write_report(out)
+    return outcome
+
+
+def write_report(run_dir: str | Path) -> Path:
+    """Render report.html of a run folder from its tables alone."""
+    tables = report_files.read_run_tables(run_dir)
+    title = f"pospp run report: {Path(str(tables['summary'].input_file.iloc[0])).name}" \
+        if "summary" in tables else "pospp run report"
+    return report_files.write_text(Path(run_dir) / "report.html",
+                                   render_report(tables, title=title))
+
+
+def calibrate(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
+              config: PipelineConfig) -> Any:
+    """Legs, B replays, pairs, least squares and B re-run (pospp.calib)."""
+    raise NotImplementedError  # wired to pospp.calib at integration
+
+
+def diagnose(calib_run: Any, config: PipelineConfig) -> Any:
+    """Model-discrepancy workflow on the calibrated run (pospp.diagnose)."""
+    raise NotImplementedError  # wired to pospp.diagnose at integration
