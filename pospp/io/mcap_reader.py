@@ -18,15 +18,17 @@ Frames and units
 
 Speed
 -----
-The file is read in ONE sequential pass (no summary section needed, so a truncated file
-yields everything before the break, including the readable part of a cut-off zstd/lz4 chunk).
-Records are framed here (index records skipped unparsed; Schema and Channel records parsed by
-``mcap.records``). Each chunk is decompressed and its records are walked with ``struct``;
-the payloads of the wanted topics are gathered with numpy and decoded through one structured
-dtype per (frame_id length) layout (``pospp.io.ros_messages.cdr_dtype``), for all messages of
-the chunk at once. The first message of every (channel, layout) is also decoded by
-``mcap_ros2``'s generic decoder and the two must agree bit for bit, else that layout falls back
-to the generic decoder; messages that are not little-endian plain CDR always go through it.
+The file is read in ONE sequential pass by :mod:`pospp.io._mcap_scan` (no summary section
+needed, so a truncated file yields everything before the break, including the readable part of a
+cut-off zstd/lz4 chunk). Records are framed there (index records skipped unparsed; Schema and
+Channel records parsed by ``mcap.records``); docs/formats.md gives the measured reason for not
+using ``mcap.reader.make_reader(...).iter_messages()``. Each chunk is decompressed and its
+records are walked with ``struct``; the payloads of the wanted topics are gathered with numpy
+and decoded through one structured dtype per (frame_id length) layout
+(``pospp.io.ros_messages.cdr_dtype``), for all messages of the chunk at once. The first message
+of every (channel, layout) is also decoded by ``mcap_ros2``'s generic decoder and the two must
+agree bit for bit, else that layout falls back to the generic decoder; messages that are not
+little-endian plain CDR always go through it.
 
 Checks
 ------
@@ -34,26 +36,21 @@ Each raises ``IngestError`` or records an ``IngestIssue`` (docs/formats.md lists
 required topic (the available ones are listed), wrong schema or encoding, IMU stamps not
 strictly increasing (error), GNSS duplicate stamps (dropped, warning) or backwards (error),
 NaN/inf (error naming the first bad message), IMU gaps over 3 nominal intervals and interval
-changes (warnings), IMU magnitudes that look like g or deg/s (error), NO_FIX fixes (dropped,
-warning), truncated or corrupt file (error issue, ``complete=False``, data read so far kept).
+changes (warnings), IMU magnitudes that look like g or deg/s (error), IMU turn rates that
+disagree with the GNSS course rate by a factor near 180/pi (error: deg/s logged as rad/s),
+NO_FIX fixes (dropped, warning), truncated or corrupt file (error issue, ``complete=False``,
+data read so far kept; a corrupt chunk is skipped and reading goes on).
 """
 
 from __future__ import annotations
 
-import struct
-import zlib
-from collections.abc import Callable
 from dataclasses import dataclass
-from io import BytesIO
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from mcap.data_stream import ReadDataStream
-from mcap.records import Channel, Schema
-from mcap_ros2.decoder import DecoderFactory
 
-from pospp.io import ros_messages as rm
+from pospp.io._mcap_scan import FIX_SPEC, IMU_SPEC, VEL_SPEC, Collector, Scan
 from pospp.io.errors import IngestError, IngestIssue
 
 __all__ = [
@@ -78,7 +75,6 @@ ENU_TO_NED.setflags(write=False)
 G_MPS2 = 9.80665  # standard gravity, only for the units-plausibility check
 _GAP_FACTOR = 3.0  # an IMU interval longer than this many nominal intervals is a gap
 _MAX_LISTED = 100  # at most this many individual gap / rate-change issues
-_GATHER_BATCH = 16384  # messages gathered at a time (bounds the index array to ~100 MB)
 
 
 # --------------------------------------------------------------------------- public data
@@ -218,443 +214,6 @@ def check_dcm(c_bs: Any, name: str = "c_bs") -> np.ndarray:
     return c
 
 
-# --------------------------------------------------------------------------- topic specs
-
-
-def _vec(v: Any) -> tuple[float, float, float]:
-    return (v.x, v.y, v.z)
-
-
-@dataclass(frozen=True)
-class _Spec:
-    """How to decode one message type: layout, fields wanted, generic-decoder extractor."""
-
-    type_name: str
-    layout: tuple[tuple[str, str, int], ...]
-    wanted: tuple[str, ...]
-    from_decoded: Callable[[Any], dict[str, Any]]
-
-
-_IMU_SPEC = _Spec(
-    rm.IMU_TYPE,
-    rm.IMU_FIELDS,
-    ("angular_velocity", "linear_acceleration"),
-    lambda m: {
-        "angular_velocity": _vec(m.angular_velocity),
-        "linear_acceleration": _vec(m.linear_acceleration),
-    },
-)
-_FIX_SPEC = _Spec(
-    rm.NAVSATFIX_TYPE,
-    rm.NAVSATFIX_FIELDS,
-    ("status", "latitude", "longitude", "altitude", "position_covariance",
-     "position_covariance_type"),
-    lambda m: {
-        "status": m.status.status,
-        "latitude": m.latitude,
-        "longitude": m.longitude,
-        "altitude": m.altitude,
-        "position_covariance": tuple(m.position_covariance),
-        "position_covariance_type": m.position_covariance_type,
-    },
-)
-_VEL_SPEC = _Spec(
-    rm.TWIST_COV_STAMPED_TYPE,
-    rm.TWIST_COV_STAMPED_FIELDS,
-    ("linear", "covariance"),
-    lambda m: {"linear": _vec(m.twist.twist.linear), "covariance": tuple(m.twist.covariance)},
-)
-
-
-def _gather(buf: np.ndarray, starts: np.ndarray, offset: int, width: int) -> np.ndarray:
-    """Bytes ``buf[s + offset : s + offset + width]`` for every s in ``starts``: (n, width)."""
-    return buf[(starts + offset)[:, None] + np.arange(width)]
-
-
-def _field_values(buf: np.ndarray, starts: np.ndarray, dt: np.ndarray, name: str) -> np.ndarray:
-    """Field ``name`` of layout ``dt`` for messages starting at ``starts``: (n,) or (n, k)."""
-    ftype, offset = dt.fields[name][:2]
-    base = ftype.base if ftype.subdtype else ftype
-    raw = np.ascontiguousarray(_gather(buf, starts, offset, ftype.itemsize))
-    vals = raw.view(base.newbyteorder("<") if base.itemsize > 1 else base)
-    vals = vals.reshape(len(starts), *ftype.shape) if ftype.shape else vals[:, 0]
-    return vals.astype(base.newbyteorder("="), copy=False)
-
-
-class _Collector:
-    """Accumulates the decoded messages of one topic, block by block."""
-
-    def __init__(self, topic: str, spec: _Spec, path: str) -> None:
-        self.topic = topic
-        self.spec = spec
-        self.path = path
-        self.blocks: list[dict[str, np.ndarray]] = []
-        self.count = 0
-        self.frame_ids: list[str] = []
-        self.channels: dict[int, Schema | None] = {}
-        self._decoders: dict[int, Callable[[bytes], Any]] = {}
-        self._verified: dict[tuple[int, int], bool] = {}  # (channel, frame_len) -> fast ok
-        self.slow_messages = 0
-
-    # -- generic path
-    def _decoder(self, channel_id: int) -> Callable[[bytes], Any]:
-        dec = self._decoders.get(channel_id)
-        if dec is None:
-            dec = DecoderFactory().decoder_for("cdr", self.channels[channel_id])
-            if dec is None:
-                raise IngestError(
-                    f"no ROS 2 decoder for the schema of {self.topic!r}", file=self.path,
-                    topic=self.topic,
-                )
-            self._decoders[channel_id] = dec
-        return dec
-
-    def _decode_slow(self, channel_id: int, payload: bytes, index: int) -> dict[str, Any]:
-        try:
-            msg = self._decoder(channel_id)(payload)
-        except Exception as exc:  # noqa: BLE001 - any decoder failure is a corrupt message
-            raise IngestError(
-                f"cannot decode {self.spec.type_name} message: {exc}", file=self.path,
-                topic=self.topic, index=index,
-            ) from exc
-        vals = self.spec.from_decoded(msg)
-        vals["time_ns"] = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
-        vals["frame_id"] = msg.header.frame_id
-        return vals
-
-    # -- one batch of messages of one channel
-    def add(self, channel_id: int, buf: np.ndarray, pos: np.ndarray) -> None:
-        """Decode the Message records starting at ``pos`` (record offsets) in ``buf``."""
-        n = len(pos)
-        first_index = self.count
-        rec_len = _gather(buf, pos, 1, 8).copy().view("<u8")[:, 0].astype(np.int64)
-        log_time = _gather(buf, pos, 15, 8).copy().view("<u8")[:, 0].astype(np.int64)
-        starts = pos + 31  # opcode 1 + length 8 + channel 2 + sequence 4 + 2 x time 8
-        plen = rec_len - 22
-        out: dict[str, np.ndarray] = {"time_ns": np.zeros(n, np.int64), "log_time_ns": log_time}
-        probe = rm.cdr_dtype(self.spec.layout, 1)
-        for name in self.spec.wanted:
-            ftype = probe.fields[name][0]
-            base = ftype.base if ftype.subdtype else ftype
-            out[name] = np.zeros((n, *ftype.shape), base.newbyteorder("="))
-        slow = np.ones(n, bool)
-        ok_hdr = plen >= 16
-        if ok_hdr.any():
-            hdr = np.zeros((n, 16), np.uint8)
-            hdr[ok_hdr] = _gather(buf, starts[ok_hdr], 0, 16)
-            le = ok_hdr & (hdr[:, 0] == 0) & (hdr[:, 1] == 1)
-            flen = hdr[:, 12:16].copy().view("<u4")[:, 0].astype(np.int64)
-            for fl in np.unique(flen[le]):
-                dt = rm.cdr_dtype(self.spec.layout, int(fl))
-                grp = np.flatnonzero(le & (flen == fl) & (plen == dt.itemsize))
-                if grp.size == 0 or not self._layout_ok(channel_id, buf, starts, grp[0], dt):
-                    continue
-                for name in self.spec.wanted:
-                    out[name][grp] = _field_values(buf, starts[grp], dt, name)
-                sec = _field_values(buf, starts[grp], dt, "sec")
-                nsec = _field_values(buf, starts[grp], dt, "nanosec")
-                out["time_ns"][grp] = rm.stamp_ns(sec, nsec)
-                chars = _field_values(buf, starts[grp], dt, "frame_id")
-                self._note_frames(chars)
-                slow[grp] = False
-        for i in np.flatnonzero(slow):
-            s, ln = int(starts[i]), int(plen[i])
-            vals = self._decode_slow(channel_id, buf[s : s + ln].tobytes(), first_index + i)
-            for name in self.spec.wanted:
-                out[name][i] = vals[name]
-            out["time_ns"][i] = vals["time_ns"]
-            if vals["frame_id"] not in self.frame_ids:
-                self.frame_ids.append(vals["frame_id"])
-            self.slow_messages += 1
-        self.blocks.append(out)
-        self.count += n
-
-    def _note_frames(self, chars: np.ndarray) -> None:
-        rows = chars if np.all(chars == chars[0]) else np.unique(chars, axis=0)
-        for row in rows[:1] if rows is chars else rows:
-            fid = row.tobytes().rstrip(b"\x00").decode("utf-8", "replace")
-            if fid not in self.frame_ids:
-                self.frame_ids.append(fid)
-
-    def _layout_ok(
-        self, channel_id: int, buf: np.ndarray, starts: np.ndarray, i: int, dt: np.dtype
-    ) -> bool:
-        """Fast layout checked once per (channel, layout) against the generic decoder."""
-        key = (channel_id, dt.itemsize)
-        if key not in self._verified:
-            s = int(starts[i])
-            ref = self._decode_slow(channel_id, buf[s : s + dt.itemsize].tobytes(), self.count)
-            one = starts[i : i + 1]
-            same = all(
-                np.array_equal(
-                    _field_values(buf, one, dt, name)[0].tobytes(),
-                    np.asarray(ref[name], dtype=_field_values(buf, one, dt, name).dtype).tobytes(),
-                )
-                for name in self.spec.wanted
-            )
-            self._verified[key] = same
-        return self._verified[key]
-
-    def arrays(self) -> dict[str, np.ndarray]:
-        """All blocks concatenated (one concatenate per field, not per block)."""
-        if not self.blocks:
-            probe = rm.cdr_dtype(self.spec.layout, 1)
-            res = {"time_ns": np.zeros(0, np.int64), "log_time_ns": np.zeros(0, np.int64)}
-            for name in self.spec.wanted:
-                ftype = probe.fields[name][0]
-                base = ftype.base if ftype.subdtype else ftype
-                res[name] = np.zeros((0, *ftype.shape), base.newbyteorder("="))
-            return res
-        return {k: np.concatenate([b[k] for b in self.blocks]) for k in self.blocks[0]}
-
-
-# --------------------------------------------------------------------------- streaming pass
-
-_REC = struct.Struct("<BQ").unpack_from
-_U16 = struct.Struct("<H").unpack_from
-_CHUNK_HEAD = struct.Struct("<QQQII")  # start, end, uncompressed size, crc, compression len
-_MAGIC = b"\x89MCAP0\r\n"
-_OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK, _OP_FOOTER = 0x03, 0x04, 0x05, 0x06, 0x02
-
-
-class _Truncated(Exception):
-    """The file ends inside a record or before the Footer."""
-
-
-@dataclass(frozen=True)
-class _RawChunk:
-    start_ns: int
-    end_ns: int
-    uncompressed_size: int
-    crc: int
-    compression: str
-    data: bytes
-    truncated: bool
-
-
-def _parse_chunk(body: bytes, truncated: bool) -> _RawChunk:
-    if len(body) < _CHUNK_HEAD.size:
-        raise _Truncated("chunk header cut off")
-    start, end, usize, crc, clen = _CHUNK_HEAD.unpack_from(body, 0)
-    p = _CHUNK_HEAD.size
-    comp = body[p : p + clen].decode("utf-8")
-    p += clen
-    (dlen,) = struct.unpack_from("<Q", body, p) if len(body) >= p + 8 else (None,)
-    if dlen is None:
-        raise _Truncated("chunk header cut off")
-    data = body[p + 8 : p + 8 + dlen]
-    return _RawChunk(start, end, usize, crc, comp, data, truncated or len(data) < dlen)
-
-
-def _decompress(chunk: _RawChunk) -> bytes:
-    """Chunk records; for a truncated chunk, as many bytes as can be decompressed."""
-    if chunk.compression == "zstd":
-        import zstandard
-
-        if chunk.truncated:
-            data = zstandard.ZstdDecompressor().decompressobj().decompress(chunk.data)
-        else:
-            data = zstandard.ZstdDecompressor().decompress(
-                chunk.data, max_output_size=chunk.uncompressed_size
-            )
-    elif chunk.compression == "lz4":
-        import lz4.frame
-
-        if chunk.truncated:
-            data = lz4.frame.LZ4FrameDecompressor().decompress(chunk.data)
-        else:
-            data = lz4.frame.decompress(chunk.data)
-    elif chunk.compression == "":
-        data = chunk.data
-    else:
-        raise ValueError(f"unsupported chunk compression {chunk.compression!r}")
-    if chunk.truncated:
-        return data
-    if len(data) != chunk.uncompressed_size:
-        raise ValueError(
-            f"chunk decompressed to {len(data)} bytes, header says {chunk.uncompressed_size}"
-        )
-    if chunk.crc != 0 and zlib.crc32(data) != chunk.crc:
-        raise ValueError("chunk CRC mismatch")
-    return data
-
-
-class _Pass:
-    """One streaming pass over the file, dispatching messages to collectors by topic.
-
-    Records are framed here (opcode, length) rather than by ``mcap``'s ``StreamReader``, so
-    that index records are skipped unparsed and a truncated last chunk is still decompressed
-    as far as it goes.
-    """
-
-    def __init__(self, path: str, collectors: dict[str, _Collector]) -> None:
-        self.path = path
-        self.by_topic = collectors
-        self.schemas: dict[int, Schema] = {}
-        self.topics: dict[str, str] = {}  # topic -> schema name
-        self.route: dict[int, _Collector | None] = {}
-        self.issues: list[IngestIssue] = []
-        self.complete = False
-        self.last_log_time_ns: int | None = None
-        self._loose: list[bytes] = []
-
-    def _schema(self, rec: Schema) -> None:
-        self.schemas[rec.id] = rec
-
-    def _channel(self, rec: Channel) -> None:
-        if rec.id in self.route:
-            return
-        schema = self.schemas.get(rec.schema_id)
-        self.topics[rec.topic] = schema.name if schema else "<no schema>"
-        col = self.by_topic.get(rec.topic)
-        if col is not None:
-            got = schema.name if schema else "<no schema>"
-            if got != col.spec.type_name:
-                raise IngestError(
-                    f"topic {rec.topic!r} has schema {got!r}, expected {col.spec.type_name!r}",
-                    file=self.path, topic=rec.topic,
-                )
-            if rec.message_encoding != "cdr" or schema.encoding != "ros2msg":
-                raise IngestError(
-                    f"topic {rec.topic!r} is {rec.message_encoding!r} / {schema.encoding!r}, "
-                    "expected 'cdr' messages with a 'ros2msg' schema",
-                    file=self.path, topic=rec.topic,
-                )
-            col.channels[rec.id] = schema
-        self.route[rec.id] = col
-
-    def _meta(self, op: int, body: bytes) -> None:
-        stream = ReadDataStream(BytesIO(body))
-        if op == _OP_SCHEMA:
-            self._schema(Schema.read(stream))
-        else:
-            self._channel(Channel.read(stream))
-
-    def _records(self, buf: bytes, *, partial: bool = False) -> int:
-        """Walk the records of a decompressed chunk (or a block of loose messages).
-
-        With ``partial`` (a truncated chunk), stop quietly at the first incomplete record.
-        Returns the number of bytes walked.
-        """
-        pos, n = 0, len(buf)
-        by_channel: dict[int, list[int]] = {}
-        while pos < n:
-            end = n + 1 if pos + 9 > n else pos + 9 + _REC(buf, pos)[1]
-            if end > n:
-                if partial:
-                    break
-                raise ValueError(f"record overruns the chunk at offset {pos}")
-            op = buf[pos]
-            if op == _OP_MESSAGE:
-                ch = _U16(buf, pos + 9)[0]
-                lst = by_channel.get(ch)
-                if lst is None:
-                    lst = by_channel[ch] = []
-                lst.append(pos)
-            elif op in (_OP_SCHEMA, _OP_CHANNEL):
-                self._meta(op, buf[pos + 9 : end])
-            pos = end
-        arr = np.frombuffer(buf, dtype=np.uint8)
-        for ch, lst in by_channel.items():
-            if ch not in self.route:
-                raise ValueError(f"message on channel {ch} before its Channel record")
-            col = self.route[ch]
-            if col is None:
-                continue
-            p = np.asarray(lst, dtype=np.int64)
-            for k in range(0, len(p), _GATHER_BATCH):
-                col.add(ch, arr, p[k : k + _GATHER_BATCH])
-            last = int(p[-1])
-            self.last_log_time_ns = max(self.last_log_time_ns or 0,
-                                        struct.unpack_from("<Q", buf, last + 15)[0])
-        return pos
-
-    def _flush_loose(self) -> None:
-        if self._loose:
-            buf = b"".join(self._loose)
-            self._loose = []
-            self._records(buf)
-
-    def run(self) -> None:
-        size = Path(self.path).stat().st_size
-        with open(self.path, "rb") as f:
-            if f.read(8) != _MAGIC:
-                raise IngestError("not an MCAP file (bad magic bytes)", file=self.path)
-            good = 8
-            try:
-                while True:
-                    head = f.read(9)
-                    if len(head) < 9:
-                        raise _Truncated("file ends without a Footer record")
-                    op, ln = _REC(head, 0)
-                    if op in (_OP_CHUNK, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE):
-                        body = f.read(ln)
-                        short = len(body) < ln
-                        if op == _OP_CHUNK:
-                            self._flush_loose()
-                            self._chunk(_parse_chunk(body, short), good)
-                        elif short:
-                            raise _Truncated("record cut off")
-                        elif op == _OP_MESSAGE:
-                            self._loose.append(head + body)
-                            if len(self._loose) >= 10000:
-                                self._flush_loose()
-                        else:
-                            self._meta(op, body)
-                        if short:
-                            raise _Truncated("chunk cut off (decoded what it held)")
-                    elif op == _OP_FOOTER:
-                        self._flush_loose()
-                        self.complete = True
-                        return
-                    else:
-                        if good + 9 + ln > size:
-                            raise _Truncated("record cut off")
-                        f.seek(ln, 1)
-                    good = f.tell()
-            except IngestError:
-                raise
-            except (_Truncated, ValueError, struct.error, UnicodeDecodeError) as exc:
-                self._flush_loose()
-                self.issues.append(
-                    IngestIssue(
-                        "error", self.path, None, None, None,
-                        f"MCAP truncated or corrupt after byte {good} of {size} ({exc}); kept "
-                        f"the messages read before it (last good log time "
-                        f"{self.last_log_time_ns} ns)",
-                        log_time_ns=self.last_log_time_ns, byte_offset=good,
-                    )
-                )
-
-    def _chunk(self, chunk: _RawChunk, offset: int) -> None:
-        try:
-            data = _decompress(chunk)
-            self._records(data, partial=chunk.truncated)
-        except IngestError:
-            raise
-        except (ValueError, struct.error) as exc:
-            if chunk.truncated:
-                raise _Truncated(f"chunk cut off and undecodable: {exc}") from exc
-            self.issues.append(
-                IngestIssue(
-                    "error", self.path, None, None, chunk.start_ns,
-                    f"corrupt chunk at byte {offset} skipped (log times "
-                    f"{chunk.start_ns}..{chunk.end_ns} ns): {exc}",
-                    log_time_ns=chunk.start_ns, byte_offset=offset,
-                )
-            )
-        except Exception as exc:  # zstd/lz4 errors have their own classes
-            if chunk.truncated:
-                raise _Truncated(f"chunk cut off and undecodable: {exc}") from exc
-            self.issues.append(
-                IngestIssue(
-                    "error", self.path, None, None, chunk.start_ns,
-                    f"corrupt chunk at byte {offset} skipped: {type(exc).__name__}: {exc}",
-                    log_time_ns=chunk.start_ns, byte_offset=offset,
-                )
-            )
-
-
 # --------------------------------------------------------------------------- checks & assembly
 
 
@@ -783,7 +342,53 @@ def _check_imu_units(w: np.ndarray, f: np.ndarray, topic: str, path: str) -> Non
         )
 
 
-def _assemble_imu(a: dict, col: _Collector, c_bs: np.ndarray, check_units: bool,
+_TURN_RATE_MIN_RADPS = np.deg2rad(1.0)  # GNSS intervals turning faster than this are compared
+_COURSE_SPEED_MIN_MPS = 3.0  # course over ground is only defined above this speed
+_MIN_TURN_INTERVALS = 5
+
+
+def _check_rate_units_against_gnss(imu: ImuSamples, vel: GnssVelocities, topic: str,
+                                   path: str) -> None:
+    """Compare the IMU rotation angle with the GNSS course change over turning intervals.
+
+    For each pair of consecutive GNSS velocities with horizontal speed above 3 m/s and a
+    course rate above 1 deg/s, the IMU rotation angle over the same interval,
+    ``|sum_k w_k dt_k|`` [rad], is divided by the course change ``|d psi|`` [rad]. In a turn the
+    body turns with its course (plus bank and crab changes), so the median ratio is near 1; a
+    gyro logged in deg/s gives about 57. A median above 10 over at least 5 intervals is an
+    error. Fewer turning intervals: no verdict (the magnitude check still applies).
+    """
+    if len(vel) < _MIN_TURN_INTERVALS + 1 or len(imu) < 3:
+        return
+    t = imu.time_ns
+    dt = np.diff(t, prepend=t[0] - (t[1] - t[0])) * 1e-9
+    cum = np.vstack([np.zeros((1, 3)), np.cumsum(imu.w_ib_b_radps * dt[:, None], axis=0)])
+    tv = vel.time_ns
+    speed = np.hypot(vel.v_n_mps[:, 0], vel.v_n_mps[:, 1])
+    course = np.arctan2(vel.v_n_mps[:, 1], vel.v_n_mps[:, 0])
+    dpsi = np.angle(np.exp(1j * np.diff(course)))
+    dtv = np.diff(tv) * 1e-9
+    ok = (speed[:-1] > _COURSE_SPEED_MIN_MPS) & (speed[1:] > _COURSE_SPEED_MIN_MPS)
+    ok &= (tv[:-1] >= t[0]) & (tv[1:] <= t[-1]) & (dtv > 0)
+    ok &= np.abs(dpsi) > _TURN_RATE_MIN_RADPS * np.where(dtv > 0, dtv, 1.0)
+    k = np.flatnonzero(ok)
+    if k.size < _MIN_TURN_INTERVALS:
+        return
+    ia = np.searchsorted(t, tv[k], side="right")
+    ib = np.searchsorted(t, tv[k + 1], side="right")
+    angle = np.linalg.norm(cum[ib] - cum[ia], axis=1)
+    ratio = float(np.median(angle / np.abs(dpsi[k])))
+    if ratio > 10.0:
+        j = int(k[np.argmax(angle / np.abs(dpsi[k]))])
+        raise IngestError(
+            f"IMU rotation over {k.size} turning GNSS intervals is {ratio:.1f} times the GNSS "
+            f"course change (median; expected about 1, 57.3 = 180/pi means angular_velocity "
+            f"is in deg/s, not rad/s)", file=path, topic=topic,
+            index=int(np.searchsorted(t, tv[j], side="right")), time_ns=int(tv[j]),
+        )
+
+
+def _assemble_imu(a: dict, col: Collector, c_bs: np.ndarray, check_units: bool,
                   issues: list[IngestIssue]) -> ImuSamples:
     topic, path = col.topic, col.path
     if len(a["time_ns"]) == 0:
@@ -804,7 +409,7 @@ def _assemble_imu(a: dict, col: _Collector, c_bs: np.ndarray, check_units: bool,
     )
 
 
-def _assemble_fix(a: dict, col: _Collector, issues: list[IngestIssue]) -> GnssFixes:
+def _assemble_fix(a: dict, col: Collector, issues: list[IngestIssue]) -> GnssFixes:
     topic, path = col.topic, col.path
     nofix = a["status"] < 0
     if nofix.any():
@@ -845,7 +450,7 @@ def _assemble_fix(a: dict, col: _Collector, issues: list[IngestIssue]) -> GnssFi
     )
 
 
-def _assemble_vel(a: dict, col: _Collector, issues: list[IngestIssue]) -> GnssVelocities:
+def _assemble_vel(a: dict, col: Collector, issues: list[IngestIssue]) -> GnssVelocities:
     topic, path = col.topic, col.path
     if len(a["time_ns"]) == 0:
         return empty_velocities()
@@ -907,11 +512,11 @@ def read_flight_log(
     if len({imu_topic, fix_topic, vel_topic}) != 3:
         raise ValueError(f"topics must differ: {imu_topic!r}, {fix_topic!r}, {vel_topic!r}")
     cols = {
-        imu_topic: _Collector(imu_topic, _IMU_SPEC, path),
-        fix_topic: _Collector(fix_topic, _FIX_SPEC, path),
-        vel_topic: _Collector(vel_topic, _VEL_SPEC, path),
+        imu_topic: Collector(imu_topic, IMU_SPEC, path),
+        fix_topic: Collector(fix_topic, FIX_SPEC, path),
+        vel_topic: Collector(vel_topic, VEL_SPEC, path),
     }
-    scan = _Pass(path, cols)
+    scan = Scan(path, cols)
     scan.run()
     issues = list(scan.issues)
     available = ", ".join(f"{t} ({s})" for t, s in sorted(scan.topics.items())) or "none"
@@ -940,6 +545,8 @@ def read_flight_log(
                         issues)
     vel = _assemble_vel(_window(cols[vel_topic].arrays(), start_ns, end_ns), cols[vel_topic],
                         issues)
+    if check_units and len(vel):
+        _check_rate_units_against_gnss(imu, vel, imu_topic, path)
     if fix.time_ns[-1] < imu.time_ns[0] or fix.time_ns[0] > imu.time_ns[-1]:
         issues.append(IngestIssue(
             "warning", path, fix_topic, None, int(fix.time_ns[0]),
