@@ -145,7 +145,8 @@ def run_batch(
 
     if scheduler is not None:
         try:
-            from dask.distributed import Client, as_completed as dask_completed
+            from dask.distributed import Client
+            from dask.distributed import as_completed as dask_completed
         except ImportError as exc:  # pragma: no cover - depends on the install
             raise RuntimeError("a Dask scheduler was given but dask.distributed is not "
                                "installed: pip install 'pospp[dask]'") from exc

@@ -31,10 +31,10 @@ import pandas as pd
 from pospp import outputs, rotation
 from pospp.config import PipelineConfig
 from pospp.io import mcap_reader, parquet_tables, report_files, trajectory_mcap
-from pospp.report.html import render_report
 from pospp.io.errors import IngestError
 from pospp.nav import filter as nav_filter
 from pospp.nav import tuning as nav_tuning
+from pospp.report.html import render_report
 
 ProgressFn = Callable[[str, float], None]
 """Progress callback: (stage name, fraction of the whole run done in [0, 1])."""
