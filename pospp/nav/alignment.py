@@ -24,8 +24,12 @@ period and the GNSS updates; heading becomes observable in the turns and acceler
 In-motion alignment
 -------------------
 Where no usable static period exists the filter starts at the first GNSS velocity epoch with a
-steady horizontal speed above ``min_speed_mps``: yaw = atan2(v_E, v_N) (track; crab/sideslip
-covered by a large sigma), pitch = atan2(-v_D, |v_h|) (flight path), roll = 0.
+steady horizontal speed above ``min_speed_mps`` whose fix agrees with the next fix moved
+back by the GNSS velocity (within ``max_fix_mismatch_m``): yaw = atan2(v_E, v_N) (track;
+crab/sideslip covered by a large sigma), pitch = atan2(-v_D, |v_h|) (flight path), roll = 0.
+
+The static alignment's position is the median of the fixes over the period (robust to
+outliers).
 
 Static detection: windows of ``window_s`` whose accelerometer and gyro standard deviations and
 |mean f| - g are below thresholds, and whose GNSS speed (where present) is below
@@ -62,6 +66,7 @@ class AlignmentOptions:
     motion_tilt_sigma_deg: float = 3.0
     static_velocity_sigma_mps: float = 0.05
     motion_velocity_sigma_mps: float = 0.5
+    max_fix_mismatch_m: float = 5.0
 
 
 @dataclass(frozen=True)
@@ -181,9 +186,8 @@ def coarse_static_alignment(
     tilt_sigma = math.hypot(noise.accel_bias_sigma_mps2, noise.accel_vrw_mpspsqrts / math.sqrt(t))
     tilt_sigma = max(tilt_sigma / g, 1e-5)
     horiz_rate = earth.EARTH_RATE_RADPS * math.cos(lat_rad)
-    heading_sigma = (
-        math.hypot(noise.gyro_bias_sigma_radps, noise.gyro_arw_radpsqrts / math.sqrt(t)) / horiz_rate
-    )
+    gyro_sigma = math.hypot(noise.gyro_bias_sigma_radps, noise.gyro_arw_radpsqrts / math.sqrt(t))
+    heading_sigma = gyro_sigma / horiz_rate
     heading_sigma = max(heading_sigma, 1e-4)
     return (
         np.array([roll, pitch, yaw]),
@@ -280,10 +284,13 @@ def align(
             w[sel].mean(axis=0), f[sel].mean(axis=0), float(fllh[0, 0]), t_stop - t[0], noise
         )
         if math.degrees(sigma_gc) <= options.max_gyrocompass_sigma_deg:
-            j = 0
+            # the antenna is at rest: the median of the fixes of the period resists outliers
+            at_rest = ft <= t_stop
+            llh = np.median(fllh[at_rest], axis=0)
             c_nb = rotation.dcm_from_euler(rpy)
-            lat, lon, h = _imu_position(*fllh[j], c_nb, lever, np.zeros(3), 0.0)
-            pos_sig = np.sqrt(np.clip(np.diag(fcov[j]), 1e-6, None))
+            lat, lon, h = _imu_position(*llh, c_nb, lever, np.zeros(3), 0.0)
+            pos_sig = np.sqrt(np.clip(np.median(np.diagonal(fcov[at_rest], axis1=1, axis2=2),
+                                                axis=0), 1e-6, None))
             return AlignmentResult(
                 method="static", k_start=0, t_s=float(t[0]), lat_rad=float(lat),
                 lon_rad=float(lon), height_m=float(h), v_n_mps=np.zeros(3), rpy_rad=rpy,
@@ -306,7 +313,15 @@ def align(
     )
     for i in cand:
         jf = _nearest(ft, vt[i])
-        if abs(ft[jf] - vt[i]) > 0.5:
+        if abs(ft[jf] - vt[i]) > 0.5 or jf + 1 >= ft.shape[0]:
+            continue
+        # the fix must agree with the next one moved back by the GNSS velocity (no outlier)
+        r_m, r_n = earth.principal_radii_m(fllh[jf, 0])
+        d_ned = np.array([(fllh[jf + 1, 0] - fllh[jf, 0]) * (r_m + fllh[jf, 2]),
+                          (fllh[jf + 1, 1] - fllh[jf, 1]) * (r_n + fllh[jf, 2])
+                          * math.cos(fllh[jf, 0]),
+                          -(fllh[jf + 1, 2] - fllh[jf, 2])])
+        if np.linalg.norm(d_ned - vv[i] * (ft[jf + 1] - ft[jf])) > options.max_fix_mismatch_m:
             continue
         k = _nearest(t, vt[i])
         rpy = motion_attitude(vv[i])

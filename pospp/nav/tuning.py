@@ -16,6 +16,9 @@ with initial variance sigma_bias^2 + sigma_gm^2. It does not pull the estimate t
 flight of a few correlation times this random walk slightly over-bounds the drift, which is
 the conservative side.
 
+Scale factors (optional filter states): random constants with initial sigma
+``*_sf_sigma_ppm`` (1 ppm = 1e-6), no process noise.
+
 White noise: angle random walk ARW [deg/sqrt(h)] -> sqrt(PSD) [rad/sqrt(s)] = ARW * pi/180 / 60;
 velocity random walk VRW [m/s/sqrt(h)] -> [m/s/sqrt(s)] = VRW / 60.
 """
@@ -47,6 +50,8 @@ class NoiseParameters:
         Initial standard deviation of the bias states [rad/s], [m/s^2].
     gyro_bias_psd_radps2ps, accel_bias_psd_mps4ps : float
         PSD of the white noise driving the bias states [rad^2/s^3], [m^2/s^5].
+    gyro_sf_sigma, accel_sf_sigma : float
+        Initial standard deviation of the scale-factor states (dimensionless, 1e-6 = 1 ppm).
     """
 
     gyro_arw_radpsqrts: float
@@ -55,6 +60,8 @@ class NoiseParameters:
     accel_bias_sigma_mps2: float
     gyro_bias_psd_radps2ps: float
     accel_bias_psd_mps4ps: float
+    gyro_sf_sigma: float = 0.0
+    accel_sf_sigma: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -77,6 +84,8 @@ class ImuTuning:
         Velocity random walk [m/s/sqrt(h)].
     accel_gm_sigma_ug, accel_gm_tau_s : float
         In-run accelerometer drift sigma [ug] and correlation time [s].
+    gyro_sf_sigma_ppm, accel_sf_sigma_ppm : float
+        Scale-factor error, 1 sigma [ppm] (used only when the filter estimates scale factors).
     """
 
     name: str
@@ -88,6 +97,8 @@ class ImuTuning:
     accel_vrw_mpsph: float
     accel_gm_sigma_ug: float
     accel_gm_tau_s: float
+    gyro_sf_sigma_ppm: float = 100.0
+    accel_sf_sigma_ppm: float = 100.0
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
@@ -95,7 +106,8 @@ class ImuTuning:
                 continue
             value = getattr(self, f.name)
             if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0.0):
-                raise ValueError(f"ImuTuning.{f.name}: expected a finite number >= 0, got {value!r}")
+                raise ValueError(
+                    f"ImuTuning.{f.name}: expected a finite number >= 0, got {value!r}")
         for tau in ("gyro_gm_tau_s", "accel_gm_tau_s"):
             if getattr(self, tau) <= 0.0:
                 raise ValueError(f"ImuTuning.{tau}: expected > 0 s, got {getattr(self, tau)!r}")
@@ -105,7 +117,8 @@ class ImuTuning:
         names = {f.name for f in dataclasses.fields(self)}
         unknown = sorted(set(overrides) - names)
         if unknown:
-            raise ValueError(f"ImuTuning: unknown field(s) {unknown}; expected some of {sorted(names)}")
+            raise ValueError(
+                f"ImuTuning: unknown field(s) {unknown}; expected some of {sorted(names)}")
         changes = {k: float(v) for k, v in overrides.items() if v is not None}
         return dataclasses.replace(self, **changes)
 
@@ -123,6 +136,8 @@ class ImuTuning:
             accel_bias_sigma_mps2=math.hypot(a_bias, a_gm),
             gyro_bias_psd_radps2ps=2.0 * g_gm**2 / self.gyro_gm_tau_s,
             accel_bias_psd_mps4ps=2.0 * a_gm**2 / self.accel_gm_tau_s,
+            gyro_sf_sigma=self.gyro_sf_sigma_ppm * 1e-6,
+            accel_sf_sigma=self.accel_sf_sigma_ppm * 1e-6,
         )
 
 
@@ -139,6 +154,8 @@ PRESETS: dict[str, ImuTuning] = {
         accel_vrw_mpsph=0.01,
         accel_gm_sigma_ug=5.0,
         accel_gm_tau_s=3600.0,
+        gyro_sf_sigma_ppm=10.0,
+        accel_sf_sigma_ppm=50.0,
     ),
     # land-vehicle POS with a better gyro (0.1 deg/h) used by the vehicle mission
     "vehicle": ImuTuning(
@@ -151,6 +168,8 @@ PRESETS: dict[str, ImuTuning] = {
         accel_vrw_mpsph=0.01,
         accel_gm_sigma_ug=5.0,
         accel_gm_tau_s=3600.0,
+        gyro_sf_sigma_ppm=10.0,
+        accel_sf_sigma_ppm=50.0,
     ),
     # tactical grade (MEMS/FOG ~1-10 deg/h)
     "tactical": ImuTuning(
@@ -163,6 +182,8 @@ PRESETS: dict[str, ImuTuning] = {
         accel_vrw_mpsph=0.06,
         accel_gm_sigma_ug=100.0,
         accel_gm_tau_s=600.0,
+        gyro_sf_sigma_ppm=300.0,
+        accel_sf_sigma_ppm=300.0,
     ),
     # consumer MEMS (deg/s-level turn-on biases, large random walks)
     "mems": ImuTuning(
@@ -175,19 +196,35 @@ PRESETS: dict[str, ImuTuning] = {
         accel_vrw_mpsph=0.3,
         accel_gm_sigma_ug=1000.0,
         accel_gm_tau_s=300.0,
+        gyro_sf_sigma_ppm=5000.0,
+        accel_sf_sigma_ppm=5000.0,
     ),
 }
 """IMU grade presets by name."""
 
+ALIASES: dict[str, str] = {"consumer": "mems"}
+"""Other names accepted by :func:`tuning_preset`."""
+
 
 def tuning_preset(grade: str, **overrides: float | None) -> ImuTuning:
-    """The preset ``grade`` ("flight", "vehicle", "tactical", "mems") with optional overrides.
+    """The preset ``grade`` ("flight", "vehicle", "tactical", "mems"/"consumer") with overrides.
 
     Overrides use the field names of :class:`ImuTuning` (the ``[imu]`` config keys); ``None``
     keeps the preset value.
     """
     try:
-        base = PRESETS[grade]
+        base = PRESETS[ALIASES.get(grade, grade)]
     except KeyError:
-        raise ValueError(f"unknown IMU grade {grade!r}; expected one of {sorted(PRESETS)}") from None
+        names = sorted([*PRESETS, *ALIASES])
+        raise ValueError(f"unknown IMU grade {grade!r}; expected one of {names}") from None
     return base.with_overrides(**overrides)
+
+
+def tuning_from_config(imu_config) -> ImuTuning:
+    """The tuning of a pipeline ``[imu]`` section (:class:`pospp.config.ImuConfig`).
+
+    The ``grade`` preset with every key that is not ``None`` overriding the preset value.
+    """
+    values = dict(vars(imu_config))
+    grade = values.pop("grade")
+    return tuning_preset(grade, **values)
