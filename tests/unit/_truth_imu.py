@@ -1,0 +1,112 @@
+"""Error-free IMU increments for tests, computed independently of pospp's mechanization.
+
+Two motions with analytically known body rates and specific force:
+
+- stationary: w_ib_b = C_bn w_ie_n and f_b = -C_bn g_n, both constant, so the increments are
+  exactly rate * dt;
+- rhumb line: constant NED velocity v_n = V [cos psi, sin psi, 0] at constant height, body
+  attitude following the NED frame (roll = pitch = 0, yaw = psi), so w_nb = 0 and
+  w_ib_b = C_bn (w_ie_n + w_en_n), f_b = C_bn ((2 w_ie_n + w_en_n) x v_n - g_n) (the NED
+  velocity equation with v_n' = 0). lat(t), lon(t) come from scipy's DOP853 on
+  lat' = v_N / (R_M + h), lon' = v_E / ((R_N + h) cos lat) at rtol 1e-13, and the increments are
+  the 3-node Gauss-Legendre quadrature of the rates over each interval.
+
+Only pospp.earth (WGS-84 radii, normal gravity, rates: tested against published values) and
+pospp.rotation are shared with the code under test.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.integrate import solve_ivp
+
+from pospp import earth, rotation
+
+
+@dataclass(frozen=True)
+class TruthImu:
+    """Epoch times, increments (N intervals) and the true state at the N + 1 epochs."""
+
+    t_s: NDArray
+    dtheta_b_rad: NDArray
+    dv_b_mps: NDArray
+    lat_rad: NDArray
+    lon_rad: NDArray
+    height_m: float
+    v_n_mps: NDArray  # (3,), constant
+    c_nb: NDArray  # (3, 3), constant
+    rpy_rad: NDArray
+
+
+def stationary(lat_rad: float, height_m: float, rpy_rad, rate_hz: float, duration_s: float):
+    n = int(round(duration_s * rate_hz))
+    dt = 1.0 / rate_hz
+    c_nb = rotation.dcm_from_euler(rpy_rad)
+    w_b = c_nb.T @ earth.earth_rate_n_radps(lat_rad)
+    f_b = -c_nb.T @ earth.gravity_n_mps2(lat_rad, height_m)
+    t = np.arange(n + 1) * dt
+    return TruthImu(
+        t,
+        np.tile(w_b * dt, (n, 1)),
+        np.tile(f_b * dt, (n, 1)),
+        np.full(n + 1, lat_rad),
+        np.zeros(n + 1),
+        height_m,
+        np.zeros(3),
+        c_nb,
+        np.asarray(rpy_rad, dtype=float),
+    )
+
+
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(3)
+
+
+def rhumb_line(
+    lat0_rad: float,
+    height_m: float,
+    speed_mps: float,
+    heading_rad: float,
+    rate_hz: float,
+    duration_s: float,
+) -> TruthImu:
+    n = int(round(duration_s * rate_hz))
+    dt = 1.0 / rate_hz
+    t = np.arange(n + 1) * dt
+    v_n = speed_mps * np.array([np.cos(heading_rad), np.sin(heading_rad), 0.0])
+
+    def rhs(_t, y):
+        r_m, r_n = earth.principal_radii_m(y[0])
+        return [v_n[0] / (r_m + height_m), v_n[1] / ((r_n + height_m) * np.cos(y[0]))]
+
+    sol = solve_ivp(
+        rhs, (0.0, t[-1]), [lat0_rad, 0.0], method="DOP853", rtol=1e-13, atol=1e-16,
+        dense_output=True,
+    )
+    rpy = np.array([0.0, 0.0, heading_rad])
+    c_bn = rotation.dcm_from_euler(rpy).T
+
+    def rates_n(lat):  # w_in_n and f_n at the latitudes `lat`
+        w_ie = earth.earth_rate_n_radps(lat)
+        w_en = earth.transport_rate_n_radps(lat, height_m, np.broadcast_to(v_n, lat.shape + (3,)))
+        c = 2.0 * w_ie + w_en
+        f_n = np.empty_like(c)  # c x v_n - g_n
+        f_n[:, 0] = c[:, 1] * v_n[2] - c[:, 2] * v_n[1]
+        f_n[:, 1] = c[:, 2] * v_n[0] - c[:, 0] * v_n[2]
+        f_n[:, 2] = c[:, 0] * v_n[1] - c[:, 1] * v_n[0] - earth.normal_gravity_mps2(lat, height_m)
+        return w_ie + w_en, f_n
+
+    # C_bn is constant, so the body increments are C_bn times the NED-resolved integrals
+    dth_n = np.zeros((n, 3))
+    dv_n = np.zeros((n, 3))
+    mid = t[:-1] + 0.5 * dt
+    for x, w in zip(_GL_X, _GL_W, strict=True):
+        w_n, f_n = rates_n(sol.sol(mid + 0.5 * dt * x)[0])
+        dth_n += (0.5 * dt * w) * w_n
+        dv_n += (0.5 * dt * w) * f_n
+    dth = dth_n @ c_bn.T
+    dvel = dv_n @ c_bn.T
+    y = sol.sol(t)
+    return TruthImu(t, dth, dvel, y[0], y[1], height_m, v_n, c_bn.T, rpy)
