@@ -1,0 +1,289 @@
+"""ANSFL quadrotor straight-line set (Xsens DOT IMUs + DJI RTK solution) -> MCAP + reference.
+
+Source (docs/realdata.md, ``ansfl_quadrotor_straightline``): the authors' time-aligned segments
+``processed/path_N/{IMU_k,IMUAvg,GTExtended}.csv`` and the Airdata export of the whole flight
+``raw/*Airdata.csv`` (for the UTC time of the log time base).
+
+Conversion
+----------
+- IMU: Xsens DOT sensor axes s (not stated relative to the airframe; z is roughly up: about
+  +9.5 m/s^2 on z in level flight), specific force m/s^2, rate deg/s -> rad/s. The mounting
+  C_bs of the chosen unit is unknown and is estimated with :mod:`pospp.nav.mounting` from the
+  windows of all four paths together (one mounting per unit for the whole flight), using the
+  drone's own attitude (roll, pitch, compass heading) as the body attitude, since the drone does
+  not always fly nose first (path 4 flies backwards). The IMU is written in body FRD, rotated by
+  that estimate; the estimate and its quality figures go into the report and the MCAP metadata.
+- Sample convention: the DOT's 120 Hz output comes from its strapdown-integration (SDI)
+  increments, so each sample is taken as the mean over the interval ending at its stamp (no
+  shift). The source does not say; the residual timing is checked against the reference yaw
+  rate (``checks['imu_lag_vs_reference_s']``).
+- Time: ``IMU_k.time`` counts from the path's first GTExtended epoch, whose ``time(millisecond)``
+  is on the Airdata log time base. Log time -> UTC by the offset between ``datetime(utc)`` (whole
+  seconds) and ``time(millisecond)`` around the path: the midpoint of the interval allowed by
+  the second boundaries (about +-0.1 s; the Airdata log time jumps by 73 s at 155 s, so the
+  offset is taken locally). The authors' IMU-to-GT alignment is kept as is.
+- GNSS and reference: the drone's RTK GNSS/INS solution from GTExtended (10 Hz): latitude /
+  longitude (deg), ``xSpeed`` north, ``ySpeed`` east, ``zSpeed`` positive down (checked on the
+  whole Airdata log: correlation with d(altitude)/dt is -0.95), roll / pitch / compass heading
+  (deg). The compass heading agrees with the GNSS course within about 1 deg on the nose-first
+  paths, so it is taken as true, not magnetic, heading. The same solution serves as the fix
+  topic (nominal sigma 0.05 m horizontal, 0.1 m vertical, velocity 0.1 m/s: RTK, and the
+  speeds are rounded to 0.1 m/s) and as the reference; it is not independent of itself.
+- Height: ``altitude_above_seaLevel`` is DJI's take-off altitude plus barometric climb (about 10
+  m here), not an ellipsoidal height; no geoid model is shipped with pospp, so the height is
+  written as given unless ``geoid_undulation_m`` is passed, and a warning says so.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from pospp import earth
+from pospp.io.converters._common import (
+    ConversionError,
+    ConversionReport,
+    check_gravity,
+    check_increasing,
+    diag_cov,
+    lag_by_correlation,
+    median_rate_hz,
+    read_csv,
+    reference_path_for,
+    require_file,
+    seconds_to_ns,
+)
+from pospp.io.mcap_reader import GnssFixes, GnssVelocities, ImuSamples
+from pospp.io.mcap_writer import write_flight_log
+from pospp.io.parquet_tables import ReferenceTrajectory, write_reference_trajectory
+from pospp.nav.mounting import MountingEstimate, MountingOptions, estimate_mounting
+
+__all__ = ["convert_ansfl_quadrotor", "estimate_unit_mounting"]
+
+_GT_COLS = ["time(millisecond)", "latitude", "longitude", "altitude_above_seaLevel(meters)",
+            "xSpeed(m/s)", "ySpeed(m/s)", "zSpeed(m/s)", "roll(degrees)", "pitch(degrees)",
+            "compass_heading(degrees)"]
+_IMU_COLS = ["time", "Acc_X", "Acc_Y", "Acc_Z", "Gyr_X", "Gyr_Y", "Gyr_Z"]
+
+
+def _root_and_path(source: Path, path: int | None) -> tuple[Path, int]:
+    """Dataset root and path number, from the root (with ``path``) or a ``path_N`` folder."""
+    if source.name.startswith("path_") and (source / "GTExtended.csv").is_file():
+        n = int(source.name.split("_")[1])
+        if path is not None and path != n:
+            raise ConversionError(f"{source}: folder is path {n} but path={path} was given")
+        return source.parent.parent, n
+    if not (source / "processed").is_dir():
+        raise ConversionError(f"{source}: expected the dataset folder (with processed/ and raw/)"
+                              " or a processed/path_N folder")
+    return source, 1 if path is None else path
+
+
+def _imu_file(root: Path, path: int, imu: int | str) -> Path:
+    name = "IMUAvg.csv" if imu == "avg" else f"IMU_{int(imu)}.csv"
+    return require_file(root / "processed" / f"path_{path}", name)
+
+
+def _read_path(root: Path, path: int, imu: int | str) -> tuple[pd.DataFrame, pd.DataFrame, Path]:
+    gt_p = require_file(root / "processed" / f"path_{path}", "GTExtended.csv")
+    imu_p = _imu_file(root, path, imu)
+    gt = read_csv(gt_p, _GT_COLS)
+    im = read_csv(imu_p, _IMU_COLS)
+    check_increasing(gt_p, "time(millisecond)", gt["time(millisecond)"].to_numpy(float))
+    check_increasing(imu_p, "time", im["time"].to_numpy(float))
+    return gt, im, imu_p
+
+
+def _available_paths(root: Path) -> list[int]:
+    out = []
+    for d in sorted((root / "processed").glob("path_*")):
+        if (d / "GTExtended.csv").is_file():
+            out.append(int(d.name.split("_")[1]))
+    return out
+
+
+def _log_to_utc_offset_s(root: Path, lo_s: float, hi_s: float) -> tuple[float, float]:
+    """(UTC - log time) offset [s] around log times [lo, hi], and its half-width [s]."""
+    raw = sorted((root / "raw").glob("*Airdata.csv"))
+    if not raw:
+        raise ConversionError(f"{root / 'raw'}: no *Airdata.csv (needed for the UTC time base)")
+    a = pd.read_csv(raw[0], usecols=["time(millisecond)", "datetime(utc)"])
+    t = a["time(millisecond)"].to_numpy(dtype=float) * 1e-3
+    utc = (pd.to_datetime(a["datetime(utc)"]) - pd.Timestamp("1970-01-01")).dt.total_seconds()
+    utc = utc.to_numpy(dtype=float)
+    m = (t >= lo_s - 20.0) & (t <= hi_s + 20.0)
+    if m.sum() < 20:
+        raise ConversionError(f"{raw[0]}: log time {lo_s:.1f}-{hi_s:.1f} s not covered")
+    lower = float(np.max(utc[m] - t[m]))       # true UTC >= the whole second shown
+    upper = float(np.min(utc[m] + 1.0 - t[m]))  # true UTC < the next second
+    if abs(lower - upper) > 1.0:
+        raise ConversionError(f"{raw[0]}: UTC minus log time is not constant near "
+                              f"{lo_s:.1f}-{hi_s:.1f} s (log time jumps?)")
+    return 0.5 * (lower + upper), 0.5 * abs(upper - lower)
+
+
+def _gt_arrays(gt: pd.DataFrame) -> dict[str, np.ndarray]:
+    v = gt[["xSpeed(m/s)", "ySpeed(m/s)", "zSpeed(m/s)"]].to_numpy(dtype=float)
+    rpy = np.radians(gt[["roll(degrees)", "pitch(degrees)", "compass_heading(degrees)"]]
+                     .to_numpy(dtype=float))
+    return {
+        "log_s": gt["time(millisecond)"].to_numpy(dtype=float) * 1e-3,
+        "lat_rad": np.radians(gt["latitude"].to_numpy(dtype=float)),
+        "lon_rad": np.radians(gt["longitude"].to_numpy(dtype=float)),
+        "h_m": gt["altitude_above_seaLevel(meters)"].to_numpy(dtype=float),
+        "v_n": v, "rpy": rpy,
+    }
+
+
+def estimate_unit_mounting(
+    source: str | Path, imu: int | str = 1, *, options: MountingOptions | None = None
+) -> MountingEstimate:
+    """Estimate C_bs of one DOT unit (or the average) from all processed paths together.
+
+    Windows of every path are stacked on the common log time base; the body attitude is the
+    drone's roll, pitch and compass heading (module docstring).
+    """
+    root, _ = _root_and_path(Path(source), None)
+    ts, fs, tv, vv, rr = [], [], [], [], []
+    lat0 = h0 = None
+    for p in _available_paths(root):
+        gt, im, imu_p = _read_path(root, p, imu)
+        a = _gt_arrays(gt)
+        ts.append(a["log_s"][0] + im["time"].to_numpy(dtype=float))
+        fs.append(im[["Acc_X", "Acc_Y", "Acc_Z"]].to_numpy(dtype=float))
+        tv.append(a["log_s"])
+        vv.append(a["v_n"])
+        rr.append(a["rpy"])
+        if lat0 is None:
+            lat0, h0 = float(a["lat_rad"][0]), float(a["h_m"][0])
+    if not ts:
+        raise ConversionError(f"{root / 'processed'}: no path_N folders")
+    opt = options or MountingOptions(window_s=0.5, max_static_accel_mps2=0.3,
+                                     min_horizontal_accel_mps2=0.3, min_speed_mps=0.0)
+    rpy = np.concatenate(rr)
+    rpy[:, 2] = np.unwrap(rpy[:, 2])
+    return estimate_mounting(np.concatenate(ts), np.concatenate(fs), np.concatenate(tv),
+                             np.concatenate(vv), lat_rad=lat0, height_m=h0, body_rpy_rad=rpy,
+                             options=opt)
+
+
+def convert_ansfl_quadrotor(
+    source: str | Path,
+    out_mcap: str | Path,
+    *,
+    path: int | None = None,
+    imu: int | str = 1,
+    geoid_undulation_m: float | None = None,
+    mounting: MountingEstimate | None = None,
+) -> ConversionReport:
+    """Convert one processed path of the ANSFL quadrotor set to MCAP + reference Parquet.
+
+    Parameters
+    ----------
+    source : path-like
+        The dataset folder (``processed/``, ``raw/``) or one ``processed/path_N`` folder.
+    out_mcap : path-like
+        MCAP to write; the reference goes to ``<stem>.reference.parquet`` beside it.
+    path : int, optional
+        Path number 1..4 (default 1, or the folder's own number).
+    imu : int or "avg"
+        DOT unit 1..4, or "avg" for the authors' average of the four.
+    geoid_undulation_m : float, optional
+        Added to the logged altitude when given (module docstring).
+    mounting : MountingEstimate, optional
+        A mounting to apply instead of estimating one (e.g. from a longer recording).
+
+    Returns
+    -------
+    ConversionReport
+    """
+    if imu != "avg" and imu not in (1, 2, 3, 4):
+        raise ValueError(f"imu must be 1, 2, 3, 4 or 'avg'; got {imu!r}")
+    root, p = _root_and_path(Path(source), path)
+    gt, im, imu_p = _read_path(root, p, imu)
+    a = _gt_arrays(gt)
+    t_imu_log = a["log_s"][0] + im["time"].to_numpy(dtype=float)
+    f_s = im[["Acc_X", "Acc_Y", "Acc_Z"]].to_numpy(dtype=float)
+    w_s = np.radians(im[["Gyr_X", "Gyr_Y", "Gyr_Z"]].to_numpy(dtype=float))
+    g_med = check_gravity(imu_p, f_s, "Acc_* expected in m/s^2")
+    if mounting is None:
+        mounting = estimate_unit_mounting(root, imu)
+    c_bs = mounting.c_bs
+    f_b = f_s @ c_bs.T
+    w_b = w_s @ c_bs.T
+    offset_s, half_width_s = _log_to_utc_offset_s(root, a["log_s"][0], a["log_s"][-1])
+    imu_ns = seconds_to_ns(t_imu_log + offset_s)
+    gt_ns = seconds_to_ns(a["log_s"] + offset_s)
+    checks: dict[str, float] = {"gravity_median_mps2": g_med,
+                                "utc_offset_half_width_s": half_width_s}
+    checks["mean_f_b_z_mps2"] = float(f_b[:, 2].mean())
+    # timing / sign check: IMU heading rate versus the reference yaw rate
+    rpy = a["rpy"]
+    r_i = np.interp(t_imu_log, a["log_s"], rpy[:, 0])
+    p_i = np.interp(t_imu_log, a["log_s"], rpy[:, 1])
+    hr = (w_b[:, 1] * np.sin(r_i) + w_b[:, 2] * np.cos(r_i)) / np.cos(p_i)
+    yaw_rate = np.gradient(np.unwrap(rpy[:, 2]), a["log_s"])
+    lag, corr = lag_by_correlation(t_imu_log, hr, a["log_s"], yaw_rate, max_lag_s=0.5,
+                                   step_s=0.01)
+    checks["imu_lag_vs_reference_s"] = lag
+    checks["heading_rate_correlation"] = corr
+    warnings: list[str] = []
+    h = a["h_m"]
+    if geoid_undulation_m is None:
+        datum = "DJI altitude_above_seaLevel (take-off altitude + baro climb); NOT ellipsoidal"
+        warnings.append("height_m is DJI's altitude above sea level, not ellipsoidal: pass "
+                        "geoid_undulation_m (and beware its barometric origin)")
+    else:
+        h = h + geoid_undulation_m
+        datum = f"DJI altitude above sea level + N, N = {geoid_undulation_m} m (given)"
+    n = gt_ns.size
+    fix = GnssFixes(time_ns=gt_ns, lat_rad=a["lat_rad"], lon_rad=a["lon_rad"], height_m=h,
+                    pos_cov_ned_m2=diag_cov([0.05, 0.05, 0.1], n),
+                    status=np.full(n, 2, dtype=np.int8))
+    vel = GnssVelocities(time_ns=gt_ns, v_n_mps=a["v_n"],
+                         vel_cov_ned_m2ps2=diag_cov([0.1, 0.1, 0.1], n))
+    samples = ImuSamples(time_ns=imu_ns, w_ib_b_radps=w_b, f_ib_b_mps2=f_b,
+                         frame_id=f"xsens_dot_{imu}")
+    ref = ReferenceTrajectory(time_ns=gt_ns, lat_rad=a["lat_rad"], lon_rad=a["lon_rad"],
+                              height_m=h, v_n_mps=a["v_n"], rpy_rad=rpy)
+    time_system = ("UTC ns since the Unix epoch: Airdata log time + (datetime(utc) - log "
+                   f"time) offset, +-{half_width_s:.2f} s")
+    imu_conv = "DOT SDI output taken as the mean over the interval ending at the stamp"
+    axes = (f"Xsens DOT sensor axes rotated to body FRD by the estimated C_bs "
+            f"(rpy_deg {np.degrees(mounting.rpy_rad).round(2).tolist()})")
+    meta = {
+        "converter": "pospp.io.converters.ansfl_quadrotor", "source": str(imu_p),
+        "path": str(p), "imu": str(imu), "time_system": time_system, "height_datum": datum,
+        "imu_convention": imu_conv, "axes": axes,
+        "c_bs_estimated": repr(np.round(c_bs, 9).tolist()),
+        "mounting_tilt_sigma_deg": f"{np.degrees(mounting.tilt_sigma_rad):.3f}",
+        "mounting_heading_sigma_deg": f"{np.degrees(mounting.heading_sigma_rad):.3f}",
+        "gnss": "DJI RTK GNSS/INS solution (also the reference)",
+    }
+    out = write_flight_log(out_mcap, samples, fix, vel, imu_frame_id=samples.frame_id,
+                           gnss_frame_id="dji_rtk", metadata=meta)
+    ref_path = write_reference_trajectory(
+        reference_path_for(out), ref,
+        metadata={"source": str(root / "processed" / f"path_{p}" / "GTExtended.csv"),
+                  "frame": "DJI body FRD w.r.t. NED (compass heading as yaw)",
+                  "time_system": time_system, "height_datum": datum})
+    lat0 = float(a["lat_rad"][0])
+    checks["reference_speed_max_mps"] = float(np.hypot(a["v_n"][:, 0], a["v_n"][:, 1]).max())
+    checks["gravity_model_mps2"] = float(earth.normal_gravity_mps2(lat0, float(h[0])))
+    return ConversionReport(
+        fmt="ansfl_quadrotor", source=str(root), mcap_path=str(out), reference_path=str(ref_path),
+        n_imu=len(samples), n_fix=n, n_vel=n, n_reference=len(ref),
+        imu_rate_hz=median_rate_hz(imu_ns), gnss_rate_hz=median_rate_hz(gt_ns),
+        start_ns=int(min(imu_ns[0], gt_ns[0])), end_ns=int(max(imu_ns[-1], gt_ns[-1])),
+        time_system=time_system, height_datum=datum, imu_convention=imu_conv, axes=axes,
+        mounting=mounting, checks=checks, warnings=tuple(warnings),
+        notes=tuple(x for x in (
+            f"path {p}, unit {imu}; mounting estimated from all paths (levelling residual "
+            f"{np.degrees(mounting.levelling_residual_rad):.2f} deg, heading scatter "
+            f"{np.degrees(mounting.heading_scatter_rad):.2f} deg)",
+            "the authors' IMUAvg averages raw outputs of units whose mountings differ "
+            "(docs/realdata.md)" if imu == "avg" else "") if x),
+    )
+
