@@ -298,15 +298,22 @@ def _imu_timing_issues(a: dict, topic: str, path: str) -> list[IngestIssue]:
             "warning", path, topic, None, None,
             f"{gaps.size} IMU gaps in total; only the first {_MAX_LISTED} are listed",
         ))
-    # rate changes: median interval per block of 1000 samples vs the overall median
+    # rate changes: median interval per block of 1000 intervals (a last partial block counts
+    # when it holds at least 250) versus the overall median; the change is located at the
+    # first interval, from the previous block on, that is nearer the new median
     block = 1000
-    nb = len(d) // block
-    if nb >= 2:
-        med = np.median(d[: nb * block].reshape(nb, block), axis=1)
+    edges = list(range(0, len(d), block))
+    if len(edges) > 1 and len(d) - edges[-1] < block // 4:
+        edges.pop()
+    if len(edges) >= 2:
+        med = np.array([np.median(d[e : e + block]) for e in edges])
         off = np.abs(med - nominal) > 0.02 * nominal
         starts = np.flatnonzero(off & ~np.r_[False, off[:-1]])
         for b in starts[:_MAX_LISTED]:
-            j = b * block + 1
+            lo = edges[max(b - 1, 0)]
+            seg = d[lo : edges[b] + block]
+            k = lo + int(np.argmax(np.abs(seg - med[b]) < np.abs(seg - nominal)))
+            j = k + 1  # the sample that ends the first changed interval
             out.append(IngestIssue(
                 "warning", path, topic, int(a["index"][j]), int(t[j]),
                 f"IMU sampling interval changes to {med[b] * 1e-6:.3f} ms (nominal "

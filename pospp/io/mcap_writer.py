@@ -14,7 +14,9 @@ Frames and units (the inverse of ``pospp.io.mcap_reader``)
   NED -> ENU (``position_covariance_type`` 3, COVARIANCE_TYPE_KNOWN).
 - GNSS velocity: ``twist.linear`` ENU [m/s], the linear 3x3 block of the 6x6 covariance ENU;
   the angular block is marked unknown with a large variance.
-- Log time = header stamp. Chunks are zstd-compressed.
+- Log time = header stamp; messages of all topics are written merged in log-time order (as a
+  recorder writes them), so a truncated file loses the end of every topic, not whole topics.
+  Chunks are zstd-compressed.
 """
 
 from __future__ import annotations
@@ -48,31 +50,51 @@ def _cov_ned_to_enu(p_ned: np.ndarray) -> np.ndarray:
     return np.einsum("ij,njk,lk->nil", t, p_ned, t).reshape(-1, 9)
 
 
-def _write_topic(
-    writer: Writer,
-    topic: str,
-    schema_name: str,
-    schema_text: str,
-    fields: tuple[tuple[str, str, int], ...],
-    time_ns: np.ndarray,
-    frame_id: str,
-    values: dict[str, np.ndarray],
-) -> None:
-    schema_id = writer.register_schema(
-        name=schema_name, encoding="ros2msg", data=schema_text.encode("utf-8")
-    )
-    channel_id = writer.register_channel(topic=topic, message_encoding="cdr", schema_id=schema_id)
-    payloads = rm.encode_batch(fields, time_ns, frame_id, values)
-    raw = payloads.tobytes()
-    size = payloads.dtype.itemsize
-    for i, t in enumerate(time_ns.tolist()):
-        writer.add_message(
-            channel_id=channel_id,
-            log_time=t,
-            publish_time=t,
-            sequence=i,
-            data=raw[i * size : (i + 1) * size],
+class _Topic:
+    """One topic's channel and its encoded payloads, ready to be merged in time order."""
+
+    def __init__(
+        self,
+        writer: Writer,
+        topic: str,
+        schema_name: str,
+        schema_text: str,
+        fields: tuple[tuple[str, str, int], ...],
+        time_ns: np.ndarray,
+        frame_id: str,
+        values: dict[str, np.ndarray],
+    ) -> None:
+        schema_id = writer.register_schema(
+            name=schema_name, encoding="ros2msg", data=schema_text.encode("utf-8")
         )
+        self.channel_id = writer.register_channel(
+            topic=topic, message_encoding="cdr", schema_id=schema_id
+        )
+        payloads = rm.encode_batch(fields, time_ns, frame_id, values)
+        self.raw = payloads.tobytes()
+        self.size = payloads.dtype.itemsize
+        self.time_ns = np.asarray(time_ns, dtype=np.int64)
+
+
+def _write_merged(writer: Writer, topics: list[_Topic]) -> None:
+    """Add all messages merged in log-time order, as a recorder would; sequence numbers count
+    per channel.
+
+    Each topic keeps its own order (the merge key is the running maximum of its stamps, ties
+    broken by topic, then position), so stamps that go backwards stay where they were given.
+    """
+    times = np.concatenate([tp.time_ns for tp in topics])
+    key = np.concatenate([np.maximum.accumulate(tp.time_ns) if len(tp.time_ns) else tp.time_ns
+                          for tp in topics])
+    which = np.concatenate([np.full(len(tp.time_ns), k) for k, tp in enumerate(topics)])
+    local = np.concatenate([np.arange(len(tp.time_ns)) for tp in topics])
+    order = np.lexsort((local, which, key))
+    add = writer.add_message
+    for t, k, i in zip(times[order].tolist(), which[order].tolist(), local[order].tolist(),
+                       strict=True):
+        tp = topics[k]
+        add(channel_id=tp.channel_id, log_time=t, publish_time=t, sequence=i,
+            data=tp.raw[i * tp.size : (i + 1) * tp.size])
 
 
 def write_flight_log(
@@ -116,7 +138,7 @@ def write_flight_log(
     with atomic_path(out) as tmp, open(tmp, "wb") as stream:
         writer = Writer(stream, compression=CompressionType.ZSTD)
         writer.start(profile="ros2", library="pospp")
-        _write_topic(
+        topics = [_Topic(
             writer, imu_topic, rm.IMU_TYPE, rm.IMU_MSGDEF, rm.IMU_FIELDS,
             np.asarray(imu.time_ns, dtype=np.int64), imu_frame_id,
             {
@@ -124,8 +146,8 @@ def write_flight_log(
                 "angular_velocity": apply_rotation(c_sb, imu.w_ib_b_radps),
                 "linear_acceleration": apply_rotation(c_sb, imu.f_ib_b_mps2),
             },
-        )
-        _write_topic(
+        )]
+        topics.append(_Topic(
             writer, fix_topic, rm.NAVSATFIX_TYPE, rm.NAVSATFIX_MSGDEF, rm.NAVSATFIX_FIELDS,
             np.asarray(fix.time_ns, dtype=np.int64), gnss_frame_id,
             {
@@ -137,12 +159,12 @@ def write_flight_log(
                 "position_covariance": _cov_ned_to_enu(fix.pos_cov_ned_m2),
                 "position_covariance_type": np.full(len(fix), 3, dtype=np.uint8),
             },
-        )
+        ))
         if vel is not None and len(vel):
             cov6 = np.zeros((len(vel), 6, 6))
             cov6[:, :3, :3] = _cov_ned_to_enu(vel.vel_cov_ned_m2ps2).reshape(-1, 3, 3)
             cov6[:, 3, 3] = cov6[:, 4, 4] = cov6[:, 5, 5] = _UNKNOWN_VARIANCE
-            _write_topic(
+            topics.append(_Topic(
                 writer, vel_topic, rm.TWIST_COV_STAMPED_TYPE, rm.TWIST_COV_STAMPED_MSGDEF,
                 rm.TWIST_COV_STAMPED_FIELDS, np.asarray(vel.time_ns, dtype=np.int64),
                 gnss_frame_id,
@@ -150,7 +172,8 @@ def write_flight_log(
                     "linear": apply_rotation(ENU_TO_NED.T, vel.v_n_mps),
                     "covariance": cov6.reshape(-1, 36),
                 },
-            )
+            ))
+        _write_merged(writer, topics)
         if metadata:
             writer.add_metadata("pospp", {str(k): str(v) for k, v in metadata.items()})
         writer.finish()

@@ -188,6 +188,28 @@ TABLES: dict[str, list[Column]] = {
         Column("heldout_gap_before_mps", _F, "m/s", "same on held-out legs, before"),
         Column("heldout_gap_after_mps", _F, "m/s", "same on held-out legs, after"),
     ],
+    "observability": [
+        Column("formulation", _S, "", "'paper' or 'body'"),
+        Column("dheading_deg", _F, "deg", "heading change between the two ideal legs"),
+        Column("dspeed_mps", _F, "m/s", "speed of leg b minus speed of leg a"),
+        Column("cond_raw", _F, "1", "condition number of the stacked matrix (paper Eq. 17), "
+               "SI units"),
+        Column("cond_scaled", _F, "1", "condition number after column scaling"),
+        _opt(Column("heading_deg", _F, "deg", "heading of leg a, clockwise from north", _ATT)),
+        _opt(Column("speed_mps", _F, "m/s", "speed of leg a")),
+        _opt(Column("duration_s", _F, "s", "duration of each ideal leg")),
+        _opt(Column("lat_deg", _F, "deg", "latitude of the ideal legs", "WGS-84")),
+    ],
+    "evaluation": [
+        Column("solution", _S, "", "'forward', 'smoothed' or 'compensated'"),
+        Column("metric", _S, "", "e.g. north_rms, horizontal_rms, vel_horizontal_rms, "
+               "roll_pitch_rms, heading_rms (solution minus reference)"),
+        Column("value", _F, "see unit", "the figure, in the row's unit"),
+        Column("unit", _S, "", "'m', 'm/s' or 'arcsec'"),
+        _opt(Column("skip_s", _F, "s", "epochs within this time of the first were left out")),
+        _opt(Column("n_epochs", _I, "", "epochs compared")),
+        _opt(Column("reference_file", _S, "", "reference trajectory used")),
+    ],
     "messages": [
         Column("severity", _S, "", "'info', 'warning' or 'error'"),
         Column("stage", _S, "", "pipeline stage that emitted it (e.g. 'ingest')"),

@@ -1,0 +1,449 @@
+"""Checks made while reading MCAP flight logs, on small synthetic files (docs/formats.md).
+
+Every file is written in ``tmp_path`` by :func:`pospp.io.mcap_writer.write_flight_log` (or by
+``mcap``'s own Writer for what pospp's writer cannot produce), then broken in one way; the test
+asserts the reader's verdict and that it names the file, topic, message index and stamps.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from mcap.writer import CompressionType, Writer
+
+from pospp.io import ros_messages as rm
+from pospp.io.errors import IngestError
+from pospp.io.mcap_reader import (
+    FLU_TO_FRD,
+    GnssFixes,
+    GnssVelocities,
+    ImuSamples,
+    read_flight_log,
+)
+from pospp.io.mcap_writer import write_flight_log
+
+T0_NS = 1_717_200_000_000_000_000
+G_MPS2 = 9.80665
+
+
+def make_log(
+    *, duration_s: float = 60.0, rate_hz: float = 100.0, seed: int = 7
+) -> tuple[ImuSamples, GnssFixes, GnssVelocities]:
+    """A level drive at 10 m/s, heading 30 deg, with a 3 deg/s turn from 20 s to 40 s.
+
+    Body rates/forces are the kinematic ones of that motion (yaw rate, centripetal force) plus
+    small noise; GNSS at 1 Hz. Precise enough for the reader's plausibility checks, not for
+    navigation.
+    """
+    rng = np.random.default_rng(seed)
+    n = int(round(duration_s * rate_hz))
+    t_s = np.arange(1, n + 1) / rate_hz
+    time_ns = T0_NS + np.round(t_s * 1e9).astype(np.int64)
+    speed, r = 10.0, np.deg2rad(3.0)
+    yaw_rate = np.where((t_s > 20.0) & (t_s <= 40.0), r, 0.0)
+    w = np.column_stack([np.zeros(n), np.zeros(n), yaw_rate]) + rng.normal(0, 1e-4, (n, 3))
+    f = np.column_stack([np.zeros(n), speed * yaw_rate, np.full(n, -G_MPS2)])
+    f += rng.normal(0, 1e-2, (n, 3))
+    imu = ImuSamples(time_ns, w, f, "imu_link")
+    tg_s = np.arange(1, int(duration_s) + 1, dtype=float)
+    psi = np.deg2rad(30.0) + r * np.clip(tg_s - 20.0, 0.0, 20.0)
+    m = tg_s.size
+    v_n = np.column_stack([speed * np.cos(psi), speed * np.sin(psi), np.zeros(m)])
+    tg_ns = T0_NS + np.round(tg_s * 1e9).astype(np.int64)
+    lat = np.deg2rad(40.0) + np.cumsum(v_n[:, 0]) / 6.37e6
+    lon = np.deg2rad(116.0) + np.cumsum(v_n[:, 1]) / (6.37e6 * np.cos(np.deg2rad(40.0)))
+    pos_cov = np.tile(np.diag([0.04, 0.09, 0.25]), (m, 1, 1))
+    pos_cov[:, 0, 1] = pos_cov[:, 1, 0] = 0.01
+    fix = GnssFixes(tg_ns, lat, lon, np.full(m, 120.0), pos_cov, np.zeros(m, np.int8))
+    vel = GnssVelocities(tg_ns, v_n, np.tile(np.diag([4e-4, 4e-4, 9e-4]), (m, 1, 1)))
+    return imu, fix, vel
+
+
+def _imu_with(imu: ImuSamples, **changes: np.ndarray) -> ImuSamples:
+    return replace(imu, **changes)
+
+
+@pytest.fixture(scope="module")
+def log_parts() -> tuple[ImuSamples, GnssFixes, GnssVelocities]:
+    return make_log()
+
+
+@pytest.fixture()
+def good_file(tmp_path: Path, log_parts) -> Path:
+    return write_flight_log(tmp_path / "good.mcap", *log_parts)
+
+
+# --------------------------------------------------------------------------- the happy path
+
+
+def test_clean_file_reads_without_issues(good_file: Path, log_parts) -> None:
+    imu, fix, vel = log_parts
+    log = read_flight_log(good_file)
+    assert log.complete
+    assert log.issues == ()
+    assert len(log.imu) == len(imu) and len(log.fix) == len(fix) and len(log.vel) == len(vel)
+    assert log.imu.frame_id == "imu_link"
+    np.testing.assert_array_equal(log.imu.time_ns, imu.time_ns)
+
+
+def test_time_window_keeps_stamps_in_half_open_interval(good_file: Path, log_parts) -> None:
+    imu, fix, _ = log_parts
+    start, end = int(imu.time_ns[1500]), int(imu.time_ns[3000])
+    log = read_flight_log(good_file, start_ns=start, end_ns=end)
+    np.testing.assert_array_equal(log.imu.time_ns, imu.time_ns[1500:3000])
+    np.testing.assert_array_equal(log.imu.f_ib_b_mps2, imu.f_ib_b_mps2[1500:3000])
+    expected_fix = fix.time_ns[(fix.time_ns >= start) & (fix.time_ns < end)]
+    np.testing.assert_array_equal(log.fix.time_ns, expected_fix)
+
+
+def test_topic_names_and_mounting_from_config(tmp_path: Path, log_parts) -> None:
+    """Custom topics and a non-permutation mounting (sensor yawed 30 deg, then FLU)."""
+    imu, fix, vel = log_parts
+    a = np.deg2rad(30.0)
+    rz = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
+    c_bs = rz @ FLU_TO_FRD
+    path = write_flight_log(tmp_path / "custom.mcap", imu, fix, vel, imu_topic="/pos/imu",
+                            fix_topic="/pos/fix", vel_topic="/pos/vel", c_bs=c_bs)
+    with pytest.raises(IngestError, match="not found"):
+        read_flight_log(path)
+    log = read_flight_log(path, imu_topic="/pos/imu", fix_topic="/pos/fix",
+                          vel_topic="/pos/vel", c_bs=c_bs)
+    np.testing.assert_allclose(log.imu.w_ib_b_radps, imu.w_ib_b_radps, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(log.imu.f_ib_b_mps2, imu.f_ib_b_mps2, rtol=0, atol=1e-14)
+    # what is in the file is the sensor-frame vector C_sb @ v_b (independent check)
+    with open(path, "rb") as fh:
+        _, _, msg = next(make_reader(fh).iter_messages(topics=["/pos/imu"]))
+    raw = np.frombuffer(msg.data, dtype=rm.cdr_dtype(rm.IMU_FIELDS, len("imu_link") + 1))[0]
+    np.testing.assert_allclose(raw["linear_acceleration"], c_bs.T @ imu.f_ib_b_mps2[0],
+                               atol=1e-14)
+
+
+def test_bad_mounting_matrix_is_rejected(good_file: Path) -> None:
+    with pytest.raises(ValueError, match="must be a rotation"):
+        read_flight_log(good_file, c_bs=np.diag([1.0, 1.0, -1.0]))
+
+
+def test_not_an_mcap_file(tmp_path: Path) -> None:
+    p = tmp_path / "x.mcap"
+    p.write_bytes(b"PAR1" + bytes(100))
+    with pytest.raises(IngestError, match="not an MCAP file") as ei:
+        read_flight_log(p)
+    assert ei.value.file == str(p)
+    with pytest.raises(FileNotFoundError):
+        read_flight_log(tmp_path / "missing.mcap")
+
+
+# --------------------------------------------------------------------------- contract errors
+
+
+def test_missing_required_topic_lists_available(tmp_path: Path, log_parts) -> None:
+    path = write_flight_log(tmp_path / "m.mcap", *log_parts, fix_topic="/gps/fix")
+    with pytest.raises(IngestError) as ei:
+        read_flight_log(path)
+    err = ei.value
+    assert err.topic == "/gnss/fix" and err.file == str(path)
+    assert "/gps/fix (sensor_msgs/msg/NavSatFix)" in str(err)
+    assert "/imu/data (sensor_msgs/msg/Imu)" in str(err)
+
+
+def test_missing_optional_velocity_topic_is_a_warning(tmp_path: Path, log_parts) -> None:
+    imu, fix, _ = log_parts
+    log = read_flight_log(write_flight_log(tmp_path / "nv.mcap", imu, fix, None))
+    assert len(log.vel) == 0
+    [issue] = log.issues
+    assert issue.severity == "warning" and issue.topic == "/gnss/vel"
+    assert "not found" in issue.message
+
+
+def test_wrong_message_type(tmp_path: Path, log_parts) -> None:
+    """Topics swapped by the logger: IMU messages on /gnss/fix, fixes on /imu/data."""
+    path = write_flight_log(tmp_path / "w.mcap", *log_parts, imu_topic="/gnss/fix",
+                            fix_topic="/imu/data")
+    with pytest.raises(IngestError, match="schema 'sensor_msgs/msg/Imu', expected "
+                       "'sensor_msgs/msg/NavSatFix'") as ei:
+        read_flight_log(path)
+    assert ei.value.topic == "/gnss/fix"
+
+
+def test_wrong_message_encoding(tmp_path: Path, log_parts) -> None:
+    imu, _, _ = log_parts
+    path = tmp_path / "json.mcap"
+    with open(path, "wb") as fh:
+        w = Writer(fh)
+        w.start(profile="ros2", library="test")
+        sid = w.register_schema(name=rm.IMU_TYPE, encoding="ros2msg",
+                                data=rm.IMU_MSGDEF.encode())
+        cid = w.register_channel(topic="/imu/data", message_encoding="json", schema_id=sid)
+        w.add_message(cid, log_time=int(imu.time_ns[0]), publish_time=int(imu.time_ns[0]),
+                      data=b"{}")
+        w.finish()
+    with pytest.raises(IngestError, match="expected 'cdr'"):
+        read_flight_log(path)
+
+
+@pytest.mark.parametrize("kind", ["backwards", "duplicate"])
+def test_imu_stamps_must_increase(tmp_path: Path, log_parts, kind: str) -> None:
+    imu, fix, vel = log_parts
+    t = imu.time_ns.copy()
+    if kind == "backwards":
+        t[2000], t[2001] = t[2001], t[2000]
+        bad = 2001
+    else:
+        t[2000] = t[1999]
+        bad = 2000
+    path = write_flight_log(tmp_path / "t.mcap", _imu_with(imu, time_ns=t), fix, vel)
+    with pytest.raises(IngestError) as ei:
+        read_flight_log(path)
+    err = ei.value
+    assert (err.topic, err.index, err.time_ns) == ("/imu/data", bad, int(t[bad]))
+    assert err.log_time_ns == int(t[bad])  # the writer logs at the stamp
+    assert ("duplicates" if kind == "duplicate" else "goes back") in err.reason
+
+
+def test_gnss_duplicate_dropped_backwards_rejected(tmp_path: Path, log_parts) -> None:
+    imu, fix, vel = log_parts
+    t = fix.time_ns.copy()
+    t[10] = t[9]
+    log = read_flight_log(write_flight_log(tmp_path / "d.mcap", imu, replace(fix, time_ns=t),
+                                           vel))
+    assert len(log.fix) == len(fix) - 1
+    [issue] = [i for i in log.issues if i.topic == "/gnss/fix"]
+    assert issue.severity == "warning" and issue.index == 10 and issue.time_ns == int(t[10])
+    t = fix.time_ns.copy()
+    t[10], t[11] = t[11], t[10]
+    with pytest.raises(IngestError, match="goes back") as ei:
+        read_flight_log(write_flight_log(tmp_path / "b.mcap", imu, replace(fix, time_ns=t),
+                                         vel))
+    assert (ei.value.topic, ei.value.index) == ("/gnss/fix", 11)
+
+
+@pytest.mark.parametrize(("field", "value"), [("f_ib_b_mps2", np.nan),
+                                              ("w_ib_b_radps", np.inf)])
+def test_non_finite_imu_values(tmp_path: Path, log_parts, field: str, value: float) -> None:
+    imu, fix, vel = log_parts
+    arr = getattr(imu, field).copy()
+    arr[1234, 1] = value
+    arr[4000, 0] = value
+    path = write_flight_log(tmp_path / "n.mcap", _imu_with(imu, **{field: arr}), fix, vel)
+    with pytest.raises(IngestError, match="non-finite") as ei:
+        read_flight_log(path)
+    err = ei.value
+    assert (err.topic, err.index, err.time_ns) == ("/imu/data", 1234, int(imu.time_ns[1234]))
+    ros_name = "linear_acceleration" if field == "f_ib_b_mps2" else "angular_velocity"
+    assert ros_name in err.reason and "2 bad message(s)" in err.reason
+
+
+def test_non_finite_gnss_position(tmp_path: Path, log_parts) -> None:
+    imu, fix, vel = log_parts
+    h = fix.height_m.copy()
+    h[5] = np.nan
+    with pytest.raises(IngestError, match="altitude") as ei:
+        read_flight_log(write_flight_log(tmp_path / "g.mcap", imu, replace(fix, height_m=h),
+                                         vel))
+    assert (ei.value.topic, ei.value.index) == ("/gnss/fix", 5)
+
+
+def test_no_fix_status_dropped(tmp_path: Path, log_parts) -> None:
+    imu, fix, vel = log_parts
+    st = fix.status.copy()
+    st[[3, 4]] = -1
+    log = read_flight_log(write_flight_log(tmp_path / "s.mcap", imu, replace(fix, status=st),
+                                           vel))
+    assert len(log.fix) == len(fix) - 2
+    [issue] = [i for i in log.issues if "NO_FIX" in i.message]
+    assert issue.index == 3 and issue.severity == "warning"
+
+
+# --------------------------------------------------------------------------- timing warnings
+
+
+def test_imu_gap_is_reported_where_it_is(tmp_path: Path, log_parts) -> None:
+    imu, fix, vel = log_parts
+    keep = np.r_[0:1000, 1100:len(imu)]
+    gapped = ImuSamples(imu.time_ns[keep], imu.w_ib_b_radps[keep], imu.f_ib_b_mps2[keep])
+    log = read_flight_log(write_flight_log(tmp_path / "gap.mcap", gapped, fix, vel))
+    [gap] = [i for i in log.issues if "gap" in i.message]
+    assert gap.severity == "warning" and gap.topic == "/imu/data"
+    assert gap.index == 1000 and gap.time_ns == int(imu.time_ns[1100])
+    assert "1.010000 s" in gap.message and "101.0 nominal intervals" in gap.message
+
+
+def test_imu_rate_change_is_reported(tmp_path: Path, log_parts) -> None:
+    """100 Hz for 4000 samples, then 50 Hz: a rate change, not a gap."""
+    imu, fix, vel = log_parts
+    t = imu.time_ns.copy()
+    t[4000:] = t[3999] + 20_000_000 * np.arange(1, len(t) - 3999)
+    path = write_flight_log(tmp_path / "r.mcap", _imu_with(imu, time_ns=t), fix, vel)
+    log = read_flight_log(path)
+    msgs = [i for i in log.issues if i.topic == "/imu/data"]
+    assert not any("gap" in i.message for i in msgs)
+    [change] = [i for i in msgs if "changes" in i.message]
+    assert "20.000 ms" in change.message and "10.000 ms" in change.message
+    assert change.index == 4000 and change.time_ns == int(t[4000])
+
+
+# --------------------------------------------------------------------------- units
+
+
+def test_specific_force_in_g_is_rejected(tmp_path: Path, log_parts) -> None:
+    imu, fix, vel = log_parts
+    path = write_flight_log(tmp_path / "g.mcap",
+                            _imu_with(imu, f_ib_b_mps2=imu.f_ib_b_mps2 / G_MPS2), fix, vel)
+    with pytest.raises(IngestError, match="looks like g"):
+        read_flight_log(path)
+    assert len(read_flight_log(path, check_units=False).imu) == len(imu)
+
+
+def test_rates_in_deg_per_s_are_rejected_via_gnss_course(tmp_path: Path, log_parts) -> None:
+    """A 3 deg/s turn logged in deg/s: magnitudes alone look fine, the course rate does not."""
+    imu, fix, vel = log_parts
+    path = write_flight_log(
+        tmp_path / "d.mcap", _imu_with(imu, w_ib_b_radps=np.rad2deg(imu.w_ib_b_radps)), fix, vel
+    )
+    with pytest.raises(IngestError, match="deg/s") as ei:
+        read_flight_log(path)
+    assert "57." in ei.value.reason and ei.value.topic == "/imu/data"
+    assert read_flight_log(path, check_units=False).complete
+
+
+def test_large_rates_in_deg_per_s_rejected_without_gnss_velocity(
+    tmp_path: Path, log_parts
+) -> None:
+    imu, fix, _ = log_parts
+    w = imu.w_ib_b_radps.copy()
+    w[3000:3100, 0] = 1.5  # a 86 deg/s roll burst: 1.5 rad/s is fine...
+    path = write_flight_log(tmp_path / "a.mcap", _imu_with(imu, w_ib_b_radps=w), fix, None)
+    assert len(read_flight_log(path).imu) == len(imu)
+    path = write_flight_log(tmp_path / "b.mcap", _imu_with(imu, w_ib_b_radps=np.rad2deg(w)),
+                            fix, None)
+    with pytest.raises(IngestError, match="looks like deg/s") as ei:  # ...85.9 is not
+        read_flight_log(path)
+    assert 3000 <= ei.value.index < 3100
+
+
+# --------------------------------------------------------------------------- broken files
+
+
+def _chunk_offsets(path: Path) -> list[tuple[int, int, int]]:
+    """(chunk record offset, its length, first log time) from the file's summary, read by the
+    mcap library (independent of pospp's framing)."""
+    with open(path, "rb") as fh:
+        summary = make_reader(fh).get_summary()
+    return sorted((c.chunk_start_offset, c.chunk_length, c.message_start_time)
+                  for c in summary.chunk_indexes)
+
+
+@pytest.mark.parametrize("keep_fraction", [0.35, 0.8])
+def test_truncated_file_yields_prefix_and_says_where(
+    tmp_path: Path, good_file: Path, log_parts, keep_fraction: float
+) -> None:
+    imu = log_parts[0]
+    data = good_file.read_bytes()
+    chunks = _chunk_offsets(good_file)
+    data_end = chunks[-1][0] + chunks[-1][1]
+    cut = int(data_end * keep_fraction)
+    p = tmp_path / "cut.mcap"
+    p.write_bytes(data[:cut])
+    log = read_flight_log(p, check_units=False)
+    assert not log.complete
+    [err] = [i for i in log.issues if i.severity == "error"]
+    assert err.byte_offset is not None and err.byte_offset <= cut
+    assert f"of {cut}" in err.message
+    n = len(log.imu)
+    assert 0 < n < len(imu)
+    np.testing.assert_array_equal(log.imu.time_ns, imu.time_ns[:n])
+    np.testing.assert_array_equal(log.imu.w_ib_b_radps, imu.w_ib_b_radps[:n])
+    # the break is located at the chunk that holds the cut, and the readable (decompressible)
+    # part of that chunk is kept: the data go beyond the last chunk that ended before the cut
+    cut_chunk = [c for c in chunks if c[0] <= cut < c[0] + c[1]][0]
+    assert err.byte_offset == cut_chunk[0]
+    assert log.imu.time_ns[-1] >= cut_chunk[2]
+    assert err.log_time_ns == log.imu.time_ns[-1]
+
+
+def test_cut_in_summary_section_keeps_all_data(tmp_path: Path, good_file: Path,
+                                               log_parts) -> None:
+    data = good_file.read_bytes()
+    p = tmp_path / "cut.mcap"
+    p.write_bytes(data[:-40])  # inside the summary offsets / footer
+    log = read_flight_log(p)
+    assert log.complete
+    assert len(log.imu) == len(log_parts[0])
+    [w] = log.issues
+    assert w.severity == "warning" and "summary section" in w.message
+
+
+def test_corrupt_chunk_is_skipped_and_located(tmp_path: Path, good_file: Path,
+                                              log_parts) -> None:
+    imu = log_parts[0]
+    chunks = _chunk_offsets(good_file)
+    assert len(chunks) >= 3
+    off, length, start_ns = chunks[len(chunks) // 2]
+    data = bytearray(good_file.read_bytes())
+    mid = off + length // 2
+    data[mid : mid + 16] = bytes(b ^ 0xFF for b in data[mid : mid + 16])
+    p = tmp_path / "flip.mcap"
+    p.write_bytes(bytes(data))
+    log = read_flight_log(p, check_units=False)
+    assert not log.complete
+    [err] = [i for i in log.issues if i.severity == "error"]
+    assert err.byte_offset == off and err.log_time_ns == start_ns
+    assert "corrupt chunk" in err.message
+    assert 0 < len(log.imu) < len(imu)
+    assert log.imu.time_ns[-1] == imu.time_ns[-1]  # reading went on after the bad chunk
+    assert np.all(np.isin(log.imu.time_ns, imu.time_ns))
+    assert any("gap" in i.message for i in log.issues)  # the hole shows as an IMU gap
+
+
+def test_issue_text_names_the_facts(tmp_path: Path, log_parts) -> None:
+    imu, fix, vel = log_parts
+    keep = np.r_[0:1000, 1100:len(imu)]
+    gapped = ImuSamples(imu.time_ns[keep], imu.w_ib_b_radps[keep], imu.f_ib_b_mps2[keep])
+    path = write_flight_log(tmp_path / "gap.mcap", gapped, fix, vel)
+    [gap] = read_flight_log(path).issues
+    text = str(gap)
+    for fact in (f"file={path}", "topic=/imu/data", "index=1000",
+                 f"stamp_ns={imu.time_ns[1100]}", f"log_time_ns={imu.time_ns[1100]}"):
+        assert fact in text
+
+
+# --------------------------------------------------------------------------- other MCAP shapes
+
+
+@pytest.mark.parametrize(
+    ("compression", "chunked"),
+    [(CompressionType.NONE, True), (CompressionType.LZ4, True), (CompressionType.NONE, False)],
+)
+def test_other_chunk_compressions_and_unchunked(tmp_path: Path, log_parts, compression,
+                                                chunked: bool) -> None:
+    """Files written by mcap's own Writer: lz4, uncompressed, and messages outside chunks."""
+    imu, fix, _ = log_parts
+    path = tmp_path / "other.mcap"
+    c_sb = FLU_TO_FRD.T
+    with open(path, "wb") as fh:
+        w = Writer(fh, compression=compression, use_chunking=chunked, chunk_size=64 * 1024)
+        w.start(profile="ros2", library="test")
+        for topic, typ, msgdef, fields, t, vals in (
+            ("/imu/data", rm.IMU_TYPE, rm.IMU_MSGDEF, rm.IMU_FIELDS, imu.time_ns,
+             {"angular_velocity": imu.w_ib_b_radps @ c_sb.T,
+              "linear_acceleration": imu.f_ib_b_mps2 @ c_sb.T}),
+            ("/gnss/fix", rm.NAVSATFIX_TYPE, rm.NAVSATFIX_MSGDEF, rm.NAVSATFIX_FIELDS,
+             fix.time_ns, {"latitude": np.rad2deg(fix.lat_rad),
+                           "longitude": np.rad2deg(fix.lon_rad), "altitude": fix.height_m}),
+        ):
+            sid = w.register_schema(name=typ, encoding="ros2msg", data=msgdef.encode())
+            cid = w.register_channel(topic=topic, message_encoding="cdr", schema_id=sid)
+            payloads = rm.encode_batch(fields, t, "sensor", vals)
+            for i, ti in enumerate(t.tolist()):
+                w.add_message(cid, log_time=ti, publish_time=ti, data=payloads[i].tobytes())
+        w.finish()
+    log = read_flight_log(path)
+    assert log.complete
+    np.testing.assert_array_equal(log.imu.time_ns, imu.time_ns)
+    np.testing.assert_array_equal(log.imu.f_ib_b_mps2, imu.f_ib_b_mps2)
+    np.testing.assert_array_equal(log.fix.height_m, fix.height_m)
+    assert log.imu.frame_id == "sensor"
