@@ -1,0 +1,369 @@
+"""Library of candidate effects and their signatures on algorithm B's velocity error.
+
+Frames and units: NED navigation frame (n), FRD body frame (b), SI inside (rad, rad/s, m/s,
+m/s^2, s, m). Errors are computed minus true (B minus A); the misalignment phi satisfies
+C_nb_hat = (I - [phi x]) C_nb; sensors read true + error. Display units (deg/h, ug/h, ppm,
+ms, m, arcsec/km) only in :attr:`Effect.unit` and :attr:`Effect.si_per_unit`.
+
+Signature
+---------
+The signature of an effect with parameters p on a leg is the sensitivity of B's horizontal
+velocity error along the leg's ACTUAL trajectory, ``S(t) = d dv_h(t) / d p`` (shape (M, 2, P)
+at the leg's samples), so that an effect of size p adds ``S(t) p`` to B minus A (to first
+order). Three ways, picked per effect:
+
+* 15-state transition matrices Phi(t, t0) along B (:class:`pospp.calib.replay.LegReplay`)
+  for effects that are error-state forcings. A forcing u(tau) entering the error dynamics as
+  ``dx' = F dx + G(tau) u(tau)`` gives (variation of constants)::
+
+      dx(t) = Phi(t, t0) int_t0^t Phi(tau, t0)^-1 G(tau) u(tau) dtau
+
+  evaluated by the trapezoidal rule on the leg's sample grid (:func:`forced_response`).
+* A perturbation of algorithm A (lever arm): B minus A changes by B's propagated initial error
+  minus A's own error.
+* Finite differences of B re-run on perturbed IMU increments (time offset, gyro scale
+  factor): the one strapdown kernel, through :func:`pospp.calib.replay.replay_leg`.
+
+Effects (stable identifiers)
+----------------------------
+``body_fixed_gyro_bias``
+    Horizontal gyro bias fixed in the body frame [b_x, b_y] (FRD). In the "paper" base model
+    the drift is a navigation-frame constant common to the legs; this effect is what tells
+    the two apart (its north/east projection turns with the heading). In the "body" base it is
+    part of the base model.
+``vertical_gyro_drift``
+    Body z gyro bias b_z (FRD). On level legs it is a heading drift, seen in the horizontal
+    channels only through the Earth-rate coupling of the heading error (phi_D' = -b_z; tilt
+    rate w_in,N phi_D): weak on short legs.
+``accel_bias_change``
+    Horizontal accelerometer bias changing in-run, a ramp [r_x, r_y] (FRD) per unit time. The
+    bias at the leg start is absorbed by the alignment (g phi + b = 0, docs/method.md); the
+    change since the start, ``r (t - t0)``, is not: forcing ``dv' = C_nb r (t - t0)``.
+``gyro_scale_factor``
+    Gyro scale-factor error [s_x, s_y, s_z] (measured = (1 + s) true, per axis): forcing
+    ``phi' = -C_nb diag(s) w_ib_b``. On straight level legs w_ib_b is the Earth and transport
+    rate only: needs rotation inside the legs (wander, turns) to be seen.
+``time_offset``
+    IMU time tag minus true time, tau: the increments labelled t were sensed at t - tau.
+    Only the changes of the specific force and rate reveal it (uniform legs cannot).
+``lever_arm``
+    Error of A's IMU-to-antenna lever arm, computed minus true, [l_x, l_y, l_z] (FRD): A's
+    velocity error is -C_nb (w_nb_b x dl) and its position error -C_nb dl. Only attitude
+    changes reveal it.
+``earth_rate_coupling``
+    The Earth-rate (Foucault) and other couplings that the paper's closed form drops: its
+    signature is the difference between the numerical transition along B and the closed
+    form, applied to the current estimates; the parameter is the fraction of that coupling
+    present (1 when the data obey the full error model). Only a candidate when the base
+    model uses the closed form.
+``gravity_disturbance``
+    Horizontal gravity disturbance (deflection of the vertical) varying along the track:
+    ``dg_h(r) = dg_h(r0) + Gamma (r - r0)``, Gamma the symmetric horizontal gradient
+    [G_NN, G_NE, G_EE] (1/s^2). The value at the leg start is absorbed like a constant
+    accelerometer bias; B (normal gravity) then errs by ``dv' = -Gamma (r - r0)``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pospp import earth, rotation
+from pospp.calib.replay import ImuIncrements, LegReplay, ReferenceSolution, replay_leg
+from pospp.calib.solve import leg_sensitivities
+from pospp.nav.error_model import BG, DR, DV, PHI
+
+DEG_PER_H = np.pi / 180.0 / 3600.0
+"""1 deg/h in rad/s."""
+UG_MPS2 = 9.80665e-6
+"""1 micro-g in m/s^2 (standard gravity, ISO 80000-3)."""
+ARCSEC_RAD = np.pi / 180.0 / 3600.0
+"""1 arcsec in rad."""
+GRAVITY_MPS2 = 9.80665
+"""Standard gravity [m/s^2], to express a gravity gradient as a deflection gradient."""
+
+
+@dataclass(frozen=True)
+class Effect:
+    """A candidate effect of the library.
+
+    Attributes
+    ----------
+    effect_id : str
+        Stable identifier (the ``effect`` column of diagnosis.parquet).
+    description : str
+        Physical name.
+    parameters : tuple of str
+        Parameter names (frames in the name: ``_x`` body FRD, ``_n`` / ``_e`` NED).
+    unit : str
+        Display unit of the parameters (diagnosis.parquet ``unit``).
+    si_per_unit : float
+        SI value of one display unit.
+    typical_si : float
+        A size worth detecting (SI): the observability screen drops parameter directions in
+        which an effect of this size would stand less than 2 noise sigmas above the base model.
+    needs_imu : bool
+        True when the signature re-runs B (needs the IMU increments and A's solution).
+    """
+
+    effect_id: str
+    description: str
+    parameters: tuple[str, ...]
+    unit: str
+    si_per_unit: float
+    typical_si: float
+    needs_imu: bool = False
+
+
+LIBRARY: tuple[Effect, ...] = (
+    Effect("body_fixed_gyro_bias", "horizontal gyro bias fixed in the body frame (vs nav frame)",
+           ("gyro_bias_x", "gyro_bias_y"), "deg_per_h", DEG_PER_H, 0.005 * DEG_PER_H),
+    Effect("vertical_gyro_drift", "vertical (body z) gyro drift",
+           ("gyro_bias_z",), "deg_per_h", DEG_PER_H, 0.05 * DEG_PER_H),
+    Effect("accel_bias_change", "horizontal accelerometer bias changing in-run (ramp)",
+           ("accel_bias_rate_x", "accel_bias_rate_y"), "ug_per_h", UG_MPS2 / 3600.0,
+           20.0 * UG_MPS2 / 3600.0),
+    Effect("gyro_scale_factor", "gyro scale-factor error", ("gyro_sf_x", "gyro_sf_y", "gyro_sf_z"),
+           "ppm", 1e-6, 100e-6, needs_imu=True),
+    Effect("time_offset", "IMU-GNSS (IMU minus reference) time offset", ("time_offset",), "ms",
+           1e-3, 5e-3, needs_imu=True),
+    Effect("lever_arm", "GNSS antenna lever-arm error of A (computed minus true)",
+           ("lever_arm_x", "lever_arm_y", "lever_arm_z"), "m", 1.0, 0.1),
+    Effect("earth_rate_coupling", "Earth-rate (Foucault) coupling dropped by the closed form",
+           ("earth_rate_fraction",), "fraction", 1.0, 0.3),
+    Effect("gravity_disturbance", "gravity disturbance (deflection of the vertical) gradient",
+           ("gravity_gradient_nn", "gravity_gradient_ne", "gravity_gradient_ee"),
+           "arcsec_per_km", GRAVITY_MPS2 * ARCSEC_RAD / 1000.0,
+           2.0 * GRAVITY_MPS2 * ARCSEC_RAD / 1000.0),
+)
+"""The candidate effects, in the order they are tested."""
+
+EFFECT_IDS: tuple[str, ...] = tuple(e.effect_id for e in LIBRARY)
+
+
+def effect_by_id(effect_id: str) -> Effect:
+    """The library entry of an identifier (ValueError naming the known ones otherwise)."""
+    for e in LIBRARY:
+        if e.effect_id == effect_id:
+            return e
+    raise ValueError(f"effect: expected one of {EFFECT_IDS}, got {effect_id!r}")
+
+
+@dataclass(frozen=True)
+class ReplayContext:
+    """What finite-difference signatures need to re-run B (optional).
+
+    Attributes
+    ----------
+    imu : ImuIncrements
+        The flight's raw increments.
+    reference : ReferenceSolution
+        Algorithm A.
+    replay_kwargs : dict
+        Keyword arguments the replays were made with (``accel_compensation``,
+        ``gyro_bias_b_radps``, ``attitude_correction_n_rad``...), except the sampling, which is
+        taken from the replays.
+    """
+
+    imu: ImuIncrements
+    reference: ReferenceSolution
+    replay_kwargs: dict = dataclasses.field(default_factory=dict)
+
+
+# --------------------------------------------------------------------------------------------
+# building blocks
+
+
+def forced_response(rep: LegReplay, g: NDArray) -> NDArray:
+    """Horizontal velocity error of a forcing, ``Phi(t) int Phi(tau)^-1 G u dtau``.
+
+    Parameters
+    ----------
+    rep : LegReplay
+        The leg (its transition matrices Phi(t_s, t0) and samples t_s).
+    g : ndarray, shape (M, 15, P)
+        ``G(tau) u(tau)`` at the samples for each of P unit parameters (error-state
+        derivative, 15-state layout of :mod:`pospp.nav.error_model`).
+
+    Returns
+    -------
+    ndarray, shape (M, 2, P)
+        [dv_N, dv_E] at the samples [m/s per unit parameter]; zero at t = 0.
+    """
+    inv = np.linalg.inv(rep.phi)
+    integrand = inv @ g  # (M, 15, P)
+    dt = np.diff(rep.t_s)[:, None, None]
+    steps = 0.5 * (integrand[1:] + integrand[:-1]) * dt
+    cum = np.concatenate([np.zeros_like(integrand[:1]), np.cumsum(steps, axis=0)])
+    return rep.phi[:, 3:5, :] @ cum
+
+
+def body_rate_nb_radps(rep: LegReplay) -> NDArray:
+    """w_nb_b at the samples from B's attitude (central differences of log(C_bn C_nb')), (M, 3)."""
+    c = rep.c_nb
+    rel = np.swapaxes(c[:-1], 1, 2) @ c[1:]
+    w_mid = rotation.rotvec_from_dcm(rel) / np.diff(rep.t_s)[:, None]
+    w = np.empty((rep.t_s.size, 3))
+    w[1:-1] = 0.5 * (w_mid[1:] + w_mid[:-1])
+    w[0], w[-1] = w_mid[0], w_mid[-1]
+    return w
+
+
+def _displacement_n_m(rep: LegReplay) -> NDArray:
+    """Horizontal displacement since the leg start along B's nominal velocity (M, 2) [m]."""
+    return rep.v_n0_mps[None, 0:2] * rep.t_s[:, None]
+
+
+# --------------------------------------------------------------------------------------------
+# signatures
+
+
+def _sig_body_bias(rep: LegReplay, axes: slice) -> NDArray:
+    return rep.phi[:, 3:5, BG][:, :, axes]
+
+
+def _sig_accel_ramp(rep: LegReplay) -> NDArray:
+    g = np.zeros((rep.t_s.size, 15, 2))
+    g[:, DV, :] = rep.c_nb[:, :, 0:2] * rep.t_s[:, None, None]
+    return forced_response(rep, g)
+
+
+def _sig_gyro_scale(rep: LegReplay) -> NDArray:
+    """Linear signature from B's attitude and the Earth and transport rates at the leg start."""
+    w_ie = earth.earth_rate_n_radps(rep.lat_rad)
+    w_en = earth.transport_rate_n_radps(rep.lat_rad, rep.height_m, rep.v_n0_mps)
+    w_ib_b = np.einsum("kji,j->ki", rep.c_nb, w_ie + w_en) + body_rate_nb_radps(rep)
+    g = np.zeros((rep.t_s.size, 15, 3))
+    g[:, PHI, :] = -rep.c_nb * w_ib_b[:, None, :]
+    return forced_response(rep, g)
+
+
+def _sig_lever_arm(rep: LegReplay) -> NDArray:
+    w = body_rate_nb_radps(rep)
+    out = np.zeros((rep.t_s.size, 2, 3))
+    for j in range(3):
+        e = np.zeros(3)
+        e[j] = 1.0
+        dv_a = -np.einsum("kij,kj->ki", rep.c_nb, np.cross(w, e))  # A's velocity error (M, 3)
+        x0 = np.zeros(15)
+        x0[DV] = dv_a[0]
+        x0[DR] = -rep.c_nb0 @ e
+        out[:, :, j] = rep.phi[:, 3:5, :] @ x0 - dv_a[:, 0:2]
+    return out
+
+
+def _sig_gravity(rep: LegReplay) -> NDArray:
+    d = _displacement_n_m(rep)
+    g = np.zeros((rep.t_s.size, 15, 3))
+    # dv' = -Gamma d, Gamma = [[G_NN, G_NE], [G_NE, G_EE]]
+    g[:, 3, 0] = -d[:, 0]
+    g[:, 3, 1] = -d[:, 1]
+    g[:, 4, 1] = -d[:, 0]
+    g[:, 4, 2] = -d[:, 1]
+    return forced_response(rep, g)
+
+
+def _sig_earth_rate(rep: LegReplay, base_x_leg: NDArray) -> NDArray:
+    """(numerical - closed form) [d_phi, d_bg] applied to the current base estimates."""
+    dp_n, db_n = leg_sensitivities(rep, "numerical")
+    dp_c, db_c = leg_sensitivities(rep, "closed_form")
+    diff = np.concatenate([dp_n - dp_c, db_n - db_c], axis=2)  # (M, 2, 6)
+    return (diff @ base_x_leg)[:, :, None]
+
+
+def _rerun_dv(rep: LegReplay, ctx: ReplayContext, imu: ImuIncrements) -> NDArray:
+    """B's horizontal velocity at the replay's samples after re-running on ``imu``."""
+    kw = dict(ctx.replay_kwargs)
+    kw["sample_rate_hz"] = 1.0 / float(rep.t_s[1] - rep.t_s[0])
+    kw["transition_step"] = 10**9
+    r = replay_leg(imu, ctx.reference, rep.leg, **kw)
+    m = min(r.t_s.size, rep.t_s.size)
+    out = np.zeros((rep.t_s.size, 2))
+    out[:m] = r.dv_n_mps[:m, 0:2]
+    out[m:] = out[m - 1]
+    return out
+
+
+def _leg_window(imu: ImuIncrements, rep: LegReplay) -> tuple[ImuIncrements, int]:
+    """A slice of the increments around a leg (faster re-runs); (window, first index)."""
+    k0 = max(int(np.searchsorted(imu.t_s, rep.leg.start_s)) - 200, 0)
+    k1 = min(int(np.searchsorted(imu.t_s, rep.leg.end_s, side="right")) + 200, imu.t_s.size - 1)
+    return ImuIncrements(imu.t_s[k0:k1 + 1], imu.dtheta_b_rad[k0:k1],
+                         imu.dv_b_mps[k0:k1]), k0
+
+
+def _sig_time_offset(rep: LegReplay, ctx: ReplayContext, tau_s: float = 2e-3) -> NDArray:
+    win, _ = _leg_window(ctx.imu, rep)
+    base = _rerun_dv(rep, ctx, win)
+    # increments labelled (t_k, t_k+1] sensed over (t_k - tau, t_k+1 - tau]: cumulative sums
+    # interpolated (linear in the cumulative angle / velocity = constant rate inside a sample)
+    t = win.t_s
+    out = []
+    for arr in (win.dtheta_b_rad, win.dv_b_mps):
+        cum = np.concatenate([np.zeros((1, 3)), np.cumsum(arr, axis=0)])
+        shifted = np.stack([np.interp(t - tau_s, t, cum[:, c]) for c in range(3)], axis=1)
+        out.append(np.diff(shifted, axis=0))
+    pert = ImuIncrements(t, out[0], out[1])
+    return ((_rerun_dv(rep, ctx, pert) - base) / tau_s)[:, :, None]
+
+
+def _sig_gyro_scale_rerun(rep: LegReplay, ctx: ReplayContext, s: float = 1e-4) -> NDArray:
+    win, _ = _leg_window(ctx.imu, rep)
+    base = _rerun_dv(rep, ctx, win)
+    out = np.zeros((rep.t_s.size, 2, 3))
+    for j in range(3):
+        dth = win.dtheta_b_rad.copy()
+        dth[:, j] *= 1.0 + s
+        out[:, :, j] = (_rerun_dv(rep, ctx, ImuIncrements(win.t_s, dth, win.dv_b_mps)) - base) / s
+    return out
+
+
+def signature(effect_id: str, rep: LegReplay, *, context: ReplayContext | None = None,
+              base_x_leg: NDArray | None = None) -> NDArray:
+    """Signature of one library effect on one leg, ``d dv_h / d p`` (M, 2, P), SI.
+
+    Parameters
+    ----------
+    effect_id : str
+        A library identifier (:data:`EFFECT_IDS`).
+    rep : LegReplay
+        The leg.
+    context : ReplayContext, optional
+        Needed by ``time_offset`` (and used by ``gyro_scale_factor`` for an exact re-run).
+    base_x_leg : ndarray, shape (6,), optional
+        Current estimates [phi_N, phi_E, phi_D, b_x, b_y, b_z] of the leg (SI), needed by
+        ``earth_rate_coupling``.
+    """
+    if effect_id == "body_fixed_gyro_bias":
+        return _sig_body_bias(rep, slice(0, 2))
+    if effect_id == "vertical_gyro_drift":
+        return _sig_body_bias(rep, slice(2, 3))
+    if effect_id == "accel_bias_change":
+        return _sig_accel_ramp(rep)
+    if effect_id == "gyro_scale_factor":
+        return _sig_gyro_scale(rep) if context is None else _sig_gyro_scale_rerun(rep, context)
+    if effect_id == "time_offset":
+        if context is None:
+            raise ValueError("time_offset: the IMU increments and A's solution are needed")
+        return _sig_time_offset(rep, context)
+    if effect_id == "lever_arm":
+        return _sig_lever_arm(rep)
+    if effect_id == "earth_rate_coupling":
+        if base_x_leg is None:
+            raise ValueError("earth_rate_coupling: the current base estimates are needed")
+        return _sig_earth_rate(rep, np.asarray(base_x_leg, dtype=float))
+    if effect_id == "gravity_disturbance":
+        return _sig_gravity(rep)
+    raise ValueError(f"effect: expected one of {EFFECT_IDS}, got {effect_id!r}")
+
+
+SignatureFunction = Callable[[LegReplay], NDArray]
+
+
+def signatures(effect_id: str, replays: Sequence[LegReplay], **kwargs) -> list[NDArray]:
+    """:func:`signature` of every leg."""
+    return [signature(effect_id, r, **kwargs) for r in replays]
