@@ -71,6 +71,28 @@ def gravity_formula(lat, height):
     )
 
 
+def gravity_gradient_formula(lat, height):
+    """(d gamma / d lat [m/s^2/rad], d gamma / d h [1/s^2]) of :func:`gravity_formula`.
+
+    Exact derivatives of the Somigliana + 2nd-order height formula (TR8350.2 Eq. 4-1, 4-3);
+    plain arithmetic for numba. With s2 = sin^2 lat, w = 1 - e^2 s2:
+    d gamma_0 / d s2 = gamma_e [k / sqrt(w) + (1 + k s2) e^2 / (2 w^1.5)], d s2 / d lat =
+    sin(2 lat).
+    """
+    s2 = np.sin(lat) ** 2
+    w = 1.0 - WGS84_E2 * s2
+    gamma0 = GAMMA_EQUATOR_MPS2 * (1.0 + SOMIGLIANA_K * s2) / np.sqrt(w)
+    dgamma0_ds2 = GAMMA_EQUATOR_MPS2 * (
+        SOMIGLIANA_K / np.sqrt(w) + (1.0 + SOMIGLIANA_K * s2) * WGS84_E2 / (2.0 * w * np.sqrt(w))
+    )
+    c1 = 2.0 / WGS84_A_M * (1.0 + WGS84_F + GRAVITY_M_RATIO - 2.0 * WGS84_F * s2)
+    height_factor = 1.0 - c1 * height + 3.0 * height**2 / WGS84_A_M**2
+    dfactor_ds2 = 4.0 * WGS84_F / WGS84_A_M * height
+    dg_dlat = np.sin(2.0 * lat) * (dgamma0_ds2 * height_factor + gamma0 * dfactor_ds2)
+    dg_dh = gamma0 * (-c1 + 6.0 * height / WGS84_A_M**2)
+    return dg_dlat, dg_dh
+
+
 def principal_radii_m(lat_rad: ArrayLike) -> tuple[NDArray, NDArray]:
     """Meridian (R_M, north-south) and prime-vertical (R_N, east-west) radii of curvature.
 

@@ -14,6 +14,11 @@ w_in = w_ie + w_en, f_n = C_nb f_b:
 
     phi'  = -w_in x phi + dw_in(dr, dv) - C_nb b_g
     dv'   = f_n x phi + C_nb b_a - (2 w_ie + w_en) x dv - (2 dw_ie + dw_en) x v + dg(dr)
+
+with dg(dr) = [0, 0, d gamma/d lat dr_N / (R_M + h) - d gamma/d h dr_D] (normal gravity at the
+computed position, exact gradients from :func:`pospp.earth.gravity_gradient_formula`). Every
+entry is checked against a finite-difference Jacobian of the nonlinear NED navigation equations
+(tests/unit/test_error_model.py).
     dr'   = F_rr dr + dv
     b_g'  = -b_g / tau_g,   b_a' = -b_a / tau_a
 
@@ -29,11 +34,11 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
-from pospp.earth import EARTH_RATE_RADPS, gravity_formula, radii_formula
+from pospp.earth import EARTH_RATE_RADPS, gravity_gradient_formula, radii_formula
 from pospp.nav._kernels import dcm_from_quat_into
 
 _radii = njit(cache=True)(radii_formula)
-_gravity = njit(cache=True)(gravity_formula)
+_gravity_gradient = njit(cache=True)(gravity_gradient_formula)
 
 N_STATES = 15
 PHI, DV, DR, BG, BA = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), slice(12, 15)
@@ -135,8 +140,12 @@ def fill_f_matrix(lat, h, v_n, c_nb, f_b, inv_tau_g, inv_tau_a, f_out):
             f_out[3 + i, 3 + j] += acc_v
             f_out[3 + i, 6 + j] = acc_r
             f_out[3 + i, 12 + j] = c_nb[i, j]
-    # gravity with height: dg_D = (2 g / R) dr_D (unstable vertical channel)
-    f_out[5, 8] += 2.0 * _gravity(lat, h) / (math.sqrt(r_m * r_n) + h)
+    # normal gravity at the computed position: dg_D = dgamma/dlat dlat + dgamma/dh dh with
+    # dlat = dr_N / (R_M + h), dh = -dr_D (exact gradients; dgamma/dh ~ -3.08e-6 /s^2 gives the
+    # unstable vertical channel)
+    dg_dlat, dg_dh = _gravity_gradient(lat, h)
+    f_out[5, 6] += dg_dlat / rm
+    f_out[5, 8] -= dg_dh
     # --- position rows (NED metres) ---------------------------------------------------------
     f_out[6, 6] = -vd / rm
     f_out[6, 8] = vn / rm

@@ -70,3 +70,22 @@ def test_rates_point_the_right_way():
     assert we[0] > 0 and we[2] < 0 and abs(we[1]) == 0
     wn = earth.transport_rate_n_radps(np.radians(40.0), 0.0, np.array([100.0, 0.0, 0.0]))
     assert wn[1] < 0 and wn[0] == 0
+
+
+@given(
+    st.floats(min_value=-1.5, max_value=1.5),
+    st.floats(min_value=-400.0, max_value=12000.0),
+)
+@settings(max_examples=40, deadline=None)
+def test_gravity_gradient_is_the_derivative_of_normal_gravity(lat, h):
+    dg_dlat, dg_dh = earth.gravity_gradient_formula(lat, h)
+    e_lat, e_h = 1e-5, 1.0  # central differences: truncation ~1e-10 relative
+    g = earth.normal_gravity_mps2
+    num_lat = g(lat + e_lat, h) - g(lat - e_lat, h)
+    num_h = g(lat, h + e_h) - g(lat, h - e_h)
+    assert abs(dg_dlat - num_lat / (2 * e_lat)) < 1e-8
+    assert abs(dg_dh - num_h / (2 * e_h)) < 1e-13
+    # free-air gradient about -3.086e-6 /s^2 (published, 45 deg, sea level; magnitude falls
+    # slowly with height); latitude gradient vanishes at equator and poles, peaks near 45 deg
+    assert -3.095e-6 < dg_dh < -3.06e-6
+    assert abs(dg_dlat) <= 0.052
