@@ -1,0 +1,227 @@
+"""IMU error models applied to exact increments (sensors read true + error).
+
+Frames and units: every per-axis parameter is on body FRD axes. Boundary names carry their
+unit (``_dph`` deg/h, ``_dpsh`` deg/sqrt(h), ``_ug`` micro-g with g = 9.80665 m/s^2,
+``_ugph`` ug per hour, ``_mpsph`` m/s/sqrt(h), ``_ppm``, ``_arcsec``, ``_s``); the arrays
+returned are SI (rad, m/s).
+
+Model, per IMU interval k of length dt (t_mid its midpoint, t from the mission start)::
+
+    dtheta_meas = (I + M_g) dtheta_true + (b_g + r_g t_mid + x_g,k) dt + n_g,k
+    dv_meas     = (I + M_a) dv_true     + (b_a + r_a t_mid + x_a,k) dt + n_a,k
+
+- b: constant bias (``gyro_bias_dph``, ``accel_bias_ug``);
+- r: bias drift in time, a ramp (``gyro_bias_ramp_dphph``, ``accel_bias_drift_ugph``);
+- x: first-order Gauss-Markov drift, stationary, sigma and correlation time tau
+  (``gyro_gm_sigma_dph`` / ``gyro_gm_tau_s``; accel likewise): x_k+1 = e^(-dt/tau) x_k +
+  sigma sqrt(1 - e^(-2 dt/tau)) w_k, x_0 ~ N(0, sigma^2). The paper's "random drift" is this
+  sigma (docs/simulator.md);
+- n: white noise on the increments, angle / velocity random walk: std = N sqrt(dt) with
+  N = ``gyro_arw_dpsh`` (deg/sqrt(h)) or ``accel_vrw_mpsph`` (m/s/sqrt(h));
+- M = diag(scale factor [ppm]) + misalignment (off-diagonal, [xy, xz, yx, yz, zx, zy] arcsec;
+  M_ij = sensitivity of axis i to the input about/along axis j).
+
+Random streams are seeded per sensor (gyro, accel) from one ``numpy.random.SeedSequence``, so
+the same seed gives bit-identical output.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import asdict, dataclass, field, fields
+from importlib import resources
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.signal import lfilter
+
+from pospp.earth import STANDARD_GRAVITY_MPS2
+from pospp.rotation import ARCSEC_RAD, DEG_PER_H_RADPS
+
+__all__ = ["ImuErrorModel", "RealisedImuErrors", "apply_imu_errors", "imu_grade", "grade_names"]
+
+UG_MPS2 = 1e-6 * STANDARD_GRAVITY_MPS2
+"""One micro-g [m/s^2] (g0 = 9.80665 m/s^2)."""
+DEG_PER_SQRT_H_RAD_PER_SQRT_S = np.pi / 180.0 / 60.0
+"""1 deg/sqrt(h) in rad/sqrt(s)."""
+MPS_PER_SQRT_H_MPS_PER_SQRT_S = 1.0 / 60.0
+"""1 m/s/sqrt(h) in m/s/sqrt(s)."""
+
+
+def _zeros3() -> tuple[float, float, float]:
+    return (0.0, 0.0, 0.0)
+
+
+def _zeros6() -> tuple[float, ...]:
+    return (0.0,) * 6
+
+
+@dataclass(frozen=True)
+class ImuErrorModel:
+    """IMU error parameters (body FRD axes; units in the names). All default to zero."""
+
+    gyro_bias_dph: tuple[float, float, float] = field(default_factory=_zeros3)
+    gyro_bias_ramp_dphph: tuple[float, float, float] = field(default_factory=_zeros3)
+    gyro_arw_dpsh: tuple[float, float, float] = field(default_factory=_zeros3)
+    gyro_gm_sigma_dph: tuple[float, float, float] = field(default_factory=_zeros3)
+    gyro_gm_tau_s: float = 300.0
+    gyro_sf_ppm: tuple[float, float, float] = field(default_factory=_zeros3)
+    gyro_misalign_arcsec: tuple[float, ...] = field(default_factory=_zeros6)
+    accel_bias_ug: tuple[float, float, float] = field(default_factory=_zeros3)
+    accel_bias_drift_ugph: tuple[float, float, float] = field(default_factory=_zeros3)
+    accel_vrw_mpsph: tuple[float, float, float] = field(default_factory=_zeros3)
+    accel_gm_sigma_ug: tuple[float, float, float] = field(default_factory=_zeros3)
+    accel_gm_tau_s: float = 300.0
+    accel_sf_ppm: tuple[float, float, float] = field(default_factory=_zeros3)
+    accel_misalign_arcsec: tuple[float, ...] = field(default_factory=_zeros6)
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if f.name.endswith("_tau_s"):
+                if not float(v) > 0.0:
+                    raise ValueError(f"{f.name} must be > 0 s, got {v!r}")
+                object.__setattr__(self, f.name, float(v))
+                continue
+            n = 6 if "misalign" in f.name else 3
+            arr = np.broadcast_to(np.asarray(v, dtype=float), (n,))
+            if not np.isfinite(arr).all():
+                raise ValueError(f"{f.name}: non-finite value {v!r}")
+            if any(k in f.name for k in ("arw", "vrw", "sigma")) and (arr < 0).any():
+                raise ValueError(f"{f.name} must be >= 0, got {v!r}")
+            object.__setattr__(self, f.name, tuple(float(x) for x in arr))
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any], *, source: str = "<dict>") -> ImuErrorModel:
+        """From a dict with the field names (unknown keys are an error)."""
+        names = {f.name for f in fields(cls)}
+        bad = set(d) - names
+        if bad:
+            raise ValueError(f"{source}: unknown IMU error parameter(s) {sorted(bad)}; "
+                             f"known: {sorted(names)}")
+        return cls(**d)
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready dict (lists), field names as keys."""
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
+
+    def is_error_free(self) -> bool:
+        return all(
+            (v == 0.0 if isinstance(v, float) else not any(v))
+            for k, v in asdict(self).items() if not k.endswith("_tau_s")
+        )
+
+    def gyro_matrix(self) -> NDArray:
+        """I + M_g (scale factor and misalignment), (3, 3)."""
+        return _sf_misalign(self.gyro_sf_ppm, self.gyro_misalign_arcsec)
+
+    def accel_matrix(self) -> NDArray:
+        """I + M_a, (3, 3)."""
+        return _sf_misalign(self.accel_sf_ppm, self.accel_misalign_arcsec)
+
+
+def _sf_misalign(sf_ppm, mis_arcsec) -> NDArray:
+    m = np.eye(3) + np.diag(np.asarray(sf_ppm) * 1e-6)
+    for (i, j), v in zip(((0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1)), mis_arcsec, strict=True):
+        m[i, j] = v * ARCSEC_RAD
+    return m
+
+
+def grade_names() -> list[str]:
+    """Names of the IMU grades in ``pospp/presets/imu.toml``."""
+    text = resources.files("pospp").joinpath("presets", "imu.toml").read_text()
+    return sorted(tomllib.loads(text))
+
+
+def imu_grade(name: str) -> ImuErrorModel:
+    """An IMU grade from ``pospp/presets/imu.toml``: ``errorfree``, ``paper_vehicle``
+    (FOG: 0.1 deg/h constant, 0.05 deg/h random drift, 5 ug), ``paper_flight`` (flexure gyro:
+    1 deg/h constant, 0.5 deg/h random drift, 5 ug)."""
+    grades = tomllib.loads(resources.files("pospp").joinpath("presets", "imu.toml").read_text())
+    if name not in grades:
+        raise ValueError(f"unknown IMU grade {name!r}; grades: {sorted(grades)}")
+    return ImuErrorModel.from_dict(grades[name], source=f"IMU grade {name}")
+
+
+@dataclass(frozen=True)
+class RealisedImuErrors:
+    """The error realisation of one run (SI, body FRD), per IMU interval.
+
+    Attributes
+    ----------
+    gyro_bias_radps, accel_bias_mps2 : (N, 3)
+        Total bias (constant + ramp + Gauss-Markov) over each interval; noise excluded.
+    gyro_matrix, accel_matrix : (3, 3)
+        I + M (scale factor and misalignment).
+    """
+
+    gyro_bias_radps: NDArray
+    accel_bias_mps2: NDArray
+    gyro_matrix: NDArray
+    accel_matrix: NDArray
+
+
+def _gauss_markov(rng: np.random.Generator, n: int, dt: float, sigma: NDArray,
+                  tau: float) -> NDArray:
+    """Stationary first-order Gauss-Markov sequence, shape (n, 3)."""
+    if not np.any(sigma):
+        return np.zeros((n, 3))
+    a = np.exp(-dt / tau)
+    w = rng.standard_normal((n, 3))
+    w[0] = w[0] / np.sqrt(1.0 - a * a)  # x_0 ~ N(0, sigma^2) after scaling below
+    x = lfilter([1.0], [1.0, -a], w, axis=0)
+    return x * (sigma * np.sqrt(1.0 - a * a))
+
+
+def apply_imu_errors(
+    t_s: NDArray,
+    dtheta_b_rad: NDArray,
+    dv_b_mps: NDArray,
+    model: ImuErrorModel,
+    seed: int | np.random.SeedSequence,
+) -> tuple[NDArray, NDArray, RealisedImuErrors]:
+    """Corrupt exact increments per the model (module docstring).
+
+    Parameters
+    ----------
+    t_s : (N + 1,) epochs [s]; uniform spacing is assumed for the Gauss-Markov step.
+    dtheta_b_rad, dv_b_mps : (N, 3) exact increments.
+    model : ImuErrorModel
+    seed : int or SeedSequence
+        Gyro and accelerometer streams are spawned from it.
+
+    Returns
+    -------
+    dtheta_meas_rad, dv_meas_mps : (N, 3)
+    realised : RealisedImuErrors
+    """
+    n = dtheta_b_rad.shape[0]
+    dt = np.diff(t_s)
+    dt_nom = float(np.median(dt)) if n else 0.0
+    t_mid = 0.5 * (t_s[1:] + t_s[:-1])
+    ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    rng_g, rng_a = (np.random.default_rng(s) for s in ss.spawn(2))
+    mg, ma = model.gyro_matrix(), model.accel_matrix()
+    bg = (
+        np.asarray(model.gyro_bias_dph) * DEG_PER_H_RADPS
+        + np.outer(t_mid / 3600.0, np.asarray(model.gyro_bias_ramp_dphph) * DEG_PER_H_RADPS)
+        + _gauss_markov(rng_g, n, dt_nom, np.asarray(model.gyro_gm_sigma_dph) * DEG_PER_H_RADPS,
+                        model.gyro_gm_tau_s)
+    )
+    ba = (
+        np.asarray(model.accel_bias_ug) * UG_MPS2
+        + np.outer(t_mid / 3600.0, np.asarray(model.accel_bias_drift_ugph) * UG_MPS2)
+        + _gauss_markov(rng_a, n, dt_nom, np.asarray(model.accel_gm_sigma_ug) * UG_MPS2,
+                        model.accel_gm_tau_s)
+    )
+    sq = np.sqrt(dt)[:, None]
+    arw = np.asarray(model.gyro_arw_dpsh) * DEG_PER_SQRT_H_RAD_PER_SQRT_S
+    vrw = np.asarray(model.accel_vrw_mpsph) * MPS_PER_SQRT_H_MPS_PER_SQRT_S
+    ng = rng_g.standard_normal((n, 3)) * arw * sq if np.any(arw) else 0.0
+    na = rng_a.standard_normal((n, 3)) * vrw * sq if np.any(vrw) else 0.0
+    dth = (dtheta_b_rad @ mg.T if not np.array_equal(mg, np.eye(3)) else dtheta_b_rad)
+    dvm = (dv_b_mps @ ma.T if not np.array_equal(ma, np.eye(3)) else dv_b_mps)
+    dth = dth + bg * dt[:, None] + ng
+    dvm = dvm + ba * dt[:, None] + na
+    return dth, dvm, RealisedImuErrors(bg, ba, mg, ma)
