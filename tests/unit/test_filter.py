@@ -1,0 +1,195 @@
+"""Algorithm A on a synthetic static record: input checks, rejections and the static solution.
+
+The synthetic IMU at rest is built here from first principles (f_b = -C_bn g_n,
+w_ib_b = C_bn w_ie_n with a known attitude), independent of the strapdown kernel; the GNSS
+antenna sits at the lever arm above the IMU. Flight-grade biases and white noise are added
+with a seeded generator.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from pospp import earth, rotation
+from pospp.io.mcap_reader import GnssFixes, GnssVelocities, ImuSamples
+from pospp.nav.filter import FilterOptions, run_integrated_navigation
+from pospp.nav.tuning import tuning_preset
+
+LAT, LON, H = math.radians(45.0), math.radians(7.0), 300.0
+RPY = np.radians([1.5, -2.0, 130.0])
+LEVER = np.array([0.3, -0.1, -0.8])
+EPOCH = 1_700_000_000_000_000_000
+ARCSEC = math.radians(1.0 / 3600.0)
+GYRO_BIAS = np.radians([0.3, -0.2, 0.4]) / 3600.0
+ACCEL_BIAS = np.array([20.0, -15.0, 10.0]) * 9.80665e-6
+
+
+def _static_record(seed=1, duration_s=120.0, rate_hz=100.0, gnss_hz=1.0):
+    rng = np.random.default_rng(seed)
+    n = int(duration_s * rate_hz) + 1
+    t_ns = EPOCH + np.round(np.arange(n) * 1e9 / rate_hz).astype(np.int64)
+    c_bn = rotation.dcm_from_euler(RPY).T
+    g_n = np.array([0.0, 0.0, float(earth.normal_gravity_mps2(LAT, H))])
+    w_ie_n = np.array([earth.EARTH_RATE_RADPS * math.cos(LAT), 0.0,
+                       -earth.EARTH_RATE_RADPS * math.sin(LAT)])
+    dt = 1.0 / rate_hz
+    arw = math.radians(0.002) / 60.0
+    w = c_bn @ w_ie_n + GYRO_BIAS + rng.normal(0.0, arw / math.sqrt(dt), (n, 3))
+    f = c_bn @ (-g_n) + ACCEL_BIAS + rng.normal(0.0, 0.002 / 60.0 / math.sqrt(dt), (n, 3))
+    imu = ImuSamples(t_ns, w, f)
+    m = int(duration_s * gnss_hz) + 1
+    g_ns = EPOCH + np.round(np.arange(m) * 1e9 / gnss_hz).astype(np.int64)
+    ant = rotation.dcm_from_euler(RPY) @ LEVER
+    r_m, r_n = earth.principal_radii_m(LAT)
+    noise = rng.normal(0.0, 1.0, (m, 3)) * [0.02, 0.02, 0.04]
+    lat = LAT + (ant[0] + noise[:, 0]) / (r_m + H)
+    lon = LON + (ant[1] + noise[:, 1]) / ((r_n + H) * math.cos(LAT))
+    h = H - ant[2] - noise[:, 2]
+    cov = np.tile(np.diag([0.02, 0.02, 0.04]) ** 2, (m, 1, 1))
+    fixes = GnssFixes(g_ns, lat, lon, h, cov, np.zeros(m, dtype=np.int8))
+    vels = GnssVelocities(g_ns.copy(), rng.normal(0.0, 0.01, (m, 3)),
+                          np.tile(np.eye(3) * 0.01**2, (m, 1, 1)))
+    return imu, fixes, vels
+
+
+def _run(imu, fixes, vels, **kw):
+    kw.setdefault("output_rate_hz", 1.0)
+    return run_integrated_navigation(imu, fixes, vels, tuning_preset("flight"), epoch_ns=EPOCH,
+                                     lever_arm_b_m=LEVER, **kw)
+
+
+@pytest.fixture(scope="module")
+def record():
+    return _static_record()
+
+
+@pytest.fixture(scope="module")
+def clean(record):
+    return _run(*record)
+
+
+def _replace_rows(obj, idx, **values):
+    changes = {}
+    for name, val in values.items():
+        arr = getattr(obj, name).copy()
+        arr[idx] = val
+        changes[name] = arr
+    return dataclasses.replace(obj, **changes)
+
+
+def test_static_solution_levels_and_holds_position(clean):
+    sol = clean.smoothed
+    assert clean.alignment.method == "static"
+    # position of the IMU (the fixes are at the antenna): centimetres
+    r_m, r_n = earth.principal_radii_m(LAT)
+    dn = (sol.lat_rad - LAT) * (r_m + H)
+    de = (sol.lon_rad - LON) * (r_n + H) * math.cos(LAT)
+    assert np.max(np.abs(dn)) < 0.03 and np.max(np.abs(de)) < 0.03
+    assert np.max(np.abs(sol.height_m - H)) < 0.05
+    assert np.max(np.abs(sol.v_n_mps)) < 0.005
+    # tilt: at rest the accelerometer bias is indistinguishable from tilt; the error is
+    # about bias / g (<= 2.5e-6 rad, 0.5") and the filter's sigma covers it
+    phi = rotation.attitude_error_n_rad(rotation.dcm_from_quat(sol.q_nb),
+                                        rotation.dcm_from_euler(RPY))
+    assert np.max(np.abs(phi[:, :2])) < 10 * ARCSEC
+    assert np.all(np.abs(phi[-1, :2]) < 3.0 * sol.att_sigma_ned_rad[-1, :2])
+    # heading from gyrocompassing within 3 sigma
+    assert abs(phi[-1, 2]) < 3.0 * sol.att_sigma_ned_rad[-1, 2]
+    assert clean.n_updates["zupt"] > 50
+    assert clean.rejections == ()
+
+
+def test_outputs_are_on_the_requested_grid(clean):
+    sol = clean.forward
+    assert np.all(np.diff(sol.time_ns) == 1_000_000_000)
+    assert sol.time_ns[0] == EPOCH
+
+
+def test_nan_zero_and_absurd_covariances_are_rejected_with_times(record, clean):
+    imu, fixes, vels = record
+    bad = _replace_rows(fixes, [10], lat_rad=np.nan)
+    bad = _replace_rows(bad, [20], pos_cov_ned_m2=np.zeros((3, 3)))
+    bad = _replace_rows(bad, [30], pos_cov_ned_m2=np.eye(3) * 1e12)
+    bad = _replace_rows(bad, [40], pos_cov_ned_m2=np.full((3, 3), np.nan))
+    badv = _replace_rows(vels, [50], v_n_mps=np.inf)
+    res = _run(imu, bad, badv)
+    got = {(r.time_ns, r.kind): r.reason for r in res.rejections}
+    t = fixes.time_ns
+    assert got[(t[10], "position")] == "non-finite value"
+    assert got[(t[20], "position")].startswith("covariance not positive")
+    assert got[(t[30], "position")].startswith("covariance too large")
+    assert got[(t[40], "position")] == "non-finite covariance"
+    assert got[(vels.time_ns[50], "velocity")] == "non-finite value"
+    assert len(res.rejections) == 5
+    assert res.n_updates["position"] == clean.n_updates["position"] - 4
+    # the rest of the data still gives the same solution
+    np.testing.assert_allclose(res.smoothed.height_m, clean.smoothed.height_m, atol=0.02)
+
+
+def test_kilometre_jump_is_gated_and_does_not_move_the_solution(record, clean):
+    imu, fixes, vels = record
+    jumped = _replace_rows(fixes, [60, 61], lat_rad=fixes.lat_rad[60] + 2000.0 / 6.37e6)
+    res = _run(imu, jumped, vels)
+    gated = [r for r in res.rejections if r.reason.startswith("innovation gate")]
+    assert [r.time_ns for r in gated] == [fixes.time_ns[60], fixes.time_ns[61]]
+    assert all(r.kind == "position" and r.value > 1e6 for r in gated)
+    r_m, _ = earth.principal_radii_m(LAT)
+    dn = (res.smoothed.lat_rad - clean.smoothed.lat_rad) * r_m
+    assert np.max(np.abs(dn)) < 0.01
+
+
+def test_duplicate_gnss_times_keep_the_first(record):
+    imu, fixes, vels = record
+    idx = np.r_[np.arange(len(fixes)), 70]
+    dup = dataclasses.replace(fixes, **{
+        f.name: getattr(fixes, f.name)[idx] for f in dataclasses.fields(fixes)})
+    res = _run(imu, dup, vels)
+    assert [(r.time_ns, r.reason) for r in res.rejections] == [(fixes.time_ns[70],
+                                                                "duplicate time")]
+
+
+def test_imu_gap_is_a_clear_error(record):
+    imu, fixes, vels = record
+    keep = np.ones(len(imu), dtype=bool)
+    keep[5000:5010] = False  # 10 samples missing: an 0.11 s interval at 100 Hz
+    gap = ImuSamples(imu.time_ns[keep], imu.w_ib_b_radps[keep], imu.f_ib_b_mps2[keep])
+    with pytest.raises(ValueError, match=r"imu: gap of 0\.110000 s .* t = 50\.100000 s"):
+        _run(imu=gap, fixes=fixes, vels=vels)
+    # a tolerant setting lets it through
+    res = _run(gap, fixes, vels, options=FilterOptions(max_imu_gap_intervals=20.0))
+    assert len(res.forward) == len(fixes)
+
+
+@pytest.mark.parametrize("what", ["nan", "backwards"])
+def test_bad_imu_samples_raise(record, what):
+    imu, fixes, vels = record
+    w = imu.w_ib_b_radps.copy()
+    t = imu.time_ns.copy()
+    if what == "nan":
+        w[300, 1] = np.nan
+        match = r"non-finite rate in sample 300"
+    else:
+        t[300] = t[299]
+        match = r"time not increasing at sample 300"
+    with pytest.raises(ValueError, match=match):
+        _run(ImuSamples(t, w, imu.f_ib_b_mps2), fixes, vels)
+
+
+def test_no_gnss_is_a_clear_error(record):
+    imu, fixes, vels = record
+    nan_all = dataclasses.replace(fixes, height_m=np.full(len(fixes), np.nan))
+    with pytest.raises(ValueError, match="no usable GNSS fix"):
+        _run(imu, nan_all, vels)
+
+
+def test_smoother_off_and_every_epoch_output(record):
+    imu, fixes, vels = record
+    short = ImuSamples(imu.time_ns[:4001], imu.w_ib_b_radps[:4001], imu.f_ib_b_mps2[:4001])
+    res = _run(short, fixes, vels, output_rate_hz=None,
+               options=FilterOptions(smoother=False))
+    assert res.smoothed is None and res.smoothed_biases is None
+    assert len(res.forward) == 4001
