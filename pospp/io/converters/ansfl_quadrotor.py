@@ -283,7 +283,8 @@ def convert_ansfl_quadrotor(
             f"path {p}, unit {imu}; mounting estimated from all paths (levelling residual "
             f"{np.degrees(mounting.levelling_residual_rad):.2f} deg, heading scatter "
             f"{np.degrees(mounting.heading_scatter_rad):.2f} deg)",
-            "the authors' IMUAvg averages raw outputs of units whose mountings differ "
-            "(docs/realdata.md)" if imu == "avg" else "") if x),
+            "IMUAvg is the authors' average of the raw outputs of the four units; their "
+            "estimated mountings agree within about 2 deg (docs/realdata.md)"
+            if imu == "avg" else "") if x),
     )
 
