@@ -1,0 +1,146 @@
+"""RTS smoother of the closed-loop error-state filter against an independent batch solution.
+
+For a linear Gaussian system the closed-loop filter's nominal state after each update is the
+Kalman estimate, and the smoothed state (nominal minus the smoothed error e^+) must equal the
+batch maximum-a-posteriori solution of the whole record (one big weighted least-squares
+problem solved by numpy), with the posterior covariance equal to the smoothed covariance.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pospp.nav import smoother
+
+
+def _system(seed, n=4, k=25, m=2):
+    rng = np.random.default_rng(seed)
+    a = rng.normal(0.0, 0.3, (n, n))
+    phi = np.eye(n) + 0.2 * (a - a.T) + 0.05 * a  # near-rotation, mildly unstable/stable
+    lq = rng.normal(0.0, 0.1, (n, n))
+    q = lq @ lq.T + 1e-3 * np.eye(n)
+    h = rng.normal(0.0, 1.0, (m, n))
+    r = np.diag(rng.uniform(0.05, 0.3, m))
+    p0 = np.diag(rng.uniform(0.5, 2.0, n))
+    m0 = rng.normal(0.0, 1.0, n)
+    x = [m0 + np.linalg.cholesky(p0) @ rng.normal(size=n)]
+    for _ in range(k - 1):
+        x.append(phi @ x[-1] + np.linalg.cholesky(q) @ rng.normal(size=n))
+    has_z = rng.uniform(size=k) < 0.7
+    has_z[0] = True
+    z = [h @ xi + np.linalg.cholesky(r) @ rng.normal(size=m) for xi in x]
+    return dict(phi=phi, q=q, h=h, r=r, p0=p0, m0=m0, z=z, has_z=has_z, n=n, k=k)
+
+
+def _closed_loop_forward(s):
+    """Closed-loop filter in the pospp form: returns nominal states and the node arrays."""
+    n, k = s["n"], s["k"]
+    p_pred = np.empty((k, n, n))
+    p_upd = np.empty((k, n, n))
+    phis = np.empty((k, n, n))
+    dx = np.zeros((k, n))
+    nominal = np.empty((k, n))
+    x_hat, p = s["m0"].copy(), s["p0"].copy()
+    for i in range(k):
+        if i > 0:
+            x_hat = s["phi"] @ x_hat  # nominal propagation; the error state stays zero
+            p = s["phi"] @ p @ s["phi"].T + s["q"]
+        phis[i] = s["phi"] if i > 0 else np.eye(n)
+        p_pred[i] = p
+        if s["has_z"][i]:
+            h, r = s["h"], s["r"]
+            dz = h @ x_hat - s["z"][i]  # predicted minus measured
+            kg = p @ h.T @ np.linalg.inv(h @ p @ h.T + r)
+            dx[i] = kg @ dz
+            x_hat = x_hat - dx[i]  # feedback; error state reset
+            ikh = np.eye(n) - kg @ h
+            p = ikh @ p @ ikh.T + kg @ r @ kg.T
+        p_upd[i] = p
+        nominal[i] = x_hat
+    return nominal, p_pred, p_upd, phis, dx
+
+
+def _batch(s):
+    """MAP estimate of all states and its covariance by whitened least squares."""
+    n, k = s["n"], s["k"]
+    rows, rhs = [], []
+
+    def add(block_cols, mat_list, cov, y):
+        w = np.linalg.inv(np.linalg.cholesky(cov))
+        row = np.zeros((cov.shape[0], n * k))
+        for col, mat in zip(block_cols, mat_list, strict=True):
+            row[:, col * n:(col + 1) * n] = w @ mat
+        rows.append(row)
+        rhs.append(w @ y)
+
+    add([0], [np.eye(n)], s["p0"], s["m0"])
+    for i in range(1, k):
+        add([i, i - 1], [np.eye(n), -s["phi"]], s["q"], np.zeros(n))
+    for i in range(k):
+        if s["has_z"][i]:
+            add([i], [s["h"]], s["r"], s["z"][i])
+    a = np.vstack(rows)
+    b = np.concatenate(rhs)
+    x, *_ = np.linalg.lstsq(a, b, rcond=None)
+    cov = np.linalg.inv(a.T @ a)
+    return x.reshape(k, n), cov
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_closed_loop_rts_equals_batch_map(seed):
+    s = _system(seed)
+    nominal, p_pred, p_upd, phis, dx = _closed_loop_forward(s)
+    e_plus, e_minus, p_s = smoother.rts_smooth(p_pred, p_upd, phis, dx)
+    x_batch, cov = _batch(s)
+    np.testing.assert_allclose(nominal - e_plus, x_batch, atol=1e-9, rtol=0)
+    np.testing.assert_allclose(e_minus - e_plus, dx, atol=1e-12)
+    n = s["n"]
+    for i in range(s["k"]):
+        np.testing.assert_allclose(p_s[i], cov[i * n:(i + 1) * n, i * n:(i + 1) * n],
+                                   atol=1e-9, rtol=1e-7)
+    # the last node is the filtered one
+    np.testing.assert_array_equal(e_plus[-1], 0.0)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(min_value=0, max_value=2**31 - 1))
+def test_smoothed_covariance_below_filtered_and_symmetric(seed):
+    s = _system(seed, n=5, k=15, m=2)
+    _, p_pred, p_upd, phis, dx = _closed_loop_forward(s)
+    _, _, p_s = smoother.rts_smooth(p_pred, p_upd, phis, dx)
+    for i in range(s["k"]):
+        np.testing.assert_allclose(p_s[i], p_s[i].T, atol=0)
+        assert np.linalg.eigvalsh(p_s[i]).min() > 0.0
+        assert np.linalg.eigvalsh(p_upd[i] - p_s[i]).min() > -1e-10
+
+
+def test_interpolation_is_linear_between_after_and_before():
+    node_t = np.array([0.0, 1.0, 3.0])
+    e_plus = np.array([[0.0], [10.0], [0.0]])
+    e_minus = np.array([[5.0], [2.0], [7.0]])
+    got = smoother.interpolate_errors(node_t, e_plus, e_minus, np.array([0.0, 0.5, 1.0, 2.0,
+                                                                         3.0, 4.0]))
+    # from e+ at node i to e- at node i + 1; at a node: e+; after the last node: e+ (zero)
+    np.testing.assert_allclose(got[:, 0], [0.0, 1.0, 10.0, 8.5, 0.0, 0.0])
+
+
+def test_correction_round_trip():
+    """apply_correction removes an error that was added with the pospp convention."""
+    from pospp import rotation
+
+    rng = np.random.default_rng(4)
+    q_true = rotation.quat_from_euler([0.1, -0.2, 2.0])
+    phi = rng.normal(0.0, 1e-3, 3)
+    c_hat = rotation.dcm_from_rotvec(-phi) @ rotation.dcm_from_quat(q_true)  # (I - [phi x]) C
+    x = np.concatenate([[0.7, 2.0, 100.0], [1.0, 2.0, 3.0], rotation.quat_from_dcm(c_hat)])
+    dx = np.zeros(15)
+    dx[:3] = phi
+    dx[3:6] = [0.1, -0.2, 0.3]
+    smoother.apply_correction(x, dx)
+    np.testing.assert_allclose(x[3:6], [0.9, 2.2, 2.7])
+    ang = rotation.angle_between_rad(rotation.dcm_from_quat(x[6:10]),
+                                     rotation.dcm_from_quat(q_true))
+    assert ang < 1e-12
