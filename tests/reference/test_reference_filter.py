@@ -235,3 +235,24 @@ def test_reference_solution_for_replay(result):
     np.testing.assert_array_equal(acc_f, result.forward_biases.accel_b_mps2)
     with pytest.raises(ValueError, match="which"):
         reference_solution(result, which="best")
+
+
+def test_in_motion_alignment_when_the_record_starts_in_flight(case, reference_cases):
+    """Started in the transit leg (no static period): the filter aligns from the GNSS track
+    and converges once the first turn makes heading observable."""
+    _, params, truth = case
+    start_ns = params["time"]["start_time_ns"] + int(1100e9)
+    log = read_flight_log(reference_cases / f"{CASE}.mcap", start_ns=start_ns)
+    res = _run(log, params)
+    al = res.alignment
+    assert al.method == "motion"
+    assert al.t_s == pytest.approx(1100.0, abs=1.5)
+    assert al.static_end_s is None
+    err = _errors(res.smoothed, truth)
+    t = _t_s(err, params)
+    past = t > 1260.0  # after the 70 deg turn onto the survey line
+    heading = _rms(err.att_ned_rad[past, 2]) / ARCSEC
+    pos = _rms(np.linalg.norm(err.pos_ned_m[past], axis=1))
+    print("in-motion: heading", heading, "arcsec, position", pos, "m")
+    assert heading < 60.0
+    assert pos < 0.1
