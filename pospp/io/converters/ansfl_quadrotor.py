@@ -225,8 +225,12 @@ def convert_ansfl_quadrotor(
     p_i = np.interp(t_imu_log, a["log_s"], rpy[:, 1])
     hr = (w_b[:, 1] * np.sin(r_i) + w_b[:, 2] * np.cos(r_i)) / np.cos(p_i)
     yaw_rate = np.gradient(np.unwrap(rpy[:, 2]), a["log_s"])
-    lag, corr = lag_by_correlation(t_imu_log, hr, a["log_s"], yaw_rate, max_lag_s=0.5,
-                                   step_s=0.01)
+    # 1 s moving means: the vibration of the airframe swamps the raw rates
+    k_imu = max(1, int(round(1.0 / float(np.median(np.diff(t_imu_log))))))
+    k_ref = max(1, int(round(1.0 / float(np.median(np.diff(a["log_s"]))))))
+    lag, corr = lag_by_correlation(
+        t_imu_log, np.convolve(hr, np.ones(k_imu) / k_imu, mode="same"), a["log_s"],
+        np.convolve(yaw_rate, np.ones(k_ref) / k_ref, mode="same"), max_lag_s=0.5, step_s=0.01)
     checks["imu_lag_vs_reference_s"] = lag
     checks["heading_rate_correlation"] = corr
     warnings: list[str] = []
