@@ -26,13 +26,14 @@ Segment types and keys (all optional keys shown in brackets):
   "shortest" | "right" | "left"], rate_dps [blend_s]. Heading rate ramps up over blend_s,
   holds, ramps down; bank follows (coordinated: tan(bank) = speed x rate / g).
 - ``climb``: rate_mps (positive up; negative or to a lower height descends), to_height_m or
-  delta_m [blend_s]. The flight-path angle gamma = atan(rate / speed) ramps in and out.
+  delta_m [blend_s]. The climb slope tan(gamma) = rate / speed ramps in and out (pitch =
+  flight-path angle gamma).
 - ``survey``: legs, heading_deg, leg_duration_s (number or list) or leg_length_m,
   turn_rate_dps [turn_direction = "alternate" | "right" | "left", first_turn = "right" |
   "left", blend_s, label]. A turn onto the line heading, then back-and-forth legs joined by
   180 degree turns.
 
-Every schedule (speed, heading rate, flight-path angle) is a sum of C2 smoothstep ramps
+Every schedule (speed, heading rate, climb slope) is a sum of C2 smoothstep ramps
 (:mod:`pospp.sim.ramps`), so the joins have continuous first and second derivatives. Angles
 here are degrees only at the TOML edge; the plan is SI and radians.
 """
@@ -257,8 +258,10 @@ class MissionPlan:
         Horizontal ground speed [m/s].
     heading_rate : RampSchedule
         Heading (yaw) rate [rad/s]; heading = heading0 + its integral.
-    gamma : RampSchedule
-        Flight-path angle [rad], positive climbing: v_D = -speed tan(gamma).
+    slope : RampSchedule
+        Climb slope k = tan(gamma) of the flight-path angle gamma (positive climbing):
+        v_D = -speed k, so a climb at constant speed changes height by exactly
+        speed x k x (hold + blend).
     heading0_rad : float
     segments : tuple of PlannedSegment
     legs : tuple of PlannedLeg
@@ -268,7 +271,7 @@ class MissionPlan:
     duration_s: float
     speed: RampSchedule
     heading_rate: RampSchedule
-    gamma: RampSchedule
+    slope: RampSchedule
     heading0_rad: float
     segments: tuple[PlannedSegment, ...]
     legs: tuple[PlannedLeg, ...]
@@ -287,7 +290,7 @@ class _Planner:
         self.height = prof.height_m
         self.speed_ramps: list[tuple[float, float, float]] = []
         self.rate_ramps: list[tuple[float, float, float]] = []
-        self.gamma_ramps: list[tuple[float, float, float]] = []
+        self.slope_ramps: list[tuple[float, float, float]] = []
         self.segments: list[PlannedSegment] = []
         self.legs: list[PlannedLeg] = []
 
@@ -384,16 +387,16 @@ class _Planner:
         if delta == 0.0:
             return
         sign = math.copysign(1.0, delta)
-        gamma = sign * math.atan(rate / self.speed)
+        slope = sign * rate / self.speed
         blend = float(s.get("blend_s", self.prof.blend_s))
         t_total = abs(delta) / rate
         blend = min(blend, t_total)
         hold = t_total - blend
-        self.gamma_ramps.append((self.t, blend, gamma))
-        self.gamma_ramps.append((self.t + blend + hold, blend, -gamma))
+        self.slope_ramps.append((self.t, blend, slope))
+        self.slope_ramps.append((self.t + blend + hold, blend, -slope))
         self._push("climb", s.get("label", "climb"), hold + 2.0 * blend,
                    height_end=self.height + delta, rate_mps=sign * rate, delta_m=delta,
-                   gamma_deg=math.degrees(gamma))
+                   gamma_deg=math.degrees(math.atan(slope)))
 
     def survey(self, s: Mapping[str, Any], where: str) -> None:
         n = int(s["legs"])
@@ -450,7 +453,7 @@ def plan_mission(profile: MissionProfile) -> MissionPlan:
         duration_s=pl.t,
         speed=RampSchedule.build(0.0, pl.speed_ramps),
         heading_rate=RampSchedule.build(0.0, pl.rate_ramps),
-        gamma=RampSchedule.build(0.0, pl.gamma_ramps),
+        slope=RampSchedule.build(0.0, pl.slope_ramps),
         heading0_rad=math.radians(profile.heading_deg),
         segments=tuple(pl.segments),
         legs=tuple(pl.legs),

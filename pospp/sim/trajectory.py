@@ -8,10 +8,10 @@ yaw] z-y-x of body FRD w.r.t. NED [rad] and their time derivatives [rad/s].
 Two motions share one interface, :meth:`evaluate`, returning a :class:`MotionSample`:
 
 - :class:`ProfileMotion`, from a :class:`pospp.sim.profile.MissionPlan`: horizontal speed s,
-  heading psi and flight-path angle gamma are closed-form smooth schedules, so
+  heading psi and climb slope k = tan(gamma) are closed-form smooth schedules, so
 
-      v_n = [s cos psi, s sin psi, -s tan gamma],
-      roll = atan(s psi' / g) (coordinated) or 0, pitch = gamma, yaw = psi,
+      v_n = [s cos psi, s sin psi, -s k],
+      roll = atan(s psi' / g) (coordinated) or 0, pitch = gamma = atan(k), yaw = psi,
 
   and a_n, the Euler rates follow analytically. Position integrates the geodetic kinematics
   lat' = v_N / (R_M + h), lon' = v_E / ((R_N + h) cos lat), h' = -v_D
@@ -114,17 +114,13 @@ class ProfileMotion:
         s, s1, _ = self.plan.speed.evaluate(t)
         r, r1, _ = self.plan.heading_rate.evaluate(t)
         psi = self.plan.heading0_rad + self.plan.heading_rate.integral(t)
-        g, g1, _ = self.plan.gamma.evaluate(t)
+        k, k1, _ = self.plan.slope.evaluate(t)
         cp, sp = np.cos(psi), np.sin(psi)
-        tg = np.tan(g)
-        v = np.stack([s * cp, s * sp, -s * tg], axis=-1)
-        a = np.stack(
-            [s1 * cp - s * r * sp, s1 * sp + s * r * cp, -(s1 * tg + s * g1 / np.cos(g) ** 2)],
-            axis=-1,
-        )
+        v = np.stack([s * cp, s * sp, -s * k], axis=-1)
+        a = np.stack([s1 * cp - s * r * sp, s1 * sp + s * r * cp, -(s1 * k + s * k1)], axis=-1)
         roll, roll1 = _bank(s, s1, r, r1, self.coordinated)
-        rpy = np.stack([roll, g, psi], axis=-1)
-        rpy1 = np.stack([roll1, g1, r], axis=-1)
+        rpy = np.stack([roll, np.arctan(k), psi], axis=-1)
+        rpy1 = np.stack([roll1, k1 / (1.0 + k * k), r], axis=-1)
         return v, a, rpy, rpy1
 
     def velocity_n_mps(self, t_s: ArrayLike) -> NDArray:
