@@ -279,6 +279,29 @@ def test_quad_gnss_velocity_matches_positions(quad):
         assert np.corrcoef(np.hypot(vp[:, 0], vp[:, 1]), sp)[0, 1] > 0.95, p
 
 
+def test_quad_raw_recording_clock_and_mounting(real_data, out_dir, quad):
+    """The 190 s raw DOT1 recording: clock placed on UTC via the processed cuts, checked."""
+    rep = convert(real_data / "ansfl_quadrotor_straightline", out_dir / "quad_raw.mcap",
+                  fmt="ansfl_quadrotor_raw", unit=1, recording=2)
+    log = read_flight_log(rep.mcap_path)
+    ref = read_reference_trajectory(rep.reference_path)
+    assert len(log.imu) == 22902 and len(log.fix) == len(ref) > 1900
+    assert 119.9 < rep.imu_rate_hz < 120.1
+    assert rep.checks["n_paths_matched"] == 3  # paths 2-4 are cuts of this recording
+    assert rep.checks["dot_clock_offset_spread_s"] < 0.01
+    # independent of how the clock was placed: IMU vs DJI yaw rate over 190 s
+    assert abs(rep.checks["imu_lag_vs_reference_s"]) < 0.05
+    assert rep.checks["heading_rate_correlation"] > 0.9
+    # the same unit's mounting from the processed paths (other data, same airframe)
+    d = rep.mounting.c_bs @ quad[1][0].mounting.c_bs.T
+    assert np.degrees(np.arccos(np.clip((np.trace(d) - 1) / 2, -1, 1))) < 1.5
+    # processed path 2 samples sit at the same UTC in both conversions
+    _, log2, _ = quad[2]
+    i = np.searchsorted(log.imu.time_ns, log2.imu.time_ns[10])
+    assert abs(int(log.imu.time_ns[i]) - int(log2.imu.time_ns[10])) < 5_000_000
+    np.testing.assert_allclose(log.imu.w_ib_b_radps[i], log2.imu.w_ib_b_radps[10], atol=0.02)
+
+
 # --------------------------------------------------------------------------- GNSS-only
 
 

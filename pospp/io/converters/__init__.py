@@ -13,6 +13,8 @@ Formats (``FORMATS`` keys)
 - ``ardupilot_csv``: ArduPlane dataflash CSV export (imu.csv, gps.csv, att.csv).
 - ``comma2k19``: comma2k19 segment CSV export (imu.csv, gnss_ublox.csv, pose_reference.csv).
 - ``ansfl_quadrotor``: ANSFL quadrotor straight-line set (processed/path_N, raw/*Airdata.csv).
+- ``ansfl_quadrotor_raw``: one untrimmed Xsens DOT recording of that set with the Airdata log
+  over its span (never detected: pass ``fmt=``).
 - ``kfgins_rtk``: KF-GINS ``GNSS-RTK.txt`` (reference only, no IMU).
 - ``navego_reference``: NaveGo ``ref.csv`` (reference only, no IMU).
 """
@@ -46,6 +48,12 @@ def _quad(src: Path, out: Path, **kw: Any) -> ConversionReport:
     return convert_ansfl_quadrotor(src, out, **kw)
 
 
+def _quad_raw(src: Path, out: Path, **kw: Any) -> ConversionReport:
+    from pospp.io.converters.ansfl_dot_raw import convert_ansfl_dot_raw
+
+    return convert_ansfl_dot_raw(src, out, **kw)
+
+
 def _kfgins(src: Path, out: Path, **kw: Any) -> ConversionReport:
     from pospp.io.converters.gnss_reference import convert_kfgins_rtk
 
@@ -62,6 +70,7 @@ FORMATS: dict[str, Callable[..., ConversionReport]] = {
     "ardupilot_csv": _ardupilot,
     "comma2k19": _comma,
     "ansfl_quadrotor": _quad,
+    "ansfl_quadrotor_raw": _quad_raw,
     "kfgins_rtk": _kfgins,
     "navego_reference": _navego,
 }
