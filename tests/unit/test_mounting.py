@@ -94,3 +94,28 @@ def test_recovers_rotation_on_independent_simulator(reference_cases):
     err_deg = np.degrees(rotation.angle_between_rad(est.c_bs, c_sb.T))
     assert err_deg < 0.05
     assert est.n_static_windows > 200 and est.n_moving_windows > 10
+
+
+@pytest.mark.reference
+def test_aircraft_needs_its_attitude_and_scatter_says_so(reference_cases):
+    """Survey flight (accelerometer bias, banked turns): true attitude vs default assumption."""
+    import pandas as pd
+
+    from pospp.io.mcap_reader import read_flight_log
+
+    log = read_flight_log(reference_cases / "flight_survey_errors.mcap")
+    truth = pd.read_parquet(reference_cases / "flight_survey_errors.truth.parquet")
+    c_sb = rotation.dcm_from_euler(np.radians([-60.0, 5.0, 250.0]))
+    f_s = log.imu.f_ib_b_mps2 @ c_sb.T
+    e0 = log.imu.time_ns[0]
+    t_i = (log.imu.time_ns - e0) * 1e-9
+    t_t = (truth["time_ns"].to_numpy() - e0) * 1e-9
+    v = truth[["vn_mps", "ve_mps", "vd_mps"]].to_numpy()
+    rpy = np.radians(truth[["roll_deg", "pitch_deg", "yaw_deg"]].to_numpy())
+    kw = dict(lat_rad=float(log.fix.lat_rad[0]), height_m=float(log.fix.height_m[0]))
+    good = estimate_mounting(t_i, f_s, t_t, v, body_rpy_rad=rpy, **kw)
+    # accelerometer bias of the case (params.json) tilts by about bias / g: < 0.1 deg
+    assert np.degrees(rotation.angle_between_rad(good.c_bs, c_sb.T)) < 0.1
+    assert np.degrees(good.heading_scatter_rad) < 1.0
+    naive = estimate_mounting(t_i, f_s, t_t, v, **kw)
+    assert np.degrees(naive.heading_scatter_rad) > 30.0
