@@ -71,6 +71,23 @@ def gravity_formula(lat, height):
     )
 
 
+def radii_from_sin2(s2):
+    """:func:`radii_formula` from s2 = sin^2(lat), for kernels that already hold sin(lat)."""
+    w = 1.0 - WGS84_E2 * s2
+    sw = np.sqrt(w)
+    return WGS84_A_M * (1.0 - WGS84_E2) / (w * sw), WGS84_A_M / sw
+
+
+def gravity_from_sin2(s2, height):
+    """:func:`gravity_formula` from s2 = sin^2(lat), for kernels that already hold sin(lat)."""
+    gamma0 = GAMMA_EQUATOR_MPS2 * (1.0 + SOMIGLIANA_K * s2) / np.sqrt(1.0 - WGS84_E2 * s2)
+    return gamma0 * (
+        1.0
+        - 2.0 / WGS84_A_M * (1.0 + WGS84_F + GRAVITY_M_RATIO - 2.0 * WGS84_F * s2) * height
+        + 3.0 * height**2 / WGS84_A_M**2
+    )
+
+
 def gravity_gradient_formula(lat, height):
     """(d gamma / d lat [m/s^2/rad], d gamma / d h [1/s^2]) of :func:`gravity_formula`.
 

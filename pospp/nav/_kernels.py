@@ -33,10 +33,22 @@ import math
 import numpy as np
 from numba import njit
 
-from pospp.earth import EARTH_RATE_RADPS, gravity_formula, radii_formula
+from pospp.earth import (
+    EARTH_RATE_RADPS,
+    gravity_formula,
+    gravity_from_sin2,
+    radii_formula,
+    radii_from_sin2,
+)
 
 _radii = njit(cache=True)(radii_formula)
 _gravity = njit(cache=True)(gravity_formula)
+_radii_s2 = njit(cache=True)(radii_from_sin2)
+_gravity_s2 = njit(cache=True)(gravity_from_sin2)
+
+_SERIES_A2 = 1e-6
+"""Below this squared angle [rad^2] the quaternion exponential uses its 4th-order series: the
+first omitted terms, a^6 / 46080 and a^6 / 645120, are under 3e-23, far below double precision."""
 
 STATE_SIZE = 10
 
@@ -56,7 +68,7 @@ def quat_mul(p0, p1, p2, p3, q0, q1, q2, q3):
 def quat_from_rotvec(x, y, z):
     """Quaternion (scalar-first) of the rotation vector (x, y, z) [rad]; series near zero."""
     a2 = x * x + y * y + z * z
-    if a2 < 1e-16:
+    if a2 < _SERIES_A2:
         # cos(a/2) and sin(a/2)/a to 4th order
         c = 1.0 - a2 / 8.0 + a2 * a2 / 384.0
         s = 0.5 - a2 / 48.0 + a2 * a2 / 3840.0
@@ -121,7 +133,14 @@ def strapdown_step(x, x_prev, dth, dvel, dth_prev, dv_prev, dt, extrap, x_out):
     vn_m = vn + extrap * (vn - x_prev[3])
     ve_m = ve + extrap * (ve - x_prev[4])
     vd_m = vd + extrap * (vd - x_prev[5])
-    wie, wen = nav_rates(lat_m, h_m, vn_m, ve_m)
+    # Earth terms at the extrapolated mid-interval: one sin/cos/sqrt serves radii, gravity and
+    # the rates (same formulas as nav_rates, _radii, _gravity)
+    sl_m = math.sin(lat_m)
+    cl_m = math.cos(lat_m)
+    s2_m = sl_m * sl_m
+    r_m_m, r_n_m = _radii_s2(s2_m)
+    wie = (EARTH_RATE_RADPS * cl_m, 0.0, -EARTH_RATE_RADPS * sl_m)
+    wen = (ve_m / (r_n_m + h_m), -vn_m / (r_m_m + h_m), -ve_m * sl_m / cl_m / (r_n_m + h_m))
     zx = (wie[0] + wen[0]) * dt
     zy = (wie[1] + wen[1]) * dt
     zz = (wie[2] + wen[2]) * dt
@@ -151,7 +170,7 @@ def strapdown_step(x, x_prev, dth, dvel, dth_prev, dv_prev, dt, extrap, x_out):
     dfe = fe - 0.5 * (zz * fn - zx * fd)
     dfd = fd - 0.5 * (zx * fe - zy * fn)
     # --- gravity and Coriolis at mid-interval ------------------------------------------------
-    g = _gravity(lat_m, h_m)
+    g = _gravity_s2(s2_m, h_m)
     cx = 2.0 * wie[0] + wen[0]
     cy = 2.0 * wie[1] + wen[1]
     cz = 2.0 * wie[2] + wen[2]
@@ -164,16 +183,18 @@ def strapdown_step(x, x_prev, dth, dvel, dth_prev, dv_prev, dt, extrap, x_out):
     # --- position (trapezoidal velocity, geodetic) -------------------------------------------
     h1 = h - 0.5 * (vd + vd1) * dt
     hm = 0.5 * (h + h1)
-    r_m, _ = _radii(lat_m)
-    lat1 = lat + 0.5 * (vn + vn1) * dt / (r_m + hm)
+    lat1 = lat + 0.5 * (vn + vn1) * dt / (r_m_m + hm)
     latm = 0.5 * (lat + lat1)
-    _, r_n = _radii(latm)
-    lon1 = lon + 0.5 * (ve + ve1) * dt / ((r_n + hm) * math.cos(latm))
+    sl2 = math.sin(latm)
+    cl2 = math.cos(latm)
+    r_m2, r_n2 = _radii_s2(sl2 * sl2)
+    lon1 = lon + 0.5 * (ve + ve1) * dt / ((r_n2 + hm) * cl2)
     # --- attitude ------------------------------------------------------------------------------
-    wie2, wen2 = nav_rates(latm, hm, 0.5 * (vn + vn1), 0.5 * (ve + ve1))
-    ex = -(wie2[0] + wen2[0]) * dt
-    ey = -(wie2[1] + wen2[1]) * dt
-    ez = -(wie2[2] + wen2[2]) * dt
+    vn_a = 0.5 * (vn + vn1)
+    ve_a = 0.5 * (ve + ve1)
+    ex = -(EARTH_RATE_RADPS * cl2 + ve_a / (r_n2 + hm)) * dt
+    ey = vn_a / (r_m2 + hm) * dt
+    ez = -(-EARTH_RATE_RADPS * sl2 - ve_a * sl2 / cl2 / (r_n2 + hm)) * dt
     phx = tx + (py * tz - pz * ty) / 12.0
     phy = ty + (pz * tx - px * tz) / 12.0
     phz = tz + (px * ty - py * tx) / 12.0
@@ -239,3 +260,28 @@ def integrate_kernel(x0, dt_s, dtheta, dvel, gyro_bias, accel_bias, dth_prev0, d
         for j in range(3):
             dth_p[j] = dth_c[j]
             dv_p[j] = dv_c[j]
+
+
+@njit(cache=True)
+def first_invalid_sample(t_s, dtheta, dvel):
+    """Scan an increment series once: (code, index) of the first problem, (0, -1) if none.
+
+    Codes, in the order they are checked: 1 non-finite ``dtheta[k]``, 2 non-finite
+    ``dvel[k]``, 3 non-finite ``t_s[k]``, 4 ``t_s[k] <= t_s[k - 1]``.
+    """
+    n = dtheta.shape[0]
+    for k in range(n):
+        for j in range(3):
+            if not math.isfinite(dtheta[k, j]):
+                return 1, k
+    for k in range(n):
+        for j in range(3):
+            if not math.isfinite(dvel[k, j]):
+                return 2, k
+    for k in range(t_s.shape[0]):
+        if not math.isfinite(t_s[k]):
+            return 3, k
+    for k in range(1, t_s.shape[0]):
+        if not t_s[k] > t_s[k - 1]:
+            return 4, k
+    return 0, -1

@@ -89,3 +89,13 @@ def test_gravity_gradient_is_the_derivative_of_normal_gravity(lat, h):
     # slowly with height); latitude gradient vanishes at equator and poles, peaks near 45 deg
     assert -3.095e-6 < dg_dh < -3.06e-6
     assert abs(dg_dlat) <= 0.052
+
+
+def test_sin2_forms_equal_the_latitude_forms():
+    lat = np.linspace(-1.57, 1.57, 101)
+    h = np.linspace(-300.0, 9000.0, 101)
+    s2 = np.sin(lat) ** 2
+    np.testing.assert_allclose(earth.radii_from_sin2(s2), earth.radii_formula(lat), rtol=1e-15)
+    np.testing.assert_allclose(
+        earth.gravity_from_sin2(s2, h), earth.gravity_formula(lat, h), rtol=1e-15
+    )

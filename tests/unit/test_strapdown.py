@@ -202,3 +202,9 @@ def test_non_finite_time_and_shapes_are_reported():
         strapdown.integrate(t, dth, dv[:, :2], x0)
     with pytest.raises(ValueError, match=r"gyro_bias_b_radps: expected shape \(3,\) or \(10, 3\)"):
         strapdown.integrate(t, dth, dv, x0, gyro_bias_b_radps=np.zeros(2))
+
+
+def test_check_increments_returns_the_intervals():
+    t, dth, dv, _ = _small_series()
+    t[5:] += 0.002  # one longer interval is fine
+    np.testing.assert_allclose(strapdown.check_increments(t, dth, dv), np.diff(t))
