@@ -20,8 +20,9 @@ Two steps, each with its own quality figure:
 1. Levelling. On quasi-static windows (|a_n| small) the direction of the specific force fixes
    the body's "up" in the sensor frame. The shortest-arc rotation ``C_1`` with
    ``C_1 u_s = u_b`` (u: mean unit specific-force directions, sensor and expected body) fixes
-   two of the three mounting angles. Levelling residual: RMS over windows of the angle between
-   ``C_1 u_s,k`` and ``u_b,k``; tilt sigma: residual / sqrt(number of windows).
+   two of the three mounting angles. Levelling residual: RMS over the static windows of the
+   angle between ``C_bs u_s,k`` and ``u_b,k`` (final rotation; equal to the step-1 residual
+   for a level body); tilt sigma: residual / sqrt(number of windows).
 2. Forward axis. The remaining rotation is a turn psi about u_b. On windows with horizontal
    acceleration (speeding up, braking, turning) the measured specific force, levelled by
    ``C_1`` and projected on the plane normal to u_b, must turn by psi into the expected one.
