@@ -36,9 +36,15 @@ Effects (stable identifiers)
     channels only through the Earth-rate coupling of the heading error (phi_D' = -b_z; tilt
     rate w_in,N phi_D): weak on short legs.
 ``accel_bias_change``
-    Horizontal accelerometer bias changing in-run, a ramp [r_x, r_y] (FRD) per unit time. The
-    bias at the leg start is absorbed by the alignment (g phi + b = 0, docs/method.md); the
-    change since the start, ``r (t - t0)``, is not: forcing ``dv' = C_nb r (t - t0)``.
+    Horizontal accelerometer bias changing in-run: a first-order (warm-up) settling
+    ``b(t) = b_inf + db exp(-t / T)`` with ``t`` the run time (since the run's epoch, about the
+    power-up) and T = ``accel_settling_s`` (default :data:`ACCEL_SETTLING_S`); parameters
+    db = [db_x, db_y] (FRD). The bias at the leg start is absorbed by the alignment
+    (g phi + b = 0, docs/method.md); the change since the start is not: forcing
+    ``dv' = C_nb db (exp(-t / T) - exp(-t0 / T))``. Within one leg this change is nearly a
+    ramp, and a ramp is indistinguishable from a horizontal body gyro bias on level legs
+    (both give dv'' + w_s^2 dv = const, with r = g b_g): only the leg-to-leg change of the
+    apparent bias (legs early and late after power-up) reveals it.
 ``gyro_scale_factor``
     Gyro scale-factor error [s_x, s_y, s_z] (measured = (1 + s) true, per axis): forcing
     ``phi' = -C_nb diag(s) w_ib_b``. On straight level legs w_ib_b is the Earth and transport
@@ -66,7 +72,7 @@ Effects (stable identifiers)
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -83,6 +89,8 @@ UG_MPS2 = 9.80665e-6
 """1 micro-g in m/s^2 (standard gravity, ISO 80000-3)."""
 ARCSEC_RAD = np.pi / 180.0 / 3600.0
 """1 arcsec in rad."""
+ACCEL_SETTLING_S = 1200.0
+"""Default time constant of the accelerometer-bias warm-up of ``accel_bias_change`` [s]."""
 GRAVITY_MPS2 = 9.80665
 """Standard gravity [m/s^2], to express a gravity gradient as a deflection gradient."""
 
@@ -103,9 +111,10 @@ class Effect:
         Display unit of the parameters (diagnosis.parquet ``unit``).
     si_per_unit : float
         SI value of one display unit.
-    typical_si : float
-        A size worth detecting (SI): the observability screen drops parameter directions in
-        which an effect of this size would stand less than 2 noise sigmas above the base model.
+    plausible_si : float
+        A large but plausible size (SI) for a navigation-grade POS: the observability screen
+        drops parameter directions in which an effect of this size would stand less than 2
+        noise sigmas above the current model (these legs cannot reveal it).
     needs_imu : bool
         True when the signature re-runs B (needs the IMU increments and A's solution).
     """
@@ -115,30 +124,29 @@ class Effect:
     parameters: tuple[str, ...]
     unit: str
     si_per_unit: float
-    typical_si: float
+    plausible_si: float
     needs_imu: bool = False
 
 
 LIBRARY: tuple[Effect, ...] = (
     Effect("body_fixed_gyro_bias", "horizontal gyro bias fixed in the body frame (vs nav frame)",
-           ("gyro_bias_x", "gyro_bias_y"), "deg_per_h", DEG_PER_H, 0.005 * DEG_PER_H),
+           ("gyro_bias_x", "gyro_bias_y"), "deg_per_h", DEG_PER_H, 0.05 * DEG_PER_H),
     Effect("vertical_gyro_drift", "vertical (body z) gyro drift",
-           ("gyro_bias_z",), "deg_per_h", DEG_PER_H, 0.05 * DEG_PER_H),
-    Effect("accel_bias_change", "horizontal accelerometer bias changing in-run (ramp)",
-           ("accel_bias_rate_x", "accel_bias_rate_y"), "ug_per_h", UG_MPS2 / 3600.0,
-           20.0 * UG_MPS2 / 3600.0),
+           ("gyro_bias_z",), "deg_per_h", DEG_PER_H, 0.5 * DEG_PER_H),
+    Effect("accel_bias_change", "horizontal accelerometer bias settling in-run (warm-up)",
+           ("accel_bias_change_x", "accel_bias_change_y"), "ug", UG_MPS2, 100.0 * UG_MPS2),
     Effect("gyro_scale_factor", "gyro scale-factor error", ("gyro_sf_x", "gyro_sf_y", "gyro_sf_z"),
-           "ppm", 1e-6, 100e-6, needs_imu=True),
+           "ppm", 1e-6, 1000e-6, needs_imu=True),
     Effect("time_offset", "IMU-GNSS (IMU minus reference) time offset", ("time_offset",), "ms",
-           1e-3, 5e-3, needs_imu=True),
+           1e-3, 20e-3, needs_imu=True),
     Effect("lever_arm", "GNSS antenna lever-arm error of A (computed minus true)",
-           ("lever_arm_x", "lever_arm_y", "lever_arm_z"), "m", 1.0, 0.1),
+           ("lever_arm_x", "lever_arm_y", "lever_arm_z"), "m", 1.0, 0.5),
     Effect("earth_rate_coupling", "Earth-rate (Foucault) coupling dropped by the closed form",
-           ("earth_rate_fraction",), "fraction", 1.0, 0.3),
+           ("earth_rate_fraction",), "fraction", 1.0, 1.0),
     Effect("gravity_disturbance", "gravity disturbance (deflection of the vertical) gradient",
            ("gravity_gradient_nn", "gravity_gradient_ne", "gravity_gradient_ee"),
            "arcsec_per_km", GRAVITY_MPS2 * ARCSEC_RAD / 1000.0,
-           2.0 * GRAVITY_MPS2 * ARCSEC_RAD / 1000.0),
+           1.0 * GRAVITY_MPS2 * ARCSEC_RAD / 1000.0),
 )
 """The candidate effects, in the order they are tested."""
 
@@ -226,9 +234,10 @@ def _sig_body_bias(rep: LegReplay, axes: slice) -> NDArray:
     return rep.phi[:, 3:5, BG][:, :, axes]
 
 
-def _sig_accel_ramp(rep: LegReplay) -> NDArray:
+def _sig_accel_settling(rep: LegReplay, settling_s: float) -> NDArray:
     g = np.zeros((rep.t_s.size, 15, 2))
-    g[:, DV, :] = rep.c_nb[:, :, 0:2] * rep.t_s[:, None, None]
+    change = np.exp(-(rep.t0_s + rep.t_s) / settling_s) - np.exp(-rep.t0_s / settling_s)
+    g[:, DV, :] = rep.c_nb[:, :, 0:2] * change[:, None, None]
     return forced_response(rep, g)
 
 
@@ -323,7 +332,8 @@ def _sig_gyro_scale_rerun(rep: LegReplay, ctx: ReplayContext, s: float = 1e-4) -
 
 
 def signature(effect_id: str, rep: LegReplay, *, context: ReplayContext | None = None,
-              base_x_leg: NDArray | None = None) -> NDArray:
+              base_x_leg: NDArray | None = None,
+              accel_settling_s: float = ACCEL_SETTLING_S) -> NDArray:
     """Signature of one library effect on one leg, ``d dv_h / d p`` (M, 2, P), SI.
 
     Parameters
@@ -337,13 +347,15 @@ def signature(effect_id: str, rep: LegReplay, *, context: ReplayContext | None =
     base_x_leg : ndarray, shape (6,), optional
         Current estimates [phi_N, phi_E, phi_D, b_x, b_y, b_z] of the leg (SI), needed by
         ``earth_rate_coupling``.
+    accel_settling_s : float
+        Time constant T of ``accel_bias_change`` [s].
     """
     if effect_id == "body_fixed_gyro_bias":
         return _sig_body_bias(rep, slice(0, 2))
     if effect_id == "vertical_gyro_drift":
         return _sig_body_bias(rep, slice(2, 3))
     if effect_id == "accel_bias_change":
-        return _sig_accel_ramp(rep)
+        return _sig_accel_settling(rep, accel_settling_s)
     if effect_id == "gyro_scale_factor":
         return _sig_gyro_scale(rep) if context is None else _sig_gyro_scale_rerun(rep, context)
     if effect_id == "time_offset":
@@ -359,9 +371,6 @@ def signature(effect_id: str, rep: LegReplay, *, context: ReplayContext | None =
     if effect_id == "gravity_disturbance":
         return _sig_gravity(rep)
     raise ValueError(f"effect: expected one of {EFFECT_IDS}, got {effect_id!r}")
-
-
-SignatureFunction = Callable[[LegReplay], NDArray]
 
 
 def signatures(effect_id: str, replays: Sequence[LegReplay], **kwargs) -> list[NDArray]:

@@ -1,0 +1,704 @@
+"""Model-discrepancy workflow: predict, compare, name, add, iterate (issue 7).
+
+Frames and units: NED (n), FRD (b), SI inside; display units only in the output rows.
+Errors are computed minus true (B minus A).
+
+Measurements: B's horizontal velocity error [dv_N, dv_E] at the samples t > 0 of every leg
+(:class:`pospp.calib.replay.LegReplay`), weighted by A's sigmas (and, when the gyro angle
+random walk is given, by the correlated covariance of :func:`pospp.calib.solve.
+gyro_noise_covariance`), i.e. whitened by the Cholesky factor of each leg's covariance.
+
+Base model (what the calibration estimates, paper Eq. 17 with pospp's signs)::
+
+    dv_h(t) = S_phi(t) [phi_N,leg, phi_E,leg, phi_D] + S_bg(t) b        (+ effects)
+
+with per-leg tilts (B's initial tilt is A's error at that leg's start), one heading error
+common to the legs and the horizontal drift b: body-frame [b_x, b_y] projected by the leg's
+attitude (``"body"``), or a navigation-frame constant [eps_N, eps_E] (``"paper"``). The
+sensitivities S come from the numerical transition matrices along B (``"numerical"``) or from
+the paper's closed form (``"closed_form"``, :mod:`pospp.nav.closed_form`).
+
+Steps
+-----
+1. Predict: fit, and predict each leg from the others (leave-one-leg-out: the common
+   parameters from the other legs, the held-out leg's own tilt fitted on it).
+2. Compare: residual RMS overall and per leg, held-out prediction error, and where the gap sits
+   (per leg: heading, speed, start time; per third of each leg).
+3. Name: every library effect (:mod:`pospp.diagnose.effects`) adds the columns of its
+   signature. Parameter directions in which an effect of a large but plausible size would not
+   stand 2 sigma above the current model are unobservable with these legs and dropped (one with none
+   left is reported unobservable, not tested). Each remaining candidate is tested by the
+   nested-model F-test on the whitened residuals::
+
+       F = ((RSS_0 - RSS_1) / r) / (RSS_1 / (n - p_1)),      p = P(F_{r, n - p_1} > F)
+
+   at level alpha / (number of candidates tested) (Bonferroni), together with the
+   leave-one-leg-out prediction error, which must decrease. A lack-of-fit basis (per leg and
+   channel, cosines cos(pi k t / T), k < ``lof_terms``) measures the whole structured gap; a
+   candidate is named only when its RSS reduction beyond noise is at least
+   ``min_explained_fraction`` of the basis's (otherwise it would be a wrong effect soaking up
+   part of an unexplained gap). The BIC difference is reported alongside.
+4. Add: the named effect joins the model, and the search repeats while a candidate remains
+   significant (at most ``max_steps``).
+5. Close: a final lack-of-fit F-test of the last model: ``"none"`` when no structured gap
+   remains at level alpha, ``"unexplained"`` when one does and no candidate explains it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import linalg, stats
+
+from pospp.calib.replay import ImuIncrements, LegReplay, ReferenceSolution
+from pospp.calib.solve import gyro_noise_covariance, leg_sensitivities
+from pospp.diagnose import effects as fx
+
+BASE_FORMULATIONS = ("body", "paper")
+BASE_TRANSITIONS = ("numerical", "closed_form")
+CRITERION = "F_test_bonferroni_and_heldout"
+LOF_CRITERION = "lack_of_fit_F"
+
+
+# --------------------------------------------------------------------------------------------
+# results
+
+
+@dataclass(frozen=True)
+class CandidateTest:
+    """One candidate tested at one step (display units in ``unit``)."""
+
+    step: int
+    effect: str
+    n_parameters: int
+    value: float
+    sigma: float
+    unit: str
+    statistic: float
+    p_value: float
+    delta_bic: float
+    explained_fraction: float
+    gap_after_mps: float
+    heldout_gap_after_mps: float
+    significant: bool
+
+
+@dataclass(frozen=True)
+class DiagnosisStep:
+    """One row of diagnosis.parquet.
+
+    Attributes
+    ----------
+    step : int
+        1, 2, ...; the final row (``effect`` "none" or "unexplained") closes the list.
+    effect : str
+        Library identifier, "none" or "unexplained".
+    parameters : tuple of str
+        Parameter names of the effect.
+    values, sigmas : ndarray, shape (P,)
+        Estimates and 1-sigma per parameter, display unit.
+    value, sigma : float
+        Size of the effect (the signed value of a one-parameter effect, the norm otherwise) and
+        its 1-sigma (delta method), display unit; NaN on the final row.
+    unit : str
+    statistic, p_value : float
+        F statistic and its p-value (lack-of-fit F on the final row).
+    criterion : str
+    significant : bool
+    delta_bic : float
+        BIC(with) - BIC(without) (negative favours the effect).
+    explained_fraction : float
+        Share of the structured gap (lack-of-fit basis) the effect explains.
+    gap_before_mps, gap_after_mps : float
+        RMS of B minus A minus the model (all legs, N and E) before and after the step [m/s].
+    heldout_gap_before_mps, heldout_gap_after_mps : float
+        The same for leave-one-leg-out predictions [m/s].
+    """
+
+    step: int
+    effect: str
+    parameters: tuple[str, ...]
+    values: NDArray
+    sigmas: NDArray
+    value: float
+    sigma: float
+    unit: str
+    statistic: float
+    p_value: float
+    criterion: str
+    significant: bool
+    delta_bic: float
+    explained_fraction: float
+    gap_before_mps: float
+    gap_after_mps: float
+    heldout_gap_before_mps: float
+    heldout_gap_after_mps: float
+
+
+@dataclass(frozen=True)
+class LegGap:
+    """Where the gap sits: one leg, base model ("before") and final model ("after") [m/s]."""
+
+    leg_id: int
+    start_s: float
+    duration_s: float
+    heading_deg: float
+    speed_mps: float
+    gap_before_mps: float
+    gap_after_mps: float
+    heldout_gap_before_mps: float
+    heldout_gap_after_mps: float
+    phase_gap_before_mps: NDArray
+    phase_gap_after_mps: NDArray
+
+
+@dataclass(frozen=True)
+class Diagnosis:
+    """Result of :func:`diagnose`.
+
+    Attributes
+    ----------
+    base_formulation, base_transition : str
+    alpha : float
+    steps : tuple of DiagnosisStep
+        Named effects in order, then the closing row ("none" or "unexplained").
+    candidates : tuple of CandidateTest
+        Every candidate tested at every step.
+    legs : tuple of LegGap
+    in_base : tuple of str
+        Library effects already in the base model (not candidates).
+    unobservable : tuple of str
+        Effects these legs cannot reveal (observability screen at the first step).
+    not_evaluated : tuple of str
+        Effects skipped for lack of inputs (IMU increments and A's solution).
+    t_s : tuple of ndarray
+        Per leg, the sample times t > 0 [s since the leg start].
+    residuals_before_n_mps, residuals_after_n_mps : tuple of ndarray, shape (M - 1, 2)
+        Per leg, measured minus modelled [dv_N, dv_E] with the base and the final model.
+    heldout_before_n_mps, heldout_after_n_mps : tuple of ndarray, shape (M - 1, 2)
+        The same for the leave-one-leg-out predictions.
+    """
+
+    base_formulation: str
+    base_transition: str
+    alpha: float
+    steps: tuple[DiagnosisStep, ...]
+    candidates: tuple[CandidateTest, ...]
+    legs: tuple[LegGap, ...]
+    in_base: tuple[str, ...]
+    unobservable: tuple[str, ...]
+    not_evaluated: tuple[str, ...]
+    t_s: tuple[NDArray, ...] = field(repr=False)
+    residuals_before_n_mps: tuple[NDArray, ...] = field(repr=False)
+    residuals_after_n_mps: tuple[NDArray, ...] = field(repr=False)
+    heldout_before_n_mps: tuple[NDArray, ...] = field(repr=False)
+    heldout_after_n_mps: tuple[NDArray, ...] = field(repr=False)
+
+    @property
+    def named(self) -> tuple[str, ...]:
+        """Effects named and added, in order."""
+        return tuple(s.effect for s in self.steps if s.effect not in ("none", "unexplained"))
+
+    @property
+    def conclusion(self) -> str:
+        """"none" or "unexplained" (the closing row)."""
+        return self.steps[-1].effect
+
+    def step_of(self, effect_id: str) -> DiagnosisStep:
+        """The step that named an effect (KeyError otherwise)."""
+        for s in self.steps:
+            if s.effect == effect_id:
+                return s
+        raise KeyError(f"effect {effect_id!r} was not named; named: {self.named}")
+
+
+# --------------------------------------------------------------------------------------------
+# linear-model machinery
+
+
+@dataclass
+class _Term:
+    """A block of columns: raw per-leg blocks (rows t > 0, sample-major [N, E])."""
+
+    name: str
+    blocks: list[NDArray]  # per leg (2 (M - 1), k)
+    local_leg: int | None = None  # index of the leg for per-leg (nuisance) terms
+    basis: NDArray | None = None  # (P, k): parameters (SI) = basis @ coefficients
+    effect: fx.Effect | None = None
+    wblocks: list[NDArray] | None = None
+
+
+@dataclass
+class _Fit:
+    x: NDArray
+    cov_unscaled: NDArray  # (H_w^T H_w)^+
+    rss_w: float
+    rank: int
+    res_raw: list[NDArray]
+
+
+class _Problem:
+    """Whitened stacked least squares over legs."""
+
+    def __init__(self, replays: Sequence[LegReplay], arw: float):
+        self.reps = list(replays)
+        self.z = [r.dv_n_mps[1:, 0:2].reshape(-1) for r in self.reps]
+        self.sizes = [z.size for z in self.z]
+        self.n = int(sum(self.sizes))
+        self.chol: list[NDArray | None] = []
+        self.sig: list[NDArray] = []
+        for r in self.reps:
+            s = r.sigma_v_n_mps[1:, 0:2].reshape(-1)
+            self.sig.append(s)
+            if arw > 0.0:
+                cov = arw**2 * gyro_noise_covariance(r)
+                cov[np.diag_indices_from(cov)] += s**2
+                self.chol.append(linalg.cholesky(cov, lower=True))
+            else:
+                self.chol.append(None)
+        self.zw = [self.whiten(i, z) for i, z in enumerate(self.z)]
+
+    def whiten(self, i: int, a: NDArray) -> NDArray:
+        c = self.chol[i]
+        if c is None:
+            return a / (self.sig[i] if a.ndim == 1 else self.sig[i][:, None])
+        return linalg.solve_triangular(c, a, lower=True, check_finite=False)
+
+    def wblocks(self, term: _Term) -> list[NDArray]:
+        """Whitened blocks of a term (cached on the term)."""
+        if term.wblocks is None:
+            term.wblocks = [self.whiten(i, b) for i, b in enumerate(term.blocks)]
+        return term.wblocks
+
+    def leg_matrix(self, terms: Sequence[_Term], i: int) -> NDArray:
+        return np.hstack([self.wblocks(t)[i] for t in terms])
+
+    @staticmethod
+    def solve_normal(g: NDArray, b: NDArray) -> tuple[NDArray, NDArray, int]:
+        """Minimum-norm solution of the column-scaled normal equations; (x, G^+, rank)."""
+        d = np.sqrt(np.diag(g))
+        d[d == 0] = 1.0
+        lam, v = np.linalg.eigh(g / np.outer(d, d))
+        keep = lam > lam[-1] * 1e-13 if lam.size else np.zeros(0, bool)
+        ginv = (v[:, keep] / lam[keep]) @ v[:, keep].T
+        ginv = ginv / np.outer(d, d)
+        return ginv @ b, ginv, int(keep.sum())
+
+    def fit(self, terms: Sequence[_Term], legs: Sequence[int] | None = None) -> _Fit:
+        legs = range(len(self.reps)) if legs is None else legs
+        hws = {i: self.leg_matrix(terms, i) for i in legs}
+        g = sum(h.T @ h for h in hws.values())
+        b = sum(hws[i].T @ self.zw[i] for i in legs)
+        x, ginv, rank = self.solve_normal(g, b)
+        rss = sum(float(np.sum((self.zw[i] - hws[i] @ x) ** 2)) for i in legs)
+        res_raw = [self.z[i] - np.hstack([t.blocks[i] for t in terms]) @ x for i in legs]
+        return _Fit(x, ginv, rss, rank, res_raw)
+
+    def heldout(self, terms: Sequence[_Term]) -> list[NDArray]:
+        """Leave-one-leg-out raw residuals per leg (held-out leg's own tilt fitted on it)."""
+        out = []
+        nl = len(self.reps)
+        for i in range(nl):
+            others = [j for j in range(nl) if j != i]
+            common = [t for t in terms if t.local_leg is None]
+            local_o = [t for t in terms if t.local_leg in others]
+            local_i = [t for t in terms if t.local_leg == i]
+            x = self.fit(common + local_o, others).x
+            k = sum(t.blocks[i].shape[1] for t in common)
+            r = self.z[i] - np.hstack([t.blocks[i] for t in common]) @ x[:k]
+            if local_i:
+                hl = np.hstack([t.blocks[i] for t in local_i])
+                hlw = self.whiten(i, hl)
+                xl, _, _ = self.solve_normal(hlw.T @ hlw, hlw.T @ self.whiten(i, r))
+                r = r - hl @ xl
+            out.append(r)
+        return out
+
+
+def _rms(res: Sequence[NDArray]) -> float:
+    a = np.concatenate([np.ravel(r) for r in res])
+    return float(np.sqrt(np.mean(a**2))) if a.size else float("nan")
+
+
+def _f_test(rss0: float, rss1: float, r: int, dof1: int) -> tuple[float, float]:
+    if r <= 0 or dof1 <= 0 or rss1 <= 0:
+        return float("nan"), 1.0
+    f = max(rss0 - rss1, 0.0) / r / (rss1 / dof1)
+    return float(f), float(stats.f.sf(f, r, dof1))
+
+
+def _bic(rss_w: float, n: int, k: int) -> float:
+    return n * np.log(rss_w / n) + k * np.log(n)
+
+
+# --------------------------------------------------------------------------------------------
+# terms
+
+
+def _rows(sig: NDArray) -> NDArray:
+    """(M, 2, k) sensitivity -> rows t > 0, sample-major (2 (M - 1), k)."""
+    return sig[1:].reshape(-1, sig.shape[2])
+
+
+def _base_terms(reps: Sequence[LegReplay], formulation: str, transition: str) -> list[_Term]:
+    nl = len(reps)
+    sens = [leg_sensitivities(r, transition) for r in reps]
+    terms = []
+    for i in range(nl):
+        blocks = [np.zeros((2 * (r.t_s.size - 1), 2)) for r in reps]
+        blocks[i] = _rows(sens[i][0][:, :, 0:2])
+        terms.append(_Term(f"tilt_leg{reps[i].leg.leg_id}", blocks, local_leg=i))
+    terms.append(_Term("phi_d", [_rows(s[0][:, :, 2:3]) for s in sens]))
+    if formulation == "body":
+        terms.append(_Term("gyro_bias_xy", [_rows(s[1][:, :, 0:2]) for s in sens]))
+    else:
+        terms.append(_Term("eps_ne", [_rows((s[1] @ r.c_nb0.T)[:, :, 0:2])
+                                      for s, r in zip(sens, reps, strict=True)]))
+    return terms
+
+
+def _lof_term(reps: Sequence[LegReplay], k: int) -> list[_Term]:
+    terms = []
+    for i, r in enumerate(reps):
+        t = r.t_s[1:]
+        u = (t - t[0]) / max(t[-1] - t[0], 1e-9)
+        cosines = np.cos(np.pi * np.outer(u, np.arange(k)))  # (M - 1, k)
+        blk = np.zeros((t.size, 2, 2 * k))
+        blk[:, 0, :k] = cosines
+        blk[:, 1, k:] = cosines
+        blocks = [np.zeros((2 * (q.t_s.size - 1), 2 * k)) for q in reps]
+        blocks[i] = blk.reshape(-1, 2 * k)
+        terms.append(_Term(f"lof_leg{r.leg.leg_id}", blocks, local_leg=i))
+    return terms
+
+
+def _base_x_per_leg(prob: _Problem, terms: list[_Term], fit: _Fit, formulation: str
+                    ) -> list[NDArray]:
+    """Current [phi_N, phi_E, phi_D, b_x, b_y, b_z] (SI) of every leg."""
+    vals: dict[str, NDArray] = {}
+    k = 0
+    for t in terms:
+        w = t.blocks[0].shape[1]
+        vals[t.name] = fit.x[k:k + w]
+        k += w
+    out = []
+    for r in prob.reps:
+        v = np.zeros(6)
+        v[0:2] = vals[f"tilt_leg{r.leg.leg_id}"]
+        v[2] = vals["phi_d"][0]
+        if formulation == "body":
+            v[3:5] = vals["gyro_bias_xy"]
+        else:
+            v[3:6] = r.c_nb0.T @ np.array([*vals["eps_ne"], 0.0])
+        for t in terms:
+            if t.effect is not None and t.effect.effect_id == "body_fixed_gyro_bias":
+                v[3:5] += t.basis @ vals[t.name]
+            if t.effect is not None and t.effect.effect_id == "vertical_gyro_drift":
+                v[5] += (t.basis @ vals[t.name])[0]
+        out.append(v)
+    return out
+
+
+def _effect_term(prob: _Problem, terms: list[_Term], eff: fx.Effect, sigs: list[NDArray]
+                 ) -> _Term | None:
+    """The effect's observable directions (in units of its plausible size), or None."""
+    raw = [_rows(s) * eff.plausible_si for s in sigs]
+    if not all(np.all(np.isfinite(r)) for r in raw):
+        return None
+    probe = _Term(eff.effect_id, raw)
+    g = c = e = 0.0
+    for i in range(len(prob.reps)):
+        h = prob.leg_matrix(terms, i)
+        ew = prob.wblocks(probe)[i]
+        g, c, e = g + h.T @ h, c + h.T @ ew, e + ew.T @ ew
+    _, ginv, _ = prob.solve_normal(g, np.zeros(g.shape[0]))
+    lam, vecs = np.linalg.eigh(e - c.T @ ginv @ c)  # Gram of the part the model cannot fit
+    keep = lam >= 4.0  # singular value >= 2: a plausible effect stands 2 sigma out
+    if not keep.any():
+        return None
+    vt = vecs.T
+    v = vt[keep].T  # (P, r)
+    return _Term(eff.effect_id, [b @ v for b in raw], basis=v * eff.plausible_si, effect=eff)
+
+
+def _effect_estimate(term: _Term, fit: _Fit, terms: list[_Term], s2: float
+                     ) -> tuple[NDArray, NDArray, float, float]:
+    """(values, sigmas, size, size sigma) in the effect's display unit."""
+    k = 0
+    for t in terms:
+        w = t.blocks[0].shape[1]
+        if t is term:
+            break
+        k += w
+    w = term.blocks[0].shape[1]
+    c = fit.x[k:k + w]
+    cc = fit.cov_unscaled[k:k + w, k:k + w] * s2
+    unit = term.effect.si_per_unit
+    p = term.basis @ c / unit
+    cp = term.basis @ cc @ term.basis.T / unit**2
+    sig = np.sqrt(np.clip(np.diag(cp), 0.0, None))
+    if p.size == 1:
+        return p, sig, float(p[0]), float(sig[0])
+    size = float(np.linalg.norm(p))
+    g = p / size if size > 0 else np.zeros_like(p)
+    return p, sig, size, float(np.sqrt(max(g @ cp @ g, 0.0)))
+
+
+def _phase_rms(res: NDArray, n_phase: int = 3) -> NDArray:
+    r = res.reshape(-1, 2)
+    parts = np.array_split(np.arange(r.shape[0]), n_phase)
+    return np.array([float(np.sqrt(np.mean(r[p] ** 2))) if p.size else np.nan for p in parts])
+
+
+# --------------------------------------------------------------------------------------------
+# the workflow
+
+
+def diagnose(
+    replays: Sequence[LegReplay],
+    *,
+    imu: ImuIncrements | None = None,
+    reference: ReferenceSolution | None = None,
+    replay_kwargs: dict | None = None,
+    base_formulation: str = "body",
+    base_transition: str = "numerical",
+    effects: Sequence[str] | None = None,
+    alpha: float = 0.01,
+    gyro_arw_radpsqrts: float = 0.0,
+    max_steps: int = 4,
+    lof_terms: int = 8,
+    min_explained_fraction: float = 0.5,
+    accel_settling_s: float = fx.ACCEL_SETTLING_S,
+) -> Diagnosis:
+    """Find, with evidence, what the calibration model is missing (module docstring).
+
+    Parameters
+    ----------
+    replays : sequence of LegReplay
+        B minus A over each leg (at least 3 legs for held-out prediction to mean much).
+    imu, reference : ImuIncrements, ReferenceSolution, optional
+        The flight's increments and A, for effects whose signature re-runs B (``time_offset``;
+        ``gyro_scale_factor`` is then exact, otherwise linearised). Without them
+        ``time_offset`` is not evaluated.
+    replay_kwargs : dict, optional
+        Keyword arguments the replays were made with (see :class:`effects.ReplayContext`).
+    base_formulation : {"body", "paper"}
+        Body-frame horizontal gyro bias, or navigation-frame drift common to the legs.
+    base_transition : {"numerical", "closed_form"}
+        Sensitivities of the base model.
+    effects : sequence of str, optional
+        Library identifiers to consider (default: all).
+    alpha : float
+        Family-wise significance level of each step (Bonferroni over the candidates).
+    gyro_arw_radpsqrts : float
+        Gyro angle random walk [rad/s^0.5] of the residual covariance (0: A's sigmas only).
+    max_steps : int
+        Most effects to add.
+    lof_terms : int
+        Cosines per leg and channel of the lack-of-fit basis.
+    min_explained_fraction : float
+        Least share of the structured gap a candidate must explain to be named.
+    accel_settling_s : float
+        Warm-up time constant of ``accel_bias_change`` [s] (run time from the run's epoch).
+
+    Returns
+    -------
+    Diagnosis
+    """
+    if base_formulation not in BASE_FORMULATIONS:
+        raise ValueError(f"base_formulation: expected one of {BASE_FORMULATIONS}, "
+                         f"got {base_formulation!r}")
+    if base_transition not in BASE_TRANSITIONS:
+        raise ValueError(f"base_transition: expected one of {BASE_TRANSITIONS}, "
+                         f"got {base_transition!r}")
+    if len(replays) < 2:
+        raise ValueError(f"replays: expected at least 2 legs, got {len(replays)}")
+    ids = [r.leg.leg_id for r in replays]
+    if len(set(ids)) != len(ids):
+        raise ValueError(f"replays: expected distinct leg ids, got {ids}")
+    wanted = fx.EFFECT_IDS if effects is None else tuple(effects)
+    for e in wanted:
+        fx.effect_by_id(e)
+    in_base = []
+    if base_formulation == "body":
+        in_base.append("body_fixed_gyro_bias")
+    if base_transition == "numerical":
+        in_base.append("earth_rate_coupling")
+    ctx = None
+    if imu is not None and reference is not None:
+        ctx = fx.ReplayContext(imu, reference, dict(replay_kwargs or {}))
+    not_evaluated = tuple(e for e in wanted
+                          if e not in in_base and ctx is None and e == "time_offset")
+    pool = [fx.effect_by_id(e) for e in wanted if e not in in_base and e not in not_evaluated]
+
+    prob = _Problem(replays, gyro_arw_radpsqrts)
+    terms = _base_terms(replays, base_formulation, base_transition)
+    lof = _lof_term(replays, lof_terms)
+    fixed_sigs = {e.effect_id: fx.signatures(e.effect_id, replays, context=ctx,
+                                             accel_settling_s=accel_settling_s)
+                  for e in pool if e.effect_id != "earth_rate_coupling"}
+
+    base_fit = prob.fit(terms)
+    base_ho = prob.heldout(terms)
+    fit0, ho0 = base_fit, base_ho
+    steps: list[DiagnosisStep] = []
+    tests: list[CandidateTest] = []
+    unobservable: list[str] = []
+    n = prob.n
+    for step in range(1, max_steps + 1):
+        gap0, hgap0 = _rms(fit0.res_raw), _rms(ho0)
+        fit_lof = prob.fit(terms + lof)
+        s2_lof = fit_lof.rss_w / max(n - fit_lof.rank, 1)
+        lof_excess = fit0.rss_w - fit_lof.rss_w - (fit_lof.rank - fit0.rank) * s2_lof
+        trials = []
+        for eff in pool:
+            if any(t.effect is eff for t in terms):
+                continue
+            if eff.effect_id == "earth_rate_coupling":
+                bx = _base_x_per_leg(prob, terms, fit0, base_formulation)
+                sigs = [fx.signature(eff.effect_id, r, base_x_leg=b)
+                        for r, b in zip(replays, bx, strict=True)]
+            else:
+                sigs = fixed_sigs[eff.effect_id]
+            term = _effect_term(prob, terms, eff, sigs)
+            if term is None:
+                if step == 1:
+                    unobservable.append(eff.effect_id)
+                continue
+            new_terms = terms + [term]
+            fit1 = prob.fit(new_terms)
+            r = fit1.rank - fit0.rank
+            dof1 = n - fit1.rank
+            f, p = _f_test(fit0.rss_w, fit1.rss_w, r, dof1)
+            ho1 = prob.heldout(new_terms)
+            s2 = fit1.rss_w / max(dof1, 1)
+            vals, sigs_, size, size_sig = _effect_estimate(term, fit1, new_terms, s2)
+            excess = fit0.rss_w - fit1.rss_w - r * s2_lof
+            frac = float(excess / lof_excess) if lof_excess > 0 else 0.0
+            trials.append(dict(eff=eff, term=term, fit=fit1, ho=ho1, f=f, p=p, r=r, vals=vals,
+                               sigs=sigs_, size=size, size_sig=size_sig, frac=frac,
+                               dbic=_bic(fit1.rss_w, n, fit1.rank) - _bic(fit0.rss_w, n,
+                                                                           fit0.rank)))
+        m = max(len(trials), 1)
+        for tr in trials:
+            tr["sig"] = bool(tr["p"] < alpha / m and _rms(tr["ho"]) < hgap0)
+            tests.append(CandidateTest(
+                step, tr["eff"].effect_id, tr["r"], tr["size"], tr["size_sig"], tr["eff"].unit,
+                tr["f"], tr["p"], float(tr["dbic"]), tr["frac"], _rms(tr["fit"].res_raw),
+                _rms(tr["ho"]), tr["sig"]))
+        good = [tr for tr in trials if tr["sig"] and tr["frac"] >= min_explained_fraction]
+        if not good:
+            break
+        best = max(good, key=lambda tr: tr["f"])
+        eff = best["eff"]
+        steps.append(DiagnosisStep(
+            step=step, effect=eff.effect_id, parameters=eff.parameters, values=best["vals"],
+            sigmas=best["sigs"], value=best["size"], sigma=best["size_sig"], unit=eff.unit,
+            statistic=best["f"], p_value=best["p"], criterion=CRITERION, significant=True,
+            delta_bic=float(best["dbic"]), explained_fraction=best["frac"],
+            gap_before_mps=gap0, gap_after_mps=_rms(best["fit"].res_raw),
+            heldout_gap_before_mps=hgap0, heldout_gap_after_mps=_rms(best["ho"]),
+        ))
+        terms = terms + [best["term"]]
+        fit0, ho0 = best["fit"], best["ho"]
+    # closing row: lack of fit of the final model
+    fit_lof = prob.fit(terms + lof)
+    f, p = _f_test(fit0.rss_w, fit_lof.rss_w, fit_lof.rank - fit0.rank, n - fit_lof.rank)
+    gap, hgap = _rms(fit0.res_raw), _rms(ho0)
+    steps.append(DiagnosisStep(
+        step=len(steps) + 1, effect="unexplained" if p < alpha else "none", parameters=(),
+        values=np.zeros(0), sigmas=np.zeros(0), value=float("nan"), sigma=float("nan"), unit="",
+        statistic=f, p_value=p, criterion=LOF_CRITERION, significant=bool(p < alpha),
+        delta_bic=float("nan"), explained_fraction=float("nan"), gap_before_mps=gap,
+        gap_after_mps=gap, heldout_gap_before_mps=hgap, heldout_gap_after_mps=hgap,
+    ))
+    legs = tuple(
+        LegGap(
+            leg_id=r.leg.leg_id, start_s=float(r.t0_s), duration_s=float(r.t_s[-1]),
+            heading_deg=float(np.degrees(r.leg.heading_rad)), speed_mps=float(r.leg.speed_mps),
+            gap_before_mps=_rms([base_fit.res_raw[i]]), gap_after_mps=_rms([fit0.res_raw[i]]),
+            heldout_gap_before_mps=_rms([base_ho[i]]), heldout_gap_after_mps=_rms([ho0[i]]),
+            phase_gap_before_mps=_phase_rms(base_fit.res_raw[i]),
+            phase_gap_after_mps=_phase_rms(fit0.res_raw[i]),
+        )
+        for i, r in enumerate(replays)
+    )
+    return Diagnosis(
+        base_formulation=base_formulation, base_transition=base_transition, alpha=alpha,
+        steps=tuple(steps), candidates=tuple(tests), legs=legs, in_base=tuple(in_base),
+        unobservable=tuple(unobservable), not_evaluated=not_evaluated,
+        t_s=tuple(r.t_s[1:].copy() for r in replays),
+        residuals_before_n_mps=tuple(x.reshape(-1, 2) for x in base_fit.res_raw),
+        residuals_after_n_mps=tuple(x.reshape(-1, 2) for x in fit0.res_raw),
+        heldout_before_n_mps=tuple(x.reshape(-1, 2) for x in base_ho),
+        heldout_after_n_mps=tuple(x.reshape(-1, 2) for x in ho0),
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# tables (dicts of arrays; pospp.io writes them)
+
+DIAGNOSIS_COLUMNS = (
+    "step", "effect", "value", "sigma", "unit", "statistic", "p_value", "criterion",
+    "significant", "delta_bic", "explained_fraction", "gap_before_mps", "gap_after_mps",
+    "heldout_gap_before_mps", "heldout_gap_after_mps", "parameters", "parameter_values",
+    "parameter_sigmas",
+)
+"""Columns of diagnosis.parquet, in order."""
+
+
+def diagnosis_columns(diagnosis: Diagnosis) -> dict[str, NDArray]:
+    """diagnosis.parquet as a dict of arrays, one row per step (:data:`DIAGNOSIS_COLUMNS`).
+
+    ``parameters``, ``parameter_values``, ``parameter_sigmas`` are ";"-joined strings (display
+    unit) so that the table stays flat.
+    """
+    s = diagnosis.steps
+
+    def join(a) -> str:
+        return ";".join(f"{float(v):.6g}" for v in a)
+
+    return {
+        "step": np.array([x.step for x in s], dtype=np.int64),
+        "effect": np.array([x.effect for x in s], dtype=object),
+        "value": np.array([x.value for x in s], dtype=float),
+        "sigma": np.array([x.sigma for x in s], dtype=float),
+        "unit": np.array([x.unit for x in s], dtype=object),
+        "statistic": np.array([x.statistic for x in s], dtype=float),
+        "p_value": np.array([x.p_value for x in s], dtype=float),
+        "criterion": np.array([x.criterion for x in s], dtype=object),
+        "significant": np.array([x.significant for x in s], dtype=bool),
+        "delta_bic": np.array([x.delta_bic for x in s], dtype=float),
+        "explained_fraction": np.array([x.explained_fraction for x in s], dtype=float),
+        "gap_before_mps": np.array([x.gap_before_mps for x in s], dtype=float),
+        "gap_after_mps": np.array([x.gap_after_mps for x in s], dtype=float),
+        "heldout_gap_before_mps": np.array([x.heldout_gap_before_mps for x in s], dtype=float),
+        "heldout_gap_after_mps": np.array([x.heldout_gap_after_mps for x in s], dtype=float),
+        "parameters": np.array([";".join(x.parameters) for x in s], dtype=object),
+        "parameter_values": np.array([join(x.values) for x in s], dtype=object),
+        "parameter_sigmas": np.array([join(x.sigmas) for x in s], dtype=object),
+    }
+
+
+def candidate_columns(diagnosis: Diagnosis) -> dict[str, NDArray]:
+    """Every candidate test (one row per step and candidate) as a dict of arrays."""
+    c = diagnosis.candidates
+    names = ("step", "effect", "n_parameters", "value", "sigma", "unit", "statistic", "p_value",
+             "delta_bic", "explained_fraction", "gap_after_mps", "heldout_gap_after_mps",
+             "significant")
+    return {k: np.array([getattr(x, k) for x in c]) for k in names}
+
+
+def leg_gap_columns(diagnosis: Diagnosis) -> dict[str, NDArray]:
+    """Per-leg gaps before (base model) and after (final model), with the thirds of each leg."""
+    g = diagnosis.legs
+    out = {k: np.array([getattr(x, k) for x in g]) for k in (
+        "leg_id", "start_s", "duration_s", "heading_deg", "speed_mps", "gap_before_mps",
+        "gap_after_mps", "heldout_gap_before_mps", "heldout_gap_after_mps")}
+    for j, ph in enumerate(("early", "middle", "late")):
+        out[f"gap_{ph}_before_mps"] = np.array([x.phase_gap_before_mps[j] for x in g])
+        out[f"gap_{ph}_after_mps"] = np.array([x.phase_gap_after_mps[j] for x in g])
+    return out
