@@ -124,5 +124,88 @@ def report(run_dir: str) -> None:
     click.echo(str(write_report(run_dir)))
 
 
+@main.command()
+@click.option("--preset", default=None, help="Mission preset: flight, vehicle, grid, sample.")
+@click.option("--profile", "profile_file", type=click.Path(exists=True, dir_okay=False),
+              default=None, help="Mission profile TOML instead of a preset.")
+@click.option("--imu-grade", default="flight", show_default=True,
+              help="IMU error grade: flight, vehicle (the paper's), errorfree, or a grade of "
+                   "pospp/presets/imu.toml.")
+@click.option("--seed", default=1, show_default=True, type=int)
+@click.option("--rate-hz", "imu_rate_hz", default=None, type=float,
+              help="IMU rate [Hz] (default: the profile's).")
+@click.option("--gnss-rate-hz", default=1.0, show_default=True, type=float)
+@click.option("--lever-arm-m", nargs=3, type=float, default=(0.0, 0.0, 0.0), show_default=True,
+              help="GNSS antenna position in the body frame FRD [m].")
+@click.option("--outage", "outages", nargs=2, type=float, multiple=True,
+              help="GNSS outage START_S END_S from the mission start (repeatable).")
+@click.option("-o", "--out", "out_mcap", required=True, type=click.Path(dir_okay=False),
+              help="Output MCAP; NAME.truth.parquet and NAME.params.json are written beside.")
+def simulate(preset: str | None, profile_file: str | None, imu_grade: str, seed: int,
+             imu_rate_hz: float | None, gnss_rate_hz: float,
+             lever_arm_m: tuple[float, float, float], outages: tuple, out_mcap: str) -> None:
+    """Simulate a mission with exact IMU increments and known truth (pospp.sim.simulate)."""
+    from pospp.io.simulation_files import write_simulation
+    from pospp.sim.api import simulate as run_simulation
+    from pospp.sim.gnss import GnssModel
+
+    if (preset is None) == (profile_file is None):
+        _fail(click.UsageError("give exactly one of --preset and --profile"))
+    grade = {"flight": "paper_flight", "vehicle": "paper_vehicle"}.get(imu_grade, imu_grade)
+    gnss = GnssModel(rate_hz=gnss_rate_hz, lever_arm_b_m=lever_arm_m,
+                     outages_s=tuple(tuple(o) for o in outages))
+    bar = _StageBar()
+    try:
+        sim = run_simulation(profile_file or preset, imu_grade=grade, gnss=gnss, seed=seed,
+                             imu_rate_hz=imu_rate_hz, progress=bar)
+    except (ValueError, KeyError, FileNotFoundError) as exc:
+        bar.close()
+        _fail(exc)
+    bar.close()
+    out = Path(out_mcap)
+    paths = write_simulation(sim, out.parent, out.stem)
+    click.echo(f"{len(sim.imu)} IMU samples, {len(sim.fix)} GNSS fixes, {len(sim.legs)} true "
+               f"straight legs")
+    for kind, path in paths.items():
+        click.echo(f"  {kind}: {path}")
+
+
+@main.command()
+@click.argument("source", type=click.Path(exists=True))
+@click.option("-o", "--out", "out_mcap", required=True, type=click.Path(dir_okay=False),
+              help="Output MCAP (a reference goes to STEM.reference.parquet beside it).")
+@click.option("--format", "fmt", default=None,
+              help="Source format (detected when omitted); see docs/realdata.md.")
+@click.option("--option", "options", multiple=True, metavar="KEY=VALUE",
+              help="Converter option, e.g. --option path=3 --option imu=avg (repeatable).")
+def convert(source: str, out_mcap: str, fmt: str | None, options: tuple[str, ...]) -> None:
+    """Convert a measured log to the MCAP data contract (pospp.io.converters.convert)."""
+    from pospp.io.converters import convert as run_convert
+
+    kw: dict[str, object] = {}
+    for item in options:
+        key, sep, value = item.partition("=")
+        if not sep:
+            _fail(click.UsageError(f"--option {item!r}: expected KEY=VALUE"))
+        try:
+            kw[key] = int(value)
+        except ValueError:
+            try:
+                kw[key] = float(value)
+            except ValueError:
+                kw[key] = value
+    try:
+        rep = run_convert(source, out_mcap, fmt=fmt, **kw)
+    except (ValueError, FileNotFoundError) as exc:
+        _fail(exc)
+    click.echo(f"{rep.fmt}: {rep.n_imu} IMU samples ({rep.imu_rate_hz or 0:.1f} Hz), "
+               f"{rep.n_fix} GNSS fixes, {rep.n_reference} reference epochs")
+    for label, path in (("mcap", rep.mcap_path), ("reference", rep.reference_path)):
+        if path:
+            click.echo(f"  {label}: {path}")
+    for w in rep.warnings:
+        click.echo(f"  warning: {w}")
+
+
 if __name__ == "__main__":  # pragma: no cover
     main()
