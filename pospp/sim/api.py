@@ -362,7 +362,7 @@ def simulate(
                     legs_fn=legs_fn)
     sim.params["numerics"]["timings_s"]["trajectory_s"] = t_traj
     sim.params["numerics"]["position"] = (
-        "Gauss-Legendre 4 nodes per 0.1 s step, Picard on the radii, cubic Hermite between")
+        "Gauss-Legendre 4 nodes per 0.02 s step, Picard on the radii, cubic Hermite between")
     return sim
 
 

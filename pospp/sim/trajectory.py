@@ -15,7 +15,7 @@ Two motions share one interface, :meth:`evaluate`, returning a :class:`MotionSam
 
   and a_n, the Euler rates follow analytically. Position integrates the geodetic kinematics
   lat' = v_N / (R_M + h), lon' = v_E / ((R_N + h) cos lat), h' = -v_D
-  on a 0.1 s grid with 4-node Gauss-Legendre quadrature per step and Picard iteration of the
+  on a 0.02 s grid with 4-node Gauss-Legendre quadrature per step and Picard iteration of the
   radii, then cubic Hermite interpolation (values and exact derivatives at the grid): the
   truth is self-consistent to far below a millimetre.
 - :class:`SplineMotion`, along a given trajectory (e.g. an RTK drive): quintic smoothing
@@ -99,7 +99,7 @@ class ProfileMotion:
         Position integration step [s] (Gauss-Legendre 4 nodes per step).
     """
 
-    def __init__(self, plan: MissionPlan, *, grid_step_s: float = 0.1) -> None:
+    def __init__(self, plan: MissionPlan, *, grid_step_s: float = 0.02) -> None:
         self.plan = plan
         self.coordinated = plan.profile.turn_bank == "coordinated"
         self.lat0_rad = np.deg2rad(plan.profile.lat_deg)

@@ -50,7 +50,7 @@ def _closure(sim, window_s=None):
     return worst
 
 
-@pytest.mark.parametrize("preset, rate", [("sample", 100.0), ("vehicle", 200.0)])
+@pytest.mark.parametrize("preset, rate", [("sample", 100.0), ("vehicle", 100.0)])
 def test_whole_mission_closure(preset, rate):
     sim = simulate(preset, imu_grade="errorfree", seed=1, imu_rate_hz=rate)
     pos, vel, att = _closure(sim)
