@@ -212,7 +212,11 @@ class Collector:
         return self._verified[key]
 
     def arrays(self) -> dict[str, np.ndarray]:
-        """All blocks concatenated (one concatenate per field, not per block)."""
+        """All blocks concatenated (one concatenate per field, not per block).
+
+        Consumes the blocks: each field's blocks are released as soon as that field is
+        concatenated, so the peak is the data plus one field, not twice the data.
+        """
         if not self.blocks:
             probe = rm.cdr_dtype(self.spec.layout, 1)
             res = {"time_ns": np.zeros(0, np.int64), "log_time_ns": np.zeros(0, np.int64)}
@@ -221,7 +225,10 @@ class Collector:
                 base = ftype.base if ftype.subdtype else ftype
                 res[name] = np.zeros((0, *ftype.shape), base.newbyteorder("="))
             return res
-        return {k: np.concatenate([b[k] for b in self.blocks]) for k in self.blocks[0]}
+        keys = list(self.blocks[0])
+        out = {k: np.concatenate([b.pop(k) for b in self.blocks]) for k in keys}
+        self.blocks = []
+        return out
 
 
 # --------------------------------------------------------------------------- streaming pass

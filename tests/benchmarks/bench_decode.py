@@ -1,0 +1,180 @@
+"""Ingestion benchmark: MCAP decode rate and peak memory on a 1.5 h, 200 Hz flight log.
+
+Run on demand (not collected by pytest)::
+
+    python tests/benchmarks/bench_decode.py            # builds /tmp/pospp_bench_1p5h.mcap once
+    python tests/benchmarks/bench_decode.py --path F --methods pospp,library_stream
+
+The file (1.08 M IMU messages, 5400 GNSS fixes and velocities, zstd chunks) is written with
+``pospp.io.mcap_writer.write_flight_log``. Each method runs in a fresh subprocess so that its
+peak resident memory (``ru_maxrss``) is its own; the baseline is the same process after its
+imports (peak = VmHWM of the subprocess). Methods:
+
+- ``pospp``: ``pospp.io.mcap_reader.read_flight_log`` (own record framing, batched numpy CDR
+  decoding, all the checks, rotation to FRD/NED).
+- ``library_stream``: ``mcap.reader.NonSeekingReader(f).iter_messages(topics,
+  log_time_order=False)`` (the mcap library's framing: chunks, CRCs, decompression), the raw
+  payloads of each topic collected in batches of 65536 and decoded with pospp's structured
+  dtypes (``ros_messages.cdr_dtype``), keeping only the wanted fields. No checks.
+- ``library_seeking``: the same with ``make_reader(f)`` (index-driven ``SeekingReader``,
+  default ``log_time_order=True``).
+- ``library_records``: the floor of any library-based path: ``mcap.stream_reader.StreamReader``
+  yielding records, payloads only appended to lists (no decoding at all).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+DEFAULT_PATH = Path("/tmp/pospp_bench_1p5h.mcap")
+TOPICS = ("/imu/data", "/gnss/fix", "/gnss/vel")
+
+
+def build(path: Path, *, duration_s: float = 5400.0, rate_hz: float = 200.0) -> None:
+    from pospp.io.mcap_reader import GnssFixes, GnssVelocities, ImuSamples
+    from pospp.io.mcap_writer import write_flight_log
+
+    rng = np.random.default_rng(20240601)
+    n = int(duration_s * rate_hz)
+    t0 = 1_717_200_000_000_000_000
+    t = t0 + np.arange(1, n + 1, dtype=np.int64) * int(round(1e9 / rate_hz))
+    w = rng.normal(0.0, 1e-3, (n, 3))
+    f = rng.normal(0.0, 0.05, (n, 3)) + [0.0, 0.0, -9.80665]
+    m = int(duration_s)
+    tg = t0 + np.arange(1, m + 1, dtype=np.int64) * 1_000_000_000
+    fix = GnssFixes(tg, 0.7 + rng.normal(0, 1e-7, m), np.full(m, 2.0), np.full(m, 100.0),
+                    np.tile(np.diag([0.01, 0.01, 0.04]), (m, 1, 1)), np.zeros(m, np.int8))
+    vel = GnssVelocities(tg, rng.normal(0, 0.02, (m, 3)), np.tile(np.eye(3) * 4e-4, (m, 1, 1)))
+    t_start = time.perf_counter()
+    write_flight_log(path, ImuSamples(t, w, f, "imu_link"), fix, vel)
+    print(f"built {path} ({path.stat().st_size / 1e6:.1f} MB, {n} IMU messages) in "
+          f"{time.perf_counter() - t_start:.1f} s", file=sys.stderr)
+
+
+def _library_decode(path: Path, *, seeking: bool) -> int:
+    from mcap.reader import NonSeekingReader, make_reader
+
+    from pospp.io import ros_messages as rm
+
+    layouts = {"/imu/data": (rm.IMU_FIELDS, ("angular_velocity", "linear_acceleration")),
+               "/gnss/fix": (rm.NAVSATFIX_FIELDS, ("latitude", "longitude", "altitude")),
+               "/gnss/vel": (rm.TWIST_COV_STAMPED_FIELDS, ("linear",))}
+    pending: dict[str, list[bytes]] = {tp: [] for tp in TOPICS}
+    blocks: dict[str, list[dict[str, np.ndarray]]] = {tp: [] for tp in TOPICS}
+
+    def flush(topic: str) -> None:
+        payloads = pending[topic]
+        if not payloads:
+            return
+        fields, wanted = layouts[topic]
+        by_len: dict[int, list[bytes]] = {}
+        for p in payloads:
+            by_len.setdefault(len(p), []).append(p)
+        for group in by_len.values():
+            flen = int.from_bytes(group[0][12:16], "little")
+            arr = np.frombuffer(b"".join(group), dtype=rm.cdr_dtype(fields, flen))
+            out = {k: arr[k].copy() for k in wanted}
+            out["time_ns"] = rm.stamp_ns(arr["sec"], arr["nanosec"])
+            blocks[topic].append(out)
+        pending[topic] = []
+
+    with open(path, "rb") as fh:
+        reader = make_reader(fh) if seeking else NonSeekingReader(fh)
+        it = reader.iter_messages(topics=list(TOPICS), log_time_order=seeking)
+        for _, channel, message in it:
+            lst = pending[channel.topic]
+            lst.append(message.data)
+            if len(lst) >= 65536:
+                flush(channel.topic)
+    for tp in TOPICS:
+        flush(tp)
+    imu = {k: np.concatenate([b[k] for b in blocks["/imu/data"]]) for k in blocks["/imu/data"][0]}
+    return int(imu["time_ns"].shape[0])
+
+
+def _records_only(path: Path) -> int:
+    from mcap.records import Message
+    from mcap.stream_reader import StreamReader
+
+    payloads: dict[int, list[bytes]] = {}
+    with open(path, "rb") as fh:
+        for rec in StreamReader(fh).records:
+            if type(rec) is Message:
+                payloads.setdefault(rec.channel_id, []).append(rec.data)
+    return max(len(v) for v in payloads.values())
+
+
+def _peak_rss_mb() -> float:
+    """Peak resident set of this process image (VmHWM; unlike ru_maxrss, not inherited from
+    the parent across exec)."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def run_one(method: str, path: Path) -> dict:
+    import mcap  # noqa: F401  (imports counted in the baseline)
+
+    from pospp.io.mcap_reader import read_flight_log
+
+    base_mb = _peak_rss_mb()
+    t = time.perf_counter()
+    if method == "pospp":
+        n_imu = len(read_flight_log(path).imu)
+    elif method == "library_stream":
+        n_imu = _library_decode(path, seeking=False)
+    elif method == "library_seeking":
+        n_imu = _library_decode(path, seeking=True)
+    elif method == "library_records":
+        n_imu = _records_only(path)
+    else:
+        raise ValueError(f"unknown method {method!r}")
+    wall = time.perf_counter() - t
+    peak_mb = _peak_rss_mb()
+    n_all = n_imu + 2 * 5400
+    return {"method": method, "wall_s": wall, "imu_messages": n_imu,
+            "messages_per_s": n_all / wall, "peak_rss_mb": peak_mb, "baseline_rss_mb": base_mb}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--path", type=Path, default=DEFAULT_PATH)
+    ap.add_argument("--methods", default="pospp,library_stream,library_seeking,library_records")
+    ap.add_argument("--repeat", type=int, default=2, help="runs per method (best is reported)")
+    ap.add_argument("--one", help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.one:
+        print(json.dumps(run_one(args.one, args.path)))
+        return
+    if not args.path.exists():
+        build(args.path)
+    size_mb = args.path.stat().st_size / 1e6
+    rows = []
+    for method in args.methods.split(","):
+        runs = []
+        for _ in range(args.repeat):
+            out = subprocess.run([sys.executable, __file__, "--path", str(args.path), "--one",
+                                  method], check=True, capture_output=True, text=True)
+            runs.append(json.loads(out.stdout))
+        rows.append(min(runs, key=lambda r: r["wall_s"]))
+    ref = rows[0]["wall_s"]
+    print(f"file: {args.path} ({size_mb:.1f} MB), best of {args.repeat}\n")
+    print("| method | wall [s] | x first | messages/s | peak RSS [MB] | baseline RSS [MB] |")
+    print("|---|---|---|---|---|---|")
+    for r in rows:
+        print(f"| {r['method']} | {r['wall_s']:.2f} | {r['wall_s'] / ref:.1f} | "
+              f"{r['messages_per_s']:,.0f} | {r['peak_rss_mb']:.0f} | "
+              f"{r['baseline_rss_mb']:.0f} |")
+
+
+if __name__ == "__main__":
+    main()
