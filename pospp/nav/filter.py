@@ -94,6 +94,9 @@ class FilterOptions:
         A GNSS record further than this from every IMU epoch is refused.
     max_imu_gap_intervals : float
         An IMU interval longer than this many median intervals raises ValueError.
+    gauss_markov_states : bool
+        Carry the biases as constant plus first-order Gauss-Markov (six more states); False:
+        one random-walk state per axis (:mod:`pospp.nav.tuning`, "Bias model").
     smoother : bool
         Run the RTS smoother.
     alignment : AlignmentOptions
@@ -113,6 +116,7 @@ class FilterOptions:
     lever_arm_sigma_m: float = 0.5
     max_gnss_imu_offset_s: float = 0.05
     max_imu_gap_intervals: float = 5.0
+    gauss_markov_states: bool = True
     smoother: bool = True
     alignment: AlignmentOptions = field(default_factory=AlignmentOptions)
 
@@ -239,13 +243,15 @@ def _inv3(s, out):
 
 @njit(cache=True)
 def _forward_kernel(
-    t, dth, dvel, k0, x0, p0, lever0, i_sf, i_l, flags, m_k, m_type, m_z, m_r, m_dt,
-    prop_steps, q_diag, gate, m_status, m_nis, out_x, out_diag, out_blk, out_sens, out_lever,
-    node_k, node_pp, node_pu, node_phi, node_dx,
+    t, w_imu, f_imu, k0, x0, p0, lever0, i_gm, inv_tau, i_sf, i_l, flags, m_k, m_type, m_z,
+    m_r, m_dt, prop_steps, q_diag, gate, m_status, m_nis, out_x, out_diag, out_blk, out_sens,
+    out_bvar, out_lever, node_k, node_pp, node_pu, node_phi, node_dx,
 ):
     """Closed-loop forward pass over IMU epochs ``k0 .. N-1`` (module docstring).
 
-    ``i_sf`` / ``i_l``: index of the first scale-factor / lever-arm state, -1 when absent.
+    ``w_imu[k]``, ``f_imu[k]``: mean rates over (t[k-1], t[k]]. ``i_gm`` / ``i_sf`` / ``i_l``:
+    index of the first Gauss-Markov bias / scale-factor / lever-arm state, -1 when absent;
+    ``inv_tau`` = [1 / tau_gyro, 1 / tau_accel] of the Gauss-Markov states [1/s].
     Fills the output and node arrays; returns (nodes used, outputs used).
     """
     n = p0.shape[0]
@@ -254,7 +260,9 @@ def _forward_kernel(
     x = x0.copy()
     xp = x0.copy()
     xn = np.empty(10)
-    sens = np.zeros(12)  # gyro bias, accel bias, gyro scale factor, accel scale factor
+    # nominal sensor errors: constant gyro bias, accel bias, gyro and accel scale factors,
+    # Gauss-Markov gyro and accel biases (decaying with their time constants)
+    sens = np.zeros(18)
     lever = lever0.copy()
     p = p0.copy()
     eye = np.eye(n)
@@ -291,11 +299,16 @@ def _forward_kernel(
     i_node = 0
     for k in range(k0, n_ep):
         if k > k0:
-            j = k - 1
             dt = t[k] - t[k - 1]
             for a in range(3):
-                dth_c[a] = (dth[j, a] - sens[a] * dt) / (1.0 + sens[6 + a])
-                dv_c[a] = (dvel[j, a] - sens[3 + a] * dt) / (1.0 + sens[9 + a])
+                dth_c[a] = (w_imu[k, a] - sens[a] - sens[12 + a]) * dt / (1.0 + sens[6 + a])
+                dv_c[a] = (f_imu[k, a] - sens[3 + a] - sens[15 + a]) * dt / (1.0 + sens[9 + a])
+            if i_gm >= 0:
+                dg = math.exp(-dt * inv_tau[0])
+                da = math.exp(-dt * inv_tau[1])
+                for a in range(3):
+                    sens[12 + a] *= dg
+                    sens[15 + a] *= da
             extrap = 0.0 if k - 1 == k0 else 0.5 * dt / (t[k - 1] - t[k - 2])
             _kernels.strapdown_step(x, xp, dth_c, dv_c, dth_p, dv_p, dt, extrap, xn)
             for a in range(10):
@@ -323,6 +336,13 @@ def _forward_kernel(
             for a in range(15):
                 for b in range(15):
                     ff[a, b] = f15[a, b] * t_acc
+            if i_gm >= 0:
+                for a in range(3):
+                    for b in range(3):
+                        ff[a, i_gm + b] = -c_nb[a, b] * t_acc
+                        ff[3 + a, i_gm + 3 + b] = c_nb[a, b] * t_acc
+                    ff[i_gm + a, i_gm + a] = -inv_tau[0] * t_acc
+                    ff[i_gm + 3 + a, i_gm + 3 + a] = -inv_tau[1] * t_acc
             if i_sf >= 0:
                 for a in range(3):
                     for b in range(3):
@@ -381,6 +401,8 @@ def _forward_kernel(
                 for a in range(3):
                     for b in range(3):
                         h_mat[a, 9 + b] = -csl[a, b]  # -C [l x] (gyro bias)
+                        if i_gm >= 0:
+                            h_mat[a, i_gm + b] = -csl[a, b]
                         if i_sf >= 0:
                             h_mat[a, i_sf + b] = -csl[a, b] * w_b[b]  # -C [l x] diag(w)
                 if i_l >= 0:
@@ -424,6 +446,9 @@ def _forward_kernel(
                 xp[3 + a] -= dxk[3 + a]
                 sens[a] += dxk[9 + a]
                 sens[3 + a] += dxk[12 + a]
+                if i_gm >= 0:
+                    sens[12 + a] += dxk[i_gm + a]
+                    sens[15 + a] += dxk[i_gm + 3 + a]
                 if i_sf >= 0:
                     sens[6 + a] += dxk[i_sf + a]
                     sens[9 + a] += dxk[i_sf + 3 + a]
@@ -449,6 +474,11 @@ def _forward_kernel(
                         out_blk[i_out, blk, a, b] = p[3 * blk + a, 3 * blk + b]
             for a in range(12):
                 out_sens[i_out, a] = sens[a]
+            for a in range(6):  # total bias = constant + Gauss-Markov, and its variance
+                out_bvar[i_out, a] = p[9 + a, 9 + a]
+                if i_gm >= 0:
+                    out_sens[i_out, a] += sens[12 + a]
+                    out_bvar[i_out, a] += p[i_gm + a, i_gm + a] + 2.0 * p[9 + a, i_gm + a]
             for a in range(3):
                 out_lever[i_out, a] = lever[a]
             i_out += 1
@@ -560,12 +590,11 @@ def run_integrated_navigation(
     """
     noise = _noise(tuning)
     imu_t_ns = np.asarray(imu.time_ns, dtype=np.int64)
-    w = np.asarray(imu.w_ib_b_radps, dtype=float)
-    f = np.asarray(imu.f_ib_b_mps2, dtype=float)
+    w = np.ascontiguousarray(imu.w_ib_b_radps, dtype=float)
+    f = np.ascontiguousarray(imu.f_ib_b_mps2, dtype=float)
     if epoch_ns is None:
         epoch_ns = int(imu_t_ns[0]) if imu_t_ns.shape[0] else 0
-    t, dth, dvl = filter_input.imu_increments(imu_t_ns, w, f, epoch_ns,
-                                              options.max_imu_gap_intervals)
+    t = filter_input.imu_epochs(imu_t_ns, w, f, epoch_ns, options.max_imu_gap_intervals)
 
     rejections: list[GnssRejection] = []
     (fix_t_ns, fix_val, fix_cov), (vel_t_ns, vel_val, vel_cov) = filter_input.gnss_arrays(
@@ -632,27 +661,15 @@ def run_integrated_navigation(
     n_nodes = int(np.count_nonzero(flags[k0:] & FLAG_NODE))
 
     # ---- state layout, initial covariance and noise ------------------------------------------
-    i_sf = 15 if estimate_scale_factors else -1
-    n = 15 + (6 if estimate_scale_factors else 0)
-    i_l = n if estimate_lever_arm else -1
-    n += 3 if estimate_lever_arm else 0
-    p0_diag = [al.rpy_sigma_rad**2, al.vel_sigma_ned_mps**2, al.pos_sigma_ned_m**2,
-               np.full(3, noise.gyro_bias_sigma_radps**2),
-               np.full(3, noise.accel_bias_sigma_mps2**2)]
-    q_diag = [np.full(3, noise.gyro_arw_radpsqrts**2), np.full(3, noise.accel_vrw_mpspsqrts**2),
-              np.zeros(3), np.full(3, noise.gyro_bias_psd_radps2ps),
-              np.full(3, noise.accel_bias_psd_mps4ps)]
-    if estimate_scale_factors:
-        p0_diag += [np.full(3, noise.gyro_sf_sigma**2), np.full(3, noise.accel_sf_sigma**2)]
-        q_diag.append(np.zeros(6))
-    if estimate_lever_arm:
-        p0_diag.append(np.full(3, options.lever_arm_sigma_m**2))
-        q_diag.append(np.zeros(3))
-    p0 = np.diag(np.concatenate(p0_diag))
+    lay = _layout(options.gauss_markov_states, estimate_scale_factors, estimate_lever_arm)
+    p0_diag, q_diag = _initial_covariance_and_noise(lay, noise, al, options)
+    p0 = np.diag(p0_diag)
+    n = lay.n
     prop_steps = max(1, int(round(options.propagation_interval_s / float(np.median(np.diff(t))))))
     gate = float(chi2.ppf(options.gate_probability, 3))
     x0 = np.concatenate([[al.lat_rad, al.lon_rad, al.height_m], al.v_n_mps,
                          rotation.quat_from_euler(al.rpy_rad)])
+    inv_tau = np.array([1.0 / noise.gyro_gm_tau_s, 1.0 / noise.accel_gm_tau_s])
 
     n_meas = m_k.shape[0]
     n_out = out_k.shape[0]
@@ -662,6 +679,7 @@ def run_integrated_navigation(
     out_diag = np.empty((n_out, n))
     out_blk = np.empty((n_out, 3, 3, 3))
     out_sens = np.empty((n_out, 12))
+    out_bvar = np.empty((n_out, 6))
     out_lever = np.empty((n_out, 3))
     node_k = np.empty(n_nodes, dtype=np.int64)
     node_pp = np.empty((n_nodes, n, n))
@@ -669,9 +687,9 @@ def run_integrated_navigation(
     node_phi = np.empty((n_nodes, n, n))
     node_dx = np.empty((n_nodes, n))
     used_nodes, used_out = _forward_kernel(
-        t, dth, dvl, k0, x0, p0, lever0.copy(), i_sf, i_l, flags, m_k, m_type, m_z, m_r, m_dt,
-        prop_steps, np.concatenate(q_diag), gate, m_status, m_nis, out_x, out_diag, out_blk,
-        out_sens, out_lever, node_k, node_pp, node_pu, node_phi, node_dx,
+        t, w, f, k0, x0, p0, lever0.copy(), lay.i_gm, inv_tau, lay.i_sf, lay.i_l, flags, m_k,
+        m_type, m_z, m_r, m_dt, prop_steps, q_diag, gate, m_status, m_nis, out_x, out_diag,
+        out_blk, out_sens, out_bvar, out_lever, node_k, node_pp, node_pu, node_phi, node_dx,
     )
     if used_nodes != n_nodes or used_out != n_out:
         raise RuntimeError(f"filter kernel: node/output count mismatch ({used_nodes} vs "
@@ -689,12 +707,12 @@ def run_integrated_navigation(
     # ---- results -------------------------------------------------------------------------------
     out_t = t[out_k]
     out_tns = imu_t_ns[out_k]
-    sf_idx = np.arange(i_sf, i_sf + 6) if estimate_scale_factors else None
+    i_sf, i_l = lay.i_sf, lay.i_l
     fwd = _solution(out_tns, out_t, out_x, out_diag,
                     [out_blk[:, 0].copy(), out_blk[:, 1].copy(), out_blk[:, 2].copy()])
-    fwd_bias = _bias_history(out_t, out_sens, out_diag, sf_idx)
+    fwd_bias = _bias_history(out_t, out_sens, out_bvar, out_diag, i_sf)
     lever_est = out_lever[-1].copy()
-    lever_sig = np.sqrt(out_diag[-1, i_l:i_l + 3]) if estimate_lever_arm else np.zeros(3)
+    lever_sig = np.sqrt(out_diag[-1, i_l:i_l + 3]) if i_l >= 0 else np.zeros(3)
     smoothed = None
     sm_bias = None
     if options.smoother:
@@ -706,29 +724,103 @@ def run_integrated_navigation(
             node_t, p_s, out_t, (slice(0, 3), slice(3, 6), slice(6, 9)))
         states_s = smoother.correct_states(out_x, np.ascontiguousarray(err))
         smoothed = _solution(out_tns, out_t, states_s, diag_s, blocks_s)
+        # total bias error (constant + Gauss-Markov) and its smoothed variance
+        tb = _total_bias_map(lay)
         sens_s = out_sens.copy()
-        sens_s[:, :6] += err[:, 9:15]
-        if estimate_scale_factors:
+        sens_s[:, :6] += err @ tb.T
+        if i_sf >= 0:
             sens_s[:, 6:] += err[:, i_sf:i_sf + 6]
-        sm_bias = _bias_history(out_t, sens_s, diag_s, sf_idx)
-        if estimate_lever_arm:
+        bvar_nodes = np.einsum("ij,kjl,il->ki", tb, p_s, tb)
+        i, a = smoother.interpolation_weights(node_t, out_t)
+        nxt = np.minimum(i + 1, node_t.shape[0] - 1)
+        bvar_s = (1.0 - a)[:, None] * bvar_nodes[i] + a[:, None] * bvar_nodes[nxt]
+        sm_bias = _bias_history(out_t, sens_s, bvar_s, diag_s, i_sf)
+        if i_l >= 0:
             lever_est = out_lever[0] - err[0, i_l:i_l + 3]
             lever_sig = np.sqrt(diag_s[0, i_l:i_l + 3])
     return FilterResult(
         forward=fwd, smoothed=smoothed, forward_biases=fwd_bias, smoothed_biases=sm_bias,
         rejections=tuple(rejections),
-        lever_arm=LeverArmEstimate(lever_est, lever_sig, bool(estimate_lever_arm)),
+        lever_arm=LeverArmEstimate(lever_est, lever_sig, i_l >= 0),
         alignment=al, n_updates=n_updates, gate_nis=gate,
     )
 
 
-def _bias_history(t_s: NDArray, sens: NDArray, diag: NDArray, sf_idx: NDArray | None
+@dataclass(frozen=True)
+class _Layout:
+    """Where the optional state blocks start (-1: absent) and the state count."""
+
+    n: int
+    i_gm: int
+    i_sf: int
+    i_l: int
+
+
+def _layout(gauss_markov: bool, scale_factors: bool, lever_arm: bool) -> _Layout:
+    n = 15
+    i_gm = i_sf = i_l = -1
+    if gauss_markov:
+        i_gm, n = n, n + 6
+    if scale_factors:
+        i_sf, n = n, n + 6
+    if lever_arm:
+        i_l, n = n, n + 3
+    return _Layout(n, i_gm, i_sf, i_l)
+
+
+def _initial_covariance_and_noise(lay: _Layout, noise: NoiseParameters, al: AlignmentResult,
+                                  options: FilterOptions) -> tuple[NDArray, NDArray]:
+    """Diagonal P0 and continuous-time noise PSD Q_c of the state layout (docs/filter.md)."""
+    p0 = np.zeros(lay.n)
+    q = np.zeros(lay.n)
+    p0[0:3] = al.rpy_sigma_rad**2
+    p0[3:6] = al.vel_sigma_ned_mps**2
+    p0[6:9] = al.pos_sigma_ned_m**2
+    q[0:3] = noise.gyro_arw_radpsqrts**2
+    q[3:6] = noise.accel_vrw_mpspsqrts**2
+    if lay.i_gm >= 0:
+        # constant part: no process noise; Gauss-Markov part: 2 sigma^2 / tau. A floor of
+        # 1e-3 of the turn-on sigma keeps P invertible for the smoother when a sigma is 0.
+        sg = max(noise.gyro_gm_sigma_radps, 1e-3 * noise.gyro_turn_on_sigma_radps, 1e-15)
+        sa = max(noise.accel_gm_sigma_mps2, 1e-3 * noise.accel_turn_on_sigma_mps2, 1e-15)
+        p0[9:12] = max(noise.gyro_turn_on_sigma_radps, 1e-15) ** 2
+        p0[12:15] = max(noise.accel_turn_on_sigma_mps2, 1e-15) ** 2
+        p0[lay.i_gm:lay.i_gm + 3] = sg**2
+        p0[lay.i_gm + 3:lay.i_gm + 6] = sa**2
+        q[lay.i_gm:lay.i_gm + 3] = 2.0 * sg**2 / noise.gyro_gm_tau_s
+        q[lay.i_gm + 3:lay.i_gm + 6] = 2.0 * sa**2 / noise.accel_gm_tau_s
+    else:
+        p0[9:12] = noise.gyro_bias_sigma_radps**2
+        p0[12:15] = noise.accel_bias_sigma_mps2**2
+        q[9:12] = noise.gyro_bias_psd_radps2ps
+        q[12:15] = noise.accel_bias_psd_mps4ps
+    if lay.i_sf >= 0:
+        p0[lay.i_sf:lay.i_sf + 3] = max(noise.gyro_sf_sigma, 1e-12) ** 2
+        p0[lay.i_sf + 3:lay.i_sf + 6] = max(noise.accel_sf_sigma, 1e-12) ** 2
+    if lay.i_l >= 0:
+        p0[lay.i_l:lay.i_l + 3] = options.lever_arm_sigma_m**2
+    return p0, q
+
+
+def _total_bias_map(lay: _Layout) -> NDArray:
+    """(6, n) matrix taking the error state to the total [gyro, accel] bias error."""
+    tb = np.zeros((6, lay.n))
+    tb[:, 9:15] = np.eye(6)
+    if lay.i_gm >= 0:
+        tb[:, lay.i_gm:lay.i_gm + 6] = np.eye(6)
+    return tb
+
+
+def _bias_history(t_s: NDArray, sens: NDArray, bias_var: NDArray, diag: NDArray, i_sf: int
                   ) -> BiasHistory:
-    sig = np.sqrt(np.clip(diag, 0.0, None))
-    sf_sig = sig[:, sf_idx] if sf_idx is not None else np.zeros((t_s.shape[0], 6))
+    bsig = np.sqrt(np.clip(bias_var, 0.0, None))
+    if i_sf >= 0:
+        sf_sig = np.sqrt(np.clip(diag[:, i_sf:i_sf + 6], 0.0, None))
+    else:
+        sf_sig = np.zeros((t_s.shape[0], 6))
     return BiasHistory(
-        t_s=t_s, gyro_b_radps=sens[:, 0:3].copy(), gyro_sigma_b_radps=sig[:, 9:12],
-        accel_b_mps2=sens[:, 3:6].copy(), accel_sigma_b_mps2=sig[:, 12:15],
+        t_s=t_s, gyro_b_radps=sens[:, 0:3].copy(), gyro_sigma_b_radps=bsig[:, 0:3].copy(),
+        accel_b_mps2=sens[:, 3:6].copy(), accel_sigma_b_mps2=bsig[:, 3:6].copy(),
         gyro_sf=sens[:, 6:9].copy(), gyro_sf_sigma=sf_sig[:, 0:3].copy(),
         accel_sf=sens[:, 9:12].copy(), accel_sf_sigma=sf_sig[:, 3:6].copy(),
     )

@@ -31,10 +31,11 @@ class GnssRejection:
     """The offending quantity (NIS for the gate, sigma for covariance checks), else NaN."""
 
 
-def imu_increments(
+def imu_epochs(
     time_ns: NDArray, w: NDArray, f: NDArray, epoch_ns: int, max_gap_intervals: float
-) -> tuple[NDArray, NDArray, NDArray]:
-    """Check the IMU samples; return epochs t_s (N,) and increments (N - 1, 3) x 2.
+) -> NDArray:
+    """Check the IMU samples (N mean rates over the intervals ending at their stamps); return
+    the epochs t_s (N,) [s] from ``epoch_ns``.
 
     Raises
     ------
@@ -67,7 +68,7 @@ def imu_increments(
             f"{dt_med:.6f} s) ending at sample {k}, t = {t[k]:.6f} s (time_ns {time_ns[k]}); "
             f"expected at most max_imu_gap_intervals = {max_gap_intervals:g}"
         )
-    return t, np.ascontiguousarray(w[1:] * dt[:, None]), np.ascontiguousarray(f[1:] * dt[:, None])
+    return t
 
 
 def screen_gnss(

@@ -54,6 +54,16 @@ def result(case):
     return _run(log, params)
 
 
+@pytest.fixture(scope="module")
+def matched(case):
+    """A run whose noise model matches the simulated errors (constant biases, tiny drift)."""
+    log, params, _ = case
+    tuning = tuning_preset("flight", gyro_bias_sigma_dph=0.5, gyro_arw_dpsh=0.002,
+                           gyro_gm_sigma_dph=0.01, accel_bias_sigma_ug=20.0,
+                           accel_vrw_mpsph=0.002, accel_gm_sigma_ug=1.0)
+    return _run(log, params, tuning)
+
+
 def _errors(sol, truth):
     return solution_errors(
         sol.time_ns, sol.lat_rad, sol.lon_rad, sol.height_m, sol.v_n_mps, sol.rpy_rad,
@@ -100,12 +110,12 @@ def test_accuracy_smoothed_and_forward(case, result):
         )
     print(report)
     sm, fw = report["smoothed"], report["forward"]
-    # measured: smoothed tilt 1.2", heading 3.6", position 0.015 m
+    # measured: smoothed tilt 1.5", heading 5.4", position 0.015 m
     assert sm["tilt_arcsec"] < 5.0
     assert sm["heading_arcsec"] < 20.0
     assert sm["pos_m"] < 0.05
     assert sm["vel_mps"] < 0.01
-    # measured: forward tilt 2.5", heading 11.5", position 0.035 m
+    # measured: forward tilt 3.2", heading 18.5", position 0.036 m
     assert fw["tilt_arcsec"] < 8.0
     assert fw["heading_arcsec"] < 40.0
     assert fw["pos_m"] < 0.08
@@ -126,17 +136,13 @@ def _nees_fractions(sol, err, params):
     return out
 
 
-def test_nees_with_tuning_matching_the_injected_errors(case):
+def test_nees_with_tuning_matching_the_injected_errors(case, matched):
     """Consistency: with the filter model matching the simulated errors, the NEES of the
     position, velocity and attitude blocks lies in the two-sided 95 % chi-square (3 dof) band
     for >= 90 % of the epochs (measured 0.90-0.97)."""
-    log, params, truth = case
-    tuning = tuning_preset("flight", gyro_bias_sigma_dph=0.5, gyro_arw_dpsh=0.002,
-                           gyro_gm_sigma_dph=0.01, accel_bias_sigma_ug=20.0,
-                           accel_vrw_mpsph=0.002, accel_gm_sigma_ug=1.0)
-    res = _run(log, params, tuning)
+    _, params, truth = case
     for name in ("forward", "smoothed"):
-        sol = getattr(res, name)
+        sol = getattr(matched, name)
         fr = _nees_fractions(sol, _errors(sol, truth), params)
         print(name, fr)
         for block, (two_sided, below) in fr.items():
@@ -154,17 +160,24 @@ def test_nees_preset_is_not_overconfident(case, result):
             assert below >= 0.95, (name, block, below)
 
 
-def test_gyro_bias_converges_to_injected_within_3_sigma(case, result):
+def test_gyro_bias_converges_to_injected_within_3_sigma(case, result, matched):
+    """Final (forward) and whole-flight (smoothed) gyro bias estimates against the injected
+    constant body-frame bias. With the "flight" preset the estimate is the constant plus a
+    0.5 deg/h, 300 s Gauss-Markov drift the case does not have, so its sigma stays near the
+    drift's; with the matched model the sigma shrinks to < 0.15 deg/h (measured 0.08-0.12)."""
     _, params, _ = case
     injected = np.asarray(params["imu_errors"]["gyro_bias_dph"]) * DPH
-    for hist in (result.forward_biases, result.smoothed_biases):
-        est, sig = hist.gyro_b_radps[-1], hist.gyro_sigma_b_radps[-1]
-        assert np.all(np.abs(est - injected) < 3.0 * sig), (est / DPH, sig / DPH)
-        # and the sigma shrank from the preset's 1.1 deg/h
-        assert np.all(sig < 0.2 * DPH)
+    for res, max_sigma in ((result, 0.5 * DPH), (matched, 0.15 * DPH)):
+        for hist in (res.forward_biases, res.smoothed_biases):
+            est, sig = hist.gyro_b_radps, hist.gyro_sigma_b_radps
+            for k in (-1, len(est) // 2):
+                assert np.all(np.abs(est[k] - injected) < 3.0 * sig[k]), (est[k] / DPH,
+                                                                          sig[k] / DPH)
+            assert np.all(sig[-1] < max_sigma), sig[-1] / DPH
     acc = np.asarray(params["imu_errors"]["accel_bias_ug"]) * 9.80665e-6
-    h = result.smoothed_biases
-    assert np.all(np.abs(h.accel_b_mps2[-1] - acc) < 3.0 * h.accel_sigma_b_mps2[-1])
+    for res in (result, matched):
+        h = res.smoothed_biases
+        assert np.all(np.abs(h.accel_b_mps2[-1] - acc) < 3.0 * h.accel_sigma_b_mps2[-1])
 
 
 def test_smoothed_covariance_below_forward(result):
