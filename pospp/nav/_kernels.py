@@ -9,8 +9,9 @@ State vector layout (float64[10]), the only place it is defined::
     x = [lat_rad, lon_rad, height_m, vn_mps, ve_mps, vd_mps, qw, qx, qy, qz]
 
 with q = q_nb scalar-first (body FRD -> NED). Earth formulas come from
-``pospp.earth.radii_formula`` / ``gravity_formula`` compiled here, so numpy and numba share
-one source of the physics.
+``pospp.earth.radii_formula`` / ``gravity_formula`` (and their sin^2 forms, so that one
+sin/cos/sqrt per latitude serves radii, gravity and rates in the step) compiled here, so numpy
+and numba share one source of the physics.
 
 Mechanization (Savage 1998, Shin 2001, two-sample "one plus previous" corrections), for the
 interval k-1 -> k with increments dtheta_k, dv_k (body, rad and m/s) and length dt:
