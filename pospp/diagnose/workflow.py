@@ -36,8 +36,12 @@ Steps
    leave-one-leg-out prediction error, which must decrease. A lack-of-fit basis (per leg and
    channel, cosines cos(pi k t / T), k < ``lof_terms``) measures the whole structured gap; a
    candidate is named only when its RSS reduction beyond noise is at least
-   ``min_explained_fraction`` of the basis's (otherwise it would be a wrong effect soaking up
-   part of an unexplained gap). The BIC difference is reported alongside.
+   ``min_explained_fraction`` (0.9) of the basis's: otherwise it would be a wrong effect
+   soaking up part of a gap it does not explain (a wrong candidate correlated with an
+   out-of-library effect typically explains 40 to 85 per cent). Two effects present at once
+   each explain part of the gap: a pair of significant candidates is accepted when together
+   they explain that share and leave no significant lack of fit; the one with the larger F is
+   named first. The BIC difference is reported alongside.
 4. Add: the named effect joins the model, and the search repeats while a candidate remains
    significant (at most ``max_steps``).
 5. Close: a final lack-of-fit F-test of the last model: ``"none"`` when no structured gap
@@ -112,6 +116,10 @@ class DiagnosisStep:
         BIC(with) - BIC(without) (negative favours the effect).
     explained_fraction : float
         Share of the structured gap (lack-of-fit basis) the effect explains.
+    confounded_with : tuple of str
+        Other significant candidates that these legs cannot tell apart from the named one (the
+        named effect adds nothing significant once one of them is in the model, nor the
+        reverse): the choice between them rests on the larger F only.
     gap_before_mps, gap_after_mps : float
         RMS of B minus A minus the model (all legs, N and E) before and after the step [m/s].
     heldout_gap_before_mps, heldout_gap_after_mps : float
@@ -132,6 +140,7 @@ class DiagnosisStep:
     significant: bool
     delta_bic: float
     explained_fraction: float
+    confounded_with: tuple[str, ...]
     gap_before_mps: float
     gap_after_mps: float
     heldout_gap_before_mps: float
@@ -453,6 +462,35 @@ def _phase_rms(res: NDArray, n_phase: int = 3) -> NDArray:
     return np.array([float(np.sqrt(np.mean(r[p] ** 2))) if p.size else np.nan for p in parts])
 
 
+def _pair_explaining(prob: _Problem, terms: list[_Term], fit0: _Fit, trials: list[dict],
+                     lof: list[_Term], lof_excess: float, s2_lof: float, alpha: float,
+                     min_fraction: float) -> list[dict]:
+    """Two significant candidates that together explain the structured gap, or [].
+
+    Two real effects of similar size each explain only part of the gap; they are accepted
+    together when their joint RSS reduction is at least ``min_fraction`` of the lack-of-fit
+    basis's and no structured gap remains after both (lack-of-fit F-test at ``alpha``).
+    """
+    if lof_excess <= 0:
+        return []
+    cands = sorted((tr for tr in trials if tr["sig"] and tr["frac"] >= 0.25),
+                   key=lambda tr: -tr["f"])[:4]
+    n = prob.n
+    best_pair: list[dict] = []
+    best_frac = min_fraction
+    for i, a in enumerate(cands):
+        for b in cands[i + 1:]:
+            both = prob.fit(terms + [a["term"], b["term"]])
+            frac = (fit0.rss_w - both.rss_w - (both.rank - fit0.rank) * s2_lof) / lof_excess
+            if frac < best_frac:
+                continue
+            lof_fit = prob.fit(terms + [a["term"], b["term"]] + lof)
+            _, p = _f_test(both.rss_w, lof_fit.rss_w, lof_fit.rank - both.rank, n - lof_fit.rank)
+            if p >= alpha:
+                best_pair, best_frac = [a, b], frac
+    return best_pair
+
+
 # --------------------------------------------------------------------------------------------
 # the workflow
 
@@ -470,7 +508,7 @@ def diagnose(
     gyro_arw_radpsqrts: float = 0.0,
     max_steps: int = 4,
     lof_terms: int = 8,
-    min_explained_fraction: float = 0.5,
+    min_explained_fraction: float = 0.9,
     accel_settling_s: float = fx.ACCEL_SETTLING_S,
 ) -> Diagnosis:
     """Find, with evidence, what the calibration model is missing (module docstring).
@@ -500,7 +538,8 @@ def diagnose(
     lof_terms : int
         Cosines per leg and channel of the lack-of-fit basis.
     min_explained_fraction : float
-        Least share of the structured gap a candidate must explain to be named.
+        Least share of the structured gap a candidate (or, failing one, a pair of candidates
+        leaving no structured gap) must explain to be named.
     accel_settling_s : float
         Warm-up time constant of ``accel_bias_change`` [s] (run time from the run's epoch).
 
@@ -591,15 +630,29 @@ def diagnose(
                 _rms(tr["ho"]), tr["sig"]))
         good = [tr for tr in trials if tr["sig"] and tr["frac"] >= min_explained_fraction]
         if not good:
+            good = _pair_explaining(prob, terms, fit0, trials, lof, lof_excess, s2_lof, alpha,
+                                    min_explained_fraction)
+        if not good:
             break
         best = max(good, key=lambda tr: tr["f"])
         eff = best["eff"]
+        confounded = []
+        for tr in trials:
+            if tr is best or not tr["sig"]:
+                continue
+            both = prob.fit(terms + [tr["term"], best["term"]])
+            dof = n - both.rank
+            _, p_best = _f_test(tr["fit"].rss_w, both.rss_w, both.rank - tr["fit"].rank, dof)
+            _, p_other = _f_test(best["fit"].rss_w, both.rss_w, both.rank - best["fit"].rank, dof)
+            if p_best >= alpha and p_other >= alpha:
+                confounded.append(tr["eff"].effect_id)
         steps.append(DiagnosisStep(
             step=step, effect=eff.effect_id, parameters=eff.parameters, values=best["vals"],
             sigmas=best["sigs"], value=best["size"], sigma=best["size_sig"], unit=eff.unit,
             statistic=best["f"], p_value=best["p"], criterion=CRITERION, significant=True,
             delta_bic=float(best["dbic"]), explained_fraction=best["frac"],
-            gap_before_mps=gap0, gap_after_mps=_rms(best["fit"].res_raw),
+            confounded_with=tuple(confounded), gap_before_mps=gap0,
+            gap_after_mps=_rms(best["fit"].res_raw),
             heldout_gap_before_mps=hgap0, heldout_gap_after_mps=_rms(best["ho"]),
         ))
         terms = terms + [best["term"]]
@@ -612,7 +665,8 @@ def diagnose(
         step=len(steps) + 1, effect="unexplained" if p < alpha else "none", parameters=(),
         values=np.zeros(0), sigmas=np.zeros(0), value=float("nan"), sigma=float("nan"), unit="",
         statistic=f, p_value=p, criterion=LOF_CRITERION, significant=bool(p < alpha),
-        delta_bic=float("nan"), explained_fraction=float("nan"), gap_before_mps=gap,
+        delta_bic=float("nan"), explained_fraction=float("nan"), confounded_with=(),
+        gap_before_mps=gap,
         gap_after_mps=gap, heldout_gap_before_mps=hgap, heldout_gap_after_mps=hgap,
     ))
     legs = tuple(
@@ -644,8 +698,8 @@ def diagnose(
 DIAGNOSIS_COLUMNS = (
     "step", "effect", "value", "sigma", "unit", "statistic", "p_value", "criterion",
     "significant", "delta_bic", "explained_fraction", "gap_before_mps", "gap_after_mps",
-    "heldout_gap_before_mps", "heldout_gap_after_mps", "parameters", "parameter_values",
-    "parameter_sigmas",
+    "heldout_gap_before_mps", "heldout_gap_after_mps", "confounded_with", "parameters",
+    "parameter_values", "parameter_sigmas",
 )
 """Columns of diagnosis.parquet, in order."""
 
@@ -653,8 +707,8 @@ DIAGNOSIS_COLUMNS = (
 def diagnosis_columns(diagnosis: Diagnosis) -> dict[str, NDArray]:
     """diagnosis.parquet as a dict of arrays, one row per step (:data:`DIAGNOSIS_COLUMNS`).
 
-    ``parameters``, ``parameter_values``, ``parameter_sigmas`` are ";"-joined strings (display
-    unit) so that the table stays flat.
+    ``confounded_with``, ``parameters``, ``parameter_values``, ``parameter_sigmas`` are
+    ";"-joined strings (values in the row's ``unit``) so that the table stays flat.
     """
     s = diagnosis.steps
 
@@ -677,6 +731,7 @@ def diagnosis_columns(diagnosis: Diagnosis) -> dict[str, NDArray]:
         "gap_after_mps": np.array([x.gap_after_mps for x in s], dtype=float),
         "heldout_gap_before_mps": np.array([x.heldout_gap_before_mps for x in s], dtype=float),
         "heldout_gap_after_mps": np.array([x.heldout_gap_after_mps for x in s], dtype=float),
+        "confounded_with": np.array([";".join(x.confounded_with) for x in s], dtype=object),
         "parameters": np.array([";".join(x.parameters) for x in s], dtype=object),
         "parameter_values": np.array([join(x.values) for x in s], dtype=object),
         "parameter_sigmas": np.array([join(x.sigmas) for x in s], dtype=object),
