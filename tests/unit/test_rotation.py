@@ -66,3 +66,23 @@ def test_kernel_quaternion_helpers_match_scipy_path(rv, rpy):
     c = np.empty((3, 3))
     _kernels.dcm_from_quat_into(p, c)
     np.testing.assert_allclose(c, rotation.dcm_from_quat(p), atol=1e-12)
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.floats(-12.0, -3.0), st.tuples(*[st.floats(-1.0, 1.0)] * 3))
+def test_kernel_quaternion_series_branch_is_exact(log10_angle, axis):
+    # below 1e-6 rad^2 the kernel uses the 4th-order series of cos(a/2), sin(a/2)/a
+    axis = np.array(axis)
+    if np.linalg.norm(axis) < 1e-3:
+        axis = np.array([0.3, -0.5, 0.8])
+    rv = axis / np.linalg.norm(axis) * 10.0**log10_angle * 0.999
+    q = np.array(_kernels.quat_from_rotvec(*rv))
+    np.testing.assert_allclose(q, rotation.quat_from_rotvec(rv), rtol=0, atol=2e-16)
+
+
+def test_roll_error_sign():
+    # level, heading north: a computed roll too small by a is phi_N = +a (docs/method.md)
+    c_true = rotation.dcm_from_euler([0.0, 0.0, 0.0])
+    c_hat = rotation.dcm_from_euler([-1e-4, 0.0, 0.0])
+    phi = rotation.attitude_error_n_rad(c_hat, c_true)
+    np.testing.assert_allclose(phi, [1e-4, 0.0, 0.0], atol=1e-12)
