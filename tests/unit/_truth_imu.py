@@ -110,3 +110,61 @@ def rhumb_line(
     dvel = dv_n @ c_bn.T
     y = sol.sol(t)
     return TruthImu(t, dth, dvel, y[0], y[1], height_m, v_n, c_bn.T, rpy)
+
+
+def oscillating_attitude(
+    lat_rad: float,
+    height_m: float,
+    amp_rad: float,
+    freq_hz: float,
+    yaw0_rad: float,
+    rate_hz: float,
+    duration_s: float,
+    n_sub: int = 4,
+) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """Stationary IMU whose attitude cones: roll = A sin(w t), pitch = A cos(w t), yaw fixed.
+
+    With Euler rates (phi', theta', psi') the body rate relative to NED is (z-y-x Euler)
+    w_nb_b = [phi' - psi' sin(theta), theta' cos(phi) + psi' sin(phi) cos(theta),
+              -theta' sin(phi) + psi' cos(phi) cos(theta)],
+    w_ib_b = w_nb_b + C_bn w_ie_n and f_b = -C_bn g_n (the IMU does not move). Increments by
+    composite 3-node Gauss-Legendre, ``n_sub`` sub-intervals per IMU interval. The 90 deg phase
+    between roll and pitch is classic coning, and the rotating specific force is sculling.
+
+    Returns t_s (N+1,), dtheta_b (N, 3), dv_b (N, 3), C_nb at the epochs (N+1, 3, 3).
+    """
+    n = int(round(duration_s * rate_hz))
+    dt = 1.0 / rate_hz
+    t = np.arange(n + 1) * dt
+    om = 2.0 * np.pi * freq_hz
+    w_ie = earth.earth_rate_n_radps(lat_rad)
+    g_n = earth.gravity_n_mps2(lat_rad, height_m)
+
+    def euler(tt):
+        rpy = np.stack([amp_rad * np.sin(om * tt), amp_rad * np.cos(om * tt),
+                        np.full_like(tt, yaw0_rad)], axis=-1)
+        rates = np.stack([amp_rad * om * np.cos(om * tt), -amp_rad * om * np.sin(om * tt),
+                          np.zeros_like(tt)], axis=-1)
+        return rpy, rates
+
+    def body(tt):
+        rpy, d = euler(tt)
+        ph, th = rpy[:, 0], rpy[:, 1]
+        w_nb = np.stack([
+            d[:, 0] - d[:, 2] * np.sin(th),
+            d[:, 1] * np.cos(ph) + d[:, 2] * np.sin(ph) * np.cos(th),
+            -d[:, 1] * np.sin(ph) + d[:, 2] * np.cos(ph) * np.cos(th),
+        ], axis=-1)
+        c_bn = np.swapaxes(rotation.dcm_from_euler(rpy), -1, -2)
+        return w_nb + c_bn @ w_ie, -(c_bn @ g_n)
+
+    dth = np.zeros((n, 3))
+    dv = np.zeros((n, 3))
+    h = dt / n_sub
+    for j in range(n_sub):
+        mid = t[:-1] + (j + 0.5) * h
+        for x, w in zip(_GL_X, _GL_W, strict=True):
+            w_b, f_b = body(mid + 0.5 * h * x)
+            dth += (0.5 * h * w) * w_b
+            dv += (0.5 * h * w) * f_b
+    return t, dth, dv, rotation.dcm_from_euler(euler(t)[0])
