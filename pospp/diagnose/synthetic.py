@@ -19,13 +19,20 @@ B's error.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
 from pospp import earth, rotation
-from pospp.calib.replay import ImuIncrements, ReferenceSolution, reference_from_trajectory
+from pospp.calib.replay import (
+    ImuIncrements,
+    LegReplay,
+    ReferenceSolution,
+    reference_from_trajectory,
+    replay_leg,
+)
 from pospp.calib.segment import Leg
 from pospp.nav import strapdown
 
@@ -170,3 +177,26 @@ def survey_flight(
         for i in range(n_legs)
     )
     return SyntheticFlight(ImuIncrements(t, dth, dv), truth, legs)
+
+
+def noisy_replays(
+    flight: SyntheticFlight,
+    imu: ImuIncrements,
+    *,
+    sigma_mps: float,
+    rng: np.random.Generator,
+    reference: ReferenceSolution | None = None,
+) -> list[LegReplay]:
+    """Replay B on (possibly perturbed) increments over every leg, with white noise on B - A.
+
+    The noise stands for A's velocity error (standard deviation ``sigma_mps`` per axis, also
+    the replays' ``sigma_v_n_mps``); the first sample stays zero (B starts on A).
+    """
+    ref = flight.reference(sigma_mps) if reference is None else reference
+    out = []
+    for leg in flight.legs:
+        r = replay_leg(imu, ref, leg, sigma_floor_mps=min(0.005, sigma_mps))
+        dv = r.dv_n_mps + rng.normal(0.0, sigma_mps, r.dv_n_mps.shape)
+        dv[0] = 0.0
+        out.append(dataclasses.replace(r, dv_n_mps=dv))
+    return out
