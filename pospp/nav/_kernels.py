@@ -17,7 +17,8 @@ Mechanization (Savage 1998, Shin 2001, two-sample "one plus previous" correction
 interval k-1 -> k with increments dtheta_k, dv_k (body, rad and m/s) and length dt:
 
 - coning:      phi_k  = dtheta_k + (dtheta_{k-1} x dtheta_k) / 12
-- sculling:    dv_b   = dv_k + (dtheta_k x dv_k) / 2
+- velocity rotation and sculling (second-order rotation term included):
+               dv_b   = dv_k + (dtheta_k x dv_k) / 2 + dtheta_k x (dtheta_k x dv_k) / 6
                         + (dtheta_{k-1} x dv_k + dv_{k-1} x dtheta_k) / 12
 - velocity:    v_k = v_{k-1} + (I - [zeta x] / 2) C_nb,{k-1} dv_b
                      + (g_n - (2 w_ie + w_en) x v) dt,        zeta = (w_ie + w_en) dt
@@ -150,9 +151,16 @@ def strapdown_step(x, x_prev, dth, dvel, dth_prev, dv_prev, dt, extrap, x_out):
     ax, ay, az = dvel[0], dvel[1], dvel[2]
     px, py, pz = dth_prev[0], dth_prev[1], dth_prev[2]
     bx, by, bz = dv_prev[0], dv_prev[1], dv_prev[2]
-    sx = ax + 0.5 * (ty * az - tz * ay) + ((py * az - pz * ay) + (by * tz - bz * ty)) / 12.0
-    sy = ay + 0.5 * (tz * ax - tx * az) + ((pz * ax - px * az) + (bz * tx - bx * tz)) / 12.0
-    sz = az + 0.5 * (tx * ay - ty * ax) + ((px * ay - py * ax) + (bx * ty - by * tx)) / 12.0
+    # dtheta x dv and dtheta x (dtheta x dv) (second-order rotation term, Savage 1998)
+    cx1 = ty * az - tz * ay
+    cy1 = tz * ax - tx * az
+    cz1 = tx * ay - ty * ax
+    sx = ax + 0.5 * cx1 + (ty * cz1 - tz * cy1) / 6.0
+    sy = ay + 0.5 * cy1 + (tz * cx1 - tx * cz1) / 6.0
+    sz = az + 0.5 * cz1 + (tx * cy1 - ty * cx1) / 6.0
+    sx += ((py * az - pz * ay) + (by * tz - bz * ty)) / 12.0
+    sy += ((pz * ax - px * az) + (bz * tx - bx * tz)) / 12.0
+    sz += ((px * ay - py * ax) + (bx * ty - by * tx)) / 12.0
     # --- rotate to n with C_nb(k-1), then (I - [zeta x]/2) ----------------------------------
     w, qx, qy, qz = x[6], x[7], x[8], x[9]
     c00 = w * w + qx * qx - qy * qy - qz * qz

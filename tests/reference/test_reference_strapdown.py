@@ -62,11 +62,13 @@ def test_vehicle_errorfree_closes_from_the_truths_first_state(reference_cases):
         np.radians(truth[["roll_deg", "pitch_deg", "yaw_deg"]].to_numpy())
     )
     att = rotation.angle_between_rad(nav.c_nb[k], c_true)
-    # reached (2026-11, pospp 0.1.0): 0.93 mm, 3.3e-6 m/s, 4.9e-5 arcsec over the 20 min,
-    # all of it after the first 180 deg turn (coning/sculling residue). Asserted with margin:
-    assert np.linalg.norm(dr, axis=1).max() < 0.01  # m
-    assert np.linalg.norm(dv, axis=1).max() < 5e-5  # m/s
-    assert att.max() < 1e-3 * ARCSEC
+    # reached (2026-11, pospp 0.1.0): 3e-6 m horizontal and 2.5e-5 m vertical, 5.6e-8 m/s,
+    # 1.6e-6 arcsec over the 20 min (before the second-order rotation term of the velocity
+    # update: 0.93 mm, 3.3e-6 m/s, 4.9e-5 arcsec, grown in the 20 deg/s turns).
+    # Asserted with margin:
+    assert np.linalg.norm(dr, axis=1).max() < 2e-4  # m
+    assert np.linalg.norm(dv, axis=1).max() < 1e-6  # m/s
+    assert att.max() < 3e-5 * ARCSEC
     # the static first 5 min close far tighter (no rotation but the Earth's)
     static = truth.time_ns.to_numpy() - epoch_ns <= 300 * 10**9
     assert np.linalg.norm(dr[static], axis=1).max() < 1e-5
