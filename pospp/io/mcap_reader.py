@@ -61,7 +61,10 @@ __all__ = [
     "GnssVelocities",
     "ImuSamples",
     "apply_rotation",
+    "check_dcm",
+    "empty_velocities",
     "read_flight_log",
+    "rotate_covariance",
 ]
 
 FLU_TO_FRD = np.diag([1.0, -1.0, -1.0])
@@ -194,8 +197,12 @@ def apply_rotation(c_ab: np.ndarray, v_b: np.ndarray) -> np.ndarray:
     return v @ c.T
 
 
-def _rotate_cov(c_ab: np.ndarray, p_b: np.ndarray) -> np.ndarray:
-    """``P_a = C_ab P_b C_ab^T`` for (N, 3, 3) stacks (exact for signed permutations)."""
+def rotate_covariance(c_ab: np.ndarray, p_b: np.ndarray) -> np.ndarray:
+    """``P_a = C_ab P_b C_ab^T`` for (N, 3, 3) stacks.
+
+    Exact for signed permutations (ENU/NED, FLU/FRD), signed zeros included, so that writing
+    and reading a covariance round-trips bit for bit.
+    """
     p_c = apply_rotation(c_ab, p_b)  # rows of P rotated: P C^T
     return np.swapaxes(apply_rotation(c_ab, np.swapaxes(p_c, -1, -2)), -1, -2)  # C (P C^T)
 
@@ -452,7 +459,7 @@ def _assemble_fix(a: dict, col: Collector, issues: list[IngestIssue]) -> GnssFix
         lat_rad=np.deg2rad(a["latitude"]),
         lon_rad=np.deg2rad(a["longitude"]),
         height_m=a["altitude"],
-        pos_cov_ned_m2=_rotate_cov(ENU_TO_NED, cov_enu),
+        pos_cov_ned_m2=rotate_covariance(ENU_TO_NED, cov_enu),
         status=a["status"].astype(np.int8),
     )
 
@@ -467,7 +474,7 @@ def _assemble_vel(a: dict, col: Collector, issues: list[IngestIssue]) -> GnssVel
     return GnssVelocities(
         time_ns=a["time_ns"],
         v_n_mps=apply_rotation(ENU_TO_NED, a["linear"]),
-        vel_cov_ned_m2ps2=_rotate_cov(ENU_TO_NED, np.ascontiguousarray(cov_enu)),
+        vel_cov_ned_m2ps2=rotate_covariance(ENU_TO_NED, np.ascontiguousarray(cov_enu)),
     )
 
 

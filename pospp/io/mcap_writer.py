@@ -35,6 +35,7 @@ from pospp.io.mcap_reader import (
     ImuSamples,
     apply_rotation,
     check_dcm,
+    rotate_covariance,
 )
 from pospp.io.parquet_tables import atomic_path
 
@@ -45,9 +46,8 @@ _UNKNOWN_VARIANCE = 1.0e6
 
 
 def _cov_ned_to_enu(p_ned: np.ndarray) -> np.ndarray:
-    """(N, 3, 3) NED covariance -> ENU, flattened row-major (N, 9)."""
-    t = ENU_TO_NED.T  # ENU_TO_NED is its own inverse, but say what we mean
-    return np.einsum("ij,njk,lk->nil", t, p_ned, t).reshape(-1, 9)
+    """(N, 3, 3) NED covariance -> ENU, flattened row-major (N, 9); exact (a permutation)."""
+    return rotate_covariance(ENU_TO_NED.T, np.asarray(p_ned, dtype=float)).reshape(-1, 9)
 
 
 class _Topic:
