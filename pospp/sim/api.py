@@ -28,7 +28,7 @@ from pospp.io.mcap_reader import GnssFixes, GnssVelocities, ImuSamples
 from pospp.io.parquet_tables import ReferenceTrajectory
 from pospp.nav.strapdown import Trajectory
 from pospp.sim.gnss import GnssModel, simulate_gnss
-from pospp.sim.imu import Motion, exact_increments
+from pospp.sim.imu import Motion, exact_increments, quat_nb_from_euler
 from pospp.sim.profile import MissionProfile, load_profile, plan_mission
 from pospp.sim.sensors import ImuErrorModel, RealisedImuErrors, apply_imu_errors, imu_grade
 from pospp.sim.trajectory import ProfileMotion, SplineMotion
@@ -222,7 +222,7 @@ def _generate(
     for a in range(0, n + 1, 200_000):
         m = motion.evaluate(t_s[a : a + 200_000])
         chunks.append((m.lat_rad, m.lon_rad, m.height_m, m.v_n_mps,
-                       rotation.quat_from_euler(m.rpy_rad)))
+                       quat_nb_from_euler(m.rpy_rad)))
         if progress is not None:
             progress("truth", min(1.0, (a + 200_000) / (n + 1)))
     truth = Trajectory(t_s, *(np.concatenate(c) for c in zip(*chunks, strict=True)))

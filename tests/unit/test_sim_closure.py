@@ -104,3 +104,13 @@ def test_static_imu_matches_the_independent_simulator(reference_cases):
     f = sim.imu.f_ib_b_mps2.mean(axis=0)
     np.testing.assert_allclose(w, w_ref, atol=1e-12)  # rad/s (Earth rate 7.3e-5)
     np.testing.assert_allclose(f, f_ref, atol=1e-9)  # m/s^2
+
+
+def test_fast_attitude_helpers_match_pospp_rotation():
+    from pospp.sim.imu import dcm_nb_from_euler, quat_nb_from_euler
+
+    rng = np.random.default_rng(0)
+    rpy = rng.uniform(-np.pi, np.pi, (500, 3)) * [1.0, 0.49, 1.0]
+    ref = rotation.dcm_from_euler(rpy)
+    assert np.abs(dcm_nb_from_euler(rpy) - ref).max() < 1e-14
+    assert np.abs(rotation.dcm_from_quat(quat_nb_from_euler(rpy)) - ref).max() < 1e-14
