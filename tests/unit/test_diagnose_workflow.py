@@ -39,8 +39,8 @@ def reversal():
 @pytest.fixture(scope="module")
 def crossing():
     """Legs on two perpendicular lines at two speeds (breaks the equal-speed confounds)."""
-    return survey_flight(headings_deg=(0.0, 180.0, 90.0, 270.0), speeds_mps=(40.0, 80.0, 80.0, 40.0),
-                         rate_hz=50.0)
+    return survey_flight(headings_deg=(0.0, 180.0, 90.0, 270.0),
+                         speeds_mps=(40.0, 80.0, 80.0, 40.0), rate_hz=50.0)
 
 
 @pytest.fixture(scope="module")
