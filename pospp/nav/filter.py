@@ -599,12 +599,13 @@ def run_integrated_navigation(
     rejections: list[GnssRejection] = []
     (fix_t_ns, fix_val, fix_cov), (vel_t_ns, vel_val, vel_cov) = filter_input.gnss_arrays(
         gnss_fixes, gnss_velocities, options.use_velocity)
+    t_lo, t_hi = t[0] - options.max_gnss_imu_offset_s, t[-1] + options.max_gnss_imu_offset_s
     keep_f = filter_input.screen_gnss(
         "position", fix_t_ns, fix_val, fix_cov, options.pos_sigma_floor_m,
-        options.max_pos_sigma_m, t[0], t[-1], epoch_ns, rejections)
+        options.max_pos_sigma_m, t_lo, t_hi, epoch_ns, rejections)
     keep_v = filter_input.screen_gnss(
         "velocity", vel_t_ns, vel_val, vel_cov, options.vel_sigma_floor_mps,
-        options.max_vel_sigma_mps, t[0], t[-1], epoch_ns, rejections)
+        options.max_vel_sigma_mps, t_lo, t_hi, epoch_ns, rejections)
     lever0 = np.zeros(3) if lever_arm_b_m is None else np.asarray(lever_arm_b_m, dtype=float)
     if lever0.shape != (3,) or not np.isfinite(lever0).all():
         raise ValueError(f"lever_arm_b_m: expected 3 finite numbers, got {lever_arm_b_m!r}")
