@@ -270,14 +270,24 @@ def _parse_chunk(body: bytes, truncated: bool) -> _RawChunk:
     return _RawChunk(start, end, usize, crc, comp, data, truncated or len(data) < dlen)
 
 
+_MAX_CHUNK_BYTES = 1 << 32  # the mcap library's own record size limit (4 GiB)
+
+
 def _decompress(chunk: _RawChunk) -> bytes:
     """Chunk records; for a truncated chunk, as many bytes as can be decompressed."""
+    if chunk.uncompressed_size > _MAX_CHUNK_BYTES:
+        raise ValueError(f"chunk claims {chunk.uncompressed_size} uncompressed bytes (corrupt "
+                         "header?)")
     if chunk.compression == "zstd":
         import zstandard
 
         if chunk.truncated:
             data = zstandard.ZstdDecompressor().decompressobj().decompress(chunk.data)
         else:
+            declared = zstandard.frame_content_size(chunk.data)  # -1: not in the frame header
+            if declared not in (-1, chunk.uncompressed_size):
+                raise ValueError(f"zstd frame declares {declared} bytes, chunk header "
+                                 f"{chunk.uncompressed_size}")
             data = zstandard.ZstdDecompressor().decompress(
                 chunk.data, max_output_size=chunk.uncompressed_size
             )
@@ -414,7 +424,8 @@ class Scan:
                         raise _Truncated("file ends without a Footer record")
                     op, ln = _REC(head, 0)
                     if op in (_OP_CHUNK, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE):
-                        body = f.read(ln)
+                        body = f.read(min(ln, size - f.tell()))  # a corrupt length
+                        # must not allocate more than the file holds
                         short = len(body) < ln
                         if op == _OP_CHUNK:
                             self._flush_loose()
@@ -444,7 +455,7 @@ class Scan:
                     good = f.tell()
             except IngestError:
                 raise
-            except (_Truncated, ValueError, struct.error, UnicodeDecodeError) as exc:
+            except (_Truncated, ValueError, struct.error, UnicodeDecodeError, IndexError) as exc:
                 try:
                     self._flush_loose()
                 except (ValueError, struct.error):
@@ -474,7 +485,7 @@ class Scan:
             self._records(data, partial=chunk.truncated)
         except IngestError:
             raise
-        except (ValueError, struct.error) as exc:
+        except (ValueError, struct.error, IndexError) as exc:
             if chunk.truncated:
                 raise _Truncated(f"chunk cut off and undecodable: {exc}") from exc
             self.damaged = True

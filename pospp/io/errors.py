@@ -55,6 +55,9 @@ class IngestError(ValueError):
         Header stamp and MCAP log time of that message [ns].
     byte_offset : int or None
         Where in the file reading broke, for corrupt files.
+    issues : tuple of IngestIssue
+        Findings recorded before ingestion stopped (e.g. where a corrupt file broke), so that
+        the caller can still write them to ``messages.parquet``.
     """
 
     def __init__(
@@ -67,8 +70,10 @@ class IngestError(ValueError):
         time_ns: int | None = None,
         log_time_ns: int | None = None,
         byte_offset: int | None = None,
+        issues: tuple[IngestIssue, ...] = (),
     ) -> None:
         self.reason = reason
+        self.issues = tuple(issues)
         self.file = file
         self.topic = topic
         self.index = index

@@ -534,12 +534,14 @@ def read_flight_log(
     scan.run()
     issues = list(scan.issues)
     available = ", ".join(f"{t} ({s})" for t, s in sorted(scan.topics.items())) or "none"
-    note = "" if scan.complete else " (the file is truncated or corrupt: see the issues)"
+    broken = [i for i in issues if i.severity == "error"]
+    note = f" (the file is truncated or corrupt: {broken[0]})" if broken else ""
     for topic in (imu_topic, fix_topic):
         if topic not in scan.topics:
             raise IngestError(
                 f"required topic {topic!r} ({cols[topic].spec.type_name}) not found; "
                 f"available topics: {available}{note}", file=path, topic=topic,
+                byte_offset=broken[0].byte_offset if broken else None, issues=tuple(issues),
             )
     if vel_topic not in scan.topics:
         issues.append(IngestIssue(
@@ -553,14 +555,23 @@ def read_flight_log(
                 f"{col.slow_messages} message(s) decoded by the generic decoder (not "
                 "little-endian plain CDR, or an unexpected layout)",
             ))
-    imu = _assemble_imu(_window(cols[imu_topic].arrays(), start_ns, end_ns), cols[imu_topic],
-                        c, check_units, issues)
-    fix = _assemble_fix(_window(cols[fix_topic].arrays(), start_ns, end_ns), cols[fix_topic],
-                        issues)
-    vel = _assemble_vel(_window(cols[vel_topic].arrays(), start_ns, end_ns), cols[vel_topic],
-                        issues)
-    if check_units and len(vel):
-        _check_rate_units_against_gnss(imu, vel, imu_topic, path)
+    try:
+        imu = _assemble_imu(_window(cols[imu_topic].arrays(), start_ns, end_ns),
+                            cols[imu_topic], c, check_units, issues)
+        fix = _assemble_fix(_window(cols[fix_topic].arrays(), start_ns, end_ns),
+                            cols[fix_topic], issues)
+        vel = _assemble_vel(_window(cols[vel_topic].arrays(), start_ns, end_ns),
+                            cols[vel_topic], issues)
+        if check_units and len(vel):
+            _check_rate_units_against_gnss(imu, vel, imu_topic, path)
+    except IngestError as exc:
+        raise IngestError(
+            exc.reason + note, file=exc.file, topic=exc.topic, index=exc.index,
+            time_ns=exc.time_ns, log_time_ns=exc.log_time_ns,
+            byte_offset=exc.byte_offset if exc.byte_offset is not None else (
+                broken[0].byte_offset if broken else None),
+            issues=tuple(issues),
+        ) from exc
     if fix.time_ns[-1] < imu.time_ns[0] or fix.time_ns[0] > imu.time_ns[-1]:
         issues.append(IngestIssue(
             "warning", path, fix_topic, None, int(fix.time_ns[0]),

@@ -447,3 +447,51 @@ def test_other_chunk_compressions_and_unchunked(tmp_path: Path, log_parts, compr
     np.testing.assert_array_equal(log.imu.f_ib_b_mps2, imu.f_ib_b_mps2)
     np.testing.assert_array_equal(log.fix.height_m, fix.height_m)
     assert log.imu.frame_id == "sensor"
+
+
+def test_error_on_a_broken_file_says_where_it_broke(tmp_path: Path, good_file: Path) -> None:
+    """Cut inside the first chunk before any GNSS message: the missing-topic error carries the
+    break (offset, and the issues so far for messages.parquet)."""
+    data = good_file.read_bytes()
+    first = _chunk_offsets(good_file)[0]
+    p = tmp_path / "cut.mcap"
+    p.write_bytes(data[: first[0] + 200])
+    with pytest.raises(IngestError, match="truncated or corrupt") as ei:
+        read_flight_log(p)
+    err = ei.value
+    assert err.byte_offset == first[0]
+    assert [i.severity for i in err.issues] == ["error"]
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_random_damage_never_escapes_as_another_exception(tmp_path: Path, log_parts,
+                                                         seed: int) -> None:
+    """Byte flips, random 16-byte patches and cuts anywhere: the reader returns what it can
+    (``complete`` telling whether it is all) or raises IngestError, nothing else."""
+    imu, fix, vel = make_log(duration_s=20.0, seed=seed)
+    data = write_flight_log(tmp_path / "src.mcap", imu, fix, vel).read_bytes()
+    rng = np.random.default_rng(seed)
+    p = tmp_path / "damaged.mcap"
+    outcomes = set()
+    for _ in range(40):
+        d = bytearray(data)
+        mode = int(rng.integers(3))
+        if mode == 0:
+            d[int(rng.integers(8, len(d)))] ^= int(rng.integers(1, 256))
+        elif mode == 1:
+            i = int(rng.integers(8, len(d) - 16))
+            d[i : i + 16] = rng.bytes(16)
+        else:
+            d = d[: int(rng.integers(8, len(d)))]
+        p.write_bytes(bytes(d))
+        try:
+            log = read_flight_log(p, check_units=False)
+        except IngestError as exc:
+            outcomes.add("error")
+            assert exc.file == str(p)
+            continue
+        outcomes.add("complete" if log.complete else "partial")
+        if not log.complete:
+            assert any(i.severity == "error" and i.byte_offset is not None for i in log.issues)
+        assert np.all(np.isin(log.imu.time_ns, imu.time_ns))
+    assert {"error", "partial"} <= outcomes
