@@ -334,7 +334,8 @@ def simulate(
             out.append(TrueLeg(
                 lg.leg_id, lg.kind, lg.label, start_time_ns + round(lg.start_s * 1e9),
                 start_time_ns + round(lg.end_s * 1e9), lg.duration_s,
-                math.degrees(lg.heading_rad) % 360.0, lg.speed_mps, lg.height_m,
+                round(math.degrees(lg.heading_rad) % 360.0, 9) % 360.0, lg.speed_mps,
+                lg.height_m,
                 lg.speed_mps * lg.duration_s, start_lat_deg=float(lat[0]),
                 start_lon_deg=float(lon[0]), end_lat_deg=float(lat[1]),
                 end_lon_deg=float(lon[1]),

@@ -219,8 +219,8 @@ class PlannedSegment:
         d = {
             "type": self.type, "label": self.label, "start_s": self.start_s,
             "end_s": self.end_s, "duration_s": self.end_s - self.start_s,
-            "heading_start_deg": math.degrees(self.heading_start_rad) % 360.0,
-            "heading_end_deg": math.degrees(self.heading_end_rad) % 360.0,
+            "heading_start_deg": round(math.degrees(self.heading_start_rad) % 360.0, 9) % 360.0,
+            "heading_end_deg": round(math.degrees(self.heading_end_rad) % 360.0, 9) % 360.0,
             "speed_start_mps": self.speed_start_mps, "speed_end_mps": self.speed_end_mps,
             "height_start_m": self.height_start_m, "height_end_m": self.height_end_m,
         }

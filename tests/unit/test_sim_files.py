@@ -109,3 +109,24 @@ def test_truth_and_params_files(sim, tmp_path):
     np.testing.assert_allclose(np.degrees(np.arctan2(v[:, 1], v[:, 0])) % 360,
                                leg.heading_deg, atol=1e-9)
     np.testing.assert_allclose(sim.truth.height_m[k], leg.height_m, atol=1e-6)
+
+
+@pytest.mark.slow
+def test_committed_sample_data_regenerates_bit_for_bit(tmp_path):
+    """sample_data/README.md's recipe reproduces the committed files exactly."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2] / "sample_data"
+    sim = simulate(
+        "sample", imu_grade="paper_flight",
+        gnss=GnssModel(rate_hz=1.0, pos_noise_m=(0.05, 0.1), vel_noise_mps=(0.02, 0.03),
+                       lever_arm_b_m=(0.3, 0.1, -1.5)),
+        seed=2012, imu_rate_hz=100.0,
+    )
+    paths = write_simulation(sim, tmp_path, "sample_flight")
+    for key in ("mcap", "truth"):
+        assert paths[key].read_bytes() == (root / paths[key].name).read_bytes(), key
+    new, old = read_params(paths["params"]), read_params(root / "sample_flight.params.json")
+    for p in (new, old):
+        p["numerics"].pop("timings_s")
+    assert new == old
