@@ -218,6 +218,8 @@ TABLES: dict[str, list[Column]] = {
         _opt(Column("topic", _S, "", "input topic concerned")),
         _opt(Column("index", _I, "", "message index within the topic (0-based, file order)")),
         _opt(Column("byte_offset", _I, "bytes", "file offset, for corrupt files")),
+        _opt(Column("log_time_ns", _I, "ns", "MCAP log time of the message concerned (where "
+                    "it is in the file; time_ns is its header stamp)")),
     ],
     "manifest": [
         Column("file", _S, "", "input file"),
@@ -439,6 +441,7 @@ def issues_to_messages(issues: Any, *, stage: str = "ingest") -> dict[str, list]
         "topic": [i.topic for i in issues],
         "index": [i.index for i in issues],
         "byte_offset": [i.byte_offset for i in issues],
+        "log_time_ns": [i.log_time_ns for i in issues],
     }
 
 

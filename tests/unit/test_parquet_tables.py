@@ -187,6 +187,7 @@ def test_ingest_issues_become_messages(tmp_path: Path) -> None:
     assert df.severity.tolist() == ["warning", "error"]
     assert df["index"].iloc[0] == 1000 and pd.isna(df["index"].iloc[1])
     assert df.byte_offset.iloc[1] == 4096 and df.text.iloc[0] == "f.mcap: IMU gap"
+    assert df.log_time_ns.iloc[0] == 17
     assert pq.read_schema(p).field("index").type == pa.int64()
 
 
