@@ -161,9 +161,20 @@ class GnssVelocities:
 class FlightLog:
     """Everything read from one MCAP file.
 
-    ``complete`` is False when the file is truncated or corrupt; then ``issues`` holds an
-    ``IngestIssue`` of severity ``"error"`` saying where reading broke, and the arrays hold what
-    was read before the break.
+    Attributes
+    ----------
+    imu, fix, vel : ImuSamples, GnssFixes, GnssVelocities
+        Body FRD / NED, SI (``vel`` empty when the file has no velocity topic).
+    path : str
+        The file read.
+    issues : tuple of IngestIssue
+        Warnings and infos, and the errors that did not stop reading (docs/formats.md).
+    complete : bool
+        False when data are missing: the file is truncated or its record framing broke (the
+        arrays hold what was read before the break, the readable part of a cut-off chunk
+        included), or a corrupt chunk was skipped (reading went on after it). ``issues`` then
+        holds an ``IngestIssue`` of severity ``"error"`` with the byte offset. A damaged
+        summary section after the data (index only) leaves ``complete`` True, with a warning.
     """
 
     imu: ImuSamples
