@@ -9,6 +9,7 @@ the leg end if shorter) is compared before and after.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -36,12 +37,14 @@ def joint_calibration(
     formulation: str,
     *,
     transition: str = "numerical",
+    **calibrate_kwargs: Any,
 ) -> Calibration | None:
     """One fit over every leg that belongs to a used pair (None if no pair is used)."""
     ids = sorted({i for p in pairs if p.used for i in (p.leg_a, p.leg_b)})
     if len(ids) < 2:
         return None
-    return calibrate(tuple(replays[i] for i in ids), formulation, transition=transition)
+    return calibrate(tuple(replays[i] for i in ids), formulation, transition=transition,
+                     **calibrate_kwargs)
 
 
 def horizontal_error_at(rep: LegReplay, horizon_s: float) -> tuple[float, float, float]:
@@ -64,8 +67,15 @@ def compensate_legs(
     accel_compensation: str = "filter",
     horizon_s: float = 300.0,
     transition_step: int = 10,
+    sample_rate_hz: float = 1.0,
+    sigma_floor_mps: float = 0.005,
 ) -> tuple[dict[int, LegReplay], tuple[LegImprovement, ...]]:
-    """Re-run B on every leg with the calibration applied; report the improvement."""
+    """Re-run B on every leg with the calibration applied; report the improvement.
+
+    Every leg gets the calibrated gyro bias (``paper``: the nav-frame drift rotated into the
+    body by that leg's initial attitude); legs that took part in the fit also get their
+    calibrated initial misalignment. Held-out legs (``in_fit`` False) measure prediction.
+    """
     after: dict[int, LegReplay] = {}
     rows: list[LegImprovement] = []
     for leg_id, rep in before.items():
@@ -75,6 +85,7 @@ def compensate_legs(
         new = replay_leg(
             imu, reference, rep.leg, gyro_bias_b_radps=bg, attitude_correction_n_rad=phi,
             accel_compensation=accel_compensation, transition_step=transition_step,
+            sample_rate_hz=sample_rate_hz, sigma_floor_mps=sigma_floor_mps,
         )
         after[leg_id] = new
         h, v0, p0 = horizontal_error_at(rep, horizon_s)

@@ -67,7 +67,8 @@ def ideal_leg(
     return LegReplay(
         leg=leg, t0_s=0.0, t_s=t[idx], dv_n_mps=np.zeros((m, 3)), dr_n_m=np.zeros((m, 3)),
         sigma_v_n_mps=np.ones((m, 3)), phi=phi[idx],
-        c_nb0=c_bn.T, lat_rad=float(lat_rad), height_m=float(height_m), v_n0_mps=v_n,
+        c_nb0=c_bn.T, c_nb=np.tile(c_bn.T, (m, 1, 1)), lat_rad=float(lat_rad),
+        height_m=float(height_m), v_n0_mps=v_n,
     )
 
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from pospp import earth, rotation
 from pospp.calib.segment import Leg
@@ -76,6 +76,9 @@ class LegReplay:
         Transition matrices Phi(t0 + t_s, t0) of the 15-state error model along B.
     c_nb0 : ndarray, shape (3, 3)
         B's initial attitude.
+    c_nb : ndarray, shape (M, 3, 3)
+        B's attitude at the samples (the body-to-navigation projection of a body-fixed gyro
+        bias and of the gyro noise).
     lat_rad, height_m : float
         B's initial latitude and height.
     v_n0_mps : ndarray, shape (3,)
@@ -90,9 +93,43 @@ class LegReplay:
     sigma_v_n_mps: NDArray
     phi: NDArray
     c_nb0: NDArray
+    c_nb: NDArray
     lat_rad: float
     height_m: float
     v_n0_mps: NDArray
+
+
+def reference_from_trajectory(
+    trajectory: strapdown.Trajectory,
+    *,
+    v_sigma_n_mps: ArrayLike,
+    accel_bias_b_mps2: ArrayLike | None = None,
+) -> ReferenceSolution:
+    """Wrap any trajectory (a smoothed solution, a reference system, simulation truth) as A.
+
+    Parameters
+    ----------
+    trajectory : Trajectory
+        N epochs of position, velocity (NED) and attitude.
+    v_sigma_n_mps : array_like, shape (3,) or (N, 3)
+        Standard deviation of A's velocity, NED [m/s] (constant or per epoch).
+    accel_bias_b_mps2 : array_like, shape (3,) or (N, 3), optional
+        A's accelerometer-bias estimate, body FRD [m/s^2] (zeros when omitted).
+    """
+    n = len(trajectory)
+
+    def per_epoch(a: ArrayLike | None, name: str) -> NDArray:
+        arr = np.zeros(3) if a is None else np.asarray(a, dtype=float)
+        if arr.shape == (3,):
+            return np.tile(arr, (n, 1))
+        if arr.shape != (n, 3):
+            raise ValueError(f"{name}: expected shape (3,) or ({n}, 3), got {arr.shape}")
+        return arr.copy()
+
+    sig = per_epoch(v_sigma_n_mps, "v_sigma_n_mps")
+    if not np.all(sig > 0):
+        raise ValueError("v_sigma_n_mps: expected positive standard deviations")
+    return ReferenceSolution(trajectory, sig, per_epoch(accel_bias_b_mps2, "accel_bias_b_mps2"))
 
 
 def interpolate_trajectory(traj: strapdown.Trajectory, t_s: NDArray) -> strapdown.Trajectory:
@@ -218,6 +255,7 @@ def replay_leg(
         sigma_v_n_mps=sig,
         phi=phi_all[idx],
         c_nb0=c_nb0,
+        c_nb=rotation.dcm_from_quat(b_s.q_nb),
         lat_rad=float(x0.lat_rad),
         height_m=float(x0.height_m),
         v_n0_mps=x0.v_n_mps.copy(),

@@ -1,28 +1,46 @@
 """Least-squares calibration of misalignment and gyro drift from B-minus-A velocity errors.
 
-For each leg, B's horizontal velocity error obeys (linear error model, 15 states)
+Frames and units: NED navigation frame n, FRD body frame b, SI (rad, rad/s, m/s). Errors are
+computed minus true (B minus A); the misalignment phi satisfies C_nb_hat = (I - [phi x]) C_nb;
+the gyro reads true + bias.
 
-    dv_h(t) = Phi_v,phi(t, t0) phi0 + Phi_v,bg(t, t0) b_g (+ Phi_v,ba(t, t0) b_a)
+For each leg, B's horizontal velocity error obeys the linear error model (15 states,
+:mod:`pospp.nav.error_model`)::
 
-with Phi from F(t) along B's actual trajectory (``transition="numerical"``) or the paper's
-closed forms (``transition="closed_form"``, ideal legs; :mod:`pospp.nav.closed_form`).
-Stacking legs gives the paper's Eq. 17, ``Z = H X``, solved by weighted least squares.
+    dv_h(t) = Phi_v,phi(t, t0) phi0 + Phi_v,bg(t, t0) b_g        (+ A's error, + noise)
 
-Formulations (docs/method.md, "Formulations"):
+with Phi from F(t) along B's actual trajectory (``transition="numerical"``) or the closed forms
+of an ideal leg (``transition="closed_form"``: paper Eq. 10 and 13 with the signs of its own
+F, :mod:`pospp.nav.closed_form`). Stacking the samples of two legs gives the paper's Eq. 17,
+``Z = H X``, solved by (generalised) least squares.
 
+Formulations (docs/calibration.md, "Formulations")
+-------------------------------------------------
 ``paper``
-    X_p = [phi_N, phi_E, phi_D, eps_N, eps_E]: one misalignment and one *navigation-frame*
-    horizontal drift common to all legs, as Liu & Fang print it (with corrected signs).
-    Reported with the paper's symbols phi_x = phi_E, phi_y = phi_N, phi_z = -phi_D (ENU).
+    X = [phi_N, phi_E, phi_D, eps_N, eps_E]: one misalignment and one *navigation-frame*
+    horizontal drift common to both legs, as Liu & Fang print it (signs corrected). The
+    paper's X_p = [phi_x, phi_y, phi_z, eps_E, eps_N] (ENU) is
+    ``pospp.nav.closed_form.PAPER_FROM_NED @ X``.
 ``body``
-    Per-leg tilts [phi_N, phi_E] (B's initial tilt is A's error at that leg's start), one
-    heading error phi_D common to the legs (its effect on 5-minute velocity errors is
-    Omega cos(lat) phi_D, far below the drift's), and the gyro bias fixed in the body frame,
-    [b_x, b_y] (FRD), projected into each leg by that leg's attitude through Phi_v,bg.
+    Per-leg tilts [phi_N, phi_E] (B's initial tilt is A's error at that leg's start, and it
+    also absorbs the accelerometer bias, whose Schuler response is identical), one heading
+    error phi_D common to the legs, and the gyro bias fixed in the body frame [b_x, b_y]
+    (FRD, optionally b_z), projected into each leg by that leg's attitude through
+    Phi_v,bg(t) = int Phi_v,phi(t, tau) (-C_nb(tau)) dtau.
 
-Sigmas are the weighted-LS covariance scaled by the a-posteriori variance factor and by the
-residuals' lag-one autocorrelation (effective sample size), so they stay honest when the
-1 Hz samples are correlated.
+Noise (``noise=``)
+------------------
+``"gyro_rw"`` (default)
+    Generalised least squares with, per leg, Cov(dv) = a diag(sigma_A^2) + q K, where K is
+    the covariance of B's velocity error driven by unit white gyro noise (angle random walk,
+    isotropic in the body frame), K = int Phi_v,phi(t_i, tau) C_nb C_nb^T Phi_v,phi(t_j, tau)^T
+    dtau, computed from the same transition matrices. The random walk makes the residuals
+    strongly correlated in time; ignoring it gives sigmas ten times too small. a and q are
+    estimated by restricted maximum likelihood (REML) unless q is given from the IMU
+    specification (``gyro_arw_radpsqrts``).
+``"white"``
+    Weighted least squares with A's sigmas, the covariance scaled by the a-posteriori variance
+    factor and by (1 + rho) / (1 - rho) from the residuals' lag-one autocorrelation rho.
 """
 
 from __future__ import annotations
@@ -31,12 +49,14 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import optimize
 
 from pospp.calib.replay import LegReplay
 from pospp.nav.error_model import BG, PHI
 
 FORMULATIONS = ("paper", "body")
 TRANSITIONS = ("numerical", "closed_form")
+NOISE_MODELS = ("gyro_rw", "white")
 
 
 @dataclass(frozen=True)
@@ -45,50 +65,73 @@ class Calibration:
 
     Attributes
     ----------
-    formulation, transition : str
+    formulation, transition, noise : str
     leg_ids : tuple of int
     names : tuple of str
         Parameter names (SI: rad, rad/s), see :func:`parameter_names`.
     x : ndarray, shape (P,)
         Estimates.
     cov : ndarray, shape (P, P)
-        Covariance (scaled, see module docstring).
+        Covariance of the estimates.
     cond_raw, cond_scaled : float
-        Condition number of the weighted stacked matrix in SI units, and after scaling every
-        column to unit norm (unit-independent).
+        Condition number of the stacked weighted matrix in SI units (as the paper), and after
+        scaling every column to unit norm (unit-independent).
+    residuals_n_mps : tuple of ndarray, shape (M_i - 1, 2)
+        Per leg, measured minus modelled [dv_N, dv_E] at the samples t > 0.
     residual_rms_mps : float
-        RMS of the velocity residuals.
+        RMS of all residuals.
     n_samples : int
         Number of scalar velocity samples.
     variance_factor : float
-        A-posteriori variance factor times the autocorrelation inflation.
+        ``"white"``: a-posteriori factor times the autocorrelation inflation; ``"gyro_rw"``: a,
+        the estimated scale of A's velocity variances.
+    gyro_arw_radpsqrts : float
+        Angle random walk of the noise model [rad/s^0.5] (0 for ``"white"``).
+    whitened_rms, whitened_lag1 : float
+        RMS and lag-one autocorrelation of the whitened residuals (about 1 and 0 when the
+        noise model fits).
+    rank_deficient : bool
+        True when directions of X were unobservable and left at zero (pseudo-inverse).
     """
 
     formulation: str
     transition: str
+    noise: str
     leg_ids: tuple[int, ...]
     names: tuple[str, ...]
     x: NDArray
     cov: NDArray
     cond_raw: float
     cond_scaled: float
+    residuals_n_mps: tuple[NDArray, ...]
     residual_rms_mps: float
     n_samples: int
     variance_factor: float
+    gyro_arw_radpsqrts: float
+    whitened_rms: float
+    whitened_lag1: float
+    rank_deficient: bool
 
     @property
     def sigma(self) -> NDArray:
+        """1-sigma of each estimate (SI)."""
         return np.sqrt(np.diag(self.cov))
 
     def value(self, name: str) -> float:
+        """Estimate of one parameter (SI)."""
         return float(self.x[self.names.index(name)])
+
+    def sigma_of(self, name: str) -> float:
+        """1-sigma of one parameter (SI)."""
+        i = self.names.index(name)
+        return float(np.sqrt(self.cov[i, i]))
 
     def gyro_bias_b_radps(self, c_nb: NDArray | None = None) -> NDArray:
         """Body-frame gyro bias implied by the calibration [rad/s], shape (3,).
 
         For ``body`` it is the estimate (z = 0 unless estimated); for ``paper`` the
-        navigation-frame drift [eps_N, eps_E, 0] is rotated into the body by ``c_nb``
-        (the attitude of the leg it is applied to), as the paper's model implies.
+        navigation-frame drift [eps_N, eps_E, 0] is rotated into the body by ``c_nb`` (the
+        attitude of the leg it is applied to), as the paper's model implies.
         """
         if self.formulation == "body":
             b = np.zeros(3)
@@ -96,9 +139,9 @@ class Calibration:
                 if f"gyro_bias_{ax}" in self.names:
                     b[i] = self.value(f"gyro_bias_{ax}")
             return b
-        eps_n = np.array([self.value("eps_n"), self.value("eps_e"), 0.0])
         if c_nb is None:
-            raise ValueError("paper formulation: c_nb of the target leg is needed")
+            raise ValueError("paper formulation: the attitude c_nb of the target leg is needed")
+        eps_n = np.array([self.value("eps_n"), self.value("eps_e"), 0.0])
         return np.asarray(c_nb).T @ eps_n
 
     def misalignment_n_rad(self, leg_id: int) -> NDArray:
@@ -113,7 +156,7 @@ class Calibration:
 
 def parameter_names(formulation: str, leg_ids: tuple[int, ...], *, estimate_gyro_z: bool = False
                     ) -> tuple[str, ...]:
-    """Parameter names of a formulation, in the order of X."""
+    """Parameter names of a formulation, in the order of X (NED / FRD, SI)."""
     if formulation == "paper":
         return ("phi_n", "phi_e", "phi_d", "eps_n", "eps_e")
     if formulation == "body":
@@ -127,22 +170,47 @@ def parameter_names(formulation: str, leg_ids: tuple[int, ...], *, estimate_gyro
     raise ValueError(f"formulation: expected one of {FORMULATIONS}, got {formulation!r}")
 
 
-def _leg_sensitivity_numerical(rep: LegReplay) -> tuple[NDArray, NDArray]:
-    """(d dv_h / d phi0 (M,2,3), d dv_h / d b_g (M,2,3)) from the numerical Phi."""
-    return rep.phi[:, 3:5, PHI], rep.phi[:, 3:5, BG]
+def leg_sensitivities(rep: LegReplay, transition: str) -> tuple[NDArray, NDArray]:
+    """(d dv_h / d phi0, d dv_h / d b_g), each (M, 2, 3), at the leg's samples.
+
+    ``numerical``: blocks of the 15-state Phi along B's trajectory. ``closed_form``: paper
+    Eq. 10/13 (pospp signs) at B's initial latitude, height and velocity; the body bias enters
+    through the leg's initial attitude, eps_n = C_nb0 b_g (no vertical drift column).
+    """
+    if transition == "numerical":
+        return rep.phi[:, 3:5, PHI], rep.phi[:, 3:5, BG]
+    if transition == "closed_form":
+        from pospp.nav import closed_form
+
+        rows = closed_form.velocity_error_rows(
+            rep.t_s, lat_rad=rep.lat_rad, height_m=rep.height_m, v_n_mps=rep.v_n0_mps
+        )  # (M, 2, 5) over [phi_N, phi_E, phi_D, eps_N, eps_E]
+        return rows[:, :, 0:3], rows[:, :, 3:5] @ rep.c_nb0[0:2, :]
+    raise ValueError(f"transition: expected one of {TRANSITIONS}, got {transition!r}")
 
 
-def _leg_sensitivity_closed_form(rep: LegReplay) -> tuple[NDArray, NDArray]:
-    """Same from the paper's closed forms (ideal leg at B's initial velocity)."""
-    from pospp.nav import closed_form  # local: optional path
-
-    rows = closed_form.velocity_error_rows(
-        rep.t_s, lat_rad=rep.lat_rad, height_m=rep.height_m, v_n_mps=rep.v_n0_mps
-    )  # (M, 2, 5) over [phi_N, phi_E, phi_D, eps_N, eps_E]
-    d_phi = rows[:, :, 0:3]
-    # nav-frame drift eps_n = C_nb b_g; the closed forms have no vertical drift column
-    d_bg = rows[:, :, 3:5] @ rep.c_nb0[0:2, :]
-    return d_phi, d_bg
+def _leg_design(rep: LegReplay, formulation: str, names: tuple[str, ...], transition: str,
+                estimate_gyro_z: bool) -> NDArray:
+    """Rows (M - 1, 2, P) of one leg (the t = 0 rows are identically zero and dropped)."""
+    d_phi, d_bg = leg_sensitivities(rep, transition)
+    col = {n: i for i, n in enumerate(names)}
+    h = np.zeros((rep.t_s.size, 2, len(names)))
+    if formulation == "paper":
+        h[:, :, 0:3] = d_phi
+        # constant navigation-frame drift: b_g = C_bn0 eps_n on a straight leg
+        d_eps = d_bg @ rep.c_nb0.T
+        h[:, :, 3] = d_eps[:, :, 0]
+        h[:, :, 4] = d_eps[:, :, 1]
+    else:
+        i = rep.leg.leg_id
+        h[:, :, col[f"phi_n_leg{i}"]] = d_phi[:, :, 0]
+        h[:, :, col[f"phi_e_leg{i}"]] = d_phi[:, :, 1]
+        h[:, :, col["phi_d"]] = d_phi[:, :, 2]
+        h[:, :, col["gyro_bias_x"]] = d_bg[:, :, 0]
+        h[:, :, col["gyro_bias_y"]] = d_bg[:, :, 1]
+        if estimate_gyro_z:
+            h[:, :, col["gyro_bias_z"]] = d_bg[:, :, 2]
+    return h[1:]
 
 
 def design_matrix(
@@ -154,40 +222,19 @@ def design_matrix(
 ) -> tuple[NDArray, NDArray, NDArray, tuple[str, ...]]:
     """Stacked system of Eq. 17: (H (m, P), z (m,), sigma (m,), names).
 
-    Rows are the north and east velocity errors of every sample of every leg, in leg order.
+    Rows are [dv_N, dv_E] of every sample t > 0 of every leg, sample-major, in leg order.
     """
     if transition not in TRANSITIONS:
         raise ValueError(f"transition: expected one of {TRANSITIONS}, got {transition!r}")
     ids = tuple(r.leg.leg_id for r in legs)
+    if len(set(ids)) != len(ids):
+        raise ValueError(f"legs: expected distinct leg ids, got {ids}")
     names = parameter_names(formulation, ids, estimate_gyro_z=estimate_gyro_z)
-    col = {n: i for i, n in enumerate(names)}
-    h_blocks, z_blocks, s_blocks = [], [], []
-    for rep in legs:
-        if transition == "numerical":
-            d_phi, d_bg = _leg_sensitivity_numerical(rep)
-        else:
-            d_phi, d_bg = _leg_sensitivity_closed_form(rep)
-        m = rep.t_s.size
-        h = np.zeros((m, 2, len(names)))
-        if formulation == "paper":
-            h[:, :, 0:3] = d_phi
-            # constant navigation-frame drift: sensitivity d_bg @ C_bn0 (straight leg)
-            d_eps = d_bg @ rep.c_nb0.T
-            h[:, :, 3] = d_eps[:, :, 0]
-            h[:, :, 4] = d_eps[:, :, 1]
-        else:
-            i = rep.leg.leg_id
-            h[:, :, col[f"phi_n_leg{i}"]] = d_phi[:, :, 0]
-            h[:, :, col[f"phi_e_leg{i}"]] = d_phi[:, :, 1]
-            h[:, :, col["phi_d"]] = d_phi[:, :, 2]
-            h[:, :, col["gyro_bias_x"]] = d_bg[:, :, 0]
-            h[:, :, col["gyro_bias_y"]] = d_bg[:, :, 1]
-            if estimate_gyro_z:
-                h[:, :, col["gyro_bias_z"]] = d_bg[:, :, 2]
-        h_blocks.append(h[1:].reshape(-1, len(names)))  # t = 0 rows are identically zero
-        z_blocks.append(rep.dv_n_mps[1:, 0:2].reshape(-1))
-        s_blocks.append(rep.sigma_v_n_mps[1:, 0:2].reshape(-1))
-    return np.vstack(h_blocks), np.concatenate(z_blocks), np.concatenate(s_blocks), names
+    h = [_leg_design(r, formulation, names, transition, estimate_gyro_z).reshape(-1, len(names))
+         for r in legs]
+    z = [r.dv_n_mps[1:, 0:2].reshape(-1) for r in legs]
+    s = [r.sigma_v_n_mps[1:, 0:2].reshape(-1) for r in legs]
+    return np.vstack(h), np.concatenate(z), np.concatenate(s), names
 
 
 def condition_numbers(h_weighted: NDArray) -> tuple[float, float]:
@@ -201,13 +248,105 @@ def condition_numbers(h_weighted: NDArray) -> tuple[float, float]:
     return raw, float(sv2[0] / sv2[-1]) if sv2[-1] > 0 else np.inf
 
 
-def _autocorr_inflation(res: NDArray, n_series: int) -> float:
-    """Variance inflation (1 + rho) / (1 - rho) from the residuals' lag-one autocorrelation."""
+def gyro_noise_covariance(rep: LegReplay, rows: NDArray | None = None) -> NDArray:
+    """Covariance of B's [dv_N, dv_E] at chosen samples for unit white gyro noise.
+
+    The gyro noise w (body, PSD 1 rad^2/s per axis, i.e. ARW 1 rad/s^0.5) drives
+    phi' = ... - C_nb w, so ``dv(t_i) = -int_0^t_i Phi_v,phi(t_i, tau) C_nb(tau) w dtau`` with
+    Phi(t_i, tau) = Phi(t_i, t0) Phi(tau, t0)^-1 from the leg's transition matrices; the
+    integral is a left Riemann sum on the leg's whole sample grid.
+
+    Parameters
+    ----------
+    rep : LegReplay
+    rows : ndarray of int, optional
+        Sample indices (> 0) of the rows; all samples t > 0 when None.
+
+    Returns
+    -------
+    ndarray, shape (2 R, 2 R)
+        Sample-major like :func:`design_matrix` [(m/s)^2 per (rad^2/s)].
+    """
+    idx = np.arange(1, rep.t_s.size) if rows is None else np.asarray(rows)
+    g = rep.phi[idx, 3:5, :]  # (R, 2, 15)
+    w = np.linalg.inv(rep.phi[:-1])[:, :, PHI] @ rep.c_nb[:-1]  # (M-1, 15, 3) at tau_k
+    dt = np.diff(rep.t_s)
+    s = np.einsum("iaj,kjb->iakb", g, w, optimize=True) * np.sqrt(dt)[None, None, :, None]
+    mask = idx[:, None] > np.arange(rep.t_s.size - 1)[None, :]  # tau_k < t_i
+    s *= mask[:, None, :, None]
+    s = s.reshape(2 * idx.size, 3 * (rep.t_s.size - 1))
+    return s @ s.T
+
+
+def _autocorr_inflation(res: NDArray, n_series: int) -> tuple[float, float]:
+    """((1 + rho) / (1 - rho), rho) from the residuals' lag-one autocorrelation."""
     r = res.reshape(n_series, -1) if res.size % n_series == 0 else res[None, :]
     num = np.sum(r[:, 1:] * r[:, :-1])
     den = np.sum(r * r)
     rho = float(np.clip(num / den, 0.0, 0.98)) if den > 0 else 0.0
-    return (1.0 + rho) / (1.0 - rho)
+    return (1.0 + rho) / (1.0 - rho), rho
+
+
+def _lag1(series: list[NDArray]) -> float:
+    num = sum(float(np.sum(r[1:] * r[:-1])) for r in series)
+    den = sum(float(np.sum(r * r)) for r in series)
+    return num / den if den > 0 else 0.0
+
+
+def _solve_scaled(hw: NDArray, zw: NDArray) -> tuple[NDArray, NDArray, bool]:
+    """Least squares of a whitened system with column scaling; (x, (H^T H)^-1, deficient)."""
+    norms = np.linalg.norm(hw, axis=0)
+    norms[norms == 0] = 1.0
+    u, sv, vt = np.linalg.svd(hw / norms, full_matrices=False)
+    keep = sv > sv[0] * 1e-10
+    xs = vt[keep].T @ ((u[:, keep].T @ zw) / sv[keep])
+    cov_s = (vt[keep].T / sv[keep] ** 2) @ vt[keep]
+    return xs / norms, cov_s / np.outer(norms, norms), bool(not keep.all())
+
+
+class _LegNoise:
+    """One leg of the GLS in the eigenbasis of its noise covariance.
+
+    With D = diag(sigma_A^2) and K' = D^-1/2 K D^-1/2 = U diag(lam) U^T (once per leg),
+    Cov = a D + q K = D^1/2 U diag(a + q lam) U^T D^1/2, so any (a, q) costs O(n P).
+    """
+
+    def __init__(self, d: NDArray, k: NDArray, h: NDArray, z: NDArray):
+        sq = np.sqrt(d)
+        kp = k / np.outer(sq, sq)
+        lam, u = np.linalg.eigh(0.5 * (kp + kp.T))
+        self.lam = np.clip(lam, 0.0, None)
+        self.h = u.T @ (h / sq[:, None])
+        self.z = u.T @ (z / sq)
+        self.u = u
+        self.sq = sq
+        self.logdet_d = float(np.sum(np.log(d)))
+
+    def whiten(self, a: float, q: float) -> tuple[NDArray, NDArray, float]:
+        v = a + q * self.lam
+        w = 1.0 / np.sqrt(v)
+        return self.h * w[:, None], self.z * w, float(np.sum(np.log(v))) + self.logdet_d
+
+
+def _gls(blocks: list[_LegNoise], a: float, q: float) -> tuple[NDArray, NDArray, float]:
+    parts = [b.whiten(a, q) for b in blocks]
+    return (np.vstack([p[0] for p in parts]), np.concatenate([p[1] for p in parts]),
+            sum(p[2] for p in parts))
+
+
+def _reml_nll(theta: NDArray, blocks: list[_LegNoise], q_fixed: float | None) -> float:
+    """Negative restricted log-likelihood (constants dropped) of log a (and log q)."""
+    a = float(np.exp(theta[0]))
+    q = q_fixed if q_fixed is not None else float(np.exp(theta[1]))
+    hw, zw, logdet = _gls(blocks, a, q)
+    norms = np.linalg.norm(hw, axis=0)
+    norms[norms == 0] = 1.0
+    u, sv, vt = np.linalg.svd(hw / norms, full_matrices=False)
+    keep = sv > sv[0] * 1e-10
+    proj = u[:, keep].T @ zw
+    rss = float(zw @ zw - proj @ proj)
+    logdet_info = 2.0 * float(np.sum(np.log(sv[keep])) + np.sum(np.log(norms)))
+    return 0.5 * (logdet + logdet_info + rss)
 
 
 def calibrate(
@@ -216,65 +355,119 @@ def calibrate(
     *,
     transition: str = "numerical",
     estimate_gyro_z: bool = False,
+    noise: str = "gyro_rw",
+    gyro_arw_radpsqrts: float | None = None,
+    noise_step_s: float = 5.0,
 ) -> Calibration:
-    """Weighted least squares over all velocity-error samples of the legs (Eq. 17).
+    """Calibrate from the B-minus-A velocity errors of a set of legs (paper Eq. 17).
 
     Parameters
     ----------
     legs : tuple of LegReplay
-        Two legs for a pair, or more for a joint fit.
+        Two legs for a pair, or more for a joint fit (distinct leg ids).
     formulation : {"paper", "body"}
+        See the module docstring.
     transition : {"numerical", "closed_form"}
+        Sensitivity rows from Phi along B, or the ideal-leg closed forms.
     estimate_gyro_z : bool
-        Add the vertical body gyro bias (weakly observable on straight legs).
+        Add the vertical body gyro bias (weakly observable on straight level legs).
+    noise : {"gyro_rw", "white"}
+        Residual model, see the module docstring.
+    gyro_arw_radpsqrts : float, optional
+        Gyro angle random walk [rad/s^0.5] for ``"gyro_rw"``; estimated (REML) when None.
+    noise_step_s : float
+        Spacing of the samples entering the ``"gyro_rw"`` GLS [s] (the estimate uses every
+        ``noise_step_s``-th second; the condition numbers and residuals use all samples).
+
+    Returns
+    -------
+    Calibration
     """
+    if noise not in NOISE_MODELS:
+        raise ValueError(f"noise: expected one of {NOISE_MODELS}, got {noise!r}")
+    if len(legs) < 1:
+        raise ValueError("legs: expected at least one leg")
     h, z, s, names = design_matrix(
         legs, formulation, transition=transition, estimate_gyro_z=estimate_gyro_z
     )
-    hw = h / s[:, None]
-    zw = z / s
-    cond_raw, cond_scaled = condition_numbers(hw)
-    norms = np.linalg.norm(hw, axis=0)
-    norms[norms == 0] = 1.0
-    hs = hw / norms
-    u, sv, vt = np.linalg.svd(hs, full_matrices=False)
-    keep = sv > sv[0] * 1e-12
-    xs = vt[keep].T @ ((u[:, keep].T @ zw) / sv[keep])
-    x = xs / norms
-    cov_s = (vt[keep].T / sv[keep] ** 2) @ vt[keep]
-    res_w = zw - hw @ x
-    dof = max(1, zw.size - len(names))
-    s0 = float(res_w @ res_w / dof)
-    infl = _autocorr_inflation(res_w, 2 * len(legs))
-    vf = max(s0, 1e-12) * infl
-    cov = cov_s / np.outer(norms, norms) * vf
+    cond_raw, cond_scaled = condition_numbers(h / s[:, None])
+    sizes = [2 * (r.t_s.size - 1) for r in legs]
+    edges = np.concatenate([[0], np.cumsum(sizes)])
+    if noise == "white":
+        hw, zw = h / s[:, None], z / s
+        x, cov_s, deficient = _solve_scaled(hw, zw)
+        res_w = zw - hw @ x
+        dof = max(1, zw.size - len(names))
+        s0 = float(res_w @ res_w / dof)
+        infl, _ = _autocorr_inflation(res_w, 2 * len(legs))
+        vf = max(s0, 1e-12) * infl
+        cov = cov_s * vf
+        arw = 0.0
+        white = [res_w[edges[i]:edges[i + 1]] / np.sqrt(vf) for i in range(len(legs))]
+    else:
+        blocks, rows_all = [], []
+        for i, rep in enumerate(legs):
+            # noise-model rows every noise_step_s: the residuals are smooth, and the
+            # eigen-decomposition per leg stays small
+            step = max(1, int(round(noise_step_s / max(np.median(np.diff(rep.t_s)), 1e-9))))
+            smp = np.arange(step, rep.t_s.size, step)
+            r = (2 * (smp - 1)[:, None] + np.arange(2)[None, :]).reshape(-1) + edges[i]
+            rows_all.append(r)
+            blocks.append(_LegNoise(s[r] ** 2, gyro_noise_covariance(rep, smp), h[r], z[r]))
+        if gyro_arw_radpsqrts is None:
+            bounds = [(np.log(1e-6), np.log(1e4)), (np.log(1e-22), np.log(1e-6))]
+            q_fixed = None
+        else:
+            bounds = [(np.log(1e-6), np.log(1e4))]
+            q_fixed = float(gyro_arw_radpsqrts) ** 2
+        # coarse grid (the likelihood is flat in q where a is large), then Nelder-Mead
+        axes = [np.linspace(lo, hi, 11) for lo, hi in bounds]
+        grid = np.stack([g.ravel() for g in np.meshgrid(*axes, indexing="ij")], axis=1)
+        nll = [_reml_nll(th, blocks, q_fixed) for th in grid]
+        theta0 = grid[int(np.argmin(nll))]
+        opt = optimize.minimize(_reml_nll, theta0, args=(blocks, q_fixed), method="Nelder-Mead",
+                                options={"xatol": 1e-3, "fatol": 1e-4, "maxiter": 400})
+        th = np.clip(opt.x, [b[0] for b in bounds], [b[1] for b in bounds])
+        vf = float(np.exp(th[0]))
+        q = q_fixed if q_fixed is not None else float(np.exp(th[1]))
+        hw, zw, _ = _gls(blocks, vf, q)
+        x, cov, deficient = _solve_scaled(hw, zw)
+        arw = float(np.sqrt(q))
+        white = []
+        for r_idx, b in zip(rows_all, blocks, strict=True):  # time-ordered Cov^-1/2 r
+            r = (z[r_idx] - h[r_idx] @ x) / b.sq
+            white.append(b.u @ ((b.u.T @ r) / np.sqrt(vf + q * b.lam)))
     res = z - h @ x
     return Calibration(
         formulation=formulation,
         transition=transition,
+        noise=noise,
         leg_ids=tuple(r.leg.leg_id for r in legs),
         names=names,
         x=x,
         cov=cov,
         cond_raw=cond_raw,
         cond_scaled=cond_scaled,
+        residuals_n_mps=tuple(res[edges[i]:edges[i + 1]].reshape(-1, 2)
+                              for i in range(len(legs))),
         residual_rms_mps=float(np.sqrt(np.mean(res**2))),
         n_samples=int(z.size),
         variance_factor=vf,
+        gyro_arw_radpsqrts=arw,
+        whitened_rms=float(np.sqrt(np.mean(np.concatenate(white) ** 2))),
+        whitened_lag1=_lag1([w.reshape(-1, 2)[:, c] for w in white for c in range(2)]),
+        rank_deficient=deficient,
     )
 
 
 def predict_velocity_error(rep: LegReplay, cal: Calibration, *, transition: str = "numerical"
                            ) -> NDArray:
-    """Model-predicted B velocity error (M, 2) on a leg, with the leg's own misalignment
-    taken from ``cal`` when the leg was in the fit and zero otherwise."""
-    if transition == "numerical":
-        d_phi, d_bg = _leg_sensitivity_numerical(rep)
-    else:
-        d_phi, d_bg = _leg_sensitivity_closed_form(rep)
+    """Model-predicted B velocity error [dv_N, dv_E] (M, 2) on a leg [m/s].
+
+    The gyro bias comes from ``cal``; the leg's own misalignment too when the leg was in the
+    fit, zero otherwise (a held-out leg's tilt is not known to the calibration).
+    """
+    d_phi, d_bg = leg_sensitivities(rep, transition)
     bg = cal.gyro_bias_b_radps(rep.c_nb0)
-    if rep.leg.leg_id in cal.leg_ids:
-        phi = cal.misalignment_n_rad(rep.leg.leg_id)
-    else:
-        phi = np.zeros(3)
+    phi = cal.misalignment_n_rad(rep.leg.leg_id) if rep.leg.leg_id in cal.leg_ids else np.zeros(3)
     return d_phi @ phi + d_bg @ bg

@@ -1,0 +1,354 @@
+"""The calibration stage: legs -> B replays -> pairs -> calibration -> compensation.
+
+One call, :func:`calibrate_flight`, runs the double-strapdown online calibration of Liu &
+Fang (2012) on a whole flight and returns a frozen :class:`CalibrationRun`. It never raises for
+bad geometry (no legs, one leg, legs too short, ill-conditioned pairs): it returns what it
+could and says why no calibration was produced in ``CalibrationRun.reason``.
+
+Frames and units: NED (n), FRD (b), SI and radians; ``CalibrationRun.tables`` converts to the
+output tables' units (deg, arcsec, deg/h, int64 ns) at the edge.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pospp.calib.compensate import LegImprovement, compensate_legs, joint_calibration
+from pospp.calib.pairs import Pair, PairPolicy, evaluate_pairs
+from pospp.calib.replay import ImuIncrements, LegReplay, ReferenceSolution, replay_leg
+from pospp.calib.segment import Leg, LegThresholds, find_legs
+from pospp.calib.solve import FORMULATIONS, Calibration
+from pospp.nav.closed_form import PAPER_FROM_NED
+from pospp.rotation import ARCSEC_RAD, DEG_PER_H_RADPS
+
+_DPSH_RADPSQRTS = np.pi / 180.0 / 60.0
+"""One deg/sqrt(h) in rad/sqrt(s)."""
+
+
+@dataclass(frozen=True)
+class CalibrationRun:
+    """Everything the calibration stage produced.
+
+    Attributes
+    ----------
+    legs : tuple of Leg
+        Straight uniform legs found on A's trajectory.
+    replays : Mapping of int to LegReplay
+        B minus A per leg before compensation (legs whose replay failed are absent).
+    pairs : tuple of Pair
+        Every candidate pair with dH, dV, condition numbers, used, reason and, when used, one
+        calibration per formulation.
+    joint : tuple of Calibration
+        One fit per formulation over all legs of the used pairs (empty if none).
+    chosen : Calibration or None
+        The joint fit of the compensation formulation (``PairsConfig.formulation``).
+    replays_after : Mapping of int to LegReplay
+        B re-run with ``chosen`` applied (empty if no calibration).
+    improvements : tuple of LegImprovement
+        B's horizontal error at the horizon (300 s or the leg end) before and after.
+    gyro_bias_b_radps, gyro_bias_sigma_b_radps : ndarray, shape (3,)
+        Calibrated body gyro bias to feed back into A, and its 1-sigma (zeros / inf when no
+        calibration; z is not estimated unless asked).
+    misalignment_n_rad : Mapping of int to ndarray, shape (3,)
+        Calibrated B initial misalignment (NED) per fitted leg: A's attitude error there.
+    reason : str
+        "ok" or why no calibration was produced.
+    messages : tuple of str
+        Per-leg problems (replay failures) and notes.
+    """
+
+    legs: tuple[Leg, ...]
+    replays: Mapping[int, LegReplay]
+    pairs: tuple[Pair, ...]
+    joint: tuple[Calibration, ...]
+    chosen: Calibration | None
+    replays_after: Mapping[int, LegReplay]
+    improvements: tuple[LegImprovement, ...]
+    gyro_bias_b_radps: NDArray
+    gyro_bias_sigma_b_radps: NDArray
+    misalignment_n_rad: Mapping[int, NDArray]
+    reason: str
+    messages: tuple[str, ...]
+
+    @property
+    def calibrated(self) -> bool:
+        """True when a calibration was produced and applied."""
+        return self.chosen is not None
+
+    def joint_calibration(self, formulation: str) -> Calibration | None:
+        """The joint fit of one formulation (None if absent)."""
+        for c in self.joint:
+            if c.formulation == formulation:
+                return c
+        return None
+
+    def summary(self) -> dict[str, Any]:
+        """Key figures (summary table columns): counts and RMS over legs at the horizon."""
+        imp = self.improvements
+
+        def rms(vals: list[float]) -> float:
+            return float(np.sqrt(np.mean(np.square(vals)))) if vals else float("nan")
+
+        return {
+            "n_legs": len(self.legs),
+            "n_pairs_used": sum(p.used for p in self.pairs),
+            "dv_before_mps": rms([i.vel_before_mps for i in imp]),
+            "dv_after_mps": rms([i.vel_after_mps for i in imp]),
+            "dp_before_m": rms([i.pos_before_m for i in imp]),
+            "dp_after_m": rms([i.pos_after_m for i in imp]),
+        }
+
+    def tables(self, epoch_ns: int) -> dict[str, dict[str, Any]]:
+        """Column dicts of the ``legs``, ``pairs``, ``calibration`` and ``leg_errors`` tables.
+
+        Parameters
+        ----------
+        epoch_ns : int
+            UTC nanoseconds of t_s = 0 (the run's epoch).
+        """
+        return {
+            "legs": _legs_table(self.legs, epoch_ns),
+            "pairs": _pairs_table(self.pairs),
+            "calibration": _calibration_table(self.pairs, self.joint),
+            "leg_errors": _leg_errors_table(self.replays, self.replays_after),
+        }
+
+
+def thresholds_from_config(cfg: Any) -> LegThresholds:
+    """LegThresholds from any object with (some of) its fields, e.g. ``LegsConfig``."""
+    if isinstance(cfg, LegThresholds):
+        return cfg
+    names = LegThresholds.__dataclass_fields__
+    return LegThresholds(**{k: getattr(cfg, k) for k in names if hasattr(cfg, k)})
+
+
+def calibrate_flight(
+    imu: ImuIncrements,
+    reference: ReferenceSolution,
+    *,
+    legs_cfg: Any = None,
+    replay_cfg: Any = None,
+    pairs_cfg: Any = None,
+    formulations: tuple[str, ...] = FORMULATIONS,
+    transition: str | None = None,
+    noise: str = "gyro_rw",
+    gyro_arw_dpsh: float | None = None,
+    estimate_gyro_z: bool = False,
+    legs: tuple[Leg, ...] | None = None,
+) -> CalibrationRun:
+    """Run the double-strapdown calibration on one flight.
+
+    Parameters
+    ----------
+    imu : ImuIncrements
+        Raw IMU increments of the whole flight (body FRD, rad and m/s).
+    reference : ReferenceSolution
+        Algorithm A (the smoothed solution by default: its errors at each leg start and along
+        the leg are the smallest, and B minus A must be B's error).
+    legs_cfg : LegsConfig or LegThresholds, optional
+        Leg thresholds (defaults when None).
+    replay_cfg : ReplayConfig, optional
+        accel_compensation, sample_rate_hz, sigma_floor_mps, horizon_s, transition_step.
+    pairs_cfg : PairsConfig or PairPolicy, optional
+        mode, max_cond_scaled, min_dheading_deg, formulation (compensated), transition.
+    formulations : tuple of str
+        Formulations calibrated and reported ("paper", "body"); the compensation formulation
+        is added if missing.
+    transition : {"numerical", "closed_form"}, optional
+        Overrides ``pairs_cfg.transition``.
+    noise : {"gyro_rw", "white"}
+        Residual model of the least squares (:mod:`pospp.calib.solve`).
+    gyro_arw_dpsh : float, optional
+        Gyro angle random walk [deg/sqrt(h)] (IMU specification); estimated by REML if None.
+    estimate_gyro_z : bool
+        Also estimate the vertical body gyro bias (weak on straight level legs).
+    legs : tuple of Leg, optional
+        Use these legs instead of segmenting A's trajectory.
+
+    Returns
+    -------
+    CalibrationRun
+    """
+    th = thresholds_from_config(legs_cfg if legs_cfg is not None else LegThresholds())
+    policy = PairPolicy.from_config(pairs_cfg) if pairs_cfg is not None else PairPolicy()
+    if transition is not None:
+        policy = PairPolicy(policy.mode, policy.max_cond_scaled, policy.min_dheading_deg,
+                            policy.formulation, transition)
+    rc = {"accel_compensation": "filter", "sample_rate_hz": 1.0, "sigma_floor_mps": 0.005,
+          "horizon_s": 300.0, "transition_step": 10}
+    if replay_cfg is not None:
+        rc.update({k: getattr(replay_cfg, k) for k in rc if hasattr(replay_cfg, k)})
+    forms = tuple(formulations) + (() if policy.formulation in formulations
+                                   else (policy.formulation,))
+    cal_kw: dict[str, Any] = {"noise": noise, "estimate_gyro_z": estimate_gyro_z,
+                              "gyro_arw_radpsqrts": None if gyro_arw_dpsh is None
+                              else gyro_arw_dpsh * _DPSH_RADPSQRTS}
+    traj = reference.trajectory
+    messages: list[str] = []
+    if legs is None:
+        legs = find_legs(traj.t_s, traj.v_n_mps, traj.height_m, thresholds=th)
+    replays: dict[int, LegReplay] = {}
+    for leg in legs:
+        try:
+            replays[leg.leg_id] = replay_leg(
+                imu, reference, leg, accel_compensation=rc["accel_compensation"],
+                sample_rate_hz=rc["sample_rate_hz"], sigma_floor_mps=rc["sigma_floor_mps"],
+                transition_step=int(rc["transition_step"]))
+        except ValueError as exc:
+            messages.append(f"leg {leg.leg_id}: B replay failed: {exc}")
+
+    def done(reason: str, pairs: tuple[Pair, ...] = (), joint: tuple[Calibration, ...] = ()
+             ) -> CalibrationRun:
+        return CalibrationRun(legs, replays, pairs, joint, None, {}, (), np.zeros(3),
+                              np.full(3, np.inf), {}, reason, tuple(messages))
+
+    if not legs:
+        return done(
+            "no calibration: no straight, level, uniform leg of at least "
+            f"{th.min_duration_s - th.duration_tolerance_s:g} s was found "
+            f"(heading rate < {th.max_heading_rate_dps:g} deg/s, speed std < "
+            f"{th.max_speed_std_mps:g} m/s, |v_D| < {th.max_vertical_speed_mps:g} m/s)")
+    if len(legs) < 2:
+        return done(f"no calibration: only one leg (leg {legs[0].leg_id}) was found; a pair "
+                    "needs two legs with different headings")
+    pairs = evaluate_pairs(replays, legs, policy, formulations=forms, **cal_kw)
+    if not any(p.used for p in pairs):
+        why = "; ".join(f"pair {p.pair_id} (legs {p.leg_a}, {p.leg_b}): {p.reason}"
+                        for p in pairs)
+        return done(f"no calibration: no pair passed the screening: {why}", pairs)
+    joint = tuple(c for f in forms if (c := joint_calibration(
+        replays, pairs, f, transition=policy.transition, **cal_kw)) is not None)
+    chosen = next(c for c in joint if c.formulation == policy.formulation)
+    after, improvements = compensate_legs(
+        imu, reference, replays, chosen, accel_compensation=rc["accel_compensation"],
+        horizon_s=rc["horizon_s"], transition_step=int(rc["transition_step"]),
+        sample_rate_hz=rc["sample_rate_hz"], sigma_floor_mps=rc["sigma_floor_mps"])
+    first = replays[chosen.leg_ids[0]]
+    bg = chosen.gyro_bias_b_radps(first.c_nb0)
+    if chosen.formulation == "body":
+        sig = np.full(3, np.inf)
+        for i, ax in enumerate("xyz"):
+            if f"gyro_bias_{ax}" in chosen.names:
+                sig[i] = chosen.sigma_of(f"gyro_bias_{ax}")
+    else:
+        cov_eps = chosen.cov[3:5, 3:5]
+        c_bn = first.c_nb0.T[:, 0:2]
+        sig = np.sqrt(np.diag(c_bn @ cov_eps @ c_bn.T))
+        messages.append("paper formulation chosen: its nav-frame drift is rotated into the body "
+                        f"with leg {first.leg.leg_id}'s attitude")
+    mis = {i: chosen.misalignment_n_rad(i) for i in chosen.leg_ids}
+    return CalibrationRun(legs, replays, pairs, joint, chosen, after, improvements, bg, sig, mis,
+                          "ok", tuple(messages))
+
+
+# --------------------------------------------------------------------------- table columns
+
+
+def _legs_table(legs: tuple[Leg, ...], epoch_ns: int) -> dict[str, Any]:
+    def ns(t: float) -> int:
+        return int(epoch_ns) + int(round(t * 1e9))
+
+    return {
+        "leg_id": np.array([g.leg_id for g in legs], dtype=np.int64),
+        "start_ns": np.array([ns(g.start_s) for g in legs], dtype=np.int64),
+        "end_ns": np.array([ns(g.end_s) for g in legs], dtype=np.int64),
+        "duration_s": np.array([g.duration_s for g in legs], dtype=float),
+        "heading_deg": np.degrees([g.heading_rad for g in legs]).astype(float),
+        "speed_mps": np.array([g.speed_mps for g in legs], dtype=float),
+        "height_m": np.array([g.height_m for g in legs], dtype=float),
+        "heading_spread_deg": np.degrees([g.heading_spread_rad for g in legs]).astype(float),
+        "speed_std_mps": np.array([g.speed_std_mps for g in legs], dtype=float),
+        "vertical_speed_mps": np.array([g.vertical_speed_mps for g in legs], dtype=float),
+        "heading_rate_max_dps": np.degrees([g.heading_rate_max_radps for g in legs]
+                                           ).astype(float),
+    }
+
+
+def _pairs_table(pairs: tuple[Pair, ...]) -> dict[str, Any]:
+    return {
+        "pair_id": np.array([p.pair_id for p in pairs], dtype=np.int64),
+        "leg_a": np.array([p.leg_a for p in pairs], dtype=np.int64),
+        "leg_b": np.array([p.leg_b for p in pairs], dtype=np.int64),
+        "dheading_deg": np.degrees([p.dheading_rad for p in pairs]).astype(float),
+        "dspeed_mps": np.array([p.dspeed_mps for p in pairs], dtype=float),
+        "cond_raw": np.array([p.cond_raw for p in pairs], dtype=float),
+        "cond_scaled": np.array([p.cond_scaled for p in pairs], dtype=float),
+        "used": np.array([p.used for p in pairs], dtype=bool),
+        "reason": [p.reason for p in pairs],
+    }
+
+
+def calibration_rows(cal: Calibration) -> list[tuple[str, float, float, str]]:
+    """(parameter, value, sigma, unit) rows of one calibration in the output convention.
+
+    Misalignments in the paper's axes (phi_x = phi_E, phi_y = phi_N, phi_z = -phi_D, arcsec;
+    per-leg tilts of ``body`` as phi_x_leg<i>, phi_y_leg<i>); nav-frame drifts eps_e, eps_n
+    and body gyro biases gyro_bias_x/y/z (FRD) in deg/h.
+    """
+    rows: list[tuple[str, float, float, str]] = []
+    sig = cal.sigma
+    if cal.formulation == "paper":
+        m = PAPER_FROM_NED
+        x = m @ cal.x
+        s = np.sqrt(np.diag(m @ cal.cov @ m.T))
+        for name, v, e in zip(("phi_x", "phi_y", "phi_z", "eps_e", "eps_n"), x, s, strict=True):
+            k, u = (ARCSEC_RAD, "arcsec") if name.startswith("phi") else (DEG_PER_H_RADPS,
+                                                                           "deg_per_h")
+            rows.append((name, float(v / k), float(e / k), u))
+        return rows
+    out_name = {"phi_n": "phi_y", "phi_e": "phi_x", "phi_d": "phi_z"}
+    for name, v, e in zip(cal.names, cal.x, sig, strict=True):
+        if name.startswith("gyro_bias"):
+            rows.append((name, float(v / DEG_PER_H_RADPS), float(e / DEG_PER_H_RADPS),
+                         "deg_per_h"))
+            continue
+        base, _, leg = name.partition("_leg")
+        sign = -1.0 if base == "phi_d" else 1.0
+        label = out_name[base] + (f"_leg{leg}" if leg else "")
+        rows.append((label, float(sign * v / ARCSEC_RAD), float(e / ARCSEC_RAD), "arcsec"))
+    return rows
+
+
+def _calibration_table(pairs: tuple[Pair, ...], joint: tuple[Calibration, ...]
+                       ) -> dict[str, Any]:
+    cols: dict[str, list] = {k: [] for k in ("pair_id", "formulation", "transition",
+                                             "parameter", "value", "sigma", "unit")}
+    items = [(p.pair_id, c) for p in pairs for c in p.calibrations] + [(-1, c) for c in joint]
+    for pid, cal in items:
+        for name, v, s, u in calibration_rows(cal):
+            cols["pair_id"].append(pid)
+            cols["formulation"].append(cal.formulation)
+            cols["transition"].append(cal.transition)
+            cols["parameter"].append(name)
+            cols["value"].append(v)
+            cols["sigma"].append(s)
+            cols["unit"].append(u)
+    out: dict[str, Any] = dict(cols)
+    out["pair_id"] = np.array(cols["pair_id"], dtype=np.int64)
+    out["value"] = np.array(cols["value"], dtype=float)
+    out["sigma"] = np.array(cols["sigma"], dtype=float)
+    return out
+
+
+def _leg_errors_table(before: Mapping[int, LegReplay], after: Mapping[int, LegReplay]
+                      ) -> dict[str, Any]:
+    parts = [(lid, stage, rep) for stage, reps in (("before", before), ("after", after))
+             for lid, rep in sorted(reps.items())]
+    if not parts:
+        return {"leg_id": np.zeros(0, np.int64), "stage": [], "t_s": np.zeros(0),
+                "dvn_mps": np.zeros(0), "dve_mps": np.zeros(0), "dpn_m": np.zeros(0),
+                "dpe_m": np.zeros(0)}
+    return {
+        "leg_id": np.concatenate([np.full(r.t_s.size, lid, np.int64) for lid, _, r in parts]),
+        "stage": [stage for _, stage, r in parts for _ in range(r.t_s.size)],
+        "t_s": np.concatenate([r.t_s for _, _, r in parts]),
+        "dvn_mps": np.concatenate([r.dv_n_mps[:, 0] for _, _, r in parts]),
+        "dve_mps": np.concatenate([r.dv_n_mps[:, 1] for _, _, r in parts]),
+        "dpn_m": np.concatenate([r.dr_n_m[:, 0] for _, _, r in parts]),
+        "dpe_m": np.concatenate([r.dr_n_m[:, 1] for _, _, r in parts]),
+    }
