@@ -168,3 +168,82 @@ def oscillating_attitude(
             dth += (0.5 * h * w) * w_b
             dv += (0.5 * h * w) * f_b
     return t, dth, dv, rotation.dcm_from_euler(euler(t)[0])
+
+
+def weaving_flight(
+    lat0_rad: float,
+    height_m: float,
+    speed_mps: float,
+    heading0_rad: float,
+    weave_amp_rad: float,
+    weave_period_s: float,
+    rate_hz: float,
+    duration_s: float,
+) -> TruthImu:
+    """Level flight at constant speed and height whose heading weaves:
+    psi(t) = psi0 + A sin(2 pi t / P), body yawing with the track (flat turns, no bank).
+
+    v_n = V [cos psi, sin psi, 0], v_n' = V psi' [-sin psi, cos psi, 0];
+    w_ib_b = C_bn (w_ie_n + w_en_n) + [0, 0, psi'];
+    f_b = C_bn (v_n' + (2 w_ie_n + w_en_n) x v_n - g_n); C_nb = Rz(psi).
+    lat, lon by DOP853 (rtol 1e-13), increments by 3-node Gauss-Legendre with 2 sub-intervals.
+    The returned ``v_n_mps`` is the INITIAL velocity and ``c_nb`` the INITIAL attitude.
+    """
+    n = int(round(duration_s * rate_hz))
+    dt = 1.0 / rate_hz
+    t = np.arange(n + 1) * dt
+    om = 2.0 * np.pi / weave_period_s
+
+    def psi(tt):
+        return heading0_rad + weave_amp_rad * np.sin(om * tt), weave_amp_rad * om * np.cos(om * tt)
+
+    def rhs(tt, y):
+        p, _ = psi(tt)
+        r_m, r_n = earth.principal_radii_m(y[0])
+        return [speed_mps * np.cos(p) / (r_m + height_m),
+                speed_mps * np.sin(p) / ((r_n + height_m) * np.cos(y[0]))]
+
+    sol = solve_ivp(rhs, (0.0, t[-1]), [lat0_rad, 0.0], method="DOP853", rtol=1e-13,
+                    atol=1e-16, dense_output=True)
+
+    def body(tt):
+        lat = sol.sol(tt)[0]
+        p, dp = psi(tt)
+        cp, sp = np.cos(p), np.sin(p)
+        v = speed_mps * np.stack([cp, sp, np.zeros_like(p)], axis=-1)
+        vdot = speed_mps * dp[:, None] * np.stack([-sp, cp, np.zeros_like(p)], axis=-1)
+        w_ie = earth.earth_rate_n_radps(lat)
+        w_en = earth.transport_rate_n_radps(lat, height_m, v)
+        f_n = vdot + np.cross(2.0 * w_ie + w_en, v) - earth.gravity_n_mps2(lat, height_m)
+
+        def to_b(a):  # C_bn = Rz(psi)^T
+            return np.stack([cp * a[:, 0] + sp * a[:, 1], -sp * a[:, 0] + cp * a[:, 1],
+                             a[:, 2]], axis=-1)
+
+        w_b = to_b(w_ie + w_en)
+        w_b[:, 2] += dp
+        return w_b, to_b(f_n)
+
+    dth = np.zeros((n, 3))
+    dvel = np.zeros((n, 3))
+    n_sub = 2
+    h = dt / n_sub
+    for j in range(n_sub):
+        mid = t[:-1] + (j + 0.5) * h
+        for x, w in zip(_GL_X, _GL_W, strict=True):
+            w_b, f_b = body(mid + 0.5 * h * x)
+            dth += (0.5 * h * w) * w_b
+            dvel += (0.5 * h * w) * f_b
+    y = sol.sol(t)
+    p0, _ = psi(np.array([0.0]))
+    rpy = np.array([0.0, 0.0, p0[0]])
+    v0 = speed_mps * np.array([np.cos(p0[0]), np.sin(p0[0]), 0.0])
+    return TruthImu(t, dth, dvel, y[0], y[1], height_m, v0, rotation.dcm_from_euler(rpy), rpy)
+
+
+def weaving_truth_state(tr: TruthImu, heading0_rad, weave_amp_rad, weave_period_s, speed_mps):
+    """True v_n (N+1, 3) and C_nb (N+1, 3, 3) of :func:`weaving_flight` at its epochs."""
+    p = heading0_rad + weave_amp_rad * np.sin(2.0 * np.pi / weave_period_s * tr.t_s)
+    v = speed_mps * np.stack([np.cos(p), np.sin(p), np.zeros_like(p)], axis=-1)
+    c = rotation.dcm_from_euler(np.stack([np.zeros_like(p), np.zeros_like(p), p], axis=-1))
+    return v, c
