@@ -2,6 +2,8 @@
 
 Run on demand (not part of the test suite):  python tests/benchmarks/bench_simulate.py
 Prints a markdown table; the numbers in docs/benchmarks.md (## Simulator) come from it.
+With ``--closure`` it prints instead the closure table of docs/simulator.md (error-free presets
+through increments_from_rates + strapdown.integrate, max errors against the truth).
 
 Each case is ``pospp.sim.api.simulate("flight", imu_grade="paper_flight", gnss=<1 Hz with
 lever arm>, seed=1, imu_rate_hz=200)``, truncated to the duration shown; wall-clock and
@@ -14,10 +16,15 @@ write the three files (MCAP, truth Parquet, params JSON) into a temporary folder
 from __future__ import annotations
 
 import resource
+import sys
 import tempfile
 import time
 
+import numpy as np
+
+from pospp import earth, rotation
 from pospp.io.simulation_files import write_simulation
+from pospp.nav.strapdown import increments_from_rates, integrate
 from pospp.sim.api import simulate
 from pospp.sim.gnss import GnssModel
 
@@ -44,6 +51,38 @@ def _run(duration_s: float | None) -> None:
     )
 
 
+def _closure(sim, window_s: float | None) -> tuple[float, float, float]:
+    t_s, dth, dv = increments_from_rates(sim.imu.time_ns, sim.imu.w_ib_b_radps,
+                                         sim.imu.f_ib_b_mps2, epoch_ns=sim.start_time_ns)
+    n = len(t_s)
+    step = n if window_s is None else int(round(window_s / (t_s[1] - t_s[0])))
+    worst = np.zeros(3)
+    tr = sim.truth
+    for a in range(0, n - 1, step):
+        b = min(n - 1, a + step)
+        out = integrate(t_s[a : b + 1], dth[a:b], dv[a:b], tr.state(a + 1),
+                        previous_increments=None if a == 0 else (dth[a - 1], dv[a - 1]))
+        s = slice(a + 1, b + 2)
+        dp = earth.llh_difference_ned_m(out.lat_rad, out.lon_rad, out.height_m,
+                                        tr.lat_rad[s], tr.lon_rad[s], tr.height_m[s])
+        att = rotation.angle_between_rad(out.c_nb, rotation.dcm_from_quat(tr.q_nb[s]))
+        worst = np.maximum(worst, [np.abs(dp).max(), np.abs(out.v_n_mps - tr.v_n_mps[s]).max(),
+                                   att.max() / rotation.ARCSEC_RAD])
+    return tuple(worst)
+
+
+def closure_table() -> None:
+    print("| preset | rate | span | position m | velocity m/s | attitude arcsec |")
+    print("|---|---|---|---|---|---|")
+    for preset, rate, window in (("vehicle", 200.0, None), ("sample", 100.0, None),
+                                 ("flight", 200.0, None), ("flight", 200.0, 1800.0),
+                                 ("grid", 200.0, None), ("grid", 200.0, 1800.0)):
+        sim = simulate(preset, seed=1, imu_rate_hz=rate)
+        p, v, a = _closure(sim, window)
+        span = "whole" if window is None else f"restarted every {window:g} s"
+        print(f"| {preset} | {rate:g} Hz | {span} | {p:.1e} | {v:.1e} | {a:.1e} |", flush=True)
+
+
 def main() -> None:
     simulate("sample", imu_rate_hz=50.0, duration_s=10.0)  # warm numba caches of the checks
     print("| mission | IMU samples | wall s | CPU s | CPU us/sample | increments s | errors s "
@@ -54,4 +93,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    closure_table() if "--closure" in sys.argv else main()

@@ -2,11 +2,10 @@
 
 The increments travel the real path: Simulation.imu (mean rates over the interval ending at
 each stamp) -> increments_from_rates -> strapdown.integrate, from the true state at the first
-IMU stamp. The unaided vertical channel diverges as exp(t sqrt(2 g / R)) (time constant about
-570 s), so over the 2.3 h flight preset the kernel's own O(dt^2) error at a climb onset
-(~1e-7 m/s at 200 Hz) grows to metres; the long flight is therefore checked in 30 min windows
-restarted from the truth (the way algorithm B uses the kernel), the shorter presets over the
-whole mission.
+IMU stamp, over the whole mission. Bounds are the brief's (0.05 m/s, 1 m, 5 arcsec); the
+errors actually left are far smaller (docs/simulator.md). The unaided vertical channel
+amplifies any error by about exp(t / 570 s), so the 2.3 h flight closing is a strong check of
+both the increments and the kernel.
 """
 
 from __future__ import annotations
@@ -61,10 +60,10 @@ def test_whole_mission_closure(preset, rate):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("preset", ["flight", "grid"])
-def test_long_flight_closure_in_30_min_windows_at_200_hz(preset):
+def test_long_flight_closure_at_200_hz(preset):
     sim = simulate(preset, imu_grade="errorfree", seed=1, imu_rate_hz=200.0)
     assert sim.truth.t_s[-1] > 2 * 3600
-    pos, vel, att = _closure(sim, window_s=1800.0)
+    pos, vel, att = _closure(sim)
     assert pos < POS_TOL_M and vel < VEL_TOL_MPS and att < ATT_TOL_ARCSEC, (pos, vel, att)
 
 
