@@ -68,6 +68,7 @@ def issue_message(issue: Any) -> dict[str, Any]:
         "topic": issue.topic,
         "index": issue.index,
         "byte_offset": issue.byte_offset,
+        "log_time_ns": issue.log_time_ns,
     }
 
 
@@ -87,9 +88,10 @@ def rejection_messages(rejections: Iterable[Any], *, limit: int = 200) -> list[d
 
 def messages_table(messages: list[dict[str, Any]]) -> pd.DataFrame:
     """messages.parquet from rows (optional columns may be absent in a row)."""
-    cols = ["severity", "stage", "time_ns", "text", "topic", "index", "byte_offset"]
+    cols = ["severity", "stage", "time_ns", "text", "topic", "index", "byte_offset",
+            "log_time_ns"]
     df = pd.DataFrame(messages, columns=cols)
-    for c in ("time_ns", "index", "byte_offset"):
+    for c in ("time_ns", "index", "byte_offset", "log_time_ns"):
         df[c] = df[c].astype("Int64")
     return df
 

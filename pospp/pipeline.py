@@ -236,6 +236,8 @@ def run(
     try:
         log = ingest(mcap_path, config)
     except (IngestError, FileNotFoundError, ValueError) as exc:
+        for issue in getattr(exc, "issues", ()):
+            book.messages.append(outputs.issue_message(issue))
         book.note("error", "ingest", str(exc))
         finish("failed")
         raise
