@@ -207,5 +207,28 @@ def convert(source: str, out_mcap: str, fmt: str | None, options: tuple[str, ...
         click.echo(f"  warning: {w}")
 
 
+@main.command()
+@click.argument("run_dir", type=click.Path(exists=True, file_okay=False))
+@click.option("--truth", "truth_file", required=True, type=click.Path(exists=True,
+              dir_okay=False), help="Reference trajectory Parquet (docs/formats.md).")
+@click.option("--skip-s", default=0.0, show_default=True,
+              help="Leave out the first seconds of each solution (alignment).")
+def evaluate(run_dir: str, truth_file: str, skip_s: float) -> None:
+    """Errors of a run's solutions against a reference: evaluation.parquet, evaluation.png.
+
+    Calls pospp.evaluate.solution_errors for every solution in RUN_DIR/trajectory.parquet.
+    """
+    from pospp.pipeline import evaluate_run
+
+    try:
+        table = evaluate_run(run_dir, truth_file, skip_s=skip_s)
+    except (ValueError, FileNotFoundError) as exc:
+        _fail(exc)
+    wide = table.pivot(index="metric", columns="solution", values="value")
+    units = table.groupby("metric").unit.first()
+    wide.insert(0, "unit", units)
+    click.echo(wide.to_string(float_format=lambda v: f"{v:.4g}"))
+
+
 if __name__ == "__main__":  # pragma: no cover
     main()

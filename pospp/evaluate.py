@@ -102,3 +102,40 @@ def solution_errors(
     vel = np.asarray(v_n_mps, dtype=float)[m] - v_r
     att = rotation.attitude_error_n_rad(c_est, c_ref)
     return SolutionErrors(t, pos, vel, att)
+
+
+_METRIC_UNITS = {
+    "north_rms_m": ("north_rms", "m", 1.0),
+    "east_rms_m": ("east_rms", "m", 1.0),
+    "down_rms_m": ("down_rms", "m", 1.0),
+    "horizontal_rms_m": ("horizontal_rms", "m", 1.0),
+    "vel_horizontal_rms_mps": ("vel_horizontal_rms", "m/s", 1.0),
+    "vd_rms_mps": ("vd_rms", "m/s", 1.0),
+    "roll_pitch_rms_rad": ("roll_pitch_rms", "arcsec", 1.0 / rotation.ARCSEC_RAD),
+    "heading_rms_rad": ("heading_rms", "arcsec", 1.0 / rotation.ARCSEC_RAD),
+}
+
+
+def evaluation_rows(errors: dict[str, SolutionErrors], *, skip_s: float = 0.0) -> dict[str, list]:
+    """Columns of the long-form ``evaluation`` table (solution, metric, value, unit, ...).
+
+    Parameters
+    ----------
+    errors : dict
+        Solution name -> its :class:`SolutionErrors`.
+    skip_s : float
+        Leave out the epochs within this time of each solution's first (alignment, take-off).
+    """
+    cols: dict[str, list] = {k: [] for k in ("solution", "metric", "value", "unit", "skip_s",
+                                             "n_epochs")}
+    for name, err in errors.items():
+        rms = err.rms(skip_s=skip_s)
+        n = int(np.sum(err.time_ns >= err.time_ns[0] + int(skip_s * 1e9)))
+        for key, (metric, unit, scale) in _METRIC_UNITS.items():
+            cols["solution"].append(name)
+            cols["metric"].append(metric)
+            cols["value"].append(rms[key] * scale)
+            cols["unit"].append(unit)
+            cols["skip_s"].append(float(skip_s))
+            cols["n_epochs"].append(n)
+    return cols

@@ -30,10 +30,12 @@ import pandas as pd
 
 from pospp import outputs, rotation
 from pospp.config import PipelineConfig
+from pospp.evaluate import evaluation_rows, solution_errors
 from pospp.io import mcap_reader, parquet_tables, report_files, trajectory_mcap
 from pospp.io.errors import IngestError
 from pospp.nav import filter as nav_filter
 from pospp.nav import tuning as nav_tuning
+from pospp.report import figures
 from pospp.report.html import render_report
 
 ProgressFn = Callable[[str, float], None]
@@ -320,3 +322,32 @@ def calibrate(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
 def diagnose(calib_run: Any, config: PipelineConfig) -> Any:
     """Model-discrepancy workflow on the calibrated run (pospp.diagnose)."""
     raise NotImplementedError  # wired to pospp.diagnose at integration
+
+
+def evaluate_run(run_dir: str | Path, truth_file: str | Path, *, skip_s: float = 0.0
+                 ) -> pd.DataFrame:
+    """``pospp evaluate``: every solution of a run against a reference trajectory.
+
+    Writes RUN_DIR/evaluation.parquet (long form) and RUN_DIR/evaluation.png; returns the
+    table.
+    """
+    run = Path(run_dir)
+    traj = parquet_tables.read_table(run / "trajectory.parquet")
+    ref = parquet_tables.read_reference_trajectory(truth_file)
+    errors = {}
+    for name, g in traj.groupby("solution", sort=False):
+        errors[str(name)] = solution_errors(
+            g.time_ns.to_numpy(np.int64), np.radians(g.lat_deg.to_numpy()),
+            np.radians(g.lon_deg.to_numpy()), g.height_m.to_numpy(),
+            g[["vn_mps", "ve_mps", "vd_mps"]].to_numpy(),
+            np.radians(g[["roll_deg", "pitch_deg", "yaw_deg"]].to_numpy()),
+            ref_time_ns=ref.time_ns, ref_lat_rad=ref.lat_rad, ref_lon_rad=ref.lon_rad,
+            ref_height_m=ref.height_m, ref_v_n_mps=ref.v_n_mps, ref_rpy_rad=ref.rpy_rad,
+        )
+    cols = evaluation_rows(errors, skip_s=skip_s)
+    cols["reference_file"] = [str(truth_file)] * len(cols["solution"])
+    table = pd.DataFrame(cols)
+    meta = {"run_dir": str(run), "reference_file": str(truth_file)}
+    parquet_tables.write_table(run / "evaluation.parquet", table, "evaluation", metadata=meta)
+    report_files.write_figure(run / "evaluation.png", figures.evaluation_errors(errors))
+    return table

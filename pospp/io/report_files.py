@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 
 from pospp.io.parquet_tables import TABLES, atomic_path, read_table
 
-__all__ = ["read_run_tables", "write_text"]
+__all__ = ["read_run_tables", "write_figure", "write_text"]
 
 
 def read_run_tables(run_dir: str | Path) -> dict[str, pd.DataFrame]:
@@ -24,4 +25,14 @@ def write_text(path: str | Path, text: str) -> Path:
     """Write a text file (UTF-8) atomically: a temporary name, then a rename."""
     with atomic_path(path) as tmp:
         Path(tmp).write_text(text, encoding="utf-8")
+    return Path(path)
+
+
+def write_figure(path: str | Path, figure: Any, *, dpi: int = 100) -> Path:
+    """Save a matplotlib figure as PNG atomically and close it."""
+    import matplotlib.pyplot as plt
+
+    with atomic_path(path) as tmp:
+        figure.savefig(tmp, format="png", dpi=dpi)
+    plt.close(figure)
     return Path(path)

@@ -155,3 +155,29 @@ def diagnosis_steps(diagnosis: pd.DataFrame) -> Figure:
     ax.grid(alpha=0.3)
     fig.tight_layout()
     return fig
+
+
+def evaluation_errors(errors: dict, *, t0_ns: int | None = None) -> Figure:
+    """Solution minus reference over time: horizontal position, velocity, tilt and heading.
+
+    ``errors`` maps a solution name to a :class:`pospp.evaluate.SolutionErrors` (SI, NED).
+    """
+    fig, axes = plt.subplots(4, 1, figsize=(10, 8), sharex=True)
+    t0 = t0_ns if t0_ns is not None else min(int(e.time_ns[0]) for e in errors.values())
+    arcsec = np.pi / 180.0 / 3600.0
+    for name, e in errors.items():
+        t = (e.time_ns - t0) * 1e-9
+        axes[0].plot(t, np.hypot(e.pos_ned_m[:, 0], e.pos_ned_m[:, 1]), lw=0.8, label=name)
+        axes[1].plot(t, np.hypot(e.vel_ned_mps[:, 0], e.vel_ned_mps[:, 1]), lw=0.8)
+        axes[2].plot(t, np.hypot(e.att_ned_rad[:, 0], e.att_ned_rad[:, 1]) / arcsec, lw=0.8)
+        axes[3].plot(t, e.att_ned_rad[:, 2] / arcsec, lw=0.8)
+    labels = ("horizontal position [m]", "horizontal velocity [m/s]", "tilt [arcsec]",
+              "heading phi_D [arcsec]")
+    for ax, lab in zip(axes, labels, strict=True):
+        ax.set_ylabel(lab, fontsize=8)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    axes[0].set_title("Solution minus reference")
+    axes[-1].set_xlabel("time since start [s]")
+    fig.tight_layout()
+    return fig
