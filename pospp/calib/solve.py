@@ -45,6 +45,7 @@ Noise (``noise=``)
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -304,23 +305,52 @@ def _solve_scaled(hw: NDArray, zw: NDArray) -> tuple[NDArray, NDArray, bool]:
     return xs / norms, cov_s / np.outer(norms, norms), bool(not keep.all())
 
 
-class _LegNoise:
-    """One leg of the GLS in the eigenbasis of its noise covariance.
+@dataclass(frozen=True)
+class NoiseBasis:
+    """One leg's noise model in the eigenbasis of its gyro-noise covariance (for GLS).
 
-    With D = diag(sigma_A^2) and K' = D^-1/2 K D^-1/2 = U diag(lam) U^T (once per leg),
+    With D = diag(sigma_A^2) and K' = D^-1/2 K D^-1/2 = U diag(lam) U^T,
     Cov = a D + q K = D^1/2 U diag(a + q lam) U^T D^1/2, so any (a, q) costs O(n P).
+
+    Attributes
+    ----------
+    samples : ndarray of int, shape (R,)
+        Sample indices (> 0) of the leg used by the GLS.
+    rows : ndarray of int, shape (2 R,)
+        Matching rows of the leg's block of :func:`design_matrix`.
+    sq : ndarray, shape (2 R,)
+        sigma_A at those rows [m/s].
+    u : ndarray, shape (2 R, 2 R)
+    lam : ndarray, shape (2 R,)
+        Eigenvectors and eigenvalues of K' [per rad^2/s].
     """
 
-    def __init__(self, d: NDArray, k: NDArray, h: NDArray, z: NDArray):
-        sq = np.sqrt(d)
-        kp = k / np.outer(sq, sq)
-        lam, u = np.linalg.eigh(0.5 * (kp + kp.T))
-        self.lam = np.clip(lam, 0.0, None)
-        self.h = u.T @ (h / sq[:, None])
-        self.z = u.T @ (z / sq)
-        self.u = u
-        self.sq = sq
-        self.logdet_d = float(np.sum(np.log(d)))
+    samples: NDArray
+    rows: NDArray
+    sq: NDArray
+    u: NDArray
+    lam: NDArray
+
+
+def noise_basis(rep: LegReplay, *, noise_step_s: float = 5.0) -> NoiseBasis:
+    """The :class:`NoiseBasis` of a leg, on samples every ``noise_step_s`` seconds."""
+    step = max(1, int(round(noise_step_s / max(float(np.median(np.diff(rep.t_s))), 1e-9))))
+    smp = np.arange(step, rep.t_s.size, step)
+    rows = (2 * (smp - 1)[:, None] + np.arange(2)[None, :]).reshape(-1)
+    sq = rep.sigma_v_n_mps[smp, 0:2].reshape(-1)
+    kp = gyro_noise_covariance(rep, smp) / np.outer(sq, sq)
+    lam, u = np.linalg.eigh(0.5 * (kp + kp.T))
+    return NoiseBasis(smp, rows, sq, u, np.clip(lam, 0.0, None))
+
+
+class _LegNoise:
+    """Projected H and z of one leg in its :class:`NoiseBasis`."""
+
+    def __init__(self, basis: NoiseBasis, h: NDArray, z: NDArray):
+        self.lam, self.u, self.sq = basis.lam, basis.u, basis.sq
+        self.h = basis.u.T @ (h / basis.sq[:, None])
+        self.z = basis.u.T @ (z / basis.sq)
+        self.logdet_d = 2.0 * float(np.sum(np.log(basis.sq)))
 
     def whiten(self, a: float, q: float) -> tuple[NDArray, NDArray, float]:
         v = a + q * self.lam
@@ -358,6 +388,7 @@ def calibrate(
     noise: str = "gyro_rw",
     gyro_arw_radpsqrts: float | None = None,
     noise_step_s: float = 5.0,
+    bases: Mapping[int, NoiseBasis] | None = None,
 ) -> Calibration:
     """Calibrate from the B-minus-A velocity errors of a set of legs (paper Eq. 17).
 
@@ -378,6 +409,8 @@ def calibrate(
     noise_step_s : float
         Spacing of the samples entering the ``"gyro_rw"`` GLS [s] (the estimate uses every
         ``noise_step_s``-th second; the condition numbers and residuals use all samples).
+    bases : Mapping of leg id to NoiseBasis, optional
+        Precomputed :func:`noise_basis` per leg (reused across pairs and formulations).
 
     Returns
     -------
@@ -407,13 +440,12 @@ def calibrate(
     else:
         blocks, rows_all = [], []
         for i, rep in enumerate(legs):
-            # noise-model rows every noise_step_s: the residuals are smooth, and the
-            # eigen-decomposition per leg stays small
-            step = max(1, int(round(noise_step_s / max(np.median(np.diff(rep.t_s)), 1e-9))))
-            smp = np.arange(step, rep.t_s.size, step)
-            r = (2 * (smp - 1)[:, None] + np.arange(2)[None, :]).reshape(-1) + edges[i]
+            basis = None if bases is None else bases.get(rep.leg.leg_id)
+            if basis is None:
+                basis = noise_basis(rep, noise_step_s=noise_step_s)
+            r = basis.rows + edges[i]
             rows_all.append(r)
-            blocks.append(_LegNoise(s[r] ** 2, gyro_noise_covariance(rep, smp), h[r], z[r]))
+            blocks.append(_LegNoise(basis, h[r], z[r]))
         if gyro_arw_radpsqrts is None:
             bounds = [(np.log(1e-6), np.log(1e4)), (np.log(1e-22), np.log(1e-6))]
             q_fixed = None

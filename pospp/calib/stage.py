@@ -22,7 +22,7 @@ from pospp.calib.compensate import LegImprovement, compensate_legs, joint_calibr
 from pospp.calib.pairs import Pair, PairPolicy, evaluate_pairs
 from pospp.calib.replay import ImuIncrements, LegReplay, ReferenceSolution, replay_leg
 from pospp.calib.segment import Leg, LegThresholds, find_legs
-from pospp.calib.solve import FORMULATIONS, Calibration
+from pospp.calib.solve import FORMULATIONS, Calibration, noise_basis
 from pospp.nav.closed_form import PAPER_FROM_NED
 from pospp.rotation import ARCSEC_RAD, DEG_PER_H_RADPS
 
@@ -216,6 +216,8 @@ def calibrate_flight(
     if len(legs) < 2:
         return done(f"no calibration: only one leg (leg {legs[0].leg_id}) was found; a pair "
                     "needs two legs with different headings")
+    if noise == "gyro_rw":
+        cal_kw["bases"] = {i: noise_basis(r) for i, r in replays.items()}
     pairs = evaluate_pairs(replays, legs, policy, formulations=forms, **cal_kw)
     if not any(p.used for p in pairs):
         why = "; ".join(f"pair {p.pair_id} (legs {p.leg_a}, {p.leg_b}): {p.reason}"
