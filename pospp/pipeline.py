@@ -29,12 +29,17 @@ import numpy as np
 import pandas as pd
 
 from pospp import outputs, rotation
+from pospp.calib.replay import ImuIncrements, ReferenceSolution
+from pospp.calib.stage import CalibrationRun, calibrate_flight
 from pospp.config import PipelineConfig
+from pospp.diagnose.workflow import Diagnosis, diagnosis_columns
+from pospp.diagnose.workflow import diagnose as run_diagnosis
 from pospp.evaluate import evaluation_rows, solution_errors
 from pospp.io import mcap_reader, parquet_tables, report_files, trajectory_mcap
 from pospp.io.errors import IngestError
 from pospp.nav import filter as nav_filter
 from pospp.nav import tuning as nav_tuning
+from pospp.nav.strapdown import increments_from_rates
 from pospp.report import figures
 from pospp.report.html import render_report
 
@@ -263,14 +268,17 @@ def run(
 
     # --- calibration: legs, B, pairs, least squares -------------------------------------------
     book.stage("calibrate")
-    calib_run = calibrate(log, nav, config)
-    for text in calib_run.reasons:
+    imu = imu_increments(log)
+    calib_run, reference = calibrate(imu, nav, config)
+    for text in calib_run.messages:
         book.note("warning", "calibrate", text)
-    status = "ok" if calib_run.calibration is not None else "partial"
+    if not calib_run.calibrated:
+        book.note("warning", "calibrate", calib_run.reason)
+    status = "ok" if calib_run.calibrated else "partial"
 
     # --- compensation: A re-run with the calibrated gyro bias ---------------------------------
     book.stage("compensate")
-    if calib_run.calibration is not None and config.compensation.rerun_filter:
+    if calib_run.calibrated and config.compensation.rerun_filter:
         comp = navigate(log, config,
                         gyro_bias_correction_b_radps=calib_run.gyro_bias_b_radps)
         solutions["compensated"] = comp.smoothed if comp.smoothed is not None else comp.forward
@@ -278,23 +286,23 @@ def run(
     # --- diagnosis -----------------------------------------------------------------------------
     book.stage("diagnose")
     diagnosis = None
-    if config.outputs.diagnose and calib_run.calibration is not None:
-        diagnosis = diagnose(calib_run, config)
+    if config.outputs.diagnose and calib_run.calibrated:
+        try:
+            diagnosis = diagnose(calib_run, imu, reference, config)
+        except ValueError as exc:
+            book.note("warning", "diagnose", f"no diagnosis: {exc}")
+            status = "partial"
 
     # --- outputs -------------------------------------------------------------------------------
     book.stage("write")
-    tables = {
-        "trajectory": outputs.trajectory_table(solutions, epoch_ns),
-        "legs": outputs.legs_table(calib_run, epoch_ns),
-        "pairs": outputs.pairs_table(calib_run),
-        "calibration": outputs.calibration_table(calib_run),
-        "leg_errors": outputs.leg_errors_table(calib_run),
-    }
+    tables: dict[str, Any] = {"trajectory": outputs.trajectory_table(solutions, epoch_ns)}
+    tables.update(calib_run.tables(epoch_ns))
     if diagnosis is not None:
-        tables["diagnosis"] = outputs.diagnosis_table(diagnosis)
+        tables["diagnosis"] = diagnosis_columns(diagnosis)
     for name, table in tables.items():
         write(name, table)
-    summary.update(outputs.calibration_summary(calib_run))
+    summary.update(calib_run.summary())
+    summary["calibration"] = calib_run.reason
     if config.outputs.mcap:
         best = solutions.get("compensated") or solutions.get("smoothed") or nav.forward
         trajectory_mcap.write_trajectory_mcap(out / "trajectory.mcap", best, epoch_ns)
@@ -313,15 +321,34 @@ def write_report(run_dir: str | Path) -> Path:
                                    render_report(tables, title=title))
 
 
-def calibrate(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
-              config: PipelineConfig) -> Any:
-    """Legs, B replays, pairs, least squares and B re-run (pospp.calib)."""
-    raise NotImplementedError  # wired to pospp.calib at integration
+def imu_increments(log: mcap_reader.FlightLog) -> ImuIncrements:
+    """The log's IMU as increments on the run's time axis (t_s from the first IMU stamp)."""
+    t_s, dth, dv = increments_from_rates(log.imu.time_ns, log.imu.w_ib_b_radps,
+                                         log.imu.f_ib_b_mps2, epoch_ns=int(log.imu.time_ns[0]))
+    return ImuIncrements(t_s, dth, dv)
 
 
-def diagnose(calib_run: Any, config: PipelineConfig) -> Any:
-    """Model-discrepancy workflow on the calibrated run (pospp.diagnose)."""
-    raise NotImplementedError  # wired to pospp.diagnose at integration
+def calibrate(imu: ImuIncrements, nav: nav_filter.FilterResult,
+              config: PipelineConfig) -> CalibrationRun:
+    """Legs, B replays, pairs, least squares and B re-run (pospp.calib.stage)."""
+    which = config.replay.reference if nav.smoothed is not None else "forward"
+    reference = ReferenceSolution(*nav_filter.reference_solution(nav, which=which))
+    tuning = imu_tuning(config)
+    return calibrate_flight(
+        imu, reference, legs_cfg=config.legs, replay_cfg=config.replay,
+        pairs_cfg=config.pairs, gyro_arw_dpsh=tuning.gyro_arw_dpsh,
+    ), reference
+
+
+def diagnose(calib_run: CalibrationRun, imu: ImuIncrements, reference: ReferenceSolution,
+             config: PipelineConfig) -> Diagnosis:
+    """Model-discrepancy workflow on the calibrated run's B-minus-A curves (pospp.diagnose)."""
+    replays = [calib_run.replays[i] for i in sorted(calib_run.replays)]
+    return run_diagnosis(
+        replays, imu=imu, reference=reference,
+        replay_kwargs={"accel_compensation": config.replay.accel_compensation},
+        base_formulation=config.pairs.formulation, base_transition=config.pairs.transition,
+    )
 
 
 def evaluate_run(run_dir: str | Path, truth_file: str | Path, *, skip_s: float = 0.0

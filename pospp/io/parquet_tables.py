@@ -187,6 +187,14 @@ TABLES: dict[str, list[Column]] = {
         Column("gap_after_mps", _F, "m/s", "model-data velocity gap after adding the effect"),
         Column("heldout_gap_before_mps", _F, "m/s", "same on held-out legs, before"),
         Column("heldout_gap_after_mps", _F, "m/s", "same on held-out legs, after"),
+        _opt(Column("criterion", _S, "", "the test behind p_value (e.g. 'F-test')")),
+        _opt(Column("delta_bic", _F, "1", "BIC of the model with the effect minus without")),
+        _opt(Column("explained_fraction", _F, "1", "share of the structured (lack-of-fit) gap "
+                    "the effect explains")),
+        _opt(Column("confounded_with", _S, "", "';'-joined effects with a similar signature")),
+        _opt(Column("parameters", _S, "", "';'-joined parameter names of the effect")),
+        _opt(Column("parameter_values", _S, "", "';'-joined values, in the row's unit")),
+        _opt(Column("parameter_sigmas", _S, "", "';'-joined 1-sigmas, in the row's unit")),
     ],
     "observability": [
         Column("formulation", _S, "", "'paper' or 'body'"),
