@@ -6,7 +6,8 @@ Errors are computed minus true (B minus A).
 Measurements: B's horizontal velocity error [dv_N, dv_E] at the samples t > 0 of every leg
 (:class:`pospp.calib.replay.LegReplay`), weighted by A's sigmas (and, when the gyro angle
 random walk is given, by the correlated covariance of :func:`pospp.calib.solve.
-gyro_noise_covariance`), i.e. whitened by the Cholesky factor of each leg's covariance.
+gyro_noise_covariance`, ``noise="gyro_rw"``), i.e. whitened by the Cholesky factor of each
+leg's covariance.
 
 Base model (what the calibration estimates, paper Eq. 17 with pospp's signs)::
 
@@ -34,7 +35,9 @@ Steps
 
    at level alpha / (number of candidates tested) (Bonferroni), together with the
    leave-one-leg-out prediction error, which must decrease. A lack-of-fit basis (per leg and
-   channel, cosines cos(pi k t / T), k < ``lof_terms``) measures the whole structured gap; a
+   channel, Legendre polynomials up to degree 4 and cosines cos(pi k t / T), 0 < k <
+   ``lof_terms``) measures the whole structured gap (the polynomials keep smooth gaps in the
+   span even when a correlated-noise whitening amplifies the cosines' truncation error); a
    candidate is named only when its RSS reduction beyond noise is at least
    ``min_explained_fraction`` (0.9) of the basis's: otherwise it would be a wrong effect
    soaking up part of a gap it does not explain (a wrong candidate correlated with an
@@ -58,12 +61,14 @@ from numpy.typing import NDArray
 from scipy import linalg, stats
 
 from pospp.calib.replay import ImuIncrements, LegReplay, ReferenceSolution
-from pospp.calib.solve import gyro_noise_covariance, leg_sensitivities
+from pospp.calib.solve import calibrate, gyro_noise_covariance, leg_sensitivities
 from pospp.diagnose import effects as fx
 
 BASE_FORMULATIONS = ("body", "paper")
 BASE_TRANSITIONS = ("numerical", "closed_form")
 CRITERION = "F_test_bonferroni_and_heldout"
+LOF_DEGREE = 4
+"""Legendre degree of the polynomial part of the lack-of-fit basis."""
 LOF_CRITERION = "lack_of_fit_F"
 
 
@@ -252,7 +257,7 @@ class _Fit:
 class _Problem:
     """Whitened stacked least squares over legs."""
 
-    def __init__(self, replays: Sequence[LegReplay], arw: float):
+    def __init__(self, replays: Sequence[LegReplay], white_scale: float, arw: float):
         self.reps = list(replays)
         self.z = [r.dv_n_mps[1:, 0:2].reshape(-1) for r in self.reps]
         self.sizes = [z.size for z in self.z]
@@ -264,7 +269,7 @@ class _Problem:
             self.sig.append(s)
             if arw > 0.0:
                 cov = arw**2 * gyro_noise_covariance(r)
-                cov[np.diag_indices_from(cov)] += s**2
+                cov[np.diag_indices_from(cov)] += white_scale * s**2
                 self.chol.append(linalg.cholesky(cov, lower=True))
             else:
                 self.chol.append(None)
@@ -374,12 +379,14 @@ def _lof_term(reps: Sequence[LegReplay], k: int) -> list[_Term]:
     for i, r in enumerate(reps):
         t = r.t_s[1:]
         u = (t - t[0]) / max(t[-1] - t[0], 1e-9)
-        cosines = np.cos(np.pi * np.outer(u, np.arange(k)))  # (M - 1, k)
-        blk = np.zeros((t.size, 2, 2 * k))
-        blk[:, 0, :k] = cosines
-        blk[:, 1, k:] = cosines
-        blocks = [np.zeros((2 * (q.t_s.size - 1), 2 * k)) for q in reps]
-        blocks[i] = blk.reshape(-1, 2 * k)
+        basis = np.hstack([np.polynomial.legendre.legvander(2.0 * u - 1.0, LOF_DEGREE),
+                           np.cos(np.pi * np.outer(u, np.arange(1, k)))])
+        w = basis.shape[1]
+        blk = np.zeros((t.size, 2, 2 * w))
+        blk[:, 0, :w] = basis
+        blk[:, 1, w:] = basis
+        blocks = [np.zeros((2 * (q.t_s.size - 1), 2 * w)) for q in reps]
+        blocks[i] = blk.reshape(-1, 2 * w)
         terms.append(_Term(f"lof_leg{r.leg.leg_id}", blocks, local_leg=i))
     return terms
 
@@ -505,7 +512,8 @@ def diagnose(
     base_transition: str = "numerical",
     effects: Sequence[str] | None = None,
     alpha: float = 0.01,
-    gyro_arw_radpsqrts: float = 0.0,
+    noise: str = "white",
+    gyro_arw_radpsqrts: float | None = None,
     max_steps: int = 4,
     lof_terms: int = 8,
     min_explained_fraction: float = 0.9,
@@ -531,12 +539,19 @@ def diagnose(
         Library identifiers to consider (default: all).
     alpha : float
         Family-wise significance level of each step (Bonferroni over the candidates).
-    gyro_arw_radpsqrts : float
-        Gyro angle random walk [rad/s^0.5] of the residual covariance (0: A's sigmas only).
+    noise : {"white", "gyro_rw"}
+        Residual covariance: A's sigmas only (``"white"``), or A's sigmas times a plus the
+        gyro angle random walk's correlated covariance q K (``"gyro_rw"``, as
+        :func:`pospp.calib.solve.calibrate`, which estimates a and q by REML on the base
+        model). Only the shape matters to the F-tests (the scale is estimated), but a wrong
+        shape (correlated residuals weighted as white) makes every test too liberal.
+    gyro_arw_radpsqrts : float, optional
+        Gyro angle random walk [rad/s^0.5] for ``"gyro_rw"``; estimated when None.
     max_steps : int
         Most effects to add.
     lof_terms : int
-        Cosines per leg and channel of the lack-of-fit basis.
+        Cosines per leg and channel of the lack-of-fit basis (plus :data:`LOF_DEGREE` + 1
+        polynomials).
     min_explained_fraction : float
         Least share of the structured gap a candidate (or, failing one, a pair of candidates
         leaving no structured gap) must explain to be named.
@@ -573,7 +588,15 @@ def diagnose(
                           if e not in in_base and ctx is None and e == "time_offset")
     pool = [fx.effect_by_id(e) for e in wanted if e not in in_base and e not in not_evaluated]
 
-    prob = _Problem(replays, gyro_arw_radpsqrts)
+    if noise == "white":
+        white_scale, arw = 1.0, 0.0
+    elif noise == "gyro_rw":
+        cal = calibrate(tuple(replays), "body", noise="gyro_rw",
+                        gyro_arw_radpsqrts=gyro_arw_radpsqrts)
+        white_scale, arw = cal.variance_factor, cal.gyro_arw_radpsqrts
+    else:
+        raise ValueError(f"noise: expected 'white' or 'gyro_rw', got {noise!r}")
+    prob = _Problem(replays, white_scale, arw)
     terms = _base_terms(replays, base_formulation, base_transition)
     lof = _lof_term(replays, lof_terms)
     fixed_sigs = {e.effect_id: fx.signatures(e.effect_id, replays, context=ctx,
