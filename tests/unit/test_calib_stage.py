@@ -1,0 +1,113 @@
+"""The calibration stage on bad geometry: it completes, returns what it could and says why.
+
+Exact IMU data of a stationary IMU and of straight rhumb lines (tests/unit/_truth_imu.py);
+the truth is algorithm A. Also the observability study (paper Fig. 4 and 5) on its table.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from _truth_imu import rhumb_line, stationary
+
+from pospp import rotation
+from pospp.calib.observability import condition_grid, observability_table
+from pospp.calib.pairs import PairPolicy
+from pospp.calib.replay import ImuIncrements, reference_from_trajectory
+from pospp.calib.segment import Leg
+from pospp.calib.stage import calibrate_flight
+from pospp.io.parquet_tables import write_table
+from pospp.nav.strapdown import Trajectory
+
+LAT = np.radians(40.0)
+
+
+def _flight(tr, n):
+    v = np.tile(tr.v_n_mps, (n, 1))
+    q = np.tile(rotation.quat_from_dcm(tr.c_nb), (n, 1))
+    traj = Trajectory(tr.t_s, tr.lat_rad, tr.lon_rad, np.full(n, tr.height_m), v, q)
+    return (ImuIncrements(tr.t_s, tr.dtheta_b_rad, tr.dv_b_mps),
+            reference_from_trajectory(traj, v_sigma_n_mps=[0.02, 0.02, 0.05]))
+
+
+def _check_tables(run, tmp_path):
+    for name, cols in run.tables(epoch_ns=1_700_000_000_000_000_000).items():
+        write_table(tmp_path / f"{name}.parquet", cols, name, metadata={})
+
+
+def test_no_straight_leg(tmp_path):
+    tr = stationary(LAT, 100.0, [0.0, 0.0, 0.3], 10.0, 400.0)
+    run = calibrate_flight(*_flight(tr, tr.t_s.size))
+    assert not run.calibrated and run.legs == () and run.pairs == ()
+    assert run.reason.startswith("no calibration: no straight, level, uniform leg")
+    assert np.all(run.gyro_bias_b_radps == 0) and np.all(np.isinf(run.gyro_bias_sigma_b_radps))
+    _check_tables(run, tmp_path)
+
+
+def test_legs_too_short():
+    tr = rhumb_line(LAT, 100.0, 20.0, 0.5, 10.0, 200.0)
+    run = calibrate_flight(*_flight(tr, tr.t_s.size))
+    assert not run.calibrated and "285 s" in run.reason
+
+
+def test_single_leg(tmp_path):
+    tr = rhumb_line(LAT, 100.0, 20.0, 0.5, 10.0, 400.0)
+    run = calibrate_flight(*_flight(tr, tr.t_s.size))
+    assert len(run.legs) == 1 and len(run.replays) == 1
+    assert not run.calibrated and "only one leg" in run.reason
+    _check_tables(run, tmp_path)
+
+
+@pytest.fixture(scope="module")
+def one_line():
+    tr = rhumb_line(LAT, 100.0, 20.0, 0.5, 10.0, 700.0)
+    hd = 0.5
+    legs = (Leg(0, 10.0, 330.0, hd, 20.0, 100.0, 0, 0, 0, 0),
+            Leg(1, 340.0, 660.0, hd, 20.0, 100.0, 0, 0, 0, 0))
+    return _flight(tr, tr.t_s.size), legs
+
+
+def test_same_heading_pair_is_rejected_with_its_reason(one_line, tmp_path):
+    (imu, ref), legs = one_line
+    run = calibrate_flight(imu, ref, legs=legs)
+    (pair,) = run.pairs
+    assert not pair.used and "heading change 0.0 deg below the minimum 30 deg" in pair.reason
+    assert not run.calibrated and "no pair passed the screening" in run.reason
+    # without the heading rule, the condition number rejects it
+    run = calibrate_flight(imu, ref, legs=legs, pairs_cfg=PairPolicy(min_dheading_deg=0.0))
+    (pair,) = run.pairs
+    assert not pair.used and pair.reason.startswith("ill-conditioned: body cond_scaled")
+    assert pair.cond_gate > 1e4 and not run.calibrated
+    _check_tables(run, tmp_path)
+
+
+def test_leg_outside_the_imu_data_is_reported_not_raised(one_line):
+    (imu, ref), legs = one_line
+    late = Leg(2, 800.0, 1100.0, 0.5 + np.pi, 20.0, 100.0, 0, 0, 0, 0)
+    run = calibrate_flight(imu, ref, legs=(legs[0], late))
+    assert any("leg 2: B replay failed" in m for m in run.messages)
+    assert run.pairs[0].reason == "no B replay for leg(s) [2]" and not run.calibrated
+
+
+def test_condition_number_follows_paper_fig4_and_fig5():
+    dh = np.array([0.0, 10.0, 30.0, 60.0, 90.0, 120.0, 150.0, 170.0, 180.0])
+    dv = np.array([0.0, 10.0, 20.0, 40.0])
+    g = condition_grid(dh, dv, formulation="paper", transition="closed_form")
+    # Fig. 4: at equal speed the best pair reverses heading
+    assert dh[np.argmin(g.cond_scaled[:, 0])] == 180.0
+    assert np.all(np.diff(g.cond_scaled[:, 0]) < 0)
+    # Fig. 5: a speed difference helps, a lot at small dH ...
+    assert np.all(np.diff(g.cond_scaled, axis=1) < 0)
+    assert g.cond_scaled[0, 0] / g.cond_scaled[0, -1] > 1e3
+    # ... and little beyond 30 deg
+    spread = g.cond_scaled[:, 0] / g.cond_scaled[:, -1]
+    assert np.all(spread[dh >= 30.0] < 2.0)
+    # the numerical rows give the same picture on these ideal legs
+    n = condition_grid(dh[2:], dv[:2], formulation="paper", transition="numerical")
+    assert np.allclose(n.cond_scaled, g.cond_scaled[2:, :2], rtol=0.02)
+
+
+def test_observability_table_columns(tmp_path):
+    tab = observability_table([0.0, 90.0, 180.0], [0.0, 20.0])
+    assert set(tab) == {"formulation", "dheading_deg", "dspeed_mps", "cond_raw", "cond_scaled"}
+    assert len(tab["formulation"]) == 12 and set(tab["formulation"]) == {"paper", "body"}
