@@ -13,6 +13,7 @@ picks up where it stopped.
 
 from __future__ import annotations
 
+import json
 import time
 import traceback
 from collections.abc import Callable, Iterable
@@ -53,7 +54,9 @@ def already_done(mcap_path: Path, run_dir: Path, config: PipelineConfig, sha256:
     if not summary.is_file():
         return False
     meta = parquet_tables.read_metadata(summary)
-    if meta.get("input_sha256") != sha256 or meta.get("config") != config.to_dict():
+    if meta.get("input_sha256") != sha256:
+        return False
+    if json.dumps(meta.get("config"), sort_keys=True) != config.to_json():  # tuples -> lists
         return False
     status = parquet_tables.read_table(summary).get("status")
     return status is not None and str(status.iloc[0]) in ("ok", "partial")

@@ -1,0 +1,246 @@
+"""End to end: MCAP bytes in, Parquet tables, trajectory MCAP and report out (issue 6).
+
+The good case runs the bundled sample flight (sample_data/, made by pospp's simulator with a
+known truth) through the CLI exactly as the README says, then checks the tables against their
+schemas, against the truth (pospp evaluate) and for determinism. The bad cases are cut from the
+same log and damaged in one way each; every one must end with a clear error naming file,
+topic and time, or a completed run that says plainly why no calibration was produced, and
+must never lose or half-write a table.
+"""
+
+from __future__ import annotations
+
+import shutil
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from click.testing import CliRunner
+
+from pospp.cli import main
+from pospp.io import parquet_tables
+from pospp.io.mcap_reader import read_flight_log
+from pospp.io.mcap_writer import write_flight_log
+
+REPO = Path(__file__).resolve().parents[2]
+SAMPLE = REPO / "sample_data" / "sample_flight.mcap"
+SAMPLE_TRUTH = REPO / "sample_data" / "sample_flight.truth.parquet"
+SAMPLE_PIPELINE = REPO / "pipelines" / "sample.toml"
+TABLES = ("trajectory", "legs", "pairs", "calibration", "leg_errors", "diagnosis", "messages",
+          "summary")
+
+
+def _cli(*args: str) -> tuple[int, str]:
+    res = CliRunner().invoke(main, list(args), catch_exceptions=False)
+    return res.exit_code, res.output
+
+
+@pytest.fixture(scope="module")
+def sample_run(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("run") / "sample"
+    code, text = _cli("run", str(SAMPLE), "-p", str(SAMPLE_PIPELINE), "-o", str(out))
+    assert code == 0, text
+    assert "status: ok" in text and "legs: 4" in text
+    return out
+
+
+@pytest.mark.slow
+def test_sample_run_writes_every_table_with_its_schema(sample_run):
+    for name in TABLES:
+        path = sample_run / f"{name}.parquet"
+        assert path.is_file(), name
+        meta = parquet_tables.read_metadata(path)
+        assert meta["schema_name"] == name
+        assert meta["input_sha256"] == parquet_tables.sha256_file(SAMPLE)
+        assert meta["config"]["name"] == "sample"
+        assert parquet_tables.schema(name).names[0] in parquet_tables.read_table(path)
+    assert (sample_run / "report.html").stat().st_size > 50_000
+    assert not list(sample_run.glob(".*.tmp")), "a temporary file was left behind"
+
+
+@pytest.mark.slow
+def test_sample_run_calibrates_and_improves(sample_run):
+    s = parquet_tables.read_table(sample_run / "summary.parquet").iloc[0]
+    assert s.status == "ok" and s.n_legs == 4 and s.n_pairs_used >= 2
+    # the calibration must shrink B's error at the horizon; the random drift (Gauss-Markov,
+    # 0.5 deg/h, 300 s) of the paper_flight grade bounds how much (docs/calibration.md)
+    assert s.dv_after_mps < s.dv_before_mps / 2.5
+    assert s.dp_after_m < s.dp_before_m / 2.5
+    cal = parquet_tables.read_table(sample_run / "calibration.parquet")
+    body = cal[(cal.pair_id == -1) & (cal.formulation == "body")].set_index("parameter")
+    # injected: constant [1, -1, 1] deg/h plus the drift's realisation (sample_data/README.md):
+    # signs right and within the drift's size
+    assert body.loc["gyro_bias_x", "value"] == pytest.approx(1.0, abs=0.6)
+    assert body.loc["gyro_bias_y", "value"] == pytest.approx(-1.0, abs=0.6)
+    legs = parquet_tables.read_table(sample_run / "legs.parquet")
+    np.testing.assert_allclose(np.sort(legs.heading_deg.to_numpy()), [20, 20, 110, 200],
+                               atol=0.5)
+
+
+@pytest.mark.slow
+def test_sample_run_against_the_truth(sample_run):
+    code, text = _cli("evaluate", str(sample_run), "--truth", str(SAMPLE_TRUTH),
+                      "--skip-s", "300")
+    assert code == 0, text
+    ev = parquet_tables.read_table(sample_run / "evaluation.parquet")
+    sm = ev[ev.solution == "smoothed"].set_index("metric").value
+    # issue 4 targets (1.5 h flight): tilt < 10 arcsec, heading < 60 arcsec, position < 0.1 m
+    assert sm["roll_pitch_rms"] < 10.0
+    assert sm["heading_rms"] < 60.0
+    assert sm["horizontal_rms"] < 0.1
+    assert (sample_run / "evaluation.png").is_file()
+
+
+@pytest.mark.slow
+def test_trajectory_mcap_reads_back(sample_run):
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    with open(sample_run / "trajectory.mcap", "rb") as fh:
+        reader = make_reader(fh, decoder_factories=[DecoderFactory()])
+        topics = {ch.topic for ch in reader.get_summary().channels.values()}
+        first = next(reader.iter_decoded_messages(topics=["/pospp/fix"]))
+    assert topics == {"/pospp/fix", "/pospp/pose"}
+    truth = parquet_tables.read_reference_trajectory(SAMPLE_TRUTH)
+    assert first.decoded_message.latitude == pytest.approx(np.degrees(truth.lat_rad[0]),
+                                                           abs=1e-5)
+
+
+@pytest.mark.slow
+def test_outputs_are_deterministic(sample_run, tmp_path):
+    again = tmp_path / "again"
+    code, text = _cli("run", str(SAMPLE), "-p", str(SAMPLE_PIPELINE), "-o", str(again))
+    assert code == 0, text
+    for name in TABLES:
+        a = parquet_tables.read_table(sample_run / f"{name}.parquet")
+        b = parquet_tables.read_table(again / f"{name}.parquet")
+        if name == "summary":
+            a, b = a.drop(columns="wall_time_s"), b.drop(columns="wall_time_s")
+        pd.testing.assert_frame_equal(a, b, check_exact=True, obj=name)
+
+
+# ------------------------------------------------------------------------------ bad inputs
+
+
+@pytest.fixture(scope="module")
+def sample_log():
+    return read_flight_log(SAMPLE)
+
+
+def _window(log, t_end_s: float):
+    t0 = int(log.imu.time_ns[0])
+
+    def keep(obj):
+        m = obj.time_ns < t0 + int(t_end_s * 1e9)
+        return replace(obj, **{k: v[m] for k, v in vars(obj).items()
+                               if isinstance(v, np.ndarray) and v.shape[:1] == m.shape})
+
+    return keep(log.imu), keep(log.fix), keep(log.vel)
+
+
+def _failed_run(path: Path, out: Path) -> tuple[str, pd.DataFrame]:
+    code, text = _cli("run", str(path), "-p", str(SAMPLE_PIPELINE), "-o", str(out))
+    assert code == 2, text
+    summary = parquet_tables.read_table(out / "summary.parquet").iloc[0]
+    assert summary.status == "failed"
+    return text, parquet_tables.read_table(out / "messages.parquet")
+
+
+def test_missing_gnss_topic_is_named(sample_log, tmp_path):
+    imu, fix, vel = _window(sample_log, 120.0)
+    path = tmp_path / "no_gnss.mcap"
+    write_flight_log(path, imu, fix, vel, fix_topic="/other/fix")
+    text, msgs = _failed_run(path, tmp_path / "out")
+    assert "'/gnss/fix'" in text and "no_gnss.mcap" in text and "/other/fix" in text
+    assert (msgs.severity == "error").any()
+
+
+def test_nan_imu_sample_is_named_with_its_time(sample_log, tmp_path):
+    imu, fix, vel = _window(sample_log, 120.0)
+    w = imu.w_ib_b_radps.copy()
+    w[5000, 1] = np.nan
+    path = tmp_path / "nan.mcap"
+    write_flight_log(path, replace(imu, w_ib_b_radps=w), fix, vel)
+    text, _ = _failed_run(path, tmp_path / "out")
+    assert "nan.mcap" in text and "/imu/data" in text and str(int(imu.time_ns[5000])) in text
+
+
+def test_imu_in_degrees_per_second_is_caught(sample_log, tmp_path):
+    imu, fix, vel = _window(sample_log, 600.0)
+    path = tmp_path / "degps.mcap"
+    write_flight_log(path, replace(imu, w_ib_b_radps=np.degrees(imu.w_ib_b_radps),
+                                   f_ib_b_mps2=imu.f_ib_b_mps2 / 9.80665), fix, vel)
+    text, _ = _failed_run(path, tmp_path / "out")
+    assert "degps.mcap" in text and "/imu/data" in text
+
+
+def test_truncated_file_keeps_earlier_outputs_and_says_where(sample_log, tmp_path):
+    imu, fix, vel = _window(sample_log, 400.0)
+    good = tmp_path / "good.mcap"
+    write_flight_log(good, imu, fix, vel)
+    out = tmp_path / "out"
+    code, text = _cli("run", str(good), "-p", str(SAMPLE_PIPELINE), "-o", str(out))
+    # 400 s of static and climb: A runs, no leg is found, and the run says so plainly
+    assert code == 0, text
+    s = parquet_tables.read_table(out / "summary.parquet").iloc[0]
+    assert s.status == "partial" and "no straight" in s.calibration
+    traj_before = parquet_tables.read_table(out / "trajectory.parquet")
+    cut = tmp_path / "cut.mcap"
+    data = good.read_bytes()
+    cut.write_bytes(data[: len(data) // 3])
+    code, text = _cli("run", str(cut), "-p", str(SAMPLE_PIPELINE), "-o", str(out))
+    msgs = parquet_tables.read_table(out / "messages.parquet")
+    assert (msgs.severity == "error").any()
+    assert msgs.text.str.contains("cut.mcap").any()
+    # the readable part was processed or the run failed cleanly; nothing half-written
+    assert not list(out.glob(".*.tmp"))
+    traj_after = parquet_tables.read_table(out / "trajectory.parquet")
+    assert len(traj_after) > 0 and len(traj_before) > 0
+
+
+def test_duplicate_gnss_stamps_and_a_jump_are_reported(sample_log, tmp_path):
+    imu, fix, vel = _window(sample_log, 400.0)
+    lat = fix.lat_rad.copy()
+    lat[200] += 5000.0 / 6.4e6  # a 5 km jump
+    t = fix.time_ns.copy()
+    t[100] = t[99]  # a duplicate stamp
+    path = tmp_path / "jump.mcap"
+    write_flight_log(path, imu, replace(fix, lat_rad=lat, time_ns=t), vel)
+    out = tmp_path / "out"
+    code, text = _cli("run", str(path), "-p", str(SAMPLE_PIPELINE), "-o", str(out))
+    assert code == 0, text
+    msgs = parquet_tables.read_table(out / "messages.parquet")
+    assert msgs.text.str.contains("duplicate").any()
+    rejected = msgs[(msgs.stage == "navigate") & msgs.text.str.contains("position")]
+    assert (rejected.time_ns == fix.time_ns[200]).any(), msgs.to_string()
+
+
+def test_batch_records_every_outcome_and_skips_finished(sample_log, tmp_path):
+    imu, fix, vel = _window(sample_log, 300.0)
+    arch = tmp_path / "archive"
+    arch.mkdir()
+    write_flight_log(arch / "a.mcap", imu, fix, vel)
+    (arch / "b.mcap").write_bytes(b"not an mcap file")
+    root = tmp_path / "out"
+    code, text = _cli("batch", str(arch), "-p", str(SAMPLE_PIPELINE), "-o", str(root), "-j",
+                      "1")
+    assert code == 1, text  # one flight failed
+    man = parquet_tables.read_table(root / "manifest.parquet").set_index("file")
+    assert man.loc[str(arch / "a.mcap"), "status"] == "partial"
+    assert man.loc[str(arch / "b.mcap"), "status"] == "failed"
+    assert "b.mcap" in man.loc[str(arch / "b.mcap"), "error"]
+    code, text = _cli("batch", str(arch), "-p", str(SAMPLE_PIPELINE), "-o", str(root), "-j",
+                      "1")
+    man = parquet_tables.read_table(root / "manifest.parquet").set_index("file")
+    assert man.loc[str(arch / "a.mcap"), "status"] == "skipped"
+
+
+def test_unknown_config_key_is_named(tmp_path):
+    bad = tmp_path / "bad.toml"
+    shutil.copy(SAMPLE_PIPELINE, bad)
+    with open(bad, "a") as fh:
+        fh.write("\n[filtre]\nsmoother = true\n")
+    code, text = _cli("run", str(SAMPLE), "-p", str(bad), "-o", str(tmp_path / "o"))
+    assert code == 2 and "filtre" in text and "bad.toml" in text
