@@ -76,11 +76,14 @@ CONVENTIONS = {
 
 @dataclass(frozen=True)
 class TrueLeg:
-    """A true straight, level, constant-velocity leg of the mission."""
+    """A true straight, level, constant-velocity leg of the mission (``start_s``/``end_s`` from
+    the mission start, ``start_ns``/``end_ns`` UTC stamps)."""
 
     leg_id: int
     kind: str
     label: str
+    start_s: float
+    end_s: float
     start_ns: int
     end_ns: int
     duration_s: float
@@ -332,7 +335,8 @@ def simulate(
                 continue
             lat, lon = np.rad2deg(motion.position(np.array([lg.start_s, lg.end_s]))[:2])
             out.append(TrueLeg(
-                lg.leg_id, lg.kind, lg.label, start_time_ns + round(lg.start_s * 1e9),
+                lg.leg_id, lg.kind, lg.label, lg.start_s, lg.end_s,
+                start_time_ns + round(lg.start_s * 1e9),
                 start_time_ns + round(lg.end_s * 1e9), lg.duration_s,
                 round(math.degrees(lg.heading_rad) % 360.0, 9) % 360.0, lg.speed_mps,
                 lg.height_m,
