@@ -230,5 +230,55 @@ def evaluate(run_dir: str, truth_file: str, skip_s: float) -> None:
     click.echo(wide.to_string(float_format=lambda v: f"{v:.4g}"))
 
 
+@main.command()
+@click.option("-o", "--out", "out_dir", required=True, type=click.Path(file_okay=False))
+@click.option("--speed-mps", default=60.0, show_default=True, help="Leg a's speed [m/s].")
+@click.option("--duration-s", default=300.0, show_default=True, help="Leg duration [s].")
+@click.option("--lat-deg", default=40.0, show_default=True, help="Latitude [deg].")
+@click.option("--transition", type=click.Choice(["closed_form", "numerical"]),
+              default="closed_form", show_default=True)
+def observability(out_dir: str, speed_mps: float, duration_s: float, lat_deg: float,
+                  transition: str) -> None:
+    """Condition number versus heading and speed change (paper Fig. 4, 5).
+
+    Writes OUT/observability.parquet and OUT/observability.png
+    (pospp.calib.observability.observability_table).
+    """
+    from pospp.pipeline import observability_study
+
+    table = observability_study(out_dir, speed_mps=speed_mps, duration_s=duration_s,
+                                lat_deg=lat_deg, transition=transition)
+    for form, g in table[table.dspeed_mps == 0.0].groupby("formulation"):
+        best = g.loc[g.cond_scaled.idxmin()]
+        click.echo(f"{form}: smallest scaled condition number {best.cond_scaled:.3g} at dH = "
+                   f"{best.dheading_deg:g} deg (equal speeds)")
+    click.echo(f"tables and figure in {out_dir}")
+
+
+@main.command()
+@click.argument("run_dir", type=click.Path(exists=True, file_okay=False))
+def diagnose(run_dir: str) -> None:
+    """Model-discrepancy workflow on a finished run: RUN_DIR/diagnosis.parquet.
+
+    Predicts B's error on every leg with the calibrated model, measures the gap, tests the
+    library of candidate effects, adds the one the data supports and repeats
+    (pospp.diagnose.workflow.diagnose).
+    """
+    from pospp.pipeline import diagnose_run
+
+    bar = _StageBar()
+    try:
+        diag = diagnose_run(run_dir, progress=bar)
+    except (ValueError, FileNotFoundError) as exc:
+        bar.close()
+        _fail(exc)
+    bar.close()
+    for s in diag.steps:
+        click.echo(f"step {s.step}: {s.effect:22s} value {s.value:+.4g} +- {s.sigma:.3g} "
+                   f"{s.unit:10s} p = {s.p_value:.3g}  gap {s.gap_before_mps:.4f} -> "
+                   f"{s.gap_after_mps:.4f} m/s, held-out {s.heldout_gap_before_mps:.4f} -> "
+                   f"{s.heldout_gap_after_mps:.4f} m/s")
+
+
 if __name__ == "__main__":  # pragma: no cover
     main()

@@ -29,9 +29,10 @@ import numpy as np
 import pandas as pd
 
 from pospp import outputs, rotation
+from pospp.calib.observability import observability_table
 from pospp.calib.replay import ImuIncrements, ReferenceSolution
 from pospp.calib.stage import CalibrationRun, calibrate_flight
-from pospp.config import PipelineConfig
+from pospp.config import PipelineConfig, config_from_dict
 from pospp.diagnose.workflow import Diagnosis, diagnosis_columns
 from pospp.diagnose.workflow import diagnose as run_diagnosis
 from pospp.evaluate import evaluation_rows, solution_errors
@@ -378,3 +379,58 @@ def evaluate_run(run_dir: str | Path, truth_file: str | Path, *, skip_s: float =
     parquet_tables.write_table(run / "evaluation.parquet", table, "evaluation", metadata=meta)
     report_files.write_figure(run / "evaluation.png", figures.evaluation_errors(errors))
     return table
+
+
+def observability_study(out_dir: str | Path, *, speed_mps: float = 60.0,
+                        duration_s: float = 300.0, lat_deg: float = 40.0,
+                        transition: str = "closed_form") -> pd.DataFrame:
+    """``pospp observability``: paper Fig. 4 and 5 as observability.parquet and a figure."""
+    out = Path(out_dir)
+    cols = observability_table(speed_mps=speed_mps, duration_s=duration_s,
+                               lat_rad=np.radians(lat_deg), transition=transition)
+    n = len(cols["formulation"])
+    cols.update({"speed_mps": np.full(n, speed_mps), "duration_s": np.full(n, duration_s),
+                 "lat_deg": np.full(n, lat_deg)})
+    table = pd.DataFrame(cols)
+    meta = {"speed_mps": speed_mps, "duration_s": duration_s, "lat_deg": lat_deg,
+            "transition": transition}
+    parquet_tables.write_table(out / "observability.parquet", table, "observability",
+                               metadata=meta)
+    report_files.write_figure(out / "observability.png", figures.observability_curves(table))
+    return table
+
+
+def diagnose_run(run_dir: str | Path, *, progress: ProgressFn | None = None) -> Diagnosis:
+    """``pospp diagnose RUN_DIR``: the discrepancy workflow on a finished run.
+
+    Re-reads the run's input and configuration (from the summary's metadata), re-runs A and
+    the calibration stage (deterministic, so it reproduces the run's B-minus-A curves), runs
+    the workflow, and writes diagnosis.parquet and the report.
+    """
+    run = Path(run_dir)
+    meta = parquet_tables.read_metadata(run / "summary.parquet")
+    path = Path(meta["input_file"])
+    if not path.is_file():
+        raise FileNotFoundError(f"{run}: the run's input {path} is no longer there")
+    if parquet_tables.sha256_file(path) != meta["input_sha256"]:
+        raise ValueError(f"{run}: the run's input {path} changed since the run (SHA-256)")
+    config = config_from_dict(meta["config"], source=f"{run}/summary.parquet")
+    book = _Progress(progress)
+    book.stage("ingest")
+    log = ingest(path, config)
+    book.stage("navigate")
+    nav = navigate(log, config)
+    book.stage("calibrate")
+    imu = imu_increments(log)
+    calib_run, reference = calibrate(imu, nav, config)
+    if not calib_run.calibrated:
+        raise ValueError(f"{run}: no calibration to diagnose: {calib_run.reason}")
+    book.stage("diagnose")
+    diagnosis = diagnose(calib_run, imu, reference, config)
+    book.stage("write")
+    out_meta = {k: meta[k] for k in ("input_file", "input_sha256", "config")}
+    parquet_tables.write_table(run / "diagnosis.parquet", diagnosis_columns(diagnosis),
+                               "diagnosis", metadata=out_meta)
+    write_report(run)
+    book.done()
+    return diagnosis
