@@ -1,0 +1,99 @@
+"""Benchmark of the whole ``pospp run``: wall time, CPU time and peak memory versus duration.
+
+Run on demand (not collected by pytest)::
+
+    python tests/benchmarks/bench_pipeline.py [--minutes 15 45 90] [--rate-hz 200]
+
+For each duration, the ``flight`` preset (paper_flight IMU, 1 Hz GNSS 0.05/0.1 m,
+0.02/0.03 m/s) is simulated once into /tmp/pospp_bench (cached), then the pipeline runs in a
+fresh process (so its peak RSS is its own): ingest, A forward + smoother, legs, every B replay,
+pairs, calibration, B re-run, A re-run with the calibrated bias, diagnosis, all tables, the
+trajectory MCAP and the HTML report. Numba's cache is warm (the first untimed call compiles).
+Results go to stdout as a markdown table for docs/benchmarks.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+CACHE = Path("/tmp/pospp_bench")
+
+_CHILD = r"""
+import json, resource, sys, time
+from pospp import pipeline
+from pospp.config import load_config
+t0 = time.perf_counter(); c0 = time.process_time()
+stages = {}
+last = [t0, None]
+def progress(stage, frac):
+    now = time.perf_counter()
+    if last[1] is not None:
+        stages[last[1]] = stages.get(last[1], 0.0) + now - last[0]
+    last[0], last[1] = now, stage
+out = pipeline.run(sys.argv[1], load_config(sys.argv[2]), sys.argv[3], progress=progress)
+print(json.dumps({"wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0,
+                  "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+                  "n_imu": out.summary["n_imu_samples"], "n_legs": out.summary.get("n_legs"),
+                  "status": out.status, "stages_s": stages}))
+"""
+
+
+def _simulate(minutes: float, rate_hz: float) -> Path:
+    path = CACHE / f"flight_{minutes:g}min_{rate_hz:g}hz.mcap"
+    if path.is_file():
+        return path
+    from pospp.io.simulation_files import write_simulation
+    from pospp.sim.api import simulate
+
+    t0 = time.perf_counter()
+    sim = simulate("flight", imu_grade="paper_flight", seed=7, imu_rate_hz=rate_hz,
+                   duration_s=minutes * 60.0)
+    t1 = time.perf_counter()
+    write_simulation(sim, CACHE, path.stem)
+    print(f"  simulated {minutes:g} min at {rate_hz:g} Hz in {t1 - t0:.1f} s, written in "
+          f"{time.perf_counter() - t1:.1f} s", file=sys.stderr)
+    return path
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--minutes", type=float, nargs="+", default=[15.0, 45.0, 90.0])
+    ap.add_argument("--rate-hz", type=float, default=200.0)
+    ap.add_argument("--pipeline", default=str(REPO / "pipelines" / "flight.toml"))
+    args = ap.parse_args()
+    CACHE.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for minutes in args.minutes:
+        mcap = _simulate(minutes, args.rate_hz)
+        out = CACHE / f"run_{mcap.stem}"
+        # warm numba's on-disk cache once (not timed)
+        if not rows:
+            subprocess.run([sys.executable, "-c", _CHILD, str(mcap), args.pipeline, str(out)],
+                           check=True, capture_output=True)
+        res = subprocess.run([sys.executable, "-c", _CHILD, str(mcap), args.pipeline,
+                              str(out)], check=True, capture_output=True, text=True)
+        r = json.loads(res.stdout.strip().splitlines()[-1])
+        r["minutes"] = minutes
+        rows.append(r)
+        print(f"  {minutes:g} min: {r['wall_s']:.1f} s wall, {r['cpu_s']:.1f} s CPU, "
+              f"{r['peak_rss_mib']:.0f} MiB, {r['n_legs']} legs, {r['status']}",
+              file=sys.stderr)
+    print("| duration | IMU epochs | legs | wall [s] | CPU [s] | wall per epoch [us] | "
+          "peak RSS [MiB] | slowest stages [s] |")
+    print("|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        top = sorted(r["stages_s"].items(), key=lambda kv: -kv[1])[:3]
+        stages = ", ".join(f"{k} {v:.1f}" for k, v in top)
+        print(f"| {r['minutes']:g} min | {r['n_imu']} | {r['n_legs']} | {r['wall_s']:.1f} | "
+              f"{r['cpu_s']:.1f} | {1e6 * r['wall_s'] / r['n_imu']:.1f} | "
+              f"{r['peak_rss_mib']:.0f} | {stages} |")
+
+
+if __name__ == "__main__":
+    main()
