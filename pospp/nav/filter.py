@@ -85,6 +85,10 @@ class FilterOptions:
         GNSS records reporting a larger sigma are refused ("covariance too large").
     gate_probability : float
         Chi-square (3 dof) quantile of the innovation gate.
+    gate_reset_s : float
+        When every GNSS position (velocity) record has failed the gate for longer than this,
+        the next one resets the position (velocity) block of the covariance and is used
+        (recorded in ``FilterResult.resets``); ``inf`` never resets.
     use_velocity, zupt : bool
         Use the GNSS velocities; zero-velocity updates over the initial static period.
     zupt_sigma_mps, zupt_interval_s : float
@@ -109,6 +113,7 @@ class FilterOptions:
     max_pos_sigma_m: float = 100.0
     max_vel_sigma_mps: float = 10.0
     gate_probability: float = 0.9999
+    gate_reset_s: float = 30.0
     use_velocity: bool = True
     zupt: bool = True
     zupt_sigma_mps: float = 0.01
@@ -206,6 +211,8 @@ class FilterResult:
     n_updates: dict[str, int]
     gate_nis: float
     """The innovation gate threshold (chi-square, 3 dof)."""
+    resets: tuple[tuple[float, str], ...] = ()
+    """(t_s, kind) of the GNSS records accepted by a covariance reset (gate_reset_s)."""
 
 
 # =============================================================================================
@@ -244,7 +251,8 @@ def _inv3(s, out):
 @njit(cache=True)
 def _forward_kernel(
     t, w_imu, f_imu, k0, x0, p0, lever0, i_gm, inv_tau, i_sf, i_l, flags, m_k, m_type, m_z,
-    m_r, m_dt, prop_steps, q_diag, gate, m_status, m_nis, out_x, out_diag, out_blk, out_sens,
+    m_r, m_dt, prop_steps, q_diag, gate, reset_after_s, m_status, m_nis, out_x, out_diag,
+    out_blk, out_sens,
     out_bvar, out_lever, node_k, node_pp, node_pu, node_phi, node_dx,
 ):
     """Closed-loop forward pass over IMU epochs ``k0 .. N-1`` (module docstring).
@@ -252,6 +260,7 @@ def _forward_kernel(
     ``w_imu[k]``, ``f_imu[k]``: mean rates over (t[k-1], t[k]]. ``i_gm`` / ``i_sf`` / ``i_l``:
     index of the first Gauss-Markov bias / scale-factor / lever-arm state, -1 when absent;
     ``inv_tau`` = [1 / tau_gyro, 1 / tau_accel] of the Gauss-Markov states [1/s].
+    ``m_status``: 0 used, 1 gated, 2 used after a covariance reset, 3 before the start.
     Fills the output and node arrays; returns (nodes used, outputs used).
     """
     n = p0.shape[0]
@@ -291,6 +300,7 @@ def _forward_kernel(
     cl = np.empty(3)
     sl = np.zeros((3, 3))
     dx_tot = np.zeros(n)
+    t_ok = np.full(3, t[k0])  # last accepted record of each kind
     im = 0
     while im < n_meas and m_k[im] < k0:
         m_status[im] = 3  # before the filter start
@@ -426,11 +436,33 @@ def _forward_kernel(
                     for b in range(3):
                         nis += dz[a] * s_inv[a, b] * dz[b]
             m_nis[im] = nis
+            status = 0
             if not (nis <= gate):
-                m_status[im] = 1
-                im += 1
-                continue
-            m_status[im] = 0
+                if kind == MEAS_ZUPT or not (t[k] - t_ok[kind] > reset_after_s):
+                    m_status[im] = 1
+                    im += 1
+                    continue
+                # every GNSS record of this kind gated for reset_after_s: the filter, not GNSS,
+                # has lost its way. Re-initialise the position (velocity) block from this
+                # record (uncorrelated, variance dz^2 + R) and accept it ungated.
+                status = 2
+                blk = 6 if kind == MEAS_POSITION else 3
+                for a in range(3):
+                    for b in range(n):
+                        p[blk + a, b] = 0.0
+                        p[b, blk + a] = 0.0
+                    p[blk + a, blk + a] = dz[a] * dz[a] + m_r[im, a, a]
+                ph = np.dot(p, h_mat.T)
+                s_full = np.dot(h_mat, ph) + m_r[im]
+                for a in range(3):
+                    for b in range(3):
+                        s_mat[a, b] = s_full[a, b]
+                if not _inv3(s_mat, s_inv):
+                    m_status[im] = 1
+                    im += 1
+                    continue
+            t_ok[kind] = t[k]
+            m_status[im] = status
             kg = np.dot(ph, s_inv)  # (n, 3)
             dxk = np.dot(kg, dz)
             ikh = eye - np.dot(kg, h_mat)
@@ -689,7 +721,8 @@ def run_integrated_navigation(
     node_dx = np.empty((n_nodes, n))
     used_nodes, used_out = _forward_kernel(
         t, w, f, k0, x0, p0, lever0.copy(), lay.i_gm, inv_tau, lay.i_sf, lay.i_l, flags, m_k,
-        m_type, m_z, m_r, m_dt, prop_steps, q_diag, gate, m_status, m_nis, out_x, out_diag,
+        m_type, m_z, m_r, m_dt, prop_steps, q_diag, gate, options.gate_reset_s, m_status, m_nis,
+        out_x, out_diag,
         out_blk, out_sens, out_bvar, out_lever, node_k, node_pp, node_pu, node_phi, node_dx,
     )
     if used_nodes != n_nodes or used_out != n_out:
@@ -704,6 +737,9 @@ def run_integrated_navigation(
     rejections.sort(key=lambda r: (r.time_ns, r.kind))
     n_updates = {kind: int(np.count_nonzero((m_status == 0) & (m_type == i)))
                  for i, kind in enumerate(MEAS_KINDS)}
+    for i, kind in enumerate(MEAS_KINDS[:2]):
+        n_updates[f"{kind}_reset"] = int(np.count_nonzero((m_status == 2) & (m_type == i)))
+    resets = tuple((float(m_t[i]), MEAS_KINDS[m_type[i]]) for i in np.flatnonzero(m_status == 2))
 
     # ---- results -------------------------------------------------------------------------------
     out_t = t[out_k]
@@ -743,7 +779,7 @@ def run_integrated_navigation(
         forward=fwd, smoothed=smoothed, forward_biases=fwd_bias, smoothed_biases=sm_bias,
         rejections=tuple(rejections),
         lever_arm=LeverArmEstimate(lever_est, lever_sig, i_l >= 0),
-        alignment=al, n_updates=n_updates, gate_nis=gate,
+        alignment=al, n_updates=n_updates, gate_nis=gate, resets=resets,
     )
 
 

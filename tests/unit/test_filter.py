@@ -142,6 +142,23 @@ def test_kilometre_jump_is_gated_and_does_not_move_the_solution(record, clean):
     assert np.max(np.abs(dn)) < 0.01
 
 
+def test_persistent_gnss_step_is_gated_then_reset_and_logged(record):
+    """Every fix from 80 s on shifted 50 m north: gated for gate_reset_s (30 s), then one
+    fix resets the position covariance and the solution follows GNSS again; all logged."""
+    imu, fixes, vels = record
+    step = fixes.time_ns >= fixes.time_ns[80]
+    shifted = dataclasses.replace(fixes, lat_rad=fixes.lat_rad + step * 50.0 / 6.37e6)
+    res = _run(imu, shifted, vels)
+    gated = [r.t_s for r in res.rejections if r.reason.startswith("innovation gate")]
+    assert gated[0] == pytest.approx(80.0) and len(gated) == 30  # 80 .. 109 s (79 last used)
+    assert res.resets == ((110.0, "position"),)
+    assert res.n_updates["position_reset"] == 1
+    r_m, _ = earth.principal_radii_m(LAT)
+    dn = (res.forward.lat_rad - LAT) * (r_m + H)
+    assert abs(dn[-1] - 50.0) < 0.5  # follows the shifted fixes at the end
+    assert np.max(np.abs(dn[res.forward.t_s < 110.0])) < 0.1  # and ignored them before
+
+
 def test_duplicate_gnss_times_keep_the_first(record):
     imu, fixes, vels = record
     idx = np.r_[np.arange(len(fixes)), 70]
