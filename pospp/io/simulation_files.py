@@ -6,10 +6,14 @@ Files, for a name NAME in an output folder:
   FLU sensor frame, GNSS fix and ENU velocity), with a ``pospp`` metadata record;
 - ``NAME.truth.parquet``: the IMU's true state through
   :func:`pospp.io.parquet_tables.write_reference_trajectory` (default 10 Hz);
+- ``NAME.bias.parquet``: the realised IMU biases (constant + ramp + Gauss-Markov, white noise
+  excluded) at the truth epochs, body FRD: time_ns, gyro_bias_{x,y,z}_dph,
+  accel_bias_{x,y,z}_ug (the bias of the IMU interval ending at each epoch; columns as the
+  reference cases');
 - ``NAME.params.json``: everything injected (``Simulation.params``), plus an ``outputs``
   section (file names, message counts, sizes). Layout mirrors the reference cases'.
 
-All three are written atomically (temporary name, then rename).
+All are written atomically (temporary name, then rename).
 """
 
 from __future__ import annotations
@@ -19,15 +23,47 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
 
 from pospp.io.mcap_writer import write_flight_log
 from pospp.io.parquet_tables import atomic_path, write_reference_trajectory
+from pospp.rotation import DEG_PER_H_RADPS
 from pospp.sim.api import Simulation
 from pospp.sim.gnss import GnssModel
-from pospp.sim.sensors import ImuErrorModel
+from pospp.sim.sensors import UG_MPS2, ImuErrorModel
 
-__all__ = ["gnss_model_from_params", "imu_error_model_from_params", "read_params",
-           "write_simulation"]
+__all__ = ["gnss_model_from_params", "imu_error_model_from_params", "read_bias_table",
+           "read_params", "write_simulation"]
+
+_BIAS_META = {
+    b"pospp.generator": b"pospp.sim",
+    b"frames": b"body FRD; realised bias = constant + ramp + Gauss-Markov, white noise "
+               b"excluded; value of the IMU interval ending at time_ns",
+}
+
+
+def _write_bias(path: Path, sim: Simulation, rate_hz: float) -> None:
+    dt_ns = int(sim.params["time"]["imu_dt_ns"])
+    step = round(1e9 / rate_hz) // dt_ns
+    j = np.arange(0, len(sim.truth), step)
+    k = np.maximum(j - 1, 0)  # interval ending at epoch j
+    g = sim.imu_errors.gyro_bias_radps[k] / DEG_PER_H_RADPS
+    a = sim.imu_errors.accel_bias_mps2[k] / UG_MPS2
+    cols = {"time_ns": pa.array(sim.truth_time_ns[j], pa.int64())}
+    for i, ax in enumerate("xyz"):
+        cols[f"gyro_bias_{ax}_dph"] = pa.array(g[:, i], pa.float64())
+    for i, ax in enumerate("xyz"):
+        cols[f"accel_bias_{ax}_ug"] = pa.array(a[:, i], pa.float64())
+    table = pa.table(cols).replace_schema_metadata(_BIAS_META)
+    with atomic_path(path) as tmp:
+        pq.write_table(table, tmp, compression="zstd")
+
+
+def read_bias_table(path: str | Path) -> dict[str, np.ndarray]:
+    """Columns of a NAME.bias.parquet as numpy arrays (ours or the reference cases')."""
+    t = pq.read_table(path)
+    return {n: t.column(n).to_numpy() for n in t.column_names}
 
 
 def _json_default(o: Any) -> Any:
@@ -44,12 +80,12 @@ def write_simulation(
     sim: Simulation, out_dir: str | Path, name: str | None = None, *,
     truth_rate_hz: float = 10.0,
 ) -> dict[str, Path]:
-    """Write NAME.mcap, NAME.truth.parquet, NAME.params.json into ``out_dir``.
+    """Write NAME.mcap, NAME.truth.parquet, NAME.bias.parquet, NAME.params.json.
 
     Returns
     -------
     dict
-        ``{"mcap": path, "truth": path, "params": path}``.
+        ``{"mcap": path, "truth": path, "bias": path, "params": path}``.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -57,6 +93,7 @@ def write_simulation(
     paths = {
         "mcap": out / f"{name}.mcap",
         "truth": out / f"{name}.truth.parquet",
+        "bias": out / f"{name}.bias.parquet",
         "params": out / f"{name}.params.json",
     }
     meta = {"generator": "pospp.sim", "name": name, "seed": str(sim.params["seed"]),
@@ -67,10 +104,12 @@ def write_simulation(
         metadata={"generator": "pospp.sim", "params": paths["params"].name,
                   "truth_rate_hz": truth_rate_hz},
     )
+    _write_bias(paths["bias"], sim, truth_rate_hz)
     params = dict(sim.params)
     params["outputs"] = {
         "mcap": paths["mcap"].name,
         "truth": paths["truth"].name,
+        "bias": paths["bias"].name,
         "params": paths["params"].name,
         "truth_rate_hz": truth_rate_hz,
         "message_counts": {"/imu/data": len(sim.imu), "/gnss/fix": len(sim.fix),

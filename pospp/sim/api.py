@@ -214,21 +214,24 @@ def _generate(
         progress("errors", 1.0)
     tick("imu_errors_s")
     dt = np.diff(t_s)[:, None]
-    imu = ImuSamples(np.int64(start_time_ns) + k[1:] * dt_ns, dth_m / dt, dv_m / dt, "imu_link")
-    del dth_m, dv_m
+    dth_m /= dt  # mean rates, in place
+    dv_m /= dt
+    imu = ImuSamples(np.int64(start_time_ns) + k[1:] * dt_ns, dth_m, dv_m, "imu_link")
     fix, vel = simulate_gnss(motion, n * dt_ns * 1e-9, gnss, start_time_ns=start_time_ns,
                              seed=ss_gnss)
     if progress is not None:
         progress("gnss", 1.0)
     tick("gnss_s")
-    chunks = []
+    lat, lon, hgt = np.empty(n + 1), np.empty(n + 1), np.empty(n + 1)
+    v_n, q_nb = np.empty((n + 1, 3)), np.empty((n + 1, 4))
     for a in range(0, n + 1, 200_000):
-        m = motion.evaluate(t_s[a : a + 200_000])
-        chunks.append((m.lat_rad, m.lon_rad, m.height_m, m.v_n_mps,
-                       quat_nb_from_euler(m.rpy_rad)))
+        s = slice(a, a + 200_000)
+        m = motion.evaluate(t_s[s])
+        lat[s], lon[s], hgt[s], v_n[s] = m.lat_rad, m.lon_rad, m.height_m, m.v_n_mps
+        q_nb[s] = quat_nb_from_euler(m.rpy_rad)
         if progress is not None:
             progress("truth", min(1.0, (a + 200_000) / (n + 1)))
-    truth = Trajectory(t_s, *(np.concatenate(c) for c in zip(*chunks, strict=True)))
+    truth = Trajectory(t_s, lat, lon, hgt, v_n, q_nb)
     tick("truth_s")
     legs = legs_fn(truth)
     g = model.as_dict()

@@ -203,25 +203,32 @@ def apply_imu_errors(
     ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
     rng_g, rng_a = (np.random.default_rng(s) for s in ss.spawn(2))
     mg, ma = model.gyro_matrix(), model.accel_matrix()
-    bg = (
-        np.asarray(model.gyro_bias_dph) * DEG_PER_H_RADPS
-        + np.outer(t_mid / 3600.0, np.asarray(model.gyro_bias_ramp_dphph) * DEG_PER_H_RADPS)
-        + _gauss_markov(rng_g, n, dt_nom, np.asarray(model.gyro_gm_sigma_dph) * DEG_PER_H_RADPS,
-                        model.gyro_gm_tau_s)
-    )
-    ba = (
-        np.asarray(model.accel_bias_ug) * UG_MPS2
-        + np.outer(t_mid / 3600.0, np.asarray(model.accel_bias_drift_ugph) * UG_MPS2)
-        + _gauss_markov(rng_a, n, dt_nom, np.asarray(model.accel_gm_sigma_ug) * UG_MPS2,
-                        model.accel_gm_tau_s)
-    )
+
+    def total_bias(const, ramp_ph, rng, gm_sigma, tau):
+        # (const + ramp t) + Gauss-Markov, built in place (one (N, 3) array alive)
+        b = np.empty((n, 3))
+        b[:] = const
+        if np.any(ramp_ph):
+            b += np.outer(t_mid / 3600.0, ramp_ph)
+        if np.any(gm_sigma):
+            b += _gauss_markov(rng, n, dt_nom, gm_sigma, tau)
+        return b
+
+    bg = total_bias(np.asarray(model.gyro_bias_dph) * DEG_PER_H_RADPS,
+                    np.asarray(model.gyro_bias_ramp_dphph) * DEG_PER_H_RADPS, rng_g,
+                    np.asarray(model.gyro_gm_sigma_dph) * DEG_PER_H_RADPS, model.gyro_gm_tau_s)
+    ba = total_bias(np.asarray(model.accel_bias_ug) * UG_MPS2,
+                    np.asarray(model.accel_bias_drift_ugph) * UG_MPS2, rng_a,
+                    np.asarray(model.accel_gm_sigma_ug) * UG_MPS2, model.accel_gm_tau_s)
     sq = np.sqrt(dt)[:, None]
     arw = np.asarray(model.gyro_arw_dpsh) * DEG_PER_SQRT_H_RAD_PER_SQRT_S
     vrw = np.asarray(model.accel_vrw_mpsph) * MPS_PER_SQRT_H_MPS_PER_SQRT_S
-    ng = rng_g.standard_normal((n, 3)) * arw * sq if np.any(arw) else 0.0
-    na = rng_a.standard_normal((n, 3)) * vrw * sq if np.any(vrw) else 0.0
-    dth = (dtheta_b_rad @ mg.T if not np.array_equal(mg, np.eye(3)) else dtheta_b_rad)
-    dvm = (dv_b_mps @ ma.T if not np.array_equal(ma, np.eye(3)) else dv_b_mps)
-    dth = dth + bg * dt[:, None] + ng
-    dvm = dvm + ba * dt[:, None] + na
+    dth = dtheta_b_rad @ mg.T if not np.array_equal(mg, np.eye(3)) else dtheta_b_rad.copy()
+    dvm = dv_b_mps @ ma.T if not np.array_equal(ma, np.eye(3)) else dv_b_mps.copy()
+    dth += bg * dt[:, None]
+    dvm += ba * dt[:, None]
+    if np.any(arw):
+        dth += rng_g.standard_normal((n, 3)) * arw * sq
+    if np.any(vrw):
+        dvm += rng_a.standard_normal((n, 3)) * vrw * sq
     return dth, dvm, RealisedImuErrors(bg, ba, mg, ma)

@@ -12,6 +12,7 @@ from pospp.io.parquet_tables import read_reference_trajectory
 from pospp.io.simulation_files import (
     gnss_model_from_params,
     imu_error_model_from_params,
+    read_bias_table,
     read_params,
     write_simulation,
 )
@@ -109,6 +110,13 @@ def test_truth_and_params_files(sim, tmp_path):
     np.testing.assert_allclose(np.degrees(np.arctan2(v[:, 1], v[:, 0])) % 360,
                                leg.heading_deg, atol=1e-9)
     np.testing.assert_allclose(sim.truth.height_m[k], leg.height_m, atol=1e-6)
+    # realised biases at 10 Hz: the constant part plus a Gauss-Markov of the grade's sigma
+    bias = read_bias_table(paths["bias"])
+    assert np.array_equal(bias["time_ns"], ref.time_ns)
+    g = np.column_stack([bias[f"gyro_bias_{a}_dph"] for a in "xyz"])
+    assert np.abs(g.mean(axis=0) - [1.0, -1.0, 1.0]).max() < 3 * 0.5
+    assert 0.0 < g.std(axis=0).min() and g.std(axis=0).max() < 1.0
+    np.testing.assert_allclose([bias[f"accel_bias_{a}_ug"][5] for a in "xyz"], [5, -5, 5])
 
 
 @pytest.mark.slow
@@ -124,7 +132,7 @@ def test_committed_sample_data_regenerates_bit_for_bit(tmp_path):
         seed=2012, imu_rate_hz=100.0,
     )
     paths = write_simulation(sim, tmp_path, "sample_flight")
-    for key in ("mcap", "truth"):
+    for key in ("mcap", "truth", "bias"):
         assert paths[key].read_bytes() == (root / paths[key].name).read_bytes(), key
     new, old = read_params(paths["params"]), read_params(root / "sample_flight.params.json")
     for p in (new, old):
