@@ -11,7 +11,7 @@ Model, per IMU interval k of length dt (t_mid its midpoint, t from the mission s
     dv_meas     = (I + M_a) dv_true     + (b_a + r_a t_mid + x_a,k) dt + n_a,k
 
 - b: constant bias (``gyro_bias_dph``, ``accel_bias_ug``);
-- r: bias drift in time, a ramp (``gyro_bias_ramp_dphph``, ``accel_bias_drift_ugph``);
+- r: bias drift in time, a ramp (``gyro_bias_drift_dphph``, ``accel_bias_drift_ugph``);
 - x: first-order Gauss-Markov drift, stationary, sigma and correlation time tau
   (``gyro_gm_sigma_dph`` / ``gyro_gm_tau_s``; accel likewise): x_k+1 = e^(-dt/tau) x_k +
   sigma sqrt(1 - e^(-2 dt/tau)) w_k, x_0 ~ N(0, sigma^2). The paper's "random drift" is this
@@ -62,7 +62,7 @@ class ImuErrorModel:
     """IMU error parameters (body FRD axes; units in the names). All default to zero."""
 
     gyro_bias_dph: tuple[float, float, float] = field(default_factory=_zeros3)
-    gyro_bias_ramp_dphph: tuple[float, float, float] = field(default_factory=_zeros3)
+    gyro_bias_drift_dphph: tuple[float, float, float] = field(default_factory=_zeros3)
     gyro_arw_dpsh: tuple[float, float, float] = field(default_factory=_zeros3)
     gyro_gm_sigma_dph: tuple[float, float, float] = field(default_factory=_zeros3)
     gyro_gm_tau_s: float = 300.0
@@ -215,7 +215,7 @@ def apply_imu_errors(
         return b
 
     bg = total_bias(np.asarray(model.gyro_bias_dph) * DEG_PER_H_RADPS,
-                    np.asarray(model.gyro_bias_ramp_dphph) * DEG_PER_H_RADPS, rng_g,
+                    np.asarray(model.gyro_bias_drift_dphph) * DEG_PER_H_RADPS, rng_g,
                     np.asarray(model.gyro_gm_sigma_dph) * DEG_PER_H_RADPS, model.gyro_gm_tau_s)
     ba = total_bias(np.asarray(model.accel_bias_ug) * UG_MPS2,
                     np.asarray(model.accel_bias_drift_ugph) * UG_MPS2, rng_a,

@@ -77,7 +77,7 @@ def test_gauss_markov_sigma_and_correlation_time():
 
 
 def test_bias_ramp_by_regression():
-    model = ImuErrorModel(gyro_bias_dph=(0.1, 0.0, 0.0), gyro_bias_ramp_dphph=(0.3, -0.2, 0.0),
+    model = ImuErrorModel(gyro_bias_dph=(0.1, 0.0, 0.0), gyro_bias_drift_dphph=(0.3, -0.2, 0.0),
                           accel_bias_drift_ugph=(10.0, 0.0, -5.0))
     t, dth, dv = _static(36_000, 0.1)
     m_th, m_dv, _ = apply_imu_errors(t, dth, dv, model, seed=0)
