@@ -780,3 +780,27 @@ def leg_gap_columns(diagnosis: Diagnosis) -> dict[str, NDArray]:
         out[f"gap_{ph}_before_mps"] = np.array([x.phase_gap_before_mps[j] for x in g])
         out[f"gap_{ph}_after_mps"] = np.array([x.phase_gap_after_mps[j] for x in g])
     return out
+
+
+def residual_curve_columns(diagnosis: Diagnosis) -> dict[str, NDArray]:
+    """B minus A minus the model over time, long form, for figures of the gap shrinking.
+
+    Columns: leg_id, t_s (since the leg start), model ("before": base model, "after": final
+    model), kind ("fit": all legs fitted, "heldout": leave-one-leg-out prediction), dvn_mps,
+    dve_mps.
+    """
+    parts: dict[str, list[NDArray]] = {k: [] for k in ("leg_id", "t_s", "model", "kind",
+                                                        "dvn_mps", "dve_mps")}
+    curves = (("before", "fit", diagnosis.residuals_before_n_mps),
+              ("after", "fit", diagnosis.residuals_after_n_mps),
+              ("before", "heldout", diagnosis.heldout_before_n_mps),
+              ("after", "heldout", diagnosis.heldout_after_n_mps))
+    for model, kind, res in curves:
+        for leg, t, r in zip(diagnosis.legs, diagnosis.t_s, res, strict=True):
+            parts["leg_id"].append(np.full(t.size, leg.leg_id, dtype=np.int64))
+            parts["t_s"].append(t)
+            parts["model"].append(np.full(t.size, model, dtype=object))
+            parts["kind"].append(np.full(t.size, kind, dtype=object))
+            parts["dvn_mps"].append(r[:, 0])
+            parts["dve_mps"].append(r[:, 1])
+    return {k: np.concatenate(v) for k, v in parts.items()}

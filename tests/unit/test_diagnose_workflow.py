@@ -24,6 +24,7 @@ from pospp.diagnose.workflow import (
     diagnose,
     diagnosis_columns,
     leg_gap_columns,
+    residual_curve_columns,
 )
 
 SIGMA = 0.003  # A's velocity noise [m/s]
@@ -194,6 +195,13 @@ def test_tables(reversal):
     # the first leg after power-up carries most of the warm-up gap
     lg = leg_gap_columns(d)
     assert lg["gap_before_mps"][0] == max(lg["gap_before_mps"])
+    curves = pa.table(residual_curve_columns(d)).to_pandas()
+    assert set(curves.model) == {"before", "after"} and set(curves.kind) == {"fit", "heldout"}
+    fit = curves[curves.kind == "fit"]
+    for model, col in (("before", "gap_before_mps"), ("after", "gap_after_mps")):
+        c = fit[fit.model == model]
+        rms = np.sqrt(np.mean(np.concatenate([c.dvn_mps, c.dve_mps]) ** 2))
+        assert rms == pytest.approx(cols[col][0], rel=1e-9)
 
 
 def test_input_contract(reversal):
