@@ -254,3 +254,17 @@ def test_paper_flight_mission_from_pospp_sim_meets_the_issue_targets():
         za = (hist.accel_b_mps2 - sim.imu_errors.accel_bias_mps2[k]) / hist.accel_sigma_b_mps2
         assert np.all(np.mean(np.abs(zg) < 3.0, axis=0) >= 0.97)
         assert np.all(np.mean(np.abs(za) < 3.0, axis=0) >= 0.97)
+
+
+def test_options_from_pipeline_config():
+    from pospp.config import config_from_dict
+    from pospp.nav.filter import options_from_config
+
+    cfg = config_from_dict({"gnss": {"pos_sigma_floor_m": 0.2, "use_velocity": False,
+                                     "gate_probability": 0.999},
+                            "filter": {"smoother": False, "static_alignment_s": 90.0}})
+    opt = options_from_config(cfg)
+    assert (opt.pos_sigma_floor_m, opt.use_velocity, opt.gate_probability, opt.smoother) == (
+        0.2, False, 0.999, False)
+    assert opt.alignment.max_static_alignment_s == 90.0
+    assert opt.vel_sigma_floor_mps == cfg.gnss.vel_sigma_floor_mps
