@@ -48,8 +48,6 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from pospp.sim.ramps import RampSchedule
 
 __all__ = [
@@ -459,7 +457,3 @@ def plan_mission(profile: MissionProfile) -> MissionPlan:
         legs=tuple(pl.legs),
     )
 
-
-def legs_as_array(plan: MissionPlan) -> np.ndarray:
-    """(L, 2) start/end times [s] of the true legs."""
-    return np.array([[lg.start_s, lg.end_s] for lg in plan.legs]).reshape(-1, 2)

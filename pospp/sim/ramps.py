@@ -79,11 +79,10 @@ class RampSchedule:
         return cls(float(x0), arr[:, 0].copy(), arr[:, 1].copy(), arr[:, 2].copy())
 
     def _locate(self, t: NDArray) -> tuple[NDArray, NDArray, NDArray]:
-        """Index of the last ramp started (-1 none), and u clipped to [0, 1]."""
+        """Index of the last ramp started (-1: none yet), that index clipped to >= 0, and
+        u = (t - t_i) / T_i clipped to [0, 1] (0 before the first ramp). Needs >= 1 ramp."""
         i = np.searchsorted(self.start_s, t, side="right") - 1
         ic = np.maximum(i, 0)
-        if self.start_s.size == 0:
-            return i, np.zeros_like(t), np.zeros_like(t)
         u = np.clip((t - self.start_s[ic]) / self.duration_s[ic], 0.0, 1.0)
         u = np.where(i >= 0, u, 0.0)
         return i, ic, u

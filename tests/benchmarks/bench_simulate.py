@@ -8,14 +8,15 @@ through increments_from_rates + strapdown.integrate, max errors against the trut
 Each case is ``pospp.sim.api.simulate("flight", imu_grade="paper_flight", gnss=<1 Hz with
 lever arm>, seed=1, imu_rate_hz=200)``, truncated to the duration shown; wall-clock and
 process CPU time (the CPU time is the robust figure on a shared machine), the phase timings
-recorded in ``params["numerics"]["timings_s"]``, the process peak RSS so far (the cases run
-shortest first, so each row's peak is that case's or the previous one's), and the time to
-write the three files (MCAP, truth Parquet, params JSON) into a temporary folder.
+recorded in ``params["numerics"]["timings_s"]``, the peak RSS of the process after
+``simulate`` and again after writing the files (each case runs in its own subprocess), and the
+time to write the files (MCAP, truth and bias Parquet, params JSON) into a temporary folder.
 """
 
 from __future__ import annotations
 
 import resource
+import subprocess
 import sys
 import tempfile
 import time
@@ -31,12 +32,17 @@ from pospp.sim.gnss import GnssModel
 GNSS = GnssModel(rate_hz=1.0, lever_arm_b_m=(0.5, 0.2, -1.2))
 
 
+def _peak_mib() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**10
+
+
 def _run(duration_s: float | None) -> None:
+    simulate("sample", imu_rate_hz=50.0, duration_s=10.0)  # warm numba caches of the checks
     w0, c0 = time.perf_counter(), time.process_time()
     sim = simulate("flight", imu_grade="paper_flight", gnss=GNSS, seed=1, imu_rate_hz=200.0,
                    duration_s=duration_s)
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**10
     wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+    peak = _peak_mib()
     n = len(sim.imu)
     ph = sim.params["numerics"]["timings_s"]
     with tempfile.TemporaryDirectory() as d:
@@ -47,7 +53,8 @@ def _run(duration_s: float | None) -> None:
     print(
         f"| {sim.truth.t_s[-1] / 3600:.2f} h | {n} | {wall:.1f} | {cpu:.1f} | "
         f"{cpu / n * 1e6:.1f} | {ph['increments_s']:.1f} | {ph['imu_errors_s']:.1f} | "
-        f"{ph['truth_s']:.1f} | {peak:.0f} | {write_s:.1f} ({mcap_mib:.0f} MiB) |"
+        f"{ph['truth_s']:.1f} | {peak:.0f} | {write_s:.1f} ({mcap_mib:.0f} MiB) | "
+        f"{_peak_mib():.0f} |", flush=True
     )
 
 
@@ -84,13 +91,18 @@ def closure_table() -> None:
 
 
 def main() -> None:
-    simulate("sample", imu_rate_hz=50.0, duration_s=10.0)  # warm numba caches of the checks
     print("| mission | IMU samples | wall s | CPU s | CPU us/sample | increments s | errors s "
-          "| truth s | peak RSS MiB | write s (MCAP) |")
-    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
-    _run(5400.0)
-    _run(None)
+          "| truth s | peak RSS MiB | write s (MCAP) | peak RSS with write MiB |")
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for case in ("5400", "all"):
+        subprocess.run([sys.executable, __file__, "--case", case], check=True)
 
 
 if __name__ == "__main__":
-    closure_table() if "--closure" in sys.argv else main()
+    if "--closure" in sys.argv:
+        closure_table()
+    elif "--case" in sys.argv:
+        arg = sys.argv[sys.argv.index("--case") + 1]
+        _run(None if arg == "all" else float(arg))
+    else:
+        main()
