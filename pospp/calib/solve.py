@@ -332,7 +332,7 @@ class NoiseBasis:
     lam: NDArray
 
 
-def noise_basis(rep: LegReplay, *, noise_step_s: float = 5.0) -> NoiseBasis:
+def noise_basis(rep: LegReplay, *, noise_step_s: float = 10.0) -> NoiseBasis:
     """The :class:`NoiseBasis` of a leg, on samples every ``noise_step_s`` seconds."""
     step = max(1, int(round(noise_step_s / max(float(np.median(np.diff(rep.t_s))), 1e-9))))
     smp = np.arange(step, rep.t_s.size, step)
@@ -387,7 +387,7 @@ def calibrate(
     estimate_gyro_z: bool = False,
     noise: str = "gyro_rw",
     gyro_arw_radpsqrts: float | None = None,
-    noise_step_s: float = 5.0,
+    noise_step_s: float = 10.0,
     bases: Mapping[int, NoiseBasis] | None = None,
 ) -> Calibration:
     """Calibrate from the B-minus-A velocity errors of a set of legs (paper Eq. 17).
