@@ -58,11 +58,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import linalg, stats
 
 from pospp.calib.replay import ImuIncrements, LegReplay, ReferenceSolution
-from pospp.calib.solve import calibrate, gyro_noise_covariance, leg_sensitivities
+from pospp.calib.solve import calibrate, leg_sensitivities
 from pospp.diagnose import effects as fx
+from pospp.diagnose._linear import Fit, Problem, Term, bic, f_test, rms
 
 BASE_FORMULATIONS = ("body", "paper")
 BASE_TRANSITIONS = ("numerical", "closed_form")
@@ -230,125 +230,6 @@ class Diagnosis:
 
 
 # --------------------------------------------------------------------------------------------
-# linear-model machinery
-
-
-@dataclass
-class _Term:
-    """A block of columns: raw per-leg blocks (rows t > 0, sample-major [N, E])."""
-
-    name: str
-    blocks: list[NDArray]  # per leg (2 (M - 1), k)
-    local_leg: int | None = None  # index of the leg for per-leg (nuisance) terms
-    basis: NDArray | None = None  # (P, k): parameters (SI) = basis @ coefficients
-    effect: fx.Effect | None = None
-    wblocks: list[NDArray] | None = None
-
-
-@dataclass
-class _Fit:
-    x: NDArray
-    cov_unscaled: NDArray  # (H_w^T H_w)^+
-    rss_w: float
-    rank: int
-    res_raw: list[NDArray]
-
-
-class _Problem:
-    """Whitened stacked least squares over legs."""
-
-    def __init__(self, replays: Sequence[LegReplay], white_scale: float, arw: float):
-        self.reps = list(replays)
-        self.z = [r.dv_n_mps[1:, 0:2].reshape(-1) for r in self.reps]
-        self.sizes = [z.size for z in self.z]
-        self.n = int(sum(self.sizes))
-        self.chol: list[NDArray | None] = []
-        self.sig: list[NDArray] = []
-        for r in self.reps:
-            s = r.sigma_v_n_mps[1:, 0:2].reshape(-1)
-            self.sig.append(s)
-            if arw > 0.0:
-                cov = arw**2 * gyro_noise_covariance(r)
-                cov[np.diag_indices_from(cov)] += white_scale * s**2
-                self.chol.append(linalg.cholesky(cov, lower=True))
-            else:
-                self.chol.append(None)
-        self.zw = [self.whiten(i, z) for i, z in enumerate(self.z)]
-
-    def whiten(self, i: int, a: NDArray) -> NDArray:
-        c = self.chol[i]
-        if c is None:
-            return a / (self.sig[i] if a.ndim == 1 else self.sig[i][:, None])
-        return linalg.solve_triangular(c, a, lower=True, check_finite=False)
-
-    def wblocks(self, term: _Term) -> list[NDArray]:
-        """Whitened blocks of a term (cached on the term)."""
-        if term.wblocks is None:
-            term.wblocks = [self.whiten(i, b) for i, b in enumerate(term.blocks)]
-        return term.wblocks
-
-    def leg_matrix(self, terms: Sequence[_Term], i: int) -> NDArray:
-        return np.hstack([self.wblocks(t)[i] for t in terms])
-
-    @staticmethod
-    def solve_normal(g: NDArray, b: NDArray) -> tuple[NDArray, NDArray, int]:
-        """Minimum-norm solution of the column-scaled normal equations; (x, G^+, rank)."""
-        d = np.sqrt(np.diag(g))
-        d[d == 0] = 1.0
-        lam, v = np.linalg.eigh(g / np.outer(d, d))
-        keep = lam > lam[-1] * 1e-13 if lam.size else np.zeros(0, bool)
-        ginv = (v[:, keep] / lam[keep]) @ v[:, keep].T
-        ginv = ginv / np.outer(d, d)
-        return ginv @ b, ginv, int(keep.sum())
-
-    def fit(self, terms: Sequence[_Term], legs: Sequence[int] | None = None) -> _Fit:
-        legs = range(len(self.reps)) if legs is None else legs
-        hws = {i: self.leg_matrix(terms, i) for i in legs}
-        g = sum(h.T @ h for h in hws.values())
-        b = sum(hws[i].T @ self.zw[i] for i in legs)
-        x, ginv, rank = self.solve_normal(g, b)
-        rss = sum(float(np.sum((self.zw[i] - hws[i] @ x) ** 2)) for i in legs)
-        res_raw = [self.z[i] - np.hstack([t.blocks[i] for t in terms]) @ x for i in legs]
-        return _Fit(x, ginv, rss, rank, res_raw)
-
-    def heldout(self, terms: Sequence[_Term]) -> list[NDArray]:
-        """Leave-one-leg-out raw residuals per leg (held-out leg's own tilt fitted on it)."""
-        out = []
-        nl = len(self.reps)
-        for i in range(nl):
-            others = [j for j in range(nl) if j != i]
-            common = [t for t in terms if t.local_leg is None]
-            local_o = [t for t in terms if t.local_leg in others]
-            local_i = [t for t in terms if t.local_leg == i]
-            x = self.fit(common + local_o, others).x
-            k = sum(t.blocks[i].shape[1] for t in common)
-            r = self.z[i] - np.hstack([t.blocks[i] for t in common]) @ x[:k]
-            if local_i:
-                hl = np.hstack([t.blocks[i] for t in local_i])
-                hlw = self.whiten(i, hl)
-                xl, _, _ = self.solve_normal(hlw.T @ hlw, hlw.T @ self.whiten(i, r))
-                r = r - hl @ xl
-            out.append(r)
-        return out
-
-
-def _rms(res: Sequence[NDArray]) -> float:
-    a = np.concatenate([np.ravel(r) for r in res])
-    return float(np.sqrt(np.mean(a**2))) if a.size else float("nan")
-
-
-def _f_test(rss0: float, rss1: float, r: int, dof1: int) -> tuple[float, float]:
-    if r <= 0 or dof1 <= 0 or rss1 <= 0:
-        return float("nan"), 1.0
-    f = max(rss0 - rss1, 0.0) / r / (rss1 / dof1)
-    return float(f), float(stats.f.sf(f, r, dof1))
-
-
-def _bic(rss_w: float, n: int, k: int) -> float:
-    return n * np.log(rss_w / n) + k * np.log(n)
-
-
-# --------------------------------------------------------------------------------------------
 # terms
 
 
@@ -357,24 +238,24 @@ def _rows(sig: NDArray) -> NDArray:
     return sig[1:].reshape(-1, sig.shape[2])
 
 
-def _base_terms(reps: Sequence[LegReplay], formulation: str, transition: str) -> list[_Term]:
+def _base_terms(reps: Sequence[LegReplay], formulation: str, transition: str) -> list[Term]:
     nl = len(reps)
     sens = [leg_sensitivities(r, transition) for r in reps]
     terms = []
     for i in range(nl):
         blocks = [np.zeros((2 * (r.t_s.size - 1), 2)) for r in reps]
         blocks[i] = _rows(sens[i][0][:, :, 0:2])
-        terms.append(_Term(f"tilt_leg{reps[i].leg.leg_id}", blocks, local_leg=i))
-    terms.append(_Term("phi_d", [_rows(s[0][:, :, 2:3]) for s in sens]))
+        terms.append(Term(f"tilt_leg{reps[i].leg.leg_id}", blocks, local_leg=i))
+    terms.append(Term("phi_d", [_rows(s[0][:, :, 2:3]) for s in sens]))
     if formulation == "body":
-        terms.append(_Term("gyro_bias_xy", [_rows(s[1][:, :, 0:2]) for s in sens]))
+        terms.append(Term("gyro_bias_xy", [_rows(s[1][:, :, 0:2]) for s in sens]))
     else:
-        terms.append(_Term("eps_ne", [_rows((s[1] @ r.c_nb0.T)[:, :, 0:2])
+        terms.append(Term("eps_ne", [_rows((s[1] @ r.c_nb0.T)[:, :, 0:2])
                                       for s, r in zip(sens, reps, strict=True)]))
     return terms
 
 
-def _lof_term(reps: Sequence[LegReplay], k: int) -> list[_Term]:
+def _lof_term(reps: Sequence[LegReplay], k: int) -> list[Term]:
     terms = []
     for i, r in enumerate(reps):
         t = r.t_s[1:]
@@ -387,11 +268,11 @@ def _lof_term(reps: Sequence[LegReplay], k: int) -> list[_Term]:
         blk[:, 1, w:] = basis
         blocks = [np.zeros((2 * (q.t_s.size - 1), 2 * w)) for q in reps]
         blocks[i] = blk.reshape(-1, 2 * w)
-        terms.append(_Term(f"lof_leg{r.leg.leg_id}", blocks, local_leg=i))
+        terms.append(Term(f"lof_leg{r.leg.leg_id}", blocks, local_leg=i))
     return terms
 
 
-def _base_x_per_leg(prob: _Problem, terms: list[_Term], fit: _Fit, formulation: str
+def _base_x_per_leg(prob: Problem, terms: list[Term], fit: Fit, formulation: str
                     ) -> list[NDArray]:
     """Current [phi_N, phi_E, phi_D, b_x, b_y, b_z] (SI) of every leg."""
     vals: dict[str, NDArray] = {}
@@ -418,13 +299,13 @@ def _base_x_per_leg(prob: _Problem, terms: list[_Term], fit: _Fit, formulation: 
     return out
 
 
-def _effect_term(prob: _Problem, terms: list[_Term], eff: fx.Effect, sigs: list[NDArray]
-                 ) -> _Term | None:
+def _effect_term(prob: Problem, terms: list[Term], eff: fx.Effect, sigs: list[NDArray]
+                 ) -> Term | None:
     """The effect's observable directions (in units of its plausible size), or None."""
     raw = [_rows(s) * eff.plausible_si for s in sigs]
     if not all(np.all(np.isfinite(r)) for r in raw):
         return None
-    probe = _Term(eff.effect_id, raw)
+    probe = Term(eff.effect_id, raw)
     g = c = e = 0.0
     for i in range(len(prob.reps)):
         h = prob.leg_matrix(terms, i)
@@ -437,10 +318,10 @@ def _effect_term(prob: _Problem, terms: list[_Term], eff: fx.Effect, sigs: list[
         return None
     vt = vecs.T
     v = vt[keep].T  # (P, r)
-    return _Term(eff.effect_id, [b @ v for b in raw], basis=v * eff.plausible_si, effect=eff)
+    return Term(eff.effect_id, [b @ v for b in raw], basis=v * eff.plausible_si, effect=eff)
 
 
-def _effect_estimate(term: _Term, fit: _Fit, terms: list[_Term], s2: float
+def _effect_estimate(term: Term, fit: Fit, terms: list[Term], s2: float
                      ) -> tuple[NDArray, NDArray, float, float]:
     """(values, sigmas, size, size sigma) in the effect's display unit."""
     k = 0
@@ -463,14 +344,14 @@ def _effect_estimate(term: _Term, fit: _Fit, terms: list[_Term], s2: float
     return p, sig, size, float(np.sqrt(max(g @ cp @ g, 0.0)))
 
 
-def _phase_rms(res: NDArray, n_phase: int = 3) -> NDArray:
+def _phaserms(res: NDArray, n_phase: int = 3) -> NDArray:
     r = res.reshape(-1, 2)
     parts = np.array_split(np.arange(r.shape[0]), n_phase)
     return np.array([float(np.sqrt(np.mean(r[p] ** 2))) if p.size else np.nan for p in parts])
 
 
-def _pair_explaining(prob: _Problem, terms: list[_Term], fit0: _Fit, trials: list[dict],
-                     lof: list[_Term], lof_excess: float, s2_lof: float, alpha: float,
+def _pair_explaining(prob: Problem, terms: list[Term], fit0: Fit, trials: list[dict],
+                     lof: list[Term], lof_excess: float, s2_lof: float, alpha: float,
                      min_fraction: float) -> list[dict]:
     """Two significant candidates that together explain the structured gap, or [].
 
@@ -492,7 +373,7 @@ def _pair_explaining(prob: _Problem, terms: list[_Term], fit0: _Fit, trials: lis
             if frac < best_frac:
                 continue
             lof_fit = prob.fit(terms + [a["term"], b["term"]] + lof)
-            _, p = _f_test(both.rss_w, lof_fit.rss_w, lof_fit.rank - both.rank, n - lof_fit.rank)
+            _, p = f_test(both.rss_w, lof_fit.rss_w, lof_fit.rank - both.rank, n - lof_fit.rank)
             if p >= alpha:
                 best_pair, best_frac = [a, b], frac
     return best_pair
@@ -596,7 +477,7 @@ def diagnose(
         white_scale, arw = cal.variance_factor, cal.gyro_arw_radpsqrts
     else:
         raise ValueError(f"noise: expected 'white' or 'gyro_rw', got {noise!r}")
-    prob = _Problem(replays, white_scale, arw)
+    prob = Problem(replays, white_scale, arw)
     terms = _base_terms(replays, base_formulation, base_transition)
     lof = _lof_term(replays, lof_terms)
     fixed_sigs = {e.effect_id: fx.signatures(e.effect_id, replays, context=ctx,
@@ -611,7 +492,7 @@ def diagnose(
     unobservable: list[str] = []
     n = prob.n
     for step in range(1, max_steps + 1):
-        gap0, hgap0 = _rms(fit0.res_raw), _rms(ho0)
+        gap0, hgap0 = rms(fit0.res_raw), rms(ho0)
         fit_lof = prob.fit(terms + lof)
         s2_lof = fit_lof.rss_w / max(n - fit_lof.rank, 1)
         lof_excess = fit0.rss_w - fit_lof.rss_w - (fit_lof.rank - fit0.rank) * s2_lof
@@ -634,7 +515,7 @@ def diagnose(
             fit1 = prob.fit(new_terms)
             r = fit1.rank - fit0.rank
             dof1 = n - fit1.rank
-            f, p = _f_test(fit0.rss_w, fit1.rss_w, r, dof1)
+            f, p = f_test(fit0.rss_w, fit1.rss_w, r, dof1)
             ho1 = prob.heldout(new_terms)
             s2 = fit1.rss_w / max(dof1, 1)
             vals, sigs_, size, size_sig = _effect_estimate(term, fit1, new_terms, s2)
@@ -642,15 +523,15 @@ def diagnose(
             frac = float(excess / lof_excess) if lof_excess > 0 else 0.0
             trials.append(dict(eff=eff, term=term, fit=fit1, ho=ho1, f=f, p=p, r=r, vals=vals,
                                sigs=sigs_, size=size, size_sig=size_sig, frac=frac,
-                               dbic=_bic(fit1.rss_w, n, fit1.rank) - _bic(fit0.rss_w, n,
+                               dbic=bic(fit1.rss_w, n, fit1.rank) - bic(fit0.rss_w, n,
                                                                            fit0.rank)))
         m = max(len(trials), 1)
         for tr in trials:
-            tr["sig"] = bool(tr["p"] < alpha / m and _rms(tr["ho"]) < hgap0)
+            tr["sig"] = bool(tr["p"] < alpha / m and rms(tr["ho"]) < hgap0)
             tests.append(CandidateTest(
                 step, tr["eff"].effect_id, tr["r"], tr["size"], tr["size_sig"], tr["eff"].unit,
-                tr["f"], tr["p"], float(tr["dbic"]), tr["frac"], _rms(tr["fit"].res_raw),
-                _rms(tr["ho"]), tr["sig"]))
+                tr["f"], tr["p"], float(tr["dbic"]), tr["frac"], rms(tr["fit"].res_raw),
+                rms(tr["ho"]), tr["sig"]))
         good = [tr for tr in trials if tr["sig"] and tr["frac"] >= min_explained_fraction]
         if not good:
             good = _pair_explaining(prob, terms, fit0, trials, lof, lof_excess, s2_lof, alpha,
@@ -665,8 +546,8 @@ def diagnose(
                 continue
             both = prob.fit(terms + [tr["term"], best["term"]])
             dof = n - both.rank
-            _, p_best = _f_test(tr["fit"].rss_w, both.rss_w, both.rank - tr["fit"].rank, dof)
-            _, p_other = _f_test(best["fit"].rss_w, both.rss_w, both.rank - best["fit"].rank, dof)
+            _, p_best = f_test(tr["fit"].rss_w, both.rss_w, both.rank - tr["fit"].rank, dof)
+            _, p_other = f_test(best["fit"].rss_w, both.rss_w, both.rank - best["fit"].rank, dof)
             if p_best >= alpha and p_other >= alpha:
                 confounded.append(tr["eff"].effect_id)
         steps.append(DiagnosisStep(
@@ -675,15 +556,15 @@ def diagnose(
             statistic=best["f"], p_value=best["p"], criterion=CRITERION, significant=True,
             delta_bic=float(best["dbic"]), explained_fraction=best["frac"],
             confounded_with=tuple(confounded), gap_before_mps=gap0,
-            gap_after_mps=_rms(best["fit"].res_raw),
-            heldout_gap_before_mps=hgap0, heldout_gap_after_mps=_rms(best["ho"]),
+            gap_after_mps=rms(best["fit"].res_raw),
+            heldout_gap_before_mps=hgap0, heldout_gap_after_mps=rms(best["ho"]),
         ))
         terms = terms + [best["term"]]
         fit0, ho0 = best["fit"], best["ho"]
     # closing row: lack of fit of the final model
     fit_lof = prob.fit(terms + lof)
-    f, p = _f_test(fit0.rss_w, fit_lof.rss_w, fit_lof.rank - fit0.rank, n - fit_lof.rank)
-    gap, hgap = _rms(fit0.res_raw), _rms(ho0)
+    f, p = f_test(fit0.rss_w, fit_lof.rss_w, fit_lof.rank - fit0.rank, n - fit_lof.rank)
+    gap, hgap = rms(fit0.res_raw), rms(ho0)
     steps.append(DiagnosisStep(
         step=len(steps) + 1, effect="unexplained" if p < alpha else "none", parameters=(),
         values=np.zeros(0), sigmas=np.zeros(0), value=float("nan"), sigma=float("nan"), unit="",
@@ -696,10 +577,10 @@ def diagnose(
         LegGap(
             leg_id=r.leg.leg_id, start_s=float(r.t0_s), duration_s=float(r.t_s[-1]),
             heading_deg=float(np.degrees(r.leg.heading_rad)), speed_mps=float(r.leg.speed_mps),
-            gap_before_mps=_rms([base_fit.res_raw[i]]), gap_after_mps=_rms([fit0.res_raw[i]]),
-            heldout_gap_before_mps=_rms([base_ho[i]]), heldout_gap_after_mps=_rms([ho0[i]]),
-            phase_gap_before_mps=_phase_rms(base_fit.res_raw[i]),
-            phase_gap_after_mps=_phase_rms(fit0.res_raw[i]),
+            gap_before_mps=rms([base_fit.res_raw[i]]), gap_after_mps=rms([fit0.res_raw[i]]),
+            heldout_gap_before_mps=rms([base_ho[i]]), heldout_gap_after_mps=rms([ho0[i]]),
+            phase_gap_before_mps=_phaserms(base_fit.res_raw[i]),
+            phase_gap_after_mps=_phaserms(fit0.res_raw[i]),
         )
         for i, r in enumerate(replays)
     )

@@ -1,0 +1,138 @@
+"""Whitened stacked least squares over legs: the linear-model machinery of the workflow.
+
+Rows are B's horizontal velocity errors [dv_N, dv_E] at the samples t > 0 of each leg
+(sample-major), whitened per leg by A's sigmas or by the Cholesky factor of
+``a diag(sigma^2) + q K`` (K: :func:`pospp.calib.solve.gyro_noise_covariance`). Columns come in
+named blocks (:class:`Term`); fits solve the column-scaled normal equations (minimum norm on
+rank deficiency). SI units.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import linalg, stats
+
+from pospp.calib.replay import LegReplay
+from pospp.calib.solve import gyro_noise_covariance
+from pospp.diagnose.effects import Effect
+
+
+@dataclass
+class Term:
+    """A block of columns: raw per-leg blocks (rows t > 0, sample-major [N, E])."""
+
+    name: str
+    blocks: list[NDArray]  # per leg (2 (M - 1), k)
+    local_leg: int | None = None  # index of the leg for per-leg (nuisance) terms
+    basis: NDArray | None = None  # (P, k): parameters (SI) = basis @ coefficients
+    effect: Effect | None = None
+    wblocks: list[NDArray] | None = None
+
+
+@dataclass
+class Fit:
+    """A whitened least-squares fit: x, (H_w^T H_w)^+, whitened RSS, rank, raw residuals."""
+
+    x: NDArray
+    cov_unscaled: NDArray  # (H_w^T H_w)^+
+    rss_w: float
+    rank: int
+    res_raw: list[NDArray]
+
+
+class Problem:
+    """Whitened stacked least squares over legs."""
+
+    def __init__(self, replays: Sequence[LegReplay], white_scale: float, arw: float):
+        self.reps = list(replays)
+        self.z = [r.dv_n_mps[1:, 0:2].reshape(-1) for r in self.reps]
+        self.sizes = [z.size for z in self.z]
+        self.n = int(sum(self.sizes))
+        self.chol: list[NDArray | None] = []
+        self.sig: list[NDArray] = []
+        for r in self.reps:
+            s = r.sigma_v_n_mps[1:, 0:2].reshape(-1)
+            self.sig.append(s)
+            if arw > 0.0:
+                cov = arw**2 * gyro_noise_covariance(r)
+                cov[np.diag_indices_from(cov)] += white_scale * s**2
+                self.chol.append(linalg.cholesky(cov, lower=True))
+            else:
+                self.chol.append(None)
+        self.zw = [self.whiten(i, z) for i, z in enumerate(self.z)]
+
+    def whiten(self, i: int, a: NDArray) -> NDArray:
+        c = self.chol[i]
+        if c is None:
+            return a / (self.sig[i] if a.ndim == 1 else self.sig[i][:, None])
+        return linalg.solve_triangular(c, a, lower=True, check_finite=False)
+
+    def wblocks(self, term: Term) -> list[NDArray]:
+        """Whitened blocks of a term (cached on the term)."""
+        if term.wblocks is None:
+            term.wblocks = [self.whiten(i, b) for i, b in enumerate(term.blocks)]
+        return term.wblocks
+
+    def leg_matrix(self, terms: Sequence[Term], i: int) -> NDArray:
+        return np.hstack([self.wblocks(t)[i] for t in terms])
+
+    @staticmethod
+    def solve_normal(g: NDArray, b: NDArray) -> tuple[NDArray, NDArray, int]:
+        """Minimum-norm solution of the column-scaled normal equations; (x, G^+, rank)."""
+        d = np.sqrt(np.diag(g))
+        d[d == 0] = 1.0
+        lam, v = np.linalg.eigh(g / np.outer(d, d))
+        keep = lam > lam[-1] * 1e-13 if lam.size else np.zeros(0, bool)
+        ginv = (v[:, keep] / lam[keep]) @ v[:, keep].T
+        ginv = ginv / np.outer(d, d)
+        return ginv @ b, ginv, int(keep.sum())
+
+    def fit(self, terms: Sequence[Term], legs: Sequence[int] | None = None) -> Fit:
+        legs = range(len(self.reps)) if legs is None else legs
+        hws = {i: self.leg_matrix(terms, i) for i in legs}
+        g = sum(h.T @ h for h in hws.values())
+        b = sum(hws[i].T @ self.zw[i] for i in legs)
+        x, ginv, rank = self.solve_normal(g, b)
+        rss = sum(float(np.sum((self.zw[i] - hws[i] @ x) ** 2)) for i in legs)
+        res_raw = [self.z[i] - np.hstack([t.blocks[i] for t in terms]) @ x for i in legs]
+        return Fit(x, ginv, rss, rank, res_raw)
+
+    def heldout(self, terms: Sequence[Term]) -> list[NDArray]:
+        """Leave-one-leg-out raw residuals per leg (held-out leg's own tilt fitted on it)."""
+        out = []
+        nl = len(self.reps)
+        for i in range(nl):
+            others = [j for j in range(nl) if j != i]
+            common = [t for t in terms if t.local_leg is None]
+            local_o = [t for t in terms if t.local_leg in others]
+            local_i = [t for t in terms if t.local_leg == i]
+            x = self.fit(common + local_o, others).x
+            k = sum(t.blocks[i].shape[1] for t in common)
+            r = self.z[i] - np.hstack([t.blocks[i] for t in common]) @ x[:k]
+            if local_i:
+                hl = np.hstack([t.blocks[i] for t in local_i])
+                hlw = self.whiten(i, hl)
+                xl, _, _ = self.solve_normal(hlw.T @ hlw, hlw.T @ self.whiten(i, r))
+                r = r - hl @ xl
+            out.append(r)
+        return out
+
+
+def rms(res: Sequence[NDArray]) -> float:
+    a = np.concatenate([np.ravel(r) for r in res])
+    return float(np.sqrt(np.mean(a**2))) if a.size else float("nan")
+
+
+def f_test(rss0: float, rss1: float, r: int, dof1: int) -> tuple[float, float]:
+    if r <= 0 or dof1 <= 0 or rss1 <= 0:
+        return float("nan"), 1.0
+    f = max(rss0 - rss1, 0.0) / r / (rss1 / dof1)
+    return float(f), float(stats.f.sf(f, r, dof1))
+
+
+def bic(rss_w: float, n: int, k: int) -> float:
+    return n * np.log(rss_w / n) + k * np.log(n)
