@@ -216,3 +216,22 @@ def test_input_contract(reversal):
         diagnose(reps, effects=("wind",))
     d = diagnose(reps, effects=("time_offset",))  # no IMU given: cannot re-run B
     assert d.not_evaluated == ("time_offset",)
+
+
+@pytest.mark.slow
+def test_time_offset_needs_wander():
+    # uniform legs cannot reveal a time offset (null test: it is in `unobservable`); legs with
+    # heading / pitch wander do, confounded with the lever arm (docs/diagnose.md)
+    fl = survey_flight(headings_deg=(0.0, 180.0, 0.0, 180.0), rate_hz=50.0,
+                       wander_heading_deg=2.0, wander_pitch_deg=1.0)
+    dth, dv = _increments(fl)
+    t = fl.imu.t_s
+    tau = 0.02  # IMU tag minus true time: the sample labelled t was sensed at t - tau
+
+    def shift(arr):
+        cum = np.concatenate([np.zeros((1, 3)), np.cumsum(arr, axis=0)])
+        return np.diff(np.stack([np.interp(t - tau, t, cum[:, c]) for c in range(3)], 1), axis=0)
+
+    d = _run(fl, shift(dth), shift(dv), seed=19)
+    _assert_named(d, "time_offset", 20.0)
+    assert "lever_arm" in d.step_of("time_offset").confounded_with
