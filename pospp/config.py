@@ -77,11 +77,28 @@ class FilterConfig:
     """Longest static period used for coarse alignment at the start [s]."""
 
 
+LEG_MIN_DURATION_BY_GRADE_S: dict[str, float] = {
+    "flight": 300.0,
+    "vehicle": 300.0,
+    "tactical": 60.0,
+    "mems": 20.0,
+}
+"""Default ``[legs] min_duration_s`` per ``[imu] grade`` [s] (docs/results.md, "Shortest
+usable leg"): the paper's 5 min for the flight and vehicle grades; for the noisier grades the
+shortest leg whose calibrated horizontal gyro bias still has a sigma well below the grade's
+turn-on bias on simulated opposite-heading pairs."""
+
+
 @dataclass(frozen=True)
 class LegsConfig:
-    """[legs]: straight uniform leg thresholds (see pospp.calib.segment.LegThresholds)."""
+    """[legs]: straight uniform leg thresholds (see pospp.calib.segment.LegThresholds).
 
-    min_duration_s: float = 300.0
+    ``min_duration_s`` omitted takes the ``[imu] grade``'s default: flight 300 s, vehicle
+    300 s, tactical 60 s, mems 20 s (``pospp.config.LEG_MIN_DURATION_BY_GRADE_S``); an explicit
+    value wins.
+    """
+
+    min_duration_s: float | None = None
     duration_tolerance_s: float = 15.0
     max_duration_s: float = 1800.0
     max_heading_rate_dps: float = 0.2
@@ -153,6 +170,18 @@ class PipelineConfig:
     pairs: PairsConfig = field(default_factory=PairsConfig)
     compensation: CompensationConfig = field(default_factory=CompensationConfig)
     outputs: OutputsConfig = field(default_factory=OutputsConfig)
+
+    def __post_init__(self) -> None:
+        # an omitted [legs] min_duration_s takes the [imu] grade's default
+        if self.legs.min_duration_s is None:
+            grade = self.imu.grade
+            if grade not in LEG_MIN_DURATION_BY_GRADE_S:
+                raise ConfigError(
+                    f"imu.grade: expected one of {list(LEG_MIN_DURATION_BY_GRADE_S)}, "
+                    f"got {grade!r}")
+            legs = dataclasses.replace(self.legs,
+                                       min_duration_s=LEG_MIN_DURATION_BY_GRADE_S[grade])
+            object.__setattr__(self, "legs", legs)
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
