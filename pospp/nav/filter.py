@@ -103,8 +103,10 @@ class FilterOptions:
         Initial sigma of the lever-arm states (when estimated).
     max_gnss_imu_offset_s : float
         A GNSS record further than this from every IMU epoch is refused.
-    max_imu_gap_intervals : float
-        An IMU interval longer than this many median intervals raises ValueError.
+    max_imu_gap_intervals, max_imu_gap_s : float
+        An IMU interval longer than this many median intervals is a gap: bridged by holding
+        the rate of the sample after it, and reported in ``FilterResult.imu_gaps``; a gap
+        longer than ``max_imu_gap_s`` raises ValueError.
     gauss_markov_states : bool
         Carry the biases as constant plus first-order Gauss-Markov (six more states); False:
         one random-walk state per axis (:mod:`pospp.nav.tuning`, "Bias model").
@@ -128,6 +130,7 @@ class FilterOptions:
     lever_arm_sigma_m: float = 0.5
     max_gnss_imu_offset_s: float = 0.05
     max_imu_gap_intervals: float = 5.0
+    max_imu_gap_s: float = 0.5
     gauss_markov_states: bool = True
     smoother: bool = True
     alignment: AlignmentOptions = field(default_factory=AlignmentOptions)
@@ -220,6 +223,8 @@ class FilterResult:
     """The innovation gate threshold (chi-square, 3 dof)."""
     resets: tuple[tuple[float, str], ...] = ()
     """(t_s, kind) of the GNSS records accepted by a covariance reset (gate_reset_s)."""
+    imu_gaps: tuple[tuple[float, float], ...] = ()
+    """(t_s at the end, duration_s) of the IMU gaps bridged (FilterOptions.max_imu_gap_*)."""
 
 
 def _grid_epochs(t: NDArray, k0: int, interval_s: float | None) -> NDArray:
@@ -331,7 +336,8 @@ def run_integrated_navigation(
     f = np.ascontiguousarray(imu.f_ib_b_mps2, dtype=float)
     if epoch_ns is None:
         epoch_ns = int(imu_t_ns[0]) if imu_t_ns.shape[0] else 0
-    t = filter_input.imu_epochs(imu_t_ns, w, f, epoch_ns, options.max_imu_gap_intervals)
+    t, imu_gaps = filter_input.imu_epochs(imu_t_ns, w, f, epoch_ns,
+                                          options.max_imu_gap_intervals, options.max_imu_gap_s)
 
     rejections: list[GnssRejection] = []
     (fix_t_ns, fix_val, fix_cov), (vel_t_ns, vel_val, vel_cov) = filter_input.gnss_arrays(
@@ -484,7 +490,7 @@ def run_integrated_navigation(
         forward=fwd, smoothed=smoothed, forward_biases=fwd_bias, smoothed_biases=sm_bias,
         rejections=tuple(rejections),
         lever_arm=LeverArmEstimate(lever_est, lever_sig, i_l >= 0),
-        alignment=al, n_updates=n_updates, gate_nis=gate, resets=resets,
+        alignment=al, n_updates=n_updates, gate_nis=gate, resets=resets, imu_gaps=imu_gaps,
     )
 
 

@@ -32,16 +32,25 @@ class GnssRejection:
 
 
 def imu_epochs(
-    time_ns: NDArray, w: NDArray, f: NDArray, epoch_ns: int, max_gap_intervals: float
-) -> NDArray:
-    """Check the IMU samples (N mean rates over the intervals ending at their stamps); return
-    the epochs t_s (N,) [s] from ``epoch_ns``.
+    time_ns: NDArray, w: NDArray, f: NDArray, epoch_ns: int, max_gap_intervals: float,
+    max_gap_s: float,
+) -> tuple[NDArray, tuple[tuple[float, float], ...]]:
+    """Check the IMU samples (N mean rates over the intervals ending at their stamps).
+
+    Returns
+    -------
+    t_s : ndarray, shape (N,)
+        Epochs [s] from ``epoch_ns``.
+    gaps : tuple of (t_s, duration_s)
+        Intervals longer than ``max_gap_intervals`` median intervals (but at most
+        ``max_gap_s``): the end of the gap and its length. The filter bridges them, holding
+        the rate of the sample after the gap, and reports them.
 
     Raises
     ------
     ValueError
         Wrong shapes, non-finite samples, time not increasing, or a gap longer than
-        ``max_gap_intervals`` median intervals, naming the sample and its time.
+        ``max_gap_s``, naming the sample and its time.
     """
     n = time_ns.shape[0]
     if n < 3 or w.shape != (n, 3) or f.shape != (n, 3):
@@ -60,15 +69,16 @@ def imu_epochs(
     t = (time_ns - np.int64(epoch_ns)).astype(float) * 1e-9
     dt = np.diff(t)
     dt_med = float(np.median(dt))
-    gap = dt > max_gap_intervals * dt_med
-    if gap.any():
-        k = int(np.argmax(gap)) + 1
+    too_long = dt > max_gap_s
+    if too_long.any():
+        k = int(np.argmax(too_long)) + 1
         raise ValueError(
             f"imu: gap of {dt[k - 1]:.6f} s ({dt[k - 1] / dt_med:.1f} nominal intervals of "
             f"{dt_med:.6f} s) ending at sample {k}, t = {t[k]:.6f} s (time_ns {time_ns[k]}); "
-            f"expected at most max_imu_gap_intervals = {max_gap_intervals:g}"
+            f"expected at most max_imu_gap_s = {max_gap_s:g} s"
         )
-    return t
+    gap = np.flatnonzero(dt > max_gap_intervals * dt_med)
+    return t, tuple((float(t[k + 1]), float(dt[k])) for k in gap)
 
 
 def screen_gnss(

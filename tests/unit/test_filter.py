@@ -169,16 +169,21 @@ def test_duplicate_gnss_times_keep_the_first(record):
                                                                 "duplicate time")]
 
 
-def test_imu_gap_is_a_clear_error(record):
+def test_imu_gaps_are_reported_or_a_clear_error(record):
     imu, fixes, vels = record
     keep = np.ones(len(imu), dtype=bool)
     keep[5000:5010] = False  # 10 samples missing: an 0.11 s interval at 100 Hz
+    keep[8000:8100] = False  # 100 samples missing: 1.01 s
     gap = ImuSamples(imu.time_ns[keep], imu.w_ib_b_radps[keep], imu.f_ib_b_mps2[keep])
-    with pytest.raises(ValueError, match=r"imu: gap of 0\.110000 s .* t = 50\.100000 s"):
-        _run(imu=gap, fixes=fixes, vels=vels)
-    # a tolerant setting lets it through
-    res = _run(gap, fixes, vels, options=FilterOptions(max_imu_gap_intervals=20.0))
+    with pytest.raises(ValueError, match=r"imu: gap of 1\.010000 s .* t = 81\.000000 s"):
+        _run(gap, fixes, vels)
+    # up to max_imu_gap_s the gap is bridged and reported with its time and length
+    res = _run(gap, fixes, vels, options=FilterOptions(max_imu_gap_s=2.0))
+    assert res.imu_gaps == (pytest.approx((50.1, 0.11)), pytest.approx((81.0, 1.01)))
     assert len(res.forward) == len(fixes)
+    # at rest the held rate is the true one: the solution is unaffected
+    np.testing.assert_allclose(res.smoothed.height_m, _run(imu, fixes, vels).smoothed.height_m,
+                               atol=0.01)
 
 
 @pytest.mark.parametrize("what", ["nan", "backwards"])
