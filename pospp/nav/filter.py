@@ -135,6 +135,24 @@ class FilterOptions:
     smoother: bool = True
     alignment: AlignmentOptions = field(default_factory=AlignmentOptions)
 
+    def __post_init__(self) -> None:
+        positive = ("propagation_interval_s", "smoother_node_interval_s", "max_pos_sigma_m",
+                    "max_vel_sigma_mps", "zupt_sigma_mps", "zupt_interval_s",
+                    "lever_arm_sigma_m", "max_gnss_imu_offset_s", "max_imu_gap_intervals",
+                    "max_imu_gap_s", "gate_reset_s")
+        for name in positive:
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and value > 0.0):
+                raise ValueError(f"FilterOptions.{name}: expected a number > 0, got {value!r}")
+        for name in ("pos_sigma_floor_m", "vel_sigma_floor_mps"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0.0):
+                raise ValueError(f"FilterOptions.{name}: expected a finite number >= 0, "
+                                 f"got {value!r}")
+        if not 0.0 < self.gate_probability < 1.0:
+            raise ValueError("FilterOptions.gate_probability: expected 0 < p < 1, got "
+                             f"{self.gate_probability!r}")
+
 
 @dataclass(frozen=True)
 class NavSolution:

@@ -273,3 +273,13 @@ def test_options_from_pipeline_config():
         0.2, False, 0.999, False)
     assert opt.alignment.max_static_alignment_s == 90.0
     assert opt.vel_sigma_floor_mps == cfg.gnss.vel_sigma_floor_mps
+
+
+@pytest.mark.parametrize(("name", "value", "match"), [
+    ("gate_probability", 1.0, "expected 0 < p < 1"),
+    ("propagation_interval_s", 0.0, "expected a number > 0"),
+    ("pos_sigma_floor_m", -0.1, "expected a finite number >= 0"),
+])
+def test_options_are_validated(name, value, match):
+    with pytest.raises(ValueError, match=f"FilterOptions.{name}: {match}"):
+        FilterOptions(**{name: value})
