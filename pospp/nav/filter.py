@@ -4,42 +4,47 @@ Frames and units: body FRD (b), navigation NED (n), SI and radians; GNSS antenna
 lever arm l_b (body FRD, m) from the IMU. Errors are computed minus true (pospp conventions).
 Error state (docs/filter.md), 15 base states and optional blocks, in this order::
 
-    dx = [phi_n, dv_n, dr_n, db_g, db_a (, ds_g, ds_a) (, dl_b)]
+    dx = [phi_n, dv_n, dr_n, db_g, db_a (, db_g,gm, db_a,gm) (, ds_g, ds_a) (, dl_b)]
 
 phi_n misalignment (C_nb_hat = (I - [phi x]) C_nb), dv_n, dr_n (NED m) as in
-:mod:`pospp.nav.error_model`; db_g, db_a the residual body-frame biases and ds_g, ds_a the
-residual scale factors left in the corrected sensor outputs (w_hat - w = db_g + diag(w) ds_g);
-dl_b = lever estimate - true lever.
+:mod:`pospp.nav.error_model`; db_g, db_a the residual constant body-frame biases, db_*,gm their
+first-order Gauss-Markov parts (default on), ds_g, ds_a the residual scale factors left in the
+corrected sensor outputs (w_hat - w = db_g + db_g,gm + diag(w) ds_g); dl_b = lever estimate -
+true lever.
 
 The compiled forward pass lives in :mod:`pospp.nav._filter_kernel`, the backward pass in
 :mod:`pospp.nav.smoother`, the input checks in :mod:`pospp.nav.filter_input`.
 
 Mechanization: the one strapdown kernel (:func:`pospp.nav._kernels.strapdown_step`) on the
-corrected increments dtheta_hat = (dtheta - b_g dt) / (1 + s_g), dv_hat likewise. Closed loop:
-after every accepted update the estimate is fed back (position, velocity,
-C_nb <- (I + [phi x]) C_nb, biases and scale factors accumulated, lever arm) and the error
-state reset to zero.
+corrected increments dtheta_hat = (dtheta - (b_g + b_g,gm) dt) / (1 + s_g), dv_hat likewise;
+the nominal Gauss-Markov biases decay as exp(-dt / tau). Closed loop: after every accepted
+update the estimate is fed back (position, velocity, C_nb <- (I + [phi x]) C_nb, biases and
+scale factors accumulated, lever arm) and the error state reset to zero.
 
 Covariance propagation at a coarser rate than the IMU (every ``propagation_interval_s``, and at
 every measurement, output and smoother node epoch): F from :func:`error_model.fill_f_matrix`
-(the one F) with the mean specific force over the interval T, extended by the scale-factor
-columns phi' += -C_nb diag(w_b) ds_g, dv' += C_nb diag(f_b) ds_a; Phi = I + F T + F^2 T^2 / 2,
-Q_d = (Phi Q_c Phi^T + Q_c) T / 2 with Q_c = diag(ARW^2 I, VRW^2 I, 0, q_bg I, q_ba I, 0...).
+(the one F) with the mean specific force over the interval T, extended by the optional columns
+phi' += -C_nb (db_g,gm + diag(w_b) ds_g), dv' += C_nb (db_a,gm + diag(f_b) ds_a) and
+db_*,gm' = -db_*,gm / tau; Phi = I + F T + F^2 T^2 / 2, Q_d = (Phi Q_c Phi^T + Q_c) T / 2 with
+Q_c = diag(ARW^2 I, VRW^2 I, 0, 0, 0, 2 sigma_gm^2 / tau I, 0...) (or random-walk biases,
+``FilterOptions.gauss_markov_states=False``).
 
 Measurements (predicted minus measured = H dx + noise; Groves 2013 Sec. 14.2)::
 
     position:  r_a = r + C l (+ v_a dt_meas)                                      (NED m)
-               H = [[(C l) x], 0, I, 0, 0 (, 0, 0) (, C)]
+               H = [[(C l) x], 0, I, 0, 0 (, 0, 0) (, 0, 0) (, C)]
     velocity:  v_a = v + C (w_ib_b x l) - w_in x (C l)
-               H = [[(C (w x l)) x], I, 0, -C [l x], 0 (, -C [l x] diag(w), 0)
-                    (, C [w x] - [w_in x] C)]
+               H = [[(C (w x l)) x], I, 0, -C [l x], 0 (, -C [l x], 0)
+                    (, -C [l x] diag(w), 0) (, C [w x] - [w_in x] C)]
     ZUPT:      the velocity model with z = 0, over the detected initial static period
 
 Each update is gated by its normalised innovation squared (NIS, 3 dof) against the chi-square
 quantile ``gate_probability``; rejected measurements are reported with time, kind and NIS, as
 are GNSS records refused on entry (non-finite values, covariance not positive definite or
-absurdly large, duplicate times, outside the IMU span). Reported covariances are used as given,
-floored at ``pos_sigma_floor_m`` / ``vel_sigma_floor_mps`` per axis.
+absurdly large, duplicate times, outside the IMU span). After ``gate_reset_s`` of gated GNSS
+positions (velocities) the position (velocity) block of P is reset from the next record
+(reported in ``FilterResult.resets``). Reported covariances are used as given, floored at
+``pos_sigma_floor_m`` / ``vel_sigma_floor_mps`` per axis.
 
 Outputs at ``output_rate_hz`` (IMU epochs nearest the multiples of 1 / rate in t_s; ``None``:
 every IMU epoch): the forward solution with sigmas, and the smoothed one (nominal corrected by
