@@ -15,6 +15,7 @@ import pytest
 
 from pospp import rotation
 from pospp.calib.compensate import compensate_legs
+from pospp.calib.pairs import PairPolicy
 from pospp.calib.replay import ImuIncrements, reference_from_trajectory, replay_leg
 from pospp.calib.solve import calibrate
 from pospp.calib.stage import calibrate_flight
@@ -119,3 +120,19 @@ def test_paper_formulation_on_a_heading_reversal(case):
         eps = np.array([paper.value("eps_n"), paper.value("eps_e")])
         assert min(np.linalg.norm(eps - eps_a), np.linalg.norm(eps + eps_a)) > 0.5 * np.linalg.norm(
             eps_a)
+
+
+def test_all_pairs_mode_and_closed_form_transition(case):
+    """mode "all" adds the same-heading pair (0, 2), rejected with its reason; the closed-form
+    transition (ideal legs here) recovers the bias too."""
+    params, _, imu, a, run = case
+    bias = np.array(params["imu_errors"]["gyro_bias_dph"]) * DPH
+    alt = calibrate_flight(imu, a, legs=run.legs, formulations=("body",),
+                           pairs_cfg=PairPolicy(mode="all", transition="closed_form"))
+    assert [(p.leg_a, p.leg_b, p.used) for p in alt.pairs] == [
+        (0, 1, True), (0, 2, False), (1, 2, True)]
+    assert alt.pairs[1].reason.startswith("heading change 0.0 deg below the minimum")
+    cal = alt.chosen
+    assert cal.transition == "closed_form" and cal.leg_ids == (0, 1, 2)
+    for i, ax in enumerate("xy"):
+        assert abs(cal.value(f"gyro_bias_{ax}") - bias[i]) < 0.05 * abs(bias[i])
