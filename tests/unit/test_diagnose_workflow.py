@@ -235,3 +235,17 @@ def test_time_offset_needs_wander():
     d = _run(fl, shift(dth), shift(dv), seed=19)
     _assert_named(d, "time_offset", 20.0)
     assert "lever_arm" in d.step_of("time_offset").confounded_with
+
+
+@pytest.mark.slow
+def test_null_with_gyro_random_walk(reversal):
+    # white gyro noise (ARW 0.002 deg/sqrt(h)) makes B's error a correlated random walk: with
+    # the gyro_rw noise model nothing is significant and no structured gap remains
+    fl = reversal
+    dth, dv = _increments(fl)
+    dt = np.diff(fl.imu.t_s)[:, None]
+    arw = np.radians(0.002) / 60.0
+    rng = np.random.default_rng(21)
+    dth = dth + rng.normal(0.0, 1.0, dth.shape) * arw * np.sqrt(dt)
+    d = _run(fl, dth, dv, seed=21, noise="gyro_rw", gyro_arw_radpsqrts=arw)
+    assert d.named == () and d.conclusion == "none"
