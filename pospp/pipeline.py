@@ -345,10 +345,14 @@ def diagnose(calib_run: CalibrationRun, imu: ImuIncrements, reference: Reference
              config: PipelineConfig) -> Diagnosis:
     """Model-discrepancy workflow on the calibrated run's B-minus-A curves (pospp.diagnose)."""
     replays = [calib_run.replays[i] for i in sorted(calib_run.replays)]
+    # B's residuals carry the gyro angle random walk, correlated along each leg: weighting them
+    # as white noise would make every F-test too liberal
+    arw_radpsqrts = np.radians(imu_tuning(config).gyro_arw_dpsh) / 60.0
     return run_diagnosis(
         replays, imu=imu, reference=reference,
         replay_kwargs={"accel_compensation": config.replay.accel_compensation},
         base_formulation=config.pairs.formulation, base_transition=config.pairs.transition,
+        noise="gyro_rw", gyro_arw_radpsqrts=arw_radpsqrts,
     )
 
 
