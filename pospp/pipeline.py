@@ -33,7 +33,7 @@ from pospp.calib.observability import observability_table
 from pospp.calib.replay import ImuIncrements, ReferenceSolution
 from pospp.calib.stage import CalibrationRun, calibrate_flight
 from pospp.config import PipelineConfig, config_from_dict
-from pospp.diagnose.workflow import Diagnosis, diagnosis_columns
+from pospp.diagnose.workflow import Diagnosis, diagnosis_columns, residual_curve_columns
 from pospp.diagnose.workflow import diagnose as run_diagnosis
 from pospp.evaluate import evaluation_rows, solution_errors
 from pospp.io import mcap_reader, parquet_tables, report_files, trajectory_mcap
@@ -300,6 +300,7 @@ def run(
     tables.update(calib_run.tables(epoch_ns))
     if diagnosis is not None:
         tables["diagnosis"] = diagnosis_columns(diagnosis)
+        tables["diagnosis_curves"] = residual_curve_columns(diagnosis)
     for name, table in tables.items():
         write(name, table)
     summary.update(calib_run.summary())
@@ -435,6 +436,9 @@ def diagnose_run(run_dir: str | Path, *, progress: ProgressFn | None = None) -> 
     out_meta = {k: meta[k] for k in ("input_file", "input_sha256", "config")}
     parquet_tables.write_table(run / "diagnosis.parquet", diagnosis_columns(diagnosis),
                                "diagnosis", metadata=out_meta)
+    parquet_tables.write_table(run / "diagnosis_curves.parquet",
+                               residual_curve_columns(diagnosis), "diagnosis_curves",
+                               metadata=out_meta)
     write_report(run)
     book.done()
     return diagnosis

@@ -218,6 +218,14 @@ TABLES: dict[str, list[Column]] = {
         _opt(Column("n_epochs", _I, "", "epochs compared")),
         _opt(Column("reference_file", _S, "", "reference trajectory used")),
     ],
+    "diagnosis_curves": [
+        Column("leg_id", _I, "", "leg"),
+        Column("t_s", _F, "s", "time since the leg start"),
+        Column("model", _S, "", "'before' (base model) or 'after' (with the named effects)"),
+        Column("kind", _S, "", "'fit' (all legs fitted) or 'heldout' (leave-one-leg-out)"),
+        Column("dvn_mps", _F, "m/s", "B minus A minus the model, north", _NED),
+        Column("dve_mps", _F, "m/s", "B minus A minus the model, east", _NED),
+    ],
     "messages": [
         Column("severity", _S, "", "'info', 'warning' or 'error'"),
         Column("stage", _S, "", "pipeline stage that emitted it (e.g. 'ingest')"),

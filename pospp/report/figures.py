@@ -181,3 +181,24 @@ def evaluation_errors(errors: dict, *, t0_ns: int | None = None) -> Figure:
     axes[-1].set_xlabel("time since start [s]")
     fig.tight_layout()
     return fig
+
+
+def diagnosis_curves(curves: pd.DataFrame) -> Figure:
+    """The gap over time per leg: B minus A minus the model, before and after the diagnosis
+    (fitted and held-out), horizontal magnitude."""
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), sharey=True)
+    cmap = plt.get_cmap("tab10")
+    for ax, kind in zip(axes, ("fit", "heldout"), strict=True):
+        g = curves[curves.kind == kind]
+        for i, (leg, gl) in enumerate(g.groupby("leg_id")):
+            for model, ls in (("before", "--"), ("after", "-")):
+                c = gl[gl.model == model]
+                ax.plot(c.t_s, np.hypot(c.dvn_mps, c.dve_mps), ls=ls, color=cmap(i % 10),
+                        lw=1, label=f"leg {leg} {model}")
+        ax.set_title(f"gap, {'fitted' if kind == 'fit' else 'held-out prediction'}")
+        ax.set_xlabel("time since leg start [s]")
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("|B - A - model| [m/s]")
+    axes[1].legend(fontsize=7, ncol=2)
+    fig.tight_layout()
+    return fig

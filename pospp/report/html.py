@@ -89,6 +89,13 @@ def render_report(tables: Mapping[str, pd.DataFrame], *, title: str = "pospp run
     if diag is not None and not diag.empty:
         parts.append("<h2>Model-discrepancy diagnosis</h2>")
         parts.append(_img(figures.diagnosis_steps(diag)) + _table(diag))
+        curves = tables.get("diagnosis_curves")
+        if curves is not None and not curves.empty:
+            parts.append(_img(figures.diagnosis_curves(curves)))
+    ev = tables.get("evaluation")
+    if ev is not None and not ev.empty:
+        wide = ev.pivot_table(index=["metric", "unit"], columns="solution", values="value")
+        parts.append("<h2>Against the reference</h2>" + _table(wide.reset_index()))
     msgs = tables.get("messages")
     if msgs is not None:
         parts.append("<h2>Messages and warnings</h2>" + _table(msgs, max_rows=200))
