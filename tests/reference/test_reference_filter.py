@@ -181,6 +181,10 @@ def test_gyro_bias_converges_to_injected_within_3_sigma(case, result, matched):
 
 
 def test_smoothed_covariance_below_forward(result):
+    for sol in (result.forward, result.smoothed):
+        for cov in (sol.pos_cov_ned_m2, sol.vel_cov_ned_m2ps2, sol.att_cov_ned_rad2):
+            np.testing.assert_allclose(cov, np.swapaxes(cov, 1, 2), rtol=1e-9, atol=0)
+            assert np.linalg.eigvalsh(cov).min() > 0.0
     for f in ("pos_sigma_ned_m", "vel_sigma_ned_mps", "att_sigma_ned_rad"):
         fwd = getattr(result.forward, f)
         sm = getattr(result.smoothed, f)
