@@ -174,6 +174,20 @@ class ProfileMotion:
         return MotionSample(t, lat, lon, h, v, a, rpy, rpy1)
 
 
+def _fit_quintic(t: NDArray, y: NDArray, sigma: float | NDArray) -> UnivariateSpline:
+    """Quintic smoothing spline with RMS residual about ``sigma`` (per sample if an array) and
+    no residual above 4 sigma (FITPACK places few knots where a tight turn needs many: the
+    smoothing budget is quartered until the worst residual fits, at most 6 times)."""
+    w = np.broadcast_to(1.0 / np.asarray(sigma, dtype=float), t.shape)
+    s = float(t.size)
+    for _ in range(6):
+        sp = UnivariateSpline(t, y, w=w, k=5, s=s)
+        if (np.abs(sp(t) - y) * w).max() <= 4.0:
+            break
+        s *= 0.25
+    return sp
+
+
 class SplineMotion:
     """Smooth true motion along a given trajectory (module docstring).
 
@@ -185,7 +199,8 @@ class SplineMotion:
     vehicle : {"car", "aircraft"}
         Zero roll for cars; coordinated-turn bank for aircraft.
     position_sigma_m : float
-        Expected position noise; the smoothing splines fit to RMS residual about this.
+        Expected position noise; the smoothing splines fit to RMS residual about this, with
+        no residual above 4 x this (the smoothing is tightened until so).
     heading_min_speed_mps : float
         Below this speed the track angle is not trusted (heading held, low weight).
     """
@@ -213,8 +228,8 @@ class SplineMotion:
         r_e = earth.llh_to_ecef_m(lat_rad, lon_rad, height_m)
         self._r0 = r_e[0].copy()
         n = t.size
-        s = n * position_sigma_m**2
-        self._pos = [UnivariateSpline(t, r_e[:, k] - self._r0[k], k=5, s=s) for k in range(3)]
+        self._pos = [_fit_quintic(t, r_e[:, k] - self._r0[k], position_sigma_m)
+                     for k in range(3)]
         self._vel = [sp.derivative(1) for sp in self._pos]
         self._acc = [sp.derivative(2) for sp in self._pos]
         # heading: smoothing spline of the unwrapped track angle, speed-weighted
@@ -228,8 +243,9 @@ class SplineMotion:
         idx = np.maximum.accumulate(idx)
         idx[idx < 0] = np.argmax(good)
         track = np.unwrap(track[idx])
-        wts = np.minimum(vh / heading_min_speed_mps, 1.0) + 1e-3
-        self._psi = UnivariateSpline(t, track, w=wts / heading_sigma_rad, k=5, s=n)
+        # held values (slow samples) are trusted; the track of slow moving samples less so
+        wts = np.where(good, np.clip(vh / (3.0 * heading_min_speed_mps), 0.3, 1.0), 1.0)
+        self._psi = _fit_quintic(t, track, heading_sigma_rad / wts)
         self._psi1 = self._psi.derivative(1)
         self._psi2 = self._psi.derivative(2)
 

@@ -54,9 +54,11 @@ def test_car_along_a_drive_closes_and_follows_the_input(drive):
                                    clean.height_m[k])
     rms = np.sqrt((d**2).mean(axis=0))
     assert rms.max() < 0.01 and np.abs(d).max() < 0.05, (rms, np.abs(d).max(axis=0))
-    # car: zero roll and pitch; heading follows the track while moving
+    # car: zero roll and pitch; heading follows the track (held through the stop)
     rpy = sim.truth.rpy_rad
     assert np.abs(rpy[:, :2]).max() < 1e-12
+    dyaw = np.angle(np.exp(1j * (rpy[idx, 2] - clean.rpy_rad[k, 2])))
+    assert np.degrees(np.abs(dyaw)).max() < 3.0
     # the increments are exact for this truth: strapdown closure over the whole drive
     t_s, dth, dv = increments_from_rates(sim.imu.time_ns, sim.imu.w_ib_b_radps,
                                          sim.imu.f_ib_b_mps2, epoch_ns=sim.start_time_ns)
