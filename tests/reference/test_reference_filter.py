@@ -139,14 +139,14 @@ def _nees_fractions(sol, err, params):
 def test_nees_with_tuning_matching_the_injected_errors(case, matched):
     """Consistency: with the filter model matching the simulated errors, the NEES of the
     position, velocity and attitude blocks lies in the two-sided 95 % chi-square (3 dof) band
-    for >= 90 % of the epochs (measured 0.90-0.97)."""
+    for >= 90 % of the epochs (measured 0.94-0.97)."""
     _, params, truth = case
     for name in ("forward", "smoothed"):
         sol = getattr(matched, name)
         fr = _nees_fractions(sol, _errors(sol, truth), params)
         print(name, fr)
         for block, (two_sided, below) in fr.items():
-            assert two_sided >= 0.88, (name, block, two_sided)
+            assert two_sided >= 0.90, (name, block, two_sided)
             assert below >= 0.95, (name, block, below)
 
 
