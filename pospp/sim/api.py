@@ -401,6 +401,7 @@ def simulate_along(
     start_time_ns: int = DEFAULT_START_TIME_NS,
     position_sigma_m: float = 0.02,
     heading_sigma_rad: float = 0.01,
+    heading_min_speed_mps: float = 1.0,
     n_sub: int = 2,
     n_gl: int = 4,
     name: str = "along",
@@ -417,6 +418,11 @@ def simulate_along(
     ----------
     time_s : (N,) [s], strictly increasing
     lat_rad, lon_rad, height_m : (N,) geodetic (WGS-84)
+    vehicle : {"car", "aircraft"}
+    position_sigma_m, heading_sigma_rad : float
+        Smoothing: RMS residual of the position / heading fits, none above 4 x this.
+    heading_min_speed_mps : float
+        Below this speed the heading is held (the track angle of a stopped vehicle is noise).
     Other parameters as :func:`simulate`.
     """
     t = np.asarray(time_s, dtype=float)
@@ -424,7 +430,8 @@ def simulate_along(
     gnss = gnss if gnss is not None else GnssModel()
     t0 = time.perf_counter()
     sm = SplineMotion(t, lat_rad, lon_rad, height_m, vehicle=vehicle,
-                      position_sigma_m=position_sigma_m, heading_sigma_rad=heading_sigma_rad)
+                      position_sigma_m=position_sigma_m, heading_sigma_rad=heading_sigma_rad,
+                      heading_min_speed_mps=heading_min_speed_mps)
     motion = _ShiftedMotion(sm, float(t[0]))
     if progress is not None:
         progress("trajectory", 1.0)
@@ -433,6 +440,7 @@ def simulate_along(
         "config": {"along": {"n_points": int(t.size), "vehicle": vehicle,
                              "position_sigma_m": position_sigma_m,
                              "heading_sigma_rad": heading_sigma_rad,
+                             "heading_min_speed_mps": heading_min_speed_mps,
                              "input_t0_s": float(t[0])}},
         "mission": {"preset": None, "turn_bank": "coordinated" if vehicle == "aircraft"
                     else "none", "duration_s": float(t[-1] - t[0])},
