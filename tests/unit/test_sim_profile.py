@@ -137,3 +137,27 @@ def test_bad_profiles_fail_with_the_facts():
         plan_mission(_profile({"type": "straight", "duration_s": 10.0}))
     with pytest.raises(ValueError, match="unknown mission preset"):
         load_profile("no_such_preset")
+
+
+def test_profile_from_a_toml_file_and_progress_reports(tmp_path):
+    from pospp.sim.api import simulate
+
+    path = tmp_path / "mine.toml"
+    path.write_text(
+        'name = "mine"\nimu_rate_hz = 20\n'
+        "[start]\nlat_deg = 10.0\nlon_deg = 20.0\nheight_m = 5.0\nheading_deg = 270.0\n"
+        '[options]\nturn_bank = "none"\n'
+        '[[segment]]\ntype = "static"\nduration_s = 3.0\n'
+        '[[segment]]\ntype = "accelerate"\nto_speed_mps = 5.0\nduration_s = 4.0\n'
+        '[[segment]]\ntype = "straight"\nlength_m = 50.0\nkind = "survey"\n'
+    )
+    prof = load_profile(path)
+    assert prof.name == "mine" and prof.turn_bank == "none" and prof.imu_rate_hz == 20.0
+    seen = []
+    sim = simulate(path, seed=0, progress=lambda stage, f: seen.append((stage, f)))
+    assert len(sim.imu) == 17 * 20 and sim.legs[0].length_m == pytest.approx(50.0)
+    stages = [s for s, _ in seen]
+    assert {"trajectory", "imu", "errors", "gnss", "truth"} <= set(stages)
+    assert all(0.0 <= f <= 1.0 for _, f in seen) and seen[-1] == ("truth", 1.0)
+    with pytest.raises(FileNotFoundError):
+        load_profile(tmp_path / "missing.toml")
