@@ -645,14 +645,8 @@ def reference_solution(
     return sol.trajectory, sol.vel_sigma_ned_mps, bias.accel_b_mps2
 
 
-def enu_to_ned_covariance(cov_enu: ArrayLike) -> NDArray:
-    """Rotate (..., 3, 3) ENU covariances to NED (swap E/N, negate U): T C T^T."""
-    tm = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
-    return tm @ np.asarray(cov_enu, dtype=float) @ tm.T
-
-
 __all__ = [
     "BiasHistory", "FilterOptions", "FilterResult", "GnssRejection", "LeverArmEstimate",
-    "NavSolution", "enu_to_ned_covariance", "options_from_config", "reference_solution",
+    "NavSolution", "options_from_config", "reference_solution",
     "run_integrated_navigation",
 ]
