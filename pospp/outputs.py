@@ -86,6 +86,22 @@ def rejection_messages(rejections: Iterable[Any], *, limit: int = 200) -> list[d
     return rows
 
 
+def filter_event_messages(resets: Iterable[tuple[float, str]],
+                          imu_gaps: Iterable[tuple[float, float]],
+                          epoch_ns: int) -> list[dict[str, Any]]:
+    """Algorithm A's covariance resets and bridged IMU gaps -> messages rows."""
+    rows = []
+    for t_s, kind in resets:
+        rows.append({"severity": "warning", "stage": "navigate",
+                     "time_ns": int(t_s_to_time_ns(t_s, epoch_ns)),
+                     "text": f"{kind} covariance reset after a run of gated GNSS records"})
+    for t_s, gap_s in imu_gaps:
+        rows.append({"severity": "warning", "stage": "navigate",
+                     "time_ns": int(t_s_to_time_ns(t_s, epoch_ns)),
+                     "text": f"IMU gap of {gap_s:.3f} s bridged"})
+    return rows
+
+
 def messages_table(messages: list[dict[str, Any]]) -> pd.DataFrame:
     """messages.parquet from rows (optional columns may be absent in a row)."""
     cols = ["severity", "stage", "time_ns", "text", "topic", "index", "byte_offset",

@@ -116,8 +116,7 @@ def ingest(path: str | Path, config: PipelineConfig) -> mcap_reader.FlightLog:
 
 def imu_tuning(config: PipelineConfig) -> nav_tuning.ImuTuning:
     """The filter's IMU noise model: the grade preset with the [imu] overrides."""
-    overrides = {k: v for k, v in vars(config.imu).items() if k != "grade" and v is not None}
-    return nav_tuning.tuning_preset(config.imu.grade, **overrides)
+    return nav_tuning.tuning_from_config(config.imu)
 
 
 def navigate(
@@ -137,14 +136,7 @@ def navigate(
         imu = replace(imu, w_ib_b_radps=imu.w_ib_b_radps - np.asarray(
             gyro_bias_correction_b_radps, dtype=float))
     g, f = config.gnss, config.filter
-    options = replace(
-        nav_filter.FilterOptions(),
-        pos_sigma_floor_m=g.pos_sigma_floor_m,
-        vel_sigma_floor_mps=g.vel_sigma_floor_mps,
-        gate_probability=g.gate_probability,
-        use_velocity=g.use_velocity,
-        smoother=f.smoother,
-    )
+    options = nav_filter.options_from_config(config)
     return nav_filter.run_integrated_navigation(
         imu,
         log.fix,
@@ -255,6 +247,7 @@ def run(
 
     # --- algorithm A --------------------------------------------------------------------------
     book.stage("navigate")
+    epoch_ns = int(log.imu.time_ns[0])
     try:
         nav = navigate(log, config)
     except ValueError as exc:
@@ -262,7 +255,7 @@ def run(
         finish("failed")
         raise
     book.messages.extend(outputs.rejection_messages(nav.rejections))
-    epoch_ns = int(log.imu.time_ns[0])
+    book.messages.extend(outputs.filter_event_messages(nav.resets, nav.imu_gaps, epoch_ns))
     solutions = {"forward": nav.forward}
     if nav.smoothed is not None:
         solutions["smoothed"] = nav.smoothed

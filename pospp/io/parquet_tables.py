@@ -142,8 +142,9 @@ TABLES: dict[str, list[Column]] = {
         Column("pair_id", _I, "", "pair the estimate comes from (-1: all pairs combined)"),
         Column("formulation", _S, "", "'paper' (nav-frame drift) or 'body' (body-frame bias)"),
         Column("transition", _S, "", "'closed_form' or 'numerical' transition matrix"),
-        Column("parameter", _S, "", "phi_x, phi_y, phi_z (NED), eps_e, eps_n, gyro_bias_x/y/z "
-               "(FRD), ... as mapped in docs/method.md"),
+        Column("parameter", _S, "", "paper axes: phi_x = phi_E, phi_y = phi_N, phi_z = -phi_D "
+               "(common misalignment), phi_x_leg<i> / phi_y_leg<i> (tilt at leg i's start); "
+               "eps_e, eps_n (nav-frame drift); gyro_bias_x/y/z (body FRD); docs/method.md"),
         Column("value", _F, "see unit", "estimate, in the row's unit"),
         Column("sigma", _F, "see unit", "1-sigma of the estimate, in the row's unit"),
         Column("unit", _S, "", "'arcsec' or 'deg_per_h'"),
