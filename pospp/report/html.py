@@ -56,8 +56,9 @@ def render_report(tables: Mapping[str, pd.DataFrame], *, title: str = "pospp run
         row = summary.iloc[0]
         parts.append("<h2>Summary</h2><table>")
         for k, v in row.items():
+            text = f"{v:.4g}" if isinstance(v, float) else str(v)
             parts.append(f"<tr><th style='text-align:left'>{html.escape(str(k))}</th>"
-                         f"<td>{html.escape(str(v))}</td></tr>")
+                         f"<td>{html.escape(text)}</td></tr>")
         parts.append("</table>")
     traj, legs = tables.get("trajectory"), tables.get("legs")
     if traj is not None and not traj.empty:
