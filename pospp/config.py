@@ -80,26 +80,37 @@ class FilterConfig:
 LEG_MIN_DURATION_BY_GRADE_S: dict[str, float] = {
     "flight": 300.0,
     "vehicle": 300.0,
-    "tactical": 60.0,
-    "mems": 20.0,
+    "tactical": 30.0,
+    "mems": 30.0,
 }
-"""Default ``[legs] min_duration_s`` per ``[imu] grade`` [s] (docs/results.md, "Shortest
-usable leg"): the paper's 5 min for the flight and vehicle grades; for the noisier grades the
-shortest leg whose calibrated horizontal gyro bias still has a sigma well below the grade's
-turn-on bias on simulated opposite-heading pairs."""
+"""Default ``[legs] min_duration_s`` per ``[imu] grade`` [s]: the paper's 5 min for the flight
+and vehicle grades; for tactical and MEMS the shortest flown leg whose pair calibration of the
+horizontal body gyro bias has a sigma below a third of the grade's turn-on bias and errors
+within 3 sigma of the injected value (simulated back-and-forth legs, docs/results.md
+"Shortest usable leg")."""
+
+LEG_DURATION_TOLERANCE_BY_GRADE_S: dict[str, float] = {
+    "flight": 15.0,
+    "vehicle": 15.0,
+    "tactical": 5.0,
+    "mems": 5.0,
+}
+"""Default ``[legs] duration_tolerance_s`` per ``[imu] grade`` [s]: a leg flown for
+min_duration_s is detected 3-5 s shorter; legs shorter than 20 s detected hold a single epoch
+of the gyro random-walk least squares (10 s spacing) and calibrate nothing."""
 
 
 @dataclass(frozen=True)
 class LegsConfig:
     """[legs]: straight uniform leg thresholds (see pospp.calib.segment.LegThresholds).
-
-    ``min_duration_s`` omitted takes the ``[imu] grade``'s default: flight 300 s, vehicle
-    300 s, tactical 60 s, mems 20 s (``pospp.config.LEG_MIN_DURATION_BY_GRADE_S``); an explicit
-    value wins.
+    Omitted, ``min_duration_s`` and ``duration_tolerance_s`` take the ``[imu] grade``'s
+    defaults: flight and vehicle 300 s and 15 s, tactical and mems 30 s and 5 s
+    (``LEG_MIN_DURATION_BY_GRADE_S``, ``LEG_DURATION_TOLERANCE_BY_GRADE_S``); explicit values
+    win.
     """
 
     min_duration_s: float | None = None
-    duration_tolerance_s: float = 15.0
+    duration_tolerance_s: float | None = None
     max_duration_s: float = 1800.0
     max_heading_rate_dps: float = 0.2
     max_heading_spread_deg: float = 2.0
@@ -172,16 +183,18 @@ class PipelineConfig:
     outputs: OutputsConfig = field(default_factory=OutputsConfig)
 
     def __post_init__(self) -> None:
-        # an omitted [legs] min_duration_s takes the [imu] grade's default
-        if self.legs.min_duration_s is None:
-            grade = self.imu.grade
-            if grade not in LEG_MIN_DURATION_BY_GRADE_S:
-                raise ConfigError(
-                    f"imu.grade: expected one of {list(LEG_MIN_DURATION_BY_GRADE_S)}, "
-                    f"got {grade!r}")
-            legs = dataclasses.replace(self.legs,
-                                       min_duration_s=LEG_MIN_DURATION_BY_GRADE_S[grade])
-            object.__setattr__(self, "legs", legs)
+        # omitted [legs] min_duration_s / duration_tolerance_s take the [imu] grade's defaults
+        grade = self.imu.grade
+        changes = {}
+        for key, table in (("min_duration_s", LEG_MIN_DURATION_BY_GRADE_S),
+                           ("duration_tolerance_s", LEG_DURATION_TOLERANCE_BY_GRADE_S)):
+            if getattr(self.legs, key) is None:
+                if grade not in table:
+                    raise ConfigError(
+                        f"imu.grade: expected one of {list(table)}, got {grade!r}")
+                changes[key] = table[grade]
+        if changes:
+            object.__setattr__(self, "legs", dataclasses.replace(self.legs, **changes))
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)

@@ -19,6 +19,7 @@ import pytest
 
 from pospp import pipeline
 from pospp.config import (
+    LEG_DURATION_TOLERANCE_BY_GRADE_S,
     LEG_MIN_DURATION_BY_GRADE_S,
     ConfigError,
     ImuConfig,
@@ -42,22 +43,28 @@ ARCSEC_PER_DEG = 3600.0
 def test_omitted_min_duration_takes_the_grade_default(grade):
     cfg = config_from_dict({"imu": {"grade": grade}, "legs": {"min_speed_mps": 5.0}})
     assert cfg.legs.min_duration_s == LEG_MIN_DURATION_BY_GRADE_S[grade]
+    assert cfg.legs.duration_tolerance_s == LEG_DURATION_TOLERANCE_BY_GRADE_S[grade]
     assert cfg.legs.min_speed_mps == 5.0
     direct = PipelineConfig(imu=ImuConfig(grade=grade))
     assert direct.legs.min_duration_s == LEG_MIN_DURATION_BY_GRADE_S[grade]
+    assert direct.legs.duration_tolerance_s == LEG_DURATION_TOLERANCE_BY_GRADE_S[grade]
 
 
 def test_grade_defaults_are_the_paper_and_the_measured_values():
-    # flight and vehicle keep the paper's 5 min; the shorter grades are the study's values
+    # flight and vehicle keep the paper's 5 min; tactical and mems: the study's 30 s, with a
+    # tolerance that keeps every accepted leg >= 20 s (two epochs of the 10 s noise grid)
     assert LEG_MIN_DURATION_BY_GRADE_S["flight"] == LEG_MIN_DURATION_BY_GRADE_S["vehicle"] == 300
-    assert (LEG_MIN_DURATION_BY_GRADE_S["tactical"] < 300
-            and LEG_MIN_DURATION_BY_GRADE_S["mems"] <= LEG_MIN_DURATION_BY_GRADE_S["tactical"])
+    for grade in ("tactical", "mems"):
+        shortest = LEG_MIN_DURATION_BY_GRADE_S[grade] - LEG_DURATION_TOLERANCE_BY_GRADE_S[grade]
+        assert 20.0 <= shortest < 300.0
     assert PipelineConfig().legs.min_duration_s == 300.0  # default grade "flight"
+    assert PipelineConfig().legs.duration_tolerance_s == 15.0
 
 
 def test_explicit_min_duration_wins_and_round_trips():
-    cfg = config_from_dict({"imu": {"grade": "mems"}, "legs": {"min_duration_s": 45}})
-    assert cfg.legs.min_duration_s == 45.0
+    cfg = config_from_dict({"imu": {"grade": "mems"},
+                            "legs": {"min_duration_s": 45, "duration_tolerance_s": 0}})
+    assert cfg.legs.min_duration_s == 45.0 and cfg.legs.duration_tolerance_s == 0.0
     again = config_from_dict(json.loads(cfg.to_json()))
     assert again == cfg and again.to_json() == cfg.to_json()
     # a resolved default is recorded in the run's config, so a re-read config is identical
@@ -69,6 +76,7 @@ def test_explicit_min_duration_wins_and_round_trips():
 
 @pytest.mark.parametrize("data, message", [
     ({"legs": {"min_duration_s": "short"}}, "legs.min_duration_s: expected a number"),
+    ({"legs": {"duration_tolerance_s": [1]}}, "legs.duration_tolerance_s: expected a number"),
     ({"imu": {"grade": "navigation"}}, "imu.grade: expected one of"),
 ])
 def test_bad_values_still_name_the_key(data, message):
