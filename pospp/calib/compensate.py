@@ -8,10 +8,12 @@ the leg end if shorter) is compared before and after.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from pospp.calib.pairs import Pair
 from pospp.calib.replay import ImuIncrements, LegReplay, ReferenceSolution, replay_leg
@@ -69,12 +71,25 @@ def compensate_legs(
     transition_step: int = 10,
     sample_rate_hz: float = 1.0,
     sigma_floor_mps: float = 0.005,
+    per_leg_drift: bool = False,
+    gyro_bias_by_leg: Mapping[int, NDArray] | None = None,
 ) -> tuple[dict[int, LegReplay], tuple[LegImprovement, ...]]:
     """Re-run B on every leg with the calibration applied; report the improvement.
 
     Every leg gets the calibrated gyro bias (``paper``: the nav-frame drift rotated into the
     body by that leg's initial attitude); legs that took part in the fit also get their
     calibrated initial misalignment. Held-out legs (``in_fit`` False) measure prediction.
+
+    Parameters
+    ----------
+    per_leg_drift : bool
+        Add the smoothed Gauss-Markov drift's mean over each leg
+        (:meth:`Calibration.leg_drift_b_radps`; zero without a Gauss-Markov noise model) to
+        the constant bias: b_leg = b_g + mean over the leg of E[x_g(t) | residuals].
+    gyro_bias_by_leg : Mapping of leg id to ndarray, shape (3,), optional
+        Body gyro bias [rad/s] to remove on those legs instead of the calibration's (e.g. the
+        true realised per-leg mean bias of a simulation: the oracle that measures the floor
+        left by the drift's change within a leg).
     """
     after: dict[int, LegReplay] = {}
     rows: list[LegImprovement] = []
@@ -82,6 +97,10 @@ def compensate_legs(
         in_fit = leg_id in cal.leg_ids
         phi = cal.misalignment_n_rad(leg_id) if in_fit else None
         bg = cal.gyro_bias_b_radps(rep.c_nb0)
+        if per_leg_drift:
+            bg = bg + cal.leg_drift_b_radps(rep)
+        if gyro_bias_by_leg is not None and leg_id in gyro_bias_by_leg:
+            bg = np.asarray(gyro_bias_by_leg[leg_id], dtype=float)
         new = replay_leg(
             imu, reference, rep.leg, gyro_bias_b_radps=bg, attitude_correction_n_rad=phi,
             accel_compensation=accel_compensation, transition_step=transition_step,

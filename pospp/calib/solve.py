@@ -50,7 +50,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import optimize
+from scipy import linalg, optimize
 
 from pospp.calib.replay import LegReplay
 from pospp.nav.error_model import BG, PHI
@@ -93,6 +93,12 @@ class Calibration:
         noise model fits).
     rank_deficient : bool
         True when directions of X were unobservable and left at zero (pseudo-inverse).
+    gyro_gm_sigma_radps, gyro_gm_tau_s : float
+        Gauss-Markov gyro drift of the noise model (steady-state sigma [rad/s], correlation
+        time [s]); 0 and inf when the model has none.
+    drift : DriftSmoother or None
+        Conditional mean of the Gauss-Markov drift given this fit's residuals (None without
+        a Gauss-Markov component), see :meth:`drift_b_radps`.
     """
 
     formulation: str
@@ -112,6 +118,27 @@ class Calibration:
     whitened_rms: float
     whitened_lag1: float
     rank_deficient: bool
+    gyro_gm_sigma_radps: float = 0.0
+    gyro_gm_tau_s: float = np.inf
+    drift: DriftSmoother | None = None
+
+    def drift_b_radps(self, t_s: NDArray) -> NDArray:
+        """Smoothed Gauss-Markov drift (body FRD, rad/s) at run times ``t_s``, shape (N, 3).
+
+        Zeros when the noise model has no Gauss-Markov component.
+        """
+        t_s = np.atleast_1d(np.asarray(t_s, dtype=float))
+        if self.drift is None:
+            return np.zeros((t_s.size, 3))
+        return self.drift.mean_b_radps(t_s)
+
+    def leg_drift_b_radps(self, rep: LegReplay) -> NDArray:
+        """Mean smoothed drift over one leg's samples (body FRD, rad/s), shape (3,).
+
+        Works for any leg, in the fit or not (a held-out leg gets the prediction from the
+        drift's correlation with the fitted legs).
+        """
+        return self.drift_b_radps(rep.t0_s + rep.t_s).mean(axis=0)
 
     @property
     def sigma(self) -> NDArray:
@@ -343,6 +370,151 @@ def noise_basis(rep: LegReplay, *, noise_step_s: float = 10.0) -> NoiseBasis:
     return NoiseBasis(smp, rows, sq, u, np.clip(lam, 0.0, None))
 
 
+@dataclass(frozen=True)
+class DriftSmoother:
+    """Conditional mean of the Gauss-Markov gyro drift given a fit's residuals (BLUP).
+
+    With the drift piecewise constant on bins j (run times ``tau_bin_s``), prior
+    Cov(x(t), x_j) = sigma^2 exp(-|t - tau_j| / tau) I_3 and the GLS residual r of the fit
+    (covariance C), the smoothed drift is
+    ``E[x(t) | r] = sigma^2 sum_j exp(-|t - tau_j| / tau) u_j`` with ``u = S^T C^-1 r``, S
+    the map from the drift bins to B's velocity errors (:func:`gm_noise_operator`).
+
+    Attributes
+    ----------
+    tau_bin_s : ndarray, shape (J,)
+        Run times of the drift bins of the fitted legs [s].
+    u : ndarray, shape (J, 3)
+        S^T C^-1 r per bin and body axis [(rad/s)^-1 ... per rad/s of drift].
+    sigma2 : float
+        Steady-state variance of the drift [(rad/s)^2].
+    tau_s : float
+        Correlation time [s].
+    """
+
+    tau_bin_s: NDArray
+    u: NDArray
+    sigma2: float
+    tau_s: float
+
+    def mean_b_radps(self, t_s: NDArray) -> NDArray:
+        """E[x(t) | r] at run times ``t_s`` (body FRD, rad/s), shape (N, 3)."""
+        e = np.exp(-np.abs(np.asarray(t_s, dtype=float)[:, None] - self.tau_bin_s[None, :])
+                   / self.tau_s)
+        return self.sigma2 * (e @ self.u)
+
+
+def gm_noise_operator(rep: LegReplay, rows: NDArray | None = None, *, bin_s: float = 5.0
+                      ) -> tuple[NDArray, NDArray]:
+    """Map from a piecewise-constant body gyro drift to B's [dv_N, dv_E] at chosen samples.
+
+    B's velocity error from a drift history x(tau) (body, rad/s) is
+    ``dv(t_i) = int_0^t_i Phi_v,phi(t_i, tau) (-C_nb(tau)) x(tau) dtau`` (the time-varying
+    analogue of Phi_v,bg), with Phi(t_i, tau) = Phi(t_i, t0) Phi(tau, t0)^-1 from the leg's
+    transition matrices; the integral is a left Riemann sum on the leg's sample grid, and x is
+    held constant over bins of ``bin_s`` seconds (fine for correlation times >> bin_s).
+
+    Parameters
+    ----------
+    rep : LegReplay
+    rows : ndarray of int, optional
+        Sample indices (> 0); all samples t > 0 when None.
+    bin_s : float
+        Width of the drift bins [s].
+
+    Returns
+    -------
+    s : ndarray, shape (2 R, 3 J)
+        Sample-major rows like :func:`design_matrix`; columns bin-major, axis-minor
+        [m/s per rad/s].
+    tau_bin_s : ndarray, shape (J,)
+        Run times of the bin centres [s].
+    """
+    idx = np.arange(1, rep.t_s.size) if rows is None else np.asarray(rows)
+    g = rep.phi[idx, 3:5, :]  # (R, 2, 15)
+    w = -(np.linalg.inv(rep.phi[:-1])[:, :, PHI] @ rep.c_nb[:-1])  # (M-1, 15, 3)
+    dt = np.diff(rep.t_s)
+    s = np.einsum("iaj,kjb->iakb", g, w, optimize=True) * dt[None, None, :, None]
+    mask = idx[:, None] > np.arange(rep.t_s.size - 1)[None, :]  # tau_k < t_i
+    s *= mask[:, None, :, None]
+    tau_k = rep.t_s[:-1]
+    b = np.floor(tau_k / bin_s).astype(int)
+    nb = int(b[-1]) + 1
+    sb = np.zeros((idx.size, 2, nb, 3))
+    np.add.at(sb, (slice(None), slice(None), b), s)
+    # bin centre: the mean sample time of the bin (weights dt)
+    centre = np.bincount(b, weights=(tau_k + 0.5 * dt) * dt, minlength=nb) / np.maximum(
+        np.bincount(b, weights=dt, minlength=nb), 1e-12)
+    return sb.reshape(2 * idx.size, 3 * nb), rep.t0_s + centre
+
+
+def _gm_covariance(ops: list[tuple[NDArray, NDArray]], tau_s: float) -> NDArray:
+    """S E S^T over several legs: unit-variance drift, E = exp(-|tau_j - tau_k| / tau) I_3.
+
+    S is block-diagonal (each leg's rows see only its own drift bins).
+    """
+    s = linalg.block_diag(*[o[0] for o in ops])
+    tb = np.concatenate([o[1] for o in ops])
+    e = np.exp(-np.abs(tb[:, None] - tb[None, :]) / tau_s)
+    sp = s.reshape(s.shape[0], tb.size, 3)
+    out = np.zeros((s.shape[0], s.shape[0]))
+    for ax in range(3):
+        out += sp[:, :, ax] @ e @ sp[:, :, ax].T
+    return out
+
+
+def _full_reml_nll(theta: NDArray, parts: tuple, fixed: tuple[float | None, float | None]
+                   ) -> float:
+    """Negative restricted log-likelihood with the full (legs coupled) covariance.
+
+    In D^-1/2-scaled units, C = a I + q K + s2 G; theta holds log a and the logs of the free
+    ones of (q, s2).
+    """
+    hs, zs, k, gm = parts
+    c = _full_cov(theta, k, gm, fixed)
+    try:
+        ll = np.linalg.cholesky(c)
+    except np.linalg.LinAlgError:
+        return 1e30
+    hw = _tri_solve(ll, hs)
+    zw = _tri_solve(ll, zs)
+    norms = np.linalg.norm(hw, axis=0)
+    norms[norms == 0] = 1.0
+    u, sv, vt = np.linalg.svd(hw / norms, full_matrices=False)
+    keep = sv > sv[0] * 1e-10
+    proj = u[:, keep].T @ zw
+    rss = float(zw @ zw - proj @ proj)
+    logdet = 2.0 * float(np.sum(np.log(np.diag(ll))))
+    logdet_info = 2.0 * float(np.sum(np.log(sv[keep])) + np.sum(np.log(norms)))
+    return 0.5 * (logdet + logdet_info + rss)
+
+
+def _full_params(theta: NDArray, fixed: tuple[float | None, float | None]
+                 ) -> tuple[float, float, float]:
+    a = float(np.exp(theta[0]))
+    j = 1
+    vals = []
+    for f in fixed:
+        if f is None:
+            vals.append(float(np.exp(theta[j])))
+            j += 1
+        else:
+            vals.append(float(f))
+    return a, vals[0], vals[1]
+
+
+def _full_cov(theta: NDArray, k: NDArray, gm: NDArray,
+              fixed: tuple[float | None, float | None]) -> NDArray:
+    a, q, s2 = _full_params(theta, fixed)
+    c = q * k + s2 * gm
+    c[np.diag_indices_from(c)] += a
+    return c
+
+
+def _tri_solve(ll: NDArray, b: NDArray) -> NDArray:
+    return linalg.solve_triangular(ll, b, lower=True, check_finite=False)
+
+
 class _LegNoise:
     """Projected H and z of one leg in its :class:`NoiseBasis`."""
 
@@ -389,6 +561,10 @@ def calibrate(
     gyro_arw_radpsqrts: float | None = None,
     noise_step_s: float = 10.0,
     bases: Mapping[int, NoiseBasis] | None = None,
+    gyro_gm_sigma_radps: float | None = None,
+    gyro_gm_tau_s: float | None = None,
+    gm_bin_s: float = 5.0,
+    gm_ops: Mapping[int, tuple[NDArray, NDArray]] | None = None,
 ) -> Calibration:
     """Calibrate from the B-minus-A velocity errors of a set of legs (paper Eq. 17).
 
@@ -411,6 +587,17 @@ def calibrate(
         ``noise_step_s``-th second; the condition numbers and residuals use all samples).
     bases : Mapping of leg id to NoiseBasis, optional
         Precomputed :func:`noise_basis` per leg (reused across pairs and formulations).
+    gyro_gm_sigma_radps, gyro_gm_tau_s : float, optional
+        First-order Gauss-Markov gyro drift (body, per axis; steady-state sigma [rad/s],
+        correlation time [s]) added to the ``"gyro_rw"`` covariance:
+        ``Cov = a D + q K + sigma^2 S E S^T``, E_jk = exp(-|tau_j - tau_k| / tau) between the
+        drift bins of **all** legs (the drift is correlated within and across legs, so the
+        legs are coupled and the GLS uses the full covariance). Off when ``gyro_gm_tau_s`` is
+        None or the sigma is 0; the sigma is estimated by REML when None (with the tau given).
+    gm_bin_s : float
+        Width of the drift bins of :func:`gm_noise_operator` [s].
+    gm_ops : Mapping of leg id to (S, tau_bin_s), optional
+        Precomputed :func:`gm_noise_operator` per leg on its basis' samples.
 
     Returns
     -------
@@ -418,6 +605,8 @@ def calibrate(
     """
     if noise not in NOISE_MODELS:
         raise ValueError(f"noise: expected one of {NOISE_MODELS}, got {noise!r}")
+    if gyro_gm_tau_s is not None and not gyro_gm_tau_s > 0:
+        raise ValueError(f"gyro_gm_tau_s: expected > 0 s, got {gyro_gm_tau_s!r}")
     if len(legs) < 1:
         raise ValueError("legs: expected at least one leg")
     h, z, s, names = design_matrix(
@@ -426,6 +615,7 @@ def calibrate(
     cond_raw, cond_scaled = condition_numbers(h / s[:, None])
     sizes = [2 * (r.t_s.size - 1) for r in legs]
     edges = np.concatenate([[0], np.cumsum(sizes)])
+    gm_sigma, drift = 0.0, None
     if noise == "white":
         hw, zw = h / s[:, None], z / s
         x, cov_s, deficient = _solve_scaled(hw, zw)
@@ -437,6 +627,11 @@ def calibrate(
         cov = cov_s * vf
         arw = 0.0
         white = [res_w[edges[i]:edges[i + 1]] / np.sqrt(vf) for i in range(len(legs))]
+    elif gyro_gm_tau_s is not None and (gyro_gm_sigma_radps is None
+                                        or gyro_gm_sigma_radps > 0):
+        x, cov, deficient, vf, arw, gm_sigma, white, drift = _calibrate_gm(
+            legs, h, z, edges, noise_step_s, bases, gm_ops, gyro_arw_radpsqrts,
+            gyro_gm_sigma_radps, float(gyro_gm_tau_s), gm_bin_s)
     else:
         blocks, rows_all = [], []
         for i, rep in enumerate(legs):
@@ -489,7 +684,61 @@ def calibrate(
         whitened_rms=float(np.sqrt(np.mean(np.concatenate(white) ** 2))),
         whitened_lag1=_lag1([w.reshape(-1, 2)[:, c] for w in white for c in range(2)]),
         rank_deficient=deficient,
+        gyro_gm_sigma_radps=gm_sigma,
+        gyro_gm_tau_s=np.inf if drift is None else drift.tau_s,
+        drift=drift,
     )
+
+
+def _calibrate_gm(legs, h, z, edges, noise_step_s, bases, gm_ops, arw_given, sigma_given,
+                  tau_s, bin_s):
+    """GLS + REML with the Gauss-Markov drift (full covariance over all legs)."""
+    rows, sqs, kb, ops = [], [], [], []
+    for i, rep in enumerate(legs):
+        lid = rep.leg.leg_id
+        basis = None if bases is None else bases.get(lid)
+        if basis is None:
+            basis = noise_basis(rep, noise_step_s=noise_step_s)
+        op = None if gm_ops is None else gm_ops.get(lid)
+        if op is None:
+            op = gm_noise_operator(rep, basis.samples, bin_s=bin_s)
+        rows.append(basis.rows + edges[i])
+        sqs.append(basis.sq)
+        kb.append((basis.u * basis.lam) @ basis.u.T)
+        ops.append((op[0] / basis.sq[:, None], op[1]))
+    r_all = np.concatenate(rows)
+    sq = np.concatenate(sqs)
+    hs, zs = h[r_all] / sq[:, None], z[r_all] / sq
+    k = linalg.block_diag(*kb)
+    gm = _gm_covariance(ops, tau_s)
+    q_fixed = None if arw_given is None else float(arw_given) ** 2
+    s2_fixed = None if sigma_given is None else float(sigma_given) ** 2
+    fixed = (q_fixed, s2_fixed)
+    bounds = [(np.log(1e-6), np.log(1e4))]
+    if q_fixed is None:
+        bounds.append((np.log(1e-22), np.log(1e-6)))
+    if s2_fixed is None:
+        bounds.append((np.log(1e-17), np.log(1e-8)))
+    parts = (hs, zs, k, gm)
+    axes = [np.linspace(lo, hi, 9 if len(bounds) < 3 else 7) for lo, hi in bounds]
+    grid = np.stack([g.ravel() for g in np.meshgrid(*axes, indexing="ij")], axis=1)
+    nll = [_full_reml_nll(th, parts, fixed) for th in grid]
+    opt = optimize.minimize(_full_reml_nll, grid[int(np.argmin(nll))], args=(parts, fixed),
+                            method="Nelder-Mead",
+                            options={"xatol": 1e-3, "fatol": 1e-4, "maxiter": 400})
+    th = np.clip(opt.x, [b[0] for b in bounds], [b[1] for b in bounds])
+    a, q, s2 = _full_params(th, fixed)
+    ll = np.linalg.cholesky(_full_cov(th, k, gm, fixed))
+    x, cov, deficient = _solve_scaled(_tri_solve(ll, hs), _tri_solve(ll, zs))
+    r = zs - hs @ x
+    wr = _tri_solve(ll, r)  # innovations: time-ordered within each leg
+    cuts = np.cumsum([rr.size for rr in rows])[:-1]
+    white = np.split(wr, cuts)
+    alpha = linalg.cho_solve((ll, True), r)
+    s_all = linalg.block_diag(*[o[0] for o in ops])
+    u = (s_all.T @ alpha).reshape(-1, 3)
+    drift = DriftSmoother(np.concatenate([o[1] for o in ops]), u, s2, tau_s)
+    return x, cov, deficient, a, float(np.sqrt(q)), float(np.sqrt(s2)), white, drift
 
 
 def predict_velocity_error(rep: LegReplay, cal: Calibration, *, transition: str = "numerical"

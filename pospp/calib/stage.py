@@ -22,12 +22,13 @@ from pospp.calib.compensate import LegImprovement, compensate_legs, joint_calibr
 from pospp.calib.pairs import Pair, PairPolicy, evaluate_pairs
 from pospp.calib.replay import ImuIncrements, LegReplay, ReferenceSolution, replay_leg
 from pospp.calib.segment import Leg, LegThresholds, find_legs
-from pospp.calib.solve import FORMULATIONS, Calibration, noise_basis
+from pospp.calib.solve import FORMULATIONS, Calibration, gm_noise_operator, noise_basis
 from pospp.nav.closed_form import PAPER_FROM_NED
 from pospp.rotation import ARCSEC_RAD, DEG_PER_H_RADPS
 
 _DPSH_RADPSQRTS = np.pi / 180.0 / 60.0
 """One deg/sqrt(h) in rad/sqrt(s)."""
+COMPENSATIONS = ("constant", "per_leg")
 
 
 @dataclass(frozen=True)
@@ -140,6 +141,9 @@ def calibrate_flight(
     gyro_arw_dpsh: float | None = None,
     estimate_gyro_z: bool = False,
     legs: tuple[Leg, ...] | None = None,
+    gyro_gm_sigma_dph: float | None = None,
+    gyro_gm_tau_s: float | None = None,
+    compensation: str = "constant",
 ) -> CalibrationRun:
     """Run the double-strapdown calibration on one flight.
 
@@ -169,6 +173,16 @@ def calibrate_flight(
         Also estimate the vertical body gyro bias (weak on straight level legs).
     legs : tuple of Leg, optional
         Use these legs instead of segmenting A's trajectory.
+    gyro_gm_sigma_dph, gyro_gm_tau_s : float, optional
+        First-order Gauss-Markov ("random") gyro drift of the IMU grade (steady-state sigma
+        [deg/h], correlation time [s]; ``pospp.nav.tuning.tuning_preset(grade)``): added to
+        the ``"gyro_rw"`` covariance, coupling the legs (:func:`pospp.calib.solve.calibrate`).
+        Off when the tau is None (the previous model); the sigma is estimated by REML when
+        None and the tau is given.
+    compensation : {"constant", "per_leg"}
+        Re-run B with the constant bias (default), or with the constant plus the smoothed
+        Gauss-Markov drift's mean over each leg (needs the Gauss-Markov model). The constant
+        bias is what ``gyro_bias_b_radps`` feeds back into A either way.
 
     Returns
     -------
@@ -185,9 +199,20 @@ def calibrate_flight(
         rc.update({k: getattr(replay_cfg, k) for k in rc if hasattr(replay_cfg, k)})
     forms = tuple(formulations) + (() if policy.formulation in formulations
                                    else (policy.formulation,))
+    if compensation not in COMPENSATIONS:
+        raise ValueError(f"compensation: expected one of {COMPENSATIONS}, got {compensation!r}")
+    gm_on = noise == "gyro_rw" and gyro_gm_tau_s is not None and (
+        gyro_gm_sigma_dph is None or gyro_gm_sigma_dph > 0)
+    if compensation == "per_leg" and not gm_on:
+        raise ValueError("compensation='per_leg' needs the Gauss-Markov drift model "
+                         "(noise='gyro_rw' and gyro_gm_tau_s given)")
     cal_kw: dict[str, Any] = {"noise": noise, "estimate_gyro_z": estimate_gyro_z,
                               "gyro_arw_radpsqrts": None if gyro_arw_dpsh is None
                               else gyro_arw_dpsh * _DPSH_RADPSQRTS}
+    if gm_on:
+        cal_kw["gyro_gm_tau_s"] = float(gyro_gm_tau_s)
+        cal_kw["gyro_gm_sigma_radps"] = (None if gyro_gm_sigma_dph is None
+                                         else gyro_gm_sigma_dph * DEG_PER_H_RADPS)
     traj = reference.trajectory
     messages: list[str] = []
     if legs is None:
@@ -218,6 +243,9 @@ def calibrate_flight(
                     "needs two legs with different headings")
     if noise == "gyro_rw":
         cal_kw["bases"] = {i: noise_basis(r) for i, r in replays.items()}
+        if gm_on:
+            cal_kw["gm_ops"] = {i: gm_noise_operator(r, cal_kw["bases"][i].samples)
+                                for i, r in replays.items()}
     pairs = evaluate_pairs(replays, legs, policy, formulations=forms, **cal_kw)
     if not any(p.used for p in pairs):
         why = "; ".join(f"pair {p.pair_id} (legs {p.leg_a}, {p.leg_b}): {p.reason}"
@@ -229,7 +257,8 @@ def calibrate_flight(
     after, improvements = compensate_legs(
         imu, reference, replays, chosen, accel_compensation=rc["accel_compensation"],
         horizon_s=rc["horizon_s"], transition_step=int(rc["transition_step"]),
-        sample_rate_hz=rc["sample_rate_hz"], sigma_floor_mps=rc["sigma_floor_mps"])
+        sample_rate_hz=rc["sample_rate_hz"], sigma_floor_mps=rc["sigma_floor_mps"],
+        per_leg_drift=compensation == "per_leg")
     first = replays[chosen.leg_ids[0]]
     bg = chosen.gyro_bias_b_radps(first.c_nb0)
     if chosen.formulation == "body":

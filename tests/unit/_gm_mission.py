@@ -1,0 +1,150 @@
+"""Short survey missions with Gauss-Markov gyro drift for the calibration's Monte Carlo.
+
+Shared by tests/unit/test_calib_gm_montecarlo.py and tests/benchmarks/bench_calib_gm.py.
+A mission: 30 s static, accelerate, then three 300 s survey legs joined by 180 deg turns
+(flight: 60 m/s at 2600 m, 3 deg/s turns; vehicle: 9 m/s, 15 deg/s U-turns), 100 Hz, with
+an IMU grade of pospp/presets/imu.toml (``paper_flight``, ``paper_vehicle``: constant drift +
+first-order Gauss-Markov drift, ARW, accelerometer bias). Algorithm A is the simulation
+truth with the accelerometer bias known (a converged filter's bias states).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from pospp.calib.compensate import compensate_legs
+from pospp.calib.replay import ImuIncrements, reference_from_trajectory
+from pospp.calib.stage import calibrate_flight
+from pospp.nav.strapdown import increments_from_rates
+from pospp.nav.tuning import tuning_preset
+from pospp.sim.api import simulate
+from pospp.sim.sensors import ImuErrorModel
+
+G0_MPS2 = 9.80665
+UG_MPS2 = 1e-6 * G0_MPS2
+
+PROFILE = {
+    "flight": """name = "gm_flight"
+imu_rate_hz = 100
+[start]
+lat_deg = 34.25
+lon_deg = 108.95
+height_m = 2600.0
+heading_deg = 0.0
+[options]
+turn_bank = "coordinated"
+blend_s = 5.0
+[[segment]]
+type = "static"
+duration_s = 30.0
+[[segment]]
+type = "accelerate"
+to_speed_mps = 60.0
+duration_s = 40.0
+[[segment]]
+type = "survey"
+legs = 3
+heading_deg = 0.0
+leg_duration_s = 300.0
+turn_rate_dps = 3.0
+turn_direction = "alternate"
+""",
+    "vehicle": """name = "gm_vehicle"
+imu_rate_hz = 100
+[start]
+lat_deg = 34.25
+lon_deg = 108.95
+height_m = 400.0
+heading_deg = 30.0
+[options]
+turn_bank = "none"
+blend_s = 3.0
+[[segment]]
+type = "static"
+duration_s = 30.0
+[[segment]]
+type = "accelerate"
+to_speed_mps = 9.0
+duration_s = 20.0
+[[segment]]
+type = "survey"
+legs = 3
+heading_deg = 30.0
+leg_duration_s = 300.0
+turn_rate_dps = 15.0
+turn_direction = "alternate"
+""",
+}
+GRADE = {"flight": "paper_flight", "vehicle": "paper_vehicle"}
+TUNING = {"flight": "flight", "vehicle": "vehicle"}  # pospp.nav.tuning presets of those IMUs
+
+
+@dataclass(frozen=True)
+class GmRun:
+    """One Monte Carlo run: the constant bias's error and sigma, and B at the horizon."""
+
+    err_b_radps: np.ndarray  # (2,) estimate minus the constant (turn-on) bias, x and y
+    sigma_b_radps: np.ndarray  # (2,)
+    gm_sigma_radps: float  # the noise model's Gauss-Markov sigma (given or REML)
+    dv_mps: dict  # RMS over legs at the horizon: before, constant, per_leg, oracle
+    dp_m: dict
+    leg_drift_err_radps: np.ndarray  # per-leg (constant + smoothed drift) minus true mean, (L, 2)
+    leg_const_err_radps: np.ndarray  # per-leg constant minus true mean, (L, 2)
+
+
+def profile_path(kind: str, folder: Path) -> Path:
+    p = Path(folder) / f"gm_{kind}.toml"
+    p.write_text(PROFILE[kind])
+    return p
+
+
+def run_once(kind: str, seed: int, folder: Path, *, estimate_gm_sigma: bool = False) -> GmRun:
+    """Simulate one mission and calibrate it with the Gauss-Markov noise model."""
+    grade = GRADE[kind]
+    sim = simulate(profile_path(kind, folder), imu_grade=grade, seed=seed, imu_rate_hz=100.0)
+    t, dth, dv = increments_from_rates(sim.imu.time_ns, sim.imu.w_ib_b_radps,
+                                       sim.imu.f_ib_b_mps2, epoch_ns=sim.start_time_ns)
+    imu = ImuIncrements(t, dth, dv)
+    model = ImuErrorModel.from_dict(sim.params["config"]["imu_errors"])
+    ba = np.array(model.accel_bias_ug) * UG_MPS2
+    a = reference_from_trajectory(sim.truth, v_sigma_n_mps=[0.02, 0.02, 0.03],
+                                  accel_bias_b_mps2=ba)
+    tun = tuning_preset(TUNING[kind])
+    run = calibrate_flight(
+        imu, a, formulations=("body",), gyro_arw_dpsh=tun.gyro_arw_dpsh,
+        gyro_gm_sigma_dph=None if estimate_gm_sigma else tun.gyro_gm_sigma_dph,
+        gyro_gm_tau_s=tun.gyro_gm_tau_s)
+    assert run.calibrated, run.reason
+    cal = run.chosen
+    const = np.array(model.gyro_bias_dph) * (np.pi / 180.0 / 3600.0)
+    est = run.gyro_bias_b_radps
+    sig = run.gyro_bias_sigma_b_radps
+    # true realised mean bias over each leg (IMU interval k spans (t[k], t[k+1]])
+    bias = sim.imu_errors.gyro_bias_radps
+    true_mean, leg_drift, leg_const = {}, [], []
+    for lid, rep in run.replays.items():
+        k0 = int(np.searchsorted(t, rep.t0_s))
+        k1 = int(np.searchsorted(t, rep.t0_s + rep.t_s[-1]))
+        true_mean[lid] = bias[k0:k1].mean(axis=0)
+        leg_drift.append((est + cal.leg_drift_b_radps(rep) - true_mean[lid])[0:2])
+        leg_const.append((est - true_mean[lid])[0:2])
+    kw = {"horizon_s": 300.0}
+    _, per_leg = compensate_legs(imu, a, run.replays, cal, per_leg_drift=True, **kw)
+    _, oracle = compensate_legs(imu, a, run.replays, cal, gyro_bias_by_leg=true_mean, **kw)
+
+    def rms(vals):
+        return float(np.sqrt(np.mean(np.square(vals))))
+
+    dv_ = {"before": rms([i.vel_before_mps for i in run.improvements]),
+           "constant": rms([i.vel_after_mps for i in run.improvements]),
+           "per_leg": rms([i.vel_after_mps for i in per_leg]),
+           "oracle": rms([i.vel_after_mps for i in oracle])}
+    dp_ = {"before": rms([i.pos_before_m for i in run.improvements]),
+           "constant": rms([i.pos_after_m for i in run.improvements]),
+           "per_leg": rms([i.pos_after_m for i in per_leg]),
+           "oracle": rms([i.pos_after_m for i in oracle])}
+    return GmRun(est[0:2] - const[0:2], sig[0:2], cal.gyro_gm_sigma_radps, dv_, dp_,
+                 np.array(leg_drift), np.array(leg_const))
