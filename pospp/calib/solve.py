@@ -451,15 +451,18 @@ def gm_noise_operator(rep: LegReplay, rows: NDArray | None = None, *, bin_s: flo
 def _gm_covariance(ops: list[tuple[NDArray, NDArray]], tau_s: float) -> NDArray:
     """S E S^T over several legs: unit-variance drift, E = exp(-|tau_j - tau_k| / tau) I_3.
 
-    S is block-diagonal (each leg's rows see only its own drift bins).
+    S is block-diagonal (each leg's rows see only its own drift bins), so the blocks are
+    ``G_LM = sum_axes S_L,a E_LM S_M,a^T``.
     """
-    s = linalg.block_diag(*[o[0] for o in ops])
-    tb = np.concatenate([o[1] for o in ops])
-    e = np.exp(-np.abs(tb[:, None] - tb[None, :]) / tau_s)
-    sp = s.reshape(s.shape[0], tb.size, 3)
-    out = np.zeros((s.shape[0], s.shape[0]))
-    for ax in range(3):
-        out += sp[:, :, ax] @ e @ sp[:, :, ax].T
+    sp = [o[0].reshape(o[0].shape[0], -1, 3) for o in ops]
+    edges = np.concatenate([[0], np.cumsum([o[0].shape[0] for o in ops])])
+    out = np.zeros((edges[-1], edges[-1]))
+    for i, (si, (_, ti)) in enumerate(zip(sp, ops, strict=True)):
+        for j in range(i, len(ops)):
+            e = np.exp(-np.abs(ti[:, None] - ops[j][1][None, :]) / tau_s)
+            blk = sum(si[:, :, ax] @ e @ sp[j][:, :, ax].T for ax in range(3))
+            out[edges[i]:edges[i + 1], edges[j]:edges[j + 1]] = blk
+            out[edges[j]:edges[j + 1], edges[i]:edges[i + 1]] = blk.T
     return out
 
 
@@ -720,13 +723,22 @@ def _calibrate_gm(legs, h, z, edges, noise_step_s, bases, gm_ops, arw_given, sig
     if s2_fixed is None:
         bounds.append((np.log(1e-17), np.log(1e-8)))
     parts = (hs, zs, k, gm)
-    axes = [np.linspace(lo, hi, 9 if len(bounds) < 3 else 7) for lo, hi in bounds]
+    # coarse grid (each evaluation is a Cholesky of the full covariance), then refine
+    axes = [np.linspace(lo, hi, 9 if len(bounds) == 1 else 6) for lo, hi in bounds]
     grid = np.stack([g.ravel() for g in np.meshgrid(*axes, indexing="ij")], axis=1)
     nll = [_full_reml_nll(th, parts, fixed) for th in grid]
-    opt = optimize.minimize(_full_reml_nll, grid[int(np.argmin(nll))], args=(parts, fixed),
-                            method="Nelder-Mead",
-                            options={"xatol": 1e-3, "fatol": 1e-4, "maxiter": 400})
-    th = np.clip(opt.x, [b[0] for b in bounds], [b[1] for b in bounds])
+    best = grid[int(np.argmin(nll))]
+    if len(bounds) == 1:  # only A's scale: bounded Brent around the best grid point
+        step = axes[0][1] - axes[0][0]
+        opt = optimize.minimize_scalar(
+            lambda v: _full_reml_nll(np.array([v]), parts, fixed), method="bounded",
+            bounds=(best[0] - step, best[0] + step), options={"xatol": 1e-3})
+        th = np.clip(np.array([opt.x]), bounds[0][0], bounds[0][1])
+    else:
+        opt = optimize.minimize(_full_reml_nll, best, args=(parts, fixed),
+                                method="Nelder-Mead",
+                                options={"xatol": 1e-2, "fatol": 1e-3, "maxiter": 300})
+        th = np.clip(opt.x, [b[0] for b in bounds], [b[1] for b in bounds])
     a, q, s2 = _full_params(th, fixed)
     ll = np.linalg.cholesky(_full_cov(th, k, gm, fixed))
     x, cov, deficient = _solve_scaled(_tri_solve(ll, hs), _tri_solve(ll, zs))
@@ -734,9 +746,8 @@ def _calibrate_gm(legs, h, z, edges, noise_step_s, bases, gm_ops, arw_given, sig
     wr = _tri_solve(ll, r)  # innovations: time-ordered within each leg
     cuts = np.cumsum([rr.size for rr in rows])[:-1]
     white = np.split(wr, cuts)
-    alpha = linalg.cho_solve((ll, True), r)
-    s_all = linalg.block_diag(*[o[0] for o in ops])
-    u = (s_all.T @ alpha).reshape(-1, 3)
+    alpha = np.split(linalg.cho_solve((ll, True), r), cuts)
+    u = np.vstack([(o[0].T @ al).reshape(-1, 3) for o, al in zip(ops, alpha, strict=True)])
     drift = DriftSmoother(np.concatenate([o[1] for o in ops]), u, s2, tau_s)
     return x, cov, deficient, a, float(np.sqrt(q)), float(np.sqrt(s2)), white, drift
 

@@ -29,6 +29,8 @@ from pospp.rotation import ARCSEC_RAD, DEG_PER_H_RADPS
 _DPSH_RADPSQRTS = np.pi / 180.0 / 60.0
 """One deg/sqrt(h) in rad/sqrt(s)."""
 COMPENSATIONS = ("constant", "per_leg")
+_REML_STEP_S = 20.0
+"""Sample spacing of the one REML fit of the Gauss-Markov sigma [s] (the GLS uses 10 s)."""
 
 
 @dataclass(frozen=True)
@@ -246,6 +248,24 @@ def calibrate_flight(
         if gm_on:
             cal_kw["gm_ops"] = {i: gm_noise_operator(r, cal_kw["bases"][i].samples)
                                 for i, r in replays.items()}
+    if gm_on and cal_kw["gyro_gm_sigma_radps"] is None:
+        # the drift's sigma by REML once, on the joint fit of the compensation formulation
+        # over the legs of the usable pairs; the pairs and the other formulations reuse it
+        # (a pair alone has too few legs to estimate it, and it saves most of the cost)
+        screened = evaluate_pairs(replays, legs, policy, formulations=(), **cal_kw)
+        coarse = {i: noise_basis(r, noise_step_s=_REML_STEP_S) for i, r in replays.items()}
+        first_fit = joint_calibration(
+            replays, screened, policy.formulation, transition=policy.transition,
+            **{**cal_kw, "bases": coarse, "noise_step_s": _REML_STEP_S,
+               "gm_ops": {i: gm_noise_operator(r, coarse[i].samples)
+                          for i, r in replays.items()}})
+        if first_fit is not None:
+            cal_kw["gyro_gm_sigma_radps"] = first_fit.gyro_gm_sigma_radps
+            if cal_kw["gyro_arw_radpsqrts"] is None:
+                cal_kw["gyro_arw_radpsqrts"] = first_fit.gyro_arw_radpsqrts
+            messages.append("Gauss-Markov gyro drift sigma by REML on the joint "
+                            f"{policy.formulation} fit: "
+                            f"{first_fit.gyro_gm_sigma_radps / DEG_PER_H_RADPS:.3f} deg/h")
     pairs = evaluate_pairs(replays, legs, policy, formulations=forms, **cal_kw)
     if not any(p.used for p in pairs):
         why = "; ".join(f"pair {p.pair_id} (legs {p.leg_a}, {p.leg_b}): {p.reason}"
