@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import functools
 import json
+import shutil
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -293,6 +294,7 @@ def main(out: Path) -> None:
             skip = 300.0 if name.startswith("kfgins") else 0.0
             tables["evaluation"] = pipeline.evaluate_run(run_dir, out / f"{ref}.parquet",
                                                          skip_s=skip)
+            shutil.copyfile(run_dir / "evaluation.png", IMG / f"results_{stem}_evaluation.png")
         results[name] = (outcome, tables)
         print(f"\n## {name}: status {outcome.status}")
         print(json.dumps({k: v for k, v in outcome.summary.items()
@@ -360,17 +362,17 @@ def figures(results: dict, study: pd.DataFrame, out: Path) -> None:
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
     for ax, grade in zip(axes, ("tactical", "mems"), strict=True):
         g0 = study[(study.grade == grade) & (study.result == "ok")]
-        for (model, g), mk in zip(g0.groupby("model", sort=False), ("o-", "s-", "^--"),
-                                  strict=False):
-            ax.plot(g.leg_flown_s, g.sigma_over_turn_on, mk, label=f"{model}: pair sigma")
-            ax.plot(g.leg_flown_s, g.max_abs_z, mk, alpha=0.4,
-                    label=f"{model}: max |error|/sigma (all pairs)")
+        for i, (model, g) in enumerate(g0.groupby("model", sort=False)):
+            ax.plot(g.leg_flown_s, g.sigma_over_turn_on, "o-", color=f"C{i}",
+                    label=f"{model}: pair sigma / turn-on")
+            ax.plot(g.leg_flown_s, g.max_abs_z, "^--", color=f"C{i}", alpha=0.6,
+                    label=f"{model}: max |error| / sigma (all pairs)")
         ax.axhline(1 / 3, color="k", lw=0.8, ls=":")
         ax.axhline(3.0, color="k", lw=0.8)
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_xlabel("leg flown [s]")
-        ax.set_ylabel("pair sigma / grade turn-on sigma;  |error| / sigma")
+        ax.set_ylabel("solid: pair sigma / turn-on sigma; dashed: |error| / sigma")
         ax.set_title(f"SYNTHETIC {grade} IMU, back-and-forth legs", fontsize=9)
         ax.legend(fontsize=6)
     fig.tight_layout()

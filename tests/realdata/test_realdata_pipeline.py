@@ -127,13 +127,17 @@ def test_ardupilot_runs_end_to_end_and_finds_no_leg(real_data, out_dir):
     fix = read_flight_log(out_dir / "ardupilot.mcap").fix
     t = sm.time_ns.to_numpy()
     assert (t[0] - fix.time_ns[0]) / 1e9 < 300.0 and (fix.time_ns[-1] - t[-1]) / 1e9 < 5.0
-    # the smoothed solution stays on its own GNSS track (measured RMS 5.3 m, max 19 m; the
-    # forward pass, 26 % of its GNSS gated and 3 covariance resets, is 31 m RMS)
-    m = (fix.time_ns > t[0]) & (fix.time_ns < t[-1])
-    lat = np.interp(fix.time_ns[m], t, np.radians(sm.lat_deg.to_numpy()))
-    lon = np.interp(fix.time_ns[m], t, np.radians(sm.lon_deg.to_numpy()))
-    d = np.hypot(lat - fix.lat_rad[m], (lon - fix.lon_rad[m]) * np.cos(lat)) * 6.371e6
-    assert np.sqrt(np.mean(d**2)) < 10.0 and d.max() < 40.0
+    # A stays on its own GNSS track. Measured RMS (max) distance to the fixes: smoothed 4.2 m
+    # (11.6 m), forward 9.8 m (33 m); with the converter's 0.3 m/s velocity sigma instead of
+    # vel_sigma_floor_mps = 1.0 the forward pass was 31 m (174 m)
+    for solution, rms_m, max_m in (("smoothed", 8.0, 25.0), ("forward", 20.0, 60.0)):
+        g = traj[traj.solution == solution]
+        t = g.time_ns.to_numpy()
+        m = (fix.time_ns > t[0]) & (fix.time_ns < t[-1])
+        lat = np.interp(fix.time_ns[m], t, np.radians(g.lat_deg.to_numpy()))
+        lon = np.interp(fix.time_ns[m], t, np.radians(g.lon_deg.to_numpy()))
+        d = np.hypot(lat - fix.lat_rad[m], (lon - fix.lon_rad[m]) * np.cos(lat)) * 6.371e6
+        assert np.sqrt(np.mean(d**2)) < rms_m and d.max() < max_m, solution
 
 
 @pytest.mark.realdata
@@ -157,20 +161,24 @@ def test_quadrotor_against_the_dji_solution(real_data, out_dir):
             fmt="ansfl_quadrotor_raw", unit=1, recording=2)
     outcome, run_dir = _run(out_dir, "quad", "ansfl_quadrotor_straightline")
     legs = pd.read_parquet(run_dir / "legs.parquet")
-    # one leg of >= 10 s: the end of path 2, flown at 248 deg
-    assert len(legs) == 1
-    assert legs.duration_s.iloc[0] == pytest.approx(10.0, abs=1.5)
-    assert legs.heading_deg.iloc[0] == pytest.approx(248.0, abs=3.0)
-    assert "only one leg" in outcome.summary["calibration"]
+    pairs = pd.read_parquet(run_dir / "pairs.parquet")
+    # two legs of >= 10 s, both nose-first at 248 deg (end of paths 1 and 2): a same-heading
+    # pair, rejected; the 68 deg leg (path 4, flown backwards) lasts only 8 s
+    assert len(legs) == 2 and len(pairs) == 1
+    assert np.allclose(legs.heading_deg, 248.3, atol=3.0)
+    assert legs.duration_s.min() >= 10.0 and legs.duration_s.max() <= 16.0
+    assert not pairs.used.iloc[0] and "heading change" in pairs.reason.iloc[0]
+    assert outcome.summary["calibration"].startswith("no calibration: no pair passed")
     ev = pipeline.evaluate_run(run_dir, out_dir / "quad.reference.parquet")
-    m = _metrics(ev, "smoothed")
-    # measured: 0.35 m, 0.17 m/s, heading 1.06 deg, roll/pitch 0.9 deg
-    assert m["horizontal_rms"] < 0.7
-    assert m["vel_horizontal_rms"] < 0.3
-    assert m["heading_rms"] < 2.0 * ARCSEC_PER_DEG
-    assert m["roll_pitch_rms"] < 2.0 * ARCSEC_PER_DEG
-    f = _metrics(ev, "forward")
-    assert m["horizontal_rms"] < f["horizontal_rms"]  # smoothing helps (0.35 vs 0.70 m)
+    m, f = _metrics(ev, "smoothed"), _metrics(ev, "forward")
+    # measured (smoothed / forward): 0.13 / 0.11 m, 0.16 / 0.18 m/s, heading 1.06 / 1.42 deg,
+    # roll-pitch 0.87 / 1.19 deg. With the converter's 0.05 m position sigma the gate locked
+    # the GNSS out after each take-off (0.35 / 0.70 m): pos_sigma_floor_m = 0.2 prevents it.
+    for r in (m, f):
+        assert r["horizontal_rms"] < 0.3
+        assert r["vel_horizontal_rms"] < 0.3
+        assert r["heading_rms"] < 2.0 * ARCSEC_PER_DEG
+        assert r["roll_pitch_rms"] < 2.0 * ARCSEC_PER_DEG
 
 
 # --- SYNTHETIC tactical IMU along the real KF-GINS street grid ---------------------------------
