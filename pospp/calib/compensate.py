@@ -60,6 +60,20 @@ def horizontal_error_at(rep: LegReplay, horizon_s: float) -> tuple[float, float,
     )
 
 
+def _drift_removed(imu: ImuIncrements, rep: LegReplay, cal: Calibration) -> ImuIncrements:
+    """The IMU increments around one leg with the smoothed drift removed from the gyro."""
+    t = imu.t_s
+    k0 = int(np.searchsorted(t, rep.leg.start_s))
+    k1 = int(np.searchsorted(t, rep.leg.end_s, side="right"))
+    lo, hi = max(k0 - 2, 0), min(k1 + 2, t.size - 1)
+    mid = 0.5 * (t[lo:hi] + t[lo + 1:hi + 1])
+    grid = np.arange(mid[0], mid[-1] + 1.0, 1.0)
+    x = cal.drift_b_radps(grid)
+    drift = np.stack([np.interp(mid, grid, x[:, c]) for c in range(3)], axis=1)
+    dth = imu.dtheta_b_rad[lo:hi] - drift * np.diff(t[lo:hi + 1])[:, None]
+    return ImuIncrements(t[lo:hi + 1], dth, imu.dv_b_mps[lo:hi])
+
+
 def compensate_legs(
     imu: ImuIncrements,
     reference: ReferenceSolution,
@@ -72,6 +86,7 @@ def compensate_legs(
     sample_rate_hz: float = 1.0,
     sigma_floor_mps: float = 0.005,
     per_leg_drift: bool = False,
+    smoothed_drift: bool = False,
     gyro_bias_by_leg: Mapping[int, NDArray] | None = None,
 ) -> tuple[dict[int, LegReplay], tuple[LegImprovement, ...]]:
     """Re-run B on every leg with the calibration applied; report the improvement.
@@ -86,6 +101,10 @@ def compensate_legs(
         Add the smoothed Gauss-Markov drift's mean over each leg
         (:meth:`Calibration.leg_drift_b_radps`; zero without a Gauss-Markov noise model) to
         the constant bias: b_leg = b_g + mean over the leg of E[x_g(t) | residuals].
+    smoothed_drift : bool
+        Remove the smoothed Gauss-Markov drift as it changes inside each leg,
+        ``b(t) = b_g + E[x_g(t) | residuals]`` (:meth:`Calibration.drift_b_radps`, evaluated
+        every second and interpolated to the IMU intervals), instead of one bias per leg.
     gyro_bias_by_leg : Mapping of leg id to ndarray, shape (3,), optional
         Body gyro bias [rad/s] to remove on those legs instead of the calibration's (e.g. the
         true realised per-leg mean bias of a simulation: the oracle that measures the floor
@@ -101,8 +120,9 @@ def compensate_legs(
             bg = bg + cal.leg_drift_b_radps(rep)
         if gyro_bias_by_leg is not None and leg_id in gyro_bias_by_leg:
             bg = np.asarray(gyro_bias_by_leg[leg_id], dtype=float)
+        leg_imu = _drift_removed(imu, rep, cal) if smoothed_drift else imu
         new = replay_leg(
-            imu, reference, rep.leg, gyro_bias_b_radps=bg, attitude_correction_n_rad=phi,
+            leg_imu, reference, rep.leg, gyro_bias_b_radps=bg, attitude_correction_n_rad=phi,
             accel_compensation=accel_compensation, transition_step=transition_step,
             sample_rate_hz=sample_rate_hz, sigma_floor_mps=sigma_floor_mps,
         )

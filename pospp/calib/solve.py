@@ -38,6 +38,13 @@ Noise (``noise=``)
     strongly correlated in time; ignoring it gives sigmas ten times too small. a and q are
     estimated by restricted maximum likelihood (REML) unless q is given from the IMU
     specification (``gyro_arw_radpsqrts``).
+    With ``gyro_gm_tau_s`` (and optionally ``gyro_gm_sigma_radps``), a first-order
+    Gauss-Markov body drift x_g is added: Cov += sigma_gm^2 S E S^T, where S maps the drift
+    (piecewise constant on bins) to B's velocity errors through the same transition matrices,
+    ``dv(t) = int Phi_v,phi(t, tau) (-C_nb) x_g(tau) dtau``, and
+    E_jk = exp(-|tau_j - tau_k| / tau_gm) between bins of any two legs (run times): the legs
+    are coupled and the GLS uses the full covariance. The fit then also carries the drift's
+    conditional mean (:class:`DriftSmoother`).
 ``"white"``
     Weighted least squares with A's sigmas, the covariance scaled by the a-posteriori variance
     factor and by (1 + rho) / (1 - rho) from the residuals' lag-one autocorrelation rho.

@@ -17,6 +17,7 @@ import numpy as np
 
 from pospp.calib.compensate import compensate_legs
 from pospp.calib.replay import ImuIncrements, reference_from_trajectory
+from pospp.calib.solve import calibrate
 from pospp.calib.stage import calibrate_flight
 from pospp.nav.strapdown import increments_from_rates
 from pospp.nav.tuning import tuning_preset
@@ -134,6 +135,17 @@ def run_once(kind: str, seed: int, folder: Path, *, estimate_gm_sigma: bool = Fa
     kw = {"horizon_s": 300.0}
     _, per_leg = compensate_legs(imu, a, run.replays, cal, per_leg_drift=True, **kw)
     _, oracle = compensate_legs(imu, a, run.replays, cal, gyro_bias_by_leg=true_mean, **kw)
+    _, smooth = compensate_legs(imu, a, run.replays, cal, smoothed_drift=True, **kw)
+    # prediction: calibrate on the first two legs only, compensate the last (not in the fit)
+    ids = sorted(run.replays)
+    pair = calibrate((run.replays[ids[0]], run.replays[ids[1]]), "body",
+                     gyro_arw_radpsqrts=tun.gyro_arw_dpsh * np.pi / 180.0 / 60.0,
+                     gyro_gm_sigma_radps=cal.gyro_gm_sigma_radps,
+                     gyro_gm_tau_s=tun.gyro_gm_tau_s)
+    last = {ids[-1]: run.replays[ids[-1]]}
+    held = {k: compensate_legs(imu, a, last, pair, **kw, **opt)[1][0] for k, opt in (
+        ("held_constant", {}), ("held_per_leg", {"per_leg_drift": True}),
+        ("held_oracle", {"gyro_bias_by_leg": true_mean}))}
 
     def rms(vals):
         return float(np.sqrt(np.mean(np.square(vals))))
@@ -141,10 +153,16 @@ def run_once(kind: str, seed: int, folder: Path, *, estimate_gm_sigma: bool = Fa
     dv_ = {"before": rms([i.vel_before_mps for i in run.improvements]),
            "constant": rms([i.vel_after_mps for i in run.improvements]),
            "per_leg": rms([i.vel_after_mps for i in per_leg]),
-           "oracle": rms([i.vel_after_mps for i in oracle])}
+           "oracle": rms([i.vel_after_mps for i in oracle]),
+           "smoothed": rms([i.vel_after_mps for i in smooth]),
+           "held_before": held["held_constant"].vel_before_mps,
+           **{k: v.vel_after_mps for k, v in held.items()}}
     dp_ = {"before": rms([i.pos_before_m for i in run.improvements]),
            "constant": rms([i.pos_after_m for i in run.improvements]),
            "per_leg": rms([i.pos_after_m for i in per_leg]),
-           "oracle": rms([i.pos_after_m for i in oracle])}
+           "oracle": rms([i.pos_after_m for i in oracle]),
+           "smoothed": rms([i.pos_after_m for i in smooth]),
+           "held_before": held["held_constant"].pos_before_m,
+           **{k: v.pos_after_m for k, v in held.items()}}
     return GmRun(est[0:2] - const[0:2], sig[0:2], cal.gyro_gm_sigma_radps, dv_, dp_,
                  np.array(leg_drift), np.array(leg_const))
