@@ -10,6 +10,7 @@ errors. The first tests (per-grade leg thresholds) need no data.
 
 from __future__ import annotations
 
+import importlib.util
 import json
 from pathlib import Path
 
@@ -187,10 +188,12 @@ def test_quadrotor_against_the_dji_solution(real_data, out_dir):
 @pytest.mark.realdata
 @pytest.mark.slow
 def test_kfgins_synthetic_tactical_recovers_the_injected_gyro_bias(real_data, out_dir):
-    import sys
-
-    sys.path.insert(0, str(REPO / "docs"))
-    from _make_results import mean_bias_dph, simulate_kfgins
+    # the simulated IMU is defined once, in the results script
+    spec = importlib.util.spec_from_file_location("_make_results", REPO / "docs" /
+                                                  "_make_results.py")
+    results = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(results)
+    mean_bias_dph, simulate_kfgins = results.mean_bias_dph, results.simulate_kfgins
 
     mcap = simulate_kfgins(out_dir, "tactical")
     assert mcap == out_dir / "kfgins_tactical.mcap"
