@@ -8,13 +8,19 @@ stage that could not produce a result exits 0 and says why in its summary.
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 
-import click
+# One BLAS thread, set before numpy loads OpenBLAS: the calibration's many small dense solves
+# run 5-60x slower when OpenBLAS threads compete with numba for 2 cores (docs/benchmarks.md).
+# An explicit setting in the environment wins.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from pospp import __version__
-from pospp.config import ConfigError, PipelineConfig, load_config
+import click  # noqa: E402
+
+from pospp import __version__  # noqa: E402
+from pospp.config import ConfigError, PipelineConfig, load_config  # noqa: E402
 
 
 def _config(path: str | None) -> PipelineConfig:

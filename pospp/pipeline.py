@@ -329,9 +329,13 @@ def calibrate(imu: ImuIncrements, nav: nav_filter.FilterResult,
     which = config.replay.reference if nav.smoothed is not None else "forward"
     reference = ReferenceSolution(*nav_filter.reference_solution(nav, which=which))
     tuning = imu_tuning(config)
+    gm = bool(np.isfinite(tuning.gyro_gm_tau_s) and tuning.gyro_gm_sigma_dph > 0)
     return calibrate_flight(
         imu, reference, legs_cfg=config.legs, replay_cfg=config.replay,
         pairs_cfg=config.pairs, gyro_arw_dpsh=tuning.gyro_arw_dpsh,
+        # the grade's Gauss-Markov ("random") drift enters the least squares' noise model
+        gyro_gm_sigma_dph=tuning.gyro_gm_sigma_dph if gm else None,
+        gyro_gm_tau_s=tuning.gyro_gm_tau_s if gm else None,
     ), reference
 
 
