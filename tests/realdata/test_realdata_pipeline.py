@@ -202,7 +202,7 @@ def test_kfgins_synthetic_tactical_recovers_the_injected_gyro_bias(real_data, ou
     assert outcome.status == "ok"
     legs = pd.read_parquet(run_dir / "legs.parquet")
     pairs = pd.read_parquet(run_dir / "pairs.parquet")
-    # measured: 8 legs of 21-47 s on the grid, 22 of 28 pairs used (the rest same heading)
+    # measured: 8 legs of 20-28 s on the grid, 22 of 28 pairs used (the rest same heading)
     assert len(legs) >= 6 and legs.duration_s.min() >= 20.0
     assert pairs.used.sum() >= 12
     assert (pairs[pairs.used].cond_scaled < 30).all()
