@@ -159,8 +159,11 @@ def evaluate_pairs(
                       f"{policy.max_cond_scaled:g}")
         cals: tuple[Calibration, ...] = ()
         if not reason:
-            cals = tuple(calibrate(reps, f, transition=policy.transition, **calibrate_kwargs)
-                         for f in formulations)
+            try:
+                cals = tuple(calibrate(reps, f, transition=policy.transition,
+                                       **calibrate_kwargs) for f in formulations)
+            except (ValueError, np.linalg.LinAlgError) as exc:
+                reason = f"least squares failed: {exc}"
         out.append(Pair(pid, a.leg_id, b.leg_id, dh, dv, c_raw, c_scaled, c_gate, not reason,
                         reason or "ok", cals))
     return tuple(out)

@@ -367,8 +367,15 @@ class NoiseBasis:
 
 
 def noise_basis(rep: LegReplay, *, noise_step_s: float = 10.0) -> NoiseBasis:
-    """The :class:`NoiseBasis` of a leg, on samples every ``noise_step_s`` seconds."""
-    step = max(1, int(round(noise_step_s / max(float(np.median(np.diff(rep.t_s))), 1e-9))))
+    """The :class:`NoiseBasis` of a leg, on samples every ``noise_step_s`` seconds.
+
+    A leg shorter than ten steps is sampled every tenth of its length instead, so that every
+    leg contributes rows however short it is (a 6 s leg would otherwise have none).
+    """
+    dt_s = max(float(np.median(np.diff(rep.t_s))), 1e-9) if rep.t_s.size > 1 else 1.0
+    span_s = float(rep.t_s[-1] - rep.t_s[0]) if rep.t_s.size > 1 else 0.0
+    step_s = min(noise_step_s, span_s / 10.0) if span_s > 0 else noise_step_s
+    step = max(1, int(round(step_s / dt_s)))
     smp = np.arange(step, rep.t_s.size, step)
     rows = (2 * (smp - 1)[:, None] + np.arange(2)[None, :]).reshape(-1)
     sq = rep.sigma_v_n_mps[smp, 0:2].reshape(-1)

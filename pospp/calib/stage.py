@@ -271,8 +271,11 @@ def calibrate_flight(
         why = "; ".join(f"pair {p.pair_id} (legs {p.leg_a}, {p.leg_b}): {p.reason}"
                         for p in pairs)
         return done(f"no calibration: no pair passed the screening: {why}", pairs)
-    joint = tuple(c for f in forms if (c := joint_calibration(
-        replays, pairs, f, transition=policy.transition, **cal_kw)) is not None)
+    try:
+        joint = tuple(c for f in forms if (c := joint_calibration(
+            replays, pairs, f, transition=policy.transition, **cal_kw)) is not None)
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        return done(f"no calibration: the joint least squares failed: {exc}", pairs)
     chosen = next(c for c in joint if c.formulation == policy.formulation)
     after, improvements = compensate_legs(
         imu, reference, replays, chosen, accel_compensation=rc["accel_compensation"],

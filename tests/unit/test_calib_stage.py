@@ -111,3 +111,18 @@ def test_observability_table_columns(tmp_path):
     tab = observability_table([0.0, 90.0, 180.0], [0.0, 20.0])
     assert set(tab) == {"formulation", "dheading_deg", "dspeed_mps", "cond_raw", "cond_scaled"}
     assert len(tab["formulation"]) == 12 and set(tab["formulation"]) == {"paper", "body"}
+
+
+def test_legs_of_a_few_seconds_never_crash_the_stage(tmp_path):
+    """Legs shorter than the 10 s noise step (found on a quadrotor log) once raised
+    IndexError in the REML fit; now every leg gets noise rows and a degenerate pair is
+    rejected with its reason."""
+    tr = rhumb_line(LAT, 100.0, 20.0, 0.5, 10.0, 60.0)
+    imu, ref = _flight(tr, tr.t_s.size)
+    legs = tuple(Leg(i, t0, t0 + 8.0, np.radians(20.0), 10.0, 100.0, 0.0, 0.0, 0.0, 0.0)
+                 for i, t0 in enumerate((5.0, 30.0)))
+    policy = PairPolicy("adjacent", 1e30, 0.0, "body", "numerical")
+    run = calibrate_flight(imu, ref, legs=legs, pairs_cfg=policy)
+    assert len(run.replays) == 2 and len(run.pairs) == 1
+    assert isinstance(run.reason, str) and run.reason
+    _check_tables(run, tmp_path)
