@@ -75,6 +75,12 @@ class FilterConfig:
     smoother: bool = True
     static_alignment_s: float = 120.0
     """Longest static period used for coarse alignment at the start [s]."""
+    max_imu_gap_s: float = 0.5
+    """Longest IMU gap bridged (and logged); a longer one is an error naming its time [s]."""
+    gate_reset_s: float = 30.0
+    """After this long of gated GNSS records, the next one resets the covariance block [s]."""
+    estimate_scale_factors: bool = False
+    """Add gyro and accelerometer scale-factor states to algorithm A."""
 
 
 LEG_MIN_DURATION_BY_GRADE_S: dict[str, float] = {
@@ -82,6 +88,7 @@ LEG_MIN_DURATION_BY_GRADE_S: dict[str, float] = {
     "vehicle": 300.0,
     "tactical": 30.0,
     "mems": 30.0,
+    "consumer": 30.0,
 }
 """Default ``[legs] min_duration_s`` per ``[imu] grade`` [s]: the paper's 5 min for the flight
 and vehicle grades; for tactical and MEMS the shortest flown leg whose pair calibration of the
@@ -94,6 +101,7 @@ LEG_DURATION_TOLERANCE_BY_GRADE_S: dict[str, float] = {
     "vehicle": 15.0,
     "tactical": 5.0,
     "mems": 5.0,
+    "consumer": 5.0,
 }
 """Default ``[legs] duration_tolerance_s`` per ``[imu] grade`` [s]: a leg flown for
 min_duration_s is detected 3-5 s shorter; legs shorter than 20 s detected hold a single epoch
@@ -147,6 +155,14 @@ class PairsConfig:
     """Formulation used for compensation: "body" or "paper" (both are always reported)."""
     transition: str = "numerical"
     """"numerical" (F(t) along B) or "closed_form" (paper Eq. 10/13 with corrected signs)."""
+    noise: str = "gyro_rw"
+    """Residual model of the least squares: "gyro_rw" (B's error driven by the gyro random
+    walk and, when the grade has one, its Gauss-Markov drift; docs/calibration.md) or
+    "white"."""
+    noise_step_s: float = 10.0
+    """Spacing of the samples the correlated-noise least squares uses [s]."""
+    estimate_gyro_z: bool = False
+    """Also estimate the vertical body gyro bias (weakly observable on level legs)."""
 
 
 @dataclass(frozen=True)
@@ -155,6 +171,9 @@ class CompensationConfig:
 
     rerun_filter: bool = True
     """Re-run algorithm A with the calibrated gyro bias removed (the compensated trajectory)."""
+    mode: str = "per_leg"
+    """How B is re-run: "per_leg" (the constant bias plus the Gauss-Markov drift's estimated
+    mean over each leg, when the grade has a drift) or "constant" (one bias for all legs)."""
 
 
 @dataclass(frozen=True)
@@ -206,12 +225,14 @@ class PipelineConfig:
 
 _CHOICES = {
     ("input", "sensor_frame"): ("flu", "frd"),
-    ("imu", "grade"): ("flight", "vehicle", "tactical", "mems"),
+    ("imu", "grade"): ("flight", "vehicle", "tactical", "mems", "consumer"),
     ("replay", "reference"): ("smoothed", "forward"),
     ("replay", "accel_compensation"): ("filter", "none"),
     ("pairs", "mode"): ("adjacent", "all"),
     ("pairs", "formulation"): ("body", "paper"),
     ("pairs", "transition"): ("numerical", "closed_form"),
+    ("pairs", "noise"): ("gyro_rw", "white"),
+    ("compensation", "mode"): ("per_leg", "constant"),
 }
 
 

@@ -145,6 +145,7 @@ def navigate(
         epoch_ns=int(log.imu.time_ns[0]),
         lever_arm_b_m=np.asarray(g.lever_arm_m, dtype=float),
         estimate_lever_arm=g.estimate_lever_arm,
+        estimate_scale_factors=f.estimate_scale_factors,
         output_rate_hz=f.output_rate_hz,
         options=options,
     )
@@ -333,6 +334,9 @@ def calibrate(imu: ImuIncrements, nav: nav_filter.FilterResult,
     return calibrate_flight(
         imu, reference, legs_cfg=config.legs, replay_cfg=config.replay,
         pairs_cfg=config.pairs, gyro_arw_dpsh=tuning.gyro_arw_dpsh,
+        noise=config.pairs.noise, noise_step_s=config.pairs.noise_step_s,
+        estimate_gyro_z=config.pairs.estimate_gyro_z,
+        compensation=config.compensation.mode if gm else "constant",
         # the grade's Gauss-Markov ("random") drift enters the least squares' noise model
         gyro_gm_sigma_dph=tuning.gyro_gm_sigma_dph if gm else None,
         gyro_gm_tau_s=tuning.gyro_gm_tau_s if gm else None,

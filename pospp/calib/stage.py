@@ -146,6 +146,7 @@ def calibrate_flight(
     gyro_gm_sigma_dph: float | None = None,
     gyro_gm_tau_s: float | None = None,
     compensation: str = "constant",
+    noise_step_s: float = 10.0,
 ) -> CalibrationRun:
     """Run the double-strapdown calibration on one flight.
 
@@ -185,6 +186,9 @@ def calibrate_flight(
         Re-run B with the constant bias (default), or with the constant plus the smoothed
         Gauss-Markov drift's mean over each leg (needs the Gauss-Markov model). The constant
         bias is what ``gyro_bias_b_radps`` feeds back into A either way.
+    noise_step_s : float
+        Spacing of the samples of the correlated-noise least squares [s] (a leg shorter than
+        ten steps is sampled every tenth of its length).
 
     Returns
     -------
@@ -209,6 +213,7 @@ def calibrate_flight(
         raise ValueError("compensation='per_leg' needs the Gauss-Markov drift model "
                          "(noise='gyro_rw' and gyro_gm_tau_s given)")
     cal_kw: dict[str, Any] = {"noise": noise, "estimate_gyro_z": estimate_gyro_z,
+                              "noise_step_s": noise_step_s,
                               "gyro_arw_radpsqrts": None if gyro_arw_dpsh is None
                               else gyro_arw_dpsh * _DPSH_RADPSQRTS}
     if gm_on:
@@ -244,7 +249,8 @@ def calibrate_flight(
         return done(f"no calibration: only one leg (leg {legs[0].leg_id}) was found; a pair "
                     "needs two legs with different headings")
     if noise == "gyro_rw":
-        cal_kw["bases"] = {i: noise_basis(r) for i, r in replays.items()}
+        cal_kw["bases"] = {i: noise_basis(r, noise_step_s=noise_step_s)
+                           for i, r in replays.items()}
         if gm_on:
             cal_kw["gm_ops"] = {i: gm_noise_operator(r, cal_kw["bases"][i].samples)
                                 for i, r in replays.items()}
