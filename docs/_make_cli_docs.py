@@ -7,6 +7,7 @@ that both files are in sync.
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import typing
 from pathlib import Path
 
@@ -75,7 +76,7 @@ def pipelines_markdown() -> str:
             lines += ["`name` (str, default `\"default\"`): the configuration's name.", ""]
             continue
         cls = hints[f.name]
-        lines += [f"## [{f.name}]", "", (cls.__doc__ or "").strip(), "",
+        lines += [f"## [{f.name}]", "", inspect.cleandoc(cls.__doc__ or ""), "",
                   "| key | type | default | choices |", "|---|---|---|---|"]
         sub = typing.get_type_hints(cls)
         for g in dataclasses.fields(cls):
