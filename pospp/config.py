@@ -61,8 +61,11 @@ class GnssConfig:
     lever_arm_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
     """Antenna position in the body frame FRD [m]."""
     estimate_lever_arm: bool = False
-    pos_sigma_floor_m: float = 0.01
-    vel_sigma_floor_mps: float = 0.005
+    pos_sigma_floor_m: float | None = None
+    """Least GNSS position sigma the filter uses [m]; omitted: the [imu] grade's default
+    (``GNSS_SIGMA_FLOORS_BY_GRADE``)."""
+    vel_sigma_floor_mps: float | None = None
+    """Least GNSS velocity sigma the filter uses [m/s]; omitted: the grade's default."""
     use_velocity: bool = True
     gate_probability: float = 0.9999
 
@@ -82,6 +85,18 @@ class FilterConfig:
     estimate_scale_factors: bool = False
     """Add gyro and accelerometer scale-factor states to algorithm A."""
 
+
+GNSS_SIGMA_FLOORS_BY_GRADE: dict[str, tuple[float, float]] = {
+    "flight": (0.01, 0.005),
+    "vehicle": (0.01, 0.005),
+    "tactical": (0.01, 0.005),
+    "mems": (0.2, 0.5),
+    "consumer": (0.2, 0.5),
+}
+"""Default ``[gnss]`` (pos_sigma_floor_m, vel_sigma_floor_mps) per ``[imu] grade``. A MEMS
+filter trusts the receivers' nominal sigmas too much: on the measured logs (docs/results.md)
+the innovation gate then locks the GNSS out (quadrotor 0.70 -> 0.11 m forward with a 0.2 m
+floor; ArduPilot 31 -> 9.8 m with 1 m/s); navigation grades keep the receivers' sigmas."""
 
 LEG_MIN_DURATION_BY_GRADE_S: dict[str, float] = {
     "flight": 300.0,
@@ -214,6 +229,16 @@ class PipelineConfig:
                 changes[key] = table[grade]
         if changes:
             object.__setattr__(self, "legs", dataclasses.replace(self.legs, **changes))
+        # omitted [gnss] sigma floors take the grade's defaults too
+        floors = GNSS_SIGMA_FLOORS_BY_GRADE.get(grade)
+        gnss_changes = {k: v for k, v in zip(("pos_sigma_floor_m", "vel_sigma_floor_mps"),
+                                             floors or (None, None), strict=True)
+                        if getattr(self.gnss, k) is None}
+        if gnss_changes:
+            if floors is None:
+                raise ConfigError(f"imu.grade: expected one of "
+                                  f"{list(GNSS_SIGMA_FLOORS_BY_GRADE)}, got {grade!r}")
+            object.__setattr__(self, "gnss", dataclasses.replace(self.gnss, **gnss_changes))
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)

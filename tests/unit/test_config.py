@@ -52,3 +52,16 @@ def test_config_json_is_canonical():
     a = config_from_dict({"legs": {"min_duration_s": 200.0}, "name": "x"})
     b = config_from_dict({"name": "x", "legs": {"min_duration_s": 200}})
     assert a.to_json() == b.to_json()
+
+
+def test_grade_defaults_fill_only_what_is_omitted():
+    mems = config_from_dict({"imu": {"grade": "mems"}})
+    assert (mems.gnss.pos_sigma_floor_m, mems.gnss.vel_sigma_floor_mps) == (0.2, 0.5)
+    assert mems.legs.min_duration_s == 30.0
+    explicit = config_from_dict({"imu": {"grade": "mems"},
+                                 "gnss": {"pos_sigma_floor_m": 0.05},
+                                 "legs": {"min_duration_s": 60.0}})
+    assert explicit.gnss.pos_sigma_floor_m == 0.05 and explicit.gnss.vel_sigma_floor_mps == 0.5
+    assert explicit.legs.min_duration_s == 60.0
+    flight = PipelineConfig()
+    assert (flight.gnss.pos_sigma_floor_m, flight.legs.min_duration_s) == (0.01, 300.0)
