@@ -195,8 +195,11 @@ class CompensationConfig:
 class OutputsConfig:
     """[outputs]."""
 
-    trajectory_rate_hz: float = 10.0
     mcap: bool = True
+    """Write the best trajectory to trajectory.mcap (ROS 2 NavSatFix + PoseStamped)."""
+    mcap_rate_hz: float = 2.0
+    """Rate of trajectory.mcap [Hz] (at most the [filter] output rate; the Parquet table keeps
+    the full output rate)."""
     report: bool = True
     diagnose: bool = True
 

@@ -301,7 +301,8 @@ def run(
     summary["calibration"] = calib_run.reason
     if config.outputs.mcap:
         best = solutions.get("compensated") or solutions.get("smoothed") or nav.forward
-        trajectory_mcap.write_trajectory_mcap(out / "trajectory.mcap", best, epoch_ns)
+        trajectory_mcap.write_trajectory_mcap(out / "trajectory.mcap", best, epoch_ns,
+                                              rate_hz=config.outputs.mcap_rate_hz)
     outcome = finish(status)
     if config.outputs.report:
         write_report(out)

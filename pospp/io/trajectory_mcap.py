@@ -33,19 +33,27 @@ def _register(writer: Writer, topic: str, name: str, text: str) -> int:
     return writer.register_channel(topic=topic, message_encoding="cdr", schema_id=sid)
 
 
-def write_trajectory_mcap(path: str | Path, solution: Any, epoch_ns: int) -> Path:
+def write_trajectory_mcap(path: str | Path, solution: Any, epoch_ns: int, *,
+                          rate_hz: float | None = None) -> Path:
     """Write ``solution`` (a NavSolution: t_s, lat/lon/height, q_nb, pos_sigma_ned_m) to MCAP.
 
-    Returns the written path (atomic: temporary name, then rename).
+    ``rate_hz`` thins the epochs to about that rate (every k-th epoch; all when None or when
+    the solution is slower). Returns the written path (atomic: temporary name, then rename).
     """
-    time_ns = np.int64(epoch_ns) + np.round(solution.t_s * 1e9).astype(np.int64)
-    lat, lon, h = solution.lat_rad, solution.lon_rad, solution.height_m
-    var_ned = solution.pos_sigma_ned_m**2
+    keep = slice(None)
+    if rate_hz is not None and len(solution.t_s) > 1:
+        dt_s = float(np.median(np.diff(solution.t_s)))
+        keep = slice(None, None, max(1, int(round(1.0 / (rate_hz * dt_s)))))
+    t_s = solution.t_s[keep]
+    time_ns = np.int64(epoch_ns) + np.round(t_s * 1e9).astype(np.int64)
+    lat, lon, h = solution.lat_rad[keep], solution.lon_rad[keep], solution.height_m[keep]
+    q_nb = solution.q_nb[keep]
+    var_ned = solution.pos_sigma_ned_m[keep] ** 2
     cov_enu = np.zeros((len(time_ns), 9))
     cov_enu[:, 0], cov_enu[:, 4], cov_enu[:, 8] = var_ned[:, 1], var_ned[:, 0], var_ned[:, 2]
     r_ned = earth.llh_to_ned_m(lat, lon, h, lat[0], lon[0], h[0])
     r_enu = r_ned @ ENU_TO_NED.T  # ENU_TO_NED is symmetric and its own inverse
-    c_enu_flu = ENU_TO_NED @ rotation.dcm_from_quat(solution.q_nb) @ FLU_TO_FRD
+    c_enu_flu = ENU_TO_NED @ rotation.dcm_from_quat(q_nb) @ FLU_TO_FRD
     q_wxyz = rotation.quat_from_dcm(c_enu_flu)
     fix = rm.encode_batch(rm.NAVSATFIX_FIELDS, time_ns, "pospp", {
         "status": np.zeros(len(time_ns), np.int8),

@@ -19,6 +19,13 @@ from matplotlib.figure import Figure  # noqa: E402
 _R_M = 6371000.0  # mean Earth radius, only to draw a local map in metres
 
 
+def _thin(df: pd.DataFrame, max_points: int = 4000) -> pd.DataFrame:
+    """Every k-th row so that a plotted series has at most ``max_points`` (a 1.5 h flight at
+    10 Hz is 54,000 epochs per solution: more than a figure can show, and slow to draw)."""
+    step = max(1, -(-len(df) // max_points))
+    return df.iloc[::step]
+
+
 def _local_en_m(lat_deg: np.ndarray, lon_deg: np.ndarray, lat0: float, lon0: float):
     e = np.radians(lon_deg - lon0) * _R_M * np.cos(np.radians(lat0))
     n = np.radians(lat_deg - lat0) * _R_M
@@ -29,7 +36,7 @@ def trajectory_map(trajectory: pd.DataFrame, legs: pd.DataFrame) -> Figure:
     """Map of the smoothed (or forward) trajectory, legs coloured and numbered."""
     fig, ax = plt.subplots(figsize=(7.5, 6.0))
     sol = "smoothed" if (trajectory.solution == "smoothed").any() else "forward"
-    tr = trajectory[trajectory.solution == sol]
+    tr = _thin(trajectory[trajectory.solution == sol])
     lat0, lon0 = float(tr.lat_deg.iloc[0]), float(tr.lon_deg.iloc[0])
     e, n = _local_en_m(tr.lat_deg.to_numpy(), tr.lon_deg.to_numpy(), lat0, lon0)
     ax.plot(e / 1e3, n / 1e3, color="0.6", lw=0.8, label=f"{sol} trajectory")
@@ -126,6 +133,7 @@ def trajectory_sigmas(trajectory: pd.DataFrame) -> Figure:
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(10, 5.5), sharex=True)
     t0 = trajectory.time_ns.min()
     for sol, g in trajectory.groupby("solution"):
+        g = _thin(g)
         t = (g.time_ns - t0) * 1e-9
         if "north_sigma_m" in g:
             a1.semilogy(t, np.hypot(g.north_sigma_m, g.east_sigma_m), label=f"{sol} horiz.")

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import time
@@ -68,6 +69,8 @@ def main() -> None:
     ap.add_argument("--pipeline", default=str(REPO / "pipelines" / "flight.toml"))
     args = ap.parse_args()
     CACHE.mkdir(parents=True, exist_ok=True)
+    # as the CLI does (pospp/cli.py): one OpenBLAS thread
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS", "1")}
     rows = []
     for minutes in args.minutes:
         mcap = _simulate(minutes, args.rate_hz)
@@ -75,9 +78,9 @@ def main() -> None:
         # warm numba's on-disk cache once (not timed)
         if not rows:
             subprocess.run([sys.executable, "-c", _CHILD, str(mcap), args.pipeline, str(out)],
-                           check=True, capture_output=True)
+                           check=True, capture_output=True, env=env)
         res = subprocess.run([sys.executable, "-c", _CHILD, str(mcap), args.pipeline,
-                              str(out)], check=True, capture_output=True, text=True)
+                              str(out)], check=True, capture_output=True, text=True, env=env)
         r = json.loads(res.stdout.strip().splitlines()[-1])
         r["minutes"] = minutes
         rows.append(r)
