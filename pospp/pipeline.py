@@ -298,7 +298,7 @@ def run(
     for name, table in tables.items():
         write(name, table)
     summary.update(calib_run.summary())
-    summary["calibration"] = calib_run.reason
+    summary["calibration_reason"] = calib_run.reason
     if config.outputs.mcap:
         best = solutions.get("compensated") or solutions.get("smoothed") or nav.forward
         trajectory_mcap.write_trajectory_mcap(out / "trajectory.mcap", best, epoch_ns,

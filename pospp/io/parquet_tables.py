@@ -174,6 +174,8 @@ TABLES: dict[str, list[Column]] = {
         _opt(Column("dp_before_m", _F, "m", "B-minus-A horizontal position error at the leg "
                     "end before compensation (RMS over legs)")),
         _opt(Column("dp_after_m", _F, "m", "same, after compensation")),
+        _opt(Column("calibration_reason", _S, "", "'ok', or why no calibration was produced")),
+        _opt(Column("wall_time_s", _F, "s", "processing wall time of the run")),
     ],
     "diagnosis": [
         Column("step", _I, "", "step of the model-discrepancy workflow"),

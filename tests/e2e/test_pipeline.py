@@ -185,7 +185,7 @@ def test_truncated_file_keeps_earlier_outputs_and_says_where(sample_log, tmp_pat
     # 400 s of static and climb: A runs, no leg is found, and the run says so plainly
     assert code == 0, text
     s = parquet_tables.read_table(out / "summary.parquet").iloc[0]
-    assert s.status == "partial" and "no straight" in s.calibration
+    assert s.status == "partial" and "no straight" in s.calibration_reason
     traj_before = parquet_tables.read_table(out / "trajectory.parquet")
     cut = tmp_path / "cut.mcap"
     data = good.read_bytes()

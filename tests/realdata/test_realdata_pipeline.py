@@ -119,7 +119,7 @@ def test_ardupilot_runs_end_to_end_and_finds_no_leg(real_data, out_dir):
     s = outcome.summary
     assert outcome.status == "partial"
     assert s["n_legs"] == 0 and s["n_pairs_used"] == 0
-    assert s["calibration"].startswith("no calibration: no straight, level, uniform leg")
+    assert s["calibration_reason"].startswith("no calibration: no straight, level, uniform leg")
     assert 612.0 < s["duration_s"] < 614.0 and 30_600 < s["n_imu_samples"] < 30_700
     traj = pd.read_parquet(run_dir / "trajectory.parquet")
     sm = traj[traj.solution == "smoothed"]
@@ -169,7 +169,7 @@ def test_quadrotor_against_the_dji_solution(real_data, out_dir):
     assert np.allclose(legs.heading_deg, 248.3, atol=3.0)
     assert legs.duration_s.min() >= 10.0 and legs.duration_s.max() <= 16.0
     assert not pairs.used.iloc[0] and "heading change" in pairs.reason.iloc[0]
-    assert outcome.summary["calibration"].startswith("no calibration: no pair passed")
+    assert outcome.summary["calibration_reason"].startswith("no calibration: no pair passed")
     ev = pipeline.evaluate_run(run_dir, out_dir / "quad.reference.parquet")
     m, f = _metrics(ev, "smoothed"), _metrics(ev, "forward")
     # measured (smoothed / forward): 0.13 / 0.11 m, 0.16 / 0.18 m/s, heading 1.06 / 1.42 deg,

@@ -47,7 +47,7 @@ UNITLESS = {"solution", "leg_id", "pair_id", "leg_a", "leg_b", "used", "reason",
             "topic", "index", "file", "sha256", "error", "metric", "cond_raw", "cond_scaled",
             "reference_file", "byte_offset", "criterion", "delta_bic", "explained_fraction",
             "confounded_with", "parameters", "parameter_values", "parameter_sigmas", "model",
-            "kind"}
+            "kind", "calibration_reason"}
 # Long-form tables: 'value' / 'sigma' carry the unit named in the row's 'unit' column.
 ROW_UNIT = {"value", "sigma"}
 
