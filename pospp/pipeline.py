@@ -49,6 +49,10 @@ ProgressFn = Callable[[str, float], None]
 
 STAGES = ("ingest", "navigate", "calibrate", "compensate", "diagnose", "write")
 
+_RUN_TABLES = ("trajectory", "legs", "pairs", "calibration", "leg_errors", "diagnosis",
+               "diagnosis_curves", "evaluation")
+"""Tables of a run folder that belong to one run (messages and summary are always written)."""
+
 
 @dataclass(frozen=True)
 class RunOutcome:
@@ -300,9 +304,14 @@ def run(
     summary.update(calib_run.summary())
     summary["calibration_reason"] = calib_run.reason
     if config.outputs.mcap:
-        best = solutions.get("compensated") or solutions.get("smoothed") or nav.forward
+        best = next(solutions[k] for k in ("compensated", "smoothed", "forward")
+                    if k in solutions)
         trajectory_mcap.write_trajectory_mcap(out / "trajectory.mcap", best, epoch_ns,
                                               rate_hz=config.outputs.mcap_rate_hz)
+    # a re-run into the same folder must not leave tables of an earlier run beside this one's
+    # (a failed run, above, keeps them: its summary says it failed)
+    stale = [n for n in _RUN_TABLES if n not in tables]
+    report_files.remove_tables(out, stale)
     outcome = finish(status)
     if config.outputs.report:
         write_report(out)

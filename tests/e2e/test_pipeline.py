@@ -244,3 +244,25 @@ def test_unknown_config_key_is_named(tmp_path):
         fh.write("\n[filtre]\nsmoother = true\n")
     code, text = _cli("run", str(SAMPLE), "-p", str(bad), "-o", str(tmp_path / "o"))
     assert code == 2 and "filtre" in text and "bad.toml" in text
+
+
+def test_rerun_into_a_folder_leaves_no_stale_table(sample_log, tmp_path):
+    """A folder first used for a calibrated run, then for a run without legs, holds only the
+    second run's tables (a report would otherwise mix the two)."""
+    out = tmp_path / "out"
+    out.mkdir()
+    imu, fix, vel = _window(sample_log, 300.0)
+    path = tmp_path / "short.mcap"
+    write_flight_log(path, imu, fix, vel)
+    parquet_tables.write_table(out / "legs.parquet", {
+        "leg_id": [0], "start_ns": [0], "end_ns": [1], "duration_s": [1.0],
+        "heading_deg": [0.0], "speed_mps": [1.0], "height_m": [0.0]}, "legs",
+        metadata={"input_sha256": "an earlier run"})
+    (out / "diagnosis.parquet").write_bytes(b"an earlier run's diagnosis")
+    code, text = _cli("run", str(path), "-p", str(SAMPLE_PIPELINE), "-o", str(out))
+    assert code == 0, text
+    legs = parquet_tables.read_table(out / "legs.parquet")
+    assert len(legs) == 0
+    assert parquet_tables.read_metadata(out / "legs.parquet")["input_sha256"] == \
+        parquet_tables.sha256_file(path)
+    assert not (out / "diagnosis.parquet").exists()
