@@ -266,3 +266,24 @@ def test_rerun_into_a_folder_leaves_no_stale_table(sample_log, tmp_path):
     assert parquet_tables.read_metadata(out / "legs.parquet")["input_sha256"] == \
         parquet_tables.sha256_file(path)
     assert not (out / "diagnosis.parquet").exists()
+
+
+@pytest.mark.slow
+def test_batch_on_a_dask_scheduler(sample_log, tmp_path):
+    """The Dask path: the same manifest through a (local, in-process) distributed scheduler."""
+    distributed = pytest.importorskip("dask.distributed")
+    from pospp.batch import run_batch
+    from pospp.config import load_config
+
+    imu, fix, vel = _window(sample_log, 300.0)
+    files = []
+    for name in ("x", "y"):
+        files.append(tmp_path / f"{name}.mcap")
+        write_flight_log(files[-1], imu, fix, vel)
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cluster:
+        rows = run_batch(files, load_config(SAMPLE_PIPELINE), tmp_path / "out",
+                         scheduler=cluster.scheduler_address)
+    assert [r.status for r in rows] == ["partial", "partial"]
+    man = parquet_tables.read_table(tmp_path / "out" / "manifest.parquet")
+    assert sorted(man.file) == sorted(str(f) for f in files)
