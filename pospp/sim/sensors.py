@@ -19,10 +19,23 @@ Model, per IMU interval k of length dt (t_mid its midpoint, t from the mission s
 - n: white noise on the increments, angle / velocity random walk: std = N sqrt(dt) with
   N = ``gyro_arw_dpsh`` (deg/sqrt(h)) or ``accel_vrw_mpsph`` (m/s/sqrt(h));
 - M = diag(scale factor [ppm]) + misalignment (off-diagonal, [xy, xz, yx, yz, zx, zy] arcsec;
-  M_ij = sensitivity of axis i to the input about/along axis j).
+  M_ij = sensitivity of axis i to the input about/along axis j);
+- vibration, a SENSOR error (the IMU case vibrates, the navigation point does not): per axis
+  j a sinusoid v_j(t) = sqrt(2) rms_j sin(2 pi f t + phi_j) of frequency f
+  (``vibration_freq_hz``, shared by all axes) with a seeded uniform random phase phi_j, RMS
+  ``accel_vibration_rms_mps2`` / ``gyro_vibration_rms_dps``. It is integrated exactly over
+  each interval, so the increments stay the exact interval means:
+
+      int_t0^t1 v dt = 2 sqrt(2) rms / w * sin(w t_mid + phi) sin(w dt / 2),  w = 2 pi f.
+
+  The sample (interval-mean) RMS is therefore rms |sinc(f dt)| (sinc(x) = sin(pi x)/(pi x)),
+  and a frequency above the Nyquist rate aliases exactly as a real sampled IMU's does. The
+  vibration's mean over any whole number of periods is zero.
 
 Random streams are seeded per sensor (gyro, accel) from one ``numpy.random.SeedSequence``, so
-the same seed gives bit-identical output.
+the same seed gives bit-identical output. The vibration phases come from a third child of that
+SeedSequence (spawn key index 2), drawn only when a vibration RMS is non-zero, so models without
+vibration give the same bits as before it existed.
 """
 
 from __future__ import annotations
@@ -39,7 +52,8 @@ from scipy.signal import lfilter
 from pospp.earth import STANDARD_GRAVITY_MPS2
 from pospp.rotation import ARCSEC_RAD, DEG_PER_H_RADPS
 
-__all__ = ["ImuErrorModel", "RealisedImuErrors", "apply_imu_errors", "imu_grade", "grade_names"]
+__all__ = ["ImuErrorModel", "RealisedImuErrors", "apply_imu_errors", "imu_grade", "grade_names",
+           "vibration_increments"]
 
 UG_MPS2 = 1e-6 * STANDARD_GRAVITY_MPS2
 """One micro-g [m/s^2] (g0 = 9.80665 m/s^2)."""
@@ -59,7 +73,9 @@ def _zeros6() -> tuple[float, ...]:
 
 @dataclass(frozen=True)
 class ImuErrorModel:
-    """IMU error parameters (body FRD axes; units in the names). All default to zero."""
+    """IMU error parameters (body FRD axes; units in the names). All default to zero, except
+    the correlation times (300 s) and ``vibration_freq_hz`` (50 Hz, used only when a
+    vibration RMS is non-zero)."""
 
     gyro_bias_dph: tuple[float, float, float] = field(default_factory=_zeros3)
     gyro_bias_drift_dphph: tuple[float, float, float] = field(default_factory=_zeros3)
@@ -75,20 +91,23 @@ class ImuErrorModel:
     accel_gm_tau_s: float = 300.0
     accel_sf_ppm: tuple[float, float, float] = field(default_factory=_zeros3)
     accel_misalign_arcsec: tuple[float, ...] = field(default_factory=_zeros6)
+    accel_vibration_rms_mps2: tuple[float, float, float] = field(default_factory=_zeros3)
+    gyro_vibration_rms_dps: tuple[float, float, float] = field(default_factory=_zeros3)
+    vibration_freq_hz: float = 50.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
             v = getattr(self, f.name)
-            if f.name.endswith("_tau_s"):
+            if f.name in _SCALAR_FIELDS:
                 if not float(v) > 0.0:
-                    raise ValueError(f"{f.name} must be > 0 s, got {v!r}")
+                    raise ValueError(f"{f.name} must be > 0, got {v!r}")
                 object.__setattr__(self, f.name, float(v))
                 continue
             n = 6 if "misalign" in f.name else 3
             arr = np.broadcast_to(np.asarray(v, dtype=float), (n,))
             if not np.isfinite(arr).all():
                 raise ValueError(f"{f.name}: non-finite value {v!r}")
-            if any(k in f.name for k in ("arw", "vrw", "sigma")) and (arr < 0).any():
+            if any(k in f.name for k in ("arw", "vrw", "sigma", "rms")) and (arr < 0).any():
                 raise ValueError(f"{f.name} must be >= 0, got {v!r}")
             object.__setattr__(self, f.name, tuple(float(x) for x in arr))
 
@@ -103,13 +122,22 @@ class ImuErrorModel:
         return cls(**d)
 
     def as_dict(self) -> dict[str, Any]:
-        """JSON-ready dict (lists), field names as keys."""
-        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
+        """JSON-ready dict (lists), field names as keys. The vibration keys are left out when
+        both vibration RMS are zero (params files of vibration-free runs stay as before)."""
+        d = {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
+        if not self.has_vibration():
+            for k in _VIBRATION_FIELDS:
+                d.pop(k)
+        return d
+
+    def has_vibration(self) -> bool:
+        """True when an accelerometer or gyro vibration RMS is non-zero."""
+        return bool(any(self.accel_vibration_rms_mps2) or any(self.gyro_vibration_rms_dps))
 
     def is_error_free(self) -> bool:
         return all(
             (v == 0.0 if isinstance(v, float) else not any(v))
-            for k, v in asdict(self).items() if not k.endswith("_tau_s")
+            for k, v in asdict(self).items() if k not in _SCALAR_FIELDS
         )
 
     def gyro_matrix(self) -> NDArray:
@@ -119,6 +147,40 @@ class ImuErrorModel:
     def accel_matrix(self) -> NDArray:
         """I + M_a, (3, 3)."""
         return _sf_misalign(self.accel_sf_ppm, self.accel_misalign_arcsec)
+
+
+_SCALAR_FIELDS = frozenset({"gyro_gm_tau_s", "accel_gm_tau_s", "vibration_freq_hz"})
+"""Scalar, strictly positive fields (the rest are per-axis vectors)."""
+_VIBRATION_FIELDS = ("accel_vibration_rms_mps2", "gyro_vibration_rms_dps", "vibration_freq_hz")
+
+
+def vibration_increments(t_s: NDArray, rms: NDArray, freq_hz: float,
+                         phase_rad: NDArray) -> NDArray:
+    """Exact integrals of per-axis sinusoidal vibration over each interval.
+
+    Integrates v_j(t) = sqrt(2) rms_j sin(2 pi f t + phi_j) from t_k to t_k+1 in closed form:
+    2 sqrt(2) rms_j / w sin(w t_mid + phi_j) sin(w dt / 2), w = 2 pi f (module docstring).
+
+    Parameters
+    ----------
+    t_s : (N + 1,) epochs [s].
+    rms : (3,) vibration RMS per axis (any unit u; the result is in u s).
+    freq_hz : float, > 0.
+    phase_rad : (3,) phases phi_j [rad].
+
+    Returns
+    -------
+    (N, 3) increments [u s].
+    """
+    t_s = np.asarray(t_s, dtype=float)
+    dt = np.diff(t_s)
+    w = 2.0 * np.pi * freq_hz
+    # phase of the midpoint reduced with the cycle count first (t f ~ 1e5 cycles)
+    t_mid = 0.5 * (t_s[1:] + t_s[:-1])
+    cyc = np.mod(freq_hz * t_mid, 1.0)
+    amp = 2.0 * np.sqrt(2.0) * np.asarray(rms, dtype=float) / w
+    return (amp * np.sin(2.0 * np.pi * cyc[:, None] + np.asarray(phase_rad)[None, :])
+            * np.sin(0.5 * w * dt)[:, None])
 
 
 def _sf_misalign(sf_ppm, mis_arcsec) -> NDArray:
@@ -231,4 +293,15 @@ def apply_imu_errors(
         dth += rng_g.standard_normal((n, 3)) * arw * sq
     if np.any(vrw):
         dvm += rng_a.standard_normal((n, 3)) * vrw * sq
+    if model.has_vibration():
+        # a third child of the seed (as ss.spawn would give next), without mutating ss
+        ss_v = np.random.SeedSequence(ss.entropy, spawn_key=(*ss.spawn_key, 2),
+                                      pool_size=ss.pool_size)
+        ph = np.random.default_rng(ss_v).uniform(0.0, 2.0 * np.pi, (2, 3))
+        f = model.vibration_freq_hz
+        if any(model.gyro_vibration_rms_dps):
+            dth += vibration_increments(t_s, np.deg2rad(model.gyro_vibration_rms_dps), f, ph[0])
+        if any(model.accel_vibration_rms_mps2):
+            dvm += vibration_increments(t_s, np.asarray(model.accel_vibration_rms_mps2), f,
+                                        ph[1])
     return dth, dvm, RealisedImuErrors(bg, ba, mg, ma)
