@@ -77,7 +77,9 @@ CONVENTIONS = {
 @dataclass(frozen=True)
 class TrueLeg:
     """A true straight, level, constant-velocity leg of the mission (``start_s``/``end_s`` from
-    the mission start, ``start_ns``/``end_ns`` UTC stamps)."""
+    the mission start, ``start_ns``/``end_ns`` UTC stamps). With leg wander (profile.py) the
+    heading and speed wander about the nominal ``heading_deg``/``speed_mps`` by the wander
+    amplitudes, and ``length_m`` is the nominal speed x duration."""
 
     leg_id: int
     kind: str
@@ -95,9 +97,20 @@ class TrueLeg:
     start_lon_deg: float
     end_lat_deg: float
     end_lon_deg: float
+    heading_wander_deg: float = 0.0
+    heading_wander_period_s: float = 0.0
+    speed_wander_mps: float = 0.0
+    speed_wander_period_s: float = 0.0
 
     def as_dict(self) -> dict[str, Any]:
-        return {k: getattr(self, k) for k in self.__dataclass_fields__}
+        """All fields; the wander fields only when that wander is on (heading, speed and
+        length are then the leg's nominal values)."""
+        d = {k: getattr(self, k) for k in self.__dataclass_fields__}
+        for k in ("heading_wander", "speed_wander"):
+            amp = f"{k}_deg" if k == "heading_wander" else f"{k}_mps"
+            if not d[amp]:
+                del d[amp], d[f"{k}_period_s"]
+        return d
 
 
 @dataclass(frozen=True)
@@ -346,6 +359,10 @@ def simulate(
                 lg.speed_mps * lg.duration_s, start_lat_deg=float(lat[0]),
                 start_lon_deg=float(lon[0]), end_lat_deg=float(lat[1]),
                 end_lon_deg=float(lon[1]),
+                heading_wander_deg=round(math.degrees(lg.heading_wander_rad), 12),
+                heading_wander_period_s=lg.heading_wander_period_s,
+                speed_wander_mps=lg.speed_wander_mps,
+                speed_wander_period_s=lg.speed_wander_period_s,
             ))
         return tuple(out)
 

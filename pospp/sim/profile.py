@@ -20,8 +20,8 @@ Segment types and keys (all optional keys shown in brackets):
 
 - ``static``: duration_s. Speed must be zero.
 - ``accelerate``: to_speed_mps, duration_s (the whole segment is one smooth ramp).
-- ``straight``: duration_s or length_m [kind = "transit" | "survey", label]. A straight level
-  leg at the current speed; recorded as a true leg.
+- ``straight``: duration_s or length_m [kind = "transit" | "survey", label, wander keys]. A
+  straight level leg at the current speed; recorded as a true leg.
 - ``turn``: angle_deg (signed, positive clockwise = right) or to_heading_deg [direction =
   "shortest" | "right" | "left"], rate_dps [blend_s]. Heading rate ramps up over blend_s,
   holds, ramps down; bank follows (coordinated: tan(bank) = speed x rate / g).
@@ -31,7 +31,16 @@ Segment types and keys (all optional keys shown in brackets):
 - ``survey``: legs, heading_deg, leg_duration_s (number or list) or leg_length_m,
   turn_rate_dps [turn_direction = "alternate" | "right" | "left", first_turn = "right" |
   "left", blend_s, label]. A turn onto the line heading, then back-and-forth legs joined by
-  180 degree turns.
+  180 degree turns. The wander keys apply to every line.
+
+Wander keys (``straight`` and ``survey``, default off): ``heading_wander_deg`` with
+``heading_wander_period_s``, and ``speed_wander_mps`` with ``speed_wander_period_s``. The leg's
+heading (speed) then is the nominal value plus A sin(2 pi u / P) with u the time into the leg,
+tapered in and out with smootherstep (:class:`pospp.sim.ramps.WanderSchedule`), so the legs
+are no longer ideal (the measured logs' 1-3 deg heading wander and speed changes,
+docs/results.md) while every derivative the IMU needs stays continuous, and the heading and
+speed are back to nominal at the leg's end. The leg keeps its nominal heading, speed and
+length in the leg table, plus the wander settings.
 
 Every schedule (speed, heading rate, climb slope) is a sum of C2 smoothstep ramps
 (:mod:`pospp.sim.ramps`), so the joins have continuous first and second derivatives. Angles
@@ -48,7 +57,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from pospp.sim.ramps import RampSchedule
+from pospp.sim.ramps import RampSchedule, WanderSchedule
 
 __all__ = [
     "MissionProfile",
@@ -61,17 +70,21 @@ __all__ = [
     "preset_names",
 ]
 
+_WANDER_KEYS = {"heading_wander_deg", "heading_wander_period_s", "speed_wander_mps",
+                "speed_wander_period_s"}
+
 _SEGMENT_KEYS: dict[str, tuple[set[str], set[str]]] = {
     # type: (required keys, optional keys) -- "one of" groups are checked in the planner
     "static": ({"duration_s"}, {"label"}),
     "accelerate": ({"to_speed_mps", "duration_s"}, {"label"}),
-    "straight": (set(), {"duration_s", "length_m", "kind", "label", "speed_mps"}),
+    "straight": (set(), {"duration_s", "length_m", "kind", "label", "speed_mps",
+                         *_WANDER_KEYS}),
     "turn": ({"rate_dps"}, {"angle_deg", "to_heading_deg", "direction", "blend_s", "label"}),
     "climb": ({"rate_mps"}, {"to_height_m", "delta_m", "blend_s", "label"}),
     "survey": (
         {"legs", "heading_deg", "turn_rate_dps"},
         {"leg_duration_s", "leg_length_m", "turn_direction", "first_turn", "blend_s", "label",
-         "speed_mps", "height_m"},
+         "speed_mps", "height_m", *_WANDER_KEYS},
     ),
 }
 
@@ -228,7 +241,8 @@ class PlannedSegment:
 
 @dataclass(frozen=True)
 class PlannedLeg:
-    """A true straight, level, constant-speed leg."""
+    """A true straight, level, constant-speed leg (nominal heading and speed; with wander, the
+    true heading and speed wander about them by the amplitudes below)."""
 
     leg_id: int
     kind: str
@@ -238,6 +252,10 @@ class PlannedLeg:
     heading_rad: float
     speed_mps: float
     height_m: float
+    heading_wander_rad: float = 0.0
+    heading_wander_period_s: float = 0.0
+    speed_wander_mps: float = 0.0
+    speed_wander_period_s: float = 0.0
 
     @property
     def duration_s(self) -> float:
@@ -263,6 +281,10 @@ class MissionPlan:
     heading0_rad : float
     segments : tuple of PlannedSegment
     legs : tuple of PlannedLeg
+    heading_wander : WanderSchedule or None
+        Added to the heading [rad] (its derivatives to the heading rate); None: no wander.
+    speed_wander : WanderSchedule or None
+        Added to the speed [m/s]; None: no wander.
     """
 
     profile: MissionProfile
@@ -273,6 +295,8 @@ class MissionPlan:
     heading0_rad: float
     segments: tuple[PlannedSegment, ...]
     legs: tuple[PlannedLeg, ...]
+    heading_wander: WanderSchedule | None = None
+    speed_wander: WanderSchedule | None = None
 
 
 def _wrap_pi(a: float) -> float:
@@ -291,6 +315,8 @@ class _Planner:
         self.slope_ramps: list[tuple[float, float, float]] = []
         self.segments: list[PlannedSegment] = []
         self.legs: list[PlannedLeg] = []
+        self.heading_wander: list[tuple[float, float, float, float]] = []
+        self.speed_wander: list[tuple[float, float, float, float]] = []
 
     def _push(self, typ: str, label: str, dur: float, *, speed_end: float | None = None,
               heading_end: float | None = None, height_end: float | None = None,
@@ -335,9 +361,25 @@ class _Planner:
                else _positive(s, "length_m", where) / self.speed)
         kind = kind or s.get("kind", "transit")
         label = label or s.get("label", "straight")
+        hw, hp = _wander(s, "heading_wander_deg", "heading_wander_period_s", where)
+        sw, sp = _wander(s, "speed_wander_mps", "speed_wander_period_s", where)
+        if sw >= self.speed:
+            raise ValueError(f"{where}: speed_wander_mps {sw} must be below the leg speed "
+                             f"{self.speed} m/s")
+        if hw >= 90.0:
+            raise ValueError(f"{where}: heading_wander_deg {hw} must be below 90 deg")
+        extra: dict[str, Any] = {}
+        if hw:
+            self.heading_wander.append((self.t, dur, math.radians(hw), hp))
+            extra.update(heading_wander_deg=hw, heading_wander_period_s=hp)
+        if sw:
+            self.speed_wander.append((self.t, dur, sw, sp))
+            extra.update(speed_wander_mps=sw, speed_wander_period_s=sp)
         self.legs.append(PlannedLeg(len(self.legs), kind, label, self.t, self.t + dur,
-                                    self.heading, self.speed, self.height))
-        self._push("straight", label, dur, leg_kind=kind, length_m=dur * self.speed)
+                                    self.heading, self.speed, self.height,
+                                    math.radians(hw), hp if hw else 0.0, sw,
+                                    sp if sw else 0.0))
+        self._push("straight", label, dur, leg_kind=kind, length_m=dur * self.speed, **extra)
 
     def turn(self, s: Mapping[str, Any], where: str, *, label: str | None = None) -> None:
         rate = math.radians(_positive(s, "rate_dps", where))
@@ -419,8 +461,10 @@ class _Planner:
             raise ValueError(f"{where}: turn_direction alternate/right/left and first_turn "
                              f"right/left, got {mode!r}, {first!r}")
         side = 1.0 if (first if mode == "alternate" else mode) == "right" else -1.0
+        wander = {k: s[k] for k in _WANDER_KEYS if k in s}
         for k, v in enumerate(vals):
             leg = {"duration_s": v} if key == "leg_duration_s" else {"length_m": v}
+            leg.update(wander)
             self.straight(leg, where, kind="survey", label=f"{label} line {k + 1}")
             if k < n - 1:
                 self.turn({"angle_deg": side * 180.0, "rate_dps": rate, "blend_s": blend},
@@ -431,6 +475,19 @@ class _Planner:
 
 _G_BANK_MPS2 = 9.80665
 """Gravity used in the coordinated-turn bank law tan(bank) = v r / g (a definition)."""
+
+
+def _wander(s: Mapping[str, Any], amp_key: str, period_key: str,
+            where: str) -> tuple[float, float]:
+    """(amplitude, period_s) of one wander; (0, 0) when off. Both keys or neither."""
+    if (amp_key in s) != (period_key in s):
+        raise ValueError(f"{where}: give both {amp_key} and {period_key} or neither")
+    if amp_key not in s:
+        return 0.0, 0.0
+    amp = float(s[amp_key])
+    if not amp >= 0.0:
+        raise ValueError(f"{where}: {amp_key} must be >= 0, got {amp}")
+    return amp, _positive(s, period_key, where)
 
 
 def _positive(s: Mapping[str, Any], key: str, where: str) -> float:
@@ -455,5 +512,8 @@ def plan_mission(profile: MissionProfile) -> MissionPlan:
         heading0_rad=math.radians(profile.heading_deg),
         segments=tuple(pl.segments),
         legs=tuple(pl.legs),
+        heading_wander=(WanderSchedule.build(pl.heading_wander) if pl.heading_wander
+                        else None),
+        speed_wander=WanderSchedule.build(pl.speed_wander) if pl.speed_wander else None,
     )
 

@@ -139,3 +139,74 @@ class RampSchedule:
             * (tau - dur),
         )
         return np.where(on, acc[ic] + ramp_part, 0.0) + self.x0 * t
+
+
+@dataclass(frozen=True)
+class WanderSchedule:
+    """Smooth sinusoidal wander on non-overlapping windows, zero outside them.
+
+    On window i (``[t_i, t_i + T_i]``), with u = t - t_i::
+
+        x(t) = A_i sin(2 pi u / P_i) c_i(u),   c_i(u) = S(u / tau_i) S((T_i - u) / tau_i),
+
+    S the smootherstep above (clipped to [0, 1]) and tau_i = min(P_i / 2, T_i / 4) the taper
+    time. c rises from 0 to 1 over the first tau_i and falls back over the last, with zero first
+    and second derivatives at both ends, so x, x' and x'' are continuous everywhere and x
+    returns to exactly 0 at the window's end (the next segment starts from the nominal value).
+    Between the tapers x is the plain sinusoid of amplitude A_i. Units are the caller's.
+
+    Attributes
+    ----------
+    start_s, duration_s, amplitude, period_s : ndarray, shape (M,)
+        Window starts [s], lengths T [s] (> 0), amplitudes A and periods P [s] (> 0).
+    """
+
+    start_s: NDArray
+    duration_s: NDArray
+    amplitude: NDArray
+    period_s: NDArray
+
+    def __post_init__(self) -> None:
+        arrs = [np.asarray(getattr(self, k), dtype=float).reshape(-1)
+                for k in ("start_s", "duration_s", "amplitude", "period_s")]
+        if len({a.shape for a in arrs}) != 1:
+            raise ValueError("start_s, duration_s, amplitude and period_s must match in shape")
+        if (arrs[1] <= 0).any() or (arrs[3] <= 0).any():
+            raise ValueError("wander windows need duration_s > 0 and period_s > 0")
+        if arrs[0].size > 1 and ((np.diff(arrs[0]) < 0).any()
+                                 or (arrs[0][1:] < arrs[0][:-1] + arrs[1][:-1] - 1e-9).any()):
+            raise ValueError("wander windows must be sorted and must not overlap")
+        for k, a in zip(("start_s", "duration_s", "amplitude", "period_s"), arrs, strict=True):
+            object.__setattr__(self, k, a)
+
+    @classmethod
+    def build(cls, windows: list[tuple[float, float, float, float]]) -> WanderSchedule:
+        """From a list of (start_s, duration_s, amplitude, period_s); zero amplitudes dropped."""
+        w = sorted((x for x in windows if x[2] != 0.0), key=lambda x: x[0])
+        arr = np.array(w, dtype=float).reshape(-1, 4)
+        return cls(*(arr[:, k].copy() for k in range(4)))
+
+    def evaluate(self, t_s: ArrayLike) -> tuple[NDArray, NDArray, NDArray]:
+        """x, dx/dt, d2x/dt2 at times ``t_s``."""
+        t = np.asarray(t_s, dtype=float)
+        zero = np.zeros(t.shape)
+        if self.start_s.size == 0:
+            return zero, zero.copy(), zero.copy()
+        i = np.clip(np.searchsorted(self.start_s, t, side="right") - 1, 0, None)
+        dur, amp, per = self.duration_s[i], self.amplitude[i], self.period_s[i]
+        u = t - self.start_s[i]
+        inside = (u >= 0.0) & (u <= dur)
+        u = np.clip(u, 0.0, dur)
+        tau = np.minimum(0.5 * per, 0.25 * dur)
+        a = np.clip(u / tau, 0.0, 1.0)
+        b = np.clip((dur - u) / tau, 0.0, 1.0)
+        sa, sb = smoothstep(a), smoothstep(b)
+        da, db = smoothstep_d1(a) / tau, -smoothstep_d1(b) / tau
+        dda, ddb = smoothstep_d2(a) / tau**2, smoothstep_d2(b) / tau**2
+        c, c1, c2 = sa * sb, da * sb + sa * db, dda * sb + 2.0 * da * db + sa * ddb
+        w = 2.0 * np.pi / per
+        g, g1, g2 = amp * np.sin(w * u), amp * w * np.cos(w * u), -amp * w * w * np.sin(w * u)
+        x = np.where(inside, g * c, 0.0)
+        x1 = np.where(inside, g1 * c + g * c1, 0.0)
+        x2 = np.where(inside, g2 * c + 2.0 * g1 * c1 + g * c2, 0.0)
+        return x, x1, x2

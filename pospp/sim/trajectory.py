@@ -13,7 +13,9 @@ Two motions share one interface, :meth:`evaluate`, returning a :class:`MotionSam
       v_n = [s cos psi, s sin psi, -s k],
       roll = atan(s psi' / g) (coordinated) or 0, pitch = gamma = atan(k), yaw = psi,
 
-  and a_n, the Euler rates follow analytically. Position integrates the geodetic kinematics
+  and a_n, the Euler rates follow analytically. Optional leg wander (the plan's
+  ``heading_wander`` / ``speed_wander``, closed-form C2 sinusoids) adds to psi and s and their
+  derivatives. Position integrates the geodetic kinematics
   lat' = v_N / (R_M + h), lon' = v_E / ((R_N + h) cos lat), h' = -v_D
   on a 0.02 s grid with 4-node Gauss-Legendre quadrature per step and Picard iteration of the
   radii, then cubic Hermite interpolation (values and exact derivatives at the grid): the
@@ -114,6 +116,12 @@ class ProfileMotion:
         s, s1, _ = self.plan.speed.evaluate(t)
         r, r1, _ = self.plan.heading_rate.evaluate(t)
         psi = self.plan.heading0_rad + self.plan.heading_rate.integral(t)
+        if self.plan.speed_wander is not None:  # leg speed wander (profile.py)
+            w, w1, _ = self.plan.speed_wander.evaluate(t)
+            s, s1 = s + w, s1 + w1
+        if self.plan.heading_wander is not None:  # leg heading wander: psi += x, r += x'
+            w, w1, w2 = self.plan.heading_wander.evaluate(t)
+            psi, r, r1 = psi + w, r + w1, r1 + w2
         k, k1, _ = self.plan.slope.evaluate(t)
         cp, sp = np.cos(psi), np.sin(psi)
         v = np.stack([s * cp, s * sp, -s * k], axis=-1)
