@@ -30,7 +30,11 @@ Model, per IMU interval k of length dt (t_mid its midpoint, t from the mission s
 
   The sample (interval-mean) RMS is therefore rms |sinc(f dt)| (sinc(x) = sin(pi x)/(pi x)),
   and a frequency above the Nyquist rate aliases exactly as a real sampled IMU's does. The
-  vibration's mean over any whole number of periods is zero.
+  vibration's mean over any whole number of periods is zero. With ``vibration_bandwidth_hz``
+  B > 0 the vibration is band-limited noise instead: per axis a sum of
+  ``VIBRATION_TONES`` sinusoids of RMS rms / sqrt(n) each, frequencies uniform in
+  [f - B/2, f + B/2] and phases uniform, all seeded, each integrated exactly as above (the
+  total RMS is rms; the increments stay exact interval means).
 
 Random streams are seeded per sensor (gyro, accel) from one ``numpy.random.SeedSequence``, so
 the same seed gives bit-identical output. The vibration phases come from a third child of that
@@ -53,7 +57,7 @@ from pospp.earth import STANDARD_GRAVITY_MPS2
 from pospp.rotation import ARCSEC_RAD, DEG_PER_H_RADPS
 
 __all__ = ["ImuErrorModel", "RealisedImuErrors", "apply_imu_errors", "imu_grade", "grade_names",
-           "vibration_increments"]
+           "vibration_increments", "VIBRATION_TONES"]
 
 UG_MPS2 = 1e-6 * STANDARD_GRAVITY_MPS2
 """One micro-g [m/s^2] (g0 = 9.80665 m/s^2)."""
@@ -94,10 +98,18 @@ class ImuErrorModel:
     accel_vibration_rms_mps2: tuple[float, float, float] = field(default_factory=_zeros3)
     gyro_vibration_rms_dps: tuple[float, float, float] = field(default_factory=_zeros3)
     vibration_freq_hz: float = 50.0
+    vibration_bandwidth_hz: float = 0.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
             v = getattr(self, f.name)
+            if f.name == "vibration_bandwidth_hz":
+                bw = float(v)
+                if not 0.0 <= bw < 2.0 * float(self.vibration_freq_hz):
+                    raise ValueError(f"vibration_bandwidth_hz must be in [0, 2 x "
+                                     f"vibration_freq_hz), got {v!r}")
+                object.__setattr__(self, f.name, bw)
+                continue
             if f.name in _SCALAR_FIELDS:
                 if not float(v) > 0.0:
                     raise ValueError(f"{f.name} must be > 0, got {v!r}")
@@ -137,7 +149,8 @@ class ImuErrorModel:
     def is_error_free(self) -> bool:
         return all(
             (v == 0.0 if isinstance(v, float) else not any(v))
-            for k, v in asdict(self).items() if k not in _SCALAR_FIELDS
+            for k, v in asdict(self).items()
+            if k not in _SCALAR_FIELDS and k != "vibration_bandwidth_hz"
         )
 
     def gyro_matrix(self) -> NDArray:
@@ -151,10 +164,13 @@ class ImuErrorModel:
 
 _SCALAR_FIELDS = frozenset({"gyro_gm_tau_s", "accel_gm_tau_s", "vibration_freq_hz"})
 """Scalar, strictly positive fields (the rest are per-axis vectors)."""
-_VIBRATION_FIELDS = ("accel_vibration_rms_mps2", "gyro_vibration_rms_dps", "vibration_freq_hz")
+_VIBRATION_FIELDS = ("accel_vibration_rms_mps2", "gyro_vibration_rms_dps", "vibration_freq_hz",
+                     "vibration_bandwidth_hz")
+VIBRATION_TONES = 16
+"""Sinusoids per axis of band-limited vibration (``vibration_bandwidth_hz`` > 0)."""
 
 
-def vibration_increments(t_s: NDArray, rms: NDArray, freq_hz: float,
+def vibration_increments(t_s: NDArray, rms: NDArray, freq_hz: float | NDArray,
                          phase_rad: NDArray) -> NDArray:
     """Exact integrals of per-axis sinusoidal vibration over each interval.
 
@@ -165,7 +181,7 @@ def vibration_increments(t_s: NDArray, rms: NDArray, freq_hz: float,
     ----------
     t_s : (N + 1,) epochs [s].
     rms : (3,) vibration RMS per axis (any unit u; the result is in u s).
-    freq_hz : float, > 0.
+    freq_hz : float or (3,) array, > 0 (one frequency, or one per axis).
     phase_rad : (3,) phases phi_j [rad].
 
     Returns
@@ -174,13 +190,14 @@ def vibration_increments(t_s: NDArray, rms: NDArray, freq_hz: float,
     """
     t_s = np.asarray(t_s, dtype=float)
     dt = np.diff(t_s)
-    w = 2.0 * np.pi * freq_hz
+    f = np.broadcast_to(np.asarray(freq_hz, dtype=float), (3,))
+    w = 2.0 * np.pi * f
     # phase of the midpoint reduced with the cycle count first (t f ~ 1e5 cycles)
     t_mid = 0.5 * (t_s[1:] + t_s[:-1])
-    cyc = np.mod(freq_hz * t_mid, 1.0)
+    cyc = np.mod(t_mid[:, None] * f[None, :], 1.0)
     amp = 2.0 * np.sqrt(2.0) * np.asarray(rms, dtype=float) / w
-    return (amp * np.sin(2.0 * np.pi * cyc[:, None] + np.asarray(phase_rad)[None, :])
-            * np.sin(0.5 * w * dt)[:, None])
+    return (amp * np.sin(2.0 * np.pi * cyc + np.asarray(phase_rad)[None, :])
+            * np.sin(0.5 * dt[:, None] * w[None, :]))
 
 
 def _sf_misalign(sf_ppm, mis_arcsec) -> NDArray:
@@ -297,11 +314,20 @@ def apply_imu_errors(
         # a third child of the seed (as ss.spawn would give next), without mutating ss
         ss_v = np.random.SeedSequence(ss.entropy, spawn_key=(*ss.spawn_key, 2),
                                       pool_size=ss.pool_size)
-        ph = np.random.default_rng(ss_v).uniform(0.0, 2.0 * np.pi, (2, 3))
-        f = model.vibration_freq_hz
-        if any(model.gyro_vibration_rms_dps):
-            dth += vibration_increments(t_s, np.deg2rad(model.gyro_vibration_rms_dps), f, ph[0])
-        if any(model.accel_vibration_rms_mps2):
-            dvm += vibration_increments(t_s, np.asarray(model.accel_vibration_rms_mps2), f,
-                                        ph[1])
+        rng_v = np.random.default_rng(ss_v)
+        ph = rng_v.uniform(0.0, 2.0 * np.pi, (2, 3))
+        f0, bw = model.vibration_freq_hz, model.vibration_bandwidth_hz
+        rms = (np.deg2rad(model.gyro_vibration_rms_dps),
+               np.asarray(model.accel_vibration_rms_mps2))
+        if bw == 0.0:
+            tones = [(ph[i][None], np.full((1, 3), f0), rms[i]) for i in range(2)]
+        else:  # band-limited: VIBRATION_TONES sinusoids per axis (module docstring)
+            nt = VIBRATION_TONES
+            fr = rng_v.uniform(f0 - 0.5 * bw, f0 + 0.5 * bw, (2, nt, 3))
+            pt = rng_v.uniform(0.0, 2.0 * np.pi, (2, nt, 3))
+            tones = [(pt[i], fr[i], rms[i] / np.sqrt(nt)) for i in range(2)]
+        for out, (phases, freqs, amp) in zip((dth, dvm), tones, strict=True):
+            if np.any(amp):
+                for p_k, f_k in zip(phases, freqs, strict=True):
+                    out += vibration_increments(t_s, amp, f_k, p_k)
     return dth, dvm, RealisedImuErrors(bg, ba, mg, ma)

@@ -121,3 +121,25 @@ def test_mems_grade_vibrates_like_the_ardupilot_log():
     assert 5.0 <= rms_norm <= 10.0, rms_norm
     for g in ("errorfree", "paper_vehicle", "paper_flight", "tactical"):
         assert not imu_grade(g).has_vibration()
+
+
+def test_band_limited_vibration_rms_and_band():
+    """Band-limited vibration (16 seeded tones per axis in [f - B/2, f + B/2]): total RMS is
+    the configured one and the power sits in the band (1 kHz IMU: sinc gain > 0.99)."""
+    t = np.arange(120_001) * 0.001
+    z = np.zeros((120_000, 3))
+    m = ImuErrorModel(accel_vibration_rms_mps2=(6.0, 6.0, 6.0), vibration_freq_hz=47.0,
+                      vibration_bandwidth_hz=20.0)
+    _, dv, _ = apply_imu_errors(t, z, z, m, 21)
+    f = dv / 0.001
+    np.testing.assert_allclose(np.sqrt((f**2).mean(axis=0)), 6.0, rtol=0.05)
+    spec = np.abs(np.fft.rfft(f, axis=0)) ** 2
+    freqs = np.fft.rfftfreq(f.shape[0], 0.001)
+    band = (freqs >= 36.9) & (freqs <= 57.1)
+    assert (spec[band].sum(axis=0) / spec.sum(axis=0) > 0.99).all()
+    # more than one tone per axis: no single FFT bin holds most of the power
+    assert (spec.max(axis=0) / spec.sum(axis=0) < 0.5).all()
+    _, again, _ = apply_imu_errors(t, z, z, m, 21)
+    np.testing.assert_array_equal(dv, again)
+    with pytest.raises(ValueError, match="bandwidth"):
+        ImuErrorModel(vibration_freq_hz=10.0, vibration_bandwidth_hz=25.0)
