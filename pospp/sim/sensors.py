@@ -216,7 +216,8 @@ def grade_names() -> list[str]:
 def imu_grade(name: str) -> ImuErrorModel:
     """An IMU grade from ``pospp/presets/imu.toml``: ``errorfree``, ``paper_vehicle``
     (FOG: 0.1 deg/h constant, 0.05 deg/h random drift, 5 ug), ``paper_flight`` (flexure gyro:
-    1 deg/h constant, 0.5 deg/h random drift, 5 ug)."""
+    1 deg/h constant, 0.5 deg/h random drift, 5 ug), ``tactical``, ``mems`` (consumer MEMS
+    with the measured ArduPilot plane's band-limited vibration, docs/simulator.md)."""
     grades = tomllib.loads(resources.files("pospp").joinpath("presets", "imu.toml").read_text())
     if name not in grades:
         raise ValueError(f"unknown IMU grade {name!r}; grades: {sorted(grades)}")
