@@ -131,7 +131,8 @@ def report(run_dir: str) -> None:
 
 
 @main.command()
-@click.option("--preset", default=None, help="Mission preset: flight, vehicle, grid, sample.")
+@click.option("--preset", default=None,
+              help="Mission preset: flight, vehicle, grid, sample, flight_wander.")
 @click.option("--profile", "profile_file", type=click.Path(exists=True, dir_okay=False),
               default=None, help="Mission profile TOML instead of a preset.")
 @click.option("--imu-grade", default="flight", show_default=True,
