@@ -50,6 +50,7 @@ from pospp.io.converters.ansfl_quadrotor import (
     _log_to_utc_offset_s,
     _read_path,
     _root_and_path,
+    dji_height,
 )
 from pospp.io.mcap_reader import GnssFixes, GnssVelocities, ImuSamples
 from pospp.io.mcap_writer import write_flight_log
@@ -187,15 +188,7 @@ def convert_ansfl_dot_raw(
         "imu_lag_vs_reference_s": lag,
         "heading_rate_correlation": corr,
     }
-    warnings: list[str] = []
-    h = a["h_m"]
-    if geoid_undulation_m is None:
-        datum = "DJI altitude_above_seaLevel (take-off altitude + baro climb); NOT ellipsoidal"
-        warnings.append("height_m is DJI's altitude above sea level, not ellipsoidal: pass "
-                        "geoid_undulation_m (and beware its barometric origin)")
-    else:
-        h = h + geoid_undulation_m
-        datum = f"DJI altitude above sea level + N, N = {geoid_undulation_m} m (given)"
+    h, datum, warnings = dji_height(a["h_m"], geoid_undulation_m)
     imu_ns = seconds_to_ns(utc_imu)
     gt_ns = seconds_to_ns(utc_gt)
     n = gt_ns.size

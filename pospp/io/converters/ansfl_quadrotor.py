@@ -68,6 +68,23 @@ _GT_COLS = ["time(millisecond)", "latitude", "longitude", "altitude_above_seaLev
 _IMU_COLS = ["time", "Acc_X", "Acc_Y", "Acc_Z", "Gyr_X", "Gyr_Y", "Gyr_Z"]
 
 
+
+def dji_height(h_m: np.ndarray, geoid_undulation_m: float | None
+               ) -> tuple[np.ndarray, str, list[str]]:
+    """DJI's altitude above sea level -> height [m], its datum text and the warnings.
+
+    DJI logs take-off altitude plus barometric climb above sea level, not an ellipsoidal
+    height: with the geoid undulation N given, h = H + N; without it the height is kept as
+    logged and a warning says so.
+    """
+    if geoid_undulation_m is None:
+        return h_m, ("DJI altitude_above_seaLevel (take-off altitude + baro climb); NOT "
+                     "ellipsoidal"), [
+            "height_m is DJI's altitude above sea level, not ellipsoidal: pass "
+            "geoid_undulation_m (and beware its barometric origin)"]
+    return (h_m + geoid_undulation_m,
+            f"DJI altitude above sea level + N, N = {geoid_undulation_m} m (given)", [])
+
 def _root_and_path(source: Path, path: int | None) -> tuple[Path, int]:
     """Dataset root and path number, from the root (with ``path``) or a ``path_N`` folder."""
     if source.name.startswith("path_") and (source / "GTExtended.csv").is_file():
@@ -233,15 +250,7 @@ def convert_ansfl_quadrotor(
         np.convolve(yaw_rate, np.ones(k_ref) / k_ref, mode="same"), max_lag_s=0.5, step_s=0.01)
     checks["imu_lag_vs_reference_s"] = lag
     checks["heading_rate_correlation"] = corr
-    warnings: list[str] = []
-    h = a["h_m"]
-    if geoid_undulation_m is None:
-        datum = "DJI altitude_above_seaLevel (take-off altitude + baro climb); NOT ellipsoidal"
-        warnings.append("height_m is DJI's altitude above sea level, not ellipsoidal: pass "
-                        "geoid_undulation_m (and beware its barometric origin)")
-    else:
-        h = h + geoid_undulation_m
-        datum = f"DJI altitude above sea level + N, N = {geoid_undulation_m} m (given)"
+    h, datum, warnings = dji_height(a["h_m"], geoid_undulation_m)
     n = gt_ns.size
     fix = GnssFixes(time_ns=gt_ns, lat_rad=a["lat_rad"], lon_rad=a["lon_rad"], height_m=h,
                     pos_cov_ned_m2=diag_cov([0.05, 0.05, 0.1], n),
