@@ -14,8 +14,6 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from pospp.rotation import ARCSEC_RAD, DEG_PER_H_RADPS
-
 _NS_PER_S = 1_000_000_000
 
 
@@ -122,14 +120,3 @@ def log_summary(log: Any) -> dict[str, Any]:
         "n_gnss_fixes": int(len(log.fix)),
         "imu_rate_hz": float(_NS_PER_S / np.median(dt)) if dt.size else float("nan"),
     }
-
-
-def angle_to_report(name: str, value_rad: float, sigma_rad: float) -> tuple[float, float, str]:
-    """Calibration parameter -> (value, sigma, unit) in report units by its kind.
-
-    Misalignments (``phi_*``) in arcsec; drifts and gyro biases (``eps_*``, ``gyro_bias_*``)
-    in deg/h.
-    """
-    if name.startswith("phi"):
-        return value_rad / ARCSEC_RAD, sigma_rad / ARCSEC_RAD, "arcsec"
-    return value_rad / DEG_PER_H_RADPS, sigma_rad / DEG_PER_H_RADPS, "deg_per_h"

@@ -156,17 +156,14 @@ def navigate(
 
 
 class _Progress:
-    """Stage bookkeeping: progress callback, wall times, messages."""
+    """Stage bookkeeping: progress callback, elapsed time, messages."""
 
     def __init__(self, progress: ProgressFn | None) -> None:
         self._progress = progress
-        self.timings_s: dict[str, float] = {}
         self.messages: list[dict[str, Any]] = []
         self._t0 = time.perf_counter()
 
     def stage(self, name: str) -> None:
-        now = time.perf_counter()
-        self.timings_s[name] = now
         if self._progress is not None:
             self._progress(name, STAGES.index(name) / len(STAGES))
 

@@ -40,7 +40,6 @@ __all__ = [
     "Column",
     "ReferenceTrajectory",
     "atomic_path",
-    "issues_to_messages",
     "read_metadata",
     "read_reference_trajectory",
     "read_table",
@@ -447,21 +446,6 @@ def read_metadata(path: str | Path) -> dict[str, Any]:
     out["schema_name"] = kv.get(b"pospp.schema_name", b"").decode() or None
     out["schema_version"] = kv.get(b"pospp.schema_version", b"").decode() or None
     return out
-
-
-def issues_to_messages(issues: Any, *, stage: str = "ingest") -> dict[str, list]:
-    """``IngestIssue`` records -> columns of the ``messages`` table."""
-    issues = list(issues)
-    return {
-        "severity": [i.severity for i in issues],
-        "stage": [stage] * len(issues),
-        "time_ns": [i.time_ns for i in issues],
-        "text": [(f"{i.file}: " if i.file else "") + i.message for i in issues],
-        "topic": [i.topic for i in issues],
-        "index": [i.index for i in issues],
-        "byte_offset": [i.byte_offset for i in issues],
-        "log_time_ns": [i.log_time_ns for i in issues],
-    }
 
 
 # --------------------------------------------------------------------------- reference

@@ -14,6 +14,7 @@ import pytest
 import pospp
 from pospp.io import parquet_tables as pt
 from pospp.io.errors import IngestIssue
+from pospp.outputs import issue_message, messages_table
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -183,8 +184,9 @@ def test_ingest_issues_become_messages(tmp_path: Path) -> None:
         IngestIssue("warning", "f.mcap", "/imu/data", 1000, 17, "IMU gap", log_time_ns=17),
         IngestIssue("error", "f.mcap", None, None, None, "truncated", byte_offset=4096),
     ]
-    p = pt.write_table(tmp_path / "messages.parquet", pt.issues_to_messages(issues),
-                       "messages", metadata={})
+    rows = [issue_message(i) for i in issues]
+    p = pt.write_table(tmp_path / "messages.parquet", messages_table(rows), "messages",
+                       metadata={})
     df = pt.read_table(p)
     assert df.severity.tolist() == ["warning", "error"]
     assert df["index"].iloc[0] == 1000 and pd.isna(df["index"].iloc[1])

@@ -36,7 +36,6 @@ from pospp.io.converters._common import (
     ConversionError,
     ConversionReport,
     check_gravity,
-    diag_cov,
     lag_by_correlation,
     median_rate_hz,
     read_csv,
@@ -50,9 +49,9 @@ from pospp.io.converters.ansfl_quadrotor import (
     _log_to_utc_offset_s,
     _read_path,
     _root_and_path,
-    dji_height,
+    dji_gnss,
 )
-from pospp.io.mcap_reader import GnssFixes, GnssVelocities, ImuSamples
+from pospp.io.mcap_reader import ImuSamples
 from pospp.io.mcap_writer import write_flight_log
 from pospp.io.parquet_tables import ReferenceTrajectory, write_reference_trajectory
 from pospp.nav.mounting import MountingOptions, estimate_mounting
@@ -188,15 +187,10 @@ def convert_ansfl_dot_raw(
         "imu_lag_vs_reference_s": lag,
         "heading_rate_correlation": corr,
     }
-    h, datum, warnings = dji_height(a["h_m"], geoid_undulation_m)
     imu_ns = seconds_to_ns(utc_imu)
     gt_ns = seconds_to_ns(utc_gt)
+    fix, vel, h, datum, warnings = dji_gnss(a, gt_ns, geoid_undulation_m)
     n = gt_ns.size
-    fix = GnssFixes(time_ns=gt_ns, lat_rad=a["lat_rad"], lon_rad=a["lon_rad"], height_m=h,
-                    pos_cov_ned_m2=diag_cov([0.05, 0.05, 0.1], n),
-                    status=np.full(n, 2, dtype=np.int8))
-    vel = GnssVelocities(time_ns=gt_ns, v_n_mps=a["v_n"],
-                         vel_cov_ned_m2ps2=diag_cov([0.1, 0.1, 0.1], n))
     samples = ImuSamples(time_ns=imu_ns, w_ib_b_radps=w_b, f_ib_b_mps2=f_b,
                          frame_id=f"xsens_dot_{unit}")
     time_system = ("UTC ns since the Unix epoch: DOT clock + offset from the processed paths "

@@ -85,6 +85,24 @@ def dji_height(h_m: np.ndarray, geoid_undulation_m: float | None
     return (h_m + geoid_undulation_m,
             f"DJI altitude above sea level + N, N = {geoid_undulation_m} m (given)", [])
 
+
+def dji_gnss(a: dict, gt_ns: np.ndarray, geoid_undulation_m: float | None
+             ) -> tuple[GnssFixes, GnssVelocities, np.ndarray, str, list[str]]:
+    """The DJI RTK/INS solution as pospp's GNSS fixes and velocities (one place for both
+    quadrotor formats): NED covariances 0.05/0.05/0.1 m and 0.1 m/s per axis (1-sigma, the
+    dataset's nominal RTK accuracy), status GBAS; heights through :func:`dji_height`.
+
+    Returns (fix, vel, height_m, datum text, warnings).
+    """
+    h, datum, warnings = dji_height(a["h_m"], geoid_undulation_m)
+    n = gt_ns.size
+    fix = GnssFixes(time_ns=gt_ns, lat_rad=a["lat_rad"], lon_rad=a["lon_rad"], height_m=h,
+                    pos_cov_ned_m2=diag_cov([0.05, 0.05, 0.1], n),
+                    status=np.full(n, 2, dtype=np.int8))
+    vel = GnssVelocities(time_ns=gt_ns, v_n_mps=a["v_n"],
+                         vel_cov_ned_m2ps2=diag_cov([0.1, 0.1, 0.1], n))
+    return fix, vel, h, datum, warnings
+
 def _root_and_path(source: Path, path: int | None) -> tuple[Path, int]:
     """Dataset root and path number, from the root (with ``path``) or a ``path_N`` folder."""
     if source.name.startswith("path_") and (source / "GTExtended.csv").is_file():
@@ -250,13 +268,8 @@ def convert_ansfl_quadrotor(
         np.convolve(yaw_rate, np.ones(k_ref) / k_ref, mode="same"), max_lag_s=0.5, step_s=0.01)
     checks["imu_lag_vs_reference_s"] = lag
     checks["heading_rate_correlation"] = corr
-    h, datum, warnings = dji_height(a["h_m"], geoid_undulation_m)
+    fix, vel, h, datum, warnings = dji_gnss(a, gt_ns, geoid_undulation_m)
     n = gt_ns.size
-    fix = GnssFixes(time_ns=gt_ns, lat_rad=a["lat_rad"], lon_rad=a["lon_rad"], height_m=h,
-                    pos_cov_ned_m2=diag_cov([0.05, 0.05, 0.1], n),
-                    status=np.full(n, 2, dtype=np.int8))
-    vel = GnssVelocities(time_ns=gt_ns, v_n_mps=a["v_n"],
-                         vel_cov_ned_m2ps2=diag_cov([0.1, 0.1, 0.1], n))
     samples = ImuSamples(time_ns=imu_ns, w_ib_b_radps=w_b, f_ib_b_mps2=f_b,
                          frame_id=f"xsens_dot_{imu}")
     ref = ReferenceTrajectory(time_ns=gt_ns, lat_rad=a["lat_rad"], lon_rad=a["lon_rad"],
