@@ -4,7 +4,7 @@ One way through the data::
 
     ingest (io) -> algorithm A (nav) -> legs, B replays, pairs, calibration (calib)
       -> compensation: B re-run, A re-run with the calibrated gyro bias (calib, nav)
-      -> diagnosis (diagnose) -> tables, MCAP trajectory, HTML report (io, report)
+      -> diagnosis (diagnose) -> quality checks (qc) -> tables, MCAP trajectory, HTML report
 
 Each stage takes the frozen results of the stages before it and returns its own; nothing
 numeric happens here, only orchestration and the translation of results into output tables
@@ -41,16 +41,17 @@ from pospp.io.errors import IngestError
 from pospp.nav import filter as nav_filter
 from pospp.nav import tuning as nav_tuning
 from pospp.nav.strapdown import increments_from_rates
+from pospp.qc.stage import QualityReport, qc_columns, quality_checks, worst_status
 from pospp.report import figures
 from pospp.report.html import render_report
 
 ProgressFn = Callable[[str, float], None]
 """Progress callback: (stage name, fraction of the whole run done in [0, 1])."""
 
-STAGES = ("ingest", "navigate", "calibrate", "compensate", "diagnose", "write")
+STAGES = ("ingest", "navigate", "calibrate", "compensate", "diagnose", "qc", "write")
 
 _RUN_TABLES = ("trajectory", "legs", "pairs", "calibration", "leg_errors", "diagnosis",
-               "diagnosis_curves", "evaluation")
+               "diagnosis_curves", "evaluation", "qc")
 """Tables of a run folder that belong to one run (messages and summary are always written)."""
 
 
@@ -63,8 +64,10 @@ class RunOutcome:
     out_dir : Path
         The run folder.
     status : str
-        "ok" (every stage ran), "partial" (a later stage produced nothing, see messages) or
-        "failed" (ingestion or algorithm A failed; only messages and summary are written).
+        "ok" (every stage ran and every quality check passed), "partial" (a later stage
+        produced nothing, see messages), "degraded" (a quality check failed: the answer is
+        suspect, qc.parquet names the check) or "failed" (ingestion or algorithm A failed, only
+        messages and summary are written; or a quality check found the answer wrong).
     summary : dict
         The one row of summary.parquet.
     messages : pandas.DataFrame
@@ -289,9 +292,17 @@ def run(
             book.note("warning", "diagnose", f"no diagnosis: {exc}")
             status = "partial"
 
+    # --- quality checks: the run is ok only when every check passes (docs/qc.md) -------------
+    book.stage("qc")
+    report = quality_control(log, nav, calib_run, config, book)
+    status = worst_status(status, report.status)
+
     # --- outputs -------------------------------------------------------------------------------
     book.stage("write")
     tables: dict[str, Any] = {"trajectory": outputs.trajectory_table(solutions, epoch_ns)}
+    tables["qc"] = qc_columns(report, epoch_ns)
+    summary["qc_failed_checks"] = report.failed_names
+    summary["qc_suggestions"] = report.suggestions
     tables.update(calib_run.tables(epoch_ns))
     if diagnosis is not None:
         tables["diagnosis"] = diagnosis_columns(diagnosis)
@@ -313,6 +324,35 @@ def run(
     if config.outputs.report:
         write_report(out)
     return outcome
+
+
+def quality_control(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
+                    calib_run: CalibrationRun | None, config: PipelineConfig,
+                    book: _Progress | None = None) -> QualityReport:
+    """The QC stage (pospp.qc): every check, with the lever arm re-estimated by A.
+
+    Unless A already estimated it, the lever arm is estimated by one more forward pass of A
+    with lever-arm states (no smoother; about a third of A's time). Failed checks are noted in
+    ``book`` (stage "qc").
+    """
+    lever = None
+    if not config.gnss.estimate_lever_arm:
+        try:
+            rerun = replace(config, gnss=replace(config.gnss, estimate_lever_arm=True),
+                            filter=replace(config.filter, smoother=False))
+            lever = navigate(log, rerun).lever_arm
+        except ValueError as exc:
+            if book is not None:
+                book.note("warning", "qc", f"lever arm not re-estimated: {exc}")
+    cin = config.input
+    report = quality_checks(log, nav, calib_run, config, lever_estimate=lever,
+                            c_bs=sensor_to_body_dcm(cin.sensor_frame, cin.mounting_rpy_deg))
+    if book is not None:
+        for c in report.failed:
+            book.note("error" if c.severity == "failed" else "warning", "qc",
+                      f"QC check {c.name} failed ({c.value:.4g} > {c.threshold:.4g} {c.unit})"
+                      + (f": {c.suggestion}" if c.suggestion else ""))
+    return report
 
 
 def write_report(run_dir: str | Path) -> Path:
