@@ -131,26 +131,32 @@ def navigate(
     config: PipelineConfig,
     *,
     gyro_bias_correction_b_radps: Any = None,
+    lever_arm_b_m: Any = None,
+    options: nav_filter.FilterOptions | None = None,
 ) -> nav_filter.FilterResult:
     """Algorithm A over the whole log; optionally with a calibrated gyro bias removed first.
 
     The correction is applied to the IMU samples (measured = true + bias, so the corrected rate
     is w - b_g), which is exactly what compensating the sensor means; the filter then runs
-    unchanged.
+    unchanged. ``lever_arm_b_m`` and ``options`` replace the configured lever arm and the
+    filter options (the QC stage's lever-arm re-estimation).
     """
     imu = log.imu
     if gyro_bias_correction_b_radps is not None:
         imu = replace(imu, w_ib_b_radps=imu.w_ib_b_radps - np.asarray(
             gyro_bias_correction_b_radps, dtype=float))
     g, f = config.gnss, config.filter
-    options = nav_filter.options_from_config(config)
+    if options is None:
+        options = nav_filter.options_from_config(config)
+    if lever_arm_b_m is None:
+        lever_arm_b_m = g.lever_arm_m
     return nav_filter.run_integrated_navigation(
         imu,
         log.fix,
         log.vel,
         imu_tuning(config),
         epoch_ns=int(log.imu.time_ns[0]),
-        lever_arm_b_m=np.asarray(g.lever_arm_m, dtype=float),
+        lever_arm_b_m=np.asarray(lever_arm_b_m, dtype=float),
         estimate_lever_arm=g.estimate_lever_arm,
         estimate_scale_factors=f.estimate_scale_factors,
         output_rate_hz=f.output_rate_hz,
@@ -326,21 +332,27 @@ def run(
     return outcome
 
 
+QC_LEVER_ARM_SIGMA_M = 2.0
+"""Prior sigma of the lever-arm states in the QC stage's re-estimation [m]."""
+
+
 def quality_control(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                     calib_run: CalibrationRun | None, config: PipelineConfig,
                     book: _Progress | None = None) -> QualityReport:
     """The QC stage (pospp.qc): every check, with the lever arm re-estimated by A.
 
     Unless A already estimated it, the lever arm is estimated by one more forward pass of A
-    with lever-arm states (no smoother; about a third of A's time). Failed checks are noted in
-    ``book`` (stage "qc").
+    with lever-arm states (no smoother; about a third of A's time), started from zero with a
+    2 m sigma so that the configured value does not pull the estimate. Failed checks are
+    noted in ``book`` (stage "qc").
     """
     lever = None
     if not config.gnss.estimate_lever_arm:
         try:
-            rerun = replace(config, gnss=replace(config.gnss, estimate_lever_arm=True),
-                            filter=replace(config.filter, smoother=False))
-            lever = navigate(log, rerun).lever_arm
+            rerun = replace(config, gnss=replace(config.gnss, estimate_lever_arm=True))
+            opts = replace(nav_filter.options_from_config(config), smoother=False,
+                           lever_arm_sigma_m=QC_LEVER_ARM_SIGMA_M)
+            lever = navigate(log, rerun, lever_arm_b_m=np.zeros(3), options=opts).lever_arm
         except ValueError as exc:
             if book is not None:
                 book.note("warning", "qc", f"lever arm not re-estimated: {exc}")

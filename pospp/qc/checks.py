@@ -325,6 +325,9 @@ TIME_OFFSET_SEARCH_S = 5.0
 """Offsets searched: [-5, 5] s."""
 TIME_OFFSET_MIN_SPEED_MPS = 3.0
 """Course over ground is used where the horizontal speed is above this."""
+TIME_OFFSET_MIN_EXPLAINED = 0.5
+"""The check applies only when the yaw rate explains at least this share (R^2) of the course
+changes: a vehicle that flies sideways (multirotor) turns its course without its heading."""
 
 
 @dataclass(frozen=True)
@@ -335,6 +338,8 @@ class TimeOffsetEstimate:
     sigma_s: float
     n_intervals: int
     residual_rms_rad: float
+    explained: float
+    """Share of the course changes' variance the integrated yaw rate explains (R^2)."""
 
 
 def estimate_time_offset(imu_t_s: ArrayLike, w_d_radps: ArrayLike, vel_t_s: ArrayLike,
@@ -402,18 +407,24 @@ def estimate_time_offset(imu_t_s: ArrayLike, w_d_radps: ArrayLike, vel_t_s: Arra
     info = float(np.sum(sens**2))
     rms = float(np.sqrt(np.mean(r**2)))
     sigma = rms / math.sqrt(info) if info > 0 else math.inf
-    return TimeOffsetEstimate(tau, sigma, int(keep.sum()), rms)
+    tot = float(np.sum((dchi[keep] - dchi[keep].mean()) ** 2))
+    explained = 1.0 - float(np.sum(r**2)) / tot if tot > 0 else 0.0
+    return TimeOffsetEstimate(tau, sigma, int(keep.sum()), rms, explained)
 
 
 def gnss_time_offset(est: TimeOffsetEstimate | None) -> Check:
     """Check of :func:`estimate_time_offset`: |tau| <= TIME_OFFSET_MAX_S or within 5 sigma.
 
     Not applicable when the flight has too few turns to see it (sigma above a third of the
-    threshold, or no estimate).
+    threshold, or no estimate) or when the course does not follow the heading (R^2 below
+    TIME_OFFSET_MIN_EXPLAINED).
     """
     name, thr = "gnss_time_offset", TIME_OFFSET_MAX_S
     if est is None:
         return _na(name, "navigate", "too few GNSS velocities while moving", "s", thr)
+    if not est.explained >= TIME_OFFSET_MIN_EXPLAINED:
+        return _na(name, "navigate", f"the course does not follow the heading (R^2 "
+                   f"{est.explained:.2f}; sideways flight?)", "s", thr)
     if not est.sigma_s < thr / 3.0:
         return _na(name, "navigate", f"too little turning to see it (sigma {est.sigma_s:.2g} "
                    "s)", "s", thr)
@@ -435,13 +446,15 @@ LEVER_ARM_MAX_M = 0.2
 LEVER_ARM_SIGMAS = 5.0
 
 
-def lever_arm(configured_b_m: ArrayLike, estimated_b_m: ArrayLike, sigma_b_m: ArrayLike
-              ) -> Check:
+def lever_arm(configured_b_m: ArrayLike, estimated_b_m: ArrayLike, sigma_b_m: ArrayLike,
+              *, mean_speed_mps: float = math.nan) -> Check:
     """Configured antenna lever arm against the one the data estimate (A with lever states).
 
     Statistic: max over axes of |l_cfg - l_est| where that difference is also beyond
     LEVER_ARM_SIGMAS of the estimate's sigma (an axis the flight cannot observe does not
-    count) [m]; threshold LEVER_ARM_MAX_M.
+    count) [m]; threshold LEVER_ARM_MAX_M. A GNSS time offset tau moves the antenna along
+    the track by -v tau, which the lever-arm states read as a forward lever arm: when the
+    forward axis dominates, the suggestion names the equivalent offset -dl_x / v as well.
     """
     cfg = np.asarray(configured_b_m, dtype=float)
     est = np.asarray(estimated_b_m, dtype=float)
@@ -457,6 +470,10 @@ def lever_arm(configured_b_m: ArrayLike, estimated_b_m: ArrayLike, sigma_b_m: Ar
         f"the data suggest a lever arm of [{fmt}] m (body FRD, sigma "
         f"{', '.join(f'{s:.2f}' for s in sig)}) where [{', '.join(f'{x:.2f}' for x in cfg)}] "
         "m is configured: set [gnss] lever_arm_m")
+    dx = est[0] - cfg[0]
+    if not passed and int(np.argmax(np.where(seen, d, 0.0))) == 0 and mean_speed_mps > 1.0:
+        sug += (f" (or, if the forward lever is right, GNSS {'lags' if dx < 0 else 'leads'} "
+                f"the IMU by about {abs(dx) / mean_speed_mps:.3f} s)")
     return Check("lever_arm", "navigate",
                  "largest |configured - estimated| antenna lever arm component (beyond "
                  f"{LEVER_ARM_SIGMAS:.0f} sigma)", value, LEVER_ARM_MAX_M, "m", passed,

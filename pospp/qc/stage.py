@@ -175,7 +175,11 @@ def quality_checks(log: Any, nav: Any, calib_run: Any, config: Any, *, c_bs: Any
         out.append(qc._na("lever_arm", "navigate", "no lever-arm estimate", "m",
                           qc.LEVER_ARM_MAX_M))
     else:
-        out.append(qc.lever_arm(config.gnss.lever_arm_m, lev.lever_b_m, lev.sigma_b_m))
+        speed = np.hypot(sol.v_n_mps[:, 0], sol.v_n_mps[:, 1])
+        moving = speed > qc.TIME_OFFSET_MIN_SPEED_MPS
+        out.append(qc.lever_arm(config.gnss.lever_arm_m, lev.lever_b_m, lev.sigma_b_m,
+                                mean_speed_mps=float(speed[moving].mean()) if moving.any()
+                                else math.nan))
 
     # --- calibration and compensation --------------------------------------------------------
     if calib_run is not None:
