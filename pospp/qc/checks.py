@@ -139,16 +139,15 @@ def gravity_direction(f_b_mps2: ArrayLike, static: ArrayLike | None, c_bs: Array
     if not passed:
         f_s = np.asarray(c_bs, dtype=float).T @ fm
         up = _axis_name(f_s)  # at rest f points up: the sensor axis that points up
-        other = {"flu": "FRD", "frd": "FLU"}.get(sensor_frame, "")
         if up == "+z" and sensor_frame == "frd":
             suggestion = "the IMU looks FLU, not FRD (its z axis points up): sensor_frame = 'flu'"
         elif up == "-z" and sensor_frame == "flu":
             suggestion = "the IMU looks FRD, not FLU (its z axis points down): " \
                 "sensor_frame = 'frd'"
         else:
-            suggestion = (f"the specific force points along the sensor's {up} axis (up), not "
-                          f"the declared frame's up axis: check [input] sensor_frame "
-                          f"(not {other}?) and mounting_rpy_deg")
+            suggestion = (f"the sensor's {up} axis points up, not the declared frame's: check "
+                          f"[input] sensor_frame ('{sensor_frame}' declared) and "
+                          "mounting_rpy_deg")
     return Check("gravity_direction", "ingest",
                  f"angle between the mean specific force ({where}) and body up (-z FRD)",
                  angle, GRAVITY_DIRECTION_MAX_DEG, "deg", passed, "failed", suggestion)
