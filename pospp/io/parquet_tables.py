@@ -185,7 +185,7 @@ TABLES: dict[str, list[Column]] = {
         Column("check", _S, "", "check name (docs/qc.md), e.g. 'gravity_direction', "
                "'gnss_time_offset'"),
         Column("stage", _S, "", "pipeline stage whose data or result is checked"),
-        Column("statistic", _S, "", "what value is (or why the check was not applicable)"),
+        Column("measure", _S, "", "what value is (or why the check was not applicable)"),
         Column("value", _F, "see unit", "the statistic (NaN: not applicable)"),
         Column("threshold", _F, "see unit", "the check fails when value exceeds it"),
         Column("unit", _S, "", "unit of value and threshold"),

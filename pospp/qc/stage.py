@@ -196,7 +196,7 @@ def qc_columns(report: QualityReport, epoch_ns: int) -> dict[str, list[Any]]:
     return {
         "check": [c.name for c in cs],
         "stage": [c.stage for c in cs],
-        "statistic": [c.statistic for c in cs],
+        "measure": [c.statistic for c in cs],
         "value": [float(c.value) for c in cs],
         "threshold": [float(c.threshold) for c in cs],
         "unit": [c.unit for c in cs],

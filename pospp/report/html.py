@@ -65,7 +65,7 @@ def _qc_section(qc: pd.DataFrame | None, summary: pd.DataFrame | None) -> list[s
                          f"{html.escape(row.suggestion)}</p>")
     ordered = pd.concat([failed, qc[qc.passed.astype(bool)]])
     parts.append(_table(ordered[["check", "passed", "value", "threshold", "unit", "severity",
-                                 "statistic"]]))
+                                 "measure"]]))
     return parts
 
 
