@@ -12,7 +12,7 @@ epoch (the first IMU stamp).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -180,6 +180,11 @@ def quality_checks(log: Any, nav: Any, calib_run: Any, config: Any, *, c_bs: Any
         out.append(qc.lever_arm(config.gnss.lever_arm_m, lev.lever_b_m, lev.sigma_b_m,
                                 mean_speed_mps=float(speed[moving].mean()) if moving.any()
                                 else math.nan))
+
+    toff, lev_check = out[-2], out[-1]
+    if not toff.passed and not lev_check.passed:  # a late GNSS bends the lever-arm estimate
+        out[-1] = replace(lev_check, suggestion="fix the GNSS time offset first, the lever-arm "
+                          "estimate is not reliable until then; " + lev_check.suggestion)
 
     # --- calibration and compensation --------------------------------------------------------
     if calib_run is not None:
