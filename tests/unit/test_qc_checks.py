@@ -210,3 +210,16 @@ def test_status_table_and_console_lines(tmp_path):
     lines = qc_lines(back)
     assert "quality checks FAILED: b, c" in lines[0] and "do this" in lines[1]
     assert qc_lines(pd.DataFrame(qc_columns(QualityReport((a,)), 0)))[0].endswith("all 1 passed")
+
+
+def test_report_opens_with_the_quality_checks():
+    from pospp.report.html import render_report
+
+    bad = qc.Check("gnss_time_offset", "navigate", "s", 2.0, 0.1, "s", False, "degraded",
+                   "GNSS lags the IMU by about 2.0 s")
+    good = qc.Check("gravity_direction", "ingest", "s", 0.1, 45.0, "deg", True, "failed")
+    page = render_report({"summary": pd.DataFrame({"input_file": ["x.mcap"],
+                                                   "status": ["degraded"]}),
+                          "qc": pd.DataFrame(qc_columns(QualityReport((good, bad)), 0))})
+    assert page.index("Quality checks") < page.index("<h2>Summary")
+    assert "GNSS lags the IMU by about 2.0 s" in page and "failed: gnss_time_offset" in page
