@@ -390,10 +390,12 @@ def test_corrupt_chunk_is_skipped_and_located(tmp_path: Path, good_file: Path,
     p.write_bytes(bytes(data))
     log = read_flight_log(p, check_units=False)
     assert not log.complete
-    [err] = [i for i in log.issues if i.severity == "error"]
+    err, count = [i for i in log.issues if i.severity == "error"]
     assert err.byte_offset == off and err.log_time_ns == start_ns
     assert "corrupt chunk" in err.message
     assert 0 < len(log.imu) < len(imu)
+    # the summary's Statistics then also say how many messages are missing
+    assert f"{len(imu)} messages on /imu/data, read {len(log.imu)}" in count.message
     assert log.imu.time_ns[-1] == imu.time_ns[-1]  # reading went on after the bad chunk
     assert np.all(np.isin(log.imu.time_ns, imu.time_ns))
     assert any("gap" in i.message for i in log.issues)  # the hole shows as an IMU gap
