@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 from mcap.data_stream import ReadDataStream
+from mcap.exceptions import McapError
 from mcap.records import Channel, Schema
 from mcap_ros2.decoder import DecoderFactory
 
@@ -450,10 +451,16 @@ class Scan:
 
     def _meta(self, op: int, body: bytes) -> None:
         stream = ReadDataStream(BytesIO(body))
+        try:
+            rec = Schema.read(stream) if op == _OP_SCHEMA else Channel.read(stream)
+        except McapError as exc:  # EndOfFile: the fields overrun the record
+            what = "Schema" if op == _OP_SCHEMA else "Channel"
+            raise ValueError(f"{what} record of {len(body)} bytes unreadable "
+                             f"({type(exc).__name__})") from exc
         if op == _OP_SCHEMA:
-            self._schema(Schema.read(stream))
+            self._schema(rec)
         else:
-            self._channel(Channel.read(stream))
+            self._channel(rec)
 
     def _records(self, buf: bytes | bytearray, *, partial: bool = False) -> int:
         """Walk the records of a decompressed chunk (or a block of loose messages).
