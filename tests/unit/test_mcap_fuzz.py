@@ -108,30 +108,33 @@ def _arrays(log: FlightLog) -> list[np.ndarray]:
             log.vel.time_ns, log.vel.v_n_mps]
 
 
-def _check_one(path: Path, ref: FlightLog, crc_protected: bool) -> str | None:
-    """None when the reader's verdict on ``path`` is acceptable, else what is wrong."""
+def _check_one(path: Path, ref: FlightLog, crc_protected: bool) -> tuple[str, str | None]:
+    """(outcome, None) when the reader's verdict on ``path`` is acceptable, else (outcome,
+    what is wrong); outcome is "error", "partial", "complete" or "changed" (complete, values
+    differ)."""
     try:
         log = read_flight_log(path)
     except IngestError as exc:
-        return None if exc.file == str(path) and exc.reason else f"IngestError without file: {exc}"
+        ok = exc.file == str(path) and exc.reason
+        return "error", None if ok else f"IngestError without file: {exc}"
     except Exception as exc:  # noqa: BLE001 - the point of the test
-        return f"{type(exc).__name__}: {exc}"
+        return "other", f"{type(exc).__name__}: {exc}"
     errors = [i for i in log.issues if i.severity == "error"]
     if not log.complete:
         if not errors or any(e.byte_offset is None or e.file != str(path) for e in errors):
-            return f"incomplete without a located error: {[str(e) for e in log.issues]}"
-        return None
+            return "partial", f"incomplete without a located error: {list(map(str, log.issues))}"
+        return "partial", None
     if errors:
-        return f"complete with errors: {[str(e) for e in errors]}"
+        return "complete", f"complete with errors: {[str(e) for e in errors]}"
+    same = all(a.shape == b.shape and np.array_equal(a, b)
+               for a, b in zip(_arrays(log), _arrays(ref), strict=True))
     if crc_protected:
-        same = all(a.shape == b.shape and np.array_equal(a, b)
-                   for a, b in zip(_arrays(log), _arrays(ref), strict=True))
-        return None if same else "complete but the data differ from the unmutated file's"
+        return "complete", None if same else "complete, but the data differ from the original"
     dropped = any("dropped" in i.message for i in log.issues)
     if len(log.imu) != len(ref.imu) or (len(log.fix) != len(ref.fix) and not dropped):
-        return (f"complete with {len(log.imu)}/{len(ref.imu)} IMU and {len(log.fix)}/"
-                f"{len(ref.fix)} fix messages")
-    return None
+        return "complete", (f"complete with {len(log.imu)}/{len(ref.imu)} IMU and "
+                            f"{len(log.fix)}/{len(ref.fix)} fix messages")
+    return "complete" if same else "changed", None
 
 
 @pytest.fixture(scope="module")
@@ -162,15 +165,19 @@ def test_mutated_files_fail_clearly(tmp_path: Path, small_log, base: str, n: int
     rng = np.random.default_rng(SEEDS[base])
     p = tmp_path / "mutated.mcap"
     before = _reset_peak()
-    failures = []
+    failures, outcomes = [], set()
     for _ in range(n):
         desc, mutated = _mutate(data, rng)
         p.write_bytes(mutated)
-        wrong = _check_one(p, ref, crc_protected)
+        outcome, wrong = _check_one(p, ref, crc_protected)
+        outcomes.add(outcome)
         if wrong:
             failures.append(f"{desc}: {wrong}")
     growth = _peak_growth_mib(before)
     assert not failures, f"{len(failures)} of {n} mutations: " + "\n".join(failures[:8])
+    # the mutations reach every verdict; without CRCs, some change payload values only
+    assert {"error", "partial", "complete"} <= outcomes
+    assert ("changed" in outcomes) == (not crc_protected)
     assert growth < 200.0, f"peak resident set grew by {growth:.0f} MiB"
 
 
