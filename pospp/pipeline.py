@@ -4,7 +4,7 @@ One way through the data::
 
     ingest (io) -> algorithm A (nav) -> legs, B replays, pairs, calibration (calib)
       -> compensation: B re-run, A re-run with the calibrated gyro bias (calib, nav)
-      -> diagnosis (diagnose) -> tables, MCAP trajectory, HTML report (io, report)
+      -> diagnosis (diagnose) -> quality checks (qc) -> tables, MCAP trajectory, HTML report
 
 Each stage takes the frozen results of the stages before it and returns its own; nothing
 numeric happens here, only orchestration and the translation of results into output tables
@@ -41,16 +41,17 @@ from pospp.io.errors import IngestError
 from pospp.nav import filter as nav_filter
 from pospp.nav import tuning as nav_tuning
 from pospp.nav.strapdown import increments_from_rates
+from pospp.qc.stage import QualityReport, qc_columns, quality_checks, worst_status
 from pospp.report import figures
 from pospp.report.html import render_report
 
 ProgressFn = Callable[[str, float], None]
 """Progress callback: (stage name, fraction of the whole run done in [0, 1])."""
 
-STAGES = ("ingest", "navigate", "calibrate", "compensate", "diagnose", "write")
+STAGES = ("ingest", "navigate", "calibrate", "compensate", "diagnose", "qc", "write")
 
 _RUN_TABLES = ("trajectory", "legs", "pairs", "calibration", "leg_errors", "diagnosis",
-               "diagnosis_curves", "evaluation")
+               "diagnosis_curves", "evaluation", "qc")
 """Tables of a run folder that belong to one run (messages and summary are always written)."""
 
 
@@ -63,8 +64,10 @@ class RunOutcome:
     out_dir : Path
         The run folder.
     status : str
-        "ok" (every stage ran), "partial" (a later stage produced nothing, see messages) or
-        "failed" (ingestion or algorithm A failed; only messages and summary are written).
+        "ok" (every stage ran and every quality check passed), "partial" (a later stage
+        produced nothing, see messages), "degraded" (a quality check failed: the answer is
+        suspect, qc.parquet names the check) or "failed" (ingestion or algorithm A failed, only
+        messages and summary are written; or a quality check found the answer wrong).
     summary : dict
         The one row of summary.parquet.
     messages : pandas.DataFrame
@@ -128,26 +131,32 @@ def navigate(
     config: PipelineConfig,
     *,
     gyro_bias_correction_b_radps: Any = None,
+    lever_arm_b_m: Any = None,
+    options: nav_filter.FilterOptions | None = None,
 ) -> nav_filter.FilterResult:
     """Algorithm A over the whole log; optionally with a calibrated gyro bias removed first.
 
     The correction is applied to the IMU samples (measured = true + bias, so the corrected rate
     is w - b_g), which is exactly what compensating the sensor means; the filter then runs
-    unchanged.
+    unchanged. ``lever_arm_b_m`` and ``options`` replace the configured lever arm and the
+    filter options (the QC stage's lever-arm re-estimation).
     """
     imu = log.imu
     if gyro_bias_correction_b_radps is not None:
         imu = replace(imu, w_ib_b_radps=imu.w_ib_b_radps - np.asarray(
             gyro_bias_correction_b_radps, dtype=float))
     g, f = config.gnss, config.filter
-    options = nav_filter.options_from_config(config)
+    if options is None:
+        options = nav_filter.options_from_config(config)
+    if lever_arm_b_m is None:
+        lever_arm_b_m = g.lever_arm_m
     return nav_filter.run_integrated_navigation(
         imu,
         log.fix,
         log.vel,
         imu_tuning(config),
         epoch_ns=int(log.imu.time_ns[0]),
-        lever_arm_b_m=np.asarray(g.lever_arm_m, dtype=float),
+        lever_arm_b_m=np.asarray(lever_arm_b_m, dtype=float),
         estimate_lever_arm=g.estimate_lever_arm,
         estimate_scale_factors=f.estimate_scale_factors,
         output_rate_hz=f.output_rate_hz,
@@ -289,9 +298,17 @@ def run(
             book.note("warning", "diagnose", f"no diagnosis: {exc}")
             status = "partial"
 
+    # --- quality checks: the run is ok only when every check passes (docs/qc.md) -------------
+    book.stage("qc")
+    report = quality_control(log, nav, calib_run, config, book)
+    status = worst_status(status, report.status)
+
     # --- outputs -------------------------------------------------------------------------------
     book.stage("write")
     tables: dict[str, Any] = {"trajectory": outputs.trajectory_table(solutions, epoch_ns)}
+    tables["qc"] = qc_columns(report, epoch_ns)
+    summary["qc_failed_checks"] = report.failed_names
+    summary["qc_suggestions"] = report.suggestions
     tables.update(calib_run.tables(epoch_ns))
     if diagnosis is not None:
         tables["diagnosis"] = diagnosis_columns(diagnosis)
@@ -313,6 +330,41 @@ def run(
     if config.outputs.report:
         write_report(out)
     return outcome
+
+
+QC_LEVER_ARM_SIGMA_M = 2.0
+"""Prior sigma of the lever-arm states in the QC stage's re-estimation [m]."""
+
+
+def quality_control(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
+                    calib_run: CalibrationRun | None, config: PipelineConfig,
+                    book: _Progress | None = None) -> QualityReport:
+    """The QC stage (pospp.qc): every check, with the lever arm re-estimated by A.
+
+    Unless A already estimated it, the lever arm is estimated by one more forward pass of A
+    with lever-arm states (no smoother; about a third of A's time), started from zero with a
+    2 m sigma so that the configured value does not pull the estimate. Failed checks are
+    noted in ``book`` (stage "qc").
+    """
+    lever = None
+    if not config.gnss.estimate_lever_arm:
+        try:
+            rerun = replace(config, gnss=replace(config.gnss, estimate_lever_arm=True))
+            opts = replace(nav_filter.options_from_config(config), smoother=False,
+                           lever_arm_sigma_m=QC_LEVER_ARM_SIGMA_M)
+            lever = navigate(log, rerun, lever_arm_b_m=np.zeros(3), options=opts).lever_arm
+        except ValueError as exc:
+            if book is not None:
+                book.note("warning", "qc", f"lever arm not re-estimated: {exc}")
+    cin = config.input
+    report = quality_checks(log, nav, calib_run, config, lever_estimate=lever,
+                            c_bs=sensor_to_body_dcm(cin.sensor_frame, cin.mounting_rpy_deg))
+    if book is not None:
+        for c in report.failed:
+            book.note("error" if c.severity == "failed" else "warning", "qc",
+                      f"QC check {c.name} failed ({c.value:.4g} > {c.threshold:.4g} {c.unit})"
+                      + (f": {c.suggestion}" if c.suggestion else ""))
+    return report
 
 
 def write_report(run_dir: str | Path) -> Path:

@@ -160,7 +160,8 @@ TABLES: dict[str, list[Column]] = {
     "summary": [
         Column("input_file", _S, "", "input MCAP path"),
         Column("input_sha256", _S, "", "SHA-256 of the input file"),
-        _opt(Column("status", _S, "", "'ok' or 'failed'")),
+        _opt(Column("status", _S, "", "'ok' (every stage ran, every QC check passed), "
+                    "'partial', 'degraded' or 'failed' (docs/qc.md)")),
         _opt(Column("duration_s", _F, "s", "IMU data span")),
         _opt(Column("n_imu_samples", _I, "", "IMU samples read")),
         _opt(Column("n_gnss_fixes", _I, "", "GNSS fixes read")),
@@ -175,6 +176,24 @@ TABLES: dict[str, list[Column]] = {
         _opt(Column("dp_after_m", _F, "m", "same, after compensation")),
         _opt(Column("calibration_reason", _S, "", "'ok', or why no calibration was produced")),
         _opt(Column("wall_time_s", _F, "s", "processing wall time of the run")),
+        _opt(Column("qc_failed_checks", _S, "", "comma-joined names of the failed QC checks "
+                    "(empty: all passed; qc.parquet)")),
+        _opt(Column("qc_suggestions", _S, "", "'; '-joined 'check: what the data suggest' of "
+                    "the failed QC checks")),
+    ],
+    "qc": [
+        Column("check", _S, "", "check name (docs/qc.md), e.g. 'gravity_direction', "
+               "'gnss_time_offset'"),
+        Column("stage", _S, "", "pipeline stage whose data or result is checked"),
+        Column("measure", _S, "", "what value is (or why the check was not applicable)"),
+        Column("value", _F, "see unit", "the statistic (NaN: not applicable)"),
+        Column("threshold", _F, "see unit", "the check fails when value exceeds it"),
+        Column("unit", _S, "", "unit of value and threshold"),
+        Column("passed", _B, "", "whether the check passed"),
+        Column("severity", _S, "", "run status a failure imposes: 'partial', 'degraded' or "
+               "'failed'"),
+        Column("suggestion", _S, "", "what the data suggest when it failed (may be empty)"),
+        Column("time_ns", _I, "ns", "time of the worst sample (null if not timed)"),
     ],
     "diagnosis": [
         Column("step", _I, "", "step of the model-discrepancy workflow"),

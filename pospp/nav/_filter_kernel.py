@@ -56,7 +56,7 @@ def _inv3(s, out):
 @njit(cache=True)
 def forward_kernel(
     t, w_imu, f_imu, k0, x0, p0, lever0, i_gm, inv_tau, i_sf, i_l, flags, m_k, m_type, m_z,
-    m_r, m_dt, prop_steps, q_diag, gate, reset_after_s, m_status, m_nis, out_x, out_diag,
+    m_r, m_dt, prop_steps, q_diag, gate, reset_after_s, m_status, m_nis, m_dz, out_x, out_diag,
     out_blk, out_sens,
     out_bvar, out_lever, node_k, node_pp, node_pu, node_phi, node_dx,
 ):
@@ -66,6 +66,7 @@ def forward_kernel(
     index of the first Gauss-Markov bias / scale-factor / lever-arm state, -1 when absent;
     ``inv_tau`` = [1 / tau_gyro, 1 / tau_accel] of the Gauss-Markov states [1/s].
     ``m_status``: 0 used, 1 gated, 2 used after a covariance reset, 3 before the start.
+    ``m_nis``, ``m_dz``: NIS and innovation (predicted minus measured, NED) of each record.
     Fills the output and node arrays; returns (nodes used, outputs used).
     """
     n = p0.shape[0]
@@ -241,6 +242,8 @@ def forward_kernel(
                     for b in range(3):
                         nis += dz[a] * s_inv[a, b] * dz[b]
             m_nis[im] = nis
+            for a in range(3):
+                m_dz[im, a] = dz[a]
             status = 0
             if not (nis <= gate):
                 if kind == MEAS_ZUPT or not (t[k] - t_ok[kind] > reset_after_s):

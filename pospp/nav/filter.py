@@ -226,6 +226,23 @@ class LeverArmEstimate:
 
 
 @dataclass(frozen=True)
+class InnovationRecord:
+    """Every GNSS/ZUPT record the forward pass processed, in processing order (M,).
+
+    ``t_s`` record time; ``kind`` index into ``MEAS_KINDS``; ``status`` 0 used, 1 gated,
+    2 used after a covariance reset, 3 before the filter start (``nis``, ``dz_ned`` NaN);
+    ``nis`` normalised innovation squared (3 dof); ``dz_ned`` innovation, predicted minus
+    measured (NED m for positions, m/s for velocities and ZUPTs), before the update.
+    """
+
+    t_s: NDArray
+    kind: NDArray
+    status: NDArray
+    nis: NDArray
+    dz_ned: NDArray
+
+
+@dataclass(frozen=True)
 class FilterResult:
     """Everything algorithm A produces.
 
@@ -248,6 +265,8 @@ class FilterResult:
     """(t_s, kind) of the GNSS records accepted by a covariance reset (gate_reset_s)."""
     imu_gaps: tuple[tuple[float, float], ...] = ()
     """(t_s at the end, duration_s) of the IMU gaps bridged (FilterOptions.max_imu_gap_*)."""
+    innovations: InnovationRecord | None = None
+    """NIS and innovation of every processed GNSS/ZUPT record (pospp.qc reads them)."""
 
 
 def _grid_epochs(t: NDArray, k0: int, interval_s: float | None) -> NDArray:
@@ -442,6 +461,7 @@ def run_integrated_navigation(
     n_out = out_k.shape[0]
     m_status = np.full(n_meas, -1, dtype=np.int64)
     m_nis = np.full(n_meas, np.nan)
+    m_dz = np.full((n_meas, 3), np.nan)
     out_x = np.empty((n_out, 10))
     out_diag = np.empty((n_out, n))
     out_blk = np.empty((n_out, 3, 3, 3))
@@ -456,7 +476,7 @@ def run_integrated_navigation(
     used_nodes, used_out = forward_kernel(
         t, w, f, k0, x0, p0, lever0.copy(), lay.i_gm, inv_tau, lay.i_sf, lay.i_l, flags, m_k,
         m_type, m_z, m_r, m_dt, prop_steps, q_diag, gate, options.gate_reset_s, m_status, m_nis,
-        out_x, out_diag,
+        m_dz, out_x, out_diag,
         out_blk, out_sens, out_bvar, out_lever, node_k, node_pp, node_pu, node_phi, node_dx,
     )
     if used_nodes != n_nodes or used_out != n_out:
@@ -514,6 +534,7 @@ def run_integrated_navigation(
         rejections=tuple(rejections),
         lever_arm=LeverArmEstimate(lever_est, lever_sig, i_l >= 0),
         alignment=al, n_updates=n_updates, gate_nis=gate, resets=resets, imu_gaps=imu_gaps,
+        innovations=InnovationRecord(m_t.copy(), m_type.copy(), m_status.copy(), m_nis, m_dz),
     )
 
 
@@ -648,7 +669,8 @@ def reference_solution(
 
 
 __all__ = [
-    "BiasHistory", "FilterOptions", "FilterResult", "GnssRejection", "LeverArmEstimate",
+    "BiasHistory", "FilterOptions", "FilterResult", "GnssRejection", "InnovationRecord",
+    "LeverArmEstimate",
     "NavSolution", "options_from_config", "reference_solution",
     "run_integrated_navigation",
 ]

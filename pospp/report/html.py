@@ -47,10 +47,33 @@ def _table(df: pd.DataFrame, *, max_rows: int = 60, floatfmt: str = "{:.4g}") ->
     return body + more
 
 
+def _qc_section(qc: pd.DataFrame | None, summary: pd.DataFrame | None) -> list[str]:
+    """Run status and the quality checks (qc.parquet), failed ones first, with suggestions."""
+    if qc is None or qc.empty:
+        return []
+    status = str(summary.status.iloc[0]) if summary is not None and "status" in summary \
+        and not summary.empty else "?"
+    failed = qc[~qc.passed.astype(bool)]
+    cls = "muted" if status == "ok" else ("err" if status == "failed" else "warn")
+    parts = [f"<h2>Quality checks</h2><p class='{cls}'>status: {html.escape(status)}; "
+             f"{len(qc) - len(failed)} of {len(qc)} checks passed"
+             + (f"; failed: {html.escape(', '.join(failed.check))}" if len(failed) else "")
+             + "</p>"]
+    for row in failed.itertuples():
+        if row.suggestion:
+            parts.append(f"<p class='{cls}'>{html.escape(row.check)}: "
+                         f"{html.escape(row.suggestion)}</p>")
+    ordered = pd.concat([failed, qc[qc.passed.astype(bool)]])
+    parts.append(_table(ordered[["check", "passed", "value", "threshold", "unit", "severity",
+                                 "measure"]]))
+    return parts
+
+
 def render_report(tables: Mapping[str, pd.DataFrame], *, title: str = "pospp run report") -> str:
     """HTML report of a run; sections appear only for the tables present."""
     parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}"
              f"</title><style>{_CSS}</style></head><body><h1>{html.escape(title)}</h1>"]
+    parts.extend(_qc_section(tables.get("qc"), tables.get("summary")))
     summary = tables.get("summary")
     if summary is not None and not summary.empty:
         row = summary.iloc[0]

@@ -21,6 +21,7 @@ def summary_text(tables: Mapping[str, pd.DataFrame]) -> str:
     if s is not None and not s.empty:
         r = s.iloc[0]
         lines.append(f"pospp run: {r.get('input_file')}  status: {r.get('status')}")
+        lines.extend(qc_lines(tables.get("qc")))
         lines.append(f"  data: {_fmt(r.get('duration_s'), '.1f')} s of IMU at "
                      f"{_fmt(r.get('imu_rate_hz'), '.0f')} Hz, "
                      f"{_fmt(r.get('n_gnss_fixes'), 'd')} GNSS fixes")
@@ -60,3 +61,18 @@ def summary_text(tables: Mapping[str, pd.DataFrame]) -> str:
         for row in msgs[msgs.stage == "calibrate"].itertuples():
             lines.append(f"    {row.severity}: {row.text}")
     return "\n".join(lines)
+
+
+def qc_lines(qc: pd.DataFrame | None) -> list[str]:
+    """The failed quality checks (qc.parquet) with what the data suggest, one line each."""
+    if qc is None or qc.empty:
+        return []
+    failed = qc[~qc.passed.astype(bool)]
+    if failed.empty:
+        return [f"  quality checks: all {len(qc)} passed"]
+    lines = [f"  quality checks FAILED: {', '.join(failed.check)} (qc.parquet)"]
+    for row in failed.itertuples():
+        tail = f": {row.suggestion}" if row.suggestion else ""
+        lines.append(f"    {row.check} ({row.severity}) {_fmt(row.value, '.4g')} > "
+                     f"{_fmt(row.threshold, '.4g')} {row.unit}{tail}")
+    return lines

@@ -48,9 +48,10 @@ UNITLESS = {"solution", "leg_id", "pair_id", "leg_a", "leg_b", "used", "reason",
             "topic", "index", "file", "sha256", "error", "metric", "cond_raw", "cond_scaled",
             "reference_file", "byte_offset", "criterion", "delta_bic", "explained_fraction",
             "confounded_with", "parameters", "parameter_values", "parameter_sigmas", "model",
-            "kind", "calibration_reason"}
+            "kind", "calibration_reason",
+            "check", "measure", "passed", "suggestion", "qc_failed_checks", "qc_suggestions"}
 # Long-form tables: 'value' / 'sigma' carry the unit named in the row's 'unit' column.
-ROW_UNIT = {"value", "sigma"}
+ROW_UNIT = {"value", "sigma", "threshold"}
 
 
 @pytest.mark.parametrize("name", sorted(PROMISED))

@@ -1,0 +1,538 @@
+"""Numeric self-checks of one run: arrays in, a frozen :class:`Check` out (no I/O).
+
+Frames and units: body FRD (b), navigation NED (n), sensor as logged (s); SI and radians
+inside, the reported ``value`` / ``threshold`` in the unit named by ``Check.unit``. Times
+``t_s`` are seconds from the run epoch (the first IMU stamp).
+
+Each check states the statistic it computes, the threshold, and (docs/qc.md) its false-alarm
+level and the margins measured on clean data. A check that cannot be evaluated on the data
+(no static part, no turns, ...) passes with a NaN value and says why in ``statistic``.
+
+``severity`` is the run status a failure imposes: "partial" (a stage produced nothing),
+"degraded" (the answer is suspect) or "failed" (the answer is wrong); the run status is the
+worst severity among the failed checks (:func:`run_status`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.stats import chi2
+
+from pospp import earth
+
+STATUS_ORDER = ("ok", "partial", "degraded", "failed")
+"""Run statuses from best to worst."""
+
+_DPH = math.pi / 180.0 / 3600.0  # rad/s per deg/h
+
+
+@dataclass(frozen=True)
+class Check:
+    """One named check and its outcome.
+
+    Attributes
+    ----------
+    name : str
+        Check name (``gravity_direction``, ``gnss_time_offset``, ...).
+    stage : str
+        Pipeline stage whose data or result it checks.
+    statistic : str
+        What ``value`` is (or why the check was not applicable).
+    value, threshold : float
+        The statistic and the limit it is compared with (fail when value > threshold, unless
+        the statistic says otherwise); NaN value when not applicable.
+    unit : str
+    passed : bool
+    severity : str
+        Run status a failure imposes ("partial", "degraded" or "failed").
+    suggestion : str
+        What the data suggest (empty when passed or nothing can be estimated).
+    time_ns_offset : int or None
+        Time of the worst sample, as nanoseconds from the run epoch (None if not timed).
+    """
+
+    name: str
+    stage: str
+    statistic: str
+    value: float
+    threshold: float
+    unit: str
+    passed: bool
+    severity: str
+    suggestion: str = ""
+    time_ns_offset: int | None = None
+
+
+def run_status(checks: tuple[Check, ...] | list[Check]) -> str:
+    """The worst severity among the failed checks ("ok" when all passed)."""
+    worst = 0
+    for c in checks:
+        if not c.passed:
+            worst = max(worst, STATUS_ORDER.index(c.severity))
+    return STATUS_ORDER[worst]
+
+
+def _na(name: str, stage: str, why: str, unit: str, threshold: float = math.nan) -> Check:
+    return Check(name, stage, f"not applicable: {why}", math.nan, threshold, unit, True,
+                 "degraded")
+
+
+def _toff(t_s: float | None) -> int | None:
+    return None if t_s is None or not math.isfinite(t_s) else int(round(t_s * 1e9))
+
+
+# =============================================================================================
+# IMU against the physics: gravity and Earth rate
+# =============================================================================================
+GRAVITY_DIRECTION_MAX_DEG = 45.0
+"""Largest angle between the mean specific force and the body's up axis (-z FRD)."""
+GRAVITY_MAGNITUDE_STATIC_MAX_MPS2 = 0.2
+"""Largest | |mean f| - normal gravity | over static windows [m/s^2] (2 %)."""
+GRAVITY_MAGNITUDE_DYNAMIC_MAX_MPS2 = 1.0
+"""Same for the median |f| over the whole log when there is no static part [m/s^2]."""
+
+
+def _axis_name(v: NDArray) -> str:
+    i = int(np.argmax(np.abs(v)))
+    return ("+" if v[i] > 0 else "-") + "xyz"[i]
+
+
+def gravity_direction(f_b_mps2: ArrayLike, static: ArrayLike | None, c_bs: ArrayLike,
+                      sensor_frame: str) -> Check:
+    """Angle between the mean specific force and the body up axis (-z FRD).
+
+    At rest or in steady (unaccelerated or coordinated) flight the specific force is the
+    reaction to gravity, f_b ~ [0, 0, -g] for a level body, so the mean of f_b over the static
+    windows (or the
+    median over the whole log when there are none) points along -z_b within the mean attitude:
+    ``angle = arccos(-f_z / |f|)``. An IMU whose axes are declared wrong gives ~180 deg (FLU
+    declared FRD or back) or ~90 deg (a mounting rotation missed). The suggestion maps the
+    mean back to the sensor axes as logged (f_s = C_bs^T f_b) and names the up axis.
+
+    Parameters
+    ----------
+    f_b_mps2 : (N, 3) specific force, body FRD, as declared [m/s^2]
+    static : (N,) bool or None
+        Samples at rest (None or all False: the whole log, by component medians).
+    c_bs : (3, 3) the declared sensor-to-body DCM
+    sensor_frame : {"flu", "frd"} the declared axis convention
+    """
+    f = np.asarray(f_b_mps2, dtype=float)
+    st = None if static is None else np.asarray(static, dtype=bool)
+    if f.shape[0] == 0:
+        return _na("gravity_direction", "ingest", "no IMU samples", "deg",
+                   GRAVITY_DIRECTION_MAX_DEG)
+    where = "static windows"
+    if st is not None and st.any():
+        fm = f[st].mean(axis=0)
+    else:
+        fm = np.median(f, axis=0)
+        where = "whole log (median)"
+    norm = float(np.linalg.norm(fm))
+    angle = math.degrees(math.acos(np.clip(-fm[2] / norm, -1.0, 1.0))) if norm > 0 else 180.0
+    passed = angle <= GRAVITY_DIRECTION_MAX_DEG
+    suggestion = ""
+    if not passed:
+        f_s = np.asarray(c_bs, dtype=float).T @ fm
+        up = _axis_name(f_s)  # at rest f points up: the sensor axis that points up
+        if up == "+z" and sensor_frame == "frd":
+            suggestion = "the IMU looks FLU, not FRD (its z axis points up): sensor_frame = 'flu'"
+        elif up == "-z" and sensor_frame == "flu":
+            suggestion = "the IMU looks FRD, not FLU (its z axis points down): " \
+                "sensor_frame = 'frd'"
+        else:
+            suggestion = (f"the sensor's {up} axis points up, not the declared frame's: check "
+                          f"[input] sensor_frame ('{sensor_frame}' declared) and "
+                          "mounting_rpy_deg")
+    return Check("gravity_direction", "ingest",
+                 f"angle between the mean specific force ({where}) and body up (-z FRD)",
+                 angle, GRAVITY_DIRECTION_MAX_DEG, "deg", passed, "failed", suggestion)
+
+
+def gravity_magnitude(f_b_mps2: ArrayLike, static: ArrayLike | None, lat_rad: float,
+                      height_m: float) -> Check:
+    """| |mean f_b| - normal gravity(lat, h) | over static windows (else median |f| of the log).
+
+    Catches accelerations in the wrong unit or scale that slipped past the reader's range
+    checks. Threshold 0.2 m/s^2 static (a 20 mg bias, beyond any grade pospp supports), 1 m/s^2
+    for the median over a dynamic log (turns and vibration raise |f|).
+    """
+    f = np.asarray(f_b_mps2, dtype=float)
+    if f.shape[0] == 0:
+        return _na("gravity_magnitude", "ingest", "no IMU samples", "m/s^2")
+    g = float(earth.normal_gravity_mps2(lat_rad, height_m))
+    st = None if static is None else np.asarray(static, dtype=bool)
+    if st is not None and st.any():
+        mag = float(np.linalg.norm(f[st].mean(axis=0)))
+        thr, where = GRAVITY_MAGNITUDE_STATIC_MAX_MPS2, "static windows"
+    else:
+        mag = float(np.median(np.linalg.norm(f, axis=1)))
+        thr, where = GRAVITY_MAGNITUDE_DYNAMIC_MAX_MPS2, "median over the log"
+    dev = abs(mag - g)
+    passed = dev <= thr
+    sug = "" if passed else (f"|f| is {mag:.3f} m/s^2 where gravity is {g:.3f} m/s^2: check the "
+                             "accelerometer unit and scale")
+    return Check("gravity_magnitude", "ingest",
+                 f"| |f| ({where}) - normal gravity |", dev, thr, "m/s^2", passed, "degraded",
+                 sug)
+
+
+EARTH_RATE_SIGMAS = 5.0
+"""Threshold of the Earth-rate check in predicted sigmas (bias and ARW over the static time)."""
+EARTH_RATE_MIN_STATIC_S = 60.0
+
+
+def earth_rate(w_b_radps: ArrayLike, f_b_mps2: ArrayLike, static: ArrayLike | None,
+               dt_s: float, lat_rad: float, *, gyro_bias_sigma_radps: float,
+               gyro_arw_radpsqrts: float) -> Check:
+    """Mean gyro output at rest against the Earth rate.
+
+    At rest w_ib_b = C_bn w_ie_n with w_ie_n = Omega [cos L, 0, -sin L] (NED). Heading is not
+    known here, so two components are compared: the vertical one (along the measured down
+    axis d_b = -f/|f|: w . d_b = -Omega sin L) and the horizontal magnitude (Omega cos L).
+    Statistic: the larger of the two misfits [deg/h]. Threshold: EARTH_RATE_SIGMAS times the
+    predicted sigma sqrt(sigma_b^2 + ARW^2 / T) (turn-on bias of the grade, T the static
+    time). Not applicable when there is less than 60 s at rest or the grade cannot see the
+    Earth rate (threshold above half of it).
+    """
+    st = None if static is None else np.asarray(static, dtype=bool)
+    w = np.asarray(w_b_radps, dtype=float)
+    f = np.asarray(f_b_mps2, dtype=float)
+    n_st = 0 if st is None else int(st.sum())
+    t_static = n_st * dt_s
+    if t_static < EARTH_RATE_MIN_STATIC_S:
+        return _na("earth_rate", "ingest", f"{t_static:.0f} s at rest (< "
+                   f"{EARTH_RATE_MIN_STATIC_S:.0f} s)", "deg/h")
+    sigma = math.hypot(gyro_bias_sigma_radps, gyro_arw_radpsqrts / math.sqrt(t_static))
+    thr = EARTH_RATE_SIGMAS * sigma
+    om = earth.EARTH_RATE_RADPS
+    if thr > 0.5 * om:
+        return _na("earth_rate", "ingest", f"the IMU grade cannot see it ({thr / _DPH:.1f} "
+                   f"deg/h threshold, Earth rate {om / _DPH:.1f} deg/h)", "deg/h", thr / _DPH)
+    wm = w[st].mean(axis=0)
+    fm = f[st].mean(axis=0)
+    d_b = -fm / np.linalg.norm(fm)
+    w_d = float(wm @ d_b)
+    w_h = float(np.linalg.norm(wm - w_d * d_b))
+    mis = max(abs(w_d + om * math.sin(lat_rad)), abs(w_h - om * math.cos(lat_rad)))
+    passed = mis <= thr
+    sug = "" if passed else (
+        f"at rest the gyros read {w_d / _DPH:+.1f} deg/h down and {w_h / _DPH:.1f} deg/h "
+        f"horizontal where the Earth rate gives {-om * math.sin(lat_rad) / _DPH:+.1f} and "
+        f"{om * math.cos(lat_rad) / _DPH:.1f}: check the gyro unit, axes and the IMU grade")
+    return Check("earth_rate", "ingest",
+                 f"misfit of the mean gyro output at rest ({t_static:.0f} s) to the Earth rate "
+                 "(vertical component, horizontal magnitude)", mis / _DPH, thr / _DPH, "deg/h",
+                 passed, "degraded", sug)
+
+
+# =============================================================================================
+# GNSS against the filter
+# =============================================================================================
+NIS_WINDOW = 60
+"""GNSS records per NIS window."""
+NIS_WINDOW_PROBABILITY = 0.999
+"""Chi-square quantile of the window band (per-window false-alarm level 1e-3)."""
+NIS_MAX_FRACTION = 0.1
+"""Largest fraction of windows above the band."""
+
+
+def nis_band(t_s: ArrayLike, nis: ArrayLike, dof: int = 3) -> Check:
+    """GNSS normalised innovation squared over time against its chi-square band.
+
+    The processed GNSS records (position and velocity, gated ones included) are cut into
+    windows of NIS_WINDOW; under the filter's model the window sum is chi-square with
+    dof * n degrees of freedom. Statistic: fraction of windows whose mean NIS is above the
+    NIS_WINDOW_PROBABILITY quantile / n (each window a 1e-3 false alarm); threshold
+    NIS_MAX_FRACTION. Only the upper side: a conservative tuning (NIS below 3) is not wrong.
+    """
+    t = np.asarray(t_s, dtype=float)
+    v = np.asarray(nis, dtype=float)
+    ok = np.isfinite(v)
+    t, v = t[ok], np.minimum(v[ok], 1e12)
+    n_win = v.shape[0] // NIS_WINDOW
+    if n_win < 1:
+        return _na("gnss_nis", "navigate", f"{v.shape[0]} GNSS updates (< {NIS_WINDOW})", "1",
+                   NIS_MAX_FRACTION)
+    vw = v[: n_win * NIS_WINDOW].reshape(n_win, NIS_WINDOW).mean(axis=1)
+    upper = chi2.ppf(NIS_WINDOW_PROBABILITY, dof * NIS_WINDOW) / NIS_WINDOW
+    bad = vw > upper
+    frac = float(bad.mean())
+    passed = frac <= NIS_MAX_FRACTION
+    worst = int(np.argmax(vw))
+    t_worst = float(t[worst * NIS_WINDOW])
+    sug = "" if passed else (
+        f"GNSS innovations are larger than the filter expects (mean NIS up to {vw.max():.3g} "
+        f"per {NIS_WINDOW} records where {upper:.2f} is the limit, worst from t = "
+        f"{t_worst:.0f} s): check the lever arm, GNSS time offset, IMU frame and GNSS "
+        "covariances")
+    return Check("gnss_nis", "navigate",
+                 f"fraction of {NIS_WINDOW}-record windows whose mean NIS is above the "
+                 f"chi-square {NIS_WINDOW_PROBABILITY} band ({upper:.2f})", frac,
+                 NIS_MAX_FRACTION, "1", passed, "degraded", sug, _toff(t_worst))
+
+
+GNSS_JUMP_BASE_M = 30.0
+"""Fixed part of the GNSS jump threshold [m]."""
+GNSS_JUMP_ACCEL_MPS2 = 10.0
+"""Acceleration allowed between fixes in the jump threshold [m/s^2] (adds a dt^2 / 2)."""
+
+
+def gnss_jumps(fix_t_s: ArrayLike, r_n_m: ArrayLike, vel_t_s: ArrayLike, v_n_mps: ArrayLike
+               ) -> Check:
+    """Largest step of the GNSS track not explained by the velocity.
+
+    For consecutive fixes k, k+1: e_k = |r_k+1 - r_k - (v(t_k) + v(t_k+1)) / 2 dt| with v the
+    velocity interpolated at the fix times (GNSS velocity, or algorithm A's when the log has
+    none). Statistic: max_k e_k - a dt_k^2 / 2 [m]; threshold GNSS_JUMP_BASE_M. A position
+    jump of D metres gives e ~ D; the trapezoid's own error is jerk dt^3 / 12, centimetres.
+    """
+    t = np.asarray(fix_t_s, dtype=float)
+    r = np.asarray(r_n_m, dtype=float)
+    tv = np.asarray(vel_t_s, dtype=float)
+    v = np.asarray(v_n_mps, dtype=float)
+    if t.shape[0] < 2 or tv.shape[0] < 2:
+        return _na("gnss_jumps", "ingest", "fewer than two GNSS fixes or velocities", "m",
+                   GNSS_JUMP_BASE_M)
+    vi = np.column_stack([np.interp(t, tv, v[:, a]) for a in range(3)])
+    dt = np.diff(t)
+    e = np.linalg.norm(np.diff(r, axis=0) - 0.5 * (vi[1:] + vi[:-1]) * dt[:, None], axis=1)
+    e = e - 0.5 * GNSS_JUMP_ACCEL_MPS2 * dt**2
+    # a step out of the track and back shows twice; name the first
+    k = int(np.argmax(e))
+    passed = bool(e[k] <= GNSS_JUMP_BASE_M)
+    step = float(np.linalg.norm(r[k + 1] - r[k] - 0.5 * (vi[k + 1] + vi[k]) * dt[k]))
+    sug = "" if passed else (
+        f"the GNSS track jumps by {step:.0f} m between t = {t[k]:.1f} s and {t[k + 1]:.1f} s "
+        "where the velocity does not move it: check the receiver log (fix type, datum, "
+        "spliced files)")
+    return Check("gnss_jumps", "ingest",
+                 "largest GNSS position step not explained by the velocity, less "
+                 f"{GNSS_JUMP_ACCEL_MPS2:.0f} m/s^2 dt^2/2", float(e[k]), GNSS_JUMP_BASE_M, "m",
+                 passed, "degraded", sug, _toff(float(t[k + 1])))
+
+
+TIME_OFFSET_MAX_S = 0.1
+"""Largest GNSS-IMU time offset accepted [s]."""
+TIME_OFFSET_SIGMAS = 5.0
+"""An offset must also be this many of its sigmas away from 0 to fail."""
+TIME_OFFSET_SEARCH_S = 5.0
+"""Offsets searched: [-5, 5] s."""
+TIME_OFFSET_MIN_SPEED_MPS = 3.0
+"""Course over ground is used where the horizontal speed is above this."""
+TIME_OFFSET_MIN_EXPLAINED = 0.5
+"""The check applies only when the yaw rate explains at least this share (R^2) of the course
+changes: a vehicle that flies sideways (multirotor) turns its course without its heading."""
+
+
+@dataclass(frozen=True)
+class TimeOffsetEstimate:
+    """GNSS stamp minus true measurement time [s] (positive: GNSS lags the IMU)."""
+
+    offset_s: float
+    sigma_s: float
+    n_intervals: int
+    residual_rms_rad: float
+    explained: float
+    """Share of the course changes' variance the integrated yaw rate explains (R^2)."""
+
+
+def estimate_time_offset(imu_t_s: ArrayLike, w_d_radps: ArrayLike, vel_t_s: ArrayLike,
+                         v_n_mps: ArrayLike) -> TimeOffsetEstimate | None:
+    """GNSS-IMU time offset from the turns: course change against integrated yaw rate.
+
+    The course over ground chi = atan2(v_E, v_N) of the GNSS velocity turns with the vehicle:
+    between records k and k+1, chi_k+1 - chi_k = Psi(t_k+1 - tau) - Psi(t_k - tau), where
+    Psi(t) = integral of the IMU's vertical rotation rate w_d (body w.r.t. NED about down, from
+    A's attitude) and tau the GNSS stamp minus the true time. tau minimises the sum of squared
+    misfits: a grid over +-TIME_OFFSET_SEARCH_S (0.02 s), a parabola through the best three,
+    one refit without 6-MAD outliers (a jump or a course flip at low speed). sigma from the
+    residual scatter and the sensitivity d(misfit)/d tau. None when fewer than 20 usable
+    intervals.
+
+    Parameters
+    ----------
+    imu_t_s : (N,) IMU interval ends [s]
+    w_d_radps : (N,) mean rotation rate about the NED down axis over each interval [rad/s]
+    vel_t_s, v_n_mps : (K,), (K, 3) GNSS velocity (antenna, NED) [s, m/s]
+    """
+    t = np.asarray(imu_t_s, dtype=float)
+    wd = np.asarray(w_d_radps, dtype=float)
+    tv = np.asarray(vel_t_s, dtype=float)
+    v = np.asarray(v_n_mps, dtype=float)
+    if t.shape[0] < 3 or tv.shape[0] < 3:
+        return None
+    psi = np.concatenate([[0.0], np.cumsum(wd[1:] * np.diff(t))])
+    speed = np.hypot(v[:, 0], v[:, 1])
+    chi = np.arctan2(v[:, 1], v[:, 0])
+    dchi = np.angle(np.exp(1j * np.diff(chi)))
+    dtv = np.diff(tv)
+    med = float(np.median(dtv))
+    ok = ((speed[:-1] > TIME_OFFSET_MIN_SPEED_MPS) & (speed[1:] > TIME_OFFSET_MIN_SPEED_MPS)
+          & (dtv < 1.5 * med) & (tv[:-1] - TIME_OFFSET_SEARCH_S > t[0])
+          & (tv[1:] + TIME_OFFSET_SEARCH_S < t[-1]))
+    if int(ok.sum()) < 20:
+        return None
+    t0, t1, dchi = tv[:-1][ok], tv[1:][ok], dchi[ok]
+
+    def resid(tau: float, keep: NDArray) -> NDArray:
+        return dchi[keep] - (np.interp(t1[keep] - tau, t, psi) - np.interp(t0[keep] - tau, t,
+                                                                            psi))
+
+    def fit(keep: NDArray) -> float:
+        grid = np.arange(-TIME_OFFSET_SEARCH_S, TIME_OFFSET_SEARCH_S + 1e-9, 0.02)
+        cost = np.array([np.sum(resid(g, keep) ** 2) for g in grid])
+        i = int(np.clip(np.argmin(cost), 1, grid.shape[0] - 2))
+        c0, c1, c2 = cost[i - 1], cost[i], cost[i + 1]
+        den = c0 - 2.0 * c1 + c2
+        shift = 0.5 * (c0 - c2) / den if den > 0 else 0.0
+        return float(grid[i] + np.clip(shift, -1.0, 1.0) * 0.02)
+
+    keep = np.ones(dchi.shape[0], dtype=bool)
+    tau = fit(keep)
+    r = resid(tau, keep)
+    mad = 1.4826 * float(np.median(np.abs(r - np.median(r))))
+    keep = np.abs(r) <= max(6.0 * mad, 1e-6)
+    if int(keep.sum()) < 20:
+        return None
+    tau = fit(keep)
+    r = resid(tau, keep)
+    h = 0.05
+    sens = (resid(tau + h, keep) - resid(tau - h, keep)) / (2.0 * h)
+    info = float(np.sum(sens**2))
+    rms = float(np.sqrt(np.mean(r**2)))
+    sigma = rms / math.sqrt(info) if info > 0 else math.inf
+    tot = float(np.sum((dchi[keep] - dchi[keep].mean()) ** 2))
+    explained = 1.0 - float(np.sum(r**2)) / tot if tot > 0 else 0.0
+    return TimeOffsetEstimate(tau, sigma, int(keep.sum()), rms, explained)
+
+
+def gnss_time_offset(est: TimeOffsetEstimate | None) -> Check:
+    """Check of :func:`estimate_time_offset`: |tau| <= TIME_OFFSET_MAX_S or within 5 sigma.
+
+    Not applicable when the flight has too few turns to see it (sigma above a third of the
+    threshold, or no estimate) or when the course does not follow the heading (R^2 below
+    TIME_OFFSET_MIN_EXPLAINED).
+    """
+    name, thr = "gnss_time_offset", TIME_OFFSET_MAX_S
+    if est is None:
+        return _na(name, "navigate", "too few GNSS velocities while moving", "s", thr)
+    if not est.explained >= TIME_OFFSET_MIN_EXPLAINED:
+        return _na(name, "navigate", f"the course does not follow the heading (R^2 "
+                   f"{est.explained:.2f}; sideways flight?)", "s", thr)
+    if not est.sigma_s < thr / 3.0:
+        return _na(name, "navigate", f"too little turning to see it (sigma {est.sigma_s:.2g} "
+                   "s)", "s", thr)
+    tau = est.offset_s
+    passed = abs(tau) <= thr or abs(tau) <= TIME_OFFSET_SIGMAS * est.sigma_s
+    sug = ""
+    if not passed:
+        word = "lags" if tau > 0 else "leads"
+        sug = (f"GNSS {word} the IMU by about {abs(tau):.1f} s ({tau:+.2f} +- {est.sigma_s:.2f} "
+               "s from the turns): fix the GNSS stamps (receiver latency, clock) before the run")
+    return Check(name, "navigate",
+                 "|GNSS stamp minus IMU time| from course changes against the integrated yaw "
+                 f"rate ({est.n_intervals} intervals, sigma {est.sigma_s:.3f} s)", abs(tau), thr,
+                 "s", passed, "degraded", sug)
+
+
+LEVER_ARM_MAX_M = 0.2
+"""Largest difference between the configured and the estimated lever arm per axis [m]."""
+LEVER_ARM_SIGMAS = 5.0
+
+
+def lever_arm(configured_b_m: ArrayLike, estimated_b_m: ArrayLike, sigma_b_m: ArrayLike,
+              *, mean_speed_mps: float = math.nan) -> Check:
+    """Configured antenna lever arm against the one the data estimate (A with lever states).
+
+    Statistic: max over axes of |l_cfg - l_est| where that difference is also beyond
+    LEVER_ARM_SIGMAS of the estimate's sigma (an axis the flight cannot observe does not
+    count) [m]; threshold LEVER_ARM_MAX_M. A GNSS time offset tau moves the antenna along
+    the track by -v tau, which the lever-arm states read as a forward lever arm: when the
+    forward axis dominates, the suggestion names the equivalent offset -dl_x / v as well.
+    """
+    cfg = np.asarray(configured_b_m, dtype=float)
+    est = np.asarray(estimated_b_m, dtype=float)
+    sig = np.asarray(sigma_b_m, dtype=float)
+    if not np.isfinite(est).all():
+        return _na("lever_arm", "navigate", "no lever-arm estimate", "m", LEVER_ARM_MAX_M)
+    d = np.abs(cfg - est)
+    seen = d > LEVER_ARM_SIGMAS * sig
+    value = float(np.max(np.where(seen, d, 0.0)))
+    passed = value <= LEVER_ARM_MAX_M
+    fmt = ", ".join(f"{x:.2f}" for x in est)
+    sug = "" if passed else (
+        f"the data suggest a lever arm of [{fmt}] m (body FRD, sigma "
+        f"{', '.join(f'{s:.2f}' for s in sig)}) where [{', '.join(f'{x:.2f}' for x in cfg)}] "
+        "m is configured: set [gnss] lever_arm_m")
+    dx = est[0] - cfg[0]
+    if not passed and int(np.argmax(np.where(seen, d, 0.0))) == 0 and mean_speed_mps > 1.0:
+        sug += (f" (or, if the forward lever is right, GNSS {'lags' if dx < 0 else 'leads'} "
+                f"the IMU by about {abs(dx) / mean_speed_mps:.3f} s)")
+    return Check("lever_arm", "navigate",
+                 "largest |configured - estimated| antenna lever arm component (beyond "
+                 f"{LEVER_ARM_SIGMAS:.0f} sigma)", value, LEVER_ARM_MAX_M, "m", passed,
+                 "degraded", sug)
+
+
+# =============================================================================================
+# Data completeness, calibration, configuration
+# =============================================================================================
+def data_complete(complete: bool, n_error_issues: int, first_error: str, duration_s: float,
+                  window_s: float | None) -> Check:
+    """The log was read to its end with no error, and covers the configured window.
+
+    Statistic: the number of problems (incomplete read, error-severity ingest issues, the data
+    ending more than 1 s before the configured [input] window); threshold 0.
+    """
+    problems = []
+    if not complete:
+        problems.append("the log was not read to its end (truncated or corrupt)")
+    if n_error_issues:
+        problems.append(f"{n_error_issues} ingest error(s), first: {first_error}")
+    if window_s is not None and duration_s < window_s - 1.0:
+        problems.append(f"the data span {duration_s:.1f} s of the {window_s:.1f} s configured "
+                        "window")
+    passed = not problems
+    return Check("data_complete", "ingest",
+                 "problems with the completeness of the read log", float(len(problems)), 0.0,
+                 "1", passed, "degraded", "; ".join(problems))
+
+
+def calibration_quality(calibrated: bool, reason: str, n_pairs_used: int) -> Check:
+    """A calibration was produced from at least one admissible pair (else the run is partial)."""
+    return Check("calibration", "calibrate", "leg pairs used in the calibration",
+                 float(n_pairs_used), 1.0, "1", bool(calibrated), "partial",
+                 "" if calibrated else f"no calibration: {reason}")
+
+
+COMPENSATION_MARGIN_MPS = 0.01
+"""Compensation may leave B's velocity error at most this much above the uncompensated one."""
+
+
+def compensation_gain(dv_before_mps: float, dv_after_mps: float) -> Check:
+    """B's RMS velocity error at the horizon after compensation against before.
+
+    Statistic: dv_after - dv_before [m/s]; threshold COMPENSATION_MARGIN_MPS. A calibration
+    that makes B worse is wrong (wrong signs, frames or a model that does not fit).
+    """
+    if not (math.isfinite(dv_before_mps) and math.isfinite(dv_after_mps)):
+        return _na("compensation", "compensate", "no compensation", "m/s",
+                   COMPENSATION_MARGIN_MPS)
+    d = dv_after_mps - dv_before_mps
+    passed = d <= COMPENSATION_MARGIN_MPS
+    sug = "" if passed else (f"compensation made B worse ({dv_before_mps:.3g} -> "
+                             f"{dv_after_mps:.3g} m/s): do not use the calibration")
+    return Check("compensation", "compensate",
+                 "B's horizontal velocity error at the horizon, after minus before (RMS over "
+                 "legs)", d, COMPENSATION_MARGIN_MPS, "m/s", passed, "degraded", sug)
+
+
+def config_sanity(problems: list[str]) -> Check:
+    """Configuration values that make no sense but were not refused (threshold 0)."""
+    return Check("config", "config", "configuration values out of their meaningful range",
+                 float(len(problems)), 0.0, "1", not problems, "failed", "; ".join(problems))

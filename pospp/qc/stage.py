@@ -1,0 +1,213 @@
+"""The QC stage: every check of :mod:`pospp.qc.checks` on one run's stage results.
+
+Takes the frozen results of ingest (``FlightLog``), algorithm A (``FilterResult``), the
+calibration stage (``CalibrationRun``) and the configuration, and returns a frozen
+:class:`QualityReport` (no I/O). The pipeline writes it as qc.parquet (:func:`qc_columns`)
+and derives the run status from it (docs/qc.md).
+
+Frames and units as in :mod:`pospp.qc.checks`: body FRD, NED, SI inside; t_s from the run
+epoch (the first IMU stamp).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pospp import earth, rotation
+from pospp.nav.alignment import static_windows
+from pospp.nav.tuning import tuning_from_config
+from pospp.qc import checks as qc
+from pospp.qc.checks import Check
+
+
+@dataclass(frozen=True)
+class QualityReport:
+    """The checks of one run and the status they give."""
+
+    checks: tuple[Check, ...]
+
+    @property
+    def status(self) -> str:
+        """Worst severity among the failed checks ("ok" when all passed)."""
+        return qc.run_status(self.checks)
+
+    @property
+    def failed(self) -> tuple[Check, ...]:
+        return tuple(c for c in self.checks if not c.passed)
+
+    @property
+    def failed_names(self) -> str:
+        """Comma-joined names of the failed checks (summary ``qc_failed_checks``)."""
+        return ",".join(c.name for c in self.failed)
+
+    @property
+    def suggestions(self) -> str:
+        """'; '-joined suggestions of the failed checks (summary ``qc_suggestions``)."""
+        return "; ".join(f"{c.name}: {c.suggestion}" for c in self.failed if c.suggestion)
+
+
+def worst_status(*statuses: str) -> str:
+    """The worst of run statuses ("ok" < "partial" < "degraded" < "failed")."""
+    return qc.STATUS_ORDER[max(qc.STATUS_ORDER.index(s) for s in statuses)]
+
+
+def config_problems(config: Any) -> list[str]:
+    """Values of a :class:`pospp.config.PipelineConfig` that make no sense (key named)."""
+    out = []
+    positive = (("replay", "horizon_s"), ("replay", "sample_rate_hz"),
+                ("filter", "output_rate_hz"), ("outputs", "mcap_rate_hz"),
+                ("legs", "min_duration_s"), ("legs", "max_duration_s"))
+    for section, key in positive:
+        value = getattr(getattr(config, section), key, None)
+        if value is not None and not (isinstance(value, int | float) and value > 0
+                                      and math.isfinite(value)):
+            out.append(f"[{section}] {key} = {value!r} must be a finite number > 0")
+    lever = np.asarray(config.gnss.lever_arm_m, dtype=float)
+    if not np.isfinite(lever).all() or float(np.linalg.norm(lever)) > 100.0:
+        out.append(f"[gnss] lever_arm_m = {list(config.gnss.lever_arm_m)} m is not an antenna "
+                   "lever arm (|l| > 100 m)")
+    s, e = config.input.start_s, config.input.end_s
+    if s is not None and s < 0:
+        out.append(f"[input] start_s = {s!r} must be >= 0")
+    if s is not None and e is not None and not e > s:
+        out.append(f"[input] end_s = {e!r} must be after start_s = {s!r}")
+    return out
+
+
+def _static_mask(t: NDArray, w: NDArray, f: NDArray, vel_t: NDArray, vel: NDArray) -> NDArray:
+    ends, is_static = static_windows(t, w, f, gnss_vel_t_s=vel_t if len(vel_t) else None,
+                                     gnss_v_n_mps=vel if len(vel_t) else None)
+    mask = np.zeros(t.shape[0], dtype=bool)
+    if ends.shape[0]:
+        m = t.shape[0] // ends.shape[0]
+        mask[: m * ends.shape[0]] = np.repeat(is_static, m)
+    return mask
+
+
+def _down_rate(t: NDArray, w: NDArray, sol: Any) -> NDArray:
+    """Rotation rate of the body w.r.t. NED about the down axis at the IMU epochs [rad/s].
+
+    w_d = (C_nb w_ib_b)_D + Omega sin L (the Earth rate's down component removed; the
+    transport rate, ~1 deg/h at 60 m/s, is left: it is a constant to the offset fit). C_nb
+    row 3 from A's solution, interpolated to the IMU epochs.
+    """
+    c3 = rotation.dcm_from_quat(sol.q_nb)[:, 2, :]
+    ts = np.asarray(sol.t_s, dtype=float)
+    row = np.column_stack([np.interp(t, ts, c3[:, a]) for a in range(3)])
+    lat = np.interp(t, ts, sol.lat_rad)
+    return np.einsum("ij,ij->i", row, w) + earth.EARTH_RATE_RADPS * np.sin(lat)
+
+
+def quality_checks(log: Any, nav: Any, calib_run: Any, config: Any, *, c_bs: Any,
+                   lever_estimate: Any = None) -> QualityReport:
+    """Run every check on a run's results.
+
+    Parameters
+    ----------
+    log : pospp.io.mcap_reader.FlightLog
+        As processed (after the [input] window).
+    nav : pospp.nav.filter.FilterResult
+        Algorithm A on the log.
+    calib_run : pospp.calib.stage.CalibrationRun or None
+    config : pospp.config.PipelineConfig
+    c_bs : (3, 3) array
+        The declared sensor-to-body DCM the log was read with (axes and mounting).
+    lever_estimate : pospp.nav.filter.LeverArmEstimate, optional
+        The lever arm estimated by a re-run of A with lever-arm states (None: not re-run; the
+        check then uses ``nav.lever_arm`` when A estimated it, else is not applicable).
+    """
+    imu = log.imu
+    epoch_ns = int(imu.time_ns[0])
+    t = (imu.time_ns - np.int64(epoch_ns)).astype(float) * 1e-9
+    w, f = imu.w_ib_b_radps, imu.f_ib_b_mps2
+    vel_t = (log.vel.time_ns - np.int64(epoch_ns)).astype(float) * 1e-9
+    fix_t = (log.fix.time_ns - np.int64(epoch_ns)).astype(float) * 1e-9
+    out: list[Check] = [qc.config_sanity(config_problems(config))]
+
+    # --- completeness -------------------------------------------------------------------------
+    errors = [i for i in log.issues if i.severity == "error"]
+    cin = config.input
+    window = None if cin.end_s is None else cin.end_s - (cin.start_s or 0.0)
+    out.append(qc.data_complete(bool(log.complete), len(errors),
+                                errors[0].message if errors else "",
+                                float(t[-1] - t[0]) if t.shape[0] else 0.0, window))
+
+    # --- IMU against gravity and the Earth rate ----------------------------------------------
+    static = _static_mask(t, w, f, vel_t, log.vel.v_n_mps)
+    out.append(qc.gravity_direction(f, static, c_bs, cin.sensor_frame))
+    lat0 = float(log.fix.lat_rad[0]) if len(log.fix.time_ns) else nav.alignment.lat_rad
+    h0 = float(log.fix.height_m[0]) if len(log.fix.time_ns) else nav.alignment.height_m
+    out.append(qc.gravity_magnitude(f, static, lat0, h0))
+    noise = tuning_from_config(config.imu).noise()
+    sb = math.hypot(noise.gyro_turn_on_sigma_radps, noise.gyro_gm_sigma_radps) \
+        or noise.gyro_bias_sigma_radps
+    dt = float(np.median(np.diff(t))) if t.shape[0] > 1 else 0.0
+    out.append(qc.earth_rate(w, f, static, dt, lat0, gyro_bias_sigma_radps=sb,
+                             gyro_arw_radpsqrts=noise.gyro_arw_radpsqrts))
+
+    # --- GNSS track, innovations, time offset, lever arm --------------------------------------
+    sol = nav.smoothed if nav.smoothed is not None else nav.forward
+    r_n = earth.llh_to_ned_m(log.fix.lat_rad, log.fix.lon_rad, log.fix.height_m,
+                             lat0, float(log.fix.lon_rad[0]) if len(fix_t) else 0.0, h0)
+    if len(vel_t) >= 2:
+        v_t, v_n = vel_t, log.vel.v_n_mps
+    elif len(fix_t) >= 3:  # no velocity topic: the track's own differences, at the midpoints
+        v_t = 0.5 * (fix_t[1:] + fix_t[:-1])
+        v_n = np.diff(r_n, axis=0) / np.diff(fix_t)[:, None]
+    else:
+        v_t, v_n = np.zeros(0), np.zeros((0, 3))
+    out.append(qc.gnss_jumps(fix_t, r_n, *((vel_t, log.vel.v_n_mps) if len(vel_t) >= 2
+                                          else (nav.forward.t_s, nav.forward.v_n_mps))))
+    rec = getattr(nav, "innovations", None)
+    if rec is not None:
+        gnss = (rec.kind <= 1) & ((rec.status == 0) | (rec.status == 1) | (rec.status == 2))
+        out.append(qc.nis_band(rec.t_s[gnss], rec.nis[gnss]))
+    est = qc.estimate_time_offset(t, _down_rate(t, w, sol), v_t, v_n)
+    out.append(qc.gnss_time_offset(est))
+    lev = lever_estimate if lever_estimate is not None else (
+        nav.lever_arm if nav.lever_arm.estimated else None)
+    if lev is None:
+        out.append(qc._na("lever_arm", "navigate", "no lever-arm estimate", "m",
+                          qc.LEVER_ARM_MAX_M))
+    else:
+        speed = np.hypot(sol.v_n_mps[:, 0], sol.v_n_mps[:, 1])
+        moving = speed > qc.TIME_OFFSET_MIN_SPEED_MPS
+        out.append(qc.lever_arm(config.gnss.lever_arm_m, lev.lever_b_m, lev.sigma_b_m,
+                                mean_speed_mps=float(speed[moving].mean()) if moving.any()
+                                else math.nan))
+
+    toff, lev_check = out[-2], out[-1]
+    if not toff.passed and not lev_check.passed:  # a late GNSS bends the lever-arm estimate
+        out[-1] = replace(lev_check, suggestion="fix the GNSS time offset first, the lever-arm "
+                          "estimate is not reliable until then; " + lev_check.suggestion)
+
+    # --- calibration and compensation --------------------------------------------------------
+    if calib_run is not None:
+        s = calib_run.summary()
+        out.append(qc.calibration_quality(calib_run.calibrated, calib_run.reason,
+                                          int(s["n_pairs_used"])))
+        out.append(qc.compensation_gain(float(s["dv_before_mps"]), float(s["dv_after_mps"])))
+    return QualityReport(tuple(out))
+
+
+def qc_columns(report: QualityReport, epoch_ns: int) -> dict[str, list[Any]]:
+    """qc.parquet columns (schema ``qc`` in pospp.io.parquet_tables)."""
+    cs = report.checks
+    return {
+        "check": [c.name for c in cs],
+        "stage": [c.stage for c in cs],
+        "measure": [c.statistic for c in cs],
+        "value": [float(c.value) for c in cs],
+        "threshold": [float(c.threshold) for c in cs],
+        "unit": [c.unit for c in cs],
+        "passed": [bool(c.passed) for c in cs],
+        "severity": [c.severity for c in cs],
+        "suggestion": [c.suggestion for c in cs],
+        "time_ns": [None if c.time_ns_offset is None else int(epoch_ns) + c.time_ns_offset
+                    for c in cs],
+    }

@@ -1,0 +1,212 @@
+"""pospp.qc.checks against closed forms and seeded synthetic data (no filter runs).
+
+Each check is fed data whose answer is known outside pospp: gravity and the Earth rate from
+their WGS-84 definitions, NIS from scipy's chi-square generator, a time offset built into a
+synthetic turning track, a 5 km step, and the statuses' order.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pospp import earth
+from pospp.config import PipelineConfig
+from pospp.io import parquet_tables
+from pospp.io.mcap_reader import FLU_TO_FRD
+from pospp.qc import checks as qc
+from pospp.qc.stage import QualityReport, config_problems, qc_columns, worst_status
+from pospp.report.summary import qc_lines
+
+LAT = math.radians(34.25)
+DPH = math.pi / 180.0 / 3600.0
+
+
+def _static_imu(rng, n=24_000, dt=0.01, heading=0.3, gyro_bias_dph=(1.0, -1.0, 1.0)):
+    """At rest, level, FRD: f = [0, 0, -g], w = C_bn w_ie_n + bias + noise."""
+    g = float(earth.normal_gravity_mps2(LAT, 400.0))
+    c_nb = np.array([[math.cos(heading), -math.sin(heading), 0.0],
+                     [math.sin(heading), math.cos(heading), 0.0], [0.0, 0.0, 1.0]])
+    w_ie_n = earth.EARTH_RATE_RADPS * np.array([math.cos(LAT), 0.0, -math.sin(LAT)])
+    w = c_nb.T @ w_ie_n + np.asarray(gyro_bias_dph) * DPH
+    arw = math.radians(0.01) / 60.0  # 0.01 deg/sqrt(h)
+    ws = w + rng.normal(0.0, arw / math.sqrt(dt), (n, 3))
+    fs = np.array([0.0, 0.0, -g]) + rng.normal(0.0, 0.01, (n, 3))
+    return ws, fs, dt
+
+
+def test_gravity_direction_names_an_flu_imu_declared_frd():
+    rng = np.random.default_rng(1)
+    _, f_frd, _ = _static_imu(rng)
+    f_flu = f_frd @ FLU_TO_FRD  # FLU_TO_FRD is its own inverse: the same vector in FLU axes
+    static = np.ones(len(f_frd), dtype=bool)
+    good = qc.gravity_direction(f_frd, static, np.eye(3), "frd")
+    assert good.passed and good.value < 0.5  # deg; the level body's 0 within noise
+    # an FLU log read as FRD: f_b = f_s, up along +z
+    bad = qc.gravity_direction(f_flu, static, np.eye(3), "frd")
+    assert not bad.passed and bad.value > 179.0 and bad.severity == "failed"
+    assert "the IMU looks FLU, not FRD" in bad.suggestion
+    # an FRD log declared FLU: the reader applies FLU->FRD to FRD axes
+    back = qc.gravity_direction(f_frd @ FLU_TO_FRD.T, static, FLU_TO_FRD, "flu")
+    assert not back.passed and "the IMU looks FRD, not FLU" in back.suggestion
+    # a 90 deg mounting error: gravity along a horizontal axis
+    side = qc.gravity_direction(f_frd[:, [2, 1, 0]], None, np.eye(3), "frd")
+    assert not side.passed and 89.0 < side.value < 91.0
+    assert "the sensor's -x axis points up" in side.suggestion
+
+
+def test_gravity_magnitude_catches_a_scale_error():
+    rng = np.random.default_rng(2)
+    _, f, _ = _static_imu(rng)
+    static = np.ones(len(f), dtype=bool)
+    ok = qc.gravity_magnitude(f, static, LAT, 400.0)
+    assert ok.passed and ok.value < 0.01  # m/s^2 against 0.2
+    bad = qc.gravity_magnitude(f * 1.05, static, LAT, 400.0)
+    assert not bad.passed and abs(bad.value - 0.05 * 9.797) < 0.01
+
+
+def test_earth_rate_at_rest_and_a_wrong_unit():
+    rng = np.random.default_rng(3)
+    w, f, dt = _static_imu(rng)
+    static = np.ones(len(w), dtype=bool)
+    kw = {"gyro_bias_sigma_radps": 1.0 * DPH, "gyro_arw_radpsqrts": math.radians(0.01) / 60.0}
+    ok = qc.earth_rate(w, f, static, dt, LAT, **kw)
+    # misfit bounded by the 1 deg/h biases (|b| sqrt(3) at most): well below 5 sigma (5 deg/h)
+    assert ok.passed and ok.value < 1.8 and ok.threshold == pytest.approx(5.0, rel=0.01)
+    bad = qc.earth_rate(w * 3.0, f, static, dt, LAT, **kw)  # a scale error of 3
+    assert not bad.passed and "Earth rate" in bad.suggestion
+    # a MEMS grade cannot see 15 deg/h: not applicable, passes
+    mems = qc.earth_rate(w * 3.0, f, static, dt, LAT, gyro_bias_sigma_radps=20.0 * DPH,
+                         gyro_arw_radpsqrts=kw["gyro_arw_radpsqrts"])
+    assert mems.passed and math.isnan(mems.value) and "cannot see" in mems.statistic
+    short = qc.earth_rate(w, f, static & (np.arange(len(w)) < 3000), dt, LAT, **kw)
+    assert short.passed and "at rest" in short.statistic
+
+
+def test_nis_band_passes_chi_square_and_fails_a_mistuned_filter():
+    rng = np.random.default_rng(4)
+    t = np.arange(3000.0)
+    nis = rng.chisquare(3, t.shape[0])
+    ok = qc.nis_band(t, nis)
+    assert ok.passed and ok.value <= 0.02  # per-window false alarm 1e-3, 50 windows
+    # GNSS noise 2x what the filter assumes: NIS x4
+    bad = qc.nis_band(t, 4.0 * nis)
+    assert not bad.passed and bad.value > 0.9 and bad.time_ns_offset is not None
+    assert qc.nis_band(t[:10], nis[:10]).passed  # too few records: not applicable
+
+
+def _track(tau_s: float, *, noise_rad: float = 0.0, seed: int = 5):
+    """A vehicle at 60 m/s with three 180 deg turns at 4 deg/s; the heading is the course.
+
+    IMU at 100 Hz: w_d the exact mean yaw rate over each interval; GNSS velocity at 1 Hz,
+    stamped tau_s late (the state at t - tau).
+    """
+    rate = math.radians(4.0)
+
+    def heading(t):
+        h = np.zeros_like(t)
+        for t0 in (200.0, 500.0, 800.0):
+            h += rate * np.clip(t - t0, 0.0, 45.0)
+        return h
+
+    t = np.arange(0.0, 1000.0, 0.01)
+    h = heading(t)
+    w_d = np.concatenate([[0.0], np.diff(h) / 0.01])
+    tv = np.arange(10.0, 990.0, 1.0)
+    hv = heading(tv - tau_s) + np.random.default_rng(seed).normal(0.0, noise_rad, tv.shape)
+    v = 60.0 * np.column_stack([np.cos(hv), np.sin(hv), np.zeros_like(hv)])
+    return t, w_d, tv, v
+
+
+@pytest.mark.parametrize("tau", [0.0, 0.2, 2.0, -0.5])
+def test_time_offset_from_the_turns(tau):
+    est = qc.estimate_time_offset(*_track(tau, noise_rad=0.002))
+    assert est is not None and est.explained > 0.9
+    assert abs(est.offset_s - tau) < max(5.0 * est.sigma_s, 0.01), est
+    check = qc.gnss_time_offset(est)
+    assert check.passed == (abs(tau) < 0.1)
+    if tau == 2.0:
+        assert "GNSS lags the IMU by about 2.0 s" in check.suggestion
+    if tau == -0.5:
+        assert "GNSS leads the IMU by about 0.5 s" in check.suggestion
+
+
+def test_time_offset_not_applicable_without_turns_or_when_flying_sideways():
+    t, w_d, tv, v = _track(0.0)
+    assert qc.gnss_time_offset(qc.estimate_time_offset(t, 0.0 * w_d, tv, v[:, [0, 0, 2]]
+                                                       )).passed
+    # yaw without course change (a multirotor turning on the spot while it flies north)
+    est = qc.estimate_time_offset(t, w_d, tv, np.tile([5.0, 0.0, 0.0], (tv.shape[0], 1)))
+    chk = qc.gnss_time_offset(est)
+    assert chk.passed and "course does not follow" in chk.statistic
+
+
+def test_gnss_jump_of_5km_is_found_with_its_time():
+    rng = np.random.default_rng(6)
+    t = np.arange(0.0, 600.0, 1.0)
+    v = np.tile([60.0, 0.0, 0.0], (t.shape[0], 1))
+    r = np.column_stack([60.0 * t, np.zeros_like(t), np.zeros_like(t)])
+    r += rng.normal(0.0, 0.1, r.shape)
+    ok = qc.gnss_jumps(t, r, t, v)
+    assert ok.passed and ok.value < -4.0  # 0.5 m of noise less the 5 m allowance
+    r[300:, 1] += 5000.0
+    bad = qc.gnss_jumps(t, r, t, v)
+    assert not bad.passed and "jumps by 5000 m between t = 299.0 s and 300.0 s" in \
+        bad.suggestion
+    assert bad.time_ns_offset == 300 * 10**9
+
+
+def test_lever_arm_check_and_its_time_offset_reading():
+    sig = np.full(3, 0.02)
+    assert qc.lever_arm([0.3, 0.1, -1.5], [0.31, 0.09, -1.48], sig).passed
+    bad = qc.lever_arm([0.0, 0.0, 0.0], [0.3, 0.1, -1.5], sig)
+    assert not bad.passed and bad.value == pytest.approx(1.5)
+    assert "the data suggest a lever arm of [0.30, 0.10, -1.50] m" in bad.suggestion
+    # an unobservable axis (sigma 1 m) does not count
+    assert qc.lever_arm([0.0, 0.0, 0.0], [0.0, 0.0, -1.5], [0.02, 0.02, 1.0]).passed
+    # GNSS 15 ms late at 60 m/s looks like the antenna 0.9 m behind
+    along = qc.lever_arm([0.0, 0.0, 0.0], [-0.9, 0.0, 0.0], sig, mean_speed_mps=60.0)
+    assert "GNSS lags the IMU by about 0.015 s" in along.suggestion
+
+
+def test_completeness_calibration_compensation_and_config():
+    assert qc.data_complete(True, 0, "", 100.0, None).passed
+    cut = qc.data_complete(False, 1, "truncated at byte 8931240", 1316.0, None)
+    assert not cut.passed and cut.value == 2.0 and "8931240" in cut.suggestion
+    short = qc.data_complete(True, 0, "", 1316.0, 1634.0)
+    assert not short.passed and "1316.0 s of the 1634.0 s" in short.suggestion
+    nocal = qc.calibration_quality(False, "no calibration: no pair passed", 0)
+    assert not nocal.passed and nocal.severity == "partial"
+    assert not qc.compensation_gain(0.1, 0.5).passed and qc.compensation_gain(2.3, 0.3).passed
+    cfg = PipelineConfig()
+    assert config_problems(cfg) == []
+    bad = replace(cfg, replay=replace(cfg.replay, horizon_s=-300.0),
+                  filter=replace(cfg.filter, output_rate_hz=0.0))
+    problems = config_problems(bad)
+    assert "[replay] horizon_s = -300.0 must be a finite number > 0" in problems
+    assert any("output_rate_hz" in p for p in problems)
+    assert qc.config_sanity(problems).severity == "failed"
+
+
+def test_status_table_and_console_lines(tmp_path):
+    a = qc.Check("a", "ingest", "s", 1.0, 2.0, "m", True, "failed")
+    b = qc.Check("b", "navigate", "s", 3.0, 2.0, "m", False, "degraded", "do this")
+    c = qc.Check("c", "calibrate", "s", 0.0, 1.0, "1", False, "partial")
+    rep = QualityReport((a, b, c))
+    assert rep.status == "degraded" and rep.failed_names == "b,c"
+    assert rep.suggestions == "b: do this"
+    assert QualityReport((a,)).status == "ok"
+    assert worst_status("partial", "ok") == "partial"
+    assert worst_status("ok", "failed", "degraded") == "failed"
+    path = tmp_path / "qc.parquet"
+    parquet_tables.write_table(path, qc_columns(rep, 10**18), "qc", metadata={})
+    back = parquet_tables.read_table(path)
+    assert list(back.check) == ["a", "b", "c"] and back.passed.tolist() == [True, False, False]
+    assert back.time_ns.isna().all()
+    lines = qc_lines(back)
+    assert "quality checks FAILED: b, c" in lines[0] and "do this" in lines[1]
+    assert qc_lines(pd.DataFrame(qc_columns(QualityReport((a,)), 0)))[0].endswith("all 1 passed")
