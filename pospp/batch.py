@@ -86,8 +86,8 @@ def run_folder_names(paths: list[str]) -> dict[str, str]:
     names = {}
     for p, ap in zip(paths, absolute, strict=True):
         rel = os.path.relpath(ap, common)
-        stem, ext = os.path.splitext(rel)
-        rel = stem if ext.lower() == ".mcap" and os.path.basename(stem) else rel
+        if rel.lower().endswith(".mcap") and len(os.path.basename(rel)) > len(".mcap"):
+            rel = rel[: -len(".mcap")]
         names[p] = "__".join(_safe_part(x) for x in rel.split(os.sep))
     counts: dict[str, int] = {}
     for n in names.values():

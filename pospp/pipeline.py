@@ -175,6 +175,10 @@ class _Progress:
             {"severity": severity, "stage": stage, "time_ns": time_ns, "text": text}
         )
 
+    def rows(self) -> list[dict[str, Any]]:
+        """The messages, their text encodable as UTF-8 (file names that do not decode)."""
+        return [{**m, "text": run_folder.display_text(str(m["text"]))} for m in self.messages]
+
     @property
     def elapsed_s(self) -> float:
         return time.perf_counter() - self._t0
@@ -226,12 +230,15 @@ def run(
         outcome = _run_stages(mcap_path, sha, config, stage, book)
     except Exception as exc:
         # the new run failed: its folder says so and keeps nothing of an earlier run
-        if not (stage / "summary.parquet").is_file():
-            book.note("error", "run", f"{type(exc).__name__}: {exc}")
-            _write_failed(mcap_path, sha, config, stage, book)
-        run_folder.write_marker(stage, input_file=mcap_path, input_sha256=sha,
-                                config_json=config.to_json(), status="failed")
-        run_folder.swap_in(stage, target)
+        try:
+            if not (stage / "summary.parquet").is_file():
+                book.note("error", "run", f"{type(exc).__name__}: {exc}")
+                _write_failed(mcap_path, sha, config, stage, book)
+            run_folder.write_marker(stage, input_file=mcap_path, input_sha256=sha,
+                                    config_json=config.to_json(), status="failed")
+            run_folder.swap_in(stage, target)
+        except Exception:  # e.g. a full disk: keep the previous run, report the first error
+            run_folder.discard(stage)
         raise
     except BaseException:  # interrupted: the previous run stays as it was
         run_folder.discard(stage)
@@ -250,7 +257,7 @@ def _write_failed(mcap_path: str | Path, sha: str, config: PipelineConfig, out: 
             "config": config.to_dict()}
     summary = {"input_file": meta["input_file"], "input_sha256": sha, "status": "failed",
                "wall_time_s": book.elapsed_s}
-    parquet_tables.write_table(out / "messages.parquet", outputs.messages_table(book.messages),
+    parquet_tables.write_table(out / "messages.parquet", outputs.messages_table(book.rows()),
                                "messages", metadata=meta)
     parquet_tables.write_table(out / "summary.parquet", summary, "summary", metadata=meta)
 
@@ -272,8 +279,8 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
     def finish(status: str) -> RunOutcome:
         summary["status"] = status
         summary["wall_time_s"] = book.elapsed_s
-        msgs = pd.DataFrame(book.messages, columns=["severity", "stage", "time_ns", "text"])
-        write("messages", outputs.messages_table(book.messages))
+        msgs = pd.DataFrame(book.rows(), columns=["severity", "stage", "time_ns", "text"])
+        write("messages", outputs.messages_table(book.rows()))
         write("summary", summary)  # last: a folder with a summary is a finished run
         return RunOutcome(out, status, summary, msgs, book.elapsed_s)
 

@@ -37,8 +37,8 @@ from pospp import __version__
 from pospp.io.parquet_tables import TABLES, atomic_path
 
 __all__ = ["MARKER", "BatchLock", "RunFolderError", "check_target", "discard",
-           "display_path", "new_staging", "read_marker", "require_run_folder", "swap_in",
-           "write_marker"]
+           "display_path", "display_text", "new_staging", "read_marker", "require_run_folder",
+           "swap_in", "write_marker"]
 
 MARKER = ".pospp-run.json"
 """Marker file of a run folder (JSON, the run's identity)."""
@@ -56,7 +56,16 @@ class RunFolderError(ValueError):
 
 def display_path(path: str | os.PathLike[str]) -> str:
     """``path`` as printable UTF-8 text: undecodable bytes of the name escaped as ``\\xNN``."""
-    return os.fsencode(path).decode("utf-8", "backslashreplace")
+    return display_text(os.fspath(path))
+
+
+def display_text(text: str) -> str:
+    """``text`` encodable as UTF-8: bytes smuggled in by surrogateescape shown as ``\\xNN``."""
+    try:
+        raw = text.encode("utf-8", "surrogateescape")
+    except UnicodeEncodeError:
+        raw = text.encode("utf-8", "backslashreplace")
+    return raw.decode("utf-8", "backslashreplace")
 
 
 def _few(names: list[str], n: int = 5) -> str:

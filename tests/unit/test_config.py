@@ -113,8 +113,8 @@ def test_every_number_must_be_finite(section, key):
         config_from_dict({section: {key: float("nan")}}, source="x.toml")
 
 
-def test_a_200_mb_string_is_refused_with_a_short_message():
-    huge = "x" * 200_000_000
+def test_a_huge_string_is_refused_with_a_short_message():
+    huge = "x" * 20_000_000  # the check is on the length: 200 MB behaves the same
     with pytest.raises(ConfigError) as err:
         config_from_dict({"name": huge}, source="x.toml")
     assert "name: expected a string of 0 to 256 characters" in str(err.value)
