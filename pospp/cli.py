@@ -62,6 +62,20 @@ def _exit_code_for(exc: BaseException) -> int:
 class _Cli(click.Group):
     """The command group: turns any error of a command into one line and an exit status."""
 
+    def main(self, args=None, prog_name=None, complete_var=None,  # noqa: ANN001
+             standalone_mode: bool = True, **extra: object) -> object:
+        if not standalone_mode:
+            return super().main(args, prog_name, complete_var, False, **extra)
+        try:
+            rv = super().main(args, prog_name, complete_var, False, **extra)
+        except click.ClickException as exc:  # usage errors: one line too (click prints 3)
+            click.echo(f"pospp: error: {_printable(exc.format_message())}", err=True)
+            sys.exit(exc.exit_code)
+        except click.Abort:
+            click.echo("pospp: aborted", err=True)
+            sys.exit(EXIT_CODES["failed"])
+        sys.exit(rv if isinstance(rv, int) else 0)
+
     def invoke(self, ctx: click.Context) -> object:
         try:
             return super().invoke(ctx)

@@ -182,7 +182,8 @@ def check_target(target: str | Path, *, input_file: str | Path, force: bool) -> 
     if t.exists() and not t.is_dir():
         raise RunFolderError(f"{shown}: exists and is not a folder")
     inp = Path(os.path.abspath(input_file))
-    if t == inp or t in inp.parents:
+    real_t, real_inp = Path(os.path.realpath(t)), Path(os.path.realpath(inp))
+    if t == inp or t in inp.parents or real_t == real_inp or real_t in real_inp.parents:
         raise RunFolderError(f"{shown}: the output folder contains the input "
                              f"{display_path(inp.name)}; choose another output folder")
     if not t.exists():

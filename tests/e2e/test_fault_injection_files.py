@@ -102,10 +102,13 @@ def test_output_folder_holding_the_input_is_refused(flight, tmp_path):
     own.mkdir()
     inp = own / "trajectory.mcap"  # a name pospp would write
     inp.write_bytes(flight.read_bytes())
+    (tmp_path / "link").symlink_to(own)
     before = _hashes(tmp_path)
     for extra in ((), ("--force",)):
-        code, out, err = _cli("run", str(inp), "-p", str(PIPELINE), "-o", str(own), *extra)
-        _one_clear_line(code, err, 2, "contains the input trajectory.mcap")
+        for target in (own, tmp_path / "link"):
+            code, out, err = _cli("run", str(inp), "-p", str(PIPELINE), "-o", str(target),
+                                  *extra)
+            _one_clear_line(code, err, 2, "contains the input trajectory.mcap")
     assert _hashes(tmp_path) == before
 
 
@@ -407,6 +410,11 @@ def test_bad_config_value_is_one_line_and_exit_2(flight, tmp_path, toml, needle)
     code, out, err = _cli("run", str(flight), "-p", str(p), "-o", str(tmp_path / "o"))
     _one_clear_line(code, err, 2, "bad.toml", needle)
     assert not (tmp_path / "o").exists()
+
+
+def test_usage_error_is_one_line_and_exit_2(tmp_path):
+    code, out, err = _cli("run", str(tmp_path / "missing.mcap"), "-o", str(tmp_path / "o"))
+    _one_clear_line(code, err, 2, "missing.mcap", "does not exist")
 
 
 def test_debug_shows_the_traceback(tmp_path):
