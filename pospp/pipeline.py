@@ -223,11 +223,12 @@ def run(
         Only after the failed run (messages and summary recording the failure) is swapped in.
     """
     target = run_folder.check_target(out_dir, input_file=mcap_path, force=force)
-    stage = run_folder.new_staging(target)
     sha = parquet_tables.sha256_file(mcap_path) if Path(mcap_path).is_file() else ""
     book = _Progress(progress)
+    stage = run_folder.new_staging(target)
     try:
         outcome = _run_stages(mcap_path, sha, config, stage, book)
+        status = outcome.status
     except Exception as exc:
         # the new run failed: its folder says so and keeps nothing of an earlier run
         try:
@@ -243,9 +244,13 @@ def run(
     except BaseException:  # interrupted: the previous run stays as it was
         run_folder.discard(stage)
         raise
-    run_folder.write_marker(stage, input_file=mcap_path, input_sha256=sha,
-                            config_json=config.to_json(), status=outcome.status)
-    run_folder.swap_in(stage, target)
+    try:
+        run_folder.write_marker(stage, input_file=mcap_path, input_sha256=sha,
+                                config_json=config.to_json(), status=status)
+        run_folder.swap_in(stage, target)
+    except BaseException:
+        run_folder.discard(stage)
+        raise
     book.done()
     return replace(outcome, out_dir=target)
 
