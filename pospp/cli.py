@@ -175,8 +175,11 @@ def batch(inputs: tuple[str, ...], pipeline_file: str | None, out_root: str, wor
     from pospp.batch import run_batch
 
     files: list[Path] = []
+    root = Path(os.path.realpath(out_root))
     for item in map(Path, inputs):
-        files.extend(sorted(item.rglob("*.mcap")) if item.is_dir() else [item])
+        found = sorted(item.rglob("*.mcap")) if item.is_dir() else [item]
+        # a root inside the archive holds pospp's own trajectory.mcap files: never inputs
+        files.extend(f for f in found if root not in Path(os.path.realpath(f)).parents)
     if not files:
         raise click.UsageError(f"no .mcap files found in {', '.join(inputs)}")
     config = _config(pipeline_file)

@@ -423,3 +423,16 @@ def test_debug_shows_the_traceback(tmp_path):
     res = CliRunner().invoke(main, ["--debug", "run", str(SAMPLE), "-p", str(p), "-o",
                                     str(tmp_path / "o")])
     assert res.exit_code != 0 and type(res.exception).__name__ == "ConfigError"
+
+
+def test_batch_root_inside_the_archive_does_not_take_its_own_outputs(flight, tmp_path):
+    arch = tmp_path / "archive"
+    arch.mkdir()
+    (arch / "f.mcap").write_bytes(flight.read_bytes())
+    for _ in range(2):
+        code, out, err = _cli("batch", str(arch), "-p", str(PIPELINE), "-o", str(arch / "out"),
+                              "-j", "1")
+        assert code == 0, (out, err)
+    assert (arch / "out" / "f" / "trajectory.mcap").is_file()
+    man = _manifest(arch / "out")
+    assert list(man.index) == [str(arch / "f.mcap")] and man.status.iloc[0] == "skipped"
