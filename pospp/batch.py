@@ -38,6 +38,8 @@ import pandas as pd
 from pospp.config import PipelineConfig, config_from_dict
 from pospp.io import parquet_tables, run_folder
 
+MAX_RUN_NAME_LEN = 160
+"""Longest run-folder name (longer ones keep their start and end in a path hash)."""
 SCHEDULER_TIMEOUT_S = 10.0
 """How long ``run_batch`` waits for a Dask scheduler before giving up [s]."""
 
@@ -77,7 +79,8 @@ def run_folder_names(paths: list[str]) -> dict[str, str]:
     """A safe, unique run-folder name per input file (see the module docstring).
 
     The name is the path relative to the inputs' common folder, without ``.mcap``; two files
-    that would still share a name get the first 8 hex digits of their path's SHA-256 appended.
+    that would still share a name, or a name longer than ``MAX_RUN_NAME_LEN``, get the first 8
+    hex digits of their path's SHA-256 appended.
     """
     if not paths:
         return {}
@@ -89,6 +92,10 @@ def run_folder_names(paths: list[str]) -> dict[str, str]:
         if rel.lower().endswith(".mcap") and len(os.path.basename(rel)) > len(".mcap"):
             rel = rel[: -len(".mcap")]
         names[p] = "__".join(_safe_part(x) for x in rel.split(os.sep))
+    for p, n in names.items():  # file systems allow 255 bytes; the staging name adds ~40
+        if len(n) > MAX_RUN_NAME_LEN:
+            digest = hashlib.sha256(os.fsencode(os.path.abspath(p))).hexdigest()[:8]
+            names[p] = f"{n[:MAX_RUN_NAME_LEN - 9]}-{digest}"
     counts: dict[str, int] = {}
     for n in names.values():
         counts[n] = counts.get(n, 0) + 1

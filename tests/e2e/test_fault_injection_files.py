@@ -436,3 +436,16 @@ def test_batch_root_inside_the_archive_does_not_take_its_own_outputs(flight, tmp
     assert (arch / "out" / "f" / "trajectory.mcap").is_file()
     man = _manifest(arch / "out")
     assert list(man.index) == [str(arch / "f.mcap")] and man.status.iloc[0] == "skipped"
+
+
+def test_run_folder_names_are_safe_unique_and_short():
+    from pospp.batch import MAX_RUN_NAME_LEN, run_folder_names
+
+    paths = ["/x/a/b.mcap", "/x/a__b.mcap", "/x/...mcap", "/x/.hidden.mcap", "/x/a b%.MCAP",
+             "/x/" + "q" * 300 + ".mcap", os.fsdecode(b"/x/caf\xe9.mcap"), "/x/../y/z.mcap"]
+    names = run_folder_names(paths)
+    assert len(set(names.values())) == len(paths)  # unique, the two "a__b" included
+    for name in names.values():
+        assert name.isascii() and "/" not in name and not name.startswith(".")
+        assert name not in (".", "..") and 0 < len(name) <= MAX_RUN_NAME_LEN
+    assert names["/x/...mcap"] == "%2E%2E" and names["/x/a b%.MCAP"] == "a%20b%25"
