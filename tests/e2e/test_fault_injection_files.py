@@ -448,4 +448,5 @@ def test_run_folder_names_are_safe_unique_and_short():
     for name in names.values():
         assert name.isascii() and "/" not in name and not name.startswith(".")
         assert name not in (".", "..") and 0 < len(name) <= MAX_RUN_NAME_LEN
-    assert names["/x/...mcap"] == "%2E%2E" and names["/x/a b%.MCAP"] == "a%20b%25"
+    assert names["/x/../y/z.mcap"] == "y__z"  # relative to the common folder, "/"
+    assert names["/x/...mcap"] == "x__%2E%2E" and names["/x/a b%.MCAP"] == "x__a%20b%25"
