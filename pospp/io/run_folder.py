@@ -175,6 +175,8 @@ def check_target(target: str | Path, *, input_file: str | Path, force: bool) -> 
         earlier pospp run and ``force`` is False.
     """
     t = Path(os.path.abspath(target))
+    if t.is_symlink():  # swap the folder the link points to, keep the link
+        t = Path(os.path.realpath(t))
     shown = display_path(t)
     if not t.name:
         raise RunFolderError(f"{shown}: not usable as a run folder")
