@@ -1,9 +1,10 @@
 """The ``pospp`` command line: parse, delegate to a stage or the pipeline, print.
 
 Every command is a thin shell over a function of the package (named in its help), so
-everything the CLI does can be done from Python too. Errors from bad input are printed as one
-clear line (file, topic, time, what is wrong) with exit status 2; a run that completes with a
-stage that could not produce a result exits 0 and says why in its summary.
+everything the CLI does can be done from Python too. No command ends with a traceback: every
+error is one line ``pospp: error: ...`` on stderr and an exit status from :data:`EXIT_CODES`
+(``--debug`` shows the traceback instead). A run's status maps to its exit status in one
+place, :func:`exit_code_for_status`.
 """
 
 from __future__ import annotations
@@ -22,14 +23,82 @@ import click  # noqa: E402
 from pospp import __version__  # noqa: E402
 from pospp.config import ConfigError, PipelineConfig, load_config  # noqa: E402
 
+EXIT_CODES = {"ok": 0, "failed": 1, "usage": 2, "degraded": 3}
+"""Exit status of every command: 0 ok (a run that completed, "ok" or "partial"), 1 failed
+(a run or flight that failed, any other error), 2 usage or configuration error (bad option,
+pipeline file, or an output folder pospp must not write into), 3 degraded (the run completed
+but a quality check failed)."""
+
+_STATUS_EXIT = {"ok": "ok", "done": "ok", "partial": "ok", "skipped": "ok",
+                "degraded": "degraded", "failed": "failed"}
+
+
+def exit_code_for_status(*statuses: str) -> int:
+    """The exit status of one or more run statuses: the worst of them (failed > degraded)."""
+    kinds = {_STATUS_EXIT.get(s, "failed") for s in statuses}
+    for kind in ("failed", "degraded"):
+        if kind in kinds:
+            return EXIT_CODES[kind]
+    return EXIT_CODES["ok"]
+
+
+def _printable(text: str) -> str:
+    """``text`` on one line, undecodable bytes of file names escaped, at most 2000 chars."""
+    text = " ".join(text.split()).encode("utf-8", "backslashreplace").decode("utf-8")
+    return text if len(text) <= 2000 else f"{text[:2000]}... (--debug for all)"
+
+
+def _one_line(exc: BaseException) -> str:
+    return _printable(str(exc)) or type(exc).__name__
+
+
+def _exit_code_for(exc: BaseException) -> int:
+    from pospp.io.run_folder import RunFolderError
+
+    usage = isinstance(exc, ConfigError | RunFolderError)
+    return EXIT_CODES["usage"] if usage else EXIT_CODES["failed"]
+
+
+class _Cli(click.Group):
+    """The command group: turns any error of a command into one line and an exit status."""
+
+    def main(self, args=None, prog_name=None, complete_var=None,  # noqa: ANN001
+             standalone_mode: bool = True, **extra: object) -> object:
+        if not standalone_mode:
+            return super().main(args, prog_name, complete_var, False, **extra)
+        try:
+            rv = super().main(args, prog_name, complete_var, False, **extra)
+        except click.ClickException as exc:  # usage errors: one line too (click prints 3)
+            click.echo(f"pospp: error: {_printable(exc.format_message())}", err=True)
+            sys.exit(exc.exit_code)
+        except click.Abort:
+            click.echo("pospp: aborted", err=True)
+            sys.exit(EXIT_CODES["failed"])
+        sys.exit(rv if isinstance(rv, int) else 0)
+
+    def invoke(self, ctx: click.Context) -> object:
+        try:
+            return super().invoke(ctx)
+        except (click.exceptions.Exit, click.ClickException, click.Abort):
+            raise
+        except KeyboardInterrupt:
+            if ctx.params.get("debug"):
+                raise
+            click.echo("pospp: interrupted", err=True)
+            ctx.exit(130)
+        except Exception as exc:
+            if ctx.params.get("debug"):
+                raise
+            text = _one_line(exc)
+            known = isinstance(exc, ValueError | OSError | RuntimeError | KeyError)
+            if not known:  # a bug: say so, keep it one line
+                text = f"internal error ({type(exc).__name__}): {text}; --debug shows where"
+            click.echo(f"pospp: error: {text}", err=True)
+            ctx.exit(_exit_code_for(exc))
+
 
 def _config(path: str | None) -> PipelineConfig:
     return PipelineConfig() if path is None else load_config(path)
-
-
-def _fail(exc: BaseException) -> None:
-    click.echo(f"pospp: error: {exc}", err=True)
-    sys.exit(2)
 
 
 class _StageBar:
@@ -49,10 +118,15 @@ class _StageBar:
         self._bar.close()
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(cls=_Cli, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="pospp")
-def main() -> None:
-    """pospp: POS post-processing with double strapdown online calibration."""
+@click.option("--debug", is_flag=True, help="Show the traceback of an error.")
+def main(debug: bool) -> None:
+    """pospp: POS post-processing with double strapdown online calibration.
+
+    Exit status: 0 ok, 1 failed, 2 usage or configuration error, 3 degraded (a quality check
+    failed).
+    """
 
 
 @main.command()
@@ -60,28 +134,28 @@ def main() -> None:
 @click.option("-p", "--pipeline", "pipeline_file", type=click.Path(exists=True, dir_okay=False),
               help="Pipeline TOML (pipelines/flight.toml, ...); defaults when omitted.")
 @click.option("-o", "--out", "out_dir", required=True, type=click.Path(file_okay=False),
-              help="Run folder for the tables, trajectory MCAP and report.")
-def run(mcap_file: str, pipeline_file: str | None, out_dir: str) -> None:
+              help="Run folder for the tables, trajectory MCAP and report: absent, empty or "
+                   "an earlier pospp run (with --force).")
+@click.option("--force", is_flag=True,
+              help="Replace an earlier pospp run in the folder (never files pospp did not "
+                   "write).")
+def run(mcap_file: str, pipeline_file: str | None, out_dir: str, force: bool) -> None:
     """Process one flight log: A, legs, B, pairs, calibration, compensation, report.
 
-    Calls pospp.pipeline.run.
+    Calls pospp.pipeline.run. The run is written beside OUT and swapped in whole when done.
     """
     from pospp import pipeline
     from pospp.io.report_files import read_run_tables
     from pospp.report.summary import summary_text
 
-    try:
-        config = _config(pipeline_file)
-    except ConfigError as exc:
-        _fail(exc)
+    config = _config(pipeline_file)
     bar = _StageBar()
     try:
-        outcome = pipeline.run(mcap_file, config, out_dir, progress=bar)
-    except (ValueError, FileNotFoundError) as exc:
+        outcome = pipeline.run(mcap_file, config, out_dir, progress=bar, force=force)
+    finally:
         bar.close()
-        _fail(exc)
-    bar.close()
     click.echo(summary_text(read_run_tables(outcome.out_dir)))
+    sys.exit(exit_code_for_status(outcome.status))
 
 
 @main.command()
@@ -92,33 +166,34 @@ def run(mcap_file: str, pipeline_file: str | None, out_dir: str) -> None:
 @click.option("-j", "--workers", default=2, show_default=True, help="Local processes.")
 @click.option("--scheduler", default=None,
               help="Dask distributed scheduler address (tcp://host:8786) instead of local.")
+@click.option("--scheduler-timeout-s", default=10.0, show_default=True,
+              help="How long to wait for the scheduler [s].")
 @click.option("--force", is_flag=True, help="Re-run flights that are already done.")
 def batch(inputs: tuple[str, ...], pipeline_file: str | None, out_root: str, workers: int,
-          scheduler: str | None, force: bool) -> None:
+          scheduler: str | None, scheduler_timeout_s: float, force: bool) -> None:
     """Process an archive: MCAP files and/or folders of them (pospp.batch.run_batch)."""
     from pospp.batch import run_batch
 
     files: list[Path] = []
+    root = Path(os.path.realpath(out_root))
     for item in map(Path, inputs):
-        files.extend(sorted(item.rglob("*.mcap")) if item.is_dir() else [item])
+        found = sorted(item.rglob("*.mcap")) if item.is_dir() else [item]
+        # a root inside the archive holds pospp's own trajectory.mcap files: never inputs
+        files.extend(f for f in found if root not in Path(os.path.realpath(f)).parents)
     if not files:
-        _fail(ValueError(f"no .mcap files found in {', '.join(inputs)}"))
-    try:
-        config = _config(pipeline_file)
-    except ConfigError as exc:
-        _fail(exc)
+        raise click.UsageError(f"no .mcap files found in {', '.join(inputs)}")
+    config = _config(pipeline_file)
 
     def show(o) -> None:
         tail = f": {o.error}" if o.error else ""
-        click.echo(f"{o.status:8s} {o.duration_s:7.1f} s  {o.file}{tail}")
+        click.echo(_printable(f"{o.status:8s} {o.duration_s:7.1f} s  {o.file}{tail}"))
 
     rows = run_batch(files, config, out_root, workers=workers, scheduler=scheduler,
-                     force=force, on_result=show)
+                     scheduler_timeout_s=scheduler_timeout_s, force=force, on_result=show)
     n_failed = sum(r.status == "failed" for r in rows)
     click.echo(f"{len(rows)} flights: {len(rows) - n_failed} processed or skipped, "
                f"{n_failed} failed; manifest: {Path(out_root) / 'manifest.parquet'}")
-    if n_failed:
-        sys.exit(1)
+    sys.exit(exit_code_for_status(*(r.status for r in rows)))
 
 
 @main.command()
@@ -157,7 +232,7 @@ def simulate(preset: str | None, profile_file: str | None, imu_grade: str, seed:
     from pospp.sim.gnss import GnssModel
 
     if (preset is None) == (profile_file is None):
-        _fail(click.UsageError("give exactly one of --preset and --profile"))
+        raise click.UsageError("give exactly one of --preset and --profile")
     grade = {"flight": "paper_flight", "vehicle": "paper_vehicle"}.get(imu_grade, imu_grade)
     gnss = GnssModel(rate_hz=gnss_rate_hz, lever_arm_b_m=lever_arm_m,
                      outages_s=tuple(tuple(o) for o in outages))
@@ -165,10 +240,8 @@ def simulate(preset: str | None, profile_file: str | None, imu_grade: str, seed:
     try:
         sim = run_simulation(profile_file or preset, imu_grade=grade, gnss=gnss, seed=seed,
                              imu_rate_hz=imu_rate_hz, progress=bar)
-    except (ValueError, KeyError, FileNotFoundError) as exc:
+    finally:
         bar.close()
-        _fail(exc)
-    bar.close()
     out = Path(out_mcap)
     paths = write_simulation(sim, out.parent, out.stem)
     click.echo(f"{len(sim.imu)} IMU samples, {len(sim.fix)} GNSS fixes, {len(sim.legs)} true "
@@ -193,7 +266,7 @@ def convert(source: str, out_mcap: str, fmt: str | None, options: tuple[str, ...
     for item in options:
         key, sep, value = item.partition("=")
         if not sep:
-            _fail(click.UsageError(f"--option {item!r}: expected KEY=VALUE"))
+            raise click.UsageError(f"--option {item!r}: expected KEY=VALUE")
         try:
             kw[key] = int(value)
         except ValueError:
@@ -201,10 +274,7 @@ def convert(source: str, out_mcap: str, fmt: str | None, options: tuple[str, ...
                 kw[key] = float(value)
             except ValueError:
                 kw[key] = value
-    try:
-        rep = run_convert(source, out_mcap, fmt=fmt, **kw)
-    except (ValueError, FileNotFoundError) as exc:
-        _fail(exc)
+    rep = run_convert(source, out_mcap, fmt=fmt, **kw)
     click.echo(f"{rep.fmt}: {rep.n_imu} IMU samples ({rep.imu_rate_hz or 0:.1f} Hz), "
                f"{rep.n_fix} GNSS fixes, {rep.n_reference} reference epochs")
     for label, path in (("mcap", rep.mcap_path), ("reference", rep.reference_path)):
@@ -227,10 +297,7 @@ def evaluate(run_dir: str, truth_file: str, skip_s: float) -> None:
     """
     from pospp.pipeline import evaluate_run
 
-    try:
-        table = evaluate_run(run_dir, truth_file, skip_s=skip_s)
-    except (ValueError, FileNotFoundError) as exc:
-        _fail(exc)
+    table = evaluate_run(run_dir, truth_file, skip_s=skip_s)
     wide = table.pivot(index="metric", columns="solution", values="value")
     units = table.groupby("metric").unit.first()
     wide.insert(0, "unit", units)
@@ -276,10 +343,8 @@ def diagnose(run_dir: str) -> None:
     bar = _StageBar()
     try:
         diag = diagnose_run(run_dir, progress=bar)
-    except (ValueError, FileNotFoundError) as exc:
+    finally:
         bar.close()
-        _fail(exc)
-    bar.close()
     for s in diag.steps:
         click.echo(f"step {s.step}: {s.effect:22s} value {s.value:+.4g} +- {s.sigma:.3g} "
                    f"{s.unit:10s} p = {s.p_value:.3g}  gap {s.gap_before_mps:.4f} -> "

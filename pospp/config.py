@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
+import os
 import tomllib
 import types
 import typing
@@ -22,20 +24,78 @@ class ConfigError(ValueError):
     """A pipeline configuration problem (names the file and key)."""
 
 
+MAX_CONFIG_BYTES = 1 << 20
+"""Largest pipeline file read [bytes] (a real one is a few kB)."""
+MAX_STRING_LEN = 256
+"""Longest string value of any key (a key may set a smaller limit)."""
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Range of one key: bounds for numbers (each element of a list), lengths for strings.
+
+    Every number must also be finite; every string at most ``MAX_STRING_LEN`` characters.
+    """
+
+    gt: float | None = None
+    ge: float | None = None
+    lt: float | None = None
+    le: float | None = None
+    min_len: int = 0
+    max_len: int = MAX_STRING_LEN
+
+    def describe(self) -> str:
+        """The limits as text: "> 0, <= 1000"."""
+        parts = [f"{op} {v:g}" for op, v in ((">", self.gt), (">=", self.ge), ("<", self.lt),
+                                             ("<=", self.le)) if v is not None]
+        return ", ".join(parts)
+
+    def check(self, value: Any, where: str) -> None:
+        """Raise :class:`ConfigError` naming ``where`` when ``value`` is out of range."""
+        if isinstance(value, str):
+            if not self.min_len <= len(value) <= self.max_len:
+                raise ConfigError(f"{where}: expected a string of {self.min_len} to "
+                                  f"{self.max_len} characters, got {len(value)}")
+            return
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            return
+        if not math.isfinite(value):
+            raise ConfigError(f"{where}: expected a finite number, got {value!r}")
+        bad = ((self.gt is not None and not value > self.gt)
+               or (self.ge is not None and not value >= self.ge)
+               or (self.lt is not None and not value < self.lt)
+               or (self.le is not None and not value <= self.le))
+        if bad:
+            raise ConfigError(f"{where}: expected a value {self.describe()}, got {value!r}")
+
+
+def _key(default: Any, **limits: Any) -> Any:
+    """A config field with its limits (kept next to the field, read by the validation)."""
+    return field(default=default, metadata={"limits": Limits(**limits)})
+
+
+def limits_of(cls: type, name: str) -> Limits:
+    """The limits of key ``name`` of config section ``cls`` (defaults when it sets none)."""
+    f = {f.name: f for f in dataclasses.fields(cls)}[name]
+    return f.metadata.get("limits", Limits())
+
+
 @dataclass(frozen=True)
 class InputConfig:
     """[input]: topics of the MCAP file and the IMU mounting."""
 
-    imu_topic: str = "/imu/data"
-    fix_topic: str = "/gnss/fix"
-    vel_topic: str = "/gnss/vel"
+    imu_topic: str = _key("/imu/data", min_len=1, max_len=256)
+    fix_topic: str = _key("/gnss/fix", min_len=1, max_len=256)
+    vel_topic: str = _key("/gnss/vel", min_len=1, max_len=256)
     sensor_frame: str = "flu"
     """Axes of the logged IMU: "flu" (ROS REP-103) or "frd"."""
-    mounting_rpy_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    mounting_rpy_deg: tuple[float, float, float] = _key((0.0, 0.0, 0.0), ge=-360.0, le=360.0)
     """Extra rotation of the IMU case w.r.t. the body (roll, pitch, yaw of sensor in body)."""
-    start_s: float | None = None
+    start_s: float | None = _key(None, ge=0.0)
     """Process from this many seconds after the first IMU sample (None: from the start)."""
-    end_s: float | None = None
+    end_s: float | None = _key(None, gt=0.0)
+    max_chunk_mib: float = _key(256.0, gt=0.0, le=65536.0)
+    """Largest decompressed MCAP chunk the reader accepts [MiB] (bounds its memory)."""
 
 
 @dataclass(frozen=True)
@@ -44,43 +104,43 @@ class ImuConfig:
 
     grade: str = "flight"
     """Preset: "flight", "vehicle", "tactical" or "mems"."""
-    gyro_bias_sigma_dph: float | None = None
-    gyro_arw_dpsh: float | None = None
-    gyro_gm_sigma_dph: float | None = None
-    gyro_gm_tau_s: float | None = None
-    accel_bias_sigma_ug: float | None = None
-    accel_vrw_mpsph: float | None = None
-    accel_gm_sigma_ug: float | None = None
-    accel_gm_tau_s: float | None = None
+    gyro_bias_sigma_dph: float | None = _key(None, ge=0.0)
+    gyro_arw_dpsh: float | None = _key(None, ge=0.0)
+    gyro_gm_sigma_dph: float | None = _key(None, ge=0.0)
+    gyro_gm_tau_s: float | None = _key(None, gt=0.0)
+    accel_bias_sigma_ug: float | None = _key(None, ge=0.0)
+    accel_vrw_mpsph: float | None = _key(None, ge=0.0)
+    accel_gm_sigma_ug: float | None = _key(None, ge=0.0)
+    accel_gm_tau_s: float | None = _key(None, gt=0.0)
 
 
 @dataclass(frozen=True)
 class GnssConfig:
     """[gnss]: antenna lever arm and measurement screening."""
 
-    lever_arm_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    lever_arm_m: tuple[float, float, float] = _key((0.0, 0.0, 0.0), ge=-100.0, le=100.0)
     """Antenna position in the body frame FRD [m]."""
     estimate_lever_arm: bool = False
-    pos_sigma_floor_m: float | None = None
+    pos_sigma_floor_m: float | None = _key(None, gt=0.0)
     """Least GNSS position sigma the filter uses [m]; omitted: the [imu] grade's default
     (``GNSS_SIGMA_FLOORS_BY_GRADE``)."""
-    vel_sigma_floor_mps: float | None = None
+    vel_sigma_floor_mps: float | None = _key(None, gt=0.0)
     """Least GNSS velocity sigma the filter uses [m/s]; omitted: the grade's default."""
     use_velocity: bool = True
-    gate_probability: float = 0.9999
+    gate_probability: float = _key(0.9999, gt=0.0, lt=1.0)
 
 
 @dataclass(frozen=True)
 class FilterConfig:
     """[filter]: algorithm A."""
 
-    output_rate_hz: float = 10.0
+    output_rate_hz: float = _key(10.0, gt=0.0, le=1000.0)
     smoother: bool = True
-    static_alignment_s: float = 120.0
+    static_alignment_s: float = _key(120.0, ge=0.0)
     """Longest static period used for coarse alignment at the start [s]."""
-    max_imu_gap_s: float = 0.5
+    max_imu_gap_s: float = _key(0.5, gt=0.0)
     """Longest IMU gap bridged (and logged); a longer one is an error naming its time [s]."""
-    gate_reset_s: float = 30.0
+    gate_reset_s: float = _key(30.0, gt=0.0)
     """After this long of gated GNSS records, the next one resets the covariance block [s]."""
     estimate_scale_factors: bool = False
     """Add gyro and accelerometer scale-factor states to algorithm A."""
@@ -132,17 +192,17 @@ class LegsConfig:
     win.
     """
 
-    min_duration_s: float | None = None
-    duration_tolerance_s: float | None = None
-    max_duration_s: float = 1800.0
-    max_heading_rate_dps: float = 0.2
-    max_heading_spread_deg: float = 2.0
-    max_speed_std_mps: float = 0.5
-    max_acceleration_mps2: float = 0.05
-    max_vertical_speed_mps: float = 1.0
-    min_speed_mps: float = 3.0
-    trim_s: float = 2.0
-    smoothing_s: float = 5.0
+    min_duration_s: float | None = _key(None, gt=0.0)
+    duration_tolerance_s: float | None = _key(None, ge=0.0)
+    max_duration_s: float = _key(1800.0, gt=0.0)
+    max_heading_rate_dps: float = _key(0.2, gt=0.0)
+    max_heading_spread_deg: float = _key(2.0, gt=0.0, le=180.0)
+    max_speed_std_mps: float = _key(0.5, gt=0.0)
+    max_acceleration_mps2: float = _key(0.05, gt=0.0)
+    max_vertical_speed_mps: float = _key(1.0, gt=0.0)
+    min_speed_mps: float = _key(3.0, ge=0.0)
+    trim_s: float = _key(2.0, ge=0.0)
+    smoothing_s: float = _key(5.0, ge=0.0)
 
 
 @dataclass(frozen=True)
@@ -153,10 +213,10 @@ class ReplayConfig:
     """A solution B starts from and is compared with: "smoothed" (default) or "forward"."""
     accel_compensation: str = "filter"
     """"filter": remove A's accelerometer bias estimate; "none": raw, as the paper."""
-    sample_rate_hz: float = 1.0
-    sigma_floor_mps: float = 0.005
-    horizon_s: float = 300.0
-    transition_step: int = 10
+    sample_rate_hz: float = _key(1.0, gt=0.0, le=1000.0)
+    sigma_floor_mps: float = _key(0.005, gt=0.0)
+    horizon_s: float = _key(300.0, gt=0.0)
+    transition_step: int = _key(10, ge=1, le=100000)
 
 
 @dataclass(frozen=True)
@@ -164,8 +224,8 @@ class PairsConfig:
     """[pairs]: pairing policy and calibration."""
 
     mode: str = "adjacent"
-    max_cond_scaled: float = 1.0e4
-    min_dheading_deg: float = 30.0
+    max_cond_scaled: float = _key(1.0e4, gt=1.0)
+    min_dheading_deg: float = _key(30.0, ge=0.0, le=180.0)
     formulation: str = "body"
     """Formulation used for compensation: "body" or "paper" (both are always reported)."""
     transition: str = "numerical"
@@ -174,7 +234,7 @@ class PairsConfig:
     """Residual model of the least squares: "gyro_rw" (B's error driven by the gyro random
     walk and, when the grade has one, its Gauss-Markov drift; docs/calibration.md) or
     "white"."""
-    noise_step_s: float = 10.0
+    noise_step_s: float = _key(10.0, gt=0.0)
     """Spacing of the samples the correlated-noise least squares uses [s]."""
     estimate_gyro_z: bool = False
     """Also estimate the vertical body gyro bias (weakly observable on level legs)."""
@@ -197,7 +257,7 @@ class OutputsConfig:
 
     mcap: bool = True
     """Write the best trajectory to trajectory.mcap (ROS 2 NavSatFix + PoseStamped)."""
-    mcap_rate_hz: float = 2.0
+    mcap_rate_hz: float = _key(2.0, gt=0.0, le=1000.0)
     """Rate of trajectory.mcap [Hz] (at most the [filter] output rate; the Parquet table keeps
     the full output rate)."""
     report: bool = True
@@ -264,6 +324,11 @@ _CHOICES = {
 }
 
 
+def _short(value: Any, n: int = 60) -> str:
+    text = repr(value)
+    return text if len(text) <= n else f"{text[:n]}... ({len(text)} characters)"
+
+
 def _convert(value: Any, tp: Any, where: str) -> Any:
     origin = typing.get_origin(tp)
     args = typing.get_args(tp)
@@ -274,24 +339,29 @@ def _convert(value: Any, tp: Any, where: str) -> Any:
         return _convert(value, inner[0], where)
     if origin is tuple:
         if not isinstance(value, list | tuple) or len(value) != len(args):
-            raise ConfigError(f"{where}: expected a list of {len(args)} numbers, got {value!r}")
+            raise ConfigError(f"{where}: expected a list of {len(args)} numbers, "
+                              f"got {_short(value)}")
         pairs = enumerate(zip(value, args, strict=True))
         return tuple(_convert(v, a, f"{where}[{i}]") for i, (v, a) in pairs)
     if tp is bool:
         if not isinstance(value, bool):
-            raise ConfigError(f"{where}: expected true or false, got {value!r}")
+            raise ConfigError(f"{where}: expected true or false, got {_short(value)}")
         return value
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ConfigError(f"{where}: expected a number, got {value!r}")
-        return float(value)
+            raise ConfigError(f"{where}: expected a number, got {_short(value)}")
+        try:
+            return float(value)
+        except OverflowError:
+            raise ConfigError(f"{where}: expected a finite number, "
+                              f"got {_short(value)}") from None
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"{where}: expected an integer, got {value!r}")
+            raise ConfigError(f"{where}: expected an integer, got {_short(value)}")
         return value
     if tp is str:
         if not isinstance(value, str):
-            raise ConfigError(f"{where}: expected a string, got {value!r}")
+            raise ConfigError(f"{where}: expected a string, got {_short(value)}")
         return value
     raise ConfigError(f"{where}: unsupported type {tp!r}")
 
@@ -307,10 +377,11 @@ def config_from_dict(data: dict[str, Any], *, source: str = "<dict>") -> Pipelin
             )
         if key == "name":
             kwargs["name"] = _convert(value, str, f"{source}: name")
+            Limits().check(kwargs["name"], f"{source}: name")
             continue
         cls = hints[key]
         if not isinstance(value, dict):
-            raise ConfigError(f"{source}: [{key}] must be a table, got {value!r}")
+            raise ConfigError(f"{source}: [{key}] must be a table, got {_short(value)}")
         sub_hints = typing.get_type_hints(cls)
         sub: dict[str, Any] = {}
         for k, v in value.items():
@@ -318,21 +389,45 @@ def config_from_dict(data: dict[str, Any], *, source: str = "<dict>") -> Pipelin
             if k not in sub_hints:
                 raise ConfigError(f"{where}: unknown key; expected one of {sorted(sub_hints)}")
             sub[k] = _convert(v, sub_hints[k], where)
+            limits = limits_of(cls, k)
+            for i, item in enumerate(sub[k] if isinstance(sub[k], tuple) else (sub[k],)):
+                if item is not None:
+                    limits.check(item, f"{where}[{i}]" if isinstance(sub[k], tuple) else where)
             choices = _CHOICES.get((key, k))
             if choices is not None and sub[k] not in choices:
-                raise ConfigError(f"{where}: expected one of {list(choices)}, got {sub[k]!r}")
+                raise ConfigError(f"{where}: expected one of {list(choices)}, got {_short(sub[k])}")
         kwargs[key] = cls(**sub)
+    inp = kwargs.get("input")
+    if inp is not None and inp.start_s is not None and inp.end_s is not None \
+            and not inp.end_s > inp.start_s:
+        raise ConfigError(f"{source}: input.end_s: expected a value > input.start_s = "
+                          f"{inp.start_s:g}, got {inp.end_s:g}")
     return PipelineConfig(**kwargs)
 
 
 def load_config(path: str | Path) -> PipelineConfig:
     """Read a pipeline TOML file."""
     p = Path(path)
+    shown = os.fsencode(p).decode("utf-8", "backslashreplace")
     try:
         with p.open("rb") as fh:
-            data = tomllib.load(fh)
+            raw = fh.read(MAX_CONFIG_BYTES + 1)
     except FileNotFoundError:
-        raise ConfigError(f"{p}: pipeline file not found") from None
+        raise ConfigError(f"{shown}: pipeline file not found") from None
+    except OSError as exc:
+        raise ConfigError(f"{shown}: cannot read the pipeline file: {exc.strerror}") from None
+    if len(raw) > MAX_CONFIG_BYTES:
+        raise ConfigError(f"{shown}: pipeline file larger than {MAX_CONFIG_BYTES} bytes; "
+                          "a pipeline file is a few kB of TOML")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{shown}: not UTF-8 text (byte {exc.start}); TOML must be "
+                          "UTF-8") from None
+    try:
+        data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{p}: not valid TOML: {exc}") from None
-    return config_from_dict(data, source=str(p))
+        raise ConfigError(f"{shown}: not valid TOML: {exc}") from None
+    except RecursionError:
+        raise ConfigError(f"{shown}: not valid TOML: nested too deeply") from None
+    return config_from_dict(data, source=shown)

@@ -13,8 +13,11 @@ numeric happens here, only orchestration and the translation of results into out
 Failure policy (design.md "nothing is lost"): ingestion problems that make the file unusable
 raise :class:`pospp.io.errors.IngestError` with file, topic and time; every later stage that
 cannot produce a result (no legs, no admissible pair, ...) records why in the ``messages``
-table and the run goes on, writing every table it can. Tables are written atomically, and the
-summary table is written last, so a folder with a summary is a finished run.
+table and the run goes on, writing every table it can. A run is written into a staging folder
+and swapped in whole when done (:mod:`pospp.io.run_folder`): a run folder is one complete run,
+or one failed run whose messages and summary say why, never a mix of two runs. The commands
+that add to a finished run (report, evaluate, diagnose) write into marked run folders only,
+each file atomically.
 """
 
 from __future__ import annotations
@@ -36,7 +39,7 @@ from pospp.config import PipelineConfig, config_from_dict
 from pospp.diagnose.workflow import Diagnosis, diagnosis_columns, residual_curve_columns
 from pospp.diagnose.workflow import diagnose as run_diagnosis
 from pospp.evaluate import evaluation_rows, solution_errors
-from pospp.io import mcap_reader, parquet_tables, report_files, trajectory_mcap
+from pospp.io import mcap_reader, parquet_tables, report_files, run_folder, trajectory_mcap
 from pospp.io.errors import IngestError
 from pospp.nav import filter as nav_filter
 from pospp.nav import tuning as nav_tuning
@@ -49,10 +52,6 @@ ProgressFn = Callable[[str, float], None]
 """Progress callback: (stage name, fraction of the whole run done in [0, 1])."""
 
 STAGES = ("ingest", "navigate", "calibrate", "compensate", "diagnose", "qc", "write")
-
-_RUN_TABLES = ("trajectory", "legs", "pairs", "calibration", "leg_errors", "diagnosis",
-               "diagnosis_curves", "evaluation", "qc")
-"""Tables of a run folder that belong to one run (messages and summary are always written)."""
 
 
 @dataclass(frozen=True)
@@ -185,6 +184,10 @@ class _Progress:
             {"severity": severity, "stage": stage, "time_ns": time_ns, "text": text}
         )
 
+    def rows(self) -> list[dict[str, Any]]:
+        """The messages, their text encodable as UTF-8 (file names that do not decode)."""
+        return [{**m, "text": run_folder.display_text(str(m["text"]))} for m in self.messages]
+
     @property
     def elapsed_s(self) -> float:
         return time.perf_counter() - self._t0
@@ -196,8 +199,13 @@ def run(
     out_dir: str | Path,
     *,
     progress: ProgressFn | None = None,
+    force: bool = False,
 ) -> RunOutcome:
     """Process one flight log into a run folder (the whole pipeline).
+
+    The run is written into a staging folder beside ``out_dir`` and swapped in whole when done
+    (:mod:`pospp.io.run_folder`): ``out_dir`` holds one complete run or one failed run (its
+    messages and summary, status "failed", and no table of an earlier run), never a mix.
 
     Parameters
     ----------
@@ -205,9 +213,12 @@ def run(
         ROS 2 MCAP flight log (data contract in docs/formats.md).
     config : PipelineConfig
     out_dir : path-like
-        Run folder; created if needed. Existing tables are replaced atomically.
+        Run folder: absent, empty, or an earlier pospp run (replaced only with ``force``).
+        A folder holding files pospp did not write, or the input itself, is refused.
     progress : callable, optional
         Called with (stage, fraction done) at each stage start.
+    force : bool
+        Replace an earlier pospp run in ``out_dir``.
 
     Returns
     -------
@@ -215,16 +226,62 @@ def run(
 
     Raises
     ------
-    pospp.io.errors.IngestError
-        Only after the messages and summary tables recording the failure are written.
+    pospp.io.run_folder.RunFolderError
+        ``out_dir`` may not be written (nothing is touched).
+    pospp.io.errors.IngestError, ValueError, ...
+        Only after the failed run (messages and summary recording the failure) is swapped in.
     """
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    target = run_folder.check_target(out_dir, input_file=mcap_path, force=force)
+    sha = parquet_tables.sha256_file(mcap_path) if Path(mcap_path).is_file() else ""
     book = _Progress(progress)
+    stage = run_folder.new_staging(target)
+    try:
+        outcome = _run_stages(mcap_path, sha, config, stage, book)
+        status = outcome.status
+    except Exception as exc:
+        # the new run failed: its folder says so and keeps nothing of an earlier run
+        try:
+            if not (stage / "summary.parquet").is_file():
+                book.note("error", "run", f"{type(exc).__name__}: {exc}")
+                _write_failed(mcap_path, sha, config, stage, book)
+            run_folder.write_marker(stage, input_file=mcap_path, input_sha256=sha,
+                                    config_json=config.to_json(), status="failed")
+            run_folder.swap_in(stage, target)
+        except Exception:  # e.g. a full disk: keep the previous run, report the first error
+            run_folder.discard(stage)
+        raise
+    except BaseException:  # interrupted: the previous run stays as it was
+        run_folder.discard(stage)
+        raise
+    try:
+        run_folder.write_marker(stage, input_file=mcap_path, input_sha256=sha,
+                                config_json=config.to_json(), status=status)
+        run_folder.swap_in(stage, target)
+    except BaseException:
+        run_folder.discard(stage)
+        raise
+    book.done()
+    return replace(outcome, out_dir=target)
+
+
+def _write_failed(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
+                  book: _Progress) -> None:
+    """Messages and summary of a run that ended with an unexpected error."""
+    meta = {"input_file": run_folder.display_path(mcap_path), "input_sha256": sha,
+            "config": config.to_dict()}
+    summary = {"input_file": meta["input_file"], "input_sha256": sha, "status": "failed",
+               "wall_time_s": book.elapsed_s}
+    parquet_tables.write_table(out / "messages.parquet", outputs.messages_table(book.rows()),
+                               "messages", metadata=meta)
+    parquet_tables.write_table(out / "summary.parquet", summary, "summary", metadata=meta)
+
+
+def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
+                book: _Progress) -> RunOutcome:
+    """Every stage of :func:`run`, writing into the (staging) folder ``out``."""
     meta = {
-        "input_file": str(mcap_path),
-        "input_sha256": parquet_tables.sha256_file(mcap_path) if Path(mcap_path).is_file()
-        else "",
+        "input_file": run_folder.display_path(mcap_path),
+        "input_sha256": sha,
         "config": config.to_dict(),
     }
     summary: dict[str, Any] = {"input_file": meta["input_file"],
@@ -236,10 +293,9 @@ def run(
     def finish(status: str) -> RunOutcome:
         summary["status"] = status
         summary["wall_time_s"] = book.elapsed_s
-        msgs = pd.DataFrame(book.messages, columns=["severity", "stage", "time_ns", "text"])
-        write("messages", outputs.messages_table(book.messages))
+        msgs = pd.DataFrame(book.rows(), columns=["severity", "stage", "time_ns", "text"])
+        write("messages", outputs.messages_table(book.rows()))
         write("summary", summary)  # last: a folder with a summary is a finished run
-        book.done()
         return RunOutcome(out, status, summary, msgs, book.elapsed_s)
 
     # --- ingest -------------------------------------------------------------------------------
@@ -322,13 +378,9 @@ def run(
                     if k in solutions)
         trajectory_mcap.write_trajectory_mcap(out / "trajectory.mcap", best, epoch_ns,
                                               rate_hz=config.outputs.mcap_rate_hz)
-    # a re-run into the same folder must not leave tables of an earlier run beside this one's
-    # (a failed run, above, keeps them: its summary says it failed)
-    stale = [n for n in _RUN_TABLES if n not in tables]
-    report_files.remove_tables(out, stale)
     outcome = finish(status)
     if config.outputs.report:
-        write_report(out)
+        _render_report(out)
     return outcome
 
 
@@ -368,7 +420,11 @@ def quality_control(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
 
 
 def write_report(run_dir: str | Path) -> Path:
-    """Render report.html of a run folder from its tables alone."""
+    """Render report.html of a run folder from its tables alone (``pospp report``)."""
+    return _render_report(run_folder.require_run_folder(run_dir))
+
+
+def _render_report(run_dir: Path) -> Path:
     tables = report_files.read_run_tables(run_dir)
     title = f"pospp run report: {Path(str(tables['summary'].input_file.iloc[0])).name}" \
         if "summary" in tables else "pospp run report"
@@ -424,7 +480,9 @@ def evaluate_run(run_dir: str | Path, truth_file: str | Path, *, skip_s: float =
     Writes RUN_DIR/evaluation.parquet (long form) and RUN_DIR/evaluation.png; returns the
     table.
     """
-    run = Path(run_dir)
+    run = run_folder.require_run_folder(run_dir)
+    if not (run / "trajectory.parquet").is_file():
+        raise FileNotFoundError(f"{run}: the run has no trajectory.parquet (it failed)")
     traj = parquet_tables.read_table(run / "trajectory.parquet")
     ref = parquet_tables.read_reference_trajectory(truth_file)
     errors = {}
@@ -472,7 +530,7 @@ def diagnose_run(run_dir: str | Path, *, progress: ProgressFn | None = None) -> 
     the calibration stage (deterministic, so it reproduces the run's B-minus-A curves), runs
     the workflow, and writes diagnosis.parquet and the report.
     """
-    run = Path(run_dir)
+    run = run_folder.require_run_folder(run_dir)
     meta = parquet_tables.read_metadata(run / "summary.parquet")
     path = Path(meta["input_file"])
     if not path.is_file():
@@ -499,6 +557,6 @@ def diagnose_run(run_dir: str | Path, *, progress: ProgressFn | None = None) -> 
     parquet_tables.write_table(run / "diagnosis_curves.parquet",
                                residual_curve_columns(diagnosis), "diagnosis_curves",
                                metadata=out_meta)
-    write_report(run)
+    _render_report(run)
     book.done()
     return diagnosis

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 from mcap.data_stream import ReadDataStream
+from mcap.exceptions import McapError
 from mcap.records import Channel, Schema
 from mcap_ros2.decoder import DecoderFactory
 
@@ -236,9 +237,21 @@ class Collector:
 _REC = struct.Struct("<BQ").unpack_from
 _U16 = struct.Struct("<H").unpack_from
 _CHUNK_HEAD = struct.Struct("<QQQII")  # start, end, uncompressed size, crc, compression len
+# Statistics: message_count u64, schema_count u16, channel_count u32, attachment_count u32,
+# metadata_count u32, chunk_count u32, message_start_time u64, message_end_time u64,
+# channel_message_counts byte length u32 (then channel_id u16, count u64 pairs)
+_STATS_HEAD = struct.Struct("<QHIIIIQQI")
 _MAGIC = b"\x89MCAP0\r\n"
 _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK, _OP_FOOTER = 0x03, 0x04, 0x05, 0x06, 0x02
-_OP_DATA_END = 0x0F
+_OP_STATISTICS, _OP_DATA_END = 0x0B, 0x0F
+_FOOTER_LEN = 20  # summary_start u64, summary_offset_start u64, summary_crc u32
+
+MAX_CHUNK_BYTES = 256 * 1024 * 1024
+"""Default cap on one chunk's decompressed size [bytes] (``max_chunk_bytes``): a chunk whose
+header claims more is corrupt (or written with huge chunks: raise the cap), and no chunk's
+decompression may produce more than the smaller of this and what its header claims."""
+_LZ4_PIECE = 16 * 1024 * 1024  # lz4 output produced at a time beyond the first call
+_READ_PIECE = 1 << 20  # bytes read at a time when records are only checksummed
 
 
 class _Truncated(Exception):
@@ -256,6 +269,17 @@ class _RawChunk:
     truncated: bool
 
 
+@dataclass(frozen=True)
+class _Stats:
+    """The summary section's Statistics record (the fields pospp checks)."""
+
+    message_count: int
+    start_ns: int
+    end_ns: int
+    per_channel: dict[int, int]
+    offset: int
+
+
 def _parse_chunk(body: bytes, truncated: bool) -> _RawChunk:
     if len(body) < _CHUNK_HEAD.size:
         raise _Truncated("chunk header cut off")
@@ -270,47 +294,82 @@ def _parse_chunk(body: bytes, truncated: bool) -> _RawChunk:
     return _RawChunk(start, end, usize, crc, comp, data, truncated or len(data) < dlen)
 
 
-_MAX_CHUNK_BYTES = 1 << 32  # the mcap library's own record size limit (4 GiB)
+def _parse_stats(body: bytes, offset: int) -> _Stats:
+    if len(body) < _STATS_HEAD.size:
+        raise ValueError(f"Statistics record of {len(body)} bytes is too short")
+    count, _, _, _, _, _, start, end, clen = _STATS_HEAD.unpack_from(body, 0)
+    p = _STATS_HEAD.size
+    if clen % 10 or p + clen > len(body):
+        raise ValueError(f"Statistics channel counts of {clen} bytes do not fit the record")
+    per_channel = dict(struct.iter_unpack("<HQ", body[p : p + clen]))
+    return _Stats(count, start, end, per_channel, offset)
 
 
-def _decompress(chunk: _RawChunk) -> bytes:
-    """Chunk records; for a truncated chunk, as many bytes as can be decompressed."""
-    if chunk.uncompressed_size > _MAX_CHUNK_BYTES:
-        raise ValueError(f"chunk claims {chunk.uncompressed_size} uncompressed bytes (corrupt "
-                         "header?)")
+def _lz4_bounded(data: bytes, limit: int) -> bytes | bytearray:
+    """Decompress an lz4 frame, producing at most ``limit + 1`` bytes (one more than allowed,
+    so that the caller sees an overrun); the readable part of a cut-off frame is returned."""
+    import lz4.frame
+
+    dec = lz4.frame.LZ4FrameDecompressor()
+    first = dec.decompress(data, max_length=min(limit + 1, _LZ4_PIECE))
+    if dec.eof or dec.needs_input or len(first) > limit:
+        return first
+    out = bytearray(first)  # grows in place (realloc), not by doubling copies
+    while len(out) <= limit and not (dec.eof or dec.needs_input):
+        out += dec.decompress(b"", max_length=min(limit + 1 - len(out), _LZ4_PIECE))
+    return out
+
+
+def _decompress(chunk: _RawChunk, max_bytes: int = MAX_CHUNK_BYTES) -> bytes | bytearray:
+    """Chunk records; for a truncated chunk, as many bytes as can be decompressed.
+
+    Memory is bounded: a header claiming more than ``max_bytes`` is rejected before anything
+    is decompressed, and decompression stops one byte past what the header claims (zstd
+    through a bounded ``stream_reader.read``, lz4 through ``max_length``), so a chunk that
+    would inflate to gigabytes costs at most ``max_bytes`` (lz4: plus 32 MiB of pieces).
+    """
+    usize = chunk.uncompressed_size
+    if usize > max_bytes:
+        raise ValueError(f"chunk claims {usize} uncompressed bytes, over the cap of {max_bytes} "
+                         "(max_chunk_bytes; a corrupt header, or raise the cap)")
     if chunk.compression == "zstd":
         import zstandard
 
-        if chunk.truncated:
-            data = zstandard.ZstdDecompressor().decompressobj().decompress(chunk.data)
-        else:
-            declared = zstandard.frame_content_size(chunk.data)  # -1: not in the frame header
-            if declared not in (-1, chunk.uncompressed_size):
-                raise ValueError(f"zstd frame declares {declared} bytes, chunk header "
-                                 f"{chunk.uncompressed_size}")
-            data = zstandard.ZstdDecompressor().decompress(
-                chunk.data, max_output_size=chunk.uncompressed_size
-            )
+        declared = zstandard.frame_content_size(chunk.data) if len(chunk.data) >= 18 else -1
+        if not chunk.truncated and declared not in (-1, usize):
+            raise ValueError(f"zstd frame declares {declared} bytes, chunk header {usize}")
+        if not chunk.truncated and declared == usize and usize > 0:
+            data = zstandard.ZstdDecompressor().decompress(chunk.data)  # allocates usize
+        else:  # no size in the frame, or cut off: read at most usize + 1 bytes
+            reader = zstandard.ZstdDecompressor().stream_reader(chunk.data,
+                                                                 read_across_frames=False)
+            data = reader.read(usize + 1)
     elif chunk.compression == "lz4":
-        import lz4.frame
-
-        if chunk.truncated:
-            data = lz4.frame.LZ4FrameDecompressor().decompress(chunk.data)
-        else:
-            data = lz4.frame.decompress(chunk.data)
+        data = _lz4_bounded(chunk.data, usize)
     elif chunk.compression == "":
         data = chunk.data
     else:
         raise ValueError(f"unsupported chunk compression {chunk.compression!r}")
+    if len(data) > usize:
+        raise ValueError(f"chunk decompresses to more than the {usize} bytes its header claims")
     if chunk.truncated:
         return data
-    if len(data) != chunk.uncompressed_size:
-        raise ValueError(
-            f"chunk decompressed to {len(data)} bytes, header says {chunk.uncompressed_size}"
-        )
+    if len(data) != usize:
+        raise ValueError(f"chunk decompressed to {len(data)} bytes, header says {usize}")
     if chunk.crc != 0 and zlib.crc32(data) != chunk.crc:
         raise ValueError("chunk CRC mismatch")
     return data
+
+
+def log_time_text(ns: int | None, first_ns: int | None = None) -> str:
+    """``2024-06-01T00:27:14.120Z`` (UTC) for an MCAP log time [ns], with the seconds since
+    ``first_ns`` when given."""
+    if ns is None:
+        return "no message read"
+    iso = np.datetime_as_string(np.datetime64(int(ns) // 1_000_000, "ms"), unit="ms")
+    if first_ns is None:
+        return f"{iso}Z"
+    return f"{iso}Z ({(int(ns) - int(first_ns)) * 1e-9:.1f} s after the first message)"
 
 
 class Scan:
@@ -318,22 +377,53 @@ class Scan:
 
     Records are framed here (opcode, length) rather than by ``mcap``'s ``StreamReader``, so
     that index records are skipped unparsed and a truncated last chunk is still decompressed
-    as far as it goes.
+    as far as it goes. ``complete`` ends True only when the Footer is found at the very end
+    (followed by the closing magic), no chunk was skipped, the DataEnd's data-section CRC
+    (when non-zero) matches, and the summary's Statistics (when present and not corrupt)
+    agree with the message counts read on the channels of the collected topics.
     """
 
-    def __init__(self, path: str, collectors: dict[str, Collector]) -> None:
+    def __init__(self, path: str, collectors: dict[str, Collector], *,
+                 max_chunk_bytes: int = MAX_CHUNK_BYTES) -> None:
         self.path = path
         self.by_topic = collectors
+        self.max_chunk_bytes = int(max_chunk_bytes)
         self.schemas: dict[int, Schema] = {}
         self.topics: dict[str, str] = {}  # topic -> schema name
         self.route: dict[int, Collector | None] = {}
         self.issues: list[IngestIssue] = []
         self.complete = False  # reached the Footer with no chunk skipped
-        self.damaged = False  # a corrupt chunk was skipped
+        self.damaged = False  # data known missing or altered (a chunk skipped, a CRC, counts)
         self.data_end = False  # the DataEnd record (end of the data section) was read
         self.last_log_time_ns: int | None = None
+        self.first_log_time_ns: int | None = None
+        self.read_counts: dict[int, int] = {}  # channel id -> Message records framed
+        self.stats: _Stats | None = None
         self._loose: list[bytes] = []
+        self._crc = 0  # running CRC-32 of the data section (from the leading magic)
+        self._crc_on = True
+        self._after_data_end_noted = False
 
+    # -- issues
+    def _when(self) -> str:
+        return log_time_text(self.last_log_time_ns, self.first_log_time_ns)
+
+    def _error(self, message: str, offset: int, *, log_time_ns: int | None = None,
+               time_ns: int | None = None) -> None:
+        self.damaged = True
+        self.issues.append(IngestIssue(
+            "error", self.path, None, None, time_ns, message,
+            log_time_ns=self.last_log_time_ns if log_time_ns is None else log_time_ns,
+            byte_offset=offset,
+        ))
+
+    def _warning(self, message: str, offset: int) -> None:
+        self.issues.append(IngestIssue(
+            "warning", self.path, None, None, None, message,
+            log_time_ns=self.last_log_time_ns, byte_offset=offset,
+        ))
+
+    # -- records
     def _schema(self, rec: Schema) -> None:
         self.schemas[rec.id] = rec
 
@@ -361,12 +451,18 @@ class Scan:
 
     def _meta(self, op: int, body: bytes) -> None:
         stream = ReadDataStream(BytesIO(body))
+        try:
+            rec = Schema.read(stream) if op == _OP_SCHEMA else Channel.read(stream)
+        except McapError as exc:  # EndOfFile: the fields overrun the record
+            what = "Schema" if op == _OP_SCHEMA else "Channel"
+            raise ValueError(f"{what} record of {len(body)} bytes unreadable "
+                             f"({type(exc).__name__})") from exc
         if op == _OP_SCHEMA:
-            self._schema(Schema.read(stream))
+            self._schema(rec)
         else:
-            self._channel(Channel.read(stream))
+            self._channel(rec)
 
-    def _records(self, buf: bytes, *, partial: bool = False) -> int:
+    def _records(self, buf: bytes | bytearray, *, partial: bool = False) -> int:
         """Walk the records of a decompressed chunk (or a block of loose messages).
 
         With ``partial`` (a truncated chunk), stop quietly at the first incomplete record.
@@ -394,15 +490,17 @@ class Scan:
         for ch, lst in by_channel.items():
             if ch not in self.route:
                 raise ValueError(f"message on channel {ch} before its Channel record")
+            self.read_counts[ch] = self.read_counts.get(ch, 0) + len(lst)
             col = self.route[ch]
             if col is None:
                 continue
             p = np.asarray(lst, dtype=np.int64)
             for k in range(0, len(p), _GATHER_BATCH):
                 col.add(ch, arr, p[k : k + _GATHER_BATCH])
-            last = int(p[-1])
-            self.last_log_time_ns = max(self.last_log_time_ns or 0,
-                                        struct.unpack_from("<Q", buf, last + 15)[0])
+            first = struct.unpack_from("<Q", buf, int(p[0]) + 15)[0]
+            last = struct.unpack_from("<Q", buf, int(p[-1]) + 15)[0]
+            self.first_log_time_ns = min(self.first_log_time_ns or first, first)
+            self.last_log_time_ns = max(self.last_log_time_ns or 0, last)
         return pos
 
     def _flush_loose(self) -> None:
@@ -411,20 +509,41 @@ class Scan:
             self._loose = []
             self._records(buf)
 
+    # -- reading with the data-section CRC
+    def _read(self, f: Any, n: int) -> bytes:
+        b = f.read(n)
+        if self._crc_on:
+            self._crc = zlib.crc32(b, self._crc)
+        return b
+
+    def _skip(self, f: Any, n: int) -> None:
+        if not self._crc_on:
+            f.seek(n, 1)
+            return
+        while n > 0:
+            b = f.read(min(n, _READ_PIECE))
+            if not b:
+                return
+            self._crc = zlib.crc32(b, self._crc)
+            n -= len(b)
+
     def run(self) -> None:
         size = Path(self.path).stat().st_size
         with open(self.path, "rb") as f:
-            if f.read(8) != _MAGIC:
+            if self._read(f, 8) != _MAGIC:
                 raise IngestError("not an MCAP file (bad magic bytes)", file=self.path)
             good = 8
             try:
                 while True:
-                    head = f.read(9)
+                    crc_before = self._crc
+                    head = self._read(f, 9)
                     if len(head) < 9:
                         raise _Truncated("file ends without a Footer record")
                     op, ln = _REC(head, 0)
-                    if op in (_OP_CHUNK, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE):
-                        body = f.read(min(ln, size - f.tell()))  # a corrupt length
+                    if op in (_OP_CHUNK, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_STATISTICS):
+                        if self.data_end and op in (_OP_CHUNK, _OP_MESSAGE):
+                            self._data_after_data_end(op, good)
+                        body = self._read(f, min(ln, size - f.tell()))  # a corrupt length
                         # must not allocate more than the file holds
                         short = len(body) < ln
                         if op == _OP_CHUNK:
@@ -436,22 +555,29 @@ class Scan:
                             self._loose.append(head + body)
                             if len(self._loose) >= 10000:
                                 self._flush_loose()
+                        elif op == _OP_STATISTICS:
+                            self.stats = _parse_stats(body, good)
                         else:
                             self._meta(op, body)
                         if short:
                             raise _Truncated("chunk cut off (decoded what it held)")
-                    elif op == _OP_FOOTER:
+                    elif op == _OP_FOOTER and self._footer_at_end(f, good, ln, size):
                         self._flush_loose()
+                        self._check_statistics()
                         self.complete = not self.damaged
                         return
-                    elif op == _OP_DATA_END:
-                        self._flush_loose()
-                        self.data_end = True
-                        f.seek(ln, 1)
                     else:
                         if good + 9 + ln > size:
                             raise _Truncated("record cut off")
-                        f.seek(ln, 1)
+                        if op == _OP_FOOTER:
+                            self._flush_loose()
+                            self._misplaced_footer(good, ln, size)
+                            self._skip(f, ln)
+                        elif op == _OP_DATA_END:
+                            self._flush_loose()
+                            self._data_end(self._read(f, ln), crc_before, good)
+                        else:
+                            self._skip(f, ln)
                     good = f.tell()
             except IngestError:
                 raise
@@ -461,50 +587,125 @@ class Scan:
                 except (ValueError, struct.error):
                     self._loose = []
                 if self.data_end:  # only the summary (index) section is damaged
-                    self.complete = not self.damaged
-                    self.issues.append(IngestIssue(
-                        "warning", self.path, None, None, None,
+                    self._warning(
                         f"MCAP summary section cut off or corrupt after byte {good} of {size} "
                         f"({exc}); the data section ended properly, all messages were read",
-                        log_time_ns=self.last_log_time_ns, byte_offset=good,
-                    ))
-                    return
-                self.issues.append(
-                    IngestIssue(
-                        "error", self.path, None, None, None,
-                        f"MCAP truncated or corrupt after byte {good} of {size} ({exc}); kept "
-                        f"the messages read before it (last good log time "
-                        f"{self.last_log_time_ns} ns)",
-                        log_time_ns=self.last_log_time_ns, byte_offset=good,
+                        good,
                     )
+                    self._check_statistics()
+                    self.complete = not self.damaged
+                    return
+                self._error(
+                    f"MCAP truncated or corrupt after byte {good} of {size} ({exc}); kept "
+                    f"the messages read before it (log time reached {self._when()}; last good "
+                    f"log time {self.last_log_time_ns} ns)", good,
                 )
+
+    def _footer_at_end(self, f: Any, offset: int, ln: int, size: int) -> bool:
+        """A Footer is the last record, followed by the closing magic and nothing else.
+
+        When it is, checks the summary CRC (a mismatch: warning, the Statistics not used) and
+        returns True; otherwise leaves the file position after the record header.
+        """
+        end = offset + 9 + ln
+        if ln < _FOOTER_LEN or end + len(_MAGIC) != size:
+            return False
+        body = f.read(ln)
+        if f.read(len(_MAGIC)) != _MAGIC:
+            f.seek(offset + 9)
+            return False
+        summary_start, _, summary_crc = struct.unpack_from("<QQI", body, 0)
+        if summary_crc and self.data_end and summary_start:
+            if summary_start > offset:
+                self._summary_unusable(f"Footer's summary_start {summary_start} is outside the "
+                                       "file", offset)
+                return True
+            f.seek(summary_start)
+            crc, n = 0, offset + 9 + 16 - summary_start  # through summary_offset_start
+            while n > 0:
+                b = f.read(min(n, _READ_PIECE))
+                crc, n = zlib.crc32(b, crc), n - len(b)
+            if crc != summary_crc:
+                self._summary_unusable(f"summary CRC mismatch (Footer says {summary_crc:#010x}, "
+                                       f"the bytes give {crc:#010x})", summary_start)
+        return True
+
+    def _summary_unusable(self, why: str, offset: int) -> None:
+        self.stats = None
+        self._warning(f"MCAP summary section corrupt: {why}; its Statistics are not used to "
+                      "check the data (the data section ended properly)", offset)
+
+    def _misplaced_footer(self, offset: int, ln: int, size: int) -> None:
+        text = (f"Footer record at byte {offset} of {size} is not at the end of the file (a "
+                f"corrupt opcode?); skipped its {ln} bytes and read on (log time reached "
+                f"{self._when()})")
+        if self.data_end:
+            self._warning(f"MCAP summary section corrupt: {text}", offset)
+        else:
+            self._error(f"MCAP corrupt: {text}", offset)
+
+    def _data_after_data_end(self, op: int, offset: int) -> None:
+        if not self._after_data_end_noted:
+            self._after_data_end_noted = True
+            what = "Chunk" if op == _OP_CHUNK else "Message"
+            self._error(f"MCAP corrupt: {what} record at byte {offset} after the DataEnd record "
+                        f"(a corrupt opcode?); read on (log time reached {self._when()})", offset)
+
+    def _data_end(self, body: bytes, crc_before: int, offset: int) -> None:
+        """DataEnd: the data-section CRC (when non-zero) must match the bytes before it."""
+        if self.data_end:
+            self._error(f"MCAP corrupt: a second DataEnd record at byte {offset} (log time "
+                        f"reached {self._when()})", offset)
+        self.data_end = True
+        self._crc_on = False
+        want = struct.unpack_from("<I", body, 0)[0] if len(body) >= 4 else 0
+        if want and want != crc_before:
+            self._error(f"MCAP data section CRC mismatch: DataEnd at byte {offset} says "
+                        f"{want:#010x}, the {offset} bytes before it give {crc_before:#010x} "
+                        "(some record of the data section is altered)", offset)
+
+    def _check_statistics(self) -> None:
+        """Message counts of the summary's Statistics against those framed in the data.
+
+        Per channel for the channels of the collected topics when the record has per-channel
+        counts, else the total over all channels. Counts are of Message records as framed, so
+        GNSS messages dropped later (duplicate stamps, NO_FIX) do not enter.
+        """
+        s = self.stats
+        if s is None:
+            return
+        wrong: list[str] = []
+        if s.per_channel:
+            for ch, col in sorted(self.route.items()):
+                if col is None:
+                    continue
+                want, got = s.per_channel.get(ch, 0), self.read_counts.get(ch, 0)
+                if want != got:
+                    wrong.append(f"{want} messages on {col.topic}, read {got}")
+        else:
+            want, got = s.message_count, sum(self.read_counts.values())
+            if want != got:
+                wrong.append(f"{want} messages in all, read {got}")
+        if wrong:
+            self._error(
+                f"MCAP data missing: the summary's Statistics say {'; '.join(wrong)} (messages "
+                f"from {log_time_text(s.start_ns)} to {log_time_text(s.end_ns)}, read to "
+                f"{self._when()})", s.offset,
+            )
 
     def _chunk(self, chunk: _RawChunk, offset: int) -> None:
         try:
-            data = _decompress(chunk)
+            data = _decompress(chunk, self.max_chunk_bytes)
             self._records(data, partial=chunk.truncated)
         except IngestError:
             raise
-        except (ValueError, struct.error, IndexError) as exc:
+        except Exception as exc:  # noqa: BLE001 - zstd/lz4 errors have their own classes
             if chunk.truncated:
                 raise _Truncated(f"chunk cut off and undecodable: {exc}") from exc
-            self.damaged = True
-            self.issues.append(
-                IngestIssue(
-                    "error", self.path, None, None, chunk.start_ns,
-                    f"corrupt chunk at byte {offset} skipped (log times "
-                    f"{chunk.start_ns}..{chunk.end_ns} ns): {exc}",
-                    log_time_ns=chunk.start_ns, byte_offset=offset,
-                )
-            )
-        except Exception as exc:  # zstd/lz4 errors have their own classes
-            if chunk.truncated:
-                raise _Truncated(f"chunk cut off and undecodable: {exc}") from exc
-            self.damaged = True
-            self.issues.append(
-                IngestIssue(
-                    "error", self.path, None, None, chunk.start_ns,
-                    f"corrupt chunk at byte {offset} skipped: {type(exc).__name__}: {exc}",
-                    log_time_ns=chunk.start_ns, byte_offset=offset,
-                )
+            cause = str(exc) if isinstance(exc, ValueError | struct.error | IndexError) else (
+                f"{type(exc).__name__}: {exc}")
+            self._error(
+                f"corrupt chunk at byte {offset} skipped (log times "
+                f"{chunk.start_ns}..{chunk.end_ns} ns): {cause}",
+                offset, log_time_ns=chunk.start_ns, time_ns=chunk.start_ns,
             )

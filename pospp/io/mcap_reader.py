@@ -50,7 +50,14 @@ from typing import Any
 
 import numpy as np
 
-from pospp.io._mcap_scan import FIX_SPEC, IMU_SPEC, VEL_SPEC, Collector, Scan
+from pospp.io._mcap_scan import (
+    FIX_SPEC,
+    IMU_SPEC,
+    MAX_CHUNK_BYTES,
+    VEL_SPEC,
+    Collector,
+    Scan,
+)
 from pospp.io.errors import IngestError, IngestIssue
 
 __all__ = [
@@ -343,8 +350,9 @@ def _imu_timing_issues(a: dict, topic: str, path: str) -> list[IngestIssue]:
 
 def _check_imu_units(w: np.ndarray, f: np.ndarray, topic: str, path: str) -> None:
     """Reject specific force in g, and rates that look like deg/s."""
-    fmag = np.linalg.norm(f, axis=1)
-    wmag = np.linalg.norm(w, axis=1)
+    with np.errstate(over="ignore"):  # finite but absurd values: inf, rejected below
+        fmag = np.linalg.norm(f, axis=1)
+        wmag = np.linalg.norm(w, axis=1)
     fmed = float(np.median(fmag))
     if 0.5 < fmed < 1.5:
         raise IngestError(
@@ -499,6 +507,7 @@ def read_flight_log(
     start_ns: int | None = None,
     end_ns: int | None = None,
     check_units: bool = True,
+    max_chunk_bytes: int = MAX_CHUNK_BYTES,
 ) -> FlightLog:
     """Read IMU and GNSS data from a ROS 2 MCAP file, rotate to FRD/NED, check the contract.
 
@@ -517,6 +526,11 @@ def read_flight_log(
         Keep samples whose header stamp is in ``[start_ns, end_ns)``.
     check_units : bool
         Reject IMU data whose magnitudes look like g or deg/s (keyword, default True).
+    max_chunk_bytes : int
+        Cap on one chunk's decompressed size [bytes] (default ``MAX_CHUNK_BYTES``, 256 MiB;
+        config ``[input] max_chunk_mib``): a chunk whose header claims more is skipped as
+        corrupt, and no decompression produces more than its header claims, so a corrupt or
+        hostile file cannot exhaust memory.
 
     Returns
     -------
@@ -532,6 +546,9 @@ def read_flight_log(
     """
     path = str(path)
     c = check_dcm(c_bs)
+    if isinstance(max_chunk_bytes, bool) or not isinstance(max_chunk_bytes, int | np.integer) \
+            or max_chunk_bytes <= 0:
+        raise ValueError(f"max_chunk_bytes must be a positive integer, got {max_chunk_bytes!r}")
     if not Path(path).is_file():
         raise FileNotFoundError(f"MCAP file not found: {path}")
     if len({imu_topic, fix_topic, vel_topic}) != 3:
@@ -541,7 +558,7 @@ def read_flight_log(
         fix_topic: Collector(fix_topic, FIX_SPEC, path),
         vel_topic: Collector(vel_topic, VEL_SPEC, path),
     }
-    scan = Scan(path, cols)
+    scan = Scan(path, cols, max_chunk_bytes=max_chunk_bytes)
     scan.run()
     issues = list(scan.issues)
     available = ", ".join(f"{t} ({s})" for t, s in sorted(scan.topics.items())) or "none"

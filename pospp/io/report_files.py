@@ -9,7 +9,7 @@ import pandas as pd
 
 from pospp.io.parquet_tables import TABLES, atomic_path, read_table
 
-__all__ = ["read_run_tables", "remove_tables", "write_figure", "write_text"]
+__all__ = ["read_run_tables", "write_figure", "write_text"]
 
 
 def read_run_tables(run_dir: str | Path) -> dict[str, pd.DataFrame]:
@@ -36,11 +36,3 @@ def write_figure(path: str | Path, figure: Any, *, dpi: int = 100) -> Path:
         figure.savefig(tmp, format="png", dpi=dpi)
     plt.close(figure)
     return Path(path)
-
-
-def remove_tables(run_dir: str | Path, names: list[str] | tuple[str, ...]) -> None:
-    """Delete ``NAME.parquet`` of these tables from ``run_dir`` where present."""
-    for name in names:
-        if name not in TABLES:
-            raise ValueError(f"unknown table {name!r}; expected one of {sorted(TABLES)}")
-        (Path(run_dir) / f"{name}.parquet").unlink(missing_ok=True)

@@ -65,3 +65,84 @@ def test_grade_defaults_fill_only_what_is_omitted():
     assert explicit.legs.min_duration_s == 60.0
     flight = PipelineConfig()
     assert (flight.gnss.pos_sigma_floor_m, flight.legs.min_duration_s) == (0.01, 300.0)
+
+
+# ---------------------------------------------------------------- ranges (issue 13 item 4)
+
+
+@pytest.mark.parametrize(
+    ("data", "needle"),
+    [  # each of these was a traceback or a silent "ok" (issue 13)
+        ({"filter": {"output_rate_hz": 0}}, "filter.output_rate_hz: expected a value > 0"),
+        ({"filter": {"output_rate_hz": -10}}, "filter.output_rate_hz: expected a value > 0"),
+        ({"outputs": {"mcap_rate_hz": 0}}, "outputs.mcap_rate_hz: expected a value > 0"),
+        ({"replay": {"sample_rate_hz": 0}}, "replay.sample_rate_hz: expected a value > 0"),
+        ({"replay": {"horizon_s": -300}}, "replay.horizon_s: expected a value > 0"),
+        ({"replay": {"transition_step": 0}}, "replay.transition_step: expected a value >= 1"),
+        ({"gnss": {"gate_probability": 1.0}}, "gnss.gate_probability: expected a value > 0, "
+                                              "< 1"),
+        ({"gnss": {"lever_arm_m": [0.0, 1e9, 0.0]}}, "gnss.lever_arm_m[1]: expected a value"),
+        ({"input": {"max_chunk_mib": 0}}, "input.max_chunk_mib: expected a value > 0"),
+        ({"input": {"start_s": 100.0, "end_s": 50.0}}, "input.end_s: expected a value > "
+                                                       "input.start_s"),
+        ({"input": {"imu_topic": ""}}, "input.imu_topic: expected a string of 1 to 256"),
+        ({"legs": {"min_duration_s": 10**400}}, "legs.min_duration_s: expected a finite"),
+        ({"imu": {"gyro_gm_tau_s": float("inf")}}, "imu.gyro_gm_tau_s: expected a finite"),
+    ],
+)
+def test_out_of_range_value_names_the_key_and_the_limit(data, needle):
+    with pytest.raises(ConfigError) as err:
+        config_from_dict(data, source="x.toml")
+    assert needle in str(err.value) and str(err.value).startswith("x.toml")
+
+
+def _numeric_keys():
+    import typing
+
+    for section, cls in typing.get_type_hints(PipelineConfig).items():
+        if section == "name":
+            continue
+        for name, tp in typing.get_type_hints(cls).items():
+            if typing.get_origin(tp) is not tuple and float in (typing.get_args(tp) or (tp,)):
+                yield section, name
+
+
+@pytest.mark.parametrize(("section", "key"), list(_numeric_keys()))
+def test_every_number_must_be_finite(section, key):
+    with pytest.raises(ConfigError, match=rf"x.toml: {section}\.{key}: expected a finite"):
+        config_from_dict({section: {key: float("nan")}}, source="x.toml")
+
+
+def test_a_huge_string_is_refused_with_a_short_message():
+    huge = "x" * 20_000_000  # the check is on the length: 200 MB behaves the same
+    with pytest.raises(ConfigError) as err:
+        config_from_dict({"name": huge}, source="x.toml")
+    assert "name: expected a string of 0 to 256 characters" in str(err.value)
+    assert len(str(err.value)) < 200
+    with pytest.raises(ConfigError) as err:
+        config_from_dict({"legs": {"min_duration_s": huge}}, source="x.toml")
+    assert len(str(err.value)) < 200
+
+
+@pytest.mark.parametrize(
+    ("content", "needle"),
+    [
+        (b'name = "caf\xe9"\n', "not UTF-8 text (byte 11)"),
+        (b"a = " + b"[" * 5000 + b"]" * 5000 + b"\n", "nested too deeply"),
+        (b"name = '" + b"x" * (2 << 20) + b"'\n", "larger than 1048576 bytes"),
+        (b"[filter]\noutput_rate_hz = nan\n", "filter.output_rate_hz: expected a finite"),
+    ],
+    ids=["latin1", "nested", "2MiB", "nan"],
+)
+def test_unreadable_pipeline_file_is_one_clear_error(tmp_path, content, needle):
+    p = tmp_path / "bad.toml"
+    p.write_bytes(content)
+    with pytest.raises(ConfigError) as err:
+        load_config(p)
+    assert str(err.value).startswith(str(p)) and needle in str(err.value)
+    assert "\n" not in str(err.value)
+
+
+def test_max_chunk_mib_defaults_to_256():
+    assert PipelineConfig().input.max_chunk_mib == 256.0
+    assert config_from_dict({"input": {"max_chunk_mib": 1}}).input.max_chunk_mib == 1.0

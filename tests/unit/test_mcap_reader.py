@@ -7,6 +7,7 @@ asserts the reader's verdict and that it names the file, topic, message index an
 
 from __future__ import annotations
 
+import struct
 from dataclasses import replace
 from pathlib import Path
 
@@ -390,13 +391,155 @@ def test_corrupt_chunk_is_skipped_and_located(tmp_path: Path, good_file: Path,
     p.write_bytes(bytes(data))
     log = read_flight_log(p, check_units=False)
     assert not log.complete
-    [err] = [i for i in log.issues if i.severity == "error"]
+    err, count = [i for i in log.issues if i.severity == "error"]
     assert err.byte_offset == off and err.log_time_ns == start_ns
     assert "corrupt chunk" in err.message
     assert 0 < len(log.imu) < len(imu)
+    # the summary's Statistics then also say how many messages are missing
+    assert f"{len(imu)} messages on /imu/data, read {len(log.imu)}" in count.message
     assert log.imu.time_ns[-1] == imu.time_ns[-1]  # reading went on after the bad chunk
     assert np.all(np.isin(log.imu.time_ns, imu.time_ns))
     assert any("gap" in i.message for i in log.issues)  # the hole shows as an IMU gap
+
+
+def top_records(data: bytes) -> list[tuple[int, int, int]]:
+    """(offset, opcode, body length) of the top-level records up to the Footer, framed by hand
+    from the MCAP specification (opcode u8, length u64 little-endian, body)."""
+    out, pos = [], 8
+    while pos + 9 <= len(data):
+        op, ln = struct.unpack_from("<BQ", data, pos)
+        out.append((pos, op, ln))
+        if op == 0x02:
+            break
+        pos += 9 + ln
+    return out
+
+
+def _library_statistics(path: Path):
+    with open(path, "rb") as fh:
+        return make_reader(fh).get_summary().statistics
+
+
+def _last_log_time_before(parts, t_ns: int) -> int:
+    """Latest message time before ``t_ns`` over all topics (pospp writes log time = stamp)."""
+    return max(int(p.time_ns[p.time_ns < t_ns].max()) for p in parts)
+
+
+def test_footer_opcode_inside_the_data_is_corruption(tmp_path: Path, good_file: Path,
+                                                     log_parts) -> None:
+    """A Footer opcode where a chunk was: reading used to stop there silently, complete."""
+    imu = log_parts[0]
+    off, _, start_ns = _chunk_offsets(good_file)[len(_chunk_offsets(good_file)) // 2]
+    data = bytearray(good_file.read_bytes())
+    data[off] = 0x02
+    p = tmp_path / "footer.mcap"
+    p.write_bytes(bytes(data))
+    log = read_flight_log(p, check_units=False)
+    assert not log.complete
+    footer, counts = [i for i in log.issues if i.severity == "error"]
+    assert "Footer record" in footer.message and footer.file == str(p)
+    assert footer.byte_offset == off
+    assert footer.log_time_ns == _last_log_time_before(log_parts, start_ns)
+    assert log.imu.time_ns[-1] == imu.time_ns[-1]  # read on after the bad record
+    assert f"{len(imu)} messages on /imu/data, read {len(log.imu)}" in counts.message
+
+
+def test_skipped_record_is_caught_by_the_summary_statistics(tmp_path: Path, good_file: Path,
+                                                            log_parts) -> None:
+    """A chunk's opcode turned into a MessageIndex one: the framing skips it without a word;
+    the summary's per-channel counts (read here by the mcap library) say what is missing."""
+    off, _, _ = _chunk_offsets(good_file)[1]
+    data = bytearray(good_file.read_bytes())
+    data[off] = 0x07
+    p = tmp_path / "skipped.mcap"
+    p.write_bytes(bytes(data))
+    log = read_flight_log(p, check_units=False)
+    assert not log.complete
+    [err] = [i for i in log.issues if i.severity == "error"]
+    stats = _library_statistics(good_file)
+    assert stats.channel_message_counts  # per-channel counts are what is compared
+    n_imu = max(stats.channel_message_counts.values())
+    assert n_imu == len(log_parts[0])
+    assert f"{n_imu} messages on /imu/data, read {len(log.imu)}" in err.message
+    assert len(log.imu) < n_imu
+
+
+def test_summary_crc_guards_the_statistics(tmp_path: Path, good_file: Path, log_parts) -> None:
+    """An altered per-channel count in the Statistics: the summary CRC says the summary is
+    corrupt (warning, counts not used, all data read); with the Footer's CRC zeroed (not
+    available), the altered count is believed and the log is not complete."""
+    data = bytearray(good_file.read_bytes())
+    [(stats_off, _, _)] = [r for r in top_records(bytes(data)) if r[1] == 0x0B]
+    data[stats_off + 9 + 46 + 2] ^= 0x01  # low byte of the first channel's count
+    p = tmp_path / "stats.mcap"
+    p.write_bytes(bytes(data))
+    log = read_flight_log(p, check_units=False)
+    assert log.complete and len(log.imu) == len(log_parts[0])
+    [w] = log.issues
+    assert w.severity == "warning" and "summary CRC mismatch" in w.message
+    footer_off = top_records(bytes(data))[-1][0]
+    data[footer_off + 9 + 16 : footer_off + 9 + 20] = bytes(4)
+    p.write_bytes(bytes(data))
+    log = read_flight_log(p, check_units=False)
+    assert not log.complete
+    [err] = [i for i in log.issues if i.severity == "error"]
+    assert "Statistics say" in err.message
+
+
+def test_data_section_crc_checked_when_present(tmp_path: Path, log_parts) -> None:
+    """mcap's Writer with data CRCs: a byte changed in a MessageIndex record (outside every
+    chunk CRC, not used by pospp) still makes the file not complete."""
+    imu, fix, _ = log_parts
+    path = write_with_library(tmp_path / "crc.mcap", imu, fix, enable_data_crcs=True,
+                              chunk_size=64 * 1024)
+    log = read_flight_log(path, check_units=False)
+    assert log.complete and log.issues[0].severity == "warning"  # (no velocity topic)
+    data = bytearray(path.read_bytes())
+    off, _, ln = [r for r in top_records(bytes(data)) if r[1] == 0x07][3]
+    data[off + 9 + ln - 1] ^= 0x10
+    path.write_bytes(bytes(data))
+    log = read_flight_log(path, check_units=False)
+    assert not log.complete and len(log.imu) == len(imu)
+    [err] = [i for i in log.issues if i.severity == "error"]
+    assert "data section CRC mismatch" in err.message
+
+
+@pytest.mark.parametrize("opcode", [0x01, 0x02, 0x07, 0x0B, 0x0E, 0x0F, 0x42])
+def test_chunk_opcode_changed_is_never_complete(tmp_path: Path, good_file: Path,
+                                                log_parts, opcode: int) -> None:
+    """Whatever a chunk's opcode turns into (Header, Footer, MessageIndex, Statistics,
+    SummaryOffset, DataEnd, unknown), the log is not complete and an error names the place."""
+    off, _, _ = _chunk_offsets(good_file)[2]
+    data = bytearray(good_file.read_bytes())
+    data[off] = opcode
+    p = tmp_path / "op.mcap"
+    p.write_bytes(bytes(data))
+    log = read_flight_log(p, check_units=False)
+    assert not log.complete
+    errors = [i for i in log.issues if i.severity == "error"]
+    assert errors and all(e.byte_offset is not None for e in errors)
+    assert all(e.file == str(p) for e in errors)
+
+
+def test_truncated_sample_flight_is_not_complete(tmp_path: Path) -> None:
+    """The cut of issue 13 (``head -c 8931240 sample_flight.mcap``): 1316 s of 1634 s read;
+    not complete, and the error gives the byte offset and the log time reached."""
+    sample = Path(__file__).resolve().parents[2] / "sample_data" / "sample_flight.mcap"
+    if not sample.is_file():
+        pytest.skip(f"{sample} not found")
+    cut = 8_931_240
+    p = tmp_path / "cut.mcap"
+    with open(sample, "rb") as fh:
+        p.write_bytes(fh.read(cut))
+    log = read_flight_log(p)
+    assert not log.complete
+    [err] = [i for i in log.issues if i.severity == "error"]
+    assert err.byte_offset is not None and err.byte_offset <= cut and f"of {cut}" in err.message
+    assert err.log_time_ns >= log.imu.time_ns[-1]
+    stats = _library_statistics(sample)
+    read_s = (err.log_time_ns - stats.message_start_time) * 1e-9
+    assert 1000.0 < read_s < (stats.message_end_time - stats.message_start_time) * 1e-9 - 100
+    assert f"({read_s:.1f} s after the first message)" in err.message
 
 
 def test_issue_text_names_the_facts(tmp_path: Path, log_parts) -> None:
@@ -414,18 +557,11 @@ def test_issue_text_names_the_facts(tmp_path: Path, log_parts) -> None:
 # --------------------------------------------------------------------------- other MCAP shapes
 
 
-@pytest.mark.parametrize(
-    ("compression", "chunked"),
-    [(CompressionType.NONE, True), (CompressionType.LZ4, True), (CompressionType.NONE, False)],
-)
-def test_other_chunk_compressions_and_unchunked(tmp_path: Path, log_parts, compression,
-                                                chunked: bool) -> None:
-    """Files written by mcap's own Writer: lz4, uncompressed, and messages outside chunks."""
-    imu, fix, _ = log_parts
-    path = tmp_path / "other.mcap"
+def write_with_library(path: Path, imu: ImuSamples, fix: GnssFixes, **writer_kwargs) -> Path:
+    """IMU and fix topics written by mcap's own ``Writer`` (sensor frame FLU)."""
     c_sb = FLU_TO_FRD.T
     with open(path, "wb") as fh:
-        w = Writer(fh, compression=compression, use_chunking=chunked, chunk_size=64 * 1024)
+        w = Writer(fh, **writer_kwargs)
         w.start(profile="ros2", library="test")
         for topic, typ, msgdef, fields, t, vals in (
             ("/imu/data", rm.IMU_TYPE, rm.IMU_MSGDEF, rm.IMU_FIELDS, imu.time_ns,
@@ -441,6 +577,19 @@ def test_other_chunk_compressions_and_unchunked(tmp_path: Path, log_parts, compr
             for i, ti in enumerate(t.tolist()):
                 w.add_message(cid, log_time=ti, publish_time=ti, data=payloads[i].tobytes())
         w.finish()
+    return path
+
+
+@pytest.mark.parametrize(
+    ("compression", "chunked"),
+    [(CompressionType.NONE, True), (CompressionType.LZ4, True), (CompressionType.NONE, False)],
+)
+def test_other_chunk_compressions_and_unchunked(tmp_path: Path, log_parts, compression,
+                                                chunked: bool) -> None:
+    """Files written by mcap's own Writer: lz4, uncompressed, and messages outside chunks."""
+    imu, fix, _ = log_parts
+    path = write_with_library(tmp_path / "other.mcap", imu, fix, compression=compression,
+                              use_chunking=chunked, chunk_size=64 * 1024)
     log = read_flight_log(path)
     assert log.complete
     np.testing.assert_array_equal(log.imu.time_ns, imu.time_ns)

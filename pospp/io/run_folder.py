@@ -1,0 +1,304 @@
+"""Run folders on disk: the marker, the staging folder and its swap, the batch lock.
+
+Nothing of the user's is lost (issue 13 item 3):
+
+- A run folder holds a marker file ``.pospp-run.json`` with the run's identity (pospp version,
+  input path and SHA-256, configuration SHA-256, status, creation time in UTC).
+- An output folder is used only when it is absent, empty, or a pospp run holding nothing but
+  files pospp writes; replacing an earlier run needs ``force``; a folder holding files pospp
+  did not write is refused even with ``force`` (the error names a few of them); a folder that
+  contains the input file is always refused.
+- A run writes into a staging folder beside the target (``.NAME.pospp-staging-PID-HEX``, same
+  file system) and swaps it in whole when done: on Linux one ``renameat2(RENAME_EXCHANGE)``,
+  elsewhere two renames (target -> trash, staging -> target) with a recovery step that puts the
+  trash back when a crash fell between them. A kill at any point leaves the previous complete
+  run or the new one, plus leftovers that the next run into the same target removes.
+- A batch root is locked with ``flock`` on ``.pospp-batch.lock`` holding the pid; the kernel
+  releases it when the holder dies, even by ``kill -9``.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import errno
+import fcntl
+import hashlib
+import json
+import os
+import shutil
+import uuid
+from datetime import UTC, datetime
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+from pospp import __version__
+from pospp.io.parquet_tables import TABLES, atomic_path
+
+__all__ = ["MARKER", "BatchLock", "RunFolderError", "check_target", "discard",
+           "display_path", "display_text", "new_staging", "read_marker", "require_run_folder",
+           "swap_in", "write_marker"]
+
+MARKER = ".pospp-run.json"
+"""Marker file of a run folder (JSON, the run's identity)."""
+LOCK_NAME = ".pospp-batch.lock"
+_STAGING = ".pospp-staging-"
+_TRASH = ".pospp-trash-"
+_OTHER_OUTPUTS = frozenset({"report.html", "trajectory.mcap", "evaluation.png",
+                            "observability.png", MARKER})
+_RENAME_EXCHANGE = 2  # linux/fs.h
+
+
+class RunFolderError(ValueError):
+    """An output folder that pospp must not write into (names the folder and why)."""
+
+
+def display_path(path: str | os.PathLike[str]) -> str:
+    """``path`` as printable UTF-8 text: undecodable bytes of the name escaped as ``\\xNN``."""
+    return display_text(os.fspath(path))
+
+
+def display_text(text: str) -> str:
+    """``text`` encodable as UTF-8: bytes smuggled in by surrogateescape shown as ``\\xNN``."""
+    try:
+        raw = text.encode("utf-8", "surrogateescape")
+    except UnicodeEncodeError:
+        raw = text.encode("utf-8", "backslashreplace")
+    return raw.decode("utf-8", "backslashreplace")
+
+
+def _few(names: list[str], n: int = 5) -> str:
+    shown = ", ".join(display_path(x) for x in sorted(names)[:n])
+    return shown + (f" and {len(names) - n} more" if len(names) > n else "")
+
+
+def is_pospp_file(name: str) -> bool:
+    """True for a file name a run folder may hold (tables, report, MCAP, figures, temporaries)."""
+    if name in _OTHER_OUTPUTS:
+        return True
+    if name.endswith(".parquet") and name[: -len(".parquet")] in TABLES:
+        return True
+    return name.startswith(".") and name.endswith(".tmp")
+
+
+def read_marker(folder: str | Path) -> dict[str, Any] | None:
+    """The marker of ``folder``, or None when it has none (or an unreadable one)."""
+    try:
+        data = json.loads((Path(folder) / MARKER).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return data if isinstance(data, dict) and data.get("pospp_run") == 1 else None
+
+
+def write_marker(folder: str | Path, *, input_file: str | Path, input_sha256: str,
+                 config_json: str, status: str) -> dict[str, Any]:
+    """Write ``folder/.pospp-run.json`` atomically and return its content."""
+    marker = {
+        "pospp_run": 1,
+        "pospp_version": __version__,
+        "input_file": os.fsdecode(os.path.abspath(input_file)),
+        "input_sha256": input_sha256,
+        "config_sha256": config_sha256(config_json),
+        "status": status,
+        "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+    }
+    with atomic_path(Path(folder) / MARKER) as tmp:
+        Path(tmp).write_text(json.dumps(marker, indent=1), encoding="utf-8")
+    return marker
+
+
+def config_sha256(config_json: str) -> str:
+    """The configuration hash stored in the marker (SHA-256 of the canonical JSON)."""
+    return hashlib.sha256(config_json.encode()).hexdigest()
+
+
+def require_run_folder(folder: str | Path) -> Path:
+    """``folder`` if it is a pospp run folder; else a clear error (for diagnose/report/evaluate)."""
+    p = Path(folder)
+    if not p.is_dir():
+        raise FileNotFoundError(f"run folder not found: {display_path(p)}")
+    if read_marker(p) is None:
+        raise RunFolderError(f"{display_path(p)}: not a pospp run folder (no {MARKER}); "
+                             "give a folder written by pospp run")
+    return p
+
+
+def _pid_alive(pid: int | None) -> bool:
+    if pid is None or pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _leftovers(target: Path, tag: str) -> list[Path]:
+    prefix = f".{target.name}{tag}"
+    try:
+        return [p for p in target.parent.iterdir() if p.name.startswith(prefix)]
+    except OSError:
+        return []
+
+
+def _owner_pid(p: Path, target: Path, tag: str) -> int | None:
+    rest = p.name[len(f".{target.name}{tag}"):]
+    head = rest.split("-", 1)[0]
+    return int(head) if head.isdigit() else None
+
+
+def recover(target: str | Path) -> None:
+    """Finish or undo a swap a crash interrupted; remove staging and trash left by dead runs."""
+    target = Path(os.path.abspath(target))
+    trash = [p for p in _leftovers(target, _TRASH)
+             if not _pid_alive(_owner_pid(p, target, _TRASH))]
+    if not target.exists() and trash:
+        # killed between "target -> trash" and "staging -> target": put the old run back
+        newest = max(trash, key=lambda p: p.stat().st_mtime)
+        os.rename(newest, target)
+        trash.remove(newest)
+    for p in trash + [p for p in _leftovers(target, _STAGING)
+                      if not _pid_alive(_owner_pid(p, target, _STAGING))]:
+        shutil.rmtree(p, ignore_errors=True)
+
+
+def check_target(target: str | Path, *, input_file: str | Path, force: bool) -> Path:
+    """Check that a run may be written to ``target``; returns its absolute path.
+
+    Raises
+    ------
+    RunFolderError
+        ``target`` is a file, contains the input, holds files pospp did not write, or holds an
+        earlier pospp run and ``force`` is False.
+    """
+    t = Path(os.path.abspath(target))
+    if t.is_symlink():  # swap the folder the link points to, keep the link
+        t = Path(os.path.realpath(t))
+    shown = display_path(t)
+    if not t.name:
+        raise RunFolderError(f"{shown}: not usable as a run folder")
+    recover(t)
+    if t.exists() and not t.is_dir():
+        raise RunFolderError(f"{shown}: exists and is not a folder")
+    inp = Path(os.path.abspath(input_file))
+    real_t, real_inp = Path(os.path.realpath(t)), Path(os.path.realpath(inp))
+    if t == inp or t in inp.parents or real_t == real_inp or real_t in real_inp.parents:
+        raise RunFolderError(f"{shown}: the output folder contains the input "
+                             f"{display_path(inp.name)}; choose another output folder")
+    if not t.exists():
+        return t
+    names = [p.name for p in t.iterdir()]
+    if not names:
+        return t
+    marker = read_marker(t)
+    foreign = [n for n in names if not is_pospp_file(n)]
+    if marker is None:
+        raise RunFolderError(f"{shown}: not empty and not a pospp run folder (no {MARKER}; "
+                             f"holds {_few(names)}); choose an empty or new folder")
+    if foreign:
+        raise RunFolderError(f"{shown}: holds files pospp did not write ({_few(foreign)}); "
+                             "pospp will not replace it, even with --force")
+    if not force:
+        raise RunFolderError(f"{shown}: already holds a pospp run (of "
+                             f"{display_path(marker.get('input_file', '?'))}, "
+                             f"{marker.get('created_utc', '?')}); use --force to replace it")
+    return t
+
+
+def new_staging(target: str | Path) -> Path:
+    """Create the staging folder beside ``target`` (same file system) and return it."""
+    t = Path(os.path.abspath(target))
+    t.parent.mkdir(parents=True, exist_ok=True)
+    stage = t.parent / f".{t.name}{_STAGING}{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    stage.mkdir()
+    return stage
+
+
+def discard(stage: str | Path) -> None:
+    """Remove a staging folder (a run that ends without a result to keep)."""
+    shutil.rmtree(stage, ignore_errors=True)
+
+
+def _fsync_dir(path: Path) -> None:
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Atomically exchange two paths (Linux renameat2); False when not available."""
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+        fn = libc.renameat2
+    except (OSError, AttributeError):
+        return False
+    at_fdcwd = -100
+    rc = fn(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), _RENAME_EXCHANGE)
+    if rc == 0:
+        return True
+    err = ctypes.get_errno()
+    if err in (errno.ENOSYS, errno.EINVAL, errno.ENOTSUP):
+        return False
+    raise OSError(err, os.strerror(err), str(a))
+
+
+def swap_in(stage: str | Path, target: str | Path) -> Path:
+    """Replace ``target`` by the complete ``stage`` folder as one step; returns ``target``."""
+    stage, t = Path(stage), Path(os.path.abspath(target))
+    _fsync_dir(stage)
+    if not t.exists():
+        os.rename(stage, t)
+    elif _exchange(stage, t):
+        shutil.rmtree(stage, ignore_errors=True)  # now holds the previous run
+    else:
+        trash = t.parent / f".{t.name}{_TRASH}{os.getpid()}-{uuid.uuid4().hex[:8]}"
+        os.rename(t, trash)
+        os.rename(stage, t)
+        shutil.rmtree(trash, ignore_errors=True)
+    _fsync_dir(t.parent)
+    return t
+
+
+class BatchLock:
+    """Exclusive lock of a batch root (``ROOT/.pospp-batch.lock``, flock, holder's pid inside).
+
+    Use as a context manager; a second holder gets a :class:`RunFolderError` naming the pid.
+    """
+
+    def __init__(self, root: str | Path) -> None:
+        self.path = Path(root) / LOCK_NAME
+        self._fd: int | None = None
+
+    def __enter__(self) -> BatchLock:
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 64, 0).decode(errors="replace").strip() or "?"
+            os.close(fd)
+            raise RunFolderError(f"{display_path(self.path.parent)}: another pospp batch "
+                                 f"(pid {holder}) is working on this root; wait for it or "
+                                 "stop it") from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        self._fd = fd
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        if self._fd is not None:
+            os.ftruncate(self._fd, 0)
+            fcntl.flock(self._fd, fcntl.LOCK_UN)
+            os.close(self._fd)
+            self._fd = None
