@@ -421,12 +421,12 @@ def gnss_time_offset(est: TimeOffsetEstimate | None) -> Check:
     name, thr = "gnss_time_offset", TIME_OFFSET_MAX_S
     if est is None:
         return _na(name, "navigate", "too few GNSS velocities while moving", "s", thr)
-    if not est.explained >= TIME_OFFSET_MIN_EXPLAINED:
-        return _na(name, "navigate", f"the course does not follow the heading (R^2 "
-                   f"{est.explained:.2f}; sideways flight?)", "s", thr)
     if not est.sigma_s < thr / 3.0:
         return _na(name, "navigate", f"too little turning to see it (sigma {est.sigma_s:.2g} "
                    "s)", "s", thr)
+    if not est.explained >= TIME_OFFSET_MIN_EXPLAINED:
+        return _na(name, "navigate", f"the course does not follow the heading (R^2 "
+                   f"{est.explained:.2f}; sideways flight?)", "s", thr)
     tau = est.offset_s
     passed = abs(tau) <= thr or abs(tau) <= TIME_OFFSET_SIGMAS * est.sigma_s
     sug = ""
@@ -443,25 +443,52 @@ def gnss_time_offset(est: TimeOffsetEstimate | None) -> Check:
 LEVER_ARM_MAX_M = 0.2
 """Largest difference between the configured and the estimated lever arm per axis [m]."""
 LEVER_ARM_SIGMAS = 5.0
+LEVER_ARM_MIN_YAW_SPAN_DEG = 90.0
+"""The forward and right components count only when the heading turned this much."""
+LEVER_ARM_MIN_TILT_SPAN_DEG = 15.0
+"""The down component counts only when roll or pitch changed this much."""
+
+
+def lever_arm_observable(rpy_rad: ArrayLike) -> NDArray:
+    """Which lever-arm axes (FRD) the attitude history can reveal, (3,) bool.
+
+    A lever arm shows only through attitude changes (the antenna moves around the IMU):
+    x and y when the heading turned by LEVER_ARM_MIN_YAW_SPAN_DEG, z when roll or pitch
+    changed by LEVER_ARM_MIN_TILT_SPAN_DEG. The filter's own sigma is too optimistic on a
+    flight without such changes (a 400 s take-off and climb gave 0.8 m at 11 sigma).
+    """
+    rpy = np.asarray(rpy_rad, dtype=float)
+    if rpy.shape[0] < 2:
+        return np.zeros(3, dtype=bool)
+    yaw_span = math.degrees(float(np.ptp(np.unwrap(rpy[:, 2]))))
+    tilt_span = math.degrees(float(max(np.ptp(rpy[:, 0]), np.ptp(rpy[:, 1]))))
+    h = yaw_span >= LEVER_ARM_MIN_YAW_SPAN_DEG
+    return np.array([h, h, tilt_span >= LEVER_ARM_MIN_TILT_SPAN_DEG])
 
 
 def lever_arm(configured_b_m: ArrayLike, estimated_b_m: ArrayLike, sigma_b_m: ArrayLike,
-              *, mean_speed_mps: float = math.nan) -> Check:
+              *, observable: ArrayLike = (True, True, True),
+              mean_speed_mps: float = math.nan) -> Check:
     """Configured antenna lever arm against the one the data estimate (A with lever states).
 
     Statistic: max over axes of |l_cfg - l_est| where that difference is also beyond
-    LEVER_ARM_SIGMAS of the estimate's sigma (an axis the flight cannot observe does not
-    count) [m]; threshold LEVER_ARM_MAX_M. A GNSS time offset tau moves the antenna along
+    LEVER_ARM_SIGMAS of the estimate's sigma and the axis is ``observable``
+    (:func:`lever_arm_observable`; an axis the flight cannot reveal does not count) [m];
+    threshold LEVER_ARM_MAX_M. A GNSS time offset tau moves the antenna along
     the track by -v tau, which the lever-arm states read as a forward lever arm: when the
     forward axis dominates, the suggestion names the equivalent offset -dl_x / v as well.
     """
     cfg = np.asarray(configured_b_m, dtype=float)
     est = np.asarray(estimated_b_m, dtype=float)
     sig = np.asarray(sigma_b_m, dtype=float)
+    obs = np.asarray(observable, dtype=bool)
     if not np.isfinite(est).all():
         return _na("lever_arm", "navigate", "no lever-arm estimate", "m", LEVER_ARM_MAX_M)
+    if not obs.any():
+        return _na("lever_arm", "navigate", "no turn and no tilt change to reveal it", "m",
+                   LEVER_ARM_MAX_M)
     d = np.abs(cfg - est)
-    seen = d > LEVER_ARM_SIGMAS * sig
+    seen = (d > LEVER_ARM_SIGMAS * sig) & obs
     value = float(np.max(np.where(seen, d, 0.0)))
     passed = value <= LEVER_ARM_MAX_M
     fmt = ", ".join(f"{x:.2f}" for x in est)
@@ -475,8 +502,9 @@ def lever_arm(configured_b_m: ArrayLike, estimated_b_m: ArrayLike, sigma_b_m: Ar
                 f"the IMU by about {abs(dx) / mean_speed_mps:.3f} s)")
     return Check("lever_arm", "navigate",
                  "largest |configured - estimated| antenna lever arm component (beyond "
-                 f"{LEVER_ARM_SIGMAS:.0f} sigma)", value, LEVER_ARM_MAX_M, "m", passed,
-                 "degraded", sug)
+                 f"{LEVER_ARM_SIGMAS:.0f} sigma; axes seen: "
+                 f"{''.join(a for a, o in zip('xyz', obs, strict=True) if o)})", value,
+                 LEVER_ARM_MAX_M, "m", passed, "degraded", sug)
 
 
 # =============================================================================================
@@ -507,7 +535,8 @@ def calibration_quality(calibrated: bool, reason: str, n_pairs_used: int) -> Che
     """A calibration was produced from at least one admissible pair (else the run is partial)."""
     return Check("calibration", "calibrate", "leg pairs used in the calibration",
                  float(n_pairs_used), 1.0, "1", bool(calibrated), "partial",
-                 "" if calibrated else f"no calibration: {reason}")
+                 "" if calibrated else reason if reason.startswith("no calibration")
+                 else f"no calibration: {reason}")
 
 
 COMPENSATION_MARGIN_MPS = 0.01

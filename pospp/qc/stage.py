@@ -178,6 +178,7 @@ def quality_checks(log: Any, nav: Any, calib_run: Any, config: Any, *, c_bs: Any
         speed = np.hypot(sol.v_n_mps[:, 0], sol.v_n_mps[:, 1])
         moving = speed > qc.TIME_OFFSET_MIN_SPEED_MPS
         out.append(qc.lever_arm(config.gnss.lever_arm_m, lev.lever_b_m, lev.sigma_b_m,
+                                observable=qc.lever_arm_observable(sol.rpy_rad),
                                 mean_speed_mps=float(speed[moving].mean()) if moving.any()
                                 else math.nan))
 

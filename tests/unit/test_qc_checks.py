@@ -173,6 +173,20 @@ def test_lever_arm_check_and_its_time_offset_reading():
     assert "GNSS lags the IMU by about 0.015 s" in along.suggestion
 
 
+def test_lever_arm_counts_only_the_axes_the_attitude_reveals():
+    n = 600
+    level = np.zeros((n, 3))
+    assert not qc.lever_arm_observable(level).any()
+    chk = qc.lever_arm([0.0, 0.0, 0.0], [0.0, 0.0, -0.7], np.full(3, 0.05),
+                       observable=qc.lever_arm_observable(level))
+    assert chk.passed and "no turn" in chk.statistic
+    turn = level.copy()
+    turn[:, 2] = np.linspace(0.0, math.pi, n)  # a 180 deg turn, wings level
+    assert qc.lever_arm_observable(turn).tolist() == [True, True, False]
+    turn[n // 3: 2 * n // 3, 0] = math.radians(23.0)  # banked at 4 deg/s and 60 m/s
+    assert qc.lever_arm_observable(turn).all()
+
+
 def test_completeness_calibration_compensation_and_config():
     assert qc.data_complete(True, 0, "", 100.0, None).passed
     cut = qc.data_complete(False, 1, "truncated at byte 8931240", 1316.0, None)
