@@ -101,6 +101,7 @@ def ingest(path: str | Path, config: PipelineConfig) -> mcap_reader.FlightLog:
         fix_topic=cfg.fix_topic,
         vel_topic=cfg.vel_topic,
         c_bs=sensor_to_body_dcm(cfg.sensor_frame, cfg.mounting_rpy_deg),
+        max_chunk_bytes=int(cfg.max_chunk_mib * 2**20),
     )
     if cfg.start_s is None and cfg.end_s is None:
         return log
