@@ -172,8 +172,9 @@ def run_once(kind: str, seed: int, folder: Path, *, estimate_gm_sigma: bool = Fa
                  np.array(leg_drift), np.array(leg_const))
 
 
-MODES = ("constant", "per_leg", "oracle", "causal")
-"""Compensation modes of :func:`run_modes` (see pospp.calib.compensate)."""
+MODES = ("constant", "per_leg", "oracle", "causal", "forward")
+"""Compensation modes of :func:`run_modes` (see pospp.calib.compensate); "forward" is the
+causal mode without the calibrated prior (A's forward estimate alone)."""
 
 
 def run_modes(kind: str, seed: int, folder: Path, *, gm_tau_s: float | None = None,
@@ -198,7 +199,7 @@ def run_modes(kind: str, seed: int, folder: Path, *, gm_tau_s: float | None = No
     tun = tuning_preset(TUNING[kind])
     model = imu_grade(grade)
     if gm_tau_s is not None:
-        model = dataclasses.replace(model, gyro_gm_tau_s=(float(gm_tau_s),) * 3)
+        model = dataclasses.replace(model, gyro_gm_tau_s=float(gm_tau_s))
         tun = dataclasses.replace(tun, gyro_gm_tau_s=float(gm_tau_s))
     sim = simulate(profile_path(kind, folder), imu_grade=model, seed=seed, imu_rate_hz=100.0)
     t, dth, dv = increments_from_rates(sim.imu.time_ns, sim.imu.w_ib_b_radps,
@@ -240,6 +241,7 @@ def run_modes(kind: str, seed: int, folder: Path, *, gm_tau_s: float | None = No
         if fwd is not None:
             fused = causal_gyro_bias_b_radps(fwd.gyro_b_radps, fwd.gyro_sigma_b_radps, b0, s0)
             opts["causal"] = {"gyro_bias_history": (fwd.t_s, fused)}
+            opts["forward"] = {"gyro_bias_history": (fwd.t_s, fwd.gyro_b_radps)}
         for mode, o in opts.items():
             _, imp = compensate_legs(imu, a, reps, c, **kw, **o)
             v0 = _rms([i.vel_before_mps for i in imp])
