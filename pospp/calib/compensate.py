@@ -87,7 +87,9 @@ def causal_gyro_bias_b_radps(
         A's forward (causal) gyro-bias estimate and its 1-sigma, body FRD [rad/s]
         (:class:`pospp.nav.filter.BiasHistory` of ``FilterResult.forward_biases``).
     prior_b_radps, prior_sigma_b_radps : ndarray, shape (3,)
-        The calibrated body gyro bias and its 1-sigma [rad/s].
+        The calibrated body gyro bias and the 1-sigma of the bias **now** about it [rad/s]:
+        with a Gauss-Markov drift the instantaneous bias is the constant plus the drift, so
+        ``hypot(sigma of the constant, drift sigma)`` (:func:`prior_sigma_b_radps`).
 
     Returns
     -------
@@ -101,6 +103,16 @@ def causal_gyro_bias_b_radps(
     with np.errstate(invalid="ignore", divide="ignore"):
         w = np.where(np.isinf(vp) | (vf == 0.0), 1.0, vp / (vp + vf))
     return w * bf + (1.0 - w) * bp
+
+
+def prior_sigma_b_radps(constant_sigma_b_radps: NDArray, cal: Calibration) -> NDArray:
+    """1-sigma of the instantaneous gyro bias about the calibrated constant [rad/s], (3,).
+
+    ``hypot(sigma of the constant, Gauss-Markov drift sigma)``: the drift's steady-state
+    sigma of the calibration's noise model (0 without one) is how far the bias at any instant
+    may be from the constant.
+    """
+    return np.hypot(np.asarray(constant_sigma_b_radps, dtype=float), cal.gyro_gm_sigma_radps)
 
 
 def _bias_removed(imu: ImuIncrements, rep: LegReplay, t_s: NDArray, b_radps: NDArray,

@@ -23,6 +23,7 @@ from pospp.calib.compensate import (
     causal_gyro_bias_b_radps,
     compensate_legs,
     joint_calibration,
+    prior_sigma_b_radps,
 )
 from pospp.calib.pairs import Pair, PairPolicy, evaluate_pairs
 from pospp.calib.replay import ImuIncrements, LegReplay, ReferenceSolution, replay_leg
@@ -316,7 +317,7 @@ def calibrate_flight(
     if compensation == "causal":
         fb = forward_biases
         history = (np.asarray(fb.t_s, dtype=float), causal_gyro_bias_b_radps(
-            fb.gyro_b_radps, fb.gyro_sigma_b_radps, bg, sig))
+            fb.gyro_b_radps, fb.gyro_sigma_b_radps, bg, prior_sigma_b_radps(sig, chosen)))
     after, improvements = compensate_legs(
         imu, reference, replays, chosen, accel_compensation=rc["accel_compensation"],
         horizon_s=rc["horizon_s"], transition_step=int(rc["transition_step"]),

@@ -18,7 +18,11 @@ from pathlib import Path
 
 import numpy as np
 
-from pospp.calib.compensate import causal_gyro_bias_b_radps, compensate_legs
+from pospp.calib.compensate import (
+    causal_gyro_bias_b_radps,
+    compensate_legs,
+    prior_sigma_b_radps,
+)
 from pospp.calib.replay import ImuIncrements, reference_from_trajectory
 from pospp.calib.solve import calibrate
 from pospp.calib.stage import calibrate_flight
@@ -239,7 +243,8 @@ def run_modes(kind: str, seed: int, folder: Path, *, gm_tau_s: float | None = No
         opts: dict[str, dict] = {"constant": {}, "per_leg": {"per_leg_drift": True},
                                  "oracle": {"gyro_bias_by_leg": true_mean}}
         if fwd is not None:
-            fused = causal_gyro_bias_b_radps(fwd.gyro_b_radps, fwd.gyro_sigma_b_radps, b0, s0)
+            fused = causal_gyro_bias_b_radps(fwd.gyro_b_radps, fwd.gyro_sigma_b_radps, b0,
+                                             prior_sigma_b_radps(s0, c))
             opts["causal"] = {"gyro_bias_history": (fwd.t_s, fused)}
             opts["forward"] = {"gyro_bias_history": (fwd.t_s, fwd.gyro_b_radps)}
         for mode, o in opts.items():
