@@ -452,7 +452,9 @@ def calibrate(imu: ImuIncrements, nav: nav_filter.FilterResult,
         pairs_cfg=config.pairs, gyro_arw_dpsh=tuning.gyro_arw_dpsh,
         noise=config.pairs.noise, noise_step_s=config.pairs.noise_step_s,
         estimate_gyro_z=config.pairs.estimate_gyro_z,
-        compensation=config.compensation.mode if gm else "constant",
+        compensation=config.compensation.mode if gm or config.compensation.mode == "causal"
+        else "constant",
+        forward_biases=nav.forward_biases,
         # the grade's Gauss-Markov ("random") drift enters the least squares' noise model
         gyro_gm_sigma_dph=tuning.gyro_gm_sigma_dph if gm else None,
         gyro_gm_tau_s=tuning.gyro_gm_tau_s if gm else None,
