@@ -101,6 +101,7 @@ def ingest(path: str | Path, config: PipelineConfig) -> mcap_reader.FlightLog:
         fix_topic=cfg.fix_topic,
         vel_topic=cfg.vel_topic,
         c_bs=sensor_to_body_dcm(cfg.sensor_frame, cfg.mounting_rpy_deg),
+        max_chunk_bytes=int(cfg.max_chunk_mib * 2**20),
     )
     if cfg.start_s is None and cfg.end_s is None:
         return log
@@ -451,7 +452,9 @@ def calibrate(imu: ImuIncrements, nav: nav_filter.FilterResult,
         pairs_cfg=config.pairs, gyro_arw_dpsh=tuning.gyro_arw_dpsh,
         noise=config.pairs.noise, noise_step_s=config.pairs.noise_step_s,
         estimate_gyro_z=config.pairs.estimate_gyro_z,
-        compensation=config.compensation.mode if gm else "constant",
+        compensation=config.compensation.mode if gm or config.compensation.mode == "causal"
+        else "constant",
+        forward_biases=nav.forward_biases,
         # the grade's Gauss-Markov ("random") drift enters the least squares' noise model
         gyro_gm_sigma_dph=tuning.gyro_gm_sigma_dph if gm else None,
         gyro_gm_tau_s=tuning.gyro_gm_tau_s if gm else None,

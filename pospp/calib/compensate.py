@@ -4,6 +4,15 @@ The calibrated gyro bias goes into the strapdown kernel (removed from every gyro
 the calibrated misalignment of a leg that took part in the fit corrects B's initial attitude
 there. B is re-run on every leg, and B's error at ``horizon_s`` (300 s as in the paper, or
 the leg end if shorter) is compared before and after.
+
+Modes of the gyro bias removed (docs/calibration.md sections 5 and 9):
+
+- constant: the calibrated bias b_g on every leg;
+- per-leg: b_g plus the smoothed Gauss-Markov drift's mean over the leg;
+- causal: a bias that changes inside the leg, built only from data up to each instant:
+  algorithm A's forward (filter, not smoother) gyro-bias estimate fused with the calibrated
+  bias as its prior (:func:`causal_gyro_bias_b_radps`), held over each IMU interval from the
+  last A epoch at or before its start.
 """
 
 from __future__ import annotations
@@ -60,18 +69,81 @@ def horizontal_error_at(rep: LegReplay, horizon_s: float) -> tuple[float, float,
     )
 
 
+def causal_gyro_bias_b_radps(
+    forward_b_radps: NDArray,
+    forward_sigma_b_radps: NDArray,
+    prior_b_radps: NDArray,
+    prior_sigma_b_radps: NDArray,
+) -> NDArray:
+    """Fuse A's forward gyro-bias estimate with the calibrated bias, axis by axis.
+
+    ``b = w b_fwd + (1 - w) b_prior`` with ``w = s_prior^2 / (s_prior^2 + s_fwd^2)`` (inverse
+    variance weighting of two estimates treated as independent); an infinite prior sigma
+    (an axis the calibration did not estimate) gives A's estimate, a zero forward sigma too.
+
+    Parameters
+    ----------
+    forward_b_radps, forward_sigma_b_radps : ndarray, shape (K, 3)
+        A's forward (causal) gyro-bias estimate and its 1-sigma, body FRD [rad/s]
+        (:class:`pospp.nav.filter.BiasHistory` of ``FilterResult.forward_biases``).
+    prior_b_radps, prior_sigma_b_radps : ndarray, shape (3,)
+        The calibrated body gyro bias and the 1-sigma of the bias **now** about it [rad/s]:
+        with a Gauss-Markov drift the instantaneous bias is the constant plus the drift, so
+        ``hypot(sigma of the constant, drift sigma)`` (:func:`prior_sigma_b_radps`).
+
+    Returns
+    -------
+    ndarray, shape (K, 3)
+        The fused bias [rad/s].
+    """
+    bf = np.asarray(forward_b_radps, dtype=float)
+    vf = np.square(np.asarray(forward_sigma_b_radps, dtype=float))
+    bp = np.broadcast_to(np.asarray(prior_b_radps, dtype=float), bf.shape)
+    vp = np.broadcast_to(np.square(np.asarray(prior_sigma_b_radps, dtype=float)), bf.shape)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        w = np.where(np.isinf(vp) | (vf == 0.0), 1.0, vp / (vp + vf))
+    return w * bf + (1.0 - w) * bp
+
+
+def prior_sigma_b_radps(constant_sigma_b_radps: NDArray, cal: Calibration) -> NDArray:
+    """1-sigma of the instantaneous gyro bias about the calibrated constant [rad/s], (3,).
+
+    ``hypot(sigma of the constant, Gauss-Markov drift sigma)``: the drift's steady-state
+    sigma of the calibration's noise model (0 without one) is how far the bias at any instant
+    may be from the constant.
+    """
+    return np.hypot(np.asarray(constant_sigma_b_radps, dtype=float), cal.gyro_gm_sigma_radps)
+
+
+def _bias_removed(imu: ImuIncrements, rep: LegReplay, t_s: NDArray, b_radps: NDArray,
+                  *, hold: bool) -> ImuIncrements:
+    """The IMU increments around one leg minus a time-varying gyro bias b(t) (body, rad/s).
+
+    ``hold``: each interval gets the last value at or before its start (causal); otherwise
+    the value interpolated at its middle.
+    """
+    t = imu.t_s
+    k0 = int(np.searchsorted(t, rep.leg.start_s))
+    k1 = int(np.searchsorted(t, rep.leg.end_s, side="right"))
+    lo, hi = max(k0 - 2, 0), min(k1 + 2, t.size - 1)
+    if hold:
+        j = np.clip(np.searchsorted(t_s, t[lo:hi], side="right") - 1, 0, t_s.size - 1)
+        bias = b_radps[j]
+    else:
+        mid = 0.5 * (t[lo:hi] + t[lo + 1:hi + 1])
+        bias = np.stack([np.interp(mid, t_s, b_radps[:, c]) for c in range(3)], axis=1)
+    dth = imu.dtheta_b_rad[lo:hi] - bias * np.diff(t[lo:hi + 1])[:, None]
+    return ImuIncrements(t[lo:hi + 1], dth, imu.dv_b_mps[lo:hi])
+
+
 def _drift_removed(imu: ImuIncrements, rep: LegReplay, cal: Calibration) -> ImuIncrements:
     """The IMU increments around one leg with the smoothed drift removed from the gyro."""
     t = imu.t_s
     k0 = int(np.searchsorted(t, rep.leg.start_s))
     k1 = int(np.searchsorted(t, rep.leg.end_s, side="right"))
     lo, hi = max(k0 - 2, 0), min(k1 + 2, t.size - 1)
-    mid = 0.5 * (t[lo:hi] + t[lo + 1:hi + 1])
-    grid = np.arange(mid[0], mid[-1] + 1.0, 1.0)
-    x = cal.drift_b_radps(grid)
-    drift = np.stack([np.interp(mid, grid, x[:, c]) for c in range(3)], axis=1)
-    dth = imu.dtheta_b_rad[lo:hi] - drift * np.diff(t[lo:hi + 1])[:, None]
-    return ImuIncrements(t[lo:hi + 1], dth, imu.dv_b_mps[lo:hi])
+    grid = np.arange(0.5 * (t[lo] + t[lo + 1]), 0.5 * (t[hi - 1] + t[hi]) + 1.0, 1.0)
+    return _bias_removed(imu, rep, grid, cal.drift_b_radps(grid), hold=False)
 
 
 def compensate_legs(
@@ -88,6 +160,7 @@ def compensate_legs(
     per_leg_drift: bool = False,
     smoothed_drift: bool = False,
     gyro_bias_by_leg: Mapping[int, NDArray] | None = None,
+    gyro_bias_history: tuple[NDArray, NDArray] | None = None,
 ) -> tuple[dict[int, LegReplay], tuple[LegImprovement, ...]]:
     """Re-run B on every leg with the calibration applied; report the improvement.
 
@@ -109,6 +182,10 @@ def compensate_legs(
         Body gyro bias [rad/s] to remove on those legs instead of the calibration's (e.g. the
         true realised per-leg mean bias of a simulation: the oracle that measures the floor
         left by the drift's change within a leg).
+    gyro_bias_history : (t_s (K,), b (K, 3)), optional
+        A time-varying body gyro bias [s, rad/s] removed instead of any of the above (the
+        causal mode: :func:`causal_gyro_bias_b_radps` of A's forward estimate); each IMU
+        interval gets the last value at or before its start, so no later data is used.
     """
     after: dict[int, LegReplay] = {}
     rows: list[LegImprovement] = []
@@ -121,6 +198,10 @@ def compensate_legs(
         if gyro_bias_by_leg is not None and leg_id in gyro_bias_by_leg:
             bg = np.asarray(gyro_bias_by_leg[leg_id], dtype=float)
         leg_imu = _drift_removed(imu, rep, cal) if smoothed_drift else imu
+        if gyro_bias_history is not None:
+            hist_t, hist_b = (np.asarray(a, dtype=float) for a in gyro_bias_history)
+            leg_imu = _bias_removed(imu, rep, hist_t, hist_b, hold=True)
+            bg = np.zeros(3)
         new = replay_leg(
             leg_imu, reference, rep.leg, gyro_bias_b_radps=bg, attitude_correction_n_rad=phi,
             accel_compensation=accel_compensation, transition_step=transition_step,

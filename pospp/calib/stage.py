@@ -18,7 +18,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from pospp.calib.compensate import LegImprovement, compensate_legs, joint_calibration
+from pospp.calib.compensate import (
+    LegImprovement,
+    causal_gyro_bias_b_radps,
+    compensate_legs,
+    joint_calibration,
+    prior_sigma_b_radps,
+)
 from pospp.calib.pairs import Pair, PairPolicy, evaluate_pairs
 from pospp.calib.replay import ImuIncrements, LegReplay, ReferenceSolution, replay_leg
 from pospp.calib.segment import Leg, LegThresholds, find_legs
@@ -28,7 +34,7 @@ from pospp.rotation import ARCSEC_RAD, DEG_PER_H_RADPS
 
 _DPSH_RADPSQRTS = np.pi / 180.0 / 60.0
 """One deg/sqrt(h) in rad/sqrt(s)."""
-COMPENSATIONS = ("constant", "per_leg")
+COMPENSATIONS = ("constant", "per_leg", "causal")
 _REML_STEP_S = 20.0
 """Sample spacing of the one REML fit of the Gauss-Markov sigma [s] (the GLS uses 10 s)."""
 
@@ -147,6 +153,7 @@ def calibrate_flight(
     gyro_gm_tau_s: float | None = None,
     compensation: str = "constant",
     noise_step_s: float = 10.0,
+    forward_biases: Any = None,
 ) -> CalibrationRun:
     """Run the double-strapdown calibration on one flight.
 
@@ -185,10 +192,17 @@ def calibrate_flight(
     compensation : {"constant", "per_leg"}
         Re-run B with the constant bias (default), or with the constant plus the smoothed
         Gauss-Markov drift's mean over each leg (needs the Gauss-Markov model). The constant
-        bias is what ``gyro_bias_b_radps`` feeds back into A either way.
+        bias is what ``gyro_bias_b_radps`` feeds back into A either way. ``"causal"``:
+        remove A's forward (causal) gyro-bias estimate as it changes inside each leg, fused
+        with the calibrated bias as its prior
+        (:func:`pospp.calib.compensate.causal_gyro_bias_b_radps`; needs ``forward_biases``).
     noise_step_s : float
         Spacing of the samples of the correlated-noise least squares [s] (a leg shorter than
         ten steps is sampled every tenth of its length).
+    forward_biases : pospp.nav.filter.BiasHistory, optional
+        A's forward (filter) sensor-error history on the run's time axis: ``t_s`` (K,),
+        ``gyro_b_radps`` and ``gyro_sigma_b_radps`` (K, 3), body FRD. Used by
+        ``compensation="causal"`` only.
 
     Returns
     -------
@@ -209,6 +223,9 @@ def calibrate_flight(
         raise ValueError(f"compensation: expected one of {COMPENSATIONS}, got {compensation!r}")
     gm_on = noise == "gyro_rw" and gyro_gm_tau_s is not None and (
         gyro_gm_sigma_dph is None or gyro_gm_sigma_dph > 0)
+    if compensation == "causal" and forward_biases is None:
+        raise ValueError("compensation='causal' needs A's forward bias history "
+                         "(forward_biases=FilterResult.forward_biases)")
     if compensation == "per_leg" and not gm_on:
         raise ValueError("compensation='per_leg' needs the Gauss-Markov drift model "
                          "(noise='gyro_rw' and gyro_gm_tau_s given)")
@@ -283,11 +300,6 @@ def calibrate_flight(
     except (ValueError, np.linalg.LinAlgError) as exc:
         return done(f"no calibration: the joint least squares failed: {exc}", pairs)
     chosen = next(c for c in joint if c.formulation == policy.formulation)
-    after, improvements = compensate_legs(
-        imu, reference, replays, chosen, accel_compensation=rc["accel_compensation"],
-        horizon_s=rc["horizon_s"], transition_step=int(rc["transition_step"]),
-        sample_rate_hz=rc["sample_rate_hz"], sigma_floor_mps=rc["sigma_floor_mps"],
-        per_leg_drift=compensation == "per_leg")
     first = replays[chosen.leg_ids[0]]
     bg = chosen.gyro_bias_b_radps(first.c_nb0)
     if chosen.formulation == "body":
@@ -301,6 +313,16 @@ def calibrate_flight(
         sig = np.sqrt(np.diag(c_bn @ cov_eps @ c_bn.T))
         messages.append("paper formulation chosen: its nav-frame drift is rotated into the body "
                         f"with leg {first.leg.leg_id}'s attitude")
+    history = None
+    if compensation == "causal":
+        fb = forward_biases
+        history = (np.asarray(fb.t_s, dtype=float), causal_gyro_bias_b_radps(
+            fb.gyro_b_radps, fb.gyro_sigma_b_radps, bg, prior_sigma_b_radps(sig, chosen)))
+    after, improvements = compensate_legs(
+        imu, reference, replays, chosen, accel_compensation=rc["accel_compensation"],
+        horizon_s=rc["horizon_s"], transition_step=int(rc["transition_step"]),
+        sample_rate_hz=rc["sample_rate_hz"], sigma_floor_mps=rc["sigma_floor_mps"],
+        per_leg_drift=compensation == "per_leg", gyro_bias_history=history)
     mis = {i: chosen.misalignment_n_rad(i) for i in chosen.leg_ids}
     return CalibrationRun(legs, replays, pairs, joint, chosen, after, improvements, bg, sig, mis,
                           "ok", tuple(messages))

@@ -37,7 +37,8 @@ def progress(stage, frac):
     if last[1] is not None:
         stages[last[1]] = stages.get(last[1], 0.0) + now - last[0]
     last[0], last[1] = now, stage
-out = pipeline.run(sys.argv[1], load_config(sys.argv[2]), sys.argv[3], progress=progress)
+out = pipeline.run(sys.argv[1], load_config(sys.argv[2]), sys.argv[3], progress=progress,
+                   force=True)
 print(json.dumps({"wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0,
                   "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
                   "n_imu": out.summary["n_imu_samples"], "n_legs": out.summary.get("n_legs"),

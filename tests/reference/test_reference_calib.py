@@ -27,7 +27,6 @@ pytestmark = [pytest.mark.reference, pytest.mark.slow]
 
 NAME = "flight_survey_errors"
 DPH = rotation.DEG_PER_H_RADPS
-PAPER_FLIGHT_RATIO = {"vel": 1.24 / 0.04, "pos": 125.1 / 16.1}  # Liu & Fang 2012, flight
 
 
 @pytest.fixture(scope="module")
@@ -74,12 +73,42 @@ def test_body_formulation_recovers_the_injected_gyro_bias(case):
     assert 0.7 * arw < run.chosen.gyro_arw_radpsqrts < 1.3 * arw
 
 
-def test_compensation_shrinks_b_error_beyond_twice_the_paper(case, tmp_path):
-    _, epoch, _, _, run = case
+def _arw_floor(arw_radpsqrts: float, t_s: float, lat_rad: float) -> tuple[float, float]:
+    """Horizontal RMS of B's velocity [m/s] and position [m] errors at t from the gyro's
+    angle random walk alone (both horizontal channels, Schuler loop): white rate noise of
+    density q drives dv through the impulse response -(g / omega) sin(omega u), so
+    var(dv) = q^2 g^2 / omega^2 (t / 2 - sin(2 omega t) / (4 omega)) per axis, and dr
+    through -(g / omega^2)(1 - cos(omega u)). Independent of pospp (closed form, quadrature).
+    """
+    from scipy.integrate import quad
+
+    from pospp import earth
+
+    g = float(earth.normal_gravity_mps2(lat_rad, 0.0))
+    om = np.sqrt(g / float(earth.principal_radii_m(lat_rad)[0]))
+    var_v = quad(lambda u: (g / om * np.sin(om * u)) ** 2, 0.0, t_s)[0]
+    var_p = quad(lambda u: (g / om**2 * (1.0 - np.cos(om * u))) ** 2, 0.0, t_s)[0]
+    return (float(np.sqrt(2.0 * var_v) * arw_radpsqrts),
+            float(np.sqrt(2.0 * var_p) * arw_radpsqrts))
+
+
+def test_compensation_leaves_only_the_angle_random_walk_in_sample(case, tmp_path):
+    """In-sample (every leg took part in the fit), on a simulated flight whose only gyro
+    error besides the constant bias is an ARW of 0.002 deg/sqrt(h): after compensation B's
+    error at 300 s must be the ARW's own floor, computed here from the injected ARW.
+
+    Measured: 1.34 -> 0.016 m/s and 134 -> 2.4 m (83x / 57x), against the ARW floor of
+    0.024 m/s and 2.8 m (ratio 0.67 and 0.85: the per-leg tilt fit absorbs part of the
+    walk). These ratios are in-sample and simulated; the paper's 31x / 7.8x were measured on
+    a real flight whose residual drift is not known, so the two are not compared here.
+    """
+    params, epoch, _, _, run = case
     s = run.summary()
-    assert s["dv_before_mps"] > 1.0 and s["dp_before_m"] > 100.0  # as the paper's 1.24, 125.1
-    assert s["dv_before_mps"] / s["dv_after_mps"] > 2 * PAPER_FLIGHT_RATIO["vel"]
-    assert s["dp_before_m"] / s["dp_after_m"] > 2 * PAPER_FLIGHT_RATIO["pos"]
+    assert s["dv_before_mps"] > 1.0 and s["dp_before_m"] > 100.0
+    arw = params["imu_errors"]["gyro_arw_dpsh"][0] * np.pi / 180 / 60
+    v_floor, p_floor = _arw_floor(arw, 300.0, run.replays[0].lat_rad)
+    assert 0.3 * v_floor < s["dv_after_mps"] < 1.5 * v_floor, (s, v_floor)
+    assert 0.3 * p_floor < s["dp_after_m"] < 1.5 * p_floor, (s, p_floor)
     for name, cols in run.tables(epoch).items():
         write_table(tmp_path / f"{name}.parquet", cols, name, metadata={})
 
@@ -96,14 +125,21 @@ def test_held_out_leg_predicted_by_one_pair(case):
     a = reference_from_trajectory(a.trajectory, v_sigma_n_mps=a.v_sigma_n_mps,
                                   accel_bias_b_mps2=ba)
     reps = {leg.leg_id: replay_leg(imu, a, leg) for leg in run.legs}
-    ratios = {}
+    ratios, after = {}, {}
     for form in ("body", "paper"):
         cal = calibrate((reps[0], reps[1]), form)
         _, imp = compensate_legs(imu, a, {2: reps[2]}, cal)
+        after[form] = imp[0]
         ratios[form] = (imp[0].vel_before_mps / imp[0].vel_after_mps,
                         imp[0].pos_before_m / imp[0].pos_after_m)
-    assert ratios["body"][0] > PAPER_FLIGHT_RATIO["vel"]
-    assert ratios["body"][1] > PAPER_FLIGHT_RATIO["pos"]
+    # held out, simulated: measured 1.35 -> 0.025 m/s and 135 -> 2.79 m (53x / 48x), i.e.
+    # 1.06x and 1.00x the angle random walk's own floor (0.024 m/s, 2.79 m at 300 s), which
+    # is what the leg must keep once the constant bias is gone
+    v_floor, p_floor = _arw_floor(params["imu_errors"]["gyro_arw_dpsh"][0] * np.pi / 180 / 60,
+                                  300.0, reps[2].lat_rad)
+    assert 0.5 * v_floor < after["body"].vel_after_mps < 2.0 * v_floor
+    assert 0.5 * p_floor < after["body"].pos_after_m < 2.0 * p_floor
+    assert min(ratios["body"]) > 20.0
     # the paper formulation, faced with a body-fixed drift on a reversal, makes leg 2 worse
     assert ratios["paper"][0] < 1.0 and ratios["paper"][1] < 1.0
 

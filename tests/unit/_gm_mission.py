@@ -1,6 +1,8 @@
 """Short survey missions with Gauss-Markov gyro drift for the calibration's Monte Carlo.
 
-Shared by tests/unit/test_calib_gm_montecarlo.py and tests/benchmarks/bench_calib_gm.py.
+Shared by tests/unit/test_calib_gm_montecarlo.py, tests/benchmarks/bench_calib_gm.py and
+tests/benchmarks/bench_drift_sensitivity.py (:func:`run_modes`: the drift's correlation time
+varied, and the causal compensation from a filter's forward bias estimate).
 A mission: 30 s static, accelerate, then three 300 s survey legs joined by 180 deg turns
 (flight: 60 m/s at 2600 m, 3 deg/s turns; vehicle: 9 m/s, 15 deg/s U-turns), 100 Hz, with
 an IMU grade of pospp/presets/imu.toml (``paper_flight``, ``paper_vehicle``: constant drift +
@@ -10,19 +12,25 @@ truth with the accelerometer bias known (a converged filter's bias states).
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from pospp.calib.compensate import compensate_legs
+from pospp.calib.compensate import (
+    causal_gyro_bias_b_radps,
+    compensate_legs,
+    prior_sigma_b_radps,
+)
 from pospp.calib.replay import ImuIncrements, reference_from_trajectory
 from pospp.calib.solve import calibrate
 from pospp.calib.stage import calibrate_flight
+from pospp.nav.filter import run_integrated_navigation
 from pospp.nav.strapdown import increments_from_rates
 from pospp.nav.tuning import tuning_preset
 from pospp.sim.api import simulate
-from pospp.sim.sensors import ImuErrorModel
+from pospp.sim.sensors import ImuErrorModel, imu_grade
 
 G0_MPS2 = 9.80665
 UG_MPS2 = 1e-6 * G0_MPS2
@@ -166,3 +174,89 @@ def run_once(kind: str, seed: int, folder: Path, *, estimate_gm_sigma: bool = Fa
            **{k: v.pos_after_m for k, v in held.items()}}
     return GmRun(est[0:2] - const[0:2], sig[0:2], cal.gyro_gm_sigma_radps, dv_, dp_,
                  np.array(leg_drift), np.array(leg_const))
+
+
+MODES = ("constant", "per_leg", "oracle", "causal", "forward")
+"""Compensation modes of :func:`run_modes` (see pospp.calib.compensate); "forward" is the
+causal mode without the calibrated prior (A's forward estimate alone)."""
+
+
+def run_modes(kind: str, seed: int, folder: Path, *, gm_tau_s: float | None = None,
+              causal: bool = True) -> dict[str, float]:
+    """B's error ratios at 300 s, before / after, per compensation mode, in-sample and held out.
+
+    The mission of :func:`run_once` with the grade's Gauss-Markov correlation time replaced by
+    ``gm_tau_s`` (the grade's when None); the calibration's noise model and the filter are
+    given that same tau (the matched case: what each mode can reach when the drift's
+    correlation time is known). A for B is the truth with the accelerometer bias known; the
+    causal mode takes only the gyro-bias history of pospp's forward filter run on the
+    simulated GNSS (grade tuning, tau replaced), fused with the calibrated bias as its prior.
+
+    Returns
+    -------
+    dict
+        ``"{in|held}_{mode}_{v|p}"``: ratio of B's horizontal velocity (position) error at
+        300 s before / after; in-sample: RMS over the three legs of a joint fit; held out:
+        the last leg, predicted from a fit of the first two. Also ``"in_before_v"`` etc.
+    """
+    grade = GRADE[kind]
+    tun = tuning_preset(TUNING[kind])
+    model = imu_grade(grade)
+    if gm_tau_s is not None:
+        model = dataclasses.replace(model, gyro_gm_tau_s=float(gm_tau_s))
+        tun = dataclasses.replace(tun, gyro_gm_tau_s=float(gm_tau_s))
+    sim = simulate(profile_path(kind, folder), imu_grade=model, seed=seed, imu_rate_hz=100.0)
+    t, dth, dv = increments_from_rates(sim.imu.time_ns, sim.imu.w_ib_b_radps,
+                                       sim.imu.f_ib_b_mps2, epoch_ns=sim.start_time_ns)
+    imu = ImuIncrements(t, dth, dv)
+    ba = np.array(model.accel_bias_ug) * UG_MPS2
+    a = reference_from_trajectory(sim.truth, v_sigma_n_mps=[0.02, 0.02, 0.03],
+                                  accel_bias_b_mps2=ba)
+    gm_kw = {"gyro_arw_dpsh": tun.gyro_arw_dpsh, "gyro_gm_sigma_dph": tun.gyro_gm_sigma_dph,
+             "gyro_gm_tau_s": tun.gyro_gm_tau_s}
+    run = calibrate_flight(imu, a, formulations=("body",), **gm_kw)
+    assert run.calibrated, run.reason
+    cal = run.chosen
+    bias = sim.imu_errors.gyro_bias_radps
+    true_mean = {}
+    for lid, rep in run.replays.items():
+        k0 = int(np.searchsorted(t, rep.t0_s))
+        k1 = int(np.searchsorted(t, rep.t0_s + rep.t_s[-1]))
+        true_mean[lid] = bias[k0:k1].mean(axis=0)
+    ids = sorted(run.replays)
+    pair = calibrate((run.replays[ids[0]], run.replays[ids[1]]), "body",
+                     gyro_arw_radpsqrts=tun.gyro_arw_dpsh * np.pi / 180.0 / 60.0,
+                     gyro_gm_sigma_radps=cal.gyro_gm_sigma_radps,
+                     gyro_gm_tau_s=tun.gyro_gm_tau_s)
+    pair_sigma = np.array([pair.sigma_of("gyro_bias_x"), pair.sigma_of("gyro_bias_y"), np.inf])
+    fits = {"in": (cal, run.replays, run.gyro_bias_b_radps, run.gyro_bias_sigma_b_radps),
+            "held": (pair, {ids[-1]: run.replays[ids[-1]]}, pair.gyro_bias_b_radps(),
+                     pair_sigma)}
+    fwd = None
+    if causal:
+        nav = run_integrated_navigation(sim.imu, sim.fix, sim.vel, tun,
+                                        epoch_ns=sim.start_time_ns, output_rate_hz=10.0)
+        fwd = nav.forward_biases
+    out: dict[str, float] = {}
+    kw = {"horizon_s": 300.0}
+    for where, (c, reps, b0, s0) in fits.items():
+        opts: dict[str, dict] = {"constant": {}, "per_leg": {"per_leg_drift": True},
+                                 "oracle": {"gyro_bias_by_leg": true_mean}}
+        if fwd is not None:
+            fused = causal_gyro_bias_b_radps(fwd.gyro_b_radps, fwd.gyro_sigma_b_radps, b0,
+                                             prior_sigma_b_radps(s0, c))
+            opts["causal"] = {"gyro_bias_history": (fwd.t_s, fused)}
+            opts["forward"] = {"gyro_bias_history": (fwd.t_s, fwd.gyro_b_radps)}
+        for mode, o in opts.items():
+            _, imp = compensate_legs(imu, a, reps, c, **kw, **o)
+            v0 = _rms([i.vel_before_mps for i in imp])
+            p0 = _rms([i.pos_before_m for i in imp])
+            out[f"{where}_before_v"], out[f"{where}_before_p"] = v0, p0
+            out[f"{where}_{mode}_v"] = v0 / _rms([i.vel_after_mps for i in imp])
+            out[f"{where}_{mode}_p"] = p0 / _rms([i.pos_after_m for i in imp])
+    return out
+
+
+def _rms(vals) -> float:
+    return float(np.sqrt(np.mean(np.square(vals))))
+

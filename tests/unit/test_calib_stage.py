@@ -124,5 +124,63 @@ def test_legs_of_a_few_seconds_never_crash_the_stage(tmp_path):
     policy = PairPolicy("adjacent", 1e30, 0.0, "body", "numerical")
     run = calibrate_flight(imu, ref, legs=legs, pairs_cfg=policy)
     assert len(run.replays) == 2 and len(run.pairs) == 1
-    assert isinstance(run.reason, str) and run.reason
+    # with the condition gate opened the pair is used, and on error-free increments the
+    # truth is zero: the bias comes out at 3e-5 deg/h (measured; asserted < 1e-3 deg/h), with
+    # a sigma that says how little two 8 s legs tell (measured 470 and 780 deg/h)
+    assert run.reason == "ok" and run.calibrated and run.pairs[0].used, run.reason
+    assert np.all(np.abs(run.gyro_bias_b_radps) < 1e-3 * rotation.DEG_PER_H_RADPS)
+    sig_dph = run.gyro_bias_sigma_b_radps[0:2] / rotation.DEG_PER_H_RADPS
+    assert np.all((sig_dph > 100.0) & np.isfinite(sig_dph)), sig_dph
+    # B over 8 s of exact data: errors of the mechanization only (measured 2e-10 m/s)
+    assert all(i.vel_before_mps < 1e-6 and i.vel_after_mps < 1e-6 for i in run.improvements)
     _check_tables(run, tmp_path)
+
+
+def test_causal_compensation_removes_a_known_changing_bias_and_uses_no_later_data():
+    """compensate_legs(gyro_bias_history=...) on exact increments with a drifting gyro bias
+    injected (tests/unit/_truth_imu.py): given the true bias history, B's error at the leg
+    end drops to the mechanization's level; changing the history after some instant leaves
+    B before it untouched (only the last value at or before each interval's start is used)."""
+    from dataclasses import dataclass
+
+    from pospp.calib.compensate import causal_gyro_bias_b_radps, compensate_legs
+    from pospp.calib.replay import replay_leg
+
+    @dataclass(frozen=True)
+    class _NoFit:  # a calibration that fitted no leg and holds no bias
+        leg_ids: tuple = ()
+
+        def gyro_bias_b_radps(self, c_nb=None):
+            return np.zeros(3)
+
+    dph = rotation.DEG_PER_H_RADPS
+    tr = rhumb_line(LAT, 1000.0, 60.0, 0.5, 10.0, 340.0)
+    n = tr.t_s.size
+    mid = 0.5 * (tr.t_s[1:] + tr.t_s[:-1])
+
+    def bias(t):  # 0.5, -0.3, 0.2 deg/h plus a ramp of 1, -0.6 deg/h per 300 s
+        return (np.array([0.5, -0.3, 0.2]) + np.outer(t / 300.0, [1.0, -0.6, 0.0])) * dph
+
+    imu_true, ref = _flight(tr, n)
+    imu = type(imu_true)(tr.t_s, tr.dtheta_b_rad + bias(mid) * np.diff(tr.t_s)[:, None],
+                         tr.dv_b_mps)
+    leg = Leg(0, 5.0, 335.0, 0.5, 60.0, 1000.0, 0, 0, 0, 0)
+    before = {0: replay_leg(imu, ref, leg)}
+    grid = np.arange(0.0, 341.0, 0.1)
+    a, (imp,) = compensate_legs(imu, ref, before, _NoFit(),
+                                gyro_bias_history=(grid, bias(grid + 0.05)))
+    # measured 2.1 m/s -> 7e-9 m/s (each 0.1 s interval holds the ramp's value at its middle)
+    assert imp.vel_before_mps > 1.0 and imp.vel_after_mps < 1e-6, imp
+    # causality: a history that differs only from t = 200 s on leaves B before 200 s alone
+    late = bias(grid + 0.05)
+    late[grid >= 200.0] += 5.0 * dph
+    b, _ = compensate_legs(imu, ref, before, _NoFit(), gyro_bias_history=(grid, late))
+    t_abs = a[0].t0_s + a[0].t_s
+    early, after200 = t_abs < 199.0, t_abs > 230.0
+    np.testing.assert_array_equal(a[0].dv_n_mps[early], b[0].dv_n_mps[early])
+    assert np.abs(a[0].dv_n_mps[after200] - b[0].dv_n_mps[after200]).max() > 1e-3
+    # the fusion: inverse-variance weights; an infinite prior sigma gives A's estimate
+    fwd, s_fwd = np.array([[1.0, 2.0, 3.0]]), np.array([[1.0, 1.0, 1.0]])
+    fused = causal_gyro_bias_b_radps(fwd, s_fwd, np.array([3.0, 0.0, 0.0]),
+                                     np.array([1.0, np.sqrt(3.0), np.inf]))
+    np.testing.assert_allclose(fused, [[2.0, 1.5, 3.0]], rtol=1e-12)

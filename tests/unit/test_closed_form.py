@@ -86,16 +86,26 @@ def test_paper_mapping_round_trip_and_signs():
 
 
 def test_paper_printed_sign_is_the_opposite_of_expm():
-    # The paper prints +omega_s R sin(omega_s t) in the east-velocity row, phi_y column; its own
-    # F (and ours) gives the negative: dv_E = -omega R sin(omega t) phi_N.
+    # The paper's F, east channel (its Eq. 6, ENU, level and at rest): dV_E' = -g phi_y,
+    # phi_y' = dV_E / R (+ eps_N). Its printed Eq. 13 has +omega_s R sin(omega_s t) in the
+    # dV_E row, phi_y column. Compute both and pospp's closed form.
     lat = np.radians(40.0)
-    _, om_e = cf.schuler_frequencies_radps(lat, 0.0)
-    t = np.array([600.0])
+    g = float(earth.normal_gravity_mps2(lat, 0.0))
+    r_e = float(earth.principal_radii_m(lat)[1])
+    om = np.sqrt(g / r_e)
+    t = np.array([300.0, 600.0, 1800.0])
+    f_east = np.array([[0.0, -g], [1.0 / r_e, 0.0]])  # [dV_E, phi_y]
+    from_expm = np.array([expm(f_east * ti)[0, 1] for ti in t])
+    printed = +om * r_e * np.sin(om * t)
+    # the printed entry is the negative of what the paper's own F gives (not a small
+    # difference: both are ~2e6 m/s per rad at 600 s and their sum is 1e-9 of that)
+    np.testing.assert_allclose(from_expm, -printed, rtol=1e-9)
+    assert np.all(np.abs(from_expm - printed) > 1.9 * np.abs(printed))
+    # pospp's closed form follows F, not the print
     rows_paper = cf.velocity_error_rows(t, lat_rad=lat, height_m=0.0, v_n_mps=[0, 0]) @ (
         cf.PAPER_FROM_NED.T
-    )
-    r_e = float(earth.principal_radii_m(lat)[1])
-    assert rows_paper[0, 1, 1] == pytest.approx(-om_e * r_e * np.sin(om_e * 600.0), rel=1e-12)
+    )  # rows dv_N, dv_E; columns phi_x, phi_y, phi_z, eps_E, eps_N
+    np.testing.assert_allclose(rows_paper[:, 1, 1], from_expm, rtol=1e-9)
 
 
 def test_bad_input_raises():
