@@ -63,6 +63,20 @@ class FlightOutcome:
     dp_after_m: float | None = None
     run_dir: str | None = None
     """Run folder name under the batch root."""
+    qc_failed_checks: str | None = None
+    dv_before_mps: float | None = None
+    gyro_bias_x_dph: float | None = None
+    gyro_bias_x_sigma_dph: float | None = None
+    gyro_bias_y_dph: float | None = None
+    gyro_bias_y_sigma_dph: float | None = None
+    gap_heldout_mps: float | None = None
+    not_observable: str | None = None
+    """The answer first: QC verdict, calibrated bias, held-out gap (summary columns)."""
+
+
+_HEADLINE_COLUMNS = ("qc_failed_checks", "dv_before_mps", "gyro_bias_x_dph",
+                     "gyro_bias_x_sigma_dph", "gyro_bias_y_dph", "gyro_bias_y_sigma_dph",
+                     "gap_heldout_mps", "not_observable")
 
 
 def _safe_part(part: str) -> str:
@@ -160,6 +174,7 @@ def process_one(mcap_path: str, config_dict: dict[str, Any], out_root: str,
             shown, sha, "done" if outcome.status == "ok" else outcome.status,
             time.perf_counter() - t0, None, s.get("n_legs"), s.get("dv_after_mps"),
             s.get("dp_after_m"), name,
+            **{k: s.get(k) for k in _HEADLINE_COLUMNS},
         )
     except Exception as exc:  # noqa: BLE001 - a batch records every failure and goes on
         last = traceback.format_exception_only(type(exc), exc)[-1].strip()
