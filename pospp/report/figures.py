@@ -257,14 +257,15 @@ def diagnosis_curves(curves: pd.DataFrame) -> Figure:
     return fig
 
 
-def sensor_errors(biases: pd.DataFrame | None, calibrated: dict[str, tuple[float, float]]
-                  ) -> Figure:
+def sensor_errors(biases: pd.DataFrame | None, calibrated: dict[str, tuple[float, float]],
+                  *, span_s: float | None = None) -> Figure:
     """Algorithm A's estimated gyro (and accelerometer) biases over time with their 1-sigma
     band, beside the calibrated constant gyro bias (dashed line and band).
 
     ``biases``: the ``biases`` table (time_ns, solution, gyro_bias_x_dph, ...,
     accel_bias_z_ug and ``*_sigma`` columns) or None; ``calibrated``: parameter name
-    ("gyro_bias_x", ...) -> (value, sigma) in deg/h.
+    ("gyro_bias_x", ...) -> (value, sigma) in deg/h; ``span_s``: the run's length (the time
+    axis when there is no ``biases`` table).
     """
     has_accel = biases is not None and any(c.startswith("accel_bias") for c in biases)
     fig, axes = plt.subplots(2 if has_accel else 1, 1, figsize=(10, 5.5 if has_accel else 3.2),
@@ -295,7 +296,9 @@ def sensor_errors(biases: pd.DataFrame | None, calibrated: dict[str, tuple[float
             ax.grid(alpha=0.3)
         axes[-1].set_xlabel("time since start (s)")
     else:
-        axes[0].set_xlabel("(A's bias estimates over time are not in this run)")
+        axes[0].set_xlabel("time since start (s); A's bias estimates are not in this run")
+        if span_s:
+            axes[0].set_xlim(0.0, span_s)
     for i, axn in enumerate("xyz"):
         if f"gyro_bias_{axn}" in calibrated:
             v, sg = calibrated[f"gyro_bias_{axn}"]

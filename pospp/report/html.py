@@ -55,15 +55,28 @@ def _img(fig: Figure) -> str:
     return f'<img alt="figure" src="data:image/png;base64,{data}"/>'
 
 
-def _cell(v: object) -> str:
-    if v is None or (isinstance(v, float) and not np.isfinite(v)) or v is pd.NA:
+def _cell(v: object, decimals: int | None = None) -> str:
+    if v is None or v is pd.NA or (isinstance(v, float | np.floating) and not np.isfinite(v)):
         return "&ndash;"
     if isinstance(v, bool | np.bool_):
         return "yes" if v else "no"
     if isinstance(v, float | np.floating):
+        if decimals is not None:
+            return html.escape(f"{v:.{decimals}f}")
         a = abs(float(v))
         return html.escape(f"{v:.3g}" if a == 0 or 1e-3 <= a < 1e5 else f"{v:.2e}")
     return html.escape(str(v))
+
+
+def _decimals(col: pd.Series) -> int | None:
+    """Fixed decimals for a float column: 4 significant digits at its largest value (None:
+    too small for fixed notation)."""
+    a = np.abs(col.to_numpy(dtype=float, na_value=np.nan))
+    big = np.nanmax(a) if np.isfinite(a).any() else 0.0
+    if big == 0.0:
+        return 0
+    dec = 3 - int(np.floor(np.log10(big)))
+    return max(0, dec) if dec <= 6 else None
 
 
 def _table(df: pd.DataFrame | None, *, max_rows: int = 60, tall: bool = False,
@@ -77,11 +90,12 @@ def _table(df: pd.DataFrame | None, *, max_rows: int = 60, tall: bool = False,
                              shown[c].astype(str).str.len().max() > 24}
     head = "".join(f"<th class='{'l' if c in left_cols else ''}'>{html.escape(str(c))}</th>"
                    for c in shown.columns)
+    dec = [_decimals(shown[c]) if shown[c].dtype.kind == "f" else None for c in shown.columns]
     rows = []
     for rec in shown.itertuples(index=False):
         rows.append("<tr>" + "".join(
-            f"<td class='{'l' if c in left_cols else ''}'>{_cell(v)}</td>"
-            for c, v in zip(shown.columns, rec, strict=True)) + "</tr>")
+            f"<td class='{'l' if c in left_cols else ''}'>{_cell(v, d)}</td>"
+            for c, v, d in zip(shown.columns, rec, dec, strict=True)) + "</tr>")
     more = f'<p class="muted">{len(df) - max_rows} more rows</p>' if len(df) > max_rows else ""
     cls = "tw tall" if tall or len(shown) > 25 else "tw"
     return (f"<div class='{cls}'><table><thead><tr>{head}</tr></thead><tbody>"
@@ -186,7 +200,9 @@ def _calibration_section(cal: pd.DataFrame, h: Headline) -> list[str]:
         return [*parts, f"<p class='warn'>{html.escape(h.calibration_reason)}</p>"]
     parts.append(_img(figures.calibration_bars(cal)))
     joint = cal[cal.pair_id == -1]
-    joint = joint.iloc[np.argsort(joint.formulation.to_numpy() != h.formulation, kind="stable")]
+    order = [(f != h.formulation, "_leg" in p, p == "phi_z", not p.startswith(("gyro", "eps")))
+             for f, p in zip(joint.formulation, joint.parameter, strict=True)]
+    joint = joint.iloc[sorted(range(len(joint)), key=order.__getitem__)]
     rows = []
     for r in joint.itertuples():
         why = not_observable(r.parameter, r.sigma, r.unit)
@@ -262,16 +278,18 @@ def render_report(tables: Mapping[str, pd.DataFrame], *, title: str = "pospp run
     cal = tables.get("calibration")
     if cal is not None:
         parts.extend(_calibration_section(cal, h))
+    traj, legs = tables.get("trajectory"), tables.get("legs")
     biases = tables.get("biases")
     if (biases is not None and not biases.empty) or h.results:
         parts.append("<h2>Sensor errors: A's estimate over time and the calibration</h2>")
         calibrated = {e.name: (e.value, e.sigma) for e in h.results
                       if e.name.startswith("gyro_bias")}
-        parts.append(_img(figures.sensor_errors(biases, calibrated)))
+        span_s = None if traj is None or traj.empty else float(
+            (traj.time_ns.max() - traj.time_ns.min()) * 1e-9)
+        parts.append(_img(figures.sensor_errors(biases, calibrated, span_s=span_s)))
         if biases is None or biases.empty:
             parts.append("<p class='muted'>biases.parquet (A's bias estimates) is not in this "
                          "run: only the calibrated values are drawn.</p>")
-    traj, legs = tables.get("trajectory"), tables.get("legs")
     if traj is not None and not traj.empty:
         parts.append("<h2>Trajectory and legs</h2>")
         parts.append(_img(figures.trajectory_map(traj, legs if legs is not None else
