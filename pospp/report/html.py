@@ -68,6 +68,9 @@ def _cell(v: object, decimals: int | None = None) -> str:
     return html.escape(str(v))
 
 
+_PER_CELL = frozenset({"value", "threshold", "sigma", "statistic"})
+
+
 def _decimals(col: pd.Series) -> int | None:
     """Fixed decimals for a float column: 4 significant digits at its largest value (None:
     too small for fixed notation)."""
@@ -90,7 +93,10 @@ def _table(df: pd.DataFrame | None, *, max_rows: int = 60, tall: bool = False,
                              shown[c].astype(str).str.len().max() > 24}
     head = "".join(f"<th class='{'l' if c in left_cols else ''}'>{html.escape(str(c))}</th>"
                    for c in shown.columns)
-    dec = [_decimals(shown[c]) if shown[c].dtype.kind == "f" else None for c in shown.columns]
+    # one unit per column: fixed decimals; long-form value columns (unit in a "unit" column)
+    # are formatted cell by cell
+    dec = [_decimals(shown[c]) if shown[c].dtype.kind == "f" and not (
+        "unit" in shown and c in _PER_CELL) else None for c in shown.columns]
     rows = []
     for rec in shown.itertuples(index=False):
         rows.append("<tr>" + "".join(
