@@ -239,10 +239,11 @@ def summary_text(tables: Mapping[str, pd.DataFrame], *, verbose: bool = False) -
         lines.append(f"pospp run: {r.get('input_file')}")
         lines.extend(headline_lines(h))
         lines.extend(qc_lines(tables.get("qc"))[1:] if h.qc_failed else [])
+        t0 = run_start_ns(tables)
         lines.append(f"  data: {_fmt(r.get('duration_s'), '.1f')} s of IMU at "
                      f"{_fmt(r.get('imu_rate_hz'), '.0f')} Hz, "
-                     f"{_fmt(r.get('n_gnss_fixes'), 'd')} GNSS fixes, from "
-                     f"{utc_text(run_start_ns(tables))} UTC")
+                     f"{_fmt(r.get('n_gnss_fixes'), 'd')} GNSS fixes"
+                     + (f", from {utc_text(t0)} UTC" if t0 is not None else ""))
     legs = tables.get("legs")
     if legs is not None:
         t0 = run_start_ns(tables) or 0
