@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import re
 
+import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 import pytest
@@ -16,7 +17,7 @@ from pospp.batch import FlightOutcome, _read_manifest, _write_manifest
 from pospp.config import PipelineConfig
 from pospp.evaluate import SolutionErrors
 from pospp.outputs import NOT_OBSERVABLE_SIGMA, not_observable, velocity_gap_rms_mps
-from pospp.report import figures
+from pospp.report import figures, html
 from pospp.report.html import render_report
 from pospp.report.summary import group_messages, headline, round_to_sigma, summary_text
 
@@ -85,6 +86,16 @@ def synthetic_tables(n_legs: int = 4, seed: int = 3) -> dict[str, pd.DataFrame]:
             "trajectory": traj, "diagnosis": diag, "messages": msgs}
 
 
+@pytest.fixture
+def no_png(monkeypatch):
+    """Figures are made but not drawn to PNG (the page text is what these tests read)."""
+    def stub(fig) -> str:
+        plt.close(fig)
+        return "<img alt='figure'/>"
+
+    monkeypatch.setattr(html, "_img", stub)
+
+
 @pytest.mark.parametrize(("value", "sigma", "expected"), [
     (0.93686, 0.2927, ("+0.94", "0.29")),
     (313.0, 1915.4, ("+300", "1900")),
@@ -146,8 +157,8 @@ def test_identical_messages_are_grouped_with_a_count() -> None:
     assert g.first_ns.iloc[1] == T0_NS and g.last_ns.iloc[1] == T0_NS + 199 * 5_000_000_000
 
 
-def test_report_has_no_raw_ns_no_nan_and_readable_units() -> None:
-    page = render_report(synthetic_tables(n_legs=30))
+def test_report_has_no_raw_ns_no_nan_and_readable_units(no_png) -> None:
+    page = render_report(synthetic_tables(n_legs=12))
     text = re.sub(r"<[^>]+>", " ", re.sub(r"src=\"data:[^\"]+\"", "", page))
     assert not re.search(r"\d{19}", text), "19-digit ns times in the report"
     assert not re.search(r"\bnan\b|\bNaN\b|<NA>", text)
@@ -182,3 +193,26 @@ def test_manifest_keeps_the_headline_columns(tmp_path) -> None:
     assert back["a.mcap"].gyro_bias_x_dph == 0.937 and back["a.mcap"].not_observable == \
         "phi_z: why"
     assert back["b.mcap"].gyro_bias_x_dph is None
+
+
+def test_sensor_errors_read_the_biases_table(no_png) -> None:
+    """A's bias estimates (the ``biases`` table) are drawn beside the calibrated value."""
+    t = T0_NS + np.arange(0, 1000, 10) * 1_000_000_000
+    b = pd.DataFrame({"time_ns": np.r_[t, t], "solution": ["forward"] * 100 + ["smoothed"] * 100,
+                      "gyro_bias_x_dph": np.r_[np.zeros(100), np.linspace(0.5, 1.0, 100)],
+                      "gyro_bias_x_sigma_dph": 0.1, "gyro_bias_y_dph": -0.5,
+                      "gyro_bias_y_sigma_dph": 0.1, "gyro_bias_z_dph": 0.0,
+                      "gyro_bias_z_sigma_dph": 0.1, "accel_bias_x_ug": 5.0,
+                      "accel_bias_y_ug": -5.0, "accel_bias_z_ug": 5.0,
+                      "accel_bias_x_sigma_ug": 1.0})
+    fig = figures.sensor_errors(b, {"gyro_bias_x": (0.94, 0.29)})
+    gyro, accel = fig.axes
+    x, y = gyro.lines[0].get_data()
+    assert np.allclose(y, np.linspace(0.5, 1.0, 100)) and x[-1] == pytest.approx(990.0)  # smoothed
+    assert any(np.allclose(ln.get_ydata(), 0.94) for ln in gyro.lines)  # the calibration
+    assert accel.get_ylabel() == "accel bias (ug)"
+    assert np.allclose(accel.lines[0].get_ydata(), 5.0)
+    fig.clf()
+    tables = synthetic_tables()
+    page = render_report({**tables, "biases": b})
+    assert "is not in this run" not in page and "is not in this run" in render_report(tables)
