@@ -164,8 +164,14 @@ def process_one(mcap_path: str, config_dict: dict[str, Any], out_root: str,
         sha = parquet_tables.sha256_file(path)
         run_dir = Path(out_root) / name
         if not force and already_done(run_dir, config, sha):
+            done = parquet_tables.read_table(run_dir / "summary.parquet").iloc[0]
+            kept = {k: (None if pd.isna(done.get(k)) else done.get(k))
+                    for k in ("n_legs", "dv_after_mps", "dp_after_m", *_HEADLINE_COLUMNS)
+                    if k in done}
+            if kept.get("n_legs") is not None:
+                kept["n_legs"] = int(kept["n_legs"])
             return FlightOutcome(shown, sha, "skipped", time.perf_counter() - t0, None,
-                                 run_dir=name)
+                                 run_dir=name, **kept)
         # the batch owns its root: an earlier run of this flight is replaced (never a folder
         # holding files pospp did not write)
         outcome = pipeline.run(path, config, run_dir, force=True)
