@@ -142,8 +142,9 @@ def _qc_section(qc: pd.DataFrame | None, summary: pd.DataFrame | None) -> list[s
             parts.append(f"<p class='{cls}'>{html.escape(row.check)}: "
                          f"{html.escape(row.suggestion)}</p>")
     ordered = pd.concat([failed, qc[qc.passed.astype(bool)]])
-    parts.append(_table(ordered[["check", "passed", "value", "threshold", "unit", "severity",
-                                 "measure"]], left=("check", "measure")))
+    cols = [c for c in ("check", "passed", "value", "threshold", "unit", "severity", "measure")
+            if c in ordered]  # runs written before a column existed still render
+    parts.append(_table(ordered[cols], left=("check", "measure")))
     return parts
 
 
@@ -220,7 +221,12 @@ def _calibration_section(cal: pd.DataFrame, h: Headline) -> list[str]:
                      "unit": unit_text(r.unit), "note": why})
     parts.append("<h3>Joint fit over all used pairs</h3>"
                  + _table(pd.DataFrame(rows), max_rows=400, left=("parameter", "note")))
-    per_pair = cal[cal.pair_id != -1].assign(unit=lambda d: d.unit.map(unit_text))
+    pp = cal[cal.pair_id != -1]
+    per_pair = pd.DataFrame({
+        "pair_id": pp.pair_id, "formulation": pp.formulation, "parameter": pp.parameter,
+        "value \u00b1 1-sigma": [pm_text(v, e).replace(" +- ", " \u00b1 ")
+                                 for v, e in zip(pp.value, pp.sigma, strict=True)],
+        "unit": pp.unit.map(unit_text)})
     parts.append(f"<details><summary>Per-pair fits ({len(per_pair)} rows)</summary>"
                  + _table(per_pair, max_rows=100_000, tall=True) + "</details>")
     return parts
