@@ -63,6 +63,20 @@ class FlightOutcome:
     dp_after_m: float | None = None
     run_dir: str | None = None
     """Run folder name under the batch root."""
+    qc_failed_checks: str | None = None
+    dv_before_mps: float | None = None
+    gyro_bias_x_dph: float | None = None
+    gyro_bias_x_sigma_dph: float | None = None
+    gyro_bias_y_dph: float | None = None
+    gyro_bias_y_sigma_dph: float | None = None
+    gap_heldout_mps: float | None = None
+    not_observable: str | None = None
+    """The answer first: QC verdict, calibrated bias, held-out gap (summary columns)."""
+
+
+_HEADLINE_COLUMNS = ("qc_failed_checks", "dv_before_mps", "gyro_bias_x_dph",
+                     "gyro_bias_x_sigma_dph", "gyro_bias_y_dph", "gyro_bias_y_sigma_dph",
+                     "gap_heldout_mps", "not_observable")
 
 
 def _safe_part(part: str) -> str:
@@ -150,8 +164,14 @@ def process_one(mcap_path: str, config_dict: dict[str, Any], out_root: str,
         sha = parquet_tables.sha256_file(path)
         run_dir = Path(out_root) / name
         if not force and already_done(run_dir, config, sha):
+            done = parquet_tables.read_table(run_dir / "summary.parquet").iloc[0]
+            kept = {k: (None if pd.isna(done.get(k)) else done.get(k))
+                    for k in ("n_legs", "dv_after_mps", "dp_after_m", *_HEADLINE_COLUMNS)
+                    if k in done}
+            if kept.get("n_legs") is not None:
+                kept["n_legs"] = int(kept["n_legs"])
             return FlightOutcome(shown, sha, "skipped", time.perf_counter() - t0, None,
-                                 run_dir=name)
+                                 run_dir=name, **kept)
         # the batch owns its root: an earlier run of this flight is replaced (never a folder
         # holding files pospp did not write)
         outcome = pipeline.run(path, config, run_dir, force=True)
@@ -160,6 +180,7 @@ def process_one(mcap_path: str, config_dict: dict[str, Any], out_root: str,
             shown, sha, "done" if outcome.status == "ok" else outcome.status,
             time.perf_counter() - t0, None, s.get("n_legs"), s.get("dv_after_mps"),
             s.get("dp_after_m"), name,
+            **{k: s.get(k) for k in _HEADLINE_COLUMNS},
         )
     except Exception as exc:  # noqa: BLE001 - a batch records every failure and goes on
         last = traceback.format_exception_only(type(exc), exc)[-1].strip()

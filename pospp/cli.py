@@ -139,7 +139,11 @@ def main(debug: bool) -> None:
 @click.option("--force", is_flag=True,
               help="Replace an earlier pospp run in the folder (never files pospp did not "
                    "write).")
-def run(mcap_file: str, pipeline_file: str | None, out_dir: str, force: bool) -> None:
+@click.option("-v", "--verbose", is_flag=True,
+              help="Print every calibrated parameter (per-leg misalignments, every "
+                   "formulation), not only the headline.")
+def run(mcap_file: str, pipeline_file: str | None, out_dir: str, force: bool,
+        verbose: bool) -> None:
     """Process one flight log: A, legs, B, pairs, calibration, compensation, report.
 
     Calls pospp.pipeline.run. The run is written beside OUT and swapped in whole when done.
@@ -154,7 +158,7 @@ def run(mcap_file: str, pipeline_file: str | None, out_dir: str, force: bool) ->
         outcome = pipeline.run(mcap_file, config, out_dir, progress=bar, force=force)
     finally:
         bar.close()
-    click.echo(summary_text(read_run_tables(outcome.out_dir)))
+    click.echo(summary_text(read_run_tables(outcome.out_dir), verbose=verbose))
     sys.exit(exit_code_for_status(outcome.status))
 
 
@@ -185,7 +189,14 @@ def batch(inputs: tuple[str, ...], pipeline_file: str | None, out_root: str, wor
     config = _config(pipeline_file)
 
     def show(o) -> None:
+        from pospp.report.summary import pm_text
+
         tail = f": {o.error}" if o.error else ""
+        if o.gyro_bias_x_dph is not None and o.gyro_bias_y_dph is not None:
+            tail += (f"  gyro bias x {pm_text(o.gyro_bias_x_dph, o.gyro_bias_x_sigma_dph)}, y "
+                     f"{pm_text(o.gyro_bias_y_dph, o.gyro_bias_y_sigma_dph)} deg/h")
+        if o.qc_failed_checks:
+            tail += f"  QC failed: {o.qc_failed_checks}"
         click.echo(_printable(f"{o.status:8s} {o.duration_s:7.1f} s  {o.file}{tail}"))
 
     rows = run_batch(files, config, out_root, workers=workers, scheduler=scheduler,

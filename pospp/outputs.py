@@ -120,3 +120,61 @@ def log_summary(log: Any) -> dict[str, Any]:
         "n_gnss_fixes": int(len(log.fix)),
         "imu_rate_hz": float(_NS_PER_S / np.median(dt)) if dt.size else float("nan"),
     }
+
+
+# --------------------------------------------------------------------------- headline figures
+
+NOT_OBSERVABLE_SIGMA = {"arcsec": 360.0, "deg_per_h": 10.0}
+"""1-sigma above which a calibrated parameter is reported as not observable, by its unit.
+
+360 arcsec (0.1 deg) is the coarse-alignment level: a misalignment known no better than
+that says nothing about algorithm A's attitude error. 10 deg/h is above the bias of every
+gyro pospp targets but consumer MEMS: a drift known no better than that cannot be fed back.
+"""
+
+_WHY_NOT_OBSERVABLE = {
+    "phi_z": "heading misalignment: on straight, level, unaccelerated legs it enters B's "
+             "horizontal error only through the Earth-rate coupling, which is weak",
+    "gyro_bias_z": "vertical gyro drift: on level legs it reaches B's horizontal error only "
+                   "through the small tilts",
+}
+
+
+def not_observable(parameter: str, sigma: float, unit: str) -> str:
+    """Why a calibrated parameter is not observable ("" when it is).
+
+    A parameter is not observable when its 1-sigma exceeds :data:`NOT_OBSERVABLE_SIGMA` for
+    its unit, or is not finite; the value is then flagged, never reported as a result.
+    """
+    bound = NOT_OBSERVABLE_SIGMA.get(unit, np.inf)
+    if np.isfinite(sigma) and sigma <= bound:
+        return ""
+    base = parameter.partition("_leg")[0]
+    why = _WHY_NOT_OBSERVABLE.get(base, "these legs do not determine it")
+    unit_txt = unit.replace("_per_", "/")
+    return f"sigma {sigma:.4g} {unit_txt} > {bound:g} {unit_txt}: {why}"
+
+
+def velocity_gap_rms_mps(dv_n_mps: Iterable[Any]) -> float:
+    """RMS of B minus A horizontal velocity over every sample after each leg's start [m/s].
+
+    ``dv_n_mps``: per leg, an (M, >=2) array of [dv_N, dv_E, ...]; row 0 (the leg start, zero
+    by construction) is left out, as in the diagnosis' gaps (pospp.diagnose).
+    """
+    parts = [np.asarray(d, dtype=float)[1:, :2].ravel() for d in dv_n_mps]
+    a = np.concatenate(parts) if parts else np.zeros(0)
+    return float(np.sqrt(np.mean(a**2))) if a.size else float("nan")
+
+
+def diagnosis_summary(steps: Any) -> dict[str, float]:
+    """Summary columns from the diagnosis' first step (its base model is the calibration).
+
+    ``steps``: a sequence of :class:`pospp.diagnose.workflow.DiagnosisStep` (or None when no
+    diagnosis ran). ``gap_fit_mps`` is the in-sample residual of the calibration fitted to
+    every leg; ``gap_heldout_mps`` the leave-one-leg-out prediction's.
+    """
+    if not steps:
+        return {}
+    first = steps[0]
+    return {"gap_fit_mps": float(first.gap_before_mps),
+            "gap_heldout_mps": float(first.heldout_gap_before_mps)}

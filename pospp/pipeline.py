@@ -373,6 +373,7 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
     for name, table in tables.items():
         write(name, table)
     summary.update(calib_run.summary())
+    summary.update(outputs.diagnosis_summary(diagnosis.steps if diagnosis is not None else None))
     summary["calibration_reason"] = calib_run.reason
     if config.outputs.mcap:
         best = next(solutions[k] for k in ("compensated", "smoothed", "forward")
@@ -503,7 +504,8 @@ def evaluate_run(run_dir: str | Path, truth_file: str | Path, *, skip_s: float =
     table = pd.DataFrame(cols)
     meta = {"run_dir": str(run), "reference_file": str(truth_file)}
     parquet_tables.write_table(run / "evaluation.parquet", table, "evaluation", metadata=meta)
-    report_files.write_figure(run / "evaluation.png", figures.evaluation_errors(errors))
+    report_files.write_figure(run / "evaluation.png",
+                              figures.evaluation_errors(errors, skip_s=skip_s))
     return table
 
 

@@ -97,20 +97,39 @@ class CalibrationRun:
         return None
 
     def summary(self) -> dict[str, Any]:
-        """Key figures (summary table columns): counts and RMS over legs at the horizon."""
+        """Key figures (summary table columns): counts, RMS over legs at the horizon, the
+        calibrated body gyro bias with its sigma [deg/h] (NaN: not estimated) and the chosen
+        fit's parameters that are not observable, with why (``pospp.outputs.not_observable``)."""
         imp = self.improvements
 
         def rms(vals: list[float]) -> float:
             return float(np.sqrt(np.mean(np.square(vals)))) if vals else float("nan")
 
-        return {
+        from pospp.outputs import not_observable, velocity_gap_rms_mps
+
+        out: dict[str, Any] = {
             "n_legs": len(self.legs),
             "n_pairs_used": sum(p.used for p in self.pairs),
             "dv_before_mps": rms([i.vel_before_mps for i in imp]),
             "dv_after_mps": rms([i.vel_after_mps for i in imp]),
             "dp_before_m": rms([i.pos_before_m for i in imp]),
             "dp_after_m": rms([i.pos_after_m for i in imp]),
+            "gap_uncalibrated_mps": velocity_gap_rms_mps(
+                [self.replays[i].dv_n_mps for i in sorted(self.replays)]),
         }
+        if self.chosen is None:
+            return out
+        out["calibration_formulation"] = self.chosen.formulation
+        for i, ax in enumerate("xyz"):
+            sig = float(self.gyro_bias_sigma_b_radps[i]) / DEG_PER_H_RADPS
+            known = np.isfinite(sig)
+            out[f"gyro_bias_{ax}_dph"] = (float(self.gyro_bias_b_radps[i]) / DEG_PER_H_RADPS
+                                          if known else float("nan"))
+            out[f"gyro_bias_{ax}_sigma_dph"] = sig if known else float("nan")
+        flags = [f"{name}: {why}" for name, _, s, u in calibration_rows(self.chosen)
+                 if (why := not_observable(name, s, u))]
+        out["not_observable"] = "; ".join(flags)
+        return out
 
     def tables(self, epoch_ns: int) -> dict[str, dict[str, Any]]:
         """Column dicts of the ``legs``, ``pairs``, ``calibration`` and ``leg_errors`` tables.

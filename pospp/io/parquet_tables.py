@@ -180,6 +180,20 @@ TABLES: dict[str, list[Column]] = {
                     "(empty: all passed; qc.parquet)")),
         _opt(Column("qc_suggestions", _S, "", "'; '-joined 'check: what the data suggest' of "
                     "the failed QC checks")),
+        _opt(Column("calibration_formulation", _S, "", "formulation of the calibration applied "
+                    "('body' or 'paper')")),
+        *[_opt(Column(f"gyro_bias_{ax}{kind}_dph", _F, "deg/h", f"calibrated gyro bias, body "
+                      f"{ax} (FRD){' 1-sigma' if kind else ''}; NaN: not estimated", "b (FRD)"))
+          for ax in "xyz" for kind in ("", "_sigma")],
+        _opt(Column("not_observable", _S, "", "'; '-joined 'parameter: sigma > bound: why' of "
+                    "the applied fit's parameters not observable on these legs (docs/report.md)"
+                    )),
+        _opt(Column("gap_uncalibrated_mps", _F, "m/s", "RMS of B minus A horizontal velocity "
+                    "over every leg sample, no calibration")),
+        _opt(Column("gap_fit_mps", _F, "m/s", "same minus the calibration fitted to every leg "
+                    "(in-sample)")),
+        _opt(Column("gap_heldout_mps", _F, "m/s", "same minus the calibration fitted without "
+                    "the leg (leave-one-leg-out, held out; diagnosis)")),
     ],
     "qc": [
         Column("check", _S, "", "check name (docs/qc.md), e.g. 'gravity_direction', "
@@ -267,6 +281,12 @@ TABLES: dict[str, list[Column]] = {
         _opt(Column("n_legs", _I, "", "legs found")),
         _opt(Column("dv_after_mps", _F, "m/s", "summary dv_after_mps")),
         _opt(Column("dp_after_m", _F, "m", "summary dp_after_m")),
+        _opt(Column("qc_failed_checks", _S, "", "summary qc_failed_checks")),
+        _opt(Column("dv_before_mps", _F, "m/s", "summary dv_before_mps")),
+        *[_opt(Column(f"gyro_bias_{ax}{kind}_dph", _F, "deg/h", f"summary gyro_bias_{ax}{kind}"
+                      "_dph", "b (FRD)")) for ax in "xy" for kind in ("", "_sigma")],
+        _opt(Column("gap_heldout_mps", _F, "m/s", "summary gap_heldout_mps")),
+        _opt(Column("not_observable", _S, "", "summary not_observable")),
     ],
     "reference": [_TIME, *_NAV],
 }

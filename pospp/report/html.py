@@ -13,38 +13,116 @@ import io
 from collections.abc import Mapping
 
 import matplotlib.pyplot as plt
+import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
+from pospp.outputs import not_observable
 from pospp.report import figures
+from pospp.report.summary import (
+    Headline,
+    group_messages,
+    headline,
+    pm_text,
+    run_start_ns,
+    unit_text,
+    utc_text,
+)
 
 _CSS = """
-body{font-family:system-ui,Segoe UI,Helvetica,Arial,sans-serif;margin:2em auto;max-width:1100px;
+body{font-family:system-ui,Segoe UI,Helvetica,Arial,sans-serif;margin:1.5em auto;max-width:1100px;
 color:#222;padding:0 1em}
-h1{border-bottom:2px solid #246;padding-bottom:.2em}h2{color:#246;margin-top:1.6em}
+h1{border-bottom:2px solid #246;padding-bottom:.2em;font-size:1.5em}h2{color:#246;margin-top:1.6em}
+.tw{max-width:100%;overflow-x:auto}.tw.tall{max-height:28em;overflow-y:auto}
 table{border-collapse:collapse;font-size:.85em;margin:.5em 0}
-td,th{border:1px solid #ccc;padding:.25em .5em;text-align:right}
-th{background:#eef}img{max-width:100%;border:1px solid #eee}
-.warn{color:#a40}.err{color:#b00;font-weight:bold}.muted{color:#777}
+td,th{border:1px solid #ccc;padding:.25em .5em;text-align:right;white-space:nowrap}
+td.l,th.l{text-align:left;white-space:normal;overflow-wrap:break-word;min-width:6em}
+th{background:#eef;position:sticky;top:0}img{max-width:100%;height:auto;border:1px solid #eee}
+.warn{color:#a40}.err{color:#b00;font-weight:bold}.muted{color:#777}.ok{color:#161}
+.answer{border:2px solid #246;border-radius:6px;padding:.6em 1em;background:#f6f8fc}
+.answer table{font-size:.95em}.flag{color:#a40;font-weight:bold}
+.badge{display:inline-block;padding:.1em .6em;border-radius:4px;color:#fff;font-weight:bold}
+.b-ok{background:#2a7}.b-partial{background:#c80}.b-degraded{background:#c60}
+.b-failed{background:#b00}details{margin:.5em 0}summary{cursor:pointer;color:#246}
 """
 
 
 def _img(fig: Figure) -> str:
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90)
+    fig.savefig(buf, format="png", dpi=80)
     plt.close(fig)
     data = base64.b64encode(buf.getvalue()).decode("ascii")
     return f'<img alt="figure" src="data:image/png;base64,{data}"/>'
 
 
-def _table(df: pd.DataFrame, *, max_rows: int = 60, floatfmt: str = "{:.4g}") -> str:
+def _cell(v: object, decimals: int | None = None) -> str:
+    if v is None or v is pd.NA or (isinstance(v, float | np.floating) and not np.isfinite(v)):
+        return "&ndash;"
+    if isinstance(v, bool | np.bool_):
+        return "yes" if v else "no"
+    if isinstance(v, float | np.floating):
+        if decimals is not None:
+            return html.escape(f"{v:.{decimals}f}")
+        a = abs(float(v))
+        return html.escape(f"{v:.3g}" if a == 0 or 1e-3 <= a < 1e5 else f"{v:.2e}")
+    return html.escape(str(v))
+
+
+_PER_CELL = frozenset({"value", "threshold", "sigma", "statistic"})
+
+
+def _decimals(col: pd.Series) -> int | None:
+    """Fixed decimals for a float column: 4 significant digits at its largest value (None:
+    too small for fixed notation)."""
+    a = np.abs(col.to_numpy(dtype=float, na_value=np.nan))
+    big = np.nanmax(a) if np.isfinite(a).any() else 0.0
+    if big == 0.0:
+        return 0
+    dec = 3 - int(np.floor(np.log10(big)))
+    return max(0, dec) if dec <= 6 else None
+
+
+def _table(df: pd.DataFrame | None, *, max_rows: int = 60, tall: bool = False,
+           left: tuple[str, ...] = ()) -> str:
+    """An HTML table that scrolls inside the page (never widens it); ``max_rows`` rows, the
+    rest counted; NaN shown as a dash, floats to 3 significant digits."""
     if df is None or df.empty:
         return '<p class="muted">(none)</p>'
     shown = df.head(max_rows)
-    body = shown.to_html(index=False, float_format=lambda v: floatfmt.format(v), border=0,
-                         escape=True)
+    left_cols = set(left) | {c for c in shown.columns if shown[c].dtype == object and
+                             shown[c].astype(str).str.len().max() > 24}
+    head = "".join(f"<th class='{'l' if c in left_cols else ''}'>{html.escape(str(c))}</th>"
+                   for c in shown.columns)
+    # one unit per column: fixed decimals; long-form value columns (unit in a "unit" column)
+    # are formatted cell by cell
+    dec = [_decimals(shown[c]) if shown[c].dtype.kind == "f" and not (
+        "unit" in shown and c in _PER_CELL) else None for c in shown.columns]
+    rows = []
+    for rec in shown.itertuples(index=False):
+        rows.append("<tr>" + "".join(
+            f"<td class='{'l' if c in left_cols else ''}'>{_cell(v, d)}</td>"
+            for c, v, d in zip(shown.columns, rec, dec, strict=True)) + "</tr>")
     more = f'<p class="muted">{len(df) - max_rows} more rows</p>' if len(df) > max_rows else ""
-    return body + more
+    cls = "tw tall" if tall or len(shown) > 25 else "tw"
+    return (f"<div class='{cls}'><table><thead><tr>{head}</tr></thead><tbody>"
+            + "".join(rows) + "</tbody></table></div>" + more)
+
+
+def _with_times(df: pd.DataFrame, t0_ns: int | None, cols: tuple[str, ...]) -> pd.DataFrame:
+    """Replace int64 ns columns by "UTC" text and seconds since the run start."""
+    out = df.copy()
+    for c in cols:
+        if c not in out:
+            continue
+        at = list(out.columns).index(c)
+        stem = c[:-3] if c.endswith("_ns") else c
+        utc = [utc_text(v, date=False) for v in out[c]]
+        secs = [(float(v) - t0_ns) * 1e-9 if t0_ns is not None and not pd.isna(v)
+                else float("nan") for v in out[c]]
+        out = out.drop(columns=c)
+        out.insert(at, f"{stem} t (s)", np.round(secs, 1))
+        out.insert(at + 1, f"{stem} UTC", utc)
+    return out
 
 
 def _qc_section(qc: pd.DataFrame | None, summary: pd.DataFrame | None) -> list[str]:
@@ -64,65 +142,206 @@ def _qc_section(qc: pd.DataFrame | None, summary: pd.DataFrame | None) -> list[s
             parts.append(f"<p class='{cls}'>{html.escape(row.check)}: "
                          f"{html.escape(row.suggestion)}</p>")
     ordered = pd.concat([failed, qc[qc.passed.astype(bool)]])
-    parts.append(_table(ordered[["check", "passed", "value", "threshold", "unit", "severity",
-                                 "measure"]]))
+    cols = [c for c in ("check", "passed", "value", "threshold", "unit", "severity", "measure")
+            if c in ordered]  # runs written before a column existed still render
+    parts.append(_table(ordered[cols], left=("check", "measure")))
     return parts
 
 
+def _pm(value: float, sigma: float, unit: str = "") -> str:
+    """pm_text with a real plus-minus sign (HTML-escaped)."""
+    return html.escape(pm_text(value, sigma, unit).replace(" +- ", " \u00b1 "))
+
+
+def _answer_section(h: Headline, tables: Mapping[str, pd.DataFrame]) -> list[str]:
+    """The answer first: verdict, calibrated values with sigma, what was not observable and
+    why, the improvement in-sample and held out (each labelled)."""
+    st = html.escape(h.status)
+    parts = ["<div class='answer' id='answer'><h2 style='margin-top:.2em'>The answer</h2>",
+             f"<p><span class='badge b-{st}' id='status'>{st}</span> "
+             f"<span id='qc-verdict'>{html.escape(h.qc_verdict)}</span></p>"]
+    rows = []
+    for e in h.results:
+        rows.append(f"<tr><th class='l'>{html.escape(e.name)}</th><td class='headline'>"
+                    f"{_pm(e.value, e.sigma, e.unit)}</td><td class='l'>calibrated "
+                    f"({html.escape(h.formulation)} formulation, all pairs, 1-sigma)</td></tr>")
+    for e in h.not_observable:
+        rows.append(f"<tr><th class='l'>{html.escape(e.name)}</th><td class='flag'>not "
+                    f"observable</td><td class='l'>{html.escape(e.why_not)}</td></tr>")
+    if h.per_leg:
+        rows.append(f"<tr><th class='l'>per-leg misalignments</th><td>"
+                    f"{len(h.per_leg)} values</td><td class='l'>{html.escape(h.per_leg_text)}"
+                    " (Calibration section)</td></tr>")
+    if h.in_sample_text:
+        rows.append("<tr><th class='l'>improvement, in-sample</th><td class='headline'>"
+                    f"{h.dv_before_mps:.3g} &rarr; {h.dv_after_mps:.2g} m/s</td><td class='l'>"
+                    f"{html.escape(h.in_sample_text)}</td></tr>")
+        ho = (f"{h.gap_uncalibrated_mps:.3g} &rarr; {h.gap_heldout_mps:.2g} m/s"
+              if np.isfinite(h.gap_heldout_mps) else "&ndash;")
+        rows.append(f"<tr><th class='l'>improvement, held out</th><td class='headline'>{ho}"
+                    f"</td><td class='l'>{html.escape(h.heldout_text)}</td></tr>")
+    if not rows and h.calibration_reason:
+        rows.append(f"<tr><th class='l'>calibration</th><td class='flag'>none</td>"
+                    f"<td class='l'>{html.escape(h.calibration_reason)}</td></tr>")
+    if rows:
+        parts.append("<div class='tw'><table>" + "".join(rows) + "</table></div>")
+    s = tables.get("summary")
+    if s is not None and not s.empty:
+        r = s.iloc[0]
+        t0 = run_start_ns(tables)
+        n_legs = r.get("n_legs")
+        facts = [f"{float(r.duration_s):.0f} s of IMU data" if "duration_s" in r and
+                 pd.notna(r.duration_s) else "",
+                 f"from {utc_text(t0)} UTC" if t0 is not None else "",
+                 f"{int(n_legs)} legs, {int(r.n_pairs_used)} pairs used"
+                 if n_legs is not None and pd.notna(n_legs) and "n_pairs_used" in r
+                 and pd.notna(r.n_pairs_used) else ""]
+        parts.append(f"<p class='muted'>{html.escape(', '.join(f for f in facts if f))}</p>")
+    parts.append("</div>")
+    return parts
+
+
+def _calibration_section(cal: pd.DataFrame, h: Headline) -> list[str]:
+    parts = ["<h2>Calibration</h2>"]
+    if cal.empty:
+        return [*parts, f"<p class='warn'>{html.escape(h.calibration_reason)}</p>"]
+    parts.append(_img(figures.calibration_bars(cal)))
+    joint = cal[cal.pair_id == -1]
+    order = [(f != h.formulation, "_leg" in p, p == "phi_z", not p.startswith(("gyro", "eps")))
+             for f, p in zip(joint.formulation, joint.parameter, strict=True)]
+    joint = joint.iloc[sorted(range(len(joint)), key=order.__getitem__)]
+    rows = []
+    for r in joint.itertuples():
+        why = not_observable(r.parameter, r.sigma, r.unit)
+        rows.append({"formulation": r.formulation + (" (applied)" if r.formulation ==
+                                                     h.formulation else ""),
+                     "parameter": r.parameter,
+                     "value \u00b1 1-sigma": "not observable" if why else
+                     pm_text(r.value, r.sigma).replace(" +- ", " \u00b1 "),
+                     "unit": unit_text(r.unit), "note": why})
+    parts.append("<h3>Joint fit over all used pairs</h3>"
+                 + _table(pd.DataFrame(rows), max_rows=400, left=("parameter", "note")))
+    pp = cal[cal.pair_id != -1]
+    per_pair = pd.DataFrame({
+        "pair_id": pp.pair_id, "formulation": pp.formulation, "parameter": pp.parameter,
+        "value \u00b1 1-sigma": [pm_text(v, e).replace(" +- ", " \u00b1 ")
+                                 for v, e in zip(pp.value, pp.sigma, strict=True)],
+        "unit": pp.unit.map(unit_text)})
+    parts.append(f"<details><summary>Per-pair fits ({len(per_pair)} rows)</summary>"
+                 + _table(per_pair, max_rows=100_000, tall=True) + "</details>")
+    return parts
+
+
+def _diagnosis_section(diag: pd.DataFrame, curves: pd.DataFrame | None) -> list[str]:
+    d = diag.sort_values("step")
+    first, last = d.iloc[0], d.iloc[-1]
+    named = d[~d.effect.isin(["none", "unexplained"])]
+    text = (f"The calibrated model leaves an RMS velocity gap of {first.gap_before_mps:.2g} m/s "
+            f"on the legs it was fitted to (in-sample) and {first.heldout_gap_before_mps:.2g} "
+            "m/s predicting each leg from the others (held out). ")
+    if len(named):
+        text += ("Effects the data support, in order: " + ", ".join(
+            f"{r.effect} ({pm_text(r.value, r.sigma, unit_text(r.unit))})"
+            for r in named.itertuples())
+            + f"; held-out gap after them {last.heldout_gap_after_mps:.2g} m/s. ")
+    else:
+        text += "No effect of the library is supported by the data. "
+    text += ("The lack-of-fit test finds structure no tested effect explains "
+             f"(p = {last.p_value:.2g})." if last.effect == "unexplained" else
+             f"The lack-of-fit test finds no remaining structure (p = {last.p_value:.2g}).")
+    parts = ["<h2>Model-discrepancy diagnosis</h2>", f"<p>{html.escape(text)}</p>"]
+    if len(d) > 1:
+        parts.append(_img(figures.diagnosis_steps(d)))
+    if curves is not None and not curves.empty:
+        parts.append(_img(figures.diagnosis_curves(curves)))
+    view = pd.DataFrame({
+        "step": d.step, "effect": d.effect,
+        "value \u00b1 1-sigma": [pm_text(r.value, r.sigma, r.unit).replace(" +- ", " \u00b1 ")
+                                  if np.isfinite(r.value) else "" for r in d.itertuples()],
+        "p-value": d.p_value, "test": d.criterion if "criterion" in d else "",
+        "gap in-sample (m/s)": [f"{a:.3g} -> {b:.3g}" for a, b in
+                                zip(d.gap_before_mps, d.gap_after_mps, strict=True)],
+        "gap held out (m/s)": [f"{a:.3g} -> {b:.3g}" for a, b in
+                               zip(d.heldout_gap_before_mps, d.heldout_gap_after_mps,
+                                   strict=True)],
+    })
+    parts.append(_table(view))
+    return parts
+
+
+def _messages_section(msgs: pd.DataFrame, t0_ns: int | None) -> list[str]:
+    grouped = group_messages(msgs)
+    view = _with_times(grouped, t0_ns, ("first_ns", "last_ns"))
+    return [f"<h2>Messages and warnings</h2><p class='muted'>{len(msgs)} messages, "
+            f"{len(grouped)} distinct (identical up to numbers: counted once, first and last "
+            "time shown)</p>", _table(view, max_rows=300, left=("text",))]
+
+
 def render_report(tables: Mapping[str, pd.DataFrame], *, title: str = "pospp run report") -> str:
-    """HTML report of a run; sections appear only for the tables present."""
-    parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}"
-             f"</title><style>{_CSS}</style></head><body><h1>{html.escape(title)}</h1>"]
+    """HTML report of a run, the answer first; sections appear only for the tables present."""
+    parts = [f"<!doctype html><html><head><meta charset='utf-8'>"
+             "<meta name='viewport' content='width=device-width, initial-scale=1'>"
+             f"<title>{html.escape(title)}</title><style>{_CSS}</style></head><body>"
+             f"<h1>{html.escape(title)}</h1>"]
+    h = headline(tables)
+    t0 = run_start_ns(tables)
+    parts.extend(_answer_section(h, tables))
     parts.extend(_qc_section(tables.get("qc"), tables.get("summary")))
-    summary = tables.get("summary")
-    if summary is not None and not summary.empty:
-        row = summary.iloc[0]
-        parts.append("<h2>Summary</h2><table>")
-        for k, v in row.items():
-            text = f"{v:.4g}" if isinstance(v, float) else str(v)
-            parts.append(f"<tr><th style='text-align:left'>{html.escape(str(k))}</th>"
-                         f"<td>{html.escape(text)}</td></tr>")
-        parts.append("</table>")
+    cal = tables.get("calibration")
+    if cal is not None:
+        parts.extend(_calibration_section(cal, h))
     traj, legs = tables.get("trajectory"), tables.get("legs")
+    biases = tables.get("biases")
+    if (biases is not None and not biases.empty) or h.results:
+        parts.append("<h2>Sensor errors: A's estimate over time and the calibration</h2>")
+        calibrated = {e.name: (e.value, e.sigma) for e in h.results
+                      if e.name.startswith("gyro_bias")}
+        span_s = None if traj is None or traj.empty else float(
+            (traj.time_ns.max() - traj.time_ns.min()) * 1e-9)
+        parts.append(_img(figures.sensor_errors(biases, calibrated, span_s=span_s)))
+        if biases is None or biases.empty:
+            parts.append("<p class='muted'>biases.parquet (A's bias estimates) is not in this "
+                         "run: only the calibrated values are drawn.</p>")
     if traj is not None and not traj.empty:
         parts.append("<h2>Trajectory and legs</h2>")
         parts.append(_img(figures.trajectory_map(traj, legs if legs is not None else
                                                  pd.DataFrame(columns=["leg_id", "start_ns",
                                                                        "end_ns"]))))
-        parts.append(_img(figures.trajectory_sigmas(traj)))
     if legs is not None:
-        parts.append("<h3>Legs</h3>" + _table(legs))
-    pairs = tables.get("pairs")
-    if pairs is not None:
-        parts.append("<h2>Pairs and observability</h2>" + _table(pairs))
-    obs = tables.get("observability")
-    if obs is not None and not obs.empty:
-        parts.append(_img(figures.observability_curves(obs)))
-    cal = tables.get("calibration")
-    if cal is not None:
-        parts.append("<h2>Calibration</h2>")
-        if not cal.empty:
-            parts.append(_img(figures.calibration_bars(cal)))
-        parts.append(_table(cal, max_rows=200))
+        parts.append("<h3>Legs</h3>" + _table(_with_times(legs, t0, ("start_ns", "end_ns"))))
     le = tables.get("leg_errors")
     if le is not None and not le.empty:
         parts.append("<h2>Algorithm B error per leg, before and after compensation</h2>")
         parts.append(_img(figures.leg_error_curves(le, "velocity")))
         parts.append(_img(figures.leg_error_curves(le, "position")))
+    pairs = tables.get("pairs")
+    if pairs is not None:
+        parts.append("<h2>Pairs and observability</h2>" + _table(pairs, left=("reason",)))
+    obs = tables.get("observability")
+    if obs is not None and not obs.empty:
+        parts.append(_img(figures.observability_curves(obs)))
     diag = tables.get("diagnosis")
     if diag is not None and not diag.empty:
-        parts.append("<h2>Model-discrepancy diagnosis</h2>")
-        parts.append(_img(figures.diagnosis_steps(diag)) + _table(diag))
-        curves = tables.get("diagnosis_curves")
-        if curves is not None and not curves.empty:
-            parts.append(_img(figures.diagnosis_curves(curves)))
+        parts.extend(_diagnosis_section(diag, tables.get("diagnosis_curves")))
     ev = tables.get("evaluation")
     if ev is not None and not ev.empty:
         wide = ev.pivot_table(index=["metric", "unit"], columns="solution", values="value")
-        parts.append("<h2>Against the reference</h2>" + _table(wide.reset_index()))
+        wide.columns = [str(c) for c in wide.columns]
+        skip = ev.skip_s.dropna() if "skip_s" in ev else pd.Series(dtype=float)
+        note = f" (first {skip.iloc[0]:g} s left out)" if len(skip) and skip.iloc[0] > 0 else ""
+        parts.append(f"<h2>Against the reference{note}</h2>" + _table(wide.reset_index()))
+    if traj is not None and not traj.empty:
+        parts.append("<h2>Algorithm A's uncertainty</h2>" + _img(figures.trajectory_sigmas(traj)))
     msgs = tables.get("messages")
     if msgs is not None:
-        parts.append("<h2>Messages and warnings</h2>" + _table(msgs, max_rows=200))
+        parts.extend(_messages_section(msgs, t0))
+    summary = tables.get("summary")
+    if summary is not None and not summary.empty:
+        row = summary.iloc[0]
+        kv = pd.DataFrame({"column": [str(k) for k in row.index],
+                           "value": list(row.values)})
+        parts.append("<details><summary>summary.parquet, every column</summary>"
+                     + _table(kv, max_rows=200, left=("value",)) + "</details>")
     parts.append("<p class='muted'>Generated by pospp from the run's Parquet tables.</p>"
                  "</body></html>")
     return "\n".join(parts)
