@@ -82,6 +82,17 @@ VEL_SPEC = Spec(
     lambda m: {"linear": _vec(m.twist.twist.linear), "covariance": tuple(m.twist.covariance)},
 )
 
+EVENT_SPEC = Spec(
+    rm.TIME_REFERENCE_TYPE,
+    rm.TIME_REFERENCE_FIELDS,
+    (),
+    lambda m: {},
+)
+"""Trigger events (``sensor_msgs/msg/TimeReference``): only the header stamp is kept. The
+trailing ``source`` string makes the layout variable, so these few messages always go through
+the generic decoder."""
+
+
 
 def _gather(buf: np.ndarray, starts: np.ndarray, offset: int, width: int) -> np.ndarray:
     """Bytes ``buf[s + offset : s + offset + width]`` for every s in ``starts``: (n, width)."""
