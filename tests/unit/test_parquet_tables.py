@@ -49,7 +49,8 @@ UNITLESS = {"solution", "leg_id", "pair_id", "leg_a", "leg_b", "used", "reason",
             "reference_file", "byte_offset", "criterion", "delta_bic", "explained_fraction",
             "confounded_with", "parameters", "parameter_values", "parameter_sigmas", "model",
             "kind", "calibration_reason",
-            "check", "measure", "passed", "suggestion", "qc_failed_checks", "qc_suggestions"}
+            "check", "measure", "passed", "suggestion", "qc_failed_checks", "qc_suggestions",
+            "event_id", "inside"}  # events.parquet (export branch)
 # Long-form tables: 'value' / 'sigma' carry the unit named in the row's 'unit' column.
 ROW_UNIT = {"value", "sigma", "threshold"}
 
