@@ -93,6 +93,16 @@ float64 x
 float64 y
 float64 z
 """
+_TWIST_WITH_COV_DEF = """\
+MSG: geometry_msgs/TwistWithCovariance
+geometry_msgs/Twist twist
+float64[36] covariance
+"""
+_TWIST_DEF = """\
+MSG: geometry_msgs/Twist
+geometry_msgs/Vector3 linear
+geometry_msgs/Vector3 angular
+"""
 
 
 def _msgdef(top: str, *deps: str) -> str:
@@ -156,16 +166,8 @@ geometry_msgs/TwistWithCovariance twist
 """,
     _HEADER_DEF,
     _TIME_DEF,
-    """\
-MSG: geometry_msgs/TwistWithCovariance
-geometry_msgs/Twist twist
-float64[36] covariance
-""",
-    """\
-MSG: geometry_msgs/Twist
-geometry_msgs/Vector3 linear
-geometry_msgs/Vector3 angular
-""",
+    _TWIST_WITH_COV_DEF,
+    _TWIST_DEF,
     _VECTOR3_DEF,
 )
 
@@ -246,16 +248,8 @@ float64[36] covariance
     _POSE_DEF,
     _POINT_DEF,
     _QUATERNION_DEF,
-    """\
-MSG: geometry_msgs/TwistWithCovariance
-geometry_msgs/Twist twist
-float64[36] covariance
-""",
-    """\
-MSG: geometry_msgs/Twist
-geometry_msgs/Vector3 linear
-geometry_msgs/Vector3 angular
-""",
+    _TWIST_WITH_COV_DEF,
+    _TWIST_DEF,
     _VECTOR3_DEF,
 )
 
@@ -361,29 +355,23 @@ def encode_tf(time_ns: np.ndarray, frame_id: str, child_frame_id: str, *,
     inner = encode_batch(fields, t, frame_id, {
         **{k: np.broadcast_to(v, (t.shape[0], *np.shape(v))) for k, v in cvals.items()},
         "translation": translation, "rotation": rotation_xyzw})
-    # insert the uint32 sequence length after the encapsulation header: everything after it
-    # moves by 4 bytes, and the 8-byte alignment of the doubles (counted from the body start)
-    # must be restored, so re-lay the payload with the length as a leading field instead
     return _with_leading_count(inner, fields)
 
 
 def _with_leading_count(inner: np.ndarray, fields: tuple) -> np.ndarray:
+    """``inner`` (a stamped message's payloads) re-laid after a uint32 sequence length of 1.
+
+    The length shifts the body by 4 bytes, so the doubles are re-aligned to 8 (counted from
+    the body start) field by field, exactly as ``cdr_dtype`` lays them.
+    """
     dt = inner.dtype
     names = ["encap", "count", "sec", "nanosec", "frame_id_len", "frame_id"]
     formats: list = [("u1", (4,)), "<u4", "<i4", "<u4", "<u4",
                      ("u1", dt.fields["frame_id"][0].shape)]
     offsets = [0, 4, 8, 12, 16, 20]
     pos = 16 + dt.fields["frame_id"][0].itemsize  # relative to the body start
-    for name, typ, count in fields:
-        size = np.dtype(typ).itemsize
-        pos += (-pos) % size
-        names.append(name)
-        formats.append(typ if count == 1 else (typ, (count,)))
-        offsets.append(4 + pos)
-        pos += size * count
-    out = np.zeros(inner.shape[0], np.dtype({"names": names, "formats": formats,
-                                             "offsets": offsets, "itemsize": 4 + pos}))
-    for name in names:
+    out = np.zeros(inner.shape[0], _lay(names, formats, offsets, pos, fields))
+    for name in out.dtype.names:
         if name != "count":
             out[name] = inner[name]
     out["count"] = 1
@@ -460,6 +448,12 @@ def cdr_dtype(fields: tuple[tuple[str, str, int], ...], frame_id_len: int) -> np
     formats: list = [("u1", (4,)), "<i4", "<u4", "<u4", ("u1", (frame_id_len,))]
     offsets = [0, 4, 8, 12, 16]
     pos = 12 + frame_id_len  # relative to the CDR body start (byte 4)
+    return _lay(names, formats, offsets, pos, fields)
+
+
+def _lay(names: list, formats: list, offsets: list, pos: int,
+         fields: tuple[tuple[str, str, int], ...]) -> np.dtype:
+    """Append ``fields`` from body offset ``pos``, each aligned to its size; the dtype."""
     for name, typ, count in fields:
         size = np.dtype(typ).itemsize
         pos += (-pos) % size

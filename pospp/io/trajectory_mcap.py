@@ -29,10 +29,9 @@ from typing import Any
 import numpy as np
 from mcap.writer import CompressionType, Writer
 
-from pospp import earth, rotation
+from pospp import __version__, earth, rotation
 from pospp.io import ros_messages as rm
 from pospp.io.mcap_reader import ENU_TO_NED, FLU_TO_FRD
-from pospp import __version__
 from pospp.io.parquet_tables import atomic_path
 
 __all__ = ["thin_indices", "write_trajectory_mcap"]
