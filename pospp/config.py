@@ -275,7 +275,8 @@ class OutputsConfig:
     """[outputs]."""
 
     mcap: bool = True
-    """Write the best trajectory to trajectory.mcap (ROS 2 NavSatFix + PoseStamped)."""
+    """Write the best trajectory to trajectory.mcap (ROS 2 NavSatFix, PoseStamped, /tf,
+    Odometry, a Path per leg and the run metadata; docs/formats.md)."""
     mcap_rate_hz: float = _key(2.0, gt=0.0, le=1000.0)
     """Rate of trajectory.mcap [Hz] (at most the [filter] output rate; the Parquet table keeps
     the full output rate)."""
