@@ -173,3 +173,41 @@ def test_pipeline_writes_events_and_biases_tables(sim_run, tmp_path):
         assert abs(last[f"gyro_bias_{ax}_dph"] - val) < 3 * last[f"gyro_bias_{ax}_sigma_dph"] \
             + 1.0
     assert "gyro_sf_x_ppm" not in b  # scale factors not estimated: no columns (null on disk)
+
+
+def test_run_writes_events_and_biases_and_exports_them(sim_run, tmp_path):
+    """The whole pipeline on the simulated flight with triggers, then ``pospp export``."""
+    import json
+
+    from click.testing import CliRunner
+
+    from pospp import pipeline
+    from pospp.cli import main
+    from pospp.io import exports, parquet_tables
+
+    sim, paths, log, _ = sim_run
+    cfg = config_from_dict({"gnss": {"lever_arm_m": list(GNSS.lever_arm_b_m)},
+                            "sensor": {"lever_arm_m": LEVER_B_M.tolist(),
+                                       "boresight_rpy_deg": list(BORESIGHT_RPY_DEG)},
+                            "outputs": {"report": False, "diagnose": False}})
+    run = pipeline.run(paths["mcap"], cfg, tmp_path / "run").out_dir
+    ev = parquet_tables.read_table(run / "events.parquet")
+    assert len(ev) == 1400 and ev.inside.all()
+    (lat, lon, h), _ = _truth_sensor(sim, ev.time_ns.to_numpy())
+    late = ev.time_ns.to_numpy() > log.imu.time_ns[0] + 120 * 10**9
+    err = earth.llh_difference_ned_m(np.radians(ev.lat_deg), np.radians(ev.lon_deg),
+                                     ev.height_m, lat, lon, h)[late]
+    assert np.abs(err).max() < 0.1
+    b = parquet_tables.read_table(run / "biases.parquet")
+    assert set(b.solution) == {"forward", "smoothed"} and b.gyro_sf_x_ppm.isna().all()
+    res = CliRunner().invoke(main, ["export", str(run), "--format", "csv", "--events"])
+    assert res.exit_code == 0, res.output
+    csv_rows = pd.read_csv(run / "events.csv")
+    week, sow = exports.gps_week_seconds(ev.time_ns.to_numpy())
+    assert (csv_rows.gps_week == week).all()
+    np.testing.assert_allclose(csv_rows.gps_sow_s, sow, atol=1e-9)
+    res = CliRunner().invoke(main, ["export", str(run), "--format", "geojson", "--rate", "1"])
+    assert res.exit_code == 0, res.output
+    doc = json.loads((run / "trajectory.geojson").read_text())
+    kinds = [f["properties"]["kind"] for f in doc["features"]]
+    assert kinds.count("event") == 1400 and kinds[0] == "track"
