@@ -544,7 +544,8 @@ def read_flight_log(
         corrupt, and no decompression produces more than its header claims, so a corrupt or
         hostile file cannot exhaust memory.
     events_topic : str
-        Optional ``sensor_msgs/msg/TimeReference`` topic of trigger events (camera, lidar);
+        Optional topic of trigger events (camera, lidar): ``sensor_msgs/msg/TimeReference``
+        or any stamped message (``std_msgs/Header`` first, or a Header topic);
         "" (default): none. Their header stamps become ``FlightLog.events_ns``; a named topic
         that is absent gives an info issue.
 

@@ -211,3 +211,35 @@ def test_run_writes_events_and_biases_and_exports_them(sim_run, tmp_path):
     doc = json.loads((run / "trajectory.geojson").read_text())
     kinds = [f["properties"]["kind"] for f in doc["features"]]
     assert kinds.count("event") == 1400 and kinds[0] == "track"
+
+
+def test_any_stamped_trigger_type_is_read(sim_run, tmp_path):
+    """A trigger topic of another type (std_msgs/msg/Header itself), written by the mcap_ros2
+    library beside IMU and GNSS copied from the simulated file: its stamps are the events."""
+    from mcap_ros2.writer import Writer
+
+    from pospp.io import ros_messages as rm
+
+    _, paths, _, _ = sim_run
+    src = list(read_ros2_messages(str(paths["mcap"]), topics=["/imu/data", "/gnss/fix"],
+                                  end_time=int(3e9) + 1_717_200_000_000_000_000))
+    stamps = [1_717_200_000_000_000_000 + k * 250_000_000 + 1234 for k in range(1, 11)]
+    out = tmp_path / "header_trigger.mcap"
+    with open(out, "wb") as f:
+        w = Writer(f)
+        schemas = {"/imu/data": w.register_msgdef(rm.IMU_TYPE, rm.IMU_MSGDEF),
+                   "/gnss/fix": w.register_msgdef(rm.NAVSATFIX_TYPE, rm.NAVSATFIX_MSGDEF)}
+        hdr = w.register_msgdef("std_msgs/msg/Header", "builtin_interfaces/Time stamp\n"
+                                "string frame_id\n================================================"
+                                "================================\nMSG: builtin_interfaces/Time"
+                                "\nint32 sec\nuint32 nanosec\n")
+        for m in src:
+            w.write_message(m.channel.topic, schemas[m.channel.topic], m.ros_msg,
+                            log_time=m.log_time_ns, publish_time=m.log_time_ns)
+        for t in stamps:
+            w.write_message("/events", hdr, {"stamp": {"sec": t // 10**9,
+                                                       "nanosec": t % 10**9},
+                                             "frame_id": "cam"}, log_time=t, publish_time=t)
+        w.finish()
+    log = read_flight_log(out, events_topic="/events", check_units=False)
+    assert log.events_ns.tolist() == stamps
