@@ -1,9 +1,13 @@
 """ROS 2 message definitions and their CDR layouts as numpy structured dtypes.
 
-The message types pospp reads and writes all have exactly one variable-length field, the
-``header.frame_id`` string, right after the stamp. For a given frame_id length the CDR layout
-of the whole message is therefore fixed, and a batch of messages sharing that length can be
-decoded (or encoded) with one numpy structured dtype over the concatenated payloads.
+The flight-log message types pospp reads and writes (Imu, NavSatFix,
+TwistWithCovarianceStamped) have exactly one variable-length field, the ``header.frame_id``
+string, right after the stamp. For a given frame_id length the CDR layout of the whole message
+is therefore fixed, and a batch of messages sharing that length can be decoded (or encoded)
+with one numpy structured dtype over the concatenated payloads. The trajectory types pospp
+writes add constant strings (``child_frame_id`` of Odometry and TFMessage, ``source`` of
+TimeReference), which are encoded the same way as a uint32 length and a fixed byte array;
+``nav_msgs/msg/Path`` (a sequence of stamped poses) is encoded field by field (``_Cdr``).
 
 CDR (XCDR1, as written by ROS 2 rmw implementations and by ``mcap_ros2``)
 -----------------------------------------------------------------------
