@@ -262,6 +262,33 @@ def simulate(preset: str | None, profile_file: str | None, imu_grade: str, seed:
 
 
 @main.command()
+@click.argument("run_dir", type=click.Path(exists=True, file_okay=False))
+@click.option("--format", "fmt", required=True,
+              type=click.Choice(["sbet", "csv", "geojson", "kml"]),
+              help="sbet: Applanix SBET binary; csv: GPS week/seconds of week; geojson, kml: "
+                   "the track, the legs and the events (docs/formats.md).")
+@click.option("--rate", "rate_hz", default=None, type=click.FloatRange(min=0, min_open=True),
+              help="Thin the trajectory to about this rate [Hz] (default: every epoch).")
+@click.option("-o", "--out", "out_file", default=None, type=click.Path(dir_okay=False),
+              help="Output file (default: RUN_DIR/trajectory.out|.csv|.geojson|.kml, or "
+                   "events.out|.csv with --events).")
+@click.option("--solution", default="best", show_default=True,
+              type=click.Choice(["best", "compensated", "smoothed", "forward"]),
+              help="Which solution of trajectory.parquet (best: compensated > smoothed > "
+                   "forward).")
+@click.option("--events", "events", is_flag=True,
+              help="sbet, csv: the sensor's pose at each trigger (events.parquet) instead of "
+                   "the trajectory.")
+def export(run_dir: str, fmt: str, rate_hz: float | None, out_file: str | None,
+           solution: str, events: bool) -> None:
+    """Export a run's trajectory or trigger poses for other tools (pospp.io.exports)."""
+    from pospp.io.exports import export_run
+
+    click.echo(str(export_run(run_dir, fmt, rate_hz=rate_hz, out=out_file, solution=solution,
+                              data="events" if events else "trajectory")))
+
+
+@main.command()
 @click.argument("source", type=click.Path(exists=True))
 @click.option("-o", "--out", "out_mcap", required=True, type=click.Path(dir_okay=False),
               help="Output MCAP (a reference goes to STEM.reference.parquet beside it).")

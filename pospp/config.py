@@ -96,6 +96,25 @@ class InputConfig:
     end_s: float | None = _key(None, gt=0.0)
     max_chunk_mib: float = _key(256.0, gt=0.0, le=65536.0)
     """Largest decompressed MCAP chunk the reader accepts [MiB] (bounds its memory)."""
+    events_topic: str = _key("/events", max_len=256)
+    """Trigger events (``sensor_msgs/msg/TimeReference``, camera or lidar): the sensor's pose
+    at each goes to events.parquet; "" = none (an absent topic is noted, not an error)."""
+
+
+@dataclass(frozen=True)
+class SensorConfig:
+    """[sensor]: the imaging sensor (camera, lidar) whose pose is wanted at each trigger event.
+
+    Exterior orientation: ``r_s = r_imu + C_nb lever_arm_m`` and ``C_ns = C_nb C_bs`` with
+    ``C_bs`` the boresight rotation (z-y-x roll, pitch, yaw of the sensor frame s in the body
+    frame b, FRD).
+    """
+
+    lever_arm_m: tuple[float, float, float] = _key((0.0, 0.0, 0.0), ge=-100.0, le=100.0)
+    """Sensor origin in the body frame FRD, from the IMU's centre [m]."""
+    boresight_rpy_deg: tuple[float, float, float] = _key((0.0, 0.0, 0.0), ge=-360.0,
+                                                         le=360.0)
+    """Roll, pitch, yaw of the sensor frame in the body frame (z-y-x) [deg]."""
 
 
 @dataclass(frozen=True)
@@ -259,7 +278,8 @@ class OutputsConfig:
     """[outputs]."""
 
     mcap: bool = True
-    """Write the best trajectory to trajectory.mcap (ROS 2 NavSatFix + PoseStamped)."""
+    """Write the best trajectory to trajectory.mcap (ROS 2 NavSatFix, PoseStamped, /tf,
+    Odometry, a Path per leg and the run metadata; docs/formats.md)."""
     mcap_rate_hz: float = _key(2.0, gt=0.0, le=1000.0)
     """Rate of trajectory.mcap [Hz] (at most the [filter] output rate; the Parquet table keeps
     the full output rate)."""
@@ -281,6 +301,7 @@ class PipelineConfig:
     pairs: PairsConfig = field(default_factory=PairsConfig)
     compensation: CompensationConfig = field(default_factory=CompensationConfig)
     outputs: OutputsConfig = field(default_factory=OutputsConfig)
+    sensor: SensorConfig = field(default_factory=SensorConfig)
 
     def __post_init__(self) -> None:
         # omitted [legs] min_duration_s / duration_tolerance_s take the [imu] grade's defaults

@@ -22,6 +22,11 @@ def t_s_to_time_ns(t_s: Any, epoch_ns: int) -> np.ndarray:
     return np.int64(epoch_ns) + np.round(np.asarray(t_s, dtype=float) * 1e9).astype(np.int64)
 
 
+def time_ns_to_t_s(time_ns: Any, epoch_ns: int) -> np.ndarray:
+    """int64 nanoseconds -> run seconds (difference in integers first: no precision loss)."""
+    return (np.asarray(time_ns, dtype=np.int64) - np.int64(epoch_ns)) * 1e-9
+
+
 def trajectory_table(solutions: Mapping[str, Any], epoch_ns: int) -> pd.DataFrame:
     """trajectory.parquet: one block of rows per solution ("forward", "smoothed", ...).
 
@@ -54,6 +59,73 @@ def trajectory_table(solutions: Mapping[str, Any], epoch_ns: int) -> pd.DataFram
             "yaw_sigma_deg": rpy_sig[:, 2],
         }))
     return pd.concat(blocks, ignore_index=True)
+
+
+UG_MPS2 = 9.80665e-6
+"""One micro-g [m/s^2] (standard gravity 9.80665 m/s^2, as in pospp.nav.tuning)."""
+
+
+def bias_table(histories: Mapping[str, Any], epoch_ns: int, *, rate_hz: float = 1.0
+               ) -> pd.DataFrame:
+    """biases.parquet: algorithm A's estimated sensor errors over time, one block per solution.
+
+    Each history is a :class:`pospp.nav.filter.BiasHistory` (body FRD, rad/s, m/s^2,
+    dimensionless scale factors, measured = (1 + s) true + b). Biases in deg/h and ug, scale
+    factors in ppm; the scale-factor columns are null when A did not estimate them (all
+    sigmas zero). Thinned to about ``rate_hz`` (every k-th epoch; the estimates change over
+    minutes).
+    """
+    blocks = []
+    for name, hist in histories.items():
+        if hist is None:
+            continue
+        step = 1
+        if len(hist.t_s) > 1:
+            step = max(1, int(round(1.0 / (rate_hz * float(np.median(np.diff(hist.t_s)))))))
+        h = type(hist)(**{k: v[::step] for k, v in vars(hist).items()})
+        cols: dict[str, Any] = {"time_ns": t_s_to_time_ns(h.t_s, epoch_ns), "solution": name}
+        gyro_dph = np.degrees(h.gyro_b_radps) * 3600.0
+        gyro_sig_dph = np.degrees(h.gyro_sigma_b_radps) * 3600.0
+        for k, ax in enumerate("xyz"):
+            cols[f"gyro_bias_{ax}_dph"] = gyro_dph[:, k]
+            cols[f"gyro_bias_{ax}_sigma_dph"] = gyro_sig_dph[:, k]
+            cols[f"accel_bias_{ax}_ug"] = h.accel_b_mps2[:, k] / UG_MPS2
+            cols[f"accel_bias_{ax}_sigma_ug"] = h.accel_sigma_b_mps2[:, k] / UG_MPS2
+        for sensor, sf, sig in (("gyro", h.gyro_sf, h.gyro_sf_sigma),
+                                ("accel", h.accel_sf, h.accel_sf_sigma)):
+            if np.any(np.asarray(sig) > 0.0):
+                for k, ax in enumerate("xyz"):
+                    cols[f"{sensor}_sf_{ax}_ppm"] = sf[:, k] * 1e6
+                    cols[f"{sensor}_sf_{ax}_sigma_ppm"] = sig[:, k] * 1e6
+        blocks.append(pd.DataFrame(cols))
+    return pd.concat(blocks, ignore_index=True)
+
+
+def events_table(poses: Any, events_ns: Any, solution: str) -> pd.DataFrame:
+    """events.parquet: the sensor's pose at every trigger event.
+
+    ``poses`` is a :class:`pospp.nav.events.SensorPoses` at the stamps ``events_ns``.
+    """
+    rpy = np.degrees(poses.rpy_rad)
+    rpy_sig = np.degrees(poses.rpy_sigma_rad)
+    cols: dict[str, Any] = {
+        "time_ns": np.asarray(events_ns, dtype=np.int64),
+        "event_id": np.arange(len(poses), dtype=np.int64),
+        "solution": solution,
+        "inside": np.asarray(poses.inside, dtype=bool),
+        "lat_deg": np.degrees(poses.lat_rad), "lon_deg": np.degrees(poses.lon_rad),
+        "height_m": poses.height_m,
+    }
+    for k, ax in enumerate("ned"):
+        cols[f"v{ax}_mps"] = poses.v_n_mps[:, k]
+    cols.update({"roll_deg": rpy[:, 0], "pitch_deg": rpy[:, 1], "yaw_deg": rpy[:, 2]})
+    for k, ax in enumerate(("north", "east", "down")):
+        cols[f"{ax}_sigma_m"] = poses.pos_sigma_ned_m[:, k]
+    for k, ax in enumerate("ned"):
+        cols[f"v{ax}_sigma_mps"] = poses.vel_sigma_ned_mps[:, k]
+    for k, a in enumerate(("roll", "pitch", "yaw")):
+        cols[f"{a}_sigma_deg"] = rpy_sig[:, k]
+    return pd.DataFrame(cols)
 
 
 def issue_message(issue: Any) -> dict[str, Any]:

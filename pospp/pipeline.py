@@ -41,6 +41,7 @@ from pospp.diagnose.workflow import diagnose as run_diagnosis
 from pospp.evaluate import evaluation_rows, solution_errors
 from pospp.io import mcap_reader, parquet_tables, report_files, run_folder, trajectory_mcap
 from pospp.io.errors import IngestError
+from pospp.nav import events as sensor_events
 from pospp.nav import filter as nav_filter
 from pospp.nav import tuning as nav_tuning
 from pospp.nav.strapdown import increments_from_rates
@@ -102,6 +103,7 @@ def ingest(path: str | Path, config: PipelineConfig) -> mcap_reader.FlightLog:
         vel_topic=cfg.vel_topic,
         c_bs=sensor_to_body_dcm(cfg.sensor_frame, cfg.mounting_rpy_deg),
         max_chunk_bytes=int(cfg.max_chunk_mib * 2**20),
+        events_topic=cfg.events_topic,
     )
     if cfg.start_s is None and cfg.end_s is None:
         return log
@@ -118,7 +120,9 @@ def ingest(path: str | Path, config: PipelineConfig) -> mcap_reader.FlightLog:
     if len(imu) < 2:
         raise IngestError(f"no IMU samples in the window [{cfg.start_s}, {cfg.end_s}) s "
                           "after the first sample", file=str(path), topic=cfg.imu_topic)
-    return replace(log, imu=imu, fix=keep(log.fix), vel=keep(log.vel))
+    ev = log.events_ns
+    return replace(log, imu=imu, fix=keep(log.fix), vel=keep(log.vel),
+                   events_ns=ev[(ev >= lo) & (ev < hi)])
 
 
 def imu_tuning(config: PipelineConfig) -> nav_tuning.ImuTuning:
@@ -363,6 +367,8 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
     # --- outputs -------------------------------------------------------------------------------
     book.stage("write")
     tables: dict[str, Any] = {"trajectory": outputs.trajectory_table(solutions, epoch_ns)}
+    tables["biases"] = outputs.bias_table(
+        {"forward": nav.forward_biases, "smoothed": nav.smoothed_biases}, epoch_ns)
     tables["qc"] = qc_columns(report, epoch_ns)
     summary["qc_failed_checks"] = report.failed_names
     summary["qc_suggestions"] = report.suggestions
@@ -370,20 +376,39 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
     if diagnosis is not None:
         tables["diagnosis"] = diagnosis_columns(diagnosis)
         tables["diagnosis_curves"] = residual_curve_columns(diagnosis)
+    best_name = next(k for k in ("compensated", "smoothed", "forward") if k in solutions)
+    if len(log.events_ns):
+        tables["events"] = _event_poses(log, solutions[best_name], best_name, config, book)
     for name, table in tables.items():
         write(name, table)
     summary.update(calib_run.summary())
     summary.update(outputs.diagnosis_summary(diagnosis.steps if diagnosis is not None else None))
     summary["calibration_reason"] = calib_run.reason
     if config.outputs.mcap:
-        best = next(solutions[k] for k in ("compensated", "smoothed", "forward")
-                    if k in solutions)
-        trajectory_mcap.write_trajectory_mcap(out / "trajectory.mcap", best, epoch_ns,
-                                              rate_hz=config.outputs.mcap_rate_hz)
+        trajectory_mcap.write_trajectory_mcap(
+            out / "trajectory.mcap", solutions[best_name], epoch_ns,
+            rate_hz=config.outputs.mcap_rate_hz, legs=tables.get("legs"),
+            metadata={"input_file": meta["input_file"], "input_sha256": sha,
+                      "status": status, "solution": best_name})
     outcome = finish(status)
     if config.outputs.report:
         _render_report(out)
     return outcome
+
+
+def _event_poses(log: mcap_reader.FlightLog, solution: nav_filter.NavSolution, name: str,
+                 config: PipelineConfig, book: _Progress) -> pd.DataFrame:
+    """events.parquet: the [sensor]'s pose at every trigger event (pospp.nav.events)."""
+    epoch_ns = int(log.imu.time_ns[0])
+    sc = config.sensor
+    poses = sensor_events.sensor_poses(
+        solution, outputs.time_ns_to_t_s(log.events_ns, epoch_ns), lever_b_m=sc.lever_arm_m,
+        c_bs=rotation.dcm_from_euler(np.radians(sc.boresight_rpy_deg)))
+    n_out = int(np.count_nonzero(~poses.inside))
+    if n_out:
+        book.note("warning", "write", f"{n_out} of {len(poses)} trigger event(s) outside the "
+                  "solution's time span: NaN in events.parquet")
+    return outputs.events_table(poses, log.events_ns, name)
 
 
 QC_LEVER_ARM_SIGMA_M = 2.0

@@ -50,6 +50,9 @@ class Spec:
     layout: tuple[tuple[str, str, int], ...]
     wanted: tuple[str, ...]
     from_decoded: Callable[[Any], dict[str, Any]]
+    any_stamped: bool = False
+    """Accept any message type whose first field is a ``std_msgs/Header`` (only its stamp is
+    read), not only ``type_name``."""
 
 
 IMU_SPEC = Spec(
@@ -81,6 +84,17 @@ VEL_SPEC = Spec(
     ("linear", "covariance"),
     lambda m: {"linear": _vec(m.twist.twist.linear), "covariance": tuple(m.twist.covariance)},
 )
+
+EVENT_SPEC = Spec(
+    rm.TIME_REFERENCE_TYPE,
+    rm.TIME_REFERENCE_FIELDS,
+    (),
+    lambda m: {},
+    any_stamped=True,
+)
+"""Trigger events (``sensor_msgs/msg/TimeReference``, or any stamped trigger message): only
+the header stamp is kept. The trailing ``source`` string makes the layout variable, so these
+few messages go through the generic decoder."""
 
 
 def _gather(buf: np.ndarray, starts: np.ndarray, offset: int, width: int) -> np.ndarray:
@@ -135,8 +149,15 @@ class Collector:
                 topic=self.topic, index=index,
             ) from exc
         vals = self.spec.from_decoded(msg)
-        vals["time_ns"] = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
-        vals["frame_id"] = msg.header.frame_id
+        header = getattr(msg, "header", None)
+        if header is None and hasattr(msg, "stamp") and hasattr(msg, "frame_id"):
+            header = msg  # a std_msgs/Header published as the trigger itself
+        if header is None:
+            raise IngestError(f"{self.topic!r} messages have no std_msgs/Header (a stamped "
+                              "message is expected)", file=self.path, topic=self.topic,
+                              index=index)
+        vals["time_ns"] = int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+        vals["frame_id"] = header.frame_id
         return vals
 
     # -- one batch of messages of one channel
@@ -435,7 +456,7 @@ class Scan:
         col = self.by_topic.get(rec.topic)
         if col is not None:
             got = schema.name if schema else "<no schema>"
-            if got != col.spec.type_name:
+            if got != col.spec.type_name and not (col.spec.any_stamped and schema is not None):
                 raise IngestError(
                     f"topic {rec.topic!r} has schema {got!r}, expected {col.spec.type_name!r}",
                     file=self.path, topic=rec.topic,

@@ -44,13 +44,14 @@ data read so far kept; a corrupt chunk is skipped and reading goes on).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from pospp.io._mcap_scan import (
+    EVENT_SPEC,
     FIX_SPEC,
     IMU_SPEC,
     MAX_CHUNK_BYTES,
@@ -190,6 +191,9 @@ class FlightLog:
     path: str
     issues: tuple[IngestIssue, ...] = ()
     complete: bool = True
+    events_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    """Header stamps of the trigger events (``events_topic``), int64 ns, sorted (empty when
+    no events topic was asked for or found)."""
 
 
 def empty_velocities() -> GnssVelocities:
@@ -497,6 +501,13 @@ def _assemble_vel(a: dict, col: Collector, issues: list[IngestIssue]) -> GnssVel
     )
 
 
+def _assemble_events(a: dict, col: Collector, issues: list[IngestIssue]) -> np.ndarray:
+    """Event stamps, checked like GNSS stamps (duplicates dropped with a warning)."""
+    if len(a["time_ns"]) == 0:
+        return np.zeros(0, np.int64)
+    return _check_order(a, col.topic, col.path, drop_duplicates=True, issues=issues)["time_ns"]
+
+
 def read_flight_log(
     path: str | Path,
     *,
@@ -508,6 +519,7 @@ def read_flight_log(
     end_ns: int | None = None,
     check_units: bool = True,
     max_chunk_bytes: int = MAX_CHUNK_BYTES,
+    events_topic: str = "",
 ) -> FlightLog:
     """Read IMU and GNSS data from a ROS 2 MCAP file, rotate to FRD/NED, check the contract.
 
@@ -531,6 +543,11 @@ def read_flight_log(
         config ``[input] max_chunk_mib``): a chunk whose header claims more is skipped as
         corrupt, and no decompression produces more than its header claims, so a corrupt or
         hostile file cannot exhaust memory.
+    events_topic : str
+        Optional topic of trigger events (camera, lidar): ``sensor_msgs/msg/TimeReference``
+        or any stamped message (``std_msgs/Header`` first, or a Header topic);
+        "" (default): none. Their header stamps become ``FlightLog.events_ns``; a named topic
+        that is absent gives an info issue.
 
     Returns
     -------
@@ -551,13 +568,17 @@ def read_flight_log(
         raise ValueError(f"max_chunk_bytes must be a positive integer, got {max_chunk_bytes!r}")
     if not Path(path).is_file():
         raise FileNotFoundError(f"MCAP file not found: {path}")
-    if len({imu_topic, fix_topic, vel_topic}) != 3:
-        raise ValueError(f"topics must differ: {imu_topic!r}, {fix_topic!r}, {vel_topic!r}")
+    if len({imu_topic, fix_topic, vel_topic}) != 3 or events_topic in (imu_topic, fix_topic,
+                                                                       vel_topic):
+        raise ValueError(f"topics must differ: {imu_topic!r}, {fix_topic!r}, {vel_topic!r}"
+                         + (f", {events_topic!r}" if events_topic else ""))
     cols = {
         imu_topic: Collector(imu_topic, IMU_SPEC, path),
         fix_topic: Collector(fix_topic, FIX_SPEC, path),
         vel_topic: Collector(vel_topic, VEL_SPEC, path),
     }
+    if events_topic:
+        cols[events_topic] = Collector(events_topic, EVENT_SPEC, path)
     scan = Scan(path, cols, max_chunk_bytes=max_chunk_bytes)
     scan.run()
     issues = list(scan.issues)
@@ -576,8 +597,14 @@ def read_flight_log(
             "warning", path, vel_topic, None, None,
             f"optional topic {vel_topic!r} not found (no GNSS velocity); available: {available}",
         ))
+    if events_topic and events_topic not in scan.topics:
+        issues.append(IngestIssue(
+            "info", path, events_topic, None, None,
+            f"events topic {events_topic!r} not found (no trigger events); available: "
+            f"{available}",
+        ))
     for col in cols.values():
-        if col.slow_messages:
+        if col.slow_messages and col.spec is not EVENT_SPEC:
             issues.append(IngestIssue(
                 "info", path, col.topic, None, None,
                 f"{col.slow_messages} message(s) decoded by the generic decoder (not "
@@ -592,6 +619,8 @@ def read_flight_log(
                             cols[vel_topic], issues)
         if check_units and len(vel):
             _check_rate_units_against_gnss(imu, vel, imu_topic, path)
+        events_ns = _assemble_events(_window(cols[events_topic].arrays(), start_ns, end_ns),
+                                     cols[events_topic], issues) if events_topic else None
     except IngestError as exc:
         raise IngestError(
             exc.reason + note, file=exc.file, topic=exc.topic, index=exc.index,
@@ -606,5 +635,6 @@ def read_flight_log(
             f"GNSS stamps [{fix.time_ns[0]}, {fix.time_ns[-1]}] ns do not overlap the IMU "
             f"stamps [{imu.time_ns[0]}, {imu.time_ns[-1]}] ns: different time bases?",
         ))
+    extra = {} if events_ns is None else {"events_ns": events_ns}
     return FlightLog(imu=imu, fix=fix, vel=vel, path=path, issues=tuple(issues),
-                     complete=scan.complete)
+                     complete=scan.complete, **extra)

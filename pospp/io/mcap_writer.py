@@ -59,10 +59,8 @@ class _Topic:
         topic: str,
         schema_name: str,
         schema_text: str,
-        fields: tuple[tuple[str, str, int], ...],
+        payloads: np.ndarray,
         time_ns: np.ndarray,
-        frame_id: str,
-        values: dict[str, np.ndarray],
     ) -> None:
         schema_id = writer.register_schema(
             name=schema_name, encoding="ros2msg", data=schema_text.encode("utf-8")
@@ -70,7 +68,6 @@ class _Topic:
         self.channel_id = writer.register_channel(
             topic=topic, message_encoding="cdr", schema_id=schema_id
         )
-        payloads = rm.encode_batch(fields, time_ns, frame_id, values)
         self.raw = payloads.tobytes()
         self.size = payloads.dtype.itemsize
         self.time_ns = np.asarray(time_ns, dtype=np.int64)
@@ -110,6 +107,9 @@ def write_flight_log(
     imu_frame_id: str = "imu_link",
     gnss_frame_id: str = "gnss_antenna",
     metadata: dict[str, str] | None = None,
+    events_ns: np.ndarray | None = None,
+    events_topic: str = "/events",
+    events_frame_id: str = "trigger",
 ) -> Path:
     """Write IMU samples and GNSS fixes / velocities to an MCAP file, atomically.
 
@@ -127,6 +127,9 @@ def write_flight_log(
         Mounting DCM sensor -> body, as given to the reader (default FLU -> FRD).
     metadata : dict, optional
         Written as an MCAP metadata record named ``pospp`` (e.g. how the file was made).
+    events_ns : (M,) int64, optional
+        Trigger stamps, written to ``events_topic`` as ``sensor_msgs/msg/TimeReference``
+        (header.stamp = time_ref = the stamp, source ``events_frame_id``).
 
     Returns
     -------
@@ -138,8 +141,13 @@ def write_flight_log(
     with atomic_path(out) as tmp, open(tmp, "wb") as stream:
         writer = Writer(stream, compression=CompressionType.ZSTD)
         writer.start(profile="ros2", library="pospp")
-        topics = [_Topic(
-            writer, imu_topic, rm.IMU_TYPE, rm.IMU_MSGDEF, rm.IMU_FIELDS,
+        def topic_of(name: str, schema_name: str, schema_text: str, fields: tuple,
+                     time_ns: np.ndarray, frame_id: str, values: dict) -> _Topic:
+            payloads = rm.encode_batch(fields, np.asarray(time_ns, np.int64), frame_id, values)
+            return _Topic(writer, name, schema_name, schema_text, payloads, time_ns)
+
+        topics = [topic_of(
+            imu_topic, rm.IMU_TYPE, rm.IMU_MSGDEF, rm.IMU_FIELDS,
             np.asarray(imu.time_ns, dtype=np.int64), imu_frame_id,
             {
                 "orientation_covariance": np.tile([-1.0] + [0.0] * 8, (len(imu), 1)),
@@ -147,8 +155,8 @@ def write_flight_log(
                 "linear_acceleration": apply_rotation(c_sb, imu.f_ib_b_mps2),
             },
         )]
-        topics.append(_Topic(
-            writer, fix_topic, rm.NAVSATFIX_TYPE, rm.NAVSATFIX_MSGDEF, rm.NAVSATFIX_FIELDS,
+        topics.append(topic_of(
+            fix_topic, rm.NAVSATFIX_TYPE, rm.NAVSATFIX_MSGDEF, rm.NAVSATFIX_FIELDS,
             np.asarray(fix.time_ns, dtype=np.int64), gnss_frame_id,
             {
                 "status": np.asarray(fix.status, dtype=np.int8),
@@ -164,8 +172,8 @@ def write_flight_log(
             cov6 = np.zeros((len(vel), 6, 6))
             cov6[:, :3, :3] = _cov_ned_to_enu(vel.vel_cov_ned_m2ps2).reshape(-1, 3, 3)
             cov6[:, 3, 3] = cov6[:, 4, 4] = cov6[:, 5, 5] = _UNKNOWN_VARIANCE
-            topics.append(_Topic(
-                writer, vel_topic, rm.TWIST_COV_STAMPED_TYPE, rm.TWIST_COV_STAMPED_MSGDEF,
+            topics.append(topic_of(
+                vel_topic, rm.TWIST_COV_STAMPED_TYPE, rm.TWIST_COV_STAMPED_MSGDEF,
                 rm.TWIST_COV_STAMPED_FIELDS, np.asarray(vel.time_ns, dtype=np.int64),
                 gnss_frame_id,
                 {
@@ -173,6 +181,11 @@ def write_flight_log(
                     "covariance": cov6.reshape(-1, 36),
                 },
             ))
+        if events_ns is not None:
+            ev = rm.encode_time_reference(np.asarray(events_ns, np.int64), events_frame_id,
+                                          events_frame_id)
+            topics.append(_Topic(writer, events_topic, rm.TIME_REFERENCE_TYPE,
+                                 rm.TIME_REFERENCE_MSGDEF, ev, events_ns))
         _write_merged(writer, topics)
         if metadata:
             writer.add_metadata("pospp", {str(k): str(v) for k, v in metadata.items()})

@@ -74,6 +74,8 @@ _S = pa.string()
 _B = pa.bool_()
 _NED = "n (NED)"
 _ATT = "b (FRD) w.r.t. n (NED), z-y-x"
+_FRD = "b (FRD)"
+_SENSOR_ATT = "s (sensor, [sensor] boresight in b) w.r.t. n (NED), z-y-x"
 
 
 def _opt(c: Column) -> Column:
@@ -289,6 +291,42 @@ TABLES: dict[str, list[Column]] = {
         _opt(Column("not_observable", _S, "", "summary not_observable")),
     ],
     "reference": [_TIME, *_NAV],
+    "events": [
+        _TIME,
+        Column("event_id", _I, "", "event number, 0-based in time order"),
+        Column("solution", _S, "", "solution interpolated ('compensated', 'smoothed' or "
+               "'forward': the best of the run)"),
+        Column("inside", _B, "", "whether the event lies within the solution (else NaN)"),
+        *[c._replace(description=c.description.replace("velocity", "sensor velocity"))
+          for c in _NAV[:6]],
+        Column("roll_deg", _F, "deg", "sensor roll", _SENSOR_ATT),
+        Column("pitch_deg", _F, "deg", "sensor pitch", _SENSOR_ATT),
+        Column("yaw_deg", _F, "deg", "sensor yaw, clockwise from north, [0, 360)", _SENSOR_ATT),
+        *[Column(f"{ax}_sigma_m", _F, "m", f"1-sigma sensor position error, {ax} (IMU position "
+                 "and attitude errors through the lever arm)", _NED)
+          for ax in ("north", "east", "down")],
+        *[Column(f"v{ax}_sigma_mps", _F, "m/s", f"1-sigma velocity error, v{ax}", _NED)
+          for ax in ("n", "e", "d")],
+        *[Column(f"{a}_sigma_deg", _F, "deg", f"1-sigma sensor {a} error", _SENSOR_ATT)
+          for a in ("roll", "pitch", "yaw")],
+    ],
+    "biases": [
+        _TIME,
+        Column("solution", _S, "", "'forward' (filtered) or 'smoothed'"),
+        *[Column(f"gyro_bias_{ax}_dph", _F, "deg/h", f"estimated gyro bias, {ax} (total: "
+                 "constant + Gauss-Markov), measured = (1 + s) true + b", _FRD) for ax in "xyz"],
+        *[Column(f"gyro_bias_{ax}_sigma_dph", _F, "deg/h", f"1-sigma of gyro_bias_{ax}", _FRD)
+          for ax in "xyz"],
+        *[Column(f"accel_bias_{ax}_ug", _F, "ug", f"estimated accelerometer bias, {ax} (total), "
+                 "1 ug = 9.80665e-6 m/s^2", _FRD) for ax in "xyz"],
+        *[Column(f"accel_bias_{ax}_sigma_ug", _F, "ug", f"1-sigma of accel_bias_{ax}", _FRD)
+          for ax in "xyz"],
+        *[_opt(Column(f"{s}_sf_{ax}_ppm", _F, "ppm", f"estimated {s} scale factor, {ax} "
+                      "(null when not estimated)", _FRD))
+          for s in ("gyro", "accel") for ax in "xyz"],
+        *[_opt(Column(f"{s}_sf_{ax}_sigma_ppm", _F, "ppm", f"1-sigma of {s}_sf_{ax}", _FRD))
+          for s in ("gyro", "accel") for ax in "xyz"],
+    ],
 }
 """Table name -> columns. Add a table or a column here; docs/formats.md renders this dict."""
 

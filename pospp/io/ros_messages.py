@@ -1,9 +1,13 @@
 """ROS 2 message definitions and their CDR layouts as numpy structured dtypes.
 
-The message types pospp reads and writes all have exactly one variable-length field, the
-``header.frame_id`` string, right after the stamp. For a given frame_id length the CDR layout
-of the whole message is therefore fixed, and a batch of messages sharing that length can be
-decoded (or encoded) with one numpy structured dtype over the concatenated payloads.
+The flight-log message types pospp reads and writes (Imu, NavSatFix,
+TwistWithCovarianceStamped) have exactly one variable-length field, the ``header.frame_id``
+string, right after the stamp. For a given frame_id length the CDR layout of the whole message
+is therefore fixed, and a batch of messages sharing that length can be decoded (or encoded)
+with one numpy structured dtype over the concatenated payloads. The trajectory types pospp
+writes add constant strings (``child_frame_id`` of Odometry and TFMessage, ``source`` of
+TimeReference), which are encoded the same way as a uint32 length and a fixed byte array;
+``nav_msgs/msg/Path`` (a sequence of stamped poses) is encoded field by field (``_Cdr``).
 
 CDR (XCDR1, as written by ROS 2 rmw implementations and by ``mcap_ros2``)
 -----------------------------------------------------------------------
@@ -41,8 +45,21 @@ __all__ = [
     "TWIST_COV_STAMPED_FIELDS",
     "TWIST_COV_STAMPED_MSGDEF",
     "TWIST_COV_STAMPED_TYPE",
+    "NAV_PATH_MSGDEF",
+    "NAV_PATH_TYPE",
+    "ODOMETRY_MSGDEF",
+    "ODOMETRY_TYPE",
+    "TF_MESSAGE_MSGDEF",
+    "TF_MESSAGE_TYPE",
+    "TIME_REFERENCE_FIELDS",
+    "TIME_REFERENCE_MSGDEF",
+    "TIME_REFERENCE_TYPE",
     "cdr_dtype",
     "encode_batch",
+    "encode_odometry",
+    "encode_path",
+    "encode_tf",
+    "encode_time_reference",
     "stamp_ns",
 ]
 
@@ -79,6 +96,16 @@ MSG: geometry_msgs/Point
 float64 x
 float64 y
 float64 z
+"""
+_TWIST_WITH_COV_DEF = """\
+MSG: geometry_msgs/TwistWithCovariance
+geometry_msgs/Twist twist
+float64[36] covariance
+"""
+_TWIST_DEF = """\
+MSG: geometry_msgs/Twist
+geometry_msgs/Vector3 linear
+geometry_msgs/Vector3 angular
 """
 
 
@@ -143,16 +170,8 @@ geometry_msgs/TwistWithCovariance twist
 """,
     _HEADER_DEF,
     _TIME_DEF,
-    """\
-MSG: geometry_msgs/TwistWithCovariance
-geometry_msgs/Twist twist
-float64[36] covariance
-""",
-    """\
-MSG: geometry_msgs/Twist
-geometry_msgs/Vector3 linear
-geometry_msgs/Vector3 angular
-""",
+    _TWIST_WITH_COV_DEF,
+    _TWIST_DEF,
     _VECTOR3_DEF,
 )
 
@@ -169,6 +188,85 @@ MSG: geometry_msgs/Pose
 geometry_msgs/Point position
 geometry_msgs/Quaternion orientation
 """,
+    _POINT_DEF,
+    _QUATERNION_DEF,
+)
+
+TIME_REFERENCE_TYPE = "sensor_msgs/msg/TimeReference"
+TIME_REFERENCE_MSGDEF = _msgdef(
+    """\
+std_msgs/Header header
+builtin_interfaces/Time time_ref
+string source
+""",
+    _HEADER_DEF,
+    _TIME_DEF,
+)
+
+_POSE_DEF = """\
+MSG: geometry_msgs/Pose
+geometry_msgs/Point position
+geometry_msgs/Quaternion orientation
+"""
+_POSE_STAMPED_DEF = """\
+MSG: geometry_msgs/PoseStamped
+std_msgs/Header header
+geometry_msgs/Pose pose
+"""
+
+TF_MESSAGE_TYPE = "tf2_msgs/msg/TFMessage"
+TF_MESSAGE_MSGDEF = _msgdef(
+    "geometry_msgs/TransformStamped[] transforms\n",
+    """\
+MSG: geometry_msgs/TransformStamped
+std_msgs/Header header
+string child_frame_id
+geometry_msgs/Transform transform
+""",
+    _HEADER_DEF,
+    _TIME_DEF,
+    """\
+MSG: geometry_msgs/Transform
+geometry_msgs/Vector3 translation
+geometry_msgs/Quaternion rotation
+""",
+    _VECTOR3_DEF,
+    _QUATERNION_DEF,
+)
+
+ODOMETRY_TYPE = "nav_msgs/msg/Odometry"
+ODOMETRY_MSGDEF = _msgdef(
+    """\
+std_msgs/Header header
+string child_frame_id
+geometry_msgs/PoseWithCovariance pose
+geometry_msgs/TwistWithCovariance twist
+""",
+    _HEADER_DEF,
+    _TIME_DEF,
+    """\
+MSG: geometry_msgs/PoseWithCovariance
+geometry_msgs/Pose pose
+float64[36] covariance
+""",
+    _POSE_DEF,
+    _POINT_DEF,
+    _QUATERNION_DEF,
+    _TWIST_WITH_COV_DEF,
+    _TWIST_DEF,
+    _VECTOR3_DEF,
+)
+
+NAV_PATH_TYPE = "nav_msgs/msg/Path"
+NAV_PATH_MSGDEF = _msgdef(
+    """\
+std_msgs/Header header
+geometry_msgs/PoseStamped[] poses
+""",
+    _HEADER_DEF,
+    _TIME_DEF,
+    _POSE_STAMPED_DEF,
+    _POSE_DEF,
     _POINT_DEF,
     _QUATERNION_DEF,
 )
@@ -201,6 +299,134 @@ POSE_STAMPED_FIELDS: tuple[tuple[str, str, int], ...] = (
     ("position", "<f8", 3),
     ("orientation", "<f8", 4),
 )
+TIME_REFERENCE_FIELDS: tuple[tuple[str, str, int], ...] = (
+    ("time_ref_sec", "<i4", 1),
+    ("time_ref_nanosec", "<u4", 1),
+)
+"""The fixed part of ``sensor_msgs/msg/TimeReference`` after the header (``source``, a
+string, follows: the reader decodes these messages with the generic decoder)."""
+
+
+def _string_fields(name: str, text: str) -> tuple[tuple[tuple[str, str, int], ...], dict]:
+    """A constant CDR string as two fields (uint32 length with the NUL, then the bytes)."""
+    raw = text.encode("utf-8") + b"\x00"
+    return ((f"{name}_len", "<u4", 1), (name, "u1", len(raw))), {
+        f"{name}_len": len(raw), name: np.frombuffer(raw, np.uint8)}
+
+
+def encode_time_reference(time_ns: np.ndarray, frame_id: str, source: str) -> np.ndarray:
+    """``sensor_msgs/msg/TimeReference`` payloads: header.stamp = time_ref = ``time_ns``."""
+    t = np.asarray(time_ns, dtype=np.int64)
+    sec, nsec = np.divmod(t, 1_000_000_000)
+    sfields, svals = _string_fields("source", source)
+    return encode_batch(TIME_REFERENCE_FIELDS + sfields, t, frame_id, {
+        "time_ref_sec": sec, "time_ref_nanosec": nsec,
+        **{k: np.broadcast_to(v, (t.shape[0], *np.shape(v))) for k, v in svals.items()}})
+
+
+def encode_odometry(time_ns: np.ndarray, frame_id: str, child_frame_id: str, *,
+                    position: np.ndarray, orientation_xyzw: np.ndarray,
+                    pose_covariance: np.ndarray, linear: np.ndarray,
+                    twist_covariance: np.ndarray) -> np.ndarray:
+    """``nav_msgs/msg/Odometry`` payloads (N,): pose in ``frame_id``, twist in the child frame.
+
+    ``pose_covariance`` / ``twist_covariance``: (N, 36) row-major 6x6 [x, y, z, rot x, rot y,
+    rot z]; ``linear``: (N, 3) velocity; the angular twist is written as zero.
+    """
+    t = np.asarray(time_ns, dtype=np.int64)
+    cfields, cvals = _string_fields("child_frame_id", child_frame_id)
+    fields = cfields + (("position", "<f8", 3), ("orientation", "<f8", 4),
+                        ("pose_covariance", "<f8", 36), ("linear", "<f8", 3),
+                        ("angular", "<f8", 3), ("twist_covariance", "<f8", 36))
+    return encode_batch(fields, t, frame_id, {
+        **{k: np.broadcast_to(v, (t.shape[0], *np.shape(v))) for k, v in cvals.items()},
+        "position": position, "orientation": orientation_xyzw,
+        "pose_covariance": pose_covariance, "linear": linear,
+        "twist_covariance": twist_covariance})
+
+
+def encode_tf(time_ns: np.ndarray, frame_id: str, child_frame_id: str, *,
+              translation: np.ndarray, rotation_xyzw: np.ndarray) -> np.ndarray:
+    """``tf2_msgs/msg/TFMessage`` payloads (N,), one ``TransformStamped`` each.
+
+    TFMessage has no header of its own: the body is the sequence length (1), then the
+    TransformStamped, whose header leads as in any stamped message, so ``encode_batch`` lays
+    it out once the sequence length is given as the first field.
+    """
+    t = np.asarray(time_ns, dtype=np.int64)
+    cfields, cvals = _string_fields("child_frame_id", child_frame_id)
+    fields = cfields + (("translation", "<f8", 3), ("rotation", "<f8", 4))
+    inner = encode_batch(fields, t, frame_id, {
+        **{k: np.broadcast_to(v, (t.shape[0], *np.shape(v))) for k, v in cvals.items()},
+        "translation": translation, "rotation": rotation_xyzw})
+    return _with_leading_count(inner, fields)
+
+
+def _with_leading_count(inner: np.ndarray, fields: tuple) -> np.ndarray:
+    """``inner`` (a stamped message's payloads) re-laid after a uint32 sequence length of 1.
+
+    The length shifts the body by 4 bytes, so the doubles are re-aligned to 8 (counted from
+    the body start) field by field, exactly as ``cdr_dtype`` lays them.
+    """
+    dt = inner.dtype
+    names = ["encap", "count", "sec", "nanosec", "frame_id_len", "frame_id"]
+    formats: list = [("u1", (4,)), "<u4", "<i4", "<u4", "<u4",
+                     ("u1", dt.fields["frame_id"][0].shape)]
+    offsets = [0, 4, 8, 12, 16, 20]
+    pos = 16 + dt.fields["frame_id"][0].itemsize  # relative to the body start
+    out = np.zeros(inner.shape[0], _lay(names, formats, offsets, pos, fields))
+    for name in out.dtype.names:
+        if name != "count":
+            out[name] = inner[name]
+    out["count"] = 1
+    return out
+
+
+class _Cdr:
+    """A little-endian CDR body built field by field (for the few variable-length messages)."""
+
+    def __init__(self) -> None:
+        self.buf = bytearray()
+
+    def _align(self, n: int) -> None:
+        self.buf += b"\x00" * ((-len(self.buf)) % n)
+
+    def u32(self, v: int) -> None:
+        self._align(4)
+        self.buf += int(v).to_bytes(4, "little", signed=False)
+
+    def i32(self, v: int) -> None:
+        self._align(4)
+        self.buf += int(v).to_bytes(4, "little", signed=True)
+
+    def f64s(self, vals: np.ndarray) -> None:
+        self._align(8)
+        self.buf += np.asarray(vals, dtype="<f8").tobytes()
+
+    def string(self, text: str) -> None:
+        raw = text.encode("utf-8") + b"\x00"
+        self.u32(len(raw))
+        self.buf += raw
+
+    def header(self, time_ns: int, frame_id: str) -> None:
+        sec, nsec = divmod(int(time_ns), 1_000_000_000)
+        self.i32(sec)
+        self.u32(nsec)
+        self.string(frame_id)
+
+
+def encode_path(time_ns: int, frame_id: str, pose_time_ns: np.ndarray, position: np.ndarray,
+                orientation_xyzw: np.ndarray) -> bytes:
+    """One ``nav_msgs/msg/Path`` payload: M poses (stamps, (M, 3) positions, (M, 4) x y z w)."""
+    w = _Cdr()
+    w.header(time_ns, frame_id)
+    w.u32(len(pose_time_ns))
+    for t, p, q in zip(np.asarray(pose_time_ns).tolist(), position, orientation_xyzw,
+                       strict=True):
+        w.header(t, frame_id)
+        w.f64s(p)
+        w.f64s(q)
+    return CDR_LE_HEADER + bytes(w.buf)
 
 
 def cdr_dtype(fields: tuple[tuple[str, str, int], ...], frame_id_len: int) -> np.dtype:
@@ -226,6 +452,12 @@ def cdr_dtype(fields: tuple[tuple[str, str, int], ...], frame_id_len: int) -> np
     formats: list = [("u1", (4,)), "<i4", "<u4", "<u4", ("u1", (frame_id_len,))]
     offsets = [0, 4, 8, 12, 16]
     pos = 12 + frame_id_len  # relative to the CDR body start (byte 4)
+    return _lay(names, formats, offsets, pos, fields)
+
+
+def _lay(names: list, formats: list, offsets: list, pos: int,
+         fields: tuple[tuple[str, str, int], ...]) -> np.dtype:
+    """Append ``fields`` from body offset ``pos``, each aligned to its size; the dtype."""
     for name, typ, count in fields:
         size = np.dtype(typ).itemsize
         pos += (-pos) % size

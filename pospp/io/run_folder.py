@@ -46,7 +46,10 @@ LOCK_NAME = ".pospp-batch.lock"
 _STAGING = ".pospp-staging-"
 _TRASH = ".pospp-trash-"
 _OTHER_OUTPUTS = frozenset({"report.html", "trajectory.mcap", "evaluation.png",
-                            "observability.png", MARKER})
+                            "observability.png", MARKER,
+                            # pospp export's default files (pospp.io.exports.DEFAULT_NAMES)
+                            "trajectory.out", "trajectory.csv", "trajectory.geojson",
+                            "trajectory.kml", "events.out", "events.csv"})
 _RENAME_EXCHANGE = 2  # linux/fs.h
 
 

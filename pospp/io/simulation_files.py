@@ -78,9 +78,13 @@ def _json_default(o: Any) -> Any:
 
 def write_simulation(
     sim: Simulation, out_dir: str | Path, name: str | None = None, *,
-    truth_rate_hz: float = 10.0,
+    truth_rate_hz: float = 10.0, events_rate_hz: float | None = None,
+    events_topic: str = "/events",
 ) -> dict[str, Path]:
     """Write NAME.mcap, NAME.truth.parquet, NAME.bias.parquet, NAME.params.json.
+
+    ``events_rate_hz``: also write trigger events (``sensor_msgs/msg/TimeReference`` on
+    ``events_topic``) at this rate, stamped by ``Simulation.trigger_stamps_ns``.
 
     Returns
     -------
@@ -98,7 +102,9 @@ def write_simulation(
     }
     meta = {"generator": "pospp.sim", "name": name, "seed": str(sim.params["seed"]),
             "params": paths["params"].name}
-    write_flight_log(paths["mcap"], sim.imu, sim.fix, sim.vel, metadata=meta)
+    events = None if events_rate_hz is None else sim.trigger_stamps_ns(events_rate_hz)
+    write_flight_log(paths["mcap"], sim.imu, sim.fix, sim.vel, metadata=meta,
+                     events_ns=events, events_topic=events_topic)
     write_reference_trajectory(
         paths["truth"], sim.truth_reference(truth_rate_hz),
         metadata={"generator": "pospp.sim", "params": paths["params"].name,
@@ -113,7 +119,8 @@ def write_simulation(
         "params": paths["params"].name,
         "truth_rate_hz": truth_rate_hz,
         "message_counts": {"/imu/data": len(sim.imu), "/gnss/fix": len(sim.fix),
-                           "/gnss/vel": len(sim.vel)},
+                           "/gnss/vel": len(sim.vel),
+                           **({} if events is None else {events_topic: len(events)})},
         "sizes_bytes": {"mcap": paths["mcap"].stat().st_size,
                         "truth": paths["truth"].stat().st_size},
     }

@@ -163,6 +163,20 @@ class Simulation:
             tr.v_n_mps[idx], rotation.euler_from_quat(tr.q_nb[idx]),
         )
 
+    def trigger_stamps_ns(self, rate_hz: float, *, offset_s: float = 0.123456789
+                          ) -> np.ndarray:
+        """Trigger stamps [ns] of a sensor firing at ``rate_hz`` over the IMU span.
+
+        ``t_k = first IMU stamp + offset_s + k / rate_hz`` up to the last IMU stamp; the
+        default offset puts the triggers off the IMU and GNSS grids, so a consumer must
+        interpolate.
+        """
+        if not rate_hz > 0:
+            raise ValueError(f"rate_hz: expected a value > 0, got {rate_hz!r}")
+        first, last = int(self.imu.time_ns[0]), int(self.imu.time_ns[-1])
+        k = np.arange(int(np.floor((last - first - offset_s * 1e9) * rate_hz * 1e-9)) + 1)
+        return first + np.round((offset_s + k / rate_hz) * 1e9).astype(np.int64)
+
     def state_at_first_imu_stamp(self):
         """The true NavState at the first IMU stamp (initial state for ``increments_from_rates``
         output, which drops the first sample)."""

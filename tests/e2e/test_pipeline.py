@@ -103,7 +103,7 @@ def test_trajectory_mcap_reads_back(sample_run):
         reader = make_reader(fh, decoder_factories=[DecoderFactory()])
         topics = {ch.topic for ch in reader.get_summary().channels.values()}
         first = next(reader.iter_decoded_messages(topics=["/pospp/fix"]))
-    assert topics == {"/pospp/fix", "/pospp/pose"}
+    assert topics == {"/pospp/fix", "/pospp/pose", "/tf", "/pospp/odom", "/pospp/legs"}
     truth = parquet_tables.read_reference_trajectory(SAMPLE_TRUTH)
     assert first.decoded_message.latitude == pytest.approx(np.degrees(truth.lat_rad[0]),
                                                            abs=1e-5)
