@@ -344,8 +344,10 @@ def calibrate(imu: ImuIncrements, nav: nav_filter.FilterResult,
         noise=config.pairs.noise, noise_step_s=config.pairs.noise_step_s,
         estimate_gyro_z=config.pairs.estimate_gyro_z,
         compensation=config.compensation.mode if gm else "constant",
-        # the grade's Gauss-Markov ("random") drift enters the least squares' noise model
-        gyro_gm_sigma_dph=tuning.gyro_gm_sigma_dph if gm else None,
+        # the grade's Gauss-Markov ("random") drift enters the least squares' noise model;
+        # its level is the flight's own (REML on the joint fit), the grade only switches it on
+        # and gives its correlation time (issue 16, item 3)
+        gyro_gm_sigma_dph=None,
         gyro_gm_tau_s=tuning.gyro_gm_tau_s if gm else None,
     ), reference
 
