@@ -336,8 +336,6 @@ def calibrate(imu: ImuIncrements, nav: nav_filter.FilterResult,
     """Legs, B replays, pairs, least squares and B re-run (pospp.calib.stage)."""
     which = config.replay.reference if nav.smoothed is not None else "forward"
     reference = ReferenceSolution(*nav_filter.reference_solution(nav, which=which))
-    if which == "smoothed":  # A's error covariance between times, for B minus A's noise model
-        reference = replace(reference, error_nodes=nav.smoother_nodes)
     tuning = imu_tuning(config)
     gm = bool(np.isfinite(tuning.gyro_gm_tau_s) and tuning.gyro_gm_sigma_dph > 0)
     return calibrate_flight(

@@ -16,7 +16,6 @@ rows). Frames and units as in :mod:`pospp.nav.error_model`.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -56,9 +55,6 @@ class ReferenceSolution:
     trajectory: strapdown.Trajectory
     v_sigma_n_mps: NDArray
     accel_bias_b_mps2: NDArray
-    error_nodes: Any = None
-    """A's smoother nodes (:class:`pospp.nav.smoother.SmootherNodes`), optional: A's error
-    covariance between times, for the covariance of A's own error in B minus A."""
 
 
 @dataclass(frozen=True)
@@ -101,10 +97,6 @@ class LegReplay:
     lat_rad: float
     height_m: float
     v_n0_mps: NDArray
-    reference_error_cov: NDArray | None = None
-    """Covariance (2 (M - 1), 2 (M - 1)) of A's own error in [dv_N, dv_E] at the samples
-    t > 0 (sample-major), from A's smoother (None without ``ReferenceSolution.error_nodes``):
-    ``d = Phi(t) e_A(t0) - e_v,A(t)``, see :func:`reference_error_rows`."""
 
 
 def reference_from_trajectory(
@@ -175,7 +167,6 @@ def replay_leg(
     sample_rate_hz: float = 1.0,
     sigma_floor_mps: float = 0.005,
     transition_step: int = 10,
-    reference_error: bool = False,
 ) -> LegReplay:
     """Run algorithm B over one leg and difference it with A.
 
@@ -201,8 +192,6 @@ def replay_leg(
         Lower bound of each sample's standard deviation [m/s].
     transition_step : int
         IMU intervals per F evaluation for the numerical transition matrices.
-    reference_error : bool
-        Also compute ``LegReplay.reference_error_cov`` (needs ``reference.error_nodes``).
     """
     t_imu = imu.t_s
     k0 = int(np.searchsorted(t_imu, leg.start_s))
@@ -257,13 +246,7 @@ def replay_leg(
     phi_all = transition_matrices(b, f_b, step=transition_step)
     t_phi = b.t_s[:: transition_step][: phi_all.shape[0]] - t0
     idx = np.clip(np.searchsorted(t_phi, ts - 1e-9), 0, phi_all.shape[0] - 1)
-    ref_cov = None
-    if reference_error and reference.error_nodes is not None:
-        ref_cov = reference.error_nodes.difference_covariance(
-            t0, t0 + ts[1:], reference_error_rows(phi_all[idx][1:], reference.error_nodes,
-                                                   accel_compensation == "filter"))
     return LegReplay(
-        reference_error_cov=ref_cov,
         leg=leg,
         t0_s=t0,
         t_s=ts,
@@ -277,19 +260,3 @@ def replay_leg(
         height_m=float(x0.height_m),
         v_n0_mps=x0.v_n_mps.copy(),
     )
-
-
-def reference_error_rows(phi: NDArray, nodes: Any, inherits_accel_bias: bool) -> NDArray:
-    """B's horizontal velocity per unit error of A at the leg start, in A's state layout.
-
-    B takes A's attitude, velocity and position (error-state rows 0:9 carried by Phi) and,
-    with ``accel_compensation="filter"``, A's accelerometer-bias estimate, whose error enters
-    B's residual accelerometer error with the opposite sign (rows 12:15); B's gyro is raw, so
-    A's gyro-bias error does not enter. Shape (T, 2, n), n = A's state count.
-    """
-    n = nodes.p_smooth.shape[1]
-    h = np.zeros((phi.shape[0], 2, n))
-    h[:, :, 0:9] = phi[:, 3:5, 0:9]
-    if inherits_accel_bias:
-        h[:, :, 12:15] = -phi[:, 3:5, 12:15]
-    return h

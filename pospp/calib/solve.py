@@ -400,24 +400,16 @@ def reference_error_covariance(rep: LegReplay, length_s: float, rows: NDArray | 
         Correlation length l of A's velocity error [s].
     rows : ndarray of int, optional
         Sample indices (> 0); all samples t > 0 when None.
-    kind : str
-        Correlation family r (:data:`REFERENCE_CORRELATIONS`, ``"osc<P>"``), or
-        ``"smoother"``: A's own covariance between times from its RTS smoother
-        (``rep.reference_error_cov``; ``length_s`` unused, the result is then in (m/s)^2 and
-        the model's s_A is a dimensionless scale).
+    kind : {"matern32", "dmatern52"}
+        Correlation family r (:data:`REFERENCE_CORRELATIONS`).
 
     Returns
     -------
     ndarray, shape (2 R, 2 R)
         Sample-major like :func:`design_matrix` [(m/s)^2 per (m/s)^2].
     """
-    idx = np.arange(1, rep.t_s.size) if rows is None else np.asarray(rows)
-    if kind == "smoother":
-        if rep.reference_error_cov is None:
-            raise ValueError("kind='smoother': the replay has no reference_error_cov")
-        r = (2 * (idx - 1)[:, None] + np.arange(2)[None, :]).reshape(-1)
-        return rep.reference_error_cov[np.ix_(r, r)]
     corr = _reference_correlation(kind)
+    idx = np.arange(1, rep.t_s.size) if rows is None else np.asarray(rows)
     t = rep.t_s[idx]
     p = rep.phi[idx][:, 3:5, 3:5]  # (R, 2, 2)
     r0 = corr(t, length_s)  # r(t_i - t0)
@@ -532,7 +524,6 @@ def fit_noise_model(
     reference_lengths_s: tuple[float, ...] = REFERENCE_LENGTHS_S,
     reference_kinds: tuple[str, ...] = REFERENCE_KINDS,
     gyro_gm_taus_s: tuple[float, ...] = (),
-    use_smoother: bool = True,
 ) -> NoiseModel:
     """Fit :class:`NoiseModel` by restricted maximum likelihood on the base model's residual.
 
@@ -580,8 +571,6 @@ def fit_noise_model(
         free_q = q_fixed is None
         lo = [np.log(1e-8)] + ([np.log(1e-22)] if free_q else []) + [np.log(1e-16)] * 2
         hi = [np.log(1e4)] + ([np.log(1e-6)] if free_q else []) + [np.log(1e-4), np.log(1e-2)]
-        if kind == "smoother":  # a scale of A's own covariance
-            lo[-1], hi[-1] = np.log(1e-4), np.log(1e2)
         if tau is not None:
             lo.append(np.log(1e-20))
             hi.append(np.log(1e-8))
@@ -616,9 +605,6 @@ def fit_noise_model(
                            accel_vrw_mpsqrts=float(np.sqrt(v[2])), reference_kind=kind)
         return nll(th), model
 
-    if use_smoother and all(r.reference_error_cov is not None for r in legs):
-        # A's covariance between times from its smoother: one shape, REML scales it
-        reference_lengths_s, reference_kinds = (1.0,), ("smoother",)
     tau0 = gyro_gm_taus_s[len(gyro_gm_taus_s) // 2] if gyro_gm_taus_s else None
     best = min((fit(length, tau0, kind) for length in reference_lengths_s
                 for kind in reference_kinds), key=lambda x: x[0])

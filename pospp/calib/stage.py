@@ -230,8 +230,7 @@ def calibrate_flight(
             replays[leg.leg_id] = replay_leg(
                 imu, reference, leg, accel_compensation=rc["accel_compensation"],
                 sample_rate_hz=rc["sample_rate_hz"], sigma_floor_mps=rc["sigma_floor_mps"],
-                transition_step=int(rc["transition_step"]),
-                reference_error=reference.error_nodes is not None)
+                transition_step=int(rc["transition_step"]))
         except ValueError as exc:
             messages.append(f"leg {leg.leg_id}: B replay failed: {exc}")
 

@@ -248,8 +248,6 @@ class FilterResult:
     """(t_s, kind) of the GNSS records accepted by a covariance reset (gate_reset_s)."""
     imu_gaps: tuple[tuple[float, float], ...] = ()
     """(t_s at the end, duration_s) of the IMU gaps bridged (FilterOptions.max_imu_gap_*)."""
-    smoother_nodes: smoother.SmootherNodes | None = None
-    """Smoother gains and covariances at the nodes (A's error covariance between times)."""
 
 
 def _grid_epochs(t: NDArray, k0: int, interval_s: float | None) -> NDArray:
@@ -488,13 +486,10 @@ def run_integrated_navigation(
     lever_sig = np.sqrt(out_diag[-1, i_l:i_l + 3]) if i_l >= 0 else np.zeros(3)
     smoothed = None
     sm_bias = None
-    nodes = None
     if options.smoother:
         e_plus, e_minus, p_s = smoother.rts_smooth(node_pp, node_pu, node_phi, node_dx)
-        node_t = t[node_k]
-        nodes = smoother.SmootherNodes(node_t, smoother.rts_gains(node_pp, node_pu, node_phi),
-                                       p_s)
         del node_pp, node_phi
+        node_t = t[node_k]
         err = smoother.interpolate_errors(node_t, e_plus, e_minus, out_t)
         diag_s, blocks_s = smoother.interpolate_covariance_blocks(
             node_t, p_s, out_t, (slice(0, 3), slice(3, 6), slice(6, 9)))
@@ -519,7 +514,6 @@ def run_integrated_navigation(
         rejections=tuple(rejections),
         lever_arm=LeverArmEstimate(lever_est, lever_sig, i_l >= 0),
         alignment=al, n_updates=n_updates, gate_nis=gate, resets=resets, imu_gaps=imu_gaps,
-        smoother_nodes=nodes,
     )
 
 

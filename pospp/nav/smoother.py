@@ -33,7 +33,6 @@ never per IMU epoch.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
@@ -156,88 +155,4 @@ def correct_states(states, errors):
     out = states.copy()
     for k in range(states.shape[0]):
         apply_correction(out[k], errors[k])
-    return out
-
-
-@dataclass(frozen=True)
-class SmootherNodes:
-    """What the smoothed error's covariance between times needs (RTS lag cross-covariance).
-
-    For nodes k <= j the smoothed errors' cross-covariance is (e.g. Sarkka 2013, Sec. 8.2)::
-
-        Cov(e_k, e_j) = A_k A_k+1 ... A_j-1 P^s_j,     A_k = P_k|k Phi_k+1^T P_k+1|k^-1
-
-    Attributes
-    ----------
-    t_s : ndarray, shape (K,)
-        Node times (run time) [s].
-    gains : ndarray, shape (K, n, n)
-        Smoother gains A_k (the last one unused).
-    p_smooth : ndarray, shape (K, n, n)
-        Smoothed covariances P^s_k (error-state layout of :mod:`pospp.nav.error_model`).
-    """
-
-    t_s: NDArray
-    gains: NDArray
-    p_smooth: NDArray
-
-    def nearest(self, t_s: NDArray) -> NDArray:
-        """Index of the node nearest each time."""
-        t_s = np.asarray(t_s, dtype=float)
-        k = np.clip(np.searchsorted(self.t_s, t_s), 1, self.t_s.size - 1)
-        return np.where(np.abs(self.t_s[k - 1] - t_s) <= np.abs(self.t_s[k] - t_s), k - 1, k)
-
-    def difference_covariance(self, t0_s: float, t_s: NDArray, h: NDArray) -> NDArray:
-        """Covariance of ``d_i = h_i e(t0) - e_v(t_i)``, the smoothed error in B minus A.
-
-        B starts from A's state at ``t0_s``, so A's error there propagates (``h``: B's
-        horizontal velocity per unit initial error, (T, 2, n), zero columns for states B does
-        not inherit), and A's horizontal velocity error at t (state rows 3:5) is subtracted.
-        Errors are taken at the nearest nodes, with ``t_s >= t0_s``.
-
-        Returns
-        -------
-        ndarray, shape (2 T, 2 T)
-            Sample-major [d_N, d_E] [(m/s)^2].
-        """
-        k0 = int(self.nearest(np.array([t0_s]))[0])
-        ks = np.maximum(self.nearest(t_s), k0)
-        nt = ks.size
-        v = slice(3, 5)
-        # Cov(e(t0), e(t_i)) = M(k0, k_i) P^s_ki, M a product of gains
-        c0 = np.empty((nt,) + self.p_smooth.shape[1:])
-        m = np.eye(self.p_smooth.shape[1])
-        node = k0
-        for i in np.argsort(ks, kind="stable"):
-            while node < ks[i]:
-                m = m @ self.gains[node]
-                node += 1
-            c0[i] = m @ self.p_smooth[ks[i]]
-        cvv = np.empty((nt, 2, nt, 2))
-        order = np.argsort(ks, kind="stable")
-        for pos, i in enumerate(order):
-            r = np.eye(self.p_smooth.shape[1])[v]  # rows 3:5 of M(k_i, .)
-            node = ks[i]
-            for j in order[pos:]:
-                while node < ks[j]:
-                    r = r @ self.gains[node]
-                    node += 1
-                c = r @ self.p_smooth[ks[j]][:, v]
-                cvv[i, :, j, :] = c
-                cvv[j, :, i, :] = c.T
-        p00 = self.p_smooth[k0]
-        hc = np.einsum("iak,jbk->iajb", h @ p00, h)
-        cross = np.einsum("iak,jkb->iajb", h, c0[:, :, v])  # Cov(h_i e0, e_v(t_j))
-        out = hc - cross - cross.transpose(2, 3, 0, 1) + cvv
-        out = out.reshape(2 * nt, 2 * nt)
-        return 0.5 * (out + out.T)
-
-
-def rts_gains(p_pred: NDArray, p_upd: NDArray, phi: NDArray) -> NDArray:
-    """Smoother gains ``A_k = P_k|k Phi_k+1^T P_k+1|k^-1`` (K, n, n); the last is zero."""
-    k, n = p_upd.shape[0], p_upd.shape[1]
-    out = np.zeros((k, n, n))
-    if k > 1:
-        b = phi[1:] @ p_upd[:-1]  # Phi_k+1 P_k|k
-        out[:-1] = np.swapaxes(np.linalg.solve(p_pred[1:], b), 1, 2)
     return out
