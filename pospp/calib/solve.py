@@ -503,6 +503,15 @@ def _blocks_reml_nll(params: NDArray, mats: list[tuple], hs: list[NDArray],
         hw_all.append(_tri_solve(ll, h))
         zw_all.append(_tri_solve(ll, z))
     hw, zw = np.vstack(hw_all), np.concatenate(zw_all)
+    return _reml_whitened(hw, zw, logdet)
+
+
+def _reml_whitened(hw: NDArray, zw: NDArray, logdet: float) -> float:
+    """Negative restricted log-likelihood from the whitened system and log det Cov.
+
+    ``0.5 (log det C + log det H^T C^-1 H + r^T C^-1 r)`` (constants dropped), with the
+    information's determinant from the column-scaled SVD (rank-deficient directions dropped).
+    """
     norms = np.linalg.norm(hw, axis=0)
     norms[norms == 0] = 1.0
     u, sv, _ = np.linalg.svd(hw / norms, full_matrices=False)
@@ -795,17 +804,8 @@ def _full_reml_nll(theta: NDArray, parts: tuple, fixed: tuple[float | None, floa
         ll = np.linalg.cholesky(c)
     except np.linalg.LinAlgError:
         return 1e30
-    hw = _tri_solve(ll, hs)
-    zw = _tri_solve(ll, zs)
-    norms = np.linalg.norm(hw, axis=0)
-    norms[norms == 0] = 1.0
-    u, sv, vt = np.linalg.svd(hw / norms, full_matrices=False)
-    keep = sv > sv[0] * 1e-10
-    proj = u[:, keep].T @ zw
-    rss = float(zw @ zw - proj @ proj)
     logdet = 2.0 * float(np.sum(np.log(np.diag(ll))))
-    logdet_info = 2.0 * float(np.sum(np.log(sv[keep])) + np.sum(np.log(norms)))
-    return 0.5 * (logdet + logdet_info + rss)
+    return _reml_whitened(_tri_solve(ll, hs), _tri_solve(ll, zs), logdet)
 
 
 def _full_params(theta: NDArray, fixed: tuple[float | None, float | None]
@@ -860,14 +860,7 @@ def _reml_nll(theta: NDArray, blocks: list[_LegNoise], q_fixed: float | None) ->
     a = float(np.exp(theta[0]))
     q = q_fixed if q_fixed is not None else float(np.exp(theta[1]))
     hw, zw, logdet = _gls(blocks, a, q)
-    norms = np.linalg.norm(hw, axis=0)
-    norms[norms == 0] = 1.0
-    u, sv, vt = np.linalg.svd(hw / norms, full_matrices=False)
-    keep = sv > sv[0] * 1e-10
-    proj = u[:, keep].T @ zw
-    rss = float(zw @ zw - proj @ proj)
-    logdet_info = 2.0 * float(np.sum(np.log(sv[keep])) + np.sum(np.log(norms)))
-    return 0.5 * (logdet + logdet_info + rss)
+    return _reml_whitened(hw, zw, logdet)
 
 
 def calibrate(

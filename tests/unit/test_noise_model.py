@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 from scipy import linalg
 
+from pospp.calib.replay import replay_leg
 from pospp.calib.solve import (
     NoiseModel,
     fit_noise_model,
@@ -26,7 +27,6 @@ from pospp.calib.solve import (
 )
 from pospp.diagnose.synthetic import survey_flight
 from pospp.diagnose.workflow import diagnose
-from pospp.calib.replay import replay_leg
 
 G_MPS2 = 9.80
 
