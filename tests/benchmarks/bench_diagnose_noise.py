@@ -7,7 +7,7 @@ model (``full``: REML on A's coloured error, ARW, accelerometer noise); on the n
 with A's true error removed from B minus A exactly (``Phi_v,v e_A(t0) - e_A(t)``, from the
 truth), which separates what A's error does from what B's own error does.
 
-    python tests/benchmarks/bench_diagnose_noise.py [case ...]
+    PYTHONPATH=. python tests/benchmarks/bench_diagnose_noise.py [case ...]
 
 Prints one block per case. Slow (about 2-4 minutes per case: the REML profile).
 """
