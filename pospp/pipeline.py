@@ -481,8 +481,10 @@ def calibrate(imu: ImuIncrements, nav: nav_filter.FilterResult,
         compensation=config.compensation.mode if gm or config.compensation.mode == "causal"
         else "constant",
         forward_biases=nav.forward_biases,
-        # the grade's Gauss-Markov ("random") drift enters the least squares' noise model
-        gyro_gm_sigma_dph=tuning.gyro_gm_sigma_dph if gm else None,
+        # the grade's Gauss-Markov ("random") drift enters the least squares' noise model;
+        # its level is the flight's own (REML on the joint fit), the grade only switches it on
+        # and gives its correlation time (issue 16, item 3)
+        gyro_gm_sigma_dph=None,
         gyro_gm_tau_s=tuning.gyro_gm_tau_s if gm else None,
     ), reference
 

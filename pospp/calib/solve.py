@@ -60,7 +60,7 @@ from numpy.typing import NDArray
 from scipy import linalg, optimize
 
 from pospp.calib.replay import LegReplay
-from pospp.nav.error_model import BG, PHI
+from pospp.nav.error_model import BG, DV, PHI
 
 FORMULATIONS = ("paper", "body")
 TRANSITIONS = ("numerical", "closed_form")
@@ -289,7 +289,9 @@ def gyro_noise_covariance(rep: LegReplay, rows: NDArray | None = None) -> NDArra
     The gyro noise w (body, PSD 1 rad^2/s per axis, i.e. ARW 1 rad/s^0.5) drives
     phi' = ... - C_nb w, so ``dv(t_i) = -int_0^t_i Phi_v,phi(t_i, tau) C_nb(tau) w dtau`` with
     Phi(t_i, tau) = Phi(t_i, t0) Phi(tau, t0)^-1 from the leg's transition matrices; the
-    integral is a left Riemann sum on the leg's whole sample grid.
+    integrand is taken linear inside each interval of the leg's sample grid (exact for the
+    last interval before t_i, where Phi_v,phi(t_i, tau) falls to 0: a left Riemann sum would
+    triple the variance of each sample's newest increment, the part that whitening weighs).
 
     Parameters
     ----------
@@ -302,15 +304,324 @@ def gyro_noise_covariance(rep: LegReplay, rows: NDArray | None = None) -> NDArra
     ndarray, shape (2 R, 2 R)
         Sample-major like :func:`design_matrix` [(m/s)^2 per (rad^2/s)].
     """
+    return _white_forcing_covariance(rep, PHI, rows)
+
+
+def accel_noise_covariance(rep: LegReplay, rows: NDArray | None = None) -> NDArray:
+    """Covariance of B's [dv_N, dv_E] at chosen samples for unit white accelerometer noise.
+
+    The accelerometer noise w_a (body, PSD 1 (m/s^2)^2/s per axis, i.e. velocity random walk
+    1 m/s^1.5) drives dv' = ... + C_nb w_a, so ``dv(t_i) = int Phi_v,v(t_i, tau) C_nb w_a
+    dtau``; same quadrature and layout as :func:`gyro_noise_covariance`. It also stands for
+    any error that acts on B's velocity as white acceleration noise (the strapdown's own
+    numerical error on vibrating data, for one).
+    """
+    return _white_forcing_covariance(rep, DV, rows)
+
+
+def _white_forcing_covariance(rep: LegReplay, cols: slice, rows: NDArray | None) -> NDArray:
     idx = np.arange(1, rep.t_s.size) if rows is None else np.asarray(rows)
     g = rep.phi[idx, 3:5, :]  # (R, 2, 15)
-    w = np.linalg.inv(rep.phi[:-1])[:, :, PHI] @ rep.c_nb[:-1]  # (M-1, 15, 3) at tau_k
-    dt = np.diff(rep.t_s)
-    s = np.einsum("iaj,kjb->iakb", g, w, optimize=True) * np.sqrt(dt)[None, None, :, None]
-    mask = idx[:, None] > np.arange(rep.t_s.size - 1)[None, :]  # tau_k < t_i
-    s *= mask[:, None, :, None]
-    s = s.reshape(2 * idx.size, 3 * (rep.t_s.size - 1))
-    return s @ s.T
+    w = np.linalg.inv(rep.phi)[:, :, cols] @ rep.c_nb  # (M, 15, 3) at the grid points
+    f = np.einsum("iaj,kjb->iakb", g, w, optimize=True)  # integrand at tau_k
+    sdt = np.sqrt(np.diff(rep.t_s))[None, None, :, None]
+    mask = (idx[:, None] > np.arange(rep.t_s.size - 1)[None, :])[:, None, :, None]
+    # integrand linear inside each interval (exact for its last one, where it falls to 0):
+    # int f f^T = u u^T + v v^T with u = (f_k + f_k+1) / 2, v = (f_k+1 - f_k) / (2 sqrt 3)
+    u = 0.5 * (f[:, :, :-1] + f[:, :, 1:]) * sdt * mask
+    v = (f[:, :, 1:] - f[:, :, :-1]) * (sdt / (2.0 * np.sqrt(3.0))) * mask
+    n = 2 * idx.size
+    u = u.reshape(n, -1)
+    v = v.reshape(n, -1)
+    return u @ u.T + v @ v.T
+
+
+def matern32(lag_s: NDArray, length_s: float) -> NDArray:
+    """Matern-3/2 correlation ``(1 + sqrt(3) |t| / l) exp(-sqrt(3) |t| / l)`` (unit at 0)."""
+    x = np.sqrt(3.0) * np.abs(np.asarray(lag_s, dtype=float)) / length_s
+    return (1.0 + x) * np.exp(-x)
+
+
+def dmatern52(lag_s: NDArray, length_s: float) -> NDArray:
+    """Correlation of the derivative of a Matern-5/2 process, ``(1 + x - x^2) exp(-x)``.
+
+    ``x = sqrt(5) |t| / l``; unit at 0, zero integral (its spectrum vanishes at zero
+    frequency): the velocity error of a solution whose position is held by GNSS fixes cannot
+    stay of one sign (its integral, the position error, is bounded).
+    """
+    x = np.sqrt(5.0) * np.abs(np.asarray(lag_s, dtype=float)) / length_s
+    return (1.0 + x - x * x) * np.exp(-x)
+
+
+def oscillator(lag_s: NDArray, length_s: float, period_s: float) -> NDArray:
+    """Correlation of a damped second-order oscillator (unit at 0, smooth at 0).
+
+    ``exp(-|t| / T) (cos(w t) + sin(w |t|) / (w T))`` with T = ``length_s`` and
+    w = 2 pi / ``period_s``: the closed-loop error of a GNSS-aided INS rings at the loop's
+    own frequency (A's velocity error crosses zero and swings back within a few minutes).
+    """
+    t = np.abs(np.asarray(lag_s, dtype=float))
+    w = 2.0 * np.pi / period_s
+    return np.exp(-t / length_s) * (np.cos(w * t) + np.sin(w * t) / (w * length_s))
+
+
+REFERENCE_CORRELATIONS = {"matern32": matern32, "dmatern52": dmatern52}
+"""Correlation families of A's velocity error (:func:`reference_error_covariance`);
+``"osc<P>"`` is :func:`oscillator` with period P seconds."""
+
+
+def _reference_correlation(kind: str):
+    if kind.startswith("osc"):
+        period = float(kind[3:])
+        return lambda lag, length: oscillator(lag, length, period)
+    return REFERENCE_CORRELATIONS[kind]
+"""Correlation families of A's velocity error (:func:`reference_error_covariance`)."""
+
+
+def reference_error_covariance(rep: LegReplay, length_s: float, rows: NDArray | None = None,
+                               kind: str = "matern32") -> NDArray:
+    """Covariance of A's own error in B minus A for a unit-variance coloured A error.
+
+    A's horizontal velocity error e(t) (NED N and E independent, unit variance, Matern-3/2
+    correlation r of length ``length_s``, :func:`matern32`) enters B minus A twice: B starts
+    from A's state, so A's error at the leg start is propagated by B's error dynamics, and A's
+    error at t is subtracted::
+
+        d(t_i) = Phi_v,v(t_i, t0) e(t0) - e(t_i)
+        Cov(d_i, d_j) = r(0) P_i P_j^T - P_i r(t_j) - r(t_i) P_j^T + r(t_i - t_j) I
+
+    with P_i = Phi_v,v(t_i, t0) (horizontal block, from the leg's transition matrices).
+    A's tilt at the leg start is a parameter of every model (not noise).
+
+    Parameters
+    ----------
+    rep : LegReplay
+    length_s : float
+        Correlation length l of A's velocity error [s].
+    rows : ndarray of int, optional
+        Sample indices (> 0); all samples t > 0 when None.
+    kind : {"matern32", "dmatern52"}
+        Correlation family r (:data:`REFERENCE_CORRELATIONS`).
+
+    Returns
+    -------
+    ndarray, shape (2 R, 2 R)
+        Sample-major like :func:`design_matrix` [(m/s)^2 per (m/s)^2].
+    """
+    corr = _reference_correlation(kind)
+    idx = np.arange(1, rep.t_s.size) if rows is None else np.asarray(rows)
+    t = rep.t_s[idx]
+    p = rep.phi[idx][:, 3:5, 3:5]  # (R, 2, 2)
+    r0 = corr(t, length_s)  # r(t_i - t0)
+    c = np.einsum("iac,jbc->iajb", p, p)
+    c -= p[:, :, None, :] * r0[None, None, :, None]
+    c -= np.einsum("i,jba->iajb", r0, p)
+    rij = corr(t[:, None] - t[None, :], length_s)
+    c += rij[:, None, :, None] * np.eye(2)[None, :, None, :]
+    n = 2 * idx.size
+    c = c.reshape(n, n)
+    return 0.5 * (c + c.T)
+
+
+@dataclass(frozen=True)
+class NoiseModel:
+    """Covariance model of B minus A on one leg (the residual of the base model).
+
+    ``Cov = a diag(sigma_A^2) + q K + s_A^2 G(l) (+ sigma_gm^2 S E S^T within the leg)``:
+    a white part scaled from A's reported sigmas, B's velocity error driven by the gyro angle
+    random walk (K, :func:`gyro_noise_covariance`), A's own coloured velocity error entering
+    at the leg start and at t (G, :func:`reference_error_covariance`), and the within-leg part
+    of a first-order Gauss-Markov gyro drift (:func:`gm_noise_operator`).
+
+    Attributes
+    ----------
+    white_scale : float
+        a (times A's velocity variances).
+    gyro_arw_radpsqrts : float
+        sqrt(q), gyro angle random walk [rad/s^0.5].
+    reference_sigma_mps : float
+        s_A, standard deviation of A's horizontal velocity error per axis [m/s].
+    reference_length_s : float
+        l, its Matern-3/2 correlation length [s].
+    gyro_gm_sigma_radps, gyro_gm_tau_s : float
+        Gauss-Markov drift (0 and inf: none).
+    """
+
+    white_scale: float
+    gyro_arw_radpsqrts: float
+    reference_sigma_mps: float
+    reference_length_s: float
+    gyro_gm_sigma_radps: float = 0.0
+    gyro_gm_tau_s: float = np.inf
+    accel_vrw_mpsqrts: float = 0.0
+    reference_kind: str = "matern32"
+
+    def leg_covariance(self, rep: LegReplay, rows: NDArray | None = None) -> NDArray:
+        """Covariance (2 R, 2 R) of [dv_N, dv_E] at samples ``rows`` (all t > 0 if None)."""
+        idx = np.arange(1, rep.t_s.size) if rows is None else np.asarray(rows)
+        sq = rep.sigma_v_n_mps[idx, 0:2].reshape(-1)
+        c = self.gyro_arw_radpsqrts**2 * gyro_noise_covariance(rep, idx)
+        if self.accel_vrw_mpsqrts > 0:
+            c += self.accel_vrw_mpsqrts**2 * accel_noise_covariance(rep, idx)
+        if self.reference_sigma_mps > 0:
+            c += self.reference_sigma_mps**2 * reference_error_covariance(
+                rep, self.reference_length_s, idx, self.reference_kind)
+        if self.gyro_gm_sigma_radps > 0 and np.isfinite(self.gyro_gm_tau_s):
+            s, tb = gm_noise_operator(rep, idx)
+            c += self.gyro_gm_sigma_radps**2 * _gm_covariance([(s, tb)], self.gyro_gm_tau_s)
+        c[np.diag_indices_from(c)] += self.white_scale * sq**2
+        return c
+
+
+REFERENCE_LENGTHS_S = (20.0, 60.0, 180.0)
+"""Correlation lengths (damping times) of A's error tried by :func:`fit_noise_model` [s]."""
+REFERENCE_KINDS = ("matern32", "osc60", "osc120", "osc240")
+"""Correlation families of A's error tried by :func:`fit_noise_model` (profile REML)."""
+
+
+def _leg_rows(rep: LegReplay, step_s: float) -> NDArray:
+    dt_s = max(float(np.median(np.diff(rep.t_s))), 1e-9)
+    step = max(1, int(round(step_s / dt_s)))
+    return np.arange(step, rep.t_s.size, step)
+
+
+def _blocks_reml_nll(params: NDArray, mats: list[tuple], hs: list[NDArray],
+                     zs: list[NDArray]) -> float:
+    """Negative restricted log-likelihood over independent leg blocks (constants dropped).
+
+    Each leg's covariance is ``sum_k params[k] M_k`` (its matrices in ``mats``).
+    """
+    logdet = 0.0
+    hw_all, zw_all = [], []
+    for m, h, z in zip(mats, hs, zs, strict=True):
+        c = sum(p * mk for p, mk in zip(params, m, strict=True))
+        try:
+            ll = np.linalg.cholesky(c)
+        except np.linalg.LinAlgError:
+            return 1e30
+        logdet += 2.0 * float(np.sum(np.log(np.diag(ll))))
+        hw_all.append(_tri_solve(ll, h))
+        zw_all.append(_tri_solve(ll, z))
+    hw, zw = np.vstack(hw_all), np.concatenate(zw_all)
+    return _reml_whitened(hw, zw, logdet)
+
+
+def _reml_whitened(hw: NDArray, zw: NDArray, logdet: float) -> float:
+    """Negative restricted log-likelihood from the whitened system and log det Cov.
+
+    ``0.5 (log det C + log det H^T C^-1 H + r^T C^-1 r)`` (constants dropped), with the
+    information's determinant from the column-scaled SVD (rank-deficient directions dropped).
+    """
+    norms = np.linalg.norm(hw, axis=0)
+    norms[norms == 0] = 1.0
+    u, sv, _ = np.linalg.svd(hw / norms, full_matrices=False)
+    keep = sv > sv[0] * 1e-10
+    proj = u[:, keep].T @ zw
+    rss = float(zw @ zw - proj @ proj)
+    info = 2.0 * float(np.sum(np.log(sv[keep])) + np.sum(np.log(norms)))
+    return 0.5 * (logdet + info + rss)
+
+
+def fit_noise_model(
+    legs: tuple[LegReplay, ...],
+    formulation: str = "body",
+    *,
+    transition: str = "numerical",
+    estimate_gyro_z: bool = False,
+    noise_step_s: float = 3.0,
+    gyro_arw_radpsqrts: float | None = None,
+    reference_lengths_s: tuple[float, ...] = REFERENCE_LENGTHS_S,
+    reference_kinds: tuple[str, ...] = REFERENCE_KINDS,
+    gyro_gm_taus_s: tuple[float, ...] = (),
+) -> NoiseModel:
+    """Fit :class:`NoiseModel` by restricted maximum likelihood on the base model's residual.
+
+    The base model of ``formulation`` is the fixed effect. The variances a, q (unless
+    ``gyro_arw_radpsqrts`` is given), s_A^2 and, when ``gyro_gm_taus_s`` is not empty, the
+    Gauss-Markov drift's sigma^2 are estimated by REML (a coarse grid, then Nelder-Mead on
+    their logs) for each correlation length l of A's error in ``reference_lengths_s``; the l
+    with the largest restricted likelihood is kept (profile REML), then, with that l, each
+    drift correlation time of ``gyro_gm_taus_s`` (the grade's value and its neighbours: the
+    grade serves as the candidates, the flight's data choose). The legs are independent
+    blocks: A's errors at legs separated by turns of more than a few l are uncorrelated
+    (r(5 l) < 1e-3), and only the drift's within-leg part is modelled. Samples every
+    ``noise_step_s`` seconds (shorter than the smallest l).
+    """
+    h, z, _, _ = design_matrix(legs, formulation, transition=transition,
+                               estimate_gyro_z=estimate_gyro_z)
+    sizes = [2 * (r.t_s.size - 1) for r in legs]
+    edges = np.concatenate([[0], np.cumsum(sizes)])
+    rows, hs, zs, base = [], [], [], []
+    for i, rep in enumerate(legs):
+        smp = _leg_rows(rep, noise_step_s)
+        rr = (2 * (smp - 1)[:, None] + np.arange(2)[None, :]).reshape(-1) + edges[i]
+        sq = rep.sigma_v_n_mps[smp, 0:2].reshape(-1)
+        rows.append(smp)
+        hs.append(h[rr] / sq[:, None])
+        zs.append(z[rr] / sq)
+        base.append((np.eye(sq.size), gyro_noise_covariance(rep, smp) / np.outer(sq, sq),
+                     accel_noise_covariance(rep, smp) / np.outer(sq, sq), sq))
+    q_fixed = None if gyro_arw_radpsqrts is None else float(gyro_arw_radpsqrts) ** 2
+    ops = [None] * len(legs)
+    if gyro_gm_taus_s:
+        ops = []
+        for rep, smp, (_, _, _, sq) in zip(legs, rows, base, strict=True):
+            s_op, tb = gm_noise_operator(rep, smp)
+            ops.append((s_op / sq[:, None], tb))
+
+    def fit(length: float, tau: float | None, kind: str) -> tuple[float, NoiseModel]:
+        mats = []
+        for rep, smp, (eye, k, ka, sq), op in zip(legs, rows, base, ops, strict=True):
+            g = reference_error_covariance(rep, length, smp, kind) / np.outer(sq, sq)
+            m = [eye, k, ka, g]
+            if tau is not None:
+                m.append(_gm_covariance([op], tau))
+            mats.append(tuple(m))
+        free_q = q_fixed is None
+        lo = [np.log(1e-8)] + ([np.log(1e-22)] if free_q else []) + [np.log(1e-16)] * 2
+        hi = [np.log(1e4)] + ([np.log(1e-6)] if free_q else []) + [np.log(1e-4), np.log(1e-2)]
+        if tau is not None:
+            lo.append(np.log(1e-20))
+            hi.append(np.log(1e-8))
+
+        def unpack(theta: NDArray) -> NDArray:
+            v = np.exp(theta)
+            q = v[1] if free_q else q_fixed
+            j = 2 if free_q else 1
+            out = [v[0], q, v[j], v[j + 1]]
+            if tau is not None:
+                out.append(v[j + 2])
+            return np.array(out)
+
+        def nll(theta: NDArray) -> float:
+            return _blocks_reml_nll(unpack(theta), mats, hs, zs)
+
+        axes = [np.linspace(a_, b_, 3) for a_, b_ in zip(lo, hi, strict=True)]
+        grid = np.stack([g.ravel() for g in np.meshgrid(*axes, indexing="ij")], axis=1)
+        vals = [nll(th) for th in grid]
+        th0 = grid[int(np.argmin(vals))]
+        # Powell (bounded, derivative-free), then Nelder-Mead from its end: the likelihood is
+        # flat along components that the data cannot see, and one search alone stalls there
+        opt = optimize.minimize(nll, th0, method="Powell", bounds=list(zip(lo, hi, strict=True)),
+                                options={"xtol": 1e-3, "ftol": 1e-6, "maxfev": 3000})
+        opt = optimize.minimize(nll, np.clip(opt.x, lo, hi), method="Nelder-Mead",
+                                options={"xatol": 1e-3, "fatol": 1e-4, "maxiter": 800})
+        th = np.clip(opt.x, lo, hi)
+        v = unpack(th)
+        model = NoiseModel(float(v[0]), float(np.sqrt(v[1])), float(np.sqrt(v[3])),
+                           float(length), float(np.sqrt(v[4])) if tau is not None else 0.0,
+                           float(tau) if tau is not None else np.inf,
+                           accel_vrw_mpsqrts=float(np.sqrt(v[2])), reference_kind=kind)
+        return nll(th), model
+
+    tau0 = gyro_gm_taus_s[len(gyro_gm_taus_s) // 2] if gyro_gm_taus_s else None
+    best = min((fit(length, tau0, kind) for length in reference_lengths_s
+                for kind in reference_kinds), key=lambda x: x[0])
+    if len(gyro_gm_taus_s) > 1:
+        length, kind = best[1].reference_length_s, best[1].reference_kind
+        best = min([best] + [fit(length, t, kind) for t in gyro_gm_taus_s if t != tau0],
+                   key=lambda x: x[0])
+    return best[1]
 
 
 def _autocorr_inflation(res: NDArray, n_series: int) -> tuple[float, float]:
@@ -493,17 +804,8 @@ def _full_reml_nll(theta: NDArray, parts: tuple, fixed: tuple[float | None, floa
         ll = np.linalg.cholesky(c)
     except np.linalg.LinAlgError:
         return 1e30
-    hw = _tri_solve(ll, hs)
-    zw = _tri_solve(ll, zs)
-    norms = np.linalg.norm(hw, axis=0)
-    norms[norms == 0] = 1.0
-    u, sv, vt = np.linalg.svd(hw / norms, full_matrices=False)
-    keep = sv > sv[0] * 1e-10
-    proj = u[:, keep].T @ zw
-    rss = float(zw @ zw - proj @ proj)
     logdet = 2.0 * float(np.sum(np.log(np.diag(ll))))
-    logdet_info = 2.0 * float(np.sum(np.log(sv[keep])) + np.sum(np.log(norms)))
-    return 0.5 * (logdet + logdet_info + rss)
+    return _reml_whitened(_tri_solve(ll, hs), _tri_solve(ll, zs), logdet)
 
 
 def _full_params(theta: NDArray, fixed: tuple[float | None, float | None]
@@ -558,14 +860,7 @@ def _reml_nll(theta: NDArray, blocks: list[_LegNoise], q_fixed: float | None) ->
     a = float(np.exp(theta[0]))
     q = q_fixed if q_fixed is not None else float(np.exp(theta[1]))
     hw, zw, logdet = _gls(blocks, a, q)
-    norms = np.linalg.norm(hw, axis=0)
-    norms[norms == 0] = 1.0
-    u, sv, vt = np.linalg.svd(hw / norms, full_matrices=False)
-    keep = sv > sv[0] * 1e-10
-    proj = u[:, keep].T @ zw
-    rss = float(zw @ zw - proj @ proj)
-    logdet_info = 2.0 * float(np.sum(np.log(sv[keep])) + np.sum(np.log(norms)))
-    return 0.5 * (logdet + logdet_info + rss)
+    return _reml_whitened(hw, zw, logdet)
 
 
 def calibrate(

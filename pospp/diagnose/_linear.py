@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 from scipy import linalg, stats
 
 from pospp.calib.replay import LegReplay
-from pospp.calib.solve import gyro_noise_covariance
+from pospp.calib.solve import NoiseModel, gyro_noise_covariance
 from pospp.diagnose.effects import Effect
 
 
@@ -47,7 +47,8 @@ class Fit:
 class Problem:
     """Whitened stacked least squares over legs."""
 
-    def __init__(self, replays: Sequence[LegReplay], white_scale: float, arw: float):
+    def __init__(self, replays: Sequence[LegReplay], white_scale: float, arw: float,
+                 model: NoiseModel | None = None):
         self.reps = list(replays)
         self.z = [r.dv_n_mps[1:, 0:2].reshape(-1) for r in self.reps]
         self.sizes = [z.size for z in self.z]
@@ -57,7 +58,9 @@ class Problem:
         for r in self.reps:
             s = r.sigma_v_n_mps[1:, 0:2].reshape(-1)
             self.sig.append(s)
-            if arw > 0.0:
+            if model is not None:
+                self.chol.append(linalg.cholesky(model.leg_covariance(r), lower=True))
+            elif arw > 0.0:
                 cov = arw**2 * gyro_noise_covariance(r)
                 cov[np.diag_indices_from(cov)] += white_scale * s**2
                 self.chol.append(linalg.cholesky(cov, lower=True))

@@ -60,7 +60,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pospp.calib.replay import ImuIncrements, LegReplay, ReferenceSolution
-from pospp.calib.solve import calibrate, leg_sensitivities
+from pospp.calib.solve import NoiseModel, calibrate, fit_noise_model, leg_sensitivities
 from pospp.diagnose import effects as fx
 from pospp.diagnose._linear import Fit, Problem, Term, bic, f_test, rms
 
@@ -395,6 +395,8 @@ def diagnose(
     alpha: float = 0.01,
     noise: str = "white",
     gyro_arw_radpsqrts: float | None = None,
+    gyro_gm_taus_s: Sequence[float] = (),
+    noise_model: NoiseModel | None = None,
     max_steps: int = 4,
     lof_terms: int = 8,
     min_explained_fraction: float = 0.9,
@@ -420,14 +422,25 @@ def diagnose(
         Library identifiers to consider (default: all).
     alpha : float
         Family-wise significance level of each step (Bonferroni over the candidates).
-    noise : {"white", "gyro_rw"}
+    noise : {"white", "gyro_rw", "full"}
         Residual covariance: A's sigmas only (``"white"``), or A's sigmas times a plus the
         gyro angle random walk's correlated covariance q K (``"gyro_rw"``, as
         :func:`pospp.calib.solve.calibrate`, which estimates a and q by REML on the base
         model). Only the shape matters to the F-tests (the scale is estimated), but a wrong
         shape (correlated residuals weighted as white) makes every test too liberal.
+        ``"full"``: :class:`pospp.calib.solve.NoiseModel` fitted by REML on the base model
+        (A's sigmas times a, the gyro ARW, an accelerometer white noise, A's own coloured
+        velocity error entering at the leg start and at t, and optionally the within-leg
+        part of a Gauss-Markov gyro drift).
     gyro_arw_radpsqrts : float, optional
-        Gyro angle random walk [rad/s^0.5] for ``"gyro_rw"``; estimated when None.
+        Gyro angle random walk [rad/s^0.5] for ``"gyro_rw"`` and ``"full"``; estimated when
+        None.
+    gyro_gm_taus_s : sequence of float
+        ``"full"``: correlation times of a Gauss-Markov gyro drift for REML to choose from
+        (none: no drift in the model).
+    noise_model : NoiseModel, optional
+        ``"full"``: use this model instead of fitting one
+        (:func:`pospp.calib.solve.fit_noise_model`).
     max_steps : int
         Most effects to add.
     lof_terms : int
@@ -475,9 +488,14 @@ def diagnose(
         cal = calibrate(tuple(replays), "body", noise="gyro_rw",
                         gyro_arw_radpsqrts=gyro_arw_radpsqrts)
         white_scale, arw = cal.variance_factor, cal.gyro_arw_radpsqrts
+    elif noise == "full":
+        model = noise_model if noise_model is not None else fit_noise_model(
+            tuple(replays), "body", gyro_arw_radpsqrts=gyro_arw_radpsqrts,
+            gyro_gm_taus_s=tuple(gyro_gm_taus_s))
+        white_scale, arw = model.white_scale, model.gyro_arw_radpsqrts
     else:
-        raise ValueError(f"noise: expected 'white' or 'gyro_rw', got {noise!r}")
-    prob = Problem(replays, white_scale, arw)
+        raise ValueError(f"noise: expected 'white', 'gyro_rw' or 'full', got {noise!r}")
+    prob = Problem(replays, white_scale, arw, model if noise == "full" else None)
     terms = _base_terms(replays, base_formulation, base_transition)
     lof = _lof_term(replays, lof_terms)
     fixed_sigs = {e.effect_id: fx.signatures(e.effect_id, replays, context=ctx,
