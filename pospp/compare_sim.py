@@ -31,6 +31,10 @@ __all__ = ["SIM_GRADES", "FlightTemplate", "compare_sim_run", "flight_template",
 
 SIM_GRADES = {"flight": "paper_flight", "vehicle": "paper_vehicle", "consumer": "mems"}
 """Filter tuning grade ([imu] grade) -> simulator grade of pospp/presets/imu.toml."""
+RESIDUAL_NOISE_FACTOR = 1.5
+"""The simulated GNSS white noise is at most this times the records' RMS about A's smoothed
+solution (which follows part of the noise, so the factor keeps a consistent receiver's
+reported sigma)."""
 SIM_SEED = 20261123
 """Seed of every simulation of one comparison (common random numbers across its steps)."""
 
@@ -48,7 +52,8 @@ class FlightTemplate:
         IMU interval [ns] (the median of the log's, rounded).
     imu_gaps_s : (K, 2) IMU gaps of the log (start, end) [s from epoch]
     gnss : GnssModel
-        Rate, reported sigmas (medians), outages and the configured lever arm.
+        Rate, outages, the configured lever arm, and white noise: the median reported sigma,
+        or 1.5 x the RMS of the records about A's smoothed solution where that is smaller.
     has_velocity : bool
     vehicle : "car" or "aircraft"
     """
@@ -87,6 +92,12 @@ def flight_template(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                     for a, b in _gaps(t_fix, 2.5))
     pos_h, pos_v = _median_sigmas(log.fix.pos_cov_ned_m2)
     vel_h, vel_v = _median_sigmas(log.vel.vel_cov_ned_m2ps2) if len(log.vel) else (0.05, 0.1)
+    # receivers often report nominal sigmas far above their noise: never simulate more noise
+    # than the records show about A's smoothed solution (else A cannot even align the same way)
+    rp, rv = _residual_rms(log, sol, epoch)
+    k = RESIDUAL_NOISE_FACTOR
+    pos_h, pos_v = min(pos_h, k * rp[0]), min(pos_v, k * rp[1])
+    vel_h, vel_v = min(vel_h, k * rv[0]), min(vel_v, k * rv[1])
     gnss = GnssModel(rate_hz=1.0 / gnss_dt, pos_noise_m=(pos_h, pos_v),
                      vel_noise_mps=(vel_h, vel_v), lever_arm_b_m=config.gnss.lever_arm_m,
                      outages_s=tuple(o for o in outages if o[1] > o[0] and o[1] > 0))
@@ -95,6 +106,32 @@ def flight_template(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
         vehicle = "aircraft" if hspan > 30.0 else "car"
     return FlightTemplate(sol.t_s, sol.lat_rad, sol.lon_rad, sol.height_m, epoch, dt_ns,
                           _gaps(t_imu, 1.5), gnss, len(log.vel) > 0, vehicle)
+
+
+def _residual_rms(log: mcap_reader.FlightLog, sol: nav_filter.NavSolution, epoch_ns: int
+                  ) -> tuple[tuple[float, float], tuple[float, float]]:
+    """RMS (horizontal per axis, vertical) of the GNSS records minus A's smoothed solution,
+    position [m] and velocity [m/s] (inf when there are none in A's span)."""
+    from pospp import earth
+
+    def rms(x: np.ndarray) -> tuple[float, float]:
+        if x.shape[0] < 3:
+            return np.inf, np.inf
+        return float(np.sqrt(np.mean(x[:, :2] ** 2))), float(np.sqrt(np.mean(x[:, 2] ** 2)))
+
+    tf = (log.fix.time_ns - epoch_ns) * 1e-9
+    m = (tf >= sol.t_s[0]) & (tf <= sol.t_s[-1])
+    lat = np.interp(tf[m], sol.t_s, sol.lat_rad)
+    r_m, r_n = earth.principal_radii_m(lat)
+    dp = np.stack([(log.fix.lat_rad[m] - lat) * r_m,
+                   (log.fix.lon_rad[m] - np.interp(tf[m], sol.t_s, sol.lon_rad)) * r_n
+                   * np.cos(lat),
+                   -(log.fix.height_m[m] - np.interp(tf[m], sol.t_s, sol.height_m))], axis=1)
+    tv = (log.vel.time_ns - epoch_ns) * 1e-9
+    mv = (tv >= sol.t_s[0]) & (tv <= sol.t_s[-1])
+    dv = log.vel.v_n_mps[mv] - np.stack([np.interp(tv[mv], sol.t_s, sol.v_n_mps[:, i])
+                                         for i in range(3)], axis=1)
+    return rms(dp), rms(dv)
 
 
 def _median_sigmas(cov: np.ndarray) -> tuple[float, float]:
