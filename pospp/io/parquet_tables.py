@@ -273,11 +273,11 @@ TABLES: dict[str, list[Column]] = {
         Column("step", _I, "", "0: the configured model; k >= 1: after the k-th effect"),
         Column("kind", _S, "", "'statistic' (one row per statistic and step) or 'effect' "
                "(one row per fitted parameter of the step's effect)"),
-        Column("statistic", _S, "", "statistic (docs/compare_sim.md); on effect rows the "
+        Column("measure", _S, "", "statistic compared (docs/compare_sim.md); on effect rows the "
                "step's target"),
         Column("effect", _S, "", "effect added at this step, 'unexplained', or '' (step 0)"),
         Column("parameter", _S, "", "effect parameter (effect rows; '' otherwise)"),
-        Column("size", _F, "see unit", "fitted size of the parameter (effect rows)"),
+        Column("value", _F, "see unit", "fitted size of the parameter (effect rows)"),
         Column("sigma", _F, "see unit", "1-sigma of the fitted size (effect rows)"),
         Column("unit", _S, "", "unit of size and sigma (effect rows) or of the gaps"),
         Column("gap_before", _F, "see unit", "measured minus simulated before the step"),

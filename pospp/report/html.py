@@ -136,9 +136,9 @@ def sim_comparison_section(sc: pd.DataFrame | None) -> list[str]:
     if sc is None or sc.empty:
         return []
     stats = sc[sc.kind == "statistic"]
-    base = stats[stats.step == 0].set_index("statistic")
+    base = stats[stats.step == 0].set_index("measure")
     last_step = int(stats.step.max())
-    last = stats[stats.step == last_step].set_index("statistic")
+    last = stats[stats.step == last_step].set_index("measure")
     fig, ax = plt.subplots(figsize=(9, 3.6))
     names = list(base.index)
     x = range(len(names))
@@ -152,9 +152,9 @@ def sim_comparison_section(sc: pd.DataFrame | None) -> list[str]:
     ax.set_ylabel("|measured - simulated| / sigma")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    eff = sc[sc.kind == "effect"][["step", "statistic", "effect", "parameter", "size", "sigma",
+    eff = sc[sc.kind == "effect"][["step", "measure", "effect", "parameter", "value", "sigma",
                                    "unit", "gap_before", "gap_after", "z_before", "z_after"]]
-    cols = ["statistic", "measured", "simulated_before", "gap_before", "sigma_gap", "z_before",
+    cols = ["measure", "measured", "simulated_before", "gap_before", "sigma_gap", "z_before",
             "p_before", "significant_before"]
     return ["<h2>Measured flight versus its simulation (compare-sim)</h2>",
             _img(fig), "<h3>Steps</h3>", _table(eff),

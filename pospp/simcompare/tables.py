@@ -13,7 +13,7 @@ from pospp.simcompare.stats import STAT_UNITS
 
 __all__ = ["comparison_columns", "model_toml"]
 
-_COLS = ("step", "kind", "statistic", "effect", "parameter", "size", "sigma", "unit",
+_COLS = ("step", "kind", "measure", "effect", "parameter", "value", "sigma", "unit",
          "gap_before", "gap_after", "sigma_gap", "z_before", "z_after", "p_before",
          "significant_before", "significant_after", "measured", "simulated_before",
          "simulated_after")
@@ -21,8 +21,8 @@ _COLS = ("step", "kind", "statistic", "effect", "parameter", "size", "sigma", "u
 
 def _stat_row(step: int, effect: str, name: str, b: Gap, a: Gap | None) -> dict[str, Any]:
     nan = float("nan")
-    return {"step": step, "kind": "statistic", "statistic": name, "effect": effect,
-            "parameter": "", "size": nan, "sigma": nan, "unit": STAT_UNITS[name],
+    return {"step": step, "kind": "statistic", "measure": name, "effect": effect,
+            "parameter": "", "value": nan, "sigma": nan, "unit": STAT_UNITS[name],
             "gap_before": b.gap, "gap_after": a.gap if a else nan, "sigma_gap": b.sigma,
             "z_before": b.z, "z_after": a.z if a else nan, "p_before": b.p_adjusted,
             "significant_before": b.significant,
@@ -40,7 +40,7 @@ def comparison_columns(c: Comparison) -> dict[str, list]:
         b, a = s.before[s.target], s.after.get(s.target)
         for p, v, sg in zip(s.params, s.size, s.sigma, strict=True):
             r = _stat_row(s.step, s.effect, s.target, b, a)
-            r.update(kind="effect", parameter=p, size=float(v), sigma=float(sg), unit=s.unit)
+            r.update(kind="effect", parameter=p, value=float(v), sigma=float(sg), unit=s.unit)
             rows.append(r)
         if not s.params:
             r = _stat_row(s.step, s.effect, s.target, b, a)
