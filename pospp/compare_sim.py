@@ -53,8 +53,9 @@ class FlightTemplate:
         IMU interval [ns] (the median of the log's, rounded).
     imu_gaps_s : (K, 2) IMU gaps of the log (start, end) [s from epoch]
     gnss : GnssModel
-        Rate, outages, the configured lever arm, and white noise: the median reported sigma,
-        or 1.5 x the RMS of the records about A's smoothed solution where that is smaller.
+        Rate, outages, the configured lever arm, the median reported sigmas (reported in the
+        simulated covariances), and white noise at those sigmas, or at 1.5 x the RMS of the
+        records about A's smoothed solution where that is smaller.
     has_velocity : bool
     vehicle : "car" or "aircraft"
     """
@@ -97,10 +98,11 @@ def flight_template(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     # than the records show about A's smoothed solution (else A cannot even align the same way)
     rp, rv = _residual_rms(log, sol, epoch)
     k = RESIDUAL_NOISE_FACTOR
-    pos_h, pos_v = min(pos_h, k * rp[0]), min(pos_v, k * rp[1])
-    vel_h, vel_v = min(vel_h, k * rv[0]), min(vel_v, k * rv[1])
-    gnss = GnssModel(rate_hz=1.0 / gnss_dt, pos_noise_m=(pos_h, pos_v),
-                     vel_noise_mps=(vel_h, vel_v), lever_arm_b_m=config.gnss.lever_arm_m,
+    noise_p = (min(pos_h, k * rp[0]), min(pos_v, k * rp[1]))
+    noise_v = (min(vel_h, k * rv[0]), min(vel_v, k * rv[1]))
+    gnss = GnssModel(rate_hz=1.0 / gnss_dt, pos_noise_m=noise_p, vel_noise_mps=noise_v,
+                     reported_pos_sigma_m=(pos_h, pos_v), reported_vel_sigma_mps=(vel_h, vel_v),
+                     lever_arm_b_m=config.gnss.lever_arm_m,
                      outages_s=tuple(o for o in outages if o[1] > o[0] and o[1] > 0))
     if vehicle is None:
         hspan = float(np.ptp(sol.height_m))

@@ -14,7 +14,8 @@ What the receiver sees (exact rigid-body kinematics, nothing dropped):
 t is the antenna state at true time t - ``time_offset_s`` (a positive offset means the
 receiver stamps late). Noise is white, Gaussian, independent per epoch: horizontal and
 vertical standard deviations for position and velocity; the reported covariance is the
-diagonal of those variances (not below a 1 mm, 1 mm/s floor). Epochs fall on multiples of
+diagonal of those variances (not below a 1 mm, 1 mm/s floor), or of the ``reported_*``
+sigmas when given. Epochs fall on multiples of
 1 / ``rate_hz`` from the mission start, except inside outages [start_s, end_s).
 
 Coloured position error (optional, off by default): a first-order Gauss-Markov error per NED
@@ -61,6 +62,9 @@ class GnssModel:
     pos_gm_sigma_m : (horizontal, vertical) sigma of the coloured position error [m]
     pos_gm_tau_s : float
         Its correlation time [s] (module docstring).
+    reported_pos_sigma_m, reported_vel_sigma_mps : (horizontal, vertical), optional
+        The sigmas the receiver reports in the covariances, when they differ from the noise
+        (default: the noise sigmas; real receivers often report nominal values).
     """
 
     rate_hz: float = 1.0
@@ -71,6 +75,8 @@ class GnssModel:
     outages_s: tuple[tuple[float, float], ...] = field(default_factory=tuple)
     pos_gm_sigma_m: tuple[float, float] = (0.0, 0.0)
     pos_gm_tau_s: float = 60.0
+    reported_pos_sigma_m: tuple[float, float] | None = None
+    reported_vel_sigma_mps: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         if not self.rate_hz > 0:
@@ -90,6 +96,13 @@ class GnssModel:
         object.__setattr__(self, "outages_s", out)
         object.__setattr__(self, "rate_hz", float(self.rate_hz))
         object.__setattr__(self, "time_offset_s", float(self.time_offset_s))
+        for name in ("reported_pos_sigma_m", "reported_vel_sigma_mps"):
+            v = getattr(self, name)
+            if v is not None:
+                v = tuple(float(x) for x in v)
+                if len(v) != 2 or not (np.isfinite(v).all() and min(v) >= 0):
+                    raise ValueError(f"{name}: expected 2 finite numbers >= 0, got {v!r}")
+                object.__setattr__(self, name, v)
         if not float(self.pos_gm_tau_s) > 0:
             raise ValueError(f"pos_gm_tau_s must be > 0, got {self.pos_gm_tau_s!r}")
         object.__setattr__(self, "pos_gm_tau_s", float(self.pos_gm_tau_s))
@@ -105,6 +118,9 @@ class GnssModel:
         if not any(self.pos_gm_sigma_m):
             d.pop("pos_gm_sigma_m")
             d.pop("pos_gm_tau_s")
+        for k in ("reported_pos_sigma_m", "reported_vel_sigma_mps"):
+            if d[k] is None:
+                d.pop(k)
         return {k: ([list(x) for x in v] if k == "outages_s" else
                     (list(v) if isinstance(v, tuple) else v)) for k, v in d.items()}
 
@@ -174,6 +190,12 @@ def simulate_gnss(
     h = h - e_p[:, 2]
     time_ns = np.int64(start_time_ns) + t_rel_ns
     pos_cov = np.zeros((n, 3, 3))
+    if model.reported_pos_sigma_m is not None:
+        h_, v_ = model.reported_pos_sigma_m
+        sp = np.array([h_, h_, v_])
+    if model.reported_vel_sigma_mps is not None:
+        h_, v_ = model.reported_vel_sigma_mps
+        sv = np.array([h_, h_, v_])
     pos_cov[:, [0, 1, 2], [0, 1, 2]] = np.maximum(sp, _POS_FLOOR_M) ** 2
     vel_cov = np.zeros((n, 3, 3))
     vel_cov[:, [0, 1, 2], [0, 1, 2]] = np.maximum(sv, _VEL_FLOOR_MPS) ** 2

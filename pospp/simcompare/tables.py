@@ -69,7 +69,7 @@ def model_toml(imu: ImuErrorModel, gnss: GnssModel, *, header: str = "") -> str:
     for name, d in (("imu", imu.as_dict()), ("gnss", gnss.as_dict())):
         lines += ["", f"[{name}]"]
         for k, v in d.items():
-            if k == "outages_s":
+            if k == "outages_s" or v is None:
                 continue
             lines.append(f"{k} = {_fmt(v)}")
     return "\n".join(lines).lstrip("\n") + "\n"
