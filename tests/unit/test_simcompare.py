@@ -169,6 +169,18 @@ def test_hidden_lever_arm_named_and_sized():
     assert abs(s.after[s.target].z) < abs(s.before[s.target].z) / 2
 
 
+def test_hidden_mounting_misalignment_named_and_sized():
+    """IMU case rotated by (0.5, -0.5, 1.0) deg in the body: named, each angle within 25 %
+    (A's 1-sigma: 35 arcsec on roll and pitch, 300 arcsec on yaw), gap gone."""
+    rho = np.radians([0.5, -0.5, 1.0])
+    m = mounting_misalignment_arcsec(rho)
+    comp, _ = compare_log(measured(replace(imu_grade("tactical"), gyro_misalign_arcsec=tuple(m),
+                                           accel_misalign_arcsec=tuple(m))), CONFIG)
+    s = named(comp, "mounting_misalignment")
+    assert np.allclose(s.size, np.degrees(rho) * 3600.0, rtol=0.25)
+    assert abs(s.after[s.target].z) < abs(s.before[s.target].z) / 10
+
+
 def test_outsider_is_unexplained():
     """GNSS velocity noise 0.1 m/s above its reported 0.02 m/s (no library effect): the NIS
     gap is significant and `unexplained`, and no effect is added."""
@@ -181,12 +193,12 @@ def test_outsider_is_unexplained():
 
 @pytest.mark.slow
 def test_null_flights_false_alarms():
-    """Null flights (the configured model is the truth; 12 seeds, 120 s): the gap tests run at
-    a family-wise 1 %; an effect or `unexplained` named on at most 2 of 12 seeds (binomial:
-    P(>= 3 | p = 0.05) = 2 %, so this fails when the false-alarm rate is well above 5 %)."""
+    """Null flights (the configured model is the truth; 24 seeds, 120 s): the gap tests run at
+    a family-wise 1 %; an effect or `unexplained` named on at most 3 of 24 seeds (binomial:
+    P(>= 4 | p = 0.05) = 3 %, so this fails when the false-alarm rate is well above 5 %)."""
     alarms = []
-    for seed in range(100, 112):
+    for seed in range(100, 124):
         comp, _ = compare_log(measured(seed=seed, duration_s=120.0), CONFIG, max_steps=1)
         if comp.steps:
             alarms.append((seed, comp.steps[0].target, comp.steps[0].effect))
-    assert len(alarms) <= 2, alarms
+    assert len(alarms) <= 3, alarms
