@@ -376,8 +376,10 @@ def compare_sim(run_dir: str, out_model: str | None, max_steps: int) -> None:
         b, a = s.before[s.target], s.after.get(s.target, s.before[s.target])
         size = ", ".join(f"{p} {v:+.4g} +- {e:.2g}" for p, v, e in
                          zip(s.params, s.size, s.sigma, strict=True))
-        click.echo(f"step {s.step}: {s.target}: {s.effect} {size} {s.unit}; z "
-                   f"{b.z:+.2f} -> {a.z:+.2f}")
+        size = f"{size} {s.unit}".strip()
+        if s.candidate:
+            size = f"(best candidate {s.candidate}: {size}, did not shrink it)"
+        click.echo(f"step {s.step}: {s.target}: {s.effect} {size}; z {b.z:+.2f} -> {a.z:+.2f}")
     n_left = sum(g.significant for g in comp.final.values())
     click.echo(f"left significant: {n_left}")
 

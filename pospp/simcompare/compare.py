@@ -103,6 +103,9 @@ class Step:
     unit: str
     before: dict[str, Gap]
     after: dict[str, Gap]
+    candidate: str = ""
+    """For an ``unexplained`` step with parameters: the best candidate, whose fit (params,
+    size, sigma, after) did not shrink the target."""
 
 
 @dataclass(frozen=True)
@@ -191,8 +194,9 @@ def compare_flights(measured: FlightStats, simulate: SimulateFn, imu: ImuErrorMo
         size, sig = e.size(u, cov)
         if target in after and abs(after[target].z) >= abs(cur[target].z):
             # the best effect did not shrink its target: not kept
+            # the model is unchanged: "after" is "before"
             steps.append(Step(k, target, "unexplained", e.params, tuple(size), tuple(sig), e.unit,
-                              cur, after))
+                              cur, cur, candidate=e.name))
             dropped.add(target)
             continue
         steps.append(Step(k, target, e.name, e.params, tuple(size), tuple(sig), e.unit, cur,

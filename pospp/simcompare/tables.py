@@ -40,7 +40,8 @@ def comparison_columns(c: Comparison) -> dict[str, list]:
         b, a = s.before[s.target], s.after.get(s.target)
         for p, v, sg in zip(s.params, s.size, s.sigma, strict=True):
             r = _stat_row(s.step, s.effect, s.target, b, a)
-            r.update(kind="effect", parameter=p, value=float(v), sigma=float(sg), unit=s.unit)
+            r.update(kind="effect", parameter=f"{s.candidate}:{p}" if s.candidate else p,
+                     value=float(v), sigma=float(sg), unit=s.unit)
             rows.append(r)
         if not s.params:
             r = _stat_row(s.step, s.effect, s.target, b, a)
