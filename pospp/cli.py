@@ -390,5 +390,37 @@ def diagnose(run_dir: str) -> None:
                    f"{s.heldout_gap_after_mps:.4f} m/s")
 
 
+@main.command("compare-sim")
+@click.argument("run_dir", type=click.Path(exists=True, file_okay=False))
+@click.option("-o", "--out", "out_model", default=None, type=click.Path(dir_okay=False),
+              help="Model file to write (default RUN_DIR/sim_model.toml).")
+@click.option("--max-steps", default=4, show_default=True, type=int,
+              help="Effects to add at most.")
+def compare_sim(run_dir: str, out_model: str | None, max_steps: int) -> None:
+    """Measured flight versus its simulation: RUN_DIR/sim_comparison.parquet.
+
+    Simulates the run's flight along A's trajectory with the configured IMU grade, compares
+    statistics every flight has, names the library effect that explains the largest
+    significant gap, adds it and repeats (pospp.compare_sim, docs/compare_sim.md). Writes the
+    fitted model as a TOML file that pospp simulate --imu-grade accepts.
+    """
+    from pospp.compare_sim import compare_sim_run
+
+    comp = compare_sim_run(run_dir, out=out_model, max_steps=max_steps)
+    n_sig = sum(g.significant for g in comp.base.values())
+    click.echo(f"configured model: {n_sig} of {len(comp.base)} statistics differ "
+               "significantly")
+    for s in comp.steps:
+        b, a = s.before[s.target], s.after.get(s.target, s.before[s.target])
+        size = ", ".join(f"{p} {v:+.4g} +- {e:.2g}" for p, v, e in
+                         zip(s.params, s.size, s.sigma, strict=True))
+        size = f"{size} {s.unit}".strip()
+        if s.candidate:
+            size = f"(best candidate {s.candidate}: {size}, did not shrink it)"
+        click.echo(f"step {s.step}: {s.target}: {s.effect} {size}; z {b.z:+.2f} -> {a.z:+.2f}")
+    n_left = sum(g.significant for g in comp.final.values())
+    click.echo(f"left significant: {n_left}")
+
+
 if __name__ == "__main__":  # pragma: no cover
     main()

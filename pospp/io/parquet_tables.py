@@ -327,6 +327,29 @@ TABLES: dict[str, list[Column]] = {
         *[_opt(Column(f"{s}_sf_{ax}_sigma_ppm", _F, "ppm", f"1-sigma of {s}_sf_{ax}", _FRD))
           for s in ("gyro", "accel") for ax in "xyz"],
     ],
+    "sim_comparison": [
+        Column("step", _I, "", "0: the configured model; k >= 1: after the k-th effect"),
+        Column("kind", _S, "", "'statistic' (one row per statistic and step) or 'effect' "
+               "(one row per fitted parameter of the step's effect)"),
+        Column("measure", _S, "", "statistic compared (docs/compare_sim.md); on effect rows the "
+               "step's target"),
+        Column("effect", _S, "", "effect added at this step, 'unexplained', or '' (step 0)"),
+        Column("parameter", _S, "", "effect parameter (effect rows; '' otherwise)"),
+        Column("value", _F, "see unit", "fitted size of the parameter (effect rows)"),
+        Column("sigma", _F, "see unit", "1-sigma of the fitted size (effect rows)"),
+        Column("unit", _S, "", "unit of size and sigma (effect rows) or of the gaps"),
+        Column("gap_before", _F, "see unit", "measured minus simulated before the step"),
+        Column("gap_after", _F, "see unit", "measured minus simulated after the step"),
+        Column("sigma_gap", _F, "see unit", "1-sigma of the gap before the step"),
+        Column("z_before", _F, "1", "gap / sigma before"),
+        Column("z_after", _F, "1", "gap / sigma after"),
+        Column("p_before", _F, "1", "Holm-adjusted p-value before"),
+        Column("significant_before", _B, "", "gap significant before (family-wise level)"),
+        Column("significant_after", _B, "", "gap significant after"),
+        Column("measured", _F, "see unit", "the measured flight's value"),
+        Column("simulated_before", _F, "see unit", "the simulation's value before"),
+        Column("simulated_after", _F, "see unit", "the simulation's value after"),
+    ],
 }
 """Table name -> columns. Add a table or a column here; docs/formats.md renders this dict."""
 

@@ -14,8 +14,16 @@ What the receiver sees (exact rigid-body kinematics, nothing dropped):
 t is the antenna state at true time t - ``time_offset_s`` (a positive offset means the
 receiver stamps late). Noise is white, Gaussian, independent per epoch: horizontal and
 vertical standard deviations for position and velocity; the reported covariance is the
-diagonal of those variances (not below a 1 mm, 1 mm/s floor). Epochs fall on multiples of
+diagonal of those variances (not below a 1 mm, 1 mm/s floor), or of the ``reported_*``
+sigmas when given. Epochs fall on multiples of
 1 / ``rate_hz`` from the mission start, except inside outages [start_s, end_s).
+
+Coloured position error (optional, off by default): a first-order Gauss-Markov error per NED
+axis, stationary, horizontal / vertical sigma ``pos_gm_sigma_m`` and correlation time
+``pos_gm_tau_s``, stepped at the epochs: e_k+1 = a e_k + sigma sqrt(1 - a^2) w_k,
+a = exp(-dt_k / tau). It is added to the white noise; the reported covariance is unchanged
+(a receiver does not report its multipath). Drawn after the white noise from the same stream,
+and only when a sigma is non-zero, so models without it give the same bits as before.
 """
 
 from __future__ import annotations
@@ -51,6 +59,12 @@ class GnssModel:
         Receiver stamp minus true time of the measured state [s].
     outages_s : tuple of (start_s, end_s)
         Windows (seconds from the mission start) with no GNSS output.
+    pos_gm_sigma_m : (horizontal, vertical) sigma of the coloured position error [m]
+    pos_gm_tau_s : float
+        Its correlation time [s] (module docstring).
+    reported_pos_sigma_m, reported_vel_sigma_mps : (horizontal, vertical), optional
+        The sigmas the receiver reports in the covariances, when they differ from the noise
+        (default: the noise sigmas; real receivers often report nominal values).
     """
 
     rate_hz: float = 1.0
@@ -59,15 +73,20 @@ class GnssModel:
     lever_arm_b_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
     time_offset_s: float = 0.0
     outages_s: tuple[tuple[float, float], ...] = field(default_factory=tuple)
+    pos_gm_sigma_m: tuple[float, float] = (0.0, 0.0)
+    pos_gm_tau_s: float = 60.0
+    reported_pos_sigma_m: tuple[float, float] | None = None
+    reported_vel_sigma_mps: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         if not self.rate_hz > 0:
             raise ValueError(f"rate_hz must be > 0, got {self.rate_hz!r}")
-        for name, n in (("pos_noise_m", 2), ("vel_noise_mps", 2), ("lever_arm_b_m", 3)):
+        for name, n in (("pos_noise_m", 2), ("vel_noise_mps", 2), ("lever_arm_b_m", 3),
+                        ("pos_gm_sigma_m", 2)):
             v = tuple(float(x) for x in getattr(self, name))
             if len(v) != n or not np.isfinite(v).all():
                 raise ValueError(f"{name}: expected {n} finite numbers, got {v!r}")
-            if "noise" in name and min(v) < 0:
+            if ("noise" in name or "sigma" in name) and min(v) < 0:
                 raise ValueError(f"{name} must be >= 0, got {v!r}")
             object.__setattr__(self, name, v)
         out = tuple((float(a), float(b)) for a, b in self.outages_s)
@@ -77,13 +96,31 @@ class GnssModel:
         object.__setattr__(self, "outages_s", out)
         object.__setattr__(self, "rate_hz", float(self.rate_hz))
         object.__setattr__(self, "time_offset_s", float(self.time_offset_s))
+        for name in ("reported_pos_sigma_m", "reported_vel_sigma_mps"):
+            v = getattr(self, name)
+            if v is not None:
+                v = tuple(float(x) for x in v)
+                if len(v) != 2 or not (np.isfinite(v).all() and min(v) >= 0):
+                    raise ValueError(f"{name}: expected 2 finite numbers >= 0, got {v!r}")
+                object.__setattr__(self, name, v)
+        if not float(self.pos_gm_tau_s) > 0:
+            raise ValueError(f"pos_gm_tau_s must be > 0, got {self.pos_gm_tau_s!r}")
+        object.__setattr__(self, "pos_gm_tau_s", float(self.pos_gm_tau_s))
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> GnssModel:
         return cls(**d)
 
     def as_dict(self) -> dict[str, Any]:
+        """JSON-ready dict; the coloured-error keys only when that error is on (params files
+        of runs without it stay as before)."""
         d = asdict(self)
+        if not any(self.pos_gm_sigma_m):
+            d.pop("pos_gm_sigma_m")
+            d.pop("pos_gm_tau_s")
+        for k in ("reported_pos_sigma_m", "reported_vel_sigma_mps"):
+            if d[k] is None:
+                d.pop(k)
         return {k: ([list(x) for x in v] if k == "outages_s" else
                     (list(v) if isinstance(v, tuple) else v)) for k, v in d.items()}
 
@@ -145,15 +182,38 @@ def simulate_gnss(
     sv = np.array([model.vel_noise_mps[0], model.vel_noise_mps[0], model.vel_noise_mps[1]])
     e_p = rng.standard_normal((n, 3)) * sp
     e_v = rng.standard_normal((n, 3)) * sv
+    if any(model.pos_gm_sigma_m):
+        e_p += _gauss_markov_epochs(rng, t_true, model.pos_gm_sigma_m, model.pos_gm_tau_s)
     r_m, r_n = earth.principal_radii_m(lat)
     lat = lat + e_p[:, 0] / (r_m + h)
     lon = lon + e_p[:, 1] / ((r_n + h) * np.cos(lat))
     h = h - e_p[:, 2]
     time_ns = np.int64(start_time_ns) + t_rel_ns
     pos_cov = np.zeros((n, 3, 3))
+    if model.reported_pos_sigma_m is not None:
+        h_, v_ = model.reported_pos_sigma_m
+        sp = np.array([h_, h_, v_])
+    if model.reported_vel_sigma_mps is not None:
+        h_, v_ = model.reported_vel_sigma_mps
+        sv = np.array([h_, h_, v_])
     pos_cov[:, [0, 1, 2], [0, 1, 2]] = np.maximum(sp, _POS_FLOOR_M) ** 2
     vel_cov = np.zeros((n, 3, 3))
     vel_cov[:, [0, 1, 2], [0, 1, 2]] = np.maximum(sv, _VEL_FLOOR_MPS) ** 2
     fix = GnssFixes(time_ns, lat, lon, h, pos_cov, np.zeros(n, dtype=np.int8))
     vel = GnssVelocities(time_ns.copy(), v + e_v, vel_cov)
     return fix, vel
+
+
+def _gauss_markov_epochs(rng: np.random.Generator, t_s: NDArray, sigma_hv_m: tuple[float, float],
+                         tau_s: float) -> NDArray:
+    """Stationary first-order Gauss-Markov error at the (possibly gapped) epochs, (n, 3) NED."""
+    sig = np.array([sigma_hv_m[0], sigma_hv_m[0], sigma_hv_m[1]])
+    w = rng.standard_normal((t_s.size, 3))
+    e = np.empty_like(w)
+    if t_s.size == 0:
+        return e
+    e[0] = w[0] * sig
+    a = np.exp(-np.diff(t_s) / tau_s)
+    for k in range(1, t_s.size):
+        e[k] = a[k - 1] * e[k - 1] + sig * np.sqrt(1.0 - a[k - 1] ** 2) * w[k]
+    return e

@@ -57,6 +57,7 @@ from pospp.earth import STANDARD_GRAVITY_MPS2
 from pospp.rotation import ARCSEC_RAD, DEG_PER_H_RADPS
 
 __all__ = ["ImuErrorModel", "RealisedImuErrors", "apply_imu_errors", "imu_grade", "grade_names",
+           "imu_model_file",
            "vibration_increments", "VIBRATION_TONES"]
 
 UG_MPS2 = 1e-6 * STANDARD_GRAVITY_MPS2
@@ -217,11 +218,26 @@ def imu_grade(name: str) -> ImuErrorModel:
     """An IMU grade from ``pospp/presets/imu.toml``: ``errorfree``, ``paper_vehicle``
     (FOG: 0.1 deg/h constant, 0.05 deg/h random drift, 5 ug), ``paper_flight`` (flexure gyro:
     1 deg/h constant, 0.5 deg/h random drift, 5 ug), ``tactical``, ``mems`` (consumer MEMS
-    with the measured ArduPilot plane's band-limited vibration, docs/simulator.md)."""
+    with the measured ArduPilot plane's band-limited vibration, docs/simulator.md). A name
+    ending in ``.toml`` is a model file (:func:`imu_model_file`), e.g. the one ``pospp
+    compare-sim`` writes."""
+    if name.endswith(".toml"):
+        return imu_model_file(name)
     grades = tomllib.loads(resources.files("pospp").joinpath("presets", "imu.toml").read_text())
     if name not in grades:
         raise ValueError(f"unknown IMU grade {name!r}; grades: {sorted(grades)}")
     return ImuErrorModel.from_dict(grades[name], source=f"IMU grade {name}")
+
+
+def imu_model_file(path: str) -> ImuErrorModel:
+    """The ``[imu]`` table of a model TOML file (keys: the :class:`ImuErrorModel` fields).
+
+    Written by ``pospp compare-sim`` (sim_model.toml, docs/compare_sim.md); its ``[gnss]``
+    table holds :class:`pospp.sim.gnss.GnssModel` fields.
+    """
+    with open(path, "rb") as fh:
+        data = tomllib.load(fh)
+    return ImuErrorModel.from_dict(data.get("imu", {}), source=str(path))
 
 
 @dataclass(frozen=True)

@@ -54,6 +54,10 @@ UNITLESS = {"solution", "leg_id", "pair_id", "leg_a", "leg_b", "used", "reason",
             "event_id", "inside"}
 # Long-form tables: 'value' / 'sigma' carry the unit named in the row's 'unit' column.
 ROW_UNIT = {"value", "sigma", "threshold"}
+# sim_comparison (compare-sim): gaps in the row's unit, tests unitless
+ROW_UNIT |= {"gap_before", "gap_after", "sigma_gap", "measured", "simulated_before",
+             "simulated_after"}
+UNITLESS |= {"z_before", "z_after", "p_before", "significant_before", "significant_after"}
 
 
 @pytest.mark.parametrize("name", sorted(PROMISED))

@@ -1,0 +1,206 @@
+"""Step-wise comparison of a measured flight with its simulation (docs/compare_sim.md).
+
+At each step, every statistic's gap g = measured - simulated is tested against
+sigma_g = sqrt(sigma_m^2 + sigma_s^2) (two-sided, Student t with Welch-Satterthwaite degrees
+of freedom, normal for A's own sigmas) with a Holm-Bonferroni correction over all statistics
+at family-wise level ``alpha`` (default 0.01). The most significant gap (largest |g| /
+sigma_g) is the target. Every library effect that moves the target and is not yet in the
+model is fitted by weighted least squares on its linear statistics (slopes: identity or a
+trial simulation, :mod:`pospp.simcompare.effects`); an effect is admissible when its fitted
+u differs from zero (chi-square test, level ``alpha`` / number of candidates). Each
+admissible effect is added with its fitted size and the flight re-simulated; the one with the
+least sum of z^2 over all statistics after (plus 2 per parameter, as AIC) is kept, and the gaps
+after are recorded. A target that no
+admissible effect explains, or whose gap the added effect does not shrink, is
+``unexplained`` and left out of later targets. The loop stops when no target is left or after
+``max_steps``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import stats as sps
+
+from pospp.sim.gnss import GnssModel
+from pospp.sim.sensors import ImuErrorModel
+from pospp.simcompare.effects import LIBRARY, EffectContext, SimEffect
+from pospp.simcompare.stats import STAT_UNITS, FlightStats, Stat
+
+__all__ = ["ALPHA", "Comparison", "Gap", "compare_flights", "gaps"]
+
+ALPHA = 0.01
+"""Family-wise significance level of the gap tests (Holm-Bonferroni)."""
+
+SimulateFn = Callable[[ImuErrorModel, GnssModel], FlightStats]
+
+
+@dataclass(frozen=True)
+class Gap:
+    """Measured minus simulated for one statistic, its sigma, z, Holm-adjusted p."""
+
+    statistic: str
+    measured: float
+    simulated: float
+    gap: float
+    sigma: float
+    z: float
+    p_adjusted: float
+    significant: bool
+
+
+def _pvalue(m: Stat, s: Stat, z: float) -> float:
+    vm, vs = m.sigma ** 2, s.sigma ** 2
+    if not (np.isfinite(m.dof) and np.isfinite(s.dof)):
+        return float(2.0 * sps.norm.sf(abs(z)))
+    den = (vm ** 2 / max(m.dof, 1.0) if vm else 0.0) + (vs ** 2 / max(s.dof, 1.0) if vs else 0.0)
+    dof = (vm + vs) ** 2 / den if den > 0 else 1.0
+    return float(2.0 * sps.t.sf(abs(z), dof))
+
+
+def gaps(measured: FlightStats, simulated: FlightStats, *, alpha: float = ALPHA
+         ) -> dict[str, Gap]:
+    """Every statistic's gap with its Holm-Bonferroni test at family-wise level ``alpha``."""
+    out: dict[str, Gap] = {}
+    raw: dict[str, float] = {}
+    for name in STAT_UNITS:
+        m, s = measured.stats.get(name), simulated.stats.get(name)
+        if m is None or s is None:
+            continue
+        g = m.value - s.value
+        sig = float(np.hypot(m.sigma, s.sigma))
+        if not (np.isfinite(g) and np.isfinite(sig) and sig > 0):
+            continue
+        z = g / sig
+        raw[name] = _pvalue(m, s, z)
+        out[name] = Gap(name, m.value, s.value, g, sig, z, np.nan, False)
+    order = sorted(raw, key=raw.get)
+    n = len(order)
+    running = 0.0
+    stop = False
+    for i, name in enumerate(order):
+        running = max(running, min(1.0, (n - i) * raw[name]))
+        sig = (not stop) and running <= alpha
+        stop = stop or not sig
+        g = out[name]
+        out[name] = Gap(name, g.measured, g.simulated, g.gap, g.sigma, g.z, running, sig)
+    return out
+
+
+@dataclass(frozen=True)
+class Step:
+    """One step: the target statistic, the effect added (or "unexplained"), its fitted
+    parameters (reported units) and the gaps before and after."""
+
+    step: int
+    target: str
+    effect: str
+    params: tuple[str, ...]
+    size: tuple[float, ...]
+    sigma: tuple[float, ...]
+    unit: str
+    before: dict[str, Gap]
+    after: dict[str, Gap]
+    candidate: str = ""
+    """For an ``unexplained`` step with parameters: the best candidate, whose fit (params,
+    size, sigma, after) did not shrink the target."""
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """The whole comparison: the gaps of the base model, the steps, the final models."""
+
+    base: dict[str, Gap]
+    steps: tuple[Step, ...]
+    imu_model: ImuErrorModel
+    gnss_model: GnssModel
+    final: dict[str, Gap]
+    effects_added: tuple[str, ...] = field(default=())
+
+
+def _fit(effect: SimEffect, gap: dict[str, Gap], base: FlightStats, simulate: SimulateFn,
+         imu: ImuErrorModel, gnss: GnssModel, ctx: EffectContext):
+    names = [s for s in effect.fit_stats if s in gap]
+    if not names:
+        return None
+    p = len(effect.params)
+    if effect.trial is None:
+        h = np.eye(len(effect.fit_stats), p)[[effect.fit_stats.index(s) for s in names]]
+    else:
+        h = np.zeros((len(names), p))
+        for j, size in enumerate(effect.trial):
+            u = np.zeros(p)
+            u[j] = size
+            sim = simulate(*effect.apply(imu, gnss, u, ctx))
+            h[:, j] = [(sim.stats[s].value - base.stats[s].value) / size for s in names]
+    g = np.array([gap[s].gap for s in names])
+    w = 1.0 / np.array([gap[s].sigma for s in names]) ** 2
+    a = h.T @ (h * w[:, None])
+    if not np.all(np.isfinite(a)) or np.linalg.matrix_rank(a) < p:
+        return None
+    cov = np.linalg.inv(a)
+    u = cov @ (h.T @ (w * g))
+    chi_u = float(u @ a @ u)
+    return u, cov, chi_u
+
+
+def compare_flights(measured: FlightStats, simulate: SimulateFn, imu: ImuErrorModel,
+                    gnss: GnssModel, *, library: tuple[SimEffect, ...] = LIBRARY,
+                    alpha: float = ALPHA, max_steps: int = 4) -> Comparison:
+    """The step-wise comparison (module docstring).
+
+    Parameters
+    ----------
+    measured : FlightStats
+    simulate : callable(imu_model, gnss_model) -> FlightStats
+        Simulates the flight with the given models (always the same seed) and returns its
+        statistics.
+    imu, gnss : the configured (base) simulation models.
+    """
+    ctx = EffectContext(hf_peak_hz=measured.hf_peak_hz)
+    sim = simulate(imu, gnss)
+    cur = gaps(measured, sim, alpha=alpha)
+    base = cur
+    steps: list[Step] = []
+    added: list[str] = []
+    dropped: set[str] = set()
+    for k in range(1, max_steps + 1):
+        targets = sorted((g for g in cur.values() if g.significant and g.statistic not in dropped),
+                         key=lambda g: -abs(g.z))
+        if not targets:
+            break
+        target = targets[0].statistic
+        cands = [e for e in library if target in e.explains and e.name not in added]
+        tried = []
+        for e in cands:
+            fit = _fit(e, cur, sim, simulate, imu, gnss, ctx)
+            if fit is None:
+                continue
+            u, cov, chi_u = fit
+            if sps.chi2.sf(chi_u, len(u)) > alpha / max(len(cands), 1):
+                continue
+            imu2, gnss2 = e.apply(imu, gnss, u, ctx)
+            sim2 = simulate(imu2, gnss2)
+            after = gaps(measured, sim2, alpha=alpha)
+            score = sum(g.z ** 2 for g in after.values()) + 2.0 * len(u)
+            tried.append((score, e, u, cov, imu2, gnss2, sim2, after))
+        if not tried:
+            steps.append(Step(k, target, "unexplained", (), (), (), "", cur, cur))
+            dropped.add(target)
+            continue
+        _, e, u, cov, imu2, gnss2, sim2, after = min(tried, key=lambda x: x[0])
+        size, sig = e.size(u, cov)
+        if target in after and abs(after[target].z) >= abs(cur[target].z):
+            # the best effect did not shrink its target: not kept
+            # the model is unchanged: "after" is "before"
+            steps.append(Step(k, target, "unexplained", e.params, tuple(size), tuple(sig), e.unit,
+                              cur, cur, candidate=e.name))
+            dropped.add(target)
+            continue
+        steps.append(Step(k, target, e.name, e.params, tuple(size), tuple(sig), e.unit, cur,
+                          after))
+        added.append(e.name)
+        imu, gnss, sim, cur = imu2, gnss2, sim2, after
+    return Comparison(base, tuple(steps), imu, gnss, cur, tuple(added))

@@ -1,0 +1,194 @@
+"""Effect library of the measured-versus-simulated comparison (docs/compare_sim.md).
+
+Each effect is a change of the simulation model (:class:`pospp.sim.sensors.ImuErrorModel`,
+:class:`pospp.sim.gnss.GnssModel`) with parameters u (SI), its signature (the statistics of
+:mod:`pospp.simcompare.stats` it moves, and the ones that are linear in u, used to fit u),
+and how the slope d stat / d u is found:
+
+* ``known``: the statistic is algorithm A's own estimate of the parameter (lever arm, scale
+  factors, accelerometer bias trend, attitude offset), so the slope is the identity;
+* ``trial``: the slope is measured by simulating once with a trial size per parameter,
+  with the same random numbers as the base simulation (common random numbers).
+
+Variance-type effects (vibration, coloured GNSS error, bias instability) add a variance u to
+the model's: the model's RMS becomes sqrt(rms_0^2 + u); their size is reported as
+sign(u) sqrt(|u|).
+
+Effects (stable identifiers; parameters; unit of the reported size)
+-------------------------------------------------------------------
+``vibration``              accel and gyro sinusoidal vibration variance; m/s^2 and deg/s RMS
+``time_offset``            GNSS stamp minus true time (GnssModel.time_offset_s); ms. A's
+                           lever-arm estimate absorbs it along the track (tau v), so the
+                           lever-arm statistics are part of its signature
+``lever_arm``              IMU-to-antenna lever arm change, body FRD; m
+``scale_factor``           gyro and accelerometer scale-factor errors, FRD; ppm
+``mounting_misalignment``  IMU case rotated by rho (FRD) in the body: both misalignment
+                           matrices get M = -[rho x] (v_s = (I - [rho x]) v_b); arcsec
+``coloured_gnss``          Gauss-Markov GNSS position error (horizontal sigma, vertical 1.5 x,
+                           tau 60 s); m
+``bias_instability``       gyro Gauss-Markov (random drift) variance added; deg/h
+``accel_bias_change``      accelerometer bias ramp (ImuErrorModel.accel_bias_drift_ugph); ug/h
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pospp.rotation import ARCSEC_RAD, DEG_PER_H_RADPS
+from pospp.sim.gnss import GnssModel
+from pospp.sim.sensors import UG_MPS2, ImuErrorModel
+
+__all__ = ["SimEffect", "LIBRARY", "EffectContext", "library_by_name"]
+
+COLOURED_GNSS_TAU_S = 60.0
+"""Correlation time of the coloured GNSS position error the library adds [s]."""
+
+
+@dataclass(frozen=True)
+class EffectContext:
+    """What an effect needs beyond the models: the measured IMU's dominant high-frequency
+    line [Hz] (vibration frequency when the base model has none)."""
+
+    hf_peak_hz: float = float("nan")
+
+
+Apply = Callable[[ImuErrorModel, GnssModel, NDArray, EffectContext],
+                 tuple[ImuErrorModel, GnssModel]]
+
+
+@dataclass(frozen=True)
+class SimEffect:
+    """One effect of the library (module docstring).
+
+    Attributes
+    ----------
+    name : str
+    params : tuple of str
+        Parameter names (u, SI).
+    unit : str
+        Unit of the reported size; ``si_per_unit`` converts (size_si = size x si_per_unit).
+    fit_stats : tuple of str
+        Statistics linear in u (the fit).
+    explains : tuple of str
+        Every statistic the effect moves (a gap there makes it a candidate).
+    trial : tuple of float or None
+        Trial sizes (SI) per parameter for the slope; None: the slope is the identity.
+    variance : bool
+        u is an added variance (size reported as a signed RMS).
+    apply : callable(imu, gnss, u, context) -> (imu, gnss)
+    """
+
+    name: str
+    params: tuple[str, ...]
+    unit: str
+    si_per_unit: float
+    fit_stats: tuple[str, ...]
+    explains: tuple[str, ...]
+    trial: tuple[float, ...] | None
+    variance: bool
+    apply: Apply
+
+    def size(self, u: NDArray, cov: NDArray) -> tuple[NDArray, NDArray]:
+        """Reported size and 1-sigma [unit] of the fitted u (SI) and its covariance."""
+        s = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+        if self.variance:
+            r = np.sign(u) * np.sqrt(np.abs(u))
+            # delta method, sigma of sqrt(u) = sigma_u / (2 sqrt(u)); at u ~ 0 use sqrt(sigma_u)
+            sr = np.where(np.abs(u) > s, s / (2.0 * np.maximum(np.abs(r), 1e-300)), np.sqrt(s))
+            return r / self.si_per_unit, sr / self.si_per_unit
+        return u / self.si_per_unit, s / self.si_per_unit
+
+
+def _vibration(imu: ImuErrorModel, gnss: GnssModel, u: NDArray, ctx: EffectContext):
+    acc = np.sqrt(np.clip(np.square(imu.accel_vibration_rms_mps2) + u[0], 0.0, None))
+    gyr = np.sqrt(np.clip(np.square(np.radians(imu.gyro_vibration_rms_dps)) + u[1], 0.0, None))
+    kw = {}
+    if not imu.has_vibration():
+        f = ctx.hf_peak_hz if np.isfinite(ctx.hf_peak_hz) else 50.0
+        kw = {"vibration_freq_hz": float(f), "vibration_bandwidth_hz": 0.0}
+    return replace(imu, accel_vibration_rms_mps2=tuple(acc),
+                   gyro_vibration_rms_dps=tuple(np.degrees(gyr)), **kw), gnss
+
+
+def _time_offset(imu, gnss, u, ctx):
+    return imu, replace(gnss, time_offset_s=gnss.time_offset_s + float(u[0]))
+
+
+def _lever(imu, gnss, u, ctx):
+    return imu, replace(gnss, lever_arm_b_m=tuple(np.add(gnss.lever_arm_b_m, u)))
+
+
+def _scale(imu, gnss, u, ctx):
+    return replace(imu, gyro_sf_ppm=tuple(np.add(imu.gyro_sf_ppm, u[:3] * 1e6)),
+                   accel_sf_ppm=tuple(np.add(imu.accel_sf_ppm, u[3:] * 1e6))), gnss
+
+
+def mounting_misalignment_arcsec(rho_rad: NDArray) -> NDArray:
+    """[xy, xz, yx, yz, zx, zy] of M = -[rho x] [arcsec] (IMU case rotated by rho, FRD)."""
+    rx, ry, rz = np.asarray(rho_rad, dtype=float)
+    return np.array([rz, -ry, -rz, rx, ry, -rx]) / ARCSEC_RAD
+
+
+def _mounting(imu, gnss, u, ctx):
+    m = mounting_misalignment_arcsec(u)
+    return replace(imu, gyro_misalign_arcsec=tuple(np.add(imu.gyro_misalign_arcsec, m)),
+                   accel_misalign_arcsec=tuple(np.add(imu.accel_misalign_arcsec, m))), gnss
+
+
+def _coloured(imu, gnss, u, ctx):
+    h = float(np.sqrt(max(gnss.pos_gm_sigma_m[0] ** 2 + float(u[0]), 0.0)))
+    return imu, replace(gnss, pos_gm_sigma_m=(h, 1.5 * h), pos_gm_tau_s=COLOURED_GNSS_TAU_S)
+
+
+def _instability(imu, gnss, u, ctx):
+    s = np.radians(np.asarray(imu.gyro_gm_sigma_dph)) / 3600.0
+    s = np.sqrt(np.clip(s ** 2 + float(u[0]), 0.0, None))
+    return replace(imu, gyro_gm_sigma_dph=tuple(s / DEG_PER_H_RADPS)), gnss
+
+
+def _accel_change(imu, gnss, u, ctx):
+    r = np.asarray(u) * 3600.0 / UG_MPS2
+    return replace(imu, accel_bias_drift_ugph=tuple(np.add(imu.accel_bias_drift_ugph, r))), gnss
+
+
+_XYZ = ("x", "y", "z")
+LIBRARY: tuple[SimEffect, ...] = (
+    SimEffect("vibration", ("accel_var", "gyro_var"), "m/s2 | deg/s", 1.0,
+              ("imu_hf_accel_var", "imu_hf_gyro_var"), ("imu_hf_accel_var", "imu_hf_gyro_var"),
+              (0.25, np.radians(0.5) ** 2), True, _vibration),
+    SimEffect("time_offset", ("tau",), "ms", 1e-3,
+              ("gnss_vel_dot_accel", "a_lever_x", "a_lever_y", "att_offset_pitch"),
+              ("gnss_vel_dot_accel", "a_lever_x", "a_lever_y", "att_offset_pitch",
+               "gnss_vel_nis", "gnss_pos_nis"), (0.05,), False,
+              _time_offset),
+    SimEffect("lever_arm", tuple(f"lever_{a}" for a in _XYZ), "m", 1.0,
+              tuple(f"a_lever_{a}" for a in _XYZ),
+              (*(f"a_lever_{a}" for a in _XYZ), "gnss_pos_nis", "gnss_vel_nis"), None, False,
+              _lever),
+    SimEffect("scale_factor", (*(f"gyro_sf_{a}" for a in _XYZ),
+                               *(f"accel_sf_{a}" for a in _XYZ)), "ppm", 1e-6,
+              (*(f"a_gyro_sf_{a}" for a in _XYZ), *(f"a_accel_sf_{a}" for a in _XYZ)),
+              (*(f"a_gyro_sf_{a}" for a in _XYZ), *(f"a_accel_sf_{a}" for a in _XYZ),
+               "gnss_vel_nis"), None, False, _scale),
+    SimEffect("mounting_misalignment", tuple(f"rho_{a}" for a in _XYZ), "arcsec", ARCSEC_RAD,
+              ("att_offset_roll", "att_offset_pitch", "att_offset_yaw"),
+              ("att_offset_roll", "att_offset_pitch", "att_offset_yaw"), None, False,
+              _mounting),
+    SimEffect("coloured_gnss", ("pos_gm_var_h",), "m", 1.0, ("gnss_pos_lag1", "gnss_pos_nis"),
+              ("gnss_pos_lag1", "gnss_pos_nis"), (0.04,), True, _coloured),
+    SimEffect("bias_instability", ("gyro_gm_var",), "deg/h", DEG_PER_H_RADPS,
+              ("a_gyro_bias_wander",), ("a_gyro_bias_wander",), ((5.0 * DEG_PER_H_RADPS) ** 2,),
+              True, _instability),
+    SimEffect("accel_bias_change", tuple(f"ramp_{a}" for a in _XYZ), "ug/h", UG_MPS2 / 3600.0,
+              tuple(f"a_accel_trend_{a}" for a in _XYZ),
+              tuple(f"a_accel_trend_{a}" for a in _XYZ), None, False, _accel_change),
+)
+"""The library, in a fixed order."""
+
+
+def library_by_name() -> dict[str, SimEffect]:
+    return {e.name: e for e in LIBRARY}

@@ -1,0 +1,76 @@
+"""The comparison as columns (sim_comparison.parquet) and the fitted model as TOML text."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from pospp.sim.gnss import GnssModel
+from pospp.sim.sensors import ImuErrorModel
+from pospp.simcompare.compare import Comparison, Gap
+from pospp.simcompare.stats import STAT_UNITS
+
+__all__ = ["comparison_columns", "model_toml"]
+
+_COLS = ("step", "kind", "measure", "effect", "parameter", "value", "sigma", "unit",
+         "gap_before", "gap_after", "sigma_gap", "z_before", "z_after", "p_before",
+         "significant_before", "significant_after", "measured", "simulated_before",
+         "simulated_after")
+
+
+def _stat_row(step: int, effect: str, name: str, b: Gap, a: Gap | None) -> dict[str, Any]:
+    nan = float("nan")
+    return {"step": step, "kind": "statistic", "measure": name, "effect": effect,
+            "parameter": "", "value": nan, "sigma": nan, "unit": STAT_UNITS[name],
+            "gap_before": b.gap, "gap_after": a.gap if a else nan, "sigma_gap": b.sigma,
+            "z_before": b.z, "z_after": a.z if a else nan, "p_before": b.p_adjusted,
+            "significant_before": b.significant,
+            "significant_after": bool(a.significant) if a else False,
+            "measured": b.measured, "simulated_before": b.simulated,
+            "simulated_after": a.simulated if a else nan}
+
+
+def comparison_columns(c: Comparison) -> dict[str, list]:
+    """Long-form rows of sim_comparison.parquet (schema in pospp.io.parquet_tables)."""
+    rows = [_stat_row(0, "", n, g, None) for n, g in c.base.items()]
+    for s in c.steps:
+        for n, b in s.before.items():
+            rows.append(_stat_row(s.step, s.effect, n, b, s.after.get(n)))
+        b, a = s.before[s.target], s.after.get(s.target)
+        for p, v, sg in zip(s.params, s.size, s.sigma, strict=True):
+            r = _stat_row(s.step, s.effect, s.target, b, a)
+            r.update(kind="effect", parameter=f"{s.candidate}:{p}" if s.candidate else p,
+                     value=float(v), sigma=float(sg), unit=s.unit)
+            rows.append(r)
+        if not s.params:
+            r = _stat_row(s.step, s.effect, s.target, b, a)
+            r["kind"] = "effect"
+            rows.append(r)
+    return {k: [r[k] for r in rows] for k in _COLS}
+
+
+def _fmt(v: Any) -> str:
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_fmt(x) for x in v) + "]"
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float):
+        return repr(float(np.round(v, 12)))
+    return repr(v)
+
+
+def model_toml(imu: ImuErrorModel, gnss: GnssModel, *, header: str = "") -> str:
+    """A model file: ``[imu]`` (ImuErrorModel fields) and ``[gnss]`` (GnssModel fields).
+
+    ``pospp simulate --imu-grade FILE.toml`` reads its ``[imu]`` table
+    (:func:`pospp.sim.sensors.imu_model_file`).
+    """
+    lines = [f"# {h}" for h in header.splitlines()] if header else []
+    for name, d in (("imu", imu.as_dict()), ("gnss", gnss.as_dict())):
+        lines += ["", f"[{name}]"]
+        for k, v in d.items():
+            if k == "outages_s" or v is None:
+                continue
+            lines.append(f"{k} = {_fmt(v)}")
+    return "\n".join(lines).lstrip("\n") + "\n"
