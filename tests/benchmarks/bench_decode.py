@@ -4,6 +4,10 @@ Run on demand (not collected by pytest)::
 
     python tests/benchmarks/bench_decode.py            # builds /tmp/pospp_bench_1p5h.mcap once
     python tests/benchmarks/bench_decode.py --path F --methods pospp,library_stream
+    python tests/benchmarks/bench_decode.py --methods pospp --trees /work/main,. --repeat 7
+
+``--trees`` runs each method with the ``pospp`` of each given source tree, interleaved run by
+run (so that a change of machine load hits both alike), to compare two versions of the reader.
 
 The file (1.08 M IMU messages, 5400 GNSS fixes and velocities, zstd chunks) is written with
 ``pospp.io.mcap_writer.write_flight_log``. Each method runs in a fresh subprocess so that its
@@ -13,6 +17,9 @@ depends on the load (peak = VmHWM of the subprocess). Methods:
 
 - ``pospp``: ``pospp.io.mcap_reader.read_flight_log`` (own record framing, batched numpy CDR
   decoding, all the checks, rotation to FRD/NED).
+- ``pospp_data_crc``: the same on a copy of the file whose DataEnd record carries the data
+  section CRC (``write_flight_log``, like mcap's ``Writer`` by default, writes 0 there), so
+  that the CRC is verified; the running CRC is computed either way.
 - ``library_stream``: ``mcap.reader.NonSeekingReader(f).iter_messages(topics,
   log_time_order=False)`` (the mcap library's framing: chunks, CRCs, decompression), the raw
   payloads of each topic collected in batches of 65536 and decoded with pospp's structured
@@ -34,6 +41,11 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+_TREE = Path(__file__).resolve().parents[2]
+if "--tree" in sys.argv:
+    _TREE = Path(sys.argv[sys.argv.index("--tree") + 1]).resolve()
+sys.path.insert(0, str(_TREE))  # this (or the given) tree's pospp, not the installed one
 
 DEFAULT_PATH = Path("/tmp/pospp_bench_1p5h.mcap")
 TOPICS = ("/imu/data", "/gnss/fix", "/gnss/vel")
@@ -58,6 +70,24 @@ def build(path: Path, *, duration_s: float = 5400.0, rate_hz: float = 200.0) -> 
     write_flight_log(path, ImuSamples(t, w, f, "imu_link"), fix, vel)
     print(f"built {path} ({path.stat().st_size / 1e6:.1f} MB, {n} IMU messages) in "
           f"{time.perf_counter() - t_start:.1f} s", file=sys.stderr)
+
+
+def with_data_crc(path: Path) -> Path:
+    """A copy of ``path`` with the data section CRC (CRC-32 of every byte before the DataEnd
+    record, leading magic included) written into its DataEnd record."""
+    import struct
+    import zlib
+
+    out = path.with_name(path.stem + "_datacrc.mcap")
+    if out.exists():
+        return out
+    data = bytearray(path.read_bytes())
+    pos = 8
+    while data[pos] != 0x0F:
+        pos += 9 + struct.unpack_from("<Q", data, pos + 1)[0]
+    struct.pack_into("<I", data, pos + 9, zlib.crc32(memoryview(data)[:pos]))
+    out.write_bytes(bytes(data))
+    return out
 
 
 def _library_decode(path: Path, *, seeking: bool) -> int:
@@ -130,8 +160,10 @@ def run_one(method: str, path: Path) -> dict:
     base_mb = _peak_rss_mb()
     t = time.perf_counter()
     cpu = time.process_time()
-    if method == "pospp":
-        n_imu = len(read_flight_log(path).imu)
+    if method in ("pospp", "pospp_data_crc"):
+        log = read_flight_log(path)
+        assert log.complete, log.issues
+        n_imu = len(log.imu)
     elif method == "library_stream":
         n_imu = _library_decode(path, seeking=False)
     elif method == "library_seeking":
@@ -153,7 +185,10 @@ def main() -> None:
     ap.add_argument("--path", type=Path, default=DEFAULT_PATH)
     ap.add_argument("--methods", default="pospp,library_stream,library_seeking,library_records")
     ap.add_argument("--repeat", type=int, default=2, help="runs per method (best is reported)")
+    ap.add_argument("--trees", default=str(_TREE),
+                    help="comma-separated source trees whose pospp is measured (interleaved)")
     ap.add_argument("--one", help=argparse.SUPPRESS)
+    ap.add_argument("--tree", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.one:
         print(json.dumps(run_one(args.one, args.path)))
@@ -162,13 +197,21 @@ def main() -> None:
         build(args.path)
     size_mb = args.path.stat().st_size / 1e6
     rows = []
+    trees = [str(Path(t).resolve()) for t in args.trees.split(",")]
     for method in args.methods.split(","):
-        runs = []
+        runs: dict[str, list[dict]] = {t: [] for t in trees}
+        path = with_data_crc(args.path) if method == "pospp_data_crc" else args.path
         for _ in range(args.repeat):
-            out = subprocess.run([sys.executable, __file__, "--path", str(args.path), "--one",
-                                  method], check=True, capture_output=True, text=True)
-            runs.append(json.loads(out.stdout))
-        rows.append(min(runs, key=lambda r: r["cpu_s"]))
+            for tree in trees:
+                out = subprocess.run([sys.executable, __file__, "--path", str(path), "--one",
+                                      method, "--tree", tree],
+                                     check=True, capture_output=True, text=True)
+                runs[tree].append(json.loads(out.stdout))
+        for tree in trees:
+            best = min(runs[tree], key=lambda r: r["cpu_s"])
+            if len(trees) > 1:
+                best["method"] = f"{method} ({tree})"
+            rows.append(best)
     ref = rows[0]["cpu_s"]
     print(f"file: {args.path} ({size_mb:.1f} MB), best of {args.repeat}\n")
     print("| method | CPU [s] | wall [s] | CPU x first | messages/CPU-s | peak RSS [MB] | "
