@@ -483,6 +483,10 @@ class Scan:
                 lst.append(pos)
             elif op in (_OP_SCHEMA, _OP_CHANNEL):
                 self._meta(op, buf[pos + 9 : end])
+            elif op == 0:  # reserved: zeros (a bomb's output, or a hole) are not walked
+                if partial:
+                    break
+                raise ValueError(f"record with the reserved opcode 0x00 at offset {pos}")
             pos = end
         arr = np.frombuffer(buf, dtype=np.uint8)
         for ch, lst in by_channel.items():
