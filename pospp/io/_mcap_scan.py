@@ -552,8 +552,13 @@ class Scan:
                             self._loose.append(head + body)
                             if len(self._loose) >= 10000:
                                 self._flush_loose()
-                        elif op == _OP_STATISTICS:
+                        elif op == _OP_STATISTICS and self.data_end:
                             self.stats = _parse_stats(body, good)
+                        elif op == _OP_STATISTICS:  # a summary record in the data section
+                            self._error(f"MCAP corrupt: Statistics record at byte {good} before "
+                                        f"the DataEnd record (a corrupt opcode?); skipped its {ln} "
+                                        f"bytes and read on (log time reached {self._when()})",
+                                        good)
                         else:
                             self._meta(op, body)
                         if short:
