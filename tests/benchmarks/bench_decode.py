@@ -6,6 +6,10 @@ Run on demand (not collected by pytest)::
     python tests/benchmarks/bench_decode.py --path F --methods pospp,library_stream
     python tests/benchmarks/bench_decode.py --methods pospp --trees /work/main,. --repeat 7
 
+``--bombs`` instead reads decompression bombs (a 20 s log plus one chunk of 2 GiB of zeros,
+zstd or lz4, whole or cut, its header claiming 200 MiB or 2 GiB) and prints the peak resident
+set above the baseline of each read (per tree, with a 120 s limit per file).
+
 ``--trees`` runs each method with the ``pospp`` of each given source tree, interleaved run by
 run (so that a change of machine load hits both alike), to compare two versions of the reader.
 
@@ -90,6 +94,50 @@ def with_data_crc(path: Path) -> Path:
     return out
 
 
+def bomb_files(folder: Path) -> list[Path]:
+    """The decompression-bomb files of ``--bombs`` (built once in ``folder``)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "unit"))
+    from test_mcap_fuzz import MIB, _chunk_record, _zeros_compressed
+    from test_mcap_reader import make_log, top_records
+
+    from pospp.io.mcap_writer import write_flight_log
+
+    folder.mkdir(parents=True, exist_ok=True)
+    parts = make_log(duration_s=20.0, seed=3)
+    data = write_flight_log(folder / "src.mcap", *parts).read_bytes()
+    first = [r for r in top_records(data) if r[1] == 0x06][0]
+    head = data[: first[0] + 9 + first[2]]
+    out = []
+    for comp in ("zstd", "lz4"):
+        bomb = None
+        for claim in (200 * MIB, 2048 * MIB):
+            for cut in (False, True):
+                p = folder / f"{comp}_{claim // MIB}MiB_{'cut' if cut else 'whole'}.mcap"
+                out.append(p)
+                if p.exists():
+                    continue
+                bomb = bomb or _zeros_compressed(comp, 2048 * MIB)
+                rec = _chunk_record(bomb, claim, comp, int(parts[0].time_ns[-1]))
+                p.write_bytes(head + rec[: len(rec) * 2 // 3] if cut
+                              else head + rec + data[len(head) :])
+    return out
+
+
+def read_bomb(path: Path) -> str:
+    """Peak resident set growth [MiB] of one read, and its verdict."""
+    from pospp.io.errors import IngestError
+    from pospp.io.mcap_reader import read_flight_log
+
+    Path("/proc/self/clear_refs").write_text("5")
+    base = _status_mib("VmRSS")
+    try:
+        verdict = f"complete={read_flight_log(path, check_units=False).complete}"
+    except IngestError:
+        verdict = "IngestError"
+    grown = _status_mib("VmHWM") - base
+    return f"| {path.name} ({path.stat().st_size / 1e3:.0f} kB) | {grown:.0f} | {verdict} |"
+
+
 def _library_decode(path: Path, *, seeking: bool) -> int:
     from mcap.reader import NonSeekingReader, make_reader
 
@@ -143,6 +191,13 @@ def _records_only(path: Path) -> int:
     return max(len(v) for v in payloads.values())
 
 
+def _status_mib(key: str) -> float:
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith(key + ":"):
+            return int(line.split()[1]) / 1024
+    return float("nan")
+
+
 def _peak_rss_mb() -> float:
     """Peak resident set of this process image (VmHWM; unlike ru_maxrss, not inherited from
     the parent across exec)."""
@@ -189,7 +244,24 @@ def main() -> None:
                     help="comma-separated source trees whose pospp is measured (interleaved)")
     ap.add_argument("--one", help=argparse.SUPPRESS)
     ap.add_argument("--tree", help=argparse.SUPPRESS)
+    ap.add_argument("--bombs", action="store_true", help="peak memory on decompression bombs")
+    ap.add_argument("--bomb", help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.bomb:
+        print(read_bomb(Path(args.bomb)))
+        return
+    if args.bombs:
+        files = bomb_files(Path("/tmp/pospp_bench_bombs"))
+        for tree in [str(Path(t).resolve()) for t in args.trees.split(",")]:
+            print(f"\n{tree}\n\n| file | peak RSS growth [MiB] | verdict |\n|---|---:|---|")
+            for f in files:
+                try:
+                    out = subprocess.run([sys.executable, __file__, "--bomb", str(f), "--tree",
+                                          tree], capture_output=True, text=True, timeout=120)
+                    print(out.stdout.strip() or f"| {f.name} | failed | {out.stderr[-200:]} |")
+                except subprocess.TimeoutExpired:
+                    print(f"| {f.name} | - | not finished in 120 s |")
+        return
     if args.one:
         print(json.dumps(run_one(args.one, args.path)))
         return
