@@ -251,7 +251,7 @@ MAX_CHUNK_BYTES = 256 * 1024 * 1024
 header claims more is corrupt (or written with huge chunks: raise the cap), and no chunk's
 decompression may produce more than the smaller of this and what its header claims."""
 _LZ4_PIECE = 16 * 1024 * 1024  # lz4 output produced at a time beyond the first call
-_READ_PIECE = 1 << 20  # bytes read at a time when records are only checksummed
+_READ_PIECE = 1 << 20  # bytes read at a time when a byte range is only checksummed
 
 
 class _Truncated(Exception):
