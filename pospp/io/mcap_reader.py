@@ -39,7 +39,10 @@ NaN/inf (error naming the first bad message), IMU gaps over 3 nominal intervals 
 changes (warnings), IMU magnitudes that look like g or deg/s (error), IMU turn rates that
 disagree with the GNSS course rate by a factor near 180/pi (error: deg/s logged as rad/s),
 NO_FIX fixes (dropped, warning), truncated or corrupt file (error issue, ``complete=False``,
-data read so far kept; a corrupt chunk is skipped and reading goes on).
+data read so far kept; a corrupt chunk is skipped and reading goes on), a Footer record before
+the end of the file, a data-section CRC that does not match, and message counts that disagree
+with the summary's Statistics (each an error issue, ``complete=False``). Chunk decompression is
+bounded by the chunk header's size and by ``max_chunk_bytes``.
 """
 
 from __future__ import annotations
@@ -178,11 +181,14 @@ class FlightLog:
     issues : tuple of IngestIssue
         Warnings and infos, and the errors that did not stop reading (docs/formats.md).
     complete : bool
-        False when data are missing: the file is truncated or its record framing broke (the
-        arrays hold what was read before the break, the readable part of a cut-off chunk
-        included), or a corrupt chunk was skipped (reading went on after it). ``issues`` then
-        holds an ``IngestIssue`` of severity ``"error"`` with the byte offset. A damaged
-        summary section after the data (index only) leaves ``complete`` True, with a warning.
+        False when data are missing or altered: the file is truncated or its record framing
+        broke (the arrays hold what was read before the break, the readable part of a cut-off
+        chunk included), a Footer record appears before the end, a corrupt chunk was skipped
+        (reading went on after it), the data-section CRC (when stored) does not match, or the
+        summary's Statistics count other numbers of messages on the topics read. ``issues``
+        then holds an ``IngestIssue`` of severity ``"error"`` with the byte offset and the log
+        time reached. A damaged summary section after the data (index only) leaves
+        ``complete`` True, with a warning.
     """
 
     imu: ImuSamples

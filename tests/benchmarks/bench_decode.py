@@ -4,6 +4,14 @@ Run on demand (not collected by pytest)::
 
     python tests/benchmarks/bench_decode.py            # builds /tmp/pospp_bench_1p5h.mcap once
     python tests/benchmarks/bench_decode.py --path F --methods pospp,library_stream
+    python tests/benchmarks/bench_decode.py --methods pospp --trees /work/main,. --repeat 7
+
+``--bombs`` instead reads decompression bombs (a 20 s log plus one chunk of 2 GiB of zeros,
+zstd or lz4, whole or cut, its header claiming 200 MiB or 2 GiB) and prints the peak resident
+set above the baseline of each read (per tree, with a 120 s limit per file).
+
+``--trees`` runs each method with the ``pospp`` of each given source tree, interleaved run by
+run (so that a change of machine load hits both alike), to compare two versions of the reader.
 
 The file (1.08 M IMU messages, 5400 GNSS fixes and velocities, zstd chunks) is written with
 ``pospp.io.mcap_writer.write_flight_log``. Each method runs in a fresh subprocess so that its
@@ -13,6 +21,9 @@ depends on the load (peak = VmHWM of the subprocess). Methods:
 
 - ``pospp``: ``pospp.io.mcap_reader.read_flight_log`` (own record framing, batched numpy CDR
   decoding, all the checks, rotation to FRD/NED).
+- ``pospp_data_crc``: the same on a copy of the file whose DataEnd record carries the data
+  section CRC (``write_flight_log``, like mcap's ``Writer`` by default, writes 0 there), so
+  that the CRC is verified; the running CRC is computed either way.
 - ``library_stream``: ``mcap.reader.NonSeekingReader(f).iter_messages(topics,
   log_time_order=False)`` (the mcap library's framing: chunks, CRCs, decompression), the raw
   payloads of each topic collected in batches of 65536 and decoded with pospp's structured
@@ -34,6 +45,11 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+_TREE = Path(__file__).resolve().parents[2]
+if "--tree" in sys.argv:
+    _TREE = Path(sys.argv[sys.argv.index("--tree") + 1]).resolve()
+sys.path.insert(0, str(_TREE))  # this (or the given) tree's pospp, not the installed one
 
 DEFAULT_PATH = Path("/tmp/pospp_bench_1p5h.mcap")
 TOPICS = ("/imu/data", "/gnss/fix", "/gnss/vel")
@@ -58,6 +74,68 @@ def build(path: Path, *, duration_s: float = 5400.0, rate_hz: float = 200.0) -> 
     write_flight_log(path, ImuSamples(t, w, f, "imu_link"), fix, vel)
     print(f"built {path} ({path.stat().st_size / 1e6:.1f} MB, {n} IMU messages) in "
           f"{time.perf_counter() - t_start:.1f} s", file=sys.stderr)
+
+
+def with_data_crc(path: Path) -> Path:
+    """A copy of ``path`` with the data section CRC (CRC-32 of every byte before the DataEnd
+    record, leading magic included) written into its DataEnd record."""
+    import struct
+    import zlib
+
+    out = path.with_name(path.stem + "_datacrc.mcap")
+    if out.exists():
+        return out
+    data = bytearray(path.read_bytes())
+    pos = 8
+    while data[pos] != 0x0F:
+        pos += 9 + struct.unpack_from("<Q", data, pos + 1)[0]
+    struct.pack_into("<I", data, pos + 9, zlib.crc32(memoryview(data)[:pos]))
+    out.write_bytes(bytes(data))
+    return out
+
+
+def bomb_files(folder: Path) -> list[Path]:
+    """The decompression-bomb files of ``--bombs`` (built once in ``folder``)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "unit"))
+    from test_mcap_fuzz import MIB, _chunk_record, _zeros_compressed
+    from test_mcap_reader import make_log, top_records
+
+    from pospp.io.mcap_writer import write_flight_log
+
+    folder.mkdir(parents=True, exist_ok=True)
+    parts = make_log(duration_s=20.0, seed=3)
+    data = write_flight_log(folder / "src.mcap", *parts).read_bytes()
+    first = [r for r in top_records(data) if r[1] == 0x06][0]
+    head = data[: first[0] + 9 + first[2]]
+    out = []
+    for comp in ("zstd", "lz4"):
+        bomb = None
+        for claim in (200 * MIB, 2048 * MIB):
+            for cut in (False, True):
+                p = folder / f"{comp}_{claim // MIB}MiB_{'cut' if cut else 'whole'}.mcap"
+                out.append(p)
+                if p.exists():
+                    continue
+                bomb = bomb or _zeros_compressed(comp, 2048 * MIB)
+                rec = _chunk_record(bomb, claim, comp, int(parts[0].time_ns[-1]))
+                p.write_bytes(head + rec[: len(rec) * 2 // 3] if cut
+                              else head + rec + data[len(head) :])
+    return out
+
+
+def read_bomb(path: Path) -> str:
+    """Peak resident set growth [MiB] of one read, and its verdict."""
+    from pospp.io.errors import IngestError
+    from pospp.io.mcap_reader import read_flight_log
+
+    Path("/proc/self/clear_refs").write_text("5")
+    base = _status_mib("VmRSS")
+    try:
+        verdict = f"complete={read_flight_log(path, check_units=False).complete}"
+    except IngestError:
+        verdict = "IngestError"
+    grown = _status_mib("VmHWM") - base
+    return f"| {path.name} ({path.stat().st_size / 1e3:.0f} kB) | {grown:.0f} | {verdict} |"
 
 
 def _library_decode(path: Path, *, seeking: bool) -> int:
@@ -113,6 +191,13 @@ def _records_only(path: Path) -> int:
     return max(len(v) for v in payloads.values())
 
 
+def _status_mib(key: str) -> float:
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith(key + ":"):
+            return int(line.split()[1]) / 1024
+    return float("nan")
+
+
 def _peak_rss_mb() -> float:
     """Peak resident set of this process image (VmHWM; unlike ru_maxrss, not inherited from
     the parent across exec)."""
@@ -130,8 +215,10 @@ def run_one(method: str, path: Path) -> dict:
     base_mb = _peak_rss_mb()
     t = time.perf_counter()
     cpu = time.process_time()
-    if method == "pospp":
-        n_imu = len(read_flight_log(path).imu)
+    if method in ("pospp", "pospp_data_crc"):
+        log = read_flight_log(path)
+        assert log.complete, log.issues
+        n_imu = len(log.imu)
     elif method == "library_stream":
         n_imu = _library_decode(path, seeking=False)
     elif method == "library_seeking":
@@ -153,8 +240,28 @@ def main() -> None:
     ap.add_argument("--path", type=Path, default=DEFAULT_PATH)
     ap.add_argument("--methods", default="pospp,library_stream,library_seeking,library_records")
     ap.add_argument("--repeat", type=int, default=2, help="runs per method (best is reported)")
+    ap.add_argument("--trees", default=str(_TREE),
+                    help="comma-separated source trees whose pospp is measured (interleaved)")
     ap.add_argument("--one", help=argparse.SUPPRESS)
+    ap.add_argument("--tree", help=argparse.SUPPRESS)
+    ap.add_argument("--bombs", action="store_true", help="peak memory on decompression bombs")
+    ap.add_argument("--bomb", help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.bomb:
+        print(read_bomb(Path(args.bomb)))
+        return
+    if args.bombs:
+        files = bomb_files(Path("/tmp/pospp_bench_bombs"))
+        for tree in [str(Path(t).resolve()) for t in args.trees.split(",")]:
+            print(f"\n{tree}\n\n| file | peak RSS growth [MiB] | verdict |\n|---|---:|---|")
+            for f in files:
+                try:
+                    out = subprocess.run([sys.executable, __file__, "--bomb", str(f), "--tree",
+                                          tree], capture_output=True, text=True, timeout=120)
+                    print(out.stdout.strip() or f"| {f.name} | failed | {out.stderr[-200:]} |")
+                except subprocess.TimeoutExpired:
+                    print(f"| {f.name} | - | not finished in 120 s |")
+        return
     if args.one:
         print(json.dumps(run_one(args.one, args.path)))
         return
@@ -162,13 +269,21 @@ def main() -> None:
         build(args.path)
     size_mb = args.path.stat().st_size / 1e6
     rows = []
+    trees = [str(Path(t).resolve()) for t in args.trees.split(",")]
     for method in args.methods.split(","):
-        runs = []
+        runs: dict[str, list[dict]] = {t: [] for t in trees}
+        path = with_data_crc(args.path) if method == "pospp_data_crc" else args.path
         for _ in range(args.repeat):
-            out = subprocess.run([sys.executable, __file__, "--path", str(args.path), "--one",
-                                  method], check=True, capture_output=True, text=True)
-            runs.append(json.loads(out.stdout))
-        rows.append(min(runs, key=lambda r: r["cpu_s"]))
+            for tree in trees:
+                out = subprocess.run([sys.executable, __file__, "--path", str(path), "--one",
+                                      method, "--tree", tree],
+                                     check=True, capture_output=True, text=True)
+                runs[tree].append(json.loads(out.stdout))
+        for tree in trees:
+            best = min(runs[tree], key=lambda r: r["cpu_s"])
+            if len(trees) > 1:
+                best["method"] = f"{method} ({tree})"
+            rows.append(best)
     ref = rows[0]["cpu_s"]
     print(f"file: {args.path} ({size_mb:.1f} MB), best of {args.repeat}\n")
     print("| method | CPU [s] | wall [s] | CPU x first | messages/CPU-s | peak RSS [MB] | "
