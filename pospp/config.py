@@ -94,7 +94,7 @@ class InputConfig:
     start_s: float | None = _key(None, ge=0.0)
     """Process from this many seconds after the first IMU sample (None: from the start)."""
     end_s: float | None = _key(None, gt=0.0)
-    max_chunk_mib: float = _key(256.0, gt=0.0, le=65536.0)
+    max_chunk_mib: float = _key(256.0, ge=1.0, le=65536.0)
     """Largest decompressed MCAP chunk the reader accepts [MiB] (bounds its memory)."""
     events_topic: str = _key("/events", max_len=256)
     """Trigger events (``sensor_msgs/msg/TimeReference``, camera or lidar): the sensor's pose
