@@ -82,7 +82,7 @@ def test_grade_defaults_fill_only_what_is_omitted():
         ({"gnss": {"gate_probability": 1.0}}, "gnss.gate_probability: expected a value > 0, "
                                               "< 1"),
         ({"gnss": {"lever_arm_m": [0.0, 1e9, 0.0]}}, "gnss.lever_arm_m[1]: expected a value"),
-        ({"input": {"max_chunk_mib": 0}}, "input.max_chunk_mib: expected a value > 0"),
+        ({"input": {"max_chunk_mib": 0}}, "input.max_chunk_mib: expected a value >= 1"),
         ({"input": {"start_s": 100.0, "end_s": 50.0}}, "input.end_s: expected a value > "
                                                        "input.start_s"),
         ({"input": {"imu_topic": ""}}, "input.imu_topic: expected a string of 1 to 256"),
