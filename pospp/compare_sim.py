@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from pospp import pipeline
-from pospp.config import PipelineConfig, config_from_dict
-from pospp.io import mcap_reader, parquet_tables, report_files, run_folder
+from pospp.config import PipelineConfig
+from pospp.io import mcap_reader, parquet_tables, report_files
 from pospp.nav import filter as nav_filter
 from pospp.sim.api import simulate_along
 from pospp.sim.gnss import GnssModel
@@ -220,14 +220,7 @@ def compare_sim_run(run_dir: str | Path, *, out: str | Path | None = None,
 
     ``out`` is the model file (default RUN_DIR/sim_model.toml). The report is re-rendered.
     """
-    run = run_folder.require_run_folder(run_dir)
-    meta = parquet_tables.read_metadata(run / "summary.parquet")
-    path = Path(meta["input_file"])
-    if not path.is_file():
-        raise FileNotFoundError(f"{run}: the run's input {path} is no longer there")
-    if parquet_tables.sha256_file(path) != meta["input_sha256"]:
-        raise ValueError(f"{run}: the run's input {path} changed since the run (SHA-256)")
-    config = config_from_dict(meta["config"], source=f"{run}/summary.parquet")
+    run, meta, path, config = pipeline.reopen_run(run_dir)
     log = pipeline.ingest(path, config)
     comp, tpl = compare_log(log, config, max_steps=max_steps)
     out_meta = {k: meta[k] for k in ("input_file", "input_sha256", "config")}

@@ -555,12 +555,11 @@ def observability_study(out_dir: str | Path, *, speed_mps: float = 60.0,
     return table
 
 
-def diagnose_run(run_dir: str | Path, *, progress: ProgressFn | None = None) -> Diagnosis:
-    """``pospp diagnose RUN_DIR``: the discrepancy workflow on a finished run.
+def reopen_run(run_dir: str | Path) -> tuple[Path, dict[str, Any], Path, PipelineConfig]:
+    """A finished run's folder, summary metadata, input file and configuration.
 
-    Re-reads the run's input and configuration (from the summary's metadata), re-runs A and
-    the calibration stage (deterministic, so it reproduces the run's B-minus-A curves), runs
-    the workflow, and writes diagnosis.parquet and the report.
+    For the commands that work on a finished run (``pospp diagnose``, ``pospp compare-sim``):
+    the folder must be a pospp run, and its input must still be there, unchanged (SHA-256).
     """
     run = run_folder.require_run_folder(run_dir)
     meta = parquet_tables.read_metadata(run / "summary.parquet")
@@ -569,7 +568,17 @@ def diagnose_run(run_dir: str | Path, *, progress: ProgressFn | None = None) -> 
         raise FileNotFoundError(f"{run}: the run's input {path} is no longer there")
     if parquet_tables.sha256_file(path) != meta["input_sha256"]:
         raise ValueError(f"{run}: the run's input {path} changed since the run (SHA-256)")
-    config = config_from_dict(meta["config"], source=f"{run}/summary.parquet")
+    return run, meta, path, config_from_dict(meta["config"], source=f"{run}/summary.parquet")
+
+
+def diagnose_run(run_dir: str | Path, *, progress: ProgressFn | None = None) -> Diagnosis:
+    """``pospp diagnose RUN_DIR``: the discrepancy workflow on a finished run.
+
+    Re-reads the run's input and configuration (from the summary's metadata), re-runs A and
+    the calibration stage (deterministic, so it reproduces the run's B-minus-A curves), runs
+    the workflow, and writes diagnosis.parquet and the report.
+    """
+    run, meta, path, config = reopen_run(run_dir)
     book = _Progress(progress)
     book.stage("ingest")
     log = ingest(path, config)
