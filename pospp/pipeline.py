@@ -414,9 +414,11 @@ def quality_control(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     report = quality_checks(log, nav, calib_run, config, lever_estimate=lever,
                             c_bs=sensor_to_body_dcm(cin.sensor_frame, cin.mounting_rpy_deg))
     if book is not None:
-        for c in report.failed:
+        for c in report.failed:  # calibration fails below its threshold, the others above
+            op = "<" if c.value < c.threshold else ">"
+            unit = "" if c.unit == "1" else f" {c.unit}"
             book.note("error" if c.severity == "failed" else "warning", "qc",
-                      f"QC check {c.name} failed ({c.value:.4g} > {c.threshold:.4g} {c.unit})"
+                      f"QC check {c.name} failed ({c.value:.4g} {op} {c.threshold:.4g}{unit})"
                       + (f": {c.suggestion}" if c.suggestion else ""))
     return report
 
