@@ -562,11 +562,18 @@ def data_complete(complete: bool, n_error_issues: int, first_error: str, duratio
 
 
 def calibration_quality(calibrated: bool, reason: str, n_pairs_used: int) -> Check:
-    """A calibration was produced from at least one admissible pair (else the run is partial)."""
+    """A calibration was produced from at least one admissible pair (else the run is partial).
+
+    The suggestion is the calibration stage's reason without its "no calibration: " prefix:
+    every place that shows it already names the check ("calibration (partial) 0 < 1: only one
+    leg ..."), and the reason itself is shown beside "calibration: none" in the report.
+    """
+    why = reason.strip()
+    while why.lower().startswith("no calibration:"):
+        why = why[len("no calibration:"):].strip()
     return Check("calibration", "calibrate", "leg pairs used in the calibration",
                  float(n_pairs_used), 1.0, "1", bool(calibrated), "partial",
-                 "" if calibrated else reason if reason.startswith("no calibration")
-                 else f"no calibration: {reason}")
+                 "" if calibrated else why or "no calibration was produced")
 
 
 COMPENSATION_MARGIN_MPS = 0.01

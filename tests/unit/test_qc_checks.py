@@ -234,6 +234,11 @@ def test_completeness_calibration_compensation_and_config():
     assert not short.passed and "1316.0 s of the 1634.0 s" in short.suggestion
     nocal = qc.calibration_quality(False, "no calibration: no pair passed", 0)
     assert not nocal.passed and nocal.severity == "partial"
+    # the check's name already says calibration: the reason is not prefixed twice (issue 13)
+    assert nocal.suggestion == "no pair passed"
+    twice = qc.calibration_quality(False, "no calibration: no calibration: only one leg", 0)
+    assert twice.suggestion == "only one leg"
+    assert "no calibration" not in QualityReport((twice,)).suggestions
     assert not qc.compensation_gain(0.1, 0.5).passed and qc.compensation_gain(2.3, 0.3).passed
     cfg = PipelineConfig()
     assert config_problems(cfg) == []
