@@ -149,7 +149,8 @@ FAULTS = {
 
 
 def detection(seeds: range, grade: str = "paper_flight") -> dict[str, list[str]]:
-    """Failed checks per fault and seed on a clean flight of ``grade`` (1 m GNSS, 1 Hz)."""
+    """Failed checks per fault and seed on a clean flight of ``grade`` (0.3 m / 0.1 m/s GNSS,
+    1 Hz, 150 s static start)."""
     out: dict[str, list[str]] = {k: [] for k in FAULTS}
     for i in seeds:
         c = {"grade": grade, "noise": GNSS_NOISE[1], "rate_hz": 1.0, "static_s": 150.0,
