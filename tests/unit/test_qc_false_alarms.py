@@ -4,7 +4,8 @@
 with 0.02 m / 0.01 m/s to 1 m / 0.5 m/s noise, with and without a static start, the lever arm
 configured right; tests/benchmarks/bench_qc.py builds them). Under docs/qc.md's levels
 (<= 1 % per check, <= 5 % for the union per run) a union count above 2 of 40 runs would have
-probability < 0.14 at a true 5 % and < 0.01 at 1 %; 0 of 39 was measured. Flights that
+probability < 0.14 at a true 5 % and < 0.01 at 1 %; the first 40 give 0 (the benchmark's
+100 give 2, both lever_arm: docs/qc.md). Flights that
 algorithm A refuses (in-motion alignment with 1 m GNSS noise) are no QC verdict and are
 counted apart; at least 30 must be evaluated.
 """
