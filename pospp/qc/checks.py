@@ -198,7 +198,7 @@ EARTH_RATE_MIN_SEGMENT_S = 10.0
 def static_segments(static: ArrayLike) -> list[tuple[int, int]]:
     """Contiguous runs of True in a (N,) bool mask as [start, stop) sample index pairs."""
     st = np.asarray(static, dtype=bool)
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], st.view(np.int8), [0]])))
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], st.astype(np.int8), [0]])))
     return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
 
 
