@@ -55,7 +55,8 @@ class FlightOutcome:
     file: str
     sha256: str
     status: str
-    """"done", "partial", "failed" or "skipped"."""
+    """"done" (run status ok), "partial", "degraded", "failed" (run status or an error) or
+    "skipped" (done before; ``qc_failed_checks`` then kept from its summary)."""
     duration_s: float
     error: str | None
     n_legs: int | None = None

@@ -154,12 +154,16 @@ def gravity_direction(f_b_mps2: ArrayLike, static: ArrayLike | None, c_bs: Array
 
 
 def gravity_magnitude(f_b_mps2: ArrayLike, static: ArrayLike | None, lat_rad: float,
-                      height_m: float) -> Check:
-    """| |mean f_b| - normal gravity(lat, h) | over static windows (else median |f| of the log).
+                      height_m: float, *, window_n: int = 1) -> Check:
+    """| |mean f_b| - normal gravity(lat, h) | over static windows (else over the whole log).
 
     Catches accelerations in the wrong unit or scale that slipped past the reader's range
     checks. Threshold 0.2 m/s^2 static (a 20 mg bias, beyond any grade pospp supports), 1 m/s^2
-    for the median over a dynamic log (turns and vibration raise |f|).
+    for a dynamic log (turns raise |f|), where the statistic is the median over consecutive
+    blocks of ``window_n`` samples of |block mean of f|: a block of about 1 s averages out
+    engine and propeller vibration (zero mean, tens of Hz), whose RMS would otherwise add to
+    the norm of every sample (6 m/s^2 per axis on a MEMS airframe lifts the median |f| of the
+    samples by several m/s^2).
     """
     f = np.asarray(f_b_mps2, dtype=float)
     if f.shape[0] == 0:
@@ -170,8 +174,11 @@ def gravity_magnitude(f_b_mps2: ArrayLike, static: ArrayLike | None, lat_rad: fl
         mag = float(np.linalg.norm(f[st].mean(axis=0)))
         thr, where = GRAVITY_MAGNITUDE_STATIC_MAX_MPS2, "static windows"
     else:
-        mag = float(np.median(np.linalg.norm(f, axis=1)))
-        thr, where = GRAVITY_MAGNITUDE_DYNAMIC_MAX_MPS2, "median over the log"
+        m = max(1, min(int(window_n), f.shape[0]))
+        n = f.shape[0] // m
+        blocks = f[: n * m].reshape(n, m, 3).mean(axis=1)
+        mag = float(np.median(np.linalg.norm(blocks, axis=1)))
+        thr, where = GRAVITY_MAGNITUDE_DYNAMIC_MAX_MPS2, f"median over {m}-sample blocks"
     dev = abs(mag - g)
     passed = dev <= thr
     sug = "" if passed else (f"|f| is {mag:.3f} m/s^2 where gravity is {g:.3f} m/s^2: check the "
@@ -184,6 +191,15 @@ def gravity_magnitude(f_b_mps2: ArrayLike, static: ArrayLike | None, lat_rad: fl
 EARTH_RATE_SIGMAS = 5.0
 """Threshold of the Earth-rate check in predicted sigmas (bias and ARW over the static time)."""
 EARTH_RATE_MIN_STATIC_S = 60.0
+EARTH_RATE_MIN_SEGMENT_S = 10.0
+"""Static stretches shorter than this are left out (a lull in motion, not a vehicle at rest)."""
+
+
+def static_segments(static: ArrayLike) -> list[tuple[int, int]]:
+    """Contiguous runs of True in a (N,) bool mask as [start, stop) sample index pairs."""
+    st = np.asarray(static, dtype=bool)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], st.astype(np.int8), [0]])))
+    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
 
 
 def earth_rate(w_b_radps: ArrayLike, f_b_mps2: ArrayLike, static: ArrayLike | None,
@@ -194,40 +210,54 @@ def earth_rate(w_b_radps: ArrayLike, f_b_mps2: ArrayLike, static: ArrayLike | No
     At rest w_ib_b = C_bn w_ie_n with w_ie_n = Omega [cos L, 0, -sin L] (NED). Heading is not
     known here, so two components are compared: the vertical one (along the measured down
     axis d_b = -f/|f|: w . d_b = -Omega sin L) and the horizontal magnitude (Omega cos L).
-    Statistic: the larger of the two misfits [deg/h]. Threshold: EARTH_RATE_SIGMAS times the
-    predicted sigma sqrt(sigma_b^2 + ARW^2 / T) (turn-on bias of the grade, T the static
-    time). Not applicable when there is less than 60 s at rest or the grade cannot see the
-    Earth rate (threshold above half of it).
+    They are formed per contiguous static stretch j of at least EARTH_RATE_MIN_SEGMENT_S
+    (each stretch has its own attitude: a 10 min start at one heading and a 5 min stop at
+    another must not be averaged as vectors, which shrinks the horizontal part by
+    cos(dpsi / 2)), and the signed misfits are averaged with the stretch durations T_j as
+    weights: e_d = sum T_j (w_d,j + Omega sin L) / T, e_h = sum T_j (|w_h,j| - Omega cos L) / T.
+    Statistic: max(|e_d|, |e_h|) [deg/h]. Each e is a weighted mean of bias projections of
+    variance <= sigma_b^2 plus white noise of variance ARW^2 / T, so the threshold is
+    EARTH_RATE_SIGMAS sqrt(sigma_b^2 + ARW^2 / T) (sigma_b the grade's turn-on and
+    Gauss-Markov bias sigmas combined, T the static time used). Not applicable when less than
+    EARTH_RATE_MIN_STATIC_S is at rest or the grade cannot see the Earth rate (threshold above
+    half of it).
     """
     st = None if static is None else np.asarray(static, dtype=bool)
     w = np.asarray(w_b_radps, dtype=float)
     f = np.asarray(f_b_mps2, dtype=float)
-    n_st = 0 if st is None else int(st.sum())
+    min_n = max(1, int(math.ceil(EARTH_RATE_MIN_SEGMENT_S / dt_s))) if dt_s > 0 else 1
+    segs = [] if st is None else [(a, b) for a, b in static_segments(st) if b - a >= min_n]
+    n_st = sum(b - a for a, b in segs)
     t_static = n_st * dt_s
     if t_static < EARTH_RATE_MIN_STATIC_S:
-        return _na("earth_rate", "ingest", f"{t_static:.0f} s at rest (< "
-                   f"{EARTH_RATE_MIN_STATIC_S:.0f} s)", "deg/h")
+        return _na("earth_rate", "ingest", f"{t_static:.0f} s at rest in stretches of >= "
+                   f"{EARTH_RATE_MIN_SEGMENT_S:.0f} s (< {EARTH_RATE_MIN_STATIC_S:.0f} s)",
+                   "deg/h")
     sigma = math.hypot(gyro_bias_sigma_radps, gyro_arw_radpsqrts / math.sqrt(t_static))
     thr = EARTH_RATE_SIGMAS * sigma
     om = earth.EARTH_RATE_RADPS
     if thr > 0.5 * om:
         return _na("earth_rate", "ingest", f"the IMU grade cannot see it ({thr / _DPH:.1f} "
                    f"deg/h threshold, Earth rate {om / _DPH:.1f} deg/h)", "deg/h", thr / _DPH)
-    wm = w[st].mean(axis=0)
-    fm = f[st].mean(axis=0)
-    d_b = -fm / np.linalg.norm(fm)
-    w_d = float(wm @ d_b)
-    w_h = float(np.linalg.norm(wm - w_d * d_b))
+    wd_h = np.zeros((len(segs), 2))
+    for j, (a, b) in enumerate(segs):
+        wm = w[a:b].mean(axis=0)
+        fm = f[a:b].mean(axis=0)
+        d_b = -fm / np.linalg.norm(fm)
+        wd_h[j, 0] = float(wm @ d_b)
+        wd_h[j, 1] = float(np.linalg.norm(wm - wd_h[j, 0] * d_b))
+    weight = np.array([b - a for a, b in segs], dtype=float) / n_st
+    w_d, w_h = (float(x) for x in weight @ wd_h)
     mis = max(abs(w_d + om * math.sin(lat_rad)), abs(w_h - om * math.cos(lat_rad)))
-    passed = mis <= thr
+    passed = bool(mis <= thr)
     sug = "" if passed else (
         f"at rest the gyros read {w_d / _DPH:+.1f} deg/h down and {w_h / _DPH:.1f} deg/h "
         f"horizontal where the Earth rate gives {-om * math.sin(lat_rad) / _DPH:+.1f} and "
         f"{om * math.cos(lat_rad) / _DPH:.1f}: check the gyro unit, axes and the IMU grade")
     return Check("earth_rate", "ingest",
-                 f"misfit of the mean gyro output at rest ({t_static:.0f} s) to the Earth rate "
-                 "(vertical component, horizontal magnitude)", mis / _DPH, thr / _DPH, "deg/h",
-                 passed, "degraded", sug)
+                 f"misfit of the mean gyro output at rest ({t_static:.0f} s in {len(segs)} "
+                 "stretch(es)) to the Earth rate (vertical component, horizontal magnitude)",
+                 mis / _DPH, thr / _DPH, "deg/h", passed, "degraded", sug)
 
 
 # =============================================================================================
@@ -532,11 +562,18 @@ def data_complete(complete: bool, n_error_issues: int, first_error: str, duratio
 
 
 def calibration_quality(calibrated: bool, reason: str, n_pairs_used: int) -> Check:
-    """A calibration was produced from at least one admissible pair (else the run is partial)."""
+    """A calibration was produced from at least one admissible pair (else the run is partial).
+
+    The suggestion is the calibration stage's reason without its "no calibration: " prefix:
+    every place that shows it already names the check ("calibration (partial) 0 < 1: only one
+    leg ..."), and the reason itself is shown beside "calibration: none" in the report.
+    """
+    why = reason.strip()
+    while why.lower().startswith("no calibration:"):
+        why = why[len("no calibration:"):].strip()
     return Check("calibration", "calibrate", "leg pairs used in the calibration",
                  float(n_pairs_used), 1.0, "1", bool(calibrated), "partial",
-                 "" if calibrated else reason if reason.startswith("no calibration")
-                 else f"no calibration: {reason}")
+                 "" if calibrated else why or "no calibration was produced")
 
 
 COMPENSATION_MARGIN_MPS = 0.01

@@ -82,10 +82,12 @@ def config_problems(config: Any) -> list[str]:
 def _static_mask(t: NDArray, w: NDArray, f: NDArray, vel_t: NDArray, vel: NDArray) -> NDArray:
     ends, is_static = static_windows(t, w, f, gnss_vel_t_s=vel_t if len(vel_t) else None,
                                      gnss_v_n_mps=vel if len(vel_t) else None)
+    # windows are consecutive runs of samples, window j ending at ends[j]; samples after the
+    # last whole window belong to none
+    j = np.searchsorted(ends, t, side="left")
+    inside = j < ends.shape[0]
     mask = np.zeros(t.shape[0], dtype=bool)
-    if ends.shape[0]:
-        m = t.shape[0] // ends.shape[0]
-        mask[: m * ends.shape[0]] = np.repeat(is_static, m)
+    mask[inside] = is_static[j[inside]]
     return mask
 
 
@@ -142,11 +144,12 @@ def quality_checks(log: Any, nav: Any, calib_run: Any, config: Any, *, c_bs: Any
     out.append(qc.gravity_direction(f, static, c_bs, cin.sensor_frame))
     lat0 = float(log.fix.lat_rad[0]) if len(log.fix.time_ns) else nav.alignment.lat_rad
     h0 = float(log.fix.height_m[0]) if len(log.fix.time_ns) else nav.alignment.height_m
-    out.append(qc.gravity_magnitude(f, static, lat0, h0))
+    dt = float(np.median(np.diff(t))) if t.shape[0] > 1 else 0.0
+    out.append(qc.gravity_magnitude(f, static, lat0, h0,
+                                    window_n=int(round(1.0 / dt)) if dt > 0 else 1))
     noise = tuning_from_config(config.imu).noise()
     sb = math.hypot(noise.gyro_turn_on_sigma_radps, noise.gyro_gm_sigma_radps) \
         or noise.gyro_bias_sigma_radps
-    dt = float(np.median(np.diff(t))) if t.shape[0] > 1 else 0.0
     out.append(qc.earth_rate(w, f, static, dt, lat0, gyro_bias_sigma_radps=sb,
                              gyro_arw_radpsqrts=noise.gyro_arw_radpsqrts))
 

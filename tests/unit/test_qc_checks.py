@@ -88,6 +88,44 @@ def test_earth_rate_at_rest_and_a_wrong_unit():
     assert short.passed and "at rest" in short.statistic
 
 
+def test_earth_rate_over_a_start_and_a_stop_at_other_headings():
+    """The flight preset's 10 min start at heading 60 deg and 5 min stop at another heading:
+    the vector mean of the two shrinks the horizontal Earth rate by cos(dpsi / 2) (the
+    6.4 deg/h false alarm); per stretch it is the 1 deg/h biases again."""
+    rng = np.random.default_rng(5)
+    w1, f1, dt = _static_imu(rng, n=60_000, heading=math.radians(60.0))
+    moving = np.zeros((3000, 3))  # a flight between, not at rest
+    w2, f2, _ = _static_imu(rng, n=30_000, heading=math.radians(60.0 + 150.0))
+    w = np.vstack([w1, moving, w2])
+    f = np.vstack([f1, moving + f1[:3000], f2])
+    static = np.r_[np.ones(60_000, bool), np.zeros(3000, bool), np.ones(30_000, bool)]
+    kw = {"gyro_bias_sigma_radps": math.hypot(1.0, 0.5) * DPH,
+          "gyro_arw_radpsqrts": math.radians(0.01) / 60.0}
+    c = qc.earth_rate(w, f, static, dt, LAT, **kw)
+    assert c.passed and c.value < 1.8 and "2 stretch" in c.statistic
+    # the old statistic, one mean over both: |w_h| = 0.41 Omega cos L, a 7 deg/h miss
+    wm = w[static].mean(axis=0)
+    om_h = earth.EARTH_RATE_RADPS * math.cos(LAT) / DPH
+    assert om_h - np.hypot(wm[0], wm[1]) / DPH > c.threshold
+    # a 3x scale error still fails per stretch; stretches under 10 s are left out
+    assert not qc.earth_rate(3.0 * w, f, static, dt, LAT, **kw).passed
+    flicker = static & (np.arange(len(w)) % 500 < 400)  # 4 s stretches
+    assert "stretches" in qc.earth_rate(w, f, flicker, dt, LAT, **kw).statistic
+
+
+def test_gravity_magnitude_of_a_vibrating_log_without_rest():
+    """6 m/s^2 RMS per axis of 50 Hz vibration (the simulator's MEMS airframe) averages out
+    over 1 s blocks; the samples' median |f| is several m/s^2 above gravity."""
+    rng = np.random.default_rng(6)
+    _, f, dt = _static_imu(rng, n=20_000)
+    t = np.arange(len(f)) * dt
+    phase = rng.uniform(0.0, 2.0 * math.pi, 3)
+    f = f + 6.0 * math.sqrt(2.0) * np.sin(2.0 * math.pi * 50.3 * t[:, None] + phase)
+    assert not qc.gravity_magnitude(f, None, LAT, 400.0).passed  # per sample: > 1 m/s^2
+    ok = qc.gravity_magnitude(f, None, LAT, 400.0, window_n=int(round(1.0 / dt)))
+    assert ok.passed and ok.value < 0.1
+
+
 def test_nis_band_passes_chi_square_and_fails_a_mistuned_filter():
     rng = np.random.default_rng(4)
     t = np.arange(3000.0)
@@ -196,6 +234,11 @@ def test_completeness_calibration_compensation_and_config():
     assert not short.passed and "1316.0 s of the 1634.0 s" in short.suggestion
     nocal = qc.calibration_quality(False, "no calibration: no pair passed", 0)
     assert not nocal.passed and nocal.severity == "partial"
+    # the check's name already says calibration: the reason is not prefixed twice (issue 13)
+    assert nocal.suggestion == "no pair passed"
+    twice = qc.calibration_quality(False, "no calibration: no calibration: only one leg", 0)
+    assert twice.suggestion == "only one leg"
+    assert "no calibration" not in QualityReport((twice,)).suggestions
     assert not qc.compensation_gain(0.1, 0.5).passed and qc.compensation_gain(2.3, 0.3).passed
     cfg = PipelineConfig()
     assert config_problems(cfg) == []
