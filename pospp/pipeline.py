@@ -45,6 +45,7 @@ from pospp.nav import events as sensor_events
 from pospp.nav import filter as nav_filter
 from pospp.nav import tuning as nav_tuning
 from pospp.nav.strapdown import increments_from_rates
+from pospp.qc.checks import comparison_text
 from pospp.qc.stage import QualityReport, qc_columns, quality_checks, worst_status
 from pospp.report import figures
 from pospp.report.html import render_report
@@ -448,11 +449,10 @@ def quality_control(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     report = quality_checks(log, nav, calib_run, config, lever_estimate=lever,
                             c_bs=sensor_to_body_dcm(cin.sensor_frame, cin.mounting_rpy_deg))
     if book is not None:
-        for c in report.failed:  # calibration fails below its threshold, the others above
-            op = "<" if c.value < c.threshold else ">"
-            unit = "" if c.unit == "1" else f" {c.unit}"
+        for c in report.failed:
             book.note("error" if c.severity == "failed" else "warning", "qc",
-                      f"QC check {c.name} failed ({c.value:.4g} {op} {c.threshold:.4g}{unit})"
+                      f"QC check {c.name} failed "
+                      f"({comparison_text(c.value, c.threshold, c.unit)})"
                       + (f": {c.suggestion}" if c.suggestion else ""))
     return report
 

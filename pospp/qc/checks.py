@@ -67,6 +67,15 @@ class Check:
     time_ns_offset: int | None = None
 
 
+def comparison_text(value: float, threshold: float, unit: str) -> str:
+    """``"4985 > 30 m"``: a check's value against its threshold, for messages and the console.
+
+    Most checks fail above their threshold; a few (``calibration``: pairs used) below it.
+    """
+    op = "<" if value < threshold else ">"
+    return f"{value:.4g} {op} {threshold:.4g}" + ("" if unit in ("", "1") else f" {unit}")
+
+
 def run_status(checks: tuple[Check, ...] | list[Check]) -> str:
     """The worst severity among the failed checks ("ok" when all passed)."""
     worst = 0

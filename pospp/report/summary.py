@@ -18,6 +18,7 @@ import numpy as np
 import pandas as pd
 
 from pospp.outputs import not_observable
+from pospp.qc.checks import comparison_text
 
 UNIT_TEXT = {"deg_per_h": "deg/h", "arcsec": "arcsec", "m_per_s": "m/s", "mps": "m/s"}
 """Unit names of the tables -> what a reader expects on a label."""
@@ -318,6 +319,6 @@ def qc_lines(qc: pd.DataFrame | None) -> list[str]:
     lines = [f"  quality checks FAILED: {', '.join(failed.check)} (qc.parquet)"]
     for row in failed.itertuples():
         tail = f": {row.suggestion}" if row.suggestion else ""
-        lines.append(f"    {row.check} ({row.severity}) {_fmt(row.value, '.4g')} > "
-                     f"{_fmt(row.threshold, '.4g')} {row.unit}{tail}")
+        lines.append(f"    {row.check} ({row.severity}) "
+                     f"{comparison_text(row.value, row.threshold, row.unit)}{tail}")
     return lines
