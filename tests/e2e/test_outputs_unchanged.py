@@ -1,0 +1,95 @@
+"""The sample run's tables stay the same through speed work (issue 18).
+
+Hashes of every table of the bundled sample run, recorded from main before the speed changes
+(commit 3a6fca8). Speed work must not move a number; a change that is meant to change the
+results (a method fix) regenerates the hashes on purpose, with::
+
+    python -m pospp.cli run sample_data/sample_flight.mcap -p pipelines/sample.toml -o /tmp/s --force
+    python tests/e2e/test_outputs_unchanged.py /tmp/s
+
+and pastes the printed dictionary over ``EXPECTED`` below (say why in the commit message).
+
+What is hashed: each column's values, floats rounded to 10 significant digits (the runs are
+bitwise deterministic on one machine; the rounding absorbs last-bit differences of another
+CPU's libm). Left out: the summary's timing columns (``wall_time_s``, ``stage_*_s``) and its
+``input_file`` (the path the run was given), and the report (a figure is not a table).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+SAMPLE = REPO / "sample_data" / "sample_flight.mcap"
+SAMPLE_PIPELINE = REPO / "pipelines" / "sample.toml"
+TABLES = ("trajectory", "biases", "legs", "pairs", "calibration", "leg_errors", "qc",
+          "diagnosis", "diagnosis_curves", "messages", "summary")
+SIGNIFICANT_DIGITS = 10
+
+
+def _column_bytes(values: pd.Series) -> bytes:
+    if pd.api.types.is_float_dtype(values.dtype):
+        x = values.to_numpy(dtype=float)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            scale = np.where(np.isfinite(x) & (x != 0),
+                             10.0 ** (SIGNIFICANT_DIGITS - 1
+                                      - np.floor(np.log10(np.abs(np.where(x == 0, 1, x))))),
+                             1.0)
+            rounded = np.where(np.isfinite(x), np.round(x * scale) / scale, x)
+        return np.array([repr(float(v)) for v in rounded]).astype("U").tobytes()
+    return repr(values.tolist()).encode("utf-8")
+
+
+def table_hash(path: Path, name: str) -> str:
+    """sha256 over column names and values of one table (see the module docstring)."""
+    table = pd.read_parquet(path)
+    if name == "summary":
+        table = table.drop(columns=[c for c in table.columns if c == "wall_time_s"
+                                    or c == "input_file"
+                                    or (c.startswith("stage_") and c.endswith("_s"))])
+    digest = hashlib.sha256()
+    for column in table.columns:
+        digest.update(column.encode("utf-8"))
+        digest.update(_column_bytes(table[column]))
+    return digest.hexdigest()[:16]
+
+
+def run_hashes(run_dir: Path) -> dict[str, str]:
+    return {name: table_hash(run_dir / f"{name}.parquet", name) for name in TABLES
+            if (run_dir / f"{name}.parquet").is_file()}
+
+
+EXPECTED: dict[str, str] = {
+    "trajectory": "77d577507275546d", "biases": "e58443785ee33d51", "legs": "b1a3f06a074d2366",
+    "pairs": "3834678c775431a7", "calibration": "5835762fc2fa78e4",
+    "leg_errors": "33fd0c4842f86a50", "qc": "ad7307d0d5fb7054", "diagnosis": "04c8782be35aae0f",
+    "diagnosis_curves": "b219d94fd5ea4c06", "messages": "4bc0a2dc769abe91",
+    "summary": "a12325e1b7270737",
+}
+
+
+@pytest.mark.slow
+def test_sample_run_tables_are_unchanged(tmp_path):
+    from click.testing import CliRunner
+
+    from pospp.cli import main
+
+    out = tmp_path / "sample"
+    res = CliRunner().invoke(main, ["run", str(SAMPLE), "-p", str(SAMPLE_PIPELINE),
+                                    "-o", str(out)], catch_exceptions=False)
+    assert res.exit_code == 0, res.output
+    got = run_hashes(out)
+    changed = sorted(k for k in EXPECTED if got.get(k) != EXPECTED[k])
+    assert not changed, (f"tables changed: {changed} (if intended, regenerate: see the module "
+                         f"docstring); now {got}")
+    assert set(got) == set(EXPECTED)
+
+
+if __name__ == "__main__":
+    print(run_hashes(Path(sys.argv[1])))
