@@ -53,7 +53,8 @@ from pospp.report.html import render_report
 ProgressFn = Callable[[str, float], None]
 """Progress callback: (stage name, fraction of the whole run done in [0, 1])."""
 
-STAGES = ("ingest", "navigate", "calibrate", "compensate", "diagnose", "qc", "write")
+STAGES = ("ingest", "navigate", "calibrate", "compensate", "diagnose", "qc", "write",
+          "report")
 
 
 @dataclass(frozen=True)
@@ -170,14 +171,27 @@ def navigate(
 
 
 class _Progress:
-    """Stage bookkeeping: progress callback, elapsed time, messages."""
+    """Stage bookkeeping: progress callback, elapsed time, per-stage wall time, messages.
+
+    A stage's wall time runs from its :meth:`stage` call to the next one; the time before the
+    first stage (checking the run folder, hashing the input) counts to the first stage.
+    """
 
     def __init__(self, progress: ProgressFn | None) -> None:
         self._progress = progress
         self.messages: list[dict[str, Any]] = []
         self._t0 = time.perf_counter()
+        self._current: str | None = None
+        self._current_t0 = self._t0
+        self._stage_s: dict[str, float] = {}
 
     def stage(self, name: str) -> None:
+        now = time.perf_counter()
+        if self._current is not None:
+            self._stage_s[self._current] = (self._stage_s.get(self._current, 0.0)
+                                            + now - self._current_t0)
+            self._current_t0 = now
+        self._current = name
         if self._progress is not None:
             self._progress(name, STAGES.index(name) / len(STAGES))
 
@@ -193,6 +207,16 @@ class _Progress:
     def rows(self) -> list[dict[str, Any]]:
         """The messages, their text encodable as UTF-8 (file names that do not decode)."""
         return [{**m, "text": run_folder.display_text(str(m["text"]))} for m in self.messages]
+
+    def timings(self) -> dict[str, float]:
+        """Summary columns ``wall_time_s`` and ``stage_<name>_s`` [s] up to now (the current
+        stage counted until now): wall time since the run started, and each stage begun."""
+        now = time.perf_counter()
+        times = dict(self._stage_s)
+        if self._current is not None:
+            times[self._current] = times.get(self._current, 0.0) + now - self._current_t0
+        return {"wall_time_s": now - self._t0,
+                **{f"stage_{name}_s": times[name] for name in STAGES if name in times}}
 
     @property
     def elapsed_s(self) -> float:
@@ -237,9 +261,9 @@ def run(
     pospp.io.errors.IngestError, ValueError, ...
         Only after the failed run (messages and summary recording the failure) is swapped in.
     """
+    book = _Progress(progress)  # the run's clock starts here: wall_time_s is all of run()
     target = run_folder.check_target(out_dir, input_file=mcap_path, force=force)
     sha = parquet_tables.sha256_file(mcap_path) if Path(mcap_path).is_file() else ""
-    book = _Progress(progress)
     stage = run_folder.new_staging(target)
     try:
         outcome = _run_stages(mcap_path, sha, config, stage, book)
@@ -276,7 +300,7 @@ def _write_failed(mcap_path: str | Path, sha: str, config: PipelineConfig, out: 
     meta = {"input_file": run_folder.display_path(mcap_path), "input_sha256": sha,
             "config": config.to_dict()}
     summary = {"input_file": meta["input_file"], "input_sha256": sha, "status": "failed",
-               "wall_time_s": book.elapsed_s}
+               **book.timings()}
     parquet_tables.write_table(out / "messages.parquet", outputs.messages_table(book.rows()),
                                "messages", metadata=meta)
     parquet_tables.write_table(out / "summary.parquet", summary, "summary", metadata=meta)
@@ -296,13 +320,21 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
     def write(name: str, data: Any, schema: str | None = None) -> None:
         parquet_tables.write_table(out / f"{name}.parquet", data, schema or name, metadata=meta)
 
-    def finish(status: str) -> RunOutcome:
+    def finish(status: str, *, report: bool = False) -> RunOutcome:
         summary["status"] = status
-        summary["wall_time_s"] = book.elapsed_s
+        summary.update(book.timings())
         msgs = pd.DataFrame(book.rows(), columns=["severity", "stage", "time_ns", "text"])
         write("messages", outputs.messages_table(book.rows()))
         write("summary", summary)  # last: a folder with a summary is a finished run
-        return RunOutcome(out, status, summary, msgs, book.elapsed_s)
+        if report:
+            # the report is rendered from the tables (the summary among them), then the
+            # summary is written again with the report's time in it: its wall_time_s is the
+            # whole run's (only the marker and the swap, milliseconds, come after)
+            book.stage("report")
+            _render_report(out)
+            summary.update(book.timings())
+            write("summary", summary)
+        return RunOutcome(out, status, summary, msgs, summary["wall_time_s"])
 
     # --- ingest -------------------------------------------------------------------------------
     book.stage("ingest")
@@ -391,10 +423,7 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
             rate_hz=config.outputs.mcap_rate_hz, legs=tables.get("legs"),
             metadata={"input_file": meta["input_file"], "input_sha256": sha,
                       "status": status, "solution": best_name})
-    outcome = finish(status)
-    if config.outputs.report:
-        _render_report(out)
-    return outcome
+    return finish(status, report=config.outputs.report)
 
 
 def _event_poses(log: mcap_reader.FlightLog, solution: nav_filter.NavSolution, name: str,

@@ -177,7 +177,17 @@ TABLES: dict[str, list[Column]] = {
                     "end before compensation (RMS over legs)")),
         _opt(Column("dp_after_m", _F, "m", "same, after compensation")),
         _opt(Column("calibration_reason", _S, "", "'ok', or why no calibration was produced")),
-        _opt(Column("wall_time_s", _F, "s", "processing wall time of the run")),
+        _opt(Column("wall_time_s", _F, "s", "processing wall time of the run (pospp.pipeline.run "
+                    "from its call to the summary's last write, report included; not the "
+                    "interpreter's start-up and imports)")),
+        *[_opt(Column(f"stage_{name}_s", _F, "s", f"wall time of the {name} stage{extra}"))
+          for name, extra in (("ingest", " (with checking the run folder and hashing the "
+                                         "input)"),
+                              ("navigate", " (algorithm A)"), ("calibrate", ""),
+                              ("compensate", ""), ("diagnose", ""),
+                              ("qc", " (quality checks)"),
+                              ("write", " (tables and trajectory MCAP)"),
+                              ("report", " (report.html)"))],
         _opt(Column("qc_failed_checks", _S, "", "comma-joined names of the failed QC checks "
                     "(empty: all passed; qc.parquet)")),
         _opt(Column("qc_suggestions", _S, "", "'; '-joined 'check: what the data suggest' of "

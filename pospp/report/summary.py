@@ -229,6 +229,19 @@ def headline_lines(h: Headline) -> list[str]:
     return lines
 
 
+def timing_lines(summary: pd.DataFrame) -> list[str]:
+    """The run's wall time and each stage's (summary columns ``wall_time_s``,
+    ``stage_<name>_s``), one line; none for a summary without them."""
+    r = summary.iloc[0]
+    wall = r.get("wall_time_s")
+    if wall is None or pd.isna(wall):
+        return []
+    stages = [(c[len("stage_"):-len("_s")], r[c]) for c in summary.columns
+              if c.startswith("stage_") and c.endswith("_s") and pd.notna(r[c])]
+    parts = ", ".join(f"{name} {value:.1f}" for name, value in stages)
+    return [f"  time: {wall:.1f} s wall" + (f" ({parts} s)" if parts else "")]
+
+
 def summary_text(tables: Mapping[str, pd.DataFrame], *, verbose: bool = False) -> str:
     """The headline first, then legs, pairs and the calibration block (per-leg
     misalignments and the other formulations only when ``verbose``), then messages."""
@@ -245,6 +258,7 @@ def summary_text(tables: Mapping[str, pd.DataFrame], *, verbose: bool = False) -
                      f"{_fmt(r.get('imu_rate_hz'), '.0f')} Hz, "
                      f"{_fmt(r.get('n_gnss_fixes'), 'd')} GNSS fixes"
                      + (f", from {utc_text(t0)} UTC" if t0 is not None else ""))
+        lines.extend(timing_lines(s))
     legs = tables.get("legs")
     if legs is not None:
         t0 = run_start_ns(tables) or 0

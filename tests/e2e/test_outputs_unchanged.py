@@ -12,7 +12,8 @@ and pastes the printed dictionary over ``EXPECTED`` below (say why in the commit
 What is hashed: each column's values, floats rounded to 10 significant digits (the runs are
 bitwise deterministic on one machine; the rounding absorbs last-bit differences of another
 CPU's libm). Left out: the summary's timing columns (``wall_time_s``, ``stage_*_s``) and its
-``input_file`` (the path the run was given), and the report (a figure is not a table).
+``input_file`` (the path the run was given; in messages the path is cut to
+the file name), and the report (a figure is not a table).
 """
 
 from __future__ import annotations
@@ -53,6 +54,9 @@ def table_hash(path: Path, name: str) -> str:
         table = table.drop(columns=[c for c in table.columns if c == "wall_time_s"
                                     or c == "input_file"
                                     or (c.startswith("stage_") and c.endswith("_s"))])
+    if name == "messages":  # messages name the input as given: keep its file name only
+        table = table.assign(text=table.text.str.replace(r"\S*/(\S+\.mcap)", r"\1",
+                                                         regex=True))
     digest = hashlib.sha256()
     for column in table.columns:
         digest.update(column.encode("utf-8"))
@@ -69,26 +73,43 @@ EXPECTED: dict[str, str] = {
     "trajectory": "77d577507275546d", "biases": "e58443785ee33d51", "legs": "b1a3f06a074d2366",
     "pairs": "3834678c775431a7", "calibration": "5835762fc2fa78e4",
     "leg_errors": "33fd0c4842f86a50", "qc": "ad7307d0d5fb7054", "diagnosis": "04c8782be35aae0f",
-    "diagnosis_curves": "b219d94fd5ea4c06", "messages": "4bc0a2dc769abe91",
+    "diagnosis_curves": "b219d94fd5ea4c06", "messages": "e27b96c54ee94797",
     "summary": "a12325e1b7270737",
 }
 
 
 @pytest.mark.slow
-def test_sample_run_tables_are_unchanged(tmp_path):
-    from click.testing import CliRunner
+def test_sample_run_tables_are_unchanged_and_timed(tmp_path):
+    from pospp.config import load_config
+    from pospp.pipeline import STAGES, run
 
-    from pospp.cli import main
-
+    seen: list[tuple[str, float]] = []
     out = tmp_path / "sample"
-    res = CliRunner().invoke(main, ["run", str(SAMPLE), "-p", str(SAMPLE_PIPELINE),
-                                    "-o", str(out)], catch_exceptions=False)
-    assert res.exit_code == 0, res.output
+    outcome = run(SAMPLE, load_config(SAMPLE_PIPELINE), out,
+                  progress=lambda stage, fraction: seen.append((stage, fraction)))
+    assert outcome.status == "ok"
     got = run_hashes(out)
     changed = sorted(k for k in EXPECTED if got.get(k) != EXPECTED[k])
     assert not changed, (f"tables changed: {changed} (if intended, regenerate: see the module "
                          f"docstring); now {got}")
     assert set(got) == set(EXPECTED)
+    # the console sees every stage, the report last, before 100 %
+    assert [s for s, _ in seen] == [*STAGES, "done"]
+    assert [f for _, f in seen] == sorted(f for _, f in seen) and seen[-1][1] == 1.0
+    # the summary's wall time is the whole run, report included: the stages tile it
+    summary = pd.read_parquet(out / "summary.parquet").iloc[0]
+    stages = np.array([summary[f"stage_{name}_s"] for name in STAGES])
+    assert np.all(stages > 0)
+    assert stages.sum() == pytest.approx(summary.wall_time_s, rel=1e-9)
+    assert outcome.wall_time_s == summary.wall_time_s
+
+
+def test_summary_schema_has_a_column_for_every_stage():
+    from pospp.io.parquet_tables import schema
+    from pospp.pipeline import STAGES
+
+    names = [n for n in schema("summary").names if n.startswith("stage_")]
+    assert names == [f"stage_{name}_s" for name in STAGES]
 
 
 if __name__ == "__main__":
