@@ -1,0 +1,108 @@
+"""Benchmark of an archive: N sample-size flights through ``pospp batch -j 1`` and ``-j 2``.
+
+Run on demand (not collected by pytest)::
+
+    python tests/benchmarks/bench_batch.py [--flights 20] [--workers 1 2]
+
+The archive is ``--flights`` copies (symbolic links, each its own run folder) of the bundled
+sample flight (27 min at 100 Hz, 4 legs) in /tmp/pospp_bench_batch. Each ``pospp batch`` runs
+in a fresh process into an empty root with pipelines/sample.toml; numba's cache is warm (one
+untimed ``import pospp.pipeline`` first). Per flight the manifest's ``duration_s`` is the
+worker's time in ``process_one`` (hash, pipeline, report); the batch's overhead is what the
+wall time adds to that: start-up, imports and compiled-cache loading (once per process: the
+pool's workers are reused), the manifest. One ``pospp run`` of the same flight gives the
+single-flight overhead (its wall time minus the summary's ``wall_time_s``). Prints markdown
+for docs/benchmarks.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+
+REPO = Path(__file__).resolve().parents[2]
+WORK = Path("/tmp/pospp_bench_batch")
+SAMPLE = REPO / "sample_data" / "sample_flight.mcap"
+PIPELINE = REPO / "pipelines" / "sample.toml"
+
+
+def _env() -> dict[str, str]:
+    return {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+
+
+def _archive(n: int) -> Path:
+    folder = WORK / f"archive_{n}"
+    folder.mkdir(parents=True, exist_ok=True)
+    for i in range(n):
+        link = folder / f"flight_{i:02d}.mcap"
+        if not link.exists():
+            link.symlink_to(SAMPLE)
+    return folder
+
+
+def _timed(cmd: list[str]) -> float:
+    t0 = time.perf_counter()
+    res = subprocess.run(cmd, cwd=REPO, env=_env(), stdout=subprocess.DEVNULL,
+                         stderr=subprocess.PIPE, text=True)
+    wall = time.perf_counter() - t0
+    if res.returncode not in (0, 3):
+        raise SystemExit(f"{' '.join(cmd)} failed ({res.returncode}): {res.stderr[-2000:]}")
+    return wall
+
+
+def single_run() -> tuple[float, float]:
+    """(wall of ``pospp run`` from outside, the run's own summary wall_time_s)."""
+    out = WORK / "single"
+    wall = _timed([sys.executable, "-m", "pospp.cli", "run", str(SAMPLE), "-p", str(PIPELINE),
+                   "-o", str(out), "--force"])
+    inner = float(pd.read_parquet(out / "summary.parquet").wall_time_s.iloc[0])
+    return wall, inner
+
+
+def batch(archive: Path, workers: int) -> tuple[float, pd.DataFrame]:
+    out = WORK / f"out_j{workers}"
+    shutil.rmtree(out, ignore_errors=True)
+    wall = _timed([sys.executable, "-m", "pospp.cli", "batch", str(archive), "-p",
+                   str(PIPELINE), "-o", str(out), "-j", str(workers)])
+    return wall, pd.read_parquet(out / "manifest.parquet")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--flights", type=int, default=20)
+    ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
+    args = ap.parse_args()
+    subprocess.run([sys.executable, "-c", "import pospp.pipeline"], cwd=REPO, env=_env(),
+                   check=True)
+    archive = _archive(args.flights)
+    load = lambda: " ".join(f"{x:.1f}" for x in os.getloadavg())  # noqa: E731
+    wall, inner = single_run()
+    print(f"single `pospp run`: wall {wall:.2f} s, summary wall_time_s {inner:.2f} s, "
+          f"start-up + imports + cache loading + console {wall - inner:.2f} s "
+          f"(load average {load()})")
+    print()
+    print("| workers | flights | wall [s] | flights/min | vs -j 1 | median flight in worker [s] "
+          "| sum in workers [s] | overhead [s] | load average after |")
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|---|")
+    base = None
+    for j in args.workers:
+        wall, manifest = batch(archive, j)
+        n_ok = int((manifest.status != "failed").sum())
+        rate = 60.0 * n_ok / wall
+        base = base or rate
+        per = manifest.duration_s.to_numpy(dtype=float)
+        overhead = wall - per.sum() / j
+        print(f"| {j} | {n_ok}/{len(manifest)} | {wall:.1f} | {rate:.2f} | {rate / base:.2f}x "
+              f"| {statistics.median(per):.2f} | {per.sum():.1f} | {overhead:.1f} | {load()} |")
+
+
+if __name__ == "__main__":
+    main()
