@@ -4,7 +4,8 @@ Hashes of every table of the bundled sample run, recorded from main before the s
 (commit 3a6fca8). Speed work must not move a number; a change that is meant to change the
 results (a method fix) regenerates the hashes on purpose, with::
 
-    python -m pospp.cli run sample_data/sample_flight.mcap -p pipelines/sample.toml -o /tmp/s --force
+    python -m pospp.cli run sample_data/sample_flight.mcap -p pipelines/sample.toml \
+        -o /tmp/s --force
     python tests/e2e/test_outputs_unchanged.py /tmp/s
 
 and pastes the printed dictionary over ``EXPECTED`` below (say why in the commit message).
