@@ -1,0 +1,202 @@
+"""Null realisations of B minus A, made by pospp itself along the flight (issue 12).
+
+The noise of B minus A is not B's IMU noise plus an independent A error: A integrates the same
+increments as B between GNSS fixes, and its GNSS corrections drive what is left. Rather than
+modelling that process in closed form, the workflow's statistics are calibrated against null
+realisations of it made with pospp's own A (a parametric bootstrap by perturbation):
+
+1. Add to the flight's own IMU samples white gyro and accelerometer noise at the configured
+   grade's angle / velocity random walk, and to its GNSS fixes and velocities white noise at
+   the level A's own innovations show (:func:`gnss_noise_from_innovations`).
+2. Run A on the perturbed log exactly as on the flight (same configuration) and replay B on the
+   SAME legs (same start and end times).
+3. The realisation is the perturbed B minus A less the flight's B minus A::
+
+       d_r(t) = (B - A)[log + noise_r](t) - (B - A)[log](t)
+
+   To first order in the noise, everything the flight holds (biases, misalignment, effects in
+   and outside the library) cancels and d_r is a draw of B minus A's noise response to the
+   injected noise, with the flight's own trajectory, GNSS rate, stamps and gaps, A's own gains
+   and the legs' coupling through A.
+
+The workflow (:func:`pospp.diagnose.workflow.diagnose`, ``null_dv``) computes each statistic it
+uses (lack-of-fit F, each candidate's nested F) on the R realisations with the same design and
+whitening, and turns the flight's statistic into a p-value with the null distribution fitted by
+moments (:func:`calibrated_p_value`).
+
+Assumed: the injected noise levels are the flight's (grade ARW / VRW as configured; GNSS from
+the innovations, which also carry A's predicted error, so they read high: conservative), the
+noise is white (no in-run drift: the grade's Gauss-Markov drift is not injected by default),
+and A is linear enough over the noise's size that the difference is the noise response.
+
+No I/O. SI units.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import stats
+
+from pospp.earth import principal_radii_m
+
+POSITION_KIND, VELOCITY_KIND = 0, 1
+"""Indices into ``pospp.nav.filter.MEAS_KINDS`` ("position", "velocity")."""
+
+
+@dataclass(frozen=True)
+class NullNoise:
+    """White noise levels injected into one null realisation.
+
+    Attributes
+    ----------
+    gyro_arw_radpsqrts : float
+        Gyro angle random walk [rad/s^0.5] (rate noise sigma = ARW / sqrt(dt)).
+    accel_vrw_mpspsqrts : float
+        Accelerometer velocity random walk [m/s / s^0.5].
+    pos_sigma_ned_m : ndarray, shape (3,)
+        GNSS position noise, NED [m].
+    vel_sigma_ned_mps : ndarray, shape (3,)
+        GNSS velocity noise, NED [m/s].
+    """
+
+    gyro_arw_radpsqrts: float
+    accel_vrw_mpspsqrts: float
+    pos_sigma_ned_m: NDArray
+    vel_sigma_ned_mps: NDArray
+
+
+def gnss_noise_from_innovations(t_s: NDArray, kind: NDArray, status: NDArray, dz_ned: NDArray
+                                ) -> tuple[NDArray, NDArray]:
+    """GNSS position and velocity noise per NED axis from A's innovations.
+
+    The RMS innovation of the used records (``status`` 0), per axis::
+
+        sigma_k = sqrt(mean(dz_k^2)),   dz = predicted - measured
+
+    Its variance is ``H P H^T + R``: A's predicted error is included, so the level reads high
+    (a conservative null). Without records of a kind its sigma is 0.
+
+    Parameters
+    ----------
+    t_s, kind, status, dz_ned : arrays of :class:`pospp.nav.filter.InnovationRecord`
+
+    Returns
+    -------
+    pos_sigma_ned_m, vel_sigma_ned_mps : ndarray, shape (3,)
+    """
+    del t_s
+    out = []
+    for k in (POSITION_KIND, VELOCITY_KIND):
+        m = (np.asarray(kind) == k) & (np.asarray(status) == 0)
+        dz = np.asarray(dz_ned, dtype=float)[m]
+        dz = dz[np.all(np.isfinite(dz), axis=1)]
+        out.append(np.sqrt(np.mean(dz**2, axis=0)) if dz.size else np.zeros(3))
+    return out[0], out[1]
+
+
+def perturb_log(log: Any, noise: NullNoise, rng: np.random.Generator) -> Any:
+    """The flight log with white IMU and GNSS noise added (one null realisation's input).
+
+    IMU: samples are mean rates / specific forces over the interval dt ending at the stamp, so
+    white noise of ARW has sigma ``ARW / sqrt(dt)`` per sample (likewise the VRW). GNSS: NED
+    position noise enters latitude / longitude through the principal radii
+    (``dlat = dN / (M + h)``, ``dlon = dE / ((N + h) cos lat)``), height ``- dD``.
+
+    Parameters
+    ----------
+    log : pospp.io.mcap_reader.FlightLog (or any frozen dataclass with ``imu``, ``fix``, ``vel``)
+    noise : NullNoise
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    Same type as ``log``, with ``imu``, ``fix``, ``vel`` replaced.
+    """
+    imu, fix, vel = log.imu, log.fix, log.vel
+    t = np.asarray(imu.time_ns, dtype=np.int64)
+    dt = np.diff(t) * 1e-9
+    dt = np.concatenate([dt[:1], dt]) if dt.size else np.ones(1)
+    dt = np.clip(dt, np.median(dt) * 0.1, None)[:, None]
+    w = imu.w_ib_b_radps + rng.standard_normal(imu.w_ib_b_radps.shape) * (
+        noise.gyro_arw_radpsqrts / np.sqrt(dt))
+    f = imu.f_ib_b_mps2 + rng.standard_normal(imu.f_ib_b_mps2.shape) * (
+        noise.accel_vrw_mpspsqrts / np.sqrt(dt))
+    e_pos = rng.standard_normal((len(fix.time_ns), 3)) * np.asarray(noise.pos_sigma_ned_m)
+    rm, rn = principal_radii_m(fix.lat_rad)
+    lat = fix.lat_rad + e_pos[:, 0] / (rm + fix.height_m)
+    lon = fix.lon_rad + e_pos[:, 1] / ((rn + fix.height_m) * np.cos(fix.lat_rad))
+    h = fix.height_m - e_pos[:, 2]
+    v = vel.v_n_mps + rng.standard_normal(vel.v_n_mps.shape) * np.asarray(
+        noise.vel_sigma_ned_mps)
+    return replace(log, imu=replace(imu, w_ib_b_radps=w, f_ib_b_mps2=f),
+                   fix=replace(fix, lat_rad=lat, lon_rad=lon, height_m=h),
+                   vel=replace(vel, v_n_mps=v))
+
+
+def null_difference(perturbed_dv_n_mps: dict[int, NDArray], flight_dv_n_mps: dict[int, NDArray]
+                    ) -> dict[int, NDArray]:
+    """d_r = perturbed B minus A less the flight's, per leg id (module docstring, step 3)."""
+    return {k: np.asarray(perturbed_dv_n_mps[k]) - np.asarray(flight_dv_n_mps[k])
+            for k in flight_dv_n_mps}
+
+
+def calibrated_p_value(statistic: float, null_statistics: NDArray) -> float:
+    """p-value of a statistic against its null realisations, by a moment-matched scaled chi2.
+
+    The R null statistics are summarised by their mean m and variance v and the null
+    distribution taken as ``c chi2_nu / nu`` with the same moments (Satterthwaite)::
+
+        c = m,   nu = 2 m^2 / v,   p = P(chi2_nu > nu F / c)
+
+    This keeps the tail usable with few realisations (an empirical quantile at alpha = 0.05
+    over R = 20 draws is one draw). A NaN statistic gives p = 1; fewer than 3 finite null
+    statistics give NaN (not calibrated: the caller keeps the nominal p); zero spread gives
+    0 or 1 by comparison with m.
+    """
+    if not np.isfinite(statistic):
+        return 1.0
+    s = np.asarray(null_statistics, dtype=float)
+    s = s[np.isfinite(s)]
+    if s.size < 3:
+        return float("nan")
+    m, v = float(np.mean(s)), float(np.var(s, ddof=1))
+    if m <= 0:
+        return 0.0 if statistic > 0 else 1.0
+    if v <= 0:
+        return 0.0 if statistic > m else 1.0
+    nu = min(2.0 * m * m / v, 1e6)
+    return float(stats.chi2.sf(nu * statistic / m, nu))
+
+
+def imu_white_noise_from_samples(time_ns: NDArray, w_ib_b_radps: NDArray, f_ib_b_mps2: NDArray
+                                 ) -> tuple[float, float]:
+    """The IMU's white noise density (gyro ARW, accelerometer VRW) read from its own samples.
+
+    Second differences of the samples remove smooth motion; for white noise of per-sample
+    sigma s they have variance 6 s^2. Robustly (median absolute deviation, per axis, the
+    median over the three axes)::
+
+        s = 1.4826 MAD(w_k+1 - 2 w_k + w_k-1) / sqrt(6),   ARW = s sqrt(dt)
+
+    Vibration and quantisation above the motion's bandwidth count as noise here, so on real
+    data the level reads high (a conservative null).
+
+    Returns
+    -------
+    gyro_arw_radpsqrts, accel_vrw_mpspsqrts : float
+    """
+    t = np.asarray(time_ns, dtype=np.int64)
+    dt = float(np.median(np.diff(t))) * 1e-9 if t.size > 1 else 1.0
+    out = []
+    for a in (w_ib_b_radps, f_ib_b_mps2):
+        d2 = np.diff(np.asarray(a, dtype=float), n=2, axis=0)
+        if d2.shape[0] < 10:
+            out.append(float("nan"))
+            continue
+        mad = np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0)
+        out.append(float(np.median(1.4826 * mad / np.sqrt(6.0)) * np.sqrt(dt)))
+    return out[0], out[1]
