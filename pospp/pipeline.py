@@ -495,17 +495,24 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                       seed: int = 0) -> list[list[np.ndarray]]:
     """B minus A's null realisations along this flight (pospp.diagnose.null_model).
 
-    Each: the log with white IMU noise (the density read from the samples, or the configured
-    grade's ARW / VRW: ``[pairs] diagnose_null_imu_noise``) and GNSS noise at the level of
-    A's innovations, A re-run exactly as configured, B replayed on the same legs,
+    Each: the log with IMU noise (``[pairs] diagnose_null_imu_noise``: "measured", the white
+    density read from the samples and the Gauss-Markov drift at the calibration's REML level;
+    "grade": the configured grade's ARW, VRW and drift) and GNSS noise at the level of A's
+    innovations, A re-run exactly as configured, B replayed on the same legs,
     minus the flight's own B minus A. Returns ``n`` lists of (M, 3) arrays, legs in id order.
     """
     tuning = imu_tuning(config)
+    gm_tau = tuning.gyro_gm_tau_s
     if config.pairs.diagnose_null_imu_noise == "grade":
         arw, vrw = np.radians(tuning.gyro_arw_dpsh) / 60.0, tuning.accel_vrw_mpsph / 60.0
+        gm_sigma = np.radians(tuning.gyro_gm_sigma_dph) / 3600.0
     else:
         arw, vrw = null_model.imu_white_noise_from_samples(
             log.imu.time_ns, log.imu.w_ib_b_radps, log.imu.f_ib_b_mps2)
+        # the drift's level is the flight's own (REML in the calibration), when modelled
+        chosen = calib_run.chosen
+        gm_sigma = chosen.gyro_gm_sigma_radps if chosen is not None else 0.0
+        gm_tau = chosen.gyro_gm_tau_s if chosen is not None else np.inf
     if nav.innovations is None:
         raise ValueError("null realisations need A's innovation record")
     inn = nav.innovations
@@ -513,6 +520,7 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                                                               inn.dz_ned)
     noise = null_model.NullNoise(
         gyro_arw_radpsqrts=float(arw), accel_vrw_mpspsqrts=float(vrw),
+        gyro_gm_sigma_radps=float(gm_sigma), gyro_gm_tau_s=float(gm_tau),
         pos_sigma_ned_m=pos_sig, vel_sigma_ned_mps=vel_sig)
     ids = sorted(calib_run.replays)
     legs = {leg.leg_id: leg for leg in calib_run.legs}

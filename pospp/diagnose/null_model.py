@@ -61,12 +61,17 @@ class NullNoise:
         GNSS position noise, NED [m].
     vel_sigma_ned_mps : ndarray, shape (3,)
         GNSS velocity noise, NED [m/s].
+    gyro_gm_sigma_radps, gyro_gm_tau_s : float
+        First-order Gauss-Markov gyro drift per axis (steady-state sigma [rad/s], correlation
+        time [s]); 0 / inf: none.
     """
 
     gyro_arw_radpsqrts: float
     accel_vrw_mpspsqrts: float
     pos_sigma_ned_m: NDArray
     vel_sigma_ned_mps: NDArray
+    gyro_gm_sigma_radps: float = 0.0
+    gyro_gm_tau_s: float = float("inf")
 
 
 def gnss_noise_from_innovations(t_s: NDArray, kind: NDArray, status: NDArray, dz_ned: NDArray
@@ -102,7 +107,8 @@ def perturb_log(log: Any, noise: NullNoise, rng: np.random.Generator) -> Any:
     """The flight log with white IMU and GNSS noise added (one null realisation's input).
 
     IMU: samples are mean rates / specific forces over the interval dt ending at the stamp, so
-    white noise of ARW has sigma ``ARW / sqrt(dt)`` per sample (likewise the VRW). GNSS: NED
+    white noise of ARW has sigma ``ARW / sqrt(dt)`` per sample (likewise the VRW); a
+    Gauss-Markov gyro drift (:func:`gauss_markov_path`) is added when given. GNSS: NED
     position noise enters latitude / longitude through the principal radii
     (``dlat = dN / (M + h)``, ``dlon = dE / ((N + h) cos lat)``), height ``- dD``.
 
@@ -123,6 +129,9 @@ def perturb_log(log: Any, noise: NullNoise, rng: np.random.Generator) -> Any:
     dt = np.clip(dt, np.median(dt) * 0.1, None)[:, None]
     w = imu.w_ib_b_radps + rng.standard_normal(imu.w_ib_b_radps.shape) * (
         noise.gyro_arw_radpsqrts / np.sqrt(dt))
+    if noise.gyro_gm_sigma_radps > 0 and np.isfinite(noise.gyro_gm_tau_s):
+        w = w + gauss_markov_path(dt[:, 0], noise.gyro_gm_sigma_radps, noise.gyro_gm_tau_s,
+                                  rng)
     f = imu.f_ib_b_mps2 + rng.standard_normal(imu.f_ib_b_mps2.shape) * (
         noise.accel_vrw_mpspsqrts / np.sqrt(dt))
     e_pos = rng.standard_normal((len(fix.time_ns), 3)) * np.asarray(noise.pos_sigma_ned_m)
@@ -135,6 +144,33 @@ def perturb_log(log: Any, noise: NullNoise, rng: np.random.Generator) -> Any:
     return replace(log, imu=replace(imu, w_ib_b_radps=w, f_ib_b_mps2=f),
                    fix=replace(fix, lat_rad=lat, lon_rad=lon, height_m=h),
                    vel=replace(vel, v_n_mps=v))
+
+
+def gauss_markov_path(dt_s: NDArray, sigma: float, tau_s: float, rng: np.random.Generator
+                      ) -> NDArray:
+    """Three independent first-order Gauss-Markov paths, stationary start, shape (N, 3).
+
+    Exact discretisation: ``x_k = e^(-dt_k / tau) x_k-1 + sigma sqrt(1 - e^(-2 dt_k / tau)) n_k``
+    (varying steps: the recursion by cumulative products of the decay, in blocks of 20
+    correlation times to stay within floating range).
+    """
+    dt = np.asarray(dt_s, dtype=float)
+    a = np.exp(-dt / tau_s)
+    q = sigma * np.sqrt(1.0 - a**2)
+    e = rng.standard_normal((dt.size, 3)) * q[:, None]
+    e[0] = rng.standard_normal(3) * sigma
+    x = np.empty_like(e)
+    prev = np.zeros(3)
+    block = max(1, int(20.0 * tau_s / max(float(np.median(dt)), 1e-12)))
+    for s0 in range(0, dt.size, block):
+        sl = slice(s0, min(s0 + block, dt.size))
+        la = np.log(a[sl])
+        if s0 == 0:
+            la[0] = 0.0  # x_0 = e_0 (stationary start)
+        c = np.exp(np.cumsum(la))  # x_j = c_j (prev + sum_i<=j e_i / c_i)
+        x[sl] = c[:, None] * (prev + np.cumsum(e[sl] / c[:, None], axis=0))
+        prev = x[sl][-1]
+    return x
 
 
 def null_difference(perturbed_dv_n_mps: dict[int, NDArray], flight_dv_n_mps: dict[int, NDArray]

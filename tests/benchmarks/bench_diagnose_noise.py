@@ -109,6 +109,9 @@ def run_null(name: str, n_null: int) -> None:
     t0 = time.perf_counter()
     null = pipeline.null_realisations(log, nav, run, cfg, n_null, seed=1)
     t_null = time.perf_counter() - t0
+    ch = run.chosen
+    print(f"  calibration: GM drift {np.degrees(ch.gyro_gm_sigma_radps) * 3600:.3g} deg/h, "
+          f"tau {ch.gyro_gm_tau_s} s")
     print(f"{name}: {len(run.replays)} legs, A {t_a:.1f} s, {n_null} null realisations "
           f"{t_null:.1f} s; time offset {params['gnss']['time_offset_s']} s")
     for effects in (None, EFFECTS):
