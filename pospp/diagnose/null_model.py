@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
+from scipy import optimize, special, stats
 
 from pospp.earth import principal_radii_m
 
@@ -181,31 +181,34 @@ def null_difference(perturbed_dv_n_mps: dict[int, NDArray], flight_dv_n_mps: dic
 
 
 def calibrated_p_value(statistic: float, null_statistics: NDArray) -> float:
-    """p-value of a statistic against its null realisations, by a moment-matched scaled chi2.
+    """p-value of a statistic against its null realisations, by a scaled chi2 fitted by moments.
 
-    The R null statistics are summarised by their mean m and variance v and the null
-    distribution taken as ``c chi2_nu / nu`` with the same moments (Satterthwaite)::
+    The null distribution is taken as ``c chi2_nu / nu`` and (c, nu) matched to the mean and
+    variance of the LOGARITHMS of the R null statistics (robust to the heavy upper tail a
+    correlated drift gives, where the plain variance of a few draws reads low)::
 
-        c = m,   nu = 2 m^2 / v,   p = P(chi2_nu > nu F / c)
+        Var log F = psi'(nu / 2),   E log F = log c + psi(nu / 2) + log(2 / nu)
+        p = P(chi2_nu > nu F / c)
 
     This keeps the tail usable with few realisations (an empirical quantile at alpha = 0.05
-    over R = 20 draws is one draw). A NaN statistic gives p = 1; fewer than 3 finite null
-    statistics give NaN (not calibrated: the caller keeps the nominal p); zero spread gives
-    0 or 1 by comparison with m.
+    over R = 20 draws is one draw). A NaN statistic gives p = 1; fewer than 3 finite positive
+    null statistics give NaN (not calibrated: the caller keeps the nominal p).
     """
     if not np.isfinite(statistic):
         return 1.0
     s = np.asarray(null_statistics, dtype=float)
-    s = s[np.isfinite(s)]
+    s = s[np.isfinite(s) & (s > 0)]
     if s.size < 3:
         return float("nan")
-    m, v = float(np.mean(s)), float(np.var(s, ddof=1))
-    if m <= 0:
-        return 0.0 if statistic > 0 else 1.0
+    lg = np.log(s)
+    m, v = float(np.mean(lg)), float(np.var(lg, ddof=1))
     if v <= 0:
-        return 0.0 if statistic > m else 1.0
-    nu = min(2.0 * m * m / v, 1e6)
-    return float(stats.chi2.sf(nu * statistic / m, nu))
+        return 0.0 if statistic > float(np.exp(m)) else 1.0
+    # psi'(x) decreases from inf to 0: solve psi'(nu / 2) = v on a log bracket
+    half = optimize.brentq(lambda lx: float(special.polygamma(1, np.exp(lx))) - v, -20.0, 30.0)
+    nu = 2.0 * float(np.exp(half))
+    log_c = m - float(special.digamma(nu / 2.0)) - np.log(2.0 / nu)
+    return float(stats.chi2.sf(nu * statistic / np.exp(log_c), nu))
 
 
 def imu_white_noise_from_samples(time_ns: NDArray, w_ib_b_radps: NDArray, f_ib_b_mps2: NDArray

@@ -7,8 +7,9 @@
   radii computed here, not by pospp).
 - The workflow on B minus A drawn from a coloured model that its ``gyro_rw`` whitening gets
   wrong (A's Matern error entering at the leg start and at t): nominally it cries wolf;
-  calibrated on independent draws of the same process it closes ``none``, and a structured
-  gap 4 times the noise is still found ``unexplained``.
+  calibrated on 30 independent draws of the same process it closes ``none`` at the stated
+  rate, and a structured gap of 20 mm/s (the noise: about 30 mm/s at the leg end) is found
+  ``unexplained``.
 """
 
 from __future__ import annotations
@@ -136,6 +137,9 @@ def replays():
     return [replay_leg(fl.imu, ref, leg, sigma_floor_mps=0.002) for leg in fl.legs]
 
 
+N_DRAWS = 12
+
+
 def _draws(replays, model, n, rng):
     chol = [np.linalg.cholesky(model.leg_covariance(r)) for r in replays]
     out = []
@@ -157,7 +161,7 @@ def test_workflow_calibrated_on_null_realisations_holds_alpha(replays):
     rng = np.random.default_rng(7)
     effects = ("accel_bias_change", "gravity_disturbance", "vertical_gyro_drift")
     nominal, calibrated, powered = [], [], []
-    for _ in range(4):
+    for _ in range(N_DRAWS):
         data = _draws(replays, model, 1, rng)[0]
         null = _draws(replays, model, 30, rng)
         reps = [dataclasses.replace(r, dv_n_mps=r.dv_n_mps + d)
@@ -167,13 +171,14 @@ def test_workflow_calibrated_on_null_realisations_holds_alpha(replays):
         d = diagnose(reps, null_dv=null, **kw)
         calibrated.append(d.conclusion)
         assert d.steps[-1].criterion == "lack_of_fit_F_null_calibrated"
-        # a structured gap outside the library: a 4 mm/s cosine over leg 2's north channel
+        # a structured gap outside the library: a 20 mm/s sine over leg 2's north channel
         bumped = list(reps)
         r = reps[1]
         dv = r.dv_n_mps.copy()
-        dv[:, 0] += 4e-3 * np.sin(3 * np.pi * r.t_s / r.t_s[-1])
+        dv[:, 0] += 0.02 * np.sin(3 * np.pi * r.t_s / r.t_s[-1])
         bumped[1] = dataclasses.replace(r, dv_n_mps=dv)
         powered.append(diagnose(bumped, null_dv=null, **kw).conclusion)
-    assert nominal.count("unexplained") >= 2
-    assert calibrated == ["none"] * 4
-    assert powered == ["unexplained"] * 4
+    # at alpha = 0.05 over 12 draws, 3 or more false alarms has probability 2 %
+    assert nominal.count("unexplained") >= 6
+    assert calibrated.count("unexplained") <= 2
+    assert powered.count("unexplained") >= 11
