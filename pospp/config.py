@@ -262,8 +262,9 @@ class PairsConfig:
     flight with white IMU and GNSS noise added; docs/diagnose.md); 0: the nominal F
     distribution (cries wolf on flights with GNSS noise)."""
     diagnose_null_imu_noise: str = "measured"
-    """IMU noise injected into the null realisations: "measured" (white-noise density read
-    from the IMU samples' second differences) or "grade" (the [imu] grade's ARW / VRW)."""
+    """White IMU noise injected into the null realisations: "measured" (density read from the
+    IMU samples' second differences) or "grade" (the [imu] grade's ARW / VRW). The [imu]
+    Gauss-Markov gyro drift is injected in both."""
 
 
 @dataclass(frozen=True)

@@ -2,7 +2,7 @@
 with pospp's own A as the reference (issue 12).
 
 pipelines/flight.toml with each case's lever arm from its params.json; the pipeline's
-``diagnose`` with 10 null realisations (A re-run on the flight with white IMU noise read from
+``diagnose`` with 8 null realisations (A re-run on the flight with white IMU noise read from
 the samples, GNSS noise at the innovations' level; pospp.diagnose.null_model). The cases hold
 nothing outside the base model (flight_null_200hz, flight_survey_errors) or one hidden GNSS
 time offset of 15 ms (flight_time_offset_200hz). The nominal F-test says ``unexplained`` on all
@@ -38,7 +38,7 @@ def _run(cases: Path, name: str, extra: str = ""):
     imu = pipeline.imu_increments(log)
     run, ref = pipeline.calibrate(imu, nav, cfg)
     assert run.calibrated, run.reason
-    null = pipeline.null_realisations(log, nav, run, cfg, 10, seed=2)
+    null = pipeline.null_realisations(log, nav, run, cfg, 8, seed=2)
     return (pipeline.diagnose(run, imu, ref, cfg, null_dv=null),
             pipeline.diagnose(run, imu, ref, cfg))
 
