@@ -257,7 +257,7 @@ class PairsConfig:
     """Spacing of the samples the correlated-noise least squares uses [s]."""
     estimate_gyro_z: bool = False
     """Also estimate the vertical body gyro bias (weakly observable on level legs)."""
-    diagnose_null_realisations: int = _key(20, ge=0, le=1000)
+    diagnose_null_realisations: int = _key(10, ge=0, le=1000)
     """Null realisations of B minus A that calibrate the diagnosis's tests (A re-run on the
     flight with white IMU and GNSS noise added; docs/diagnose.md); 0: the nominal F
     distribution (cries wolf on flights with GNSS noise)."""

@@ -38,14 +38,7 @@ EFFECTS = ("vertical_gyro_drift", "accel_bias_change", "gravity_disturbance", "l
 
 
 def run_case(name: str) -> None:
-    params = json.loads((CASES / f"{name}.params.json").read_text())
-    lever = params["gnss"]["lever_arm_m"]
-    toml = (ROOT / "pipelines" / "flight.toml").read_text().replace(
-        "lever_arm_m = [0.0, 0.0, 0.0]", f"lever_arm_m = [{lever[0]}, {lever[1]}, {lever[2]}]")
-    with tempfile.TemporaryDirectory() as tmp:
-        cfg_path = Path(tmp) / "case.toml"
-        cfg_path.write_text(toml)
-        cfg = load_config(cfg_path)
+    cfg, params = case_config(name)
     log = pipeline.ingest(CASES / f"{name}.mcap", cfg)
     nav = pipeline.navigate(log, cfg)
     imu = pipeline.imu_increments(log)
