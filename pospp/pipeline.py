@@ -33,9 +33,10 @@ import pandas as pd
 
 from pospp import outputs, rotation
 from pospp.calib.observability import observability_table
-from pospp.calib.replay import ImuIncrements, ReferenceSolution
+from pospp.calib.replay import ImuIncrements, ReferenceSolution, replay_leg
 from pospp.calib.stage import CalibrationRun, calibrate_flight
 from pospp.config import PipelineConfig, config_from_dict
+from pospp.diagnose import null_model
 from pospp.diagnose.workflow import Diagnosis, diagnosis_columns, residual_curve_columns
 from pospp.diagnose.workflow import diagnose as run_diagnosis
 from pospp.evaluate import evaluation_rows, solution_errors
@@ -387,7 +388,7 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
     diagnosis = None
     if config.outputs.diagnose and calib_run.calibrated:
         try:
-            diagnosis = diagnose(calib_run, imu, reference, config)
+            diagnosis = diagnose(calib_run, imu, reference, config, log=log, nav=nav)
         except ValueError as exc:
             book.note("warning", "diagnose", f"no diagnosis: {exc}")
             status = "partial"
@@ -529,9 +530,75 @@ def calibrate(imu: ImuIncrements, nav: nav_filter.FilterResult,
     ), reference
 
 
+def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
+                      calib_run: CalibrationRun, config: PipelineConfig, n: int, *,
+                      seed: int = 0) -> list[list[np.ndarray]]:
+    """B minus A's null realisations along this flight (pospp.diagnose.null_model).
+
+    Each: the log with IMU noise (white: ``[pairs] diagnose_null_imu_noise`` "measured", the
+    density read from the samples, or "grade", the configured ARW / VRW; plus the configured
+    Gauss-Markov gyro drift, ``[imu] gyro_gm_sigma_dph`` / ``gyro_gm_tau_s``) and GNSS noise
+    at the level of A's innovations, A re-run exactly as configured, B replayed on the same legs,
+    minus the flight's own B minus A. Returns ``n`` lists of (M, 3) arrays, legs in id order
+    (fewer when A fails on more than ``n`` of ``2 n`` perturbed logs, e.g. its alignment).
+    """
+    tuning = imu_tuning(config)
+    # the drift as configured: the calibration's REML level of it reads low (it hits its lower
+    # bound on paper_vehicle flights with a 0.05 deg/h drift, 0.31 for 0.5 deg/h on
+    # paper_flight), and a null without the drift cries wolf (docs/diagnose.md)
+    gm_tau = tuning.gyro_gm_tau_s
+    gm_sigma = np.radians(tuning.gyro_gm_sigma_dph) / 3600.0
+    if config.pairs.diagnose_null_imu_noise == "grade":
+        arw, vrw = np.radians(tuning.gyro_arw_dpsh) / 60.0, tuning.accel_vrw_mpsph / 60.0
+    else:
+        arw, vrw = null_model.imu_white_noise_from_samples(
+            log.imu.time_ns, log.imu.w_ib_b_radps, log.imu.f_ib_b_mps2)
+    if nav.innovations is None:
+        raise ValueError("null realisations need A's innovation record")
+    inn = nav.innovations
+    pos_sig, vel_sig = null_model.gnss_noise_from_innovations(inn.t_s, inn.kind, inn.status,
+                                                              inn.dz_ned)
+    noise = null_model.NullNoise(
+        gyro_arw_radpsqrts=float(arw), accel_vrw_mpspsqrts=float(vrw),
+        gyro_gm_sigma_radps=float(gm_sigma), gyro_gm_tau_s=float(gm_tau),
+        pos_sigma_ned_m=pos_sig, vel_sigma_ned_mps=vel_sig)
+    ids = sorted(calib_run.replays)
+    legs = {leg.leg_id: leg for leg in calib_run.legs}
+    rc = config.replay
+    rng = np.random.default_rng(seed)
+    which = rc.reference if nav.smoothed is not None else "forward"
+    out: list[list[np.ndarray]] = []
+    for _ in range(2 * n):  # a realisation whose A fails (alignment) is skipped
+        if len(out) == n:
+            break
+        log_r = null_model.perturb_log(log, noise, rng)
+        try:
+            nav_r = navigate(log_r, config)
+        except ValueError:
+            continue
+        ref_r = ReferenceSolution(*nav_filter.reference_solution(nav_r, which=which))
+        imu_r = imu_increments(log_r)
+        out.append([replay_leg(imu_r, ref_r, legs[i], accel_compensation=rc.accel_compensation,
+                               sample_rate_hz=rc.sample_rate_hz,
+                               sigma_floor_mps=rc.sigma_floor_mps,
+                               transition_step=int(rc.transition_step)).dv_n_mps
+                    - calib_run.replays[i].dv_n_mps for i in ids])
+    return out
+
+
 def diagnose(calib_run: CalibrationRun, imu: ImuIncrements, reference: ReferenceSolution,
-             config: PipelineConfig) -> Diagnosis:
-    """Model-discrepancy workflow on the calibrated run's B-minus-A curves (pospp.diagnose)."""
+             config: PipelineConfig, *, log: mcap_reader.FlightLog | None = None,
+             nav: nav_filter.FilterResult | None = None,
+             null_dv: list[list[np.ndarray]] | None = None) -> Diagnosis:
+    """Model-discrepancy workflow on the calibrated run's B-minus-A curves (pospp.diagnose).
+
+    Every test's null distribution is calibrated on ``null_dv`` (:func:`null_realisations`)
+    when given, else on ``[pairs] diagnose_null_realisations`` realisations made here when
+    the log and A's result are given (seed 0: a run is reproducible).
+    """
+    n_null = config.pairs.diagnose_null_realisations
+    if null_dv is None and n_null > 0 and log is not None and nav is not None:
+        null_dv = null_realisations(log, nav, calib_run, config, n_null)
     replays = [calib_run.replays[i] for i in sorted(calib_run.replays)]
     # B's residuals carry the gyro angle random walk, correlated along each leg: weighting them
     # as white noise would make every F-test too liberal
@@ -540,7 +607,7 @@ def diagnose(calib_run: CalibrationRun, imu: ImuIncrements, reference: Reference
         replays, imu=imu, reference=reference,
         replay_kwargs={"accel_compensation": config.replay.accel_compensation},
         base_formulation=config.pairs.formulation, base_transition=config.pairs.transition,
-        noise="gyro_rw", gyro_arw_radpsqrts=arw_radpsqrts,
+        noise="gyro_rw", gyro_arw_radpsqrts=arw_radpsqrts, null_dv=null_dv,
     )
 
 
@@ -630,7 +697,7 @@ def diagnose_run(run_dir: str | Path, *, progress: ProgressFn | None = None) -> 
     if not calib_run.calibrated:
         raise ValueError(f"{run}: no calibration to diagnose: {calib_run.reason}")
     book.stage("diagnose")
-    diagnosis = diagnose(calib_run, imu, reference, config)
+    diagnosis = diagnose(calib_run, imu, reference, config, log=log, nav=nav)
     book.stage("write")
     out_meta = {k: meta[k] for k in ("input_file", "input_sha256", "config")}
     parquet_tables.write_table(run / "diagnosis.parquet", diagnosis_columns(diagnosis),

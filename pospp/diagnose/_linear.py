@@ -9,6 +9,7 @@ rank deficiency). SI units.
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -67,6 +68,13 @@ class Problem:
             else:
                 self.chol.append(None)
         self.zw = [self.whiten(i, z) for i, z in enumerate(self.z)]
+
+    def with_data(self, z: Sequence[NDArray]) -> Problem:
+        """The same design and whitening with other data (per leg, rows t > 0, [N, E])."""
+        other = copy.copy(self)
+        other.z = [np.asarray(a, dtype=float).reshape(-1) for a in z]
+        other.zw = [self.whiten(i, a) for i, a in enumerate(other.z)]
+        return other
 
     def whiten(self, i: int, a: NDArray) -> NDArray:
         c = self.chol[i]

@@ -63,6 +63,7 @@ from pospp.calib.replay import ImuIncrements, LegReplay, ReferenceSolution
 from pospp.calib.solve import NoiseModel, calibrate, fit_noise_model, leg_sensitivities
 from pospp.diagnose import effects as fx
 from pospp.diagnose._linear import Fit, Problem, Term, bic, f_test, rms
+from pospp.diagnose.null_model import calibrated_p_value
 
 BASE_FORMULATIONS = ("body", "paper")
 BASE_TRANSITIONS = ("numerical", "closed_form")
@@ -352,7 +353,7 @@ def _phaserms(res: NDArray, n_phase: int = 3) -> NDArray:
 
 def _pair_explaining(prob: Problem, terms: list[Term], fit0: Fit, trials: list[dict],
                      lof: list[Term], lof_excess: float, s2_lof: float, alpha: float,
-                     min_fraction: float) -> list[dict]:
+                     min_fraction: float, null: _NullCalibration | None = None) -> list[dict]:
     """Two significant candidates that together explain the structured gap, or [].
 
     Two real effects of similar size each explain only part of the gap; they are accepted
@@ -373,10 +374,47 @@ def _pair_explaining(prob: Problem, terms: list[Term], fit0: Fit, trials: list[d
             if frac < best_frac:
                 continue
             lof_fit = prob.fit(terms + [a["term"], b["term"]] + lof)
-            _, p = f_test(both.rss_w, lof_fit.rss_w, lof_fit.rank - both.rank, n - lof_fit.rank)
+            f, p = f_test(both.rss_w, lof_fit.rss_w, lof_fit.rank - both.rank, n - lof_fit.rank)
+            if null is not None:
+                p = null.p_value(f, p, terms + [a["term"], b["term"]],
+                                 terms + [a["term"], b["term"]] + lof)
             if p >= alpha:
                 best_pair, best_frac = [a, b], frac
     return best_pair
+
+
+class _NullCalibration:
+    """Each nested F-test's null distribution from B-minus-A null realisations.
+
+    The same design and whitening as the flight's problem, with the data replaced by each
+    realisation (:mod:`pospp.diagnose.null_model`); the flight's F gets the p-value of
+    :func:`pospp.diagnose.null_model.calibrated_p_value` against the R null F statistics.
+    """
+
+    def __init__(self, prob: Problem, null_dv: Sequence[Sequence[NDArray]]):
+        self.probs = [prob.with_data([np.asarray(d)[1:, 0:2] for d in real])
+                      for real in null_dv]
+        self._rss: dict[tuple[int, ...], list[tuple[float, int]]] = {}
+
+    def _fits(self, terms: Sequence[Term]) -> list[tuple[float, int]]:
+        key = tuple(id(t) for t in terms)
+        if key not in self._rss:
+            fits = [q.fit(terms) for q in self.probs]
+            self._rss[key] = [(f.rss_w, f.rank) for f in fits]
+        return self._rss[key]
+
+    def statistics(self, terms0: Sequence[Term], terms1: Sequence[Term]) -> NDArray:
+        """The nested F of terms0 within terms1 on every realisation."""
+        out = []
+        for (r0, k0), (r1, k1), q in zip(self._fits(terms0), self._fits(terms1), self.probs,
+                                         strict=True):
+            out.append(f_test(r0, r1, k1 - k0, q.n - k1)[0])
+        return np.array(out)
+
+    def p_value(self, f: float, p_nominal: float, terms0: Sequence[Term],
+                terms1: Sequence[Term]) -> float:
+        p = calibrated_p_value(f, self.statistics(terms0, terms1))
+        return p_nominal if not np.isfinite(p) else p
 
 
 # --------------------------------------------------------------------------------------------
@@ -401,6 +439,7 @@ def diagnose(
     lof_terms: int = 8,
     min_explained_fraction: float = 0.9,
     accel_settling_s: float = fx.ACCEL_SETTLING_S,
+    null_dv: Sequence[Sequence[NDArray]] | None = None,
 ) -> Diagnosis:
     """Find, with evidence, what the calibration model is missing (module docstring).
 
@@ -451,6 +490,13 @@ def diagnose(
         leaving no structured gap) must explain to be named.
     accel_settling_s : float
         Warm-up time constant of ``accel_bias_change`` [s] (run time from the run's epoch).
+    null_dv : sequence of sequences of ndarray, optional
+        Null realisations of B minus A's noise (:mod:`pospp.diagnose.null_model`): R entries,
+        each one (M, 2 or 3) array per leg in the order of ``replays`` (row 0 at t = 0, NED
+        [m/s]). Every nested F-test (candidates, pairs, the closing lack of fit) then takes its
+        p-value from these statistics' null distribution
+        (:func:`pospp.diagnose.null_model.calibrated_p_value`) instead of the F distribution,
+        and the criteria carry the suffix ``"_null_calibrated"``.
 
     Returns
     -------
@@ -496,6 +542,14 @@ def diagnose(
     else:
         raise ValueError(f"noise: expected 'white', 'gyro_rw' or 'full', got {noise!r}")
     prob = Problem(replays, white_scale, arw, model if noise == "full" else None)
+    null = None
+    if null_dv is not None and len(null_dv) > 0:
+        for real in null_dv:
+            if len(real) != len(replays) or any(
+                    np.shape(d)[0] != r.t_s.size for d, r in zip(real, replays, strict=True)):
+                raise ValueError("null_dv: expected one array per leg with the replays' rows")
+        null = _NullCalibration(prob, null_dv)
+    suffix = "_null_calibrated" if null is not None else ""
     terms = _base_terms(replays, base_formulation, base_transition)
     lof = _lof_term(replays, lof_terms)
     fixed_sigs = {e.effect_id: fx.signatures(e.effect_id, replays, context=ctx,
@@ -534,6 +588,8 @@ def diagnose(
             r = fit1.rank - fit0.rank
             dof1 = n - fit1.rank
             f, p = f_test(fit0.rss_w, fit1.rss_w, r, dof1)
+            if null is not None:
+                p = null.p_value(f, p, terms, new_terms)
             ho1 = prob.heldout(new_terms)
             s2 = fit1.rss_w / max(dof1, 1)
             vals, sigs_, size, size_sig = _effect_estimate(term, fit1, new_terms, s2)
@@ -553,7 +609,7 @@ def diagnose(
         good = [tr for tr in trials if tr["sig"] and tr["frac"] >= min_explained_fraction]
         if not good:
             good = _pair_explaining(prob, terms, fit0, trials, lof, lof_excess, s2_lof, alpha,
-                                    min_explained_fraction)
+                                    min_explained_fraction, null)
         if not good:
             break
         best = max(good, key=lambda tr: tr["f"])
@@ -571,7 +627,8 @@ def diagnose(
         steps.append(DiagnosisStep(
             step=step, effect=eff.effect_id, parameters=eff.parameters, values=best["vals"],
             sigmas=best["sigs"], value=best["size"], sigma=best["size_sig"], unit=eff.unit,
-            statistic=best["f"], p_value=best["p"], criterion=CRITERION, significant=True,
+            statistic=best["f"], p_value=best["p"], criterion=CRITERION + suffix,
+            significant=True,
             delta_bic=float(best["dbic"]), explained_fraction=best["frac"],
             confounded_with=tuple(confounded), gap_before_mps=gap0,
             gap_after_mps=rms(best["fit"].res_raw),
@@ -582,11 +639,13 @@ def diagnose(
     # closing row: lack of fit of the final model
     fit_lof = prob.fit(terms + lof)
     f, p = f_test(fit0.rss_w, fit_lof.rss_w, fit_lof.rank - fit0.rank, n - fit_lof.rank)
+    if null is not None:
+        p = null.p_value(f, p, terms, terms + lof)
     gap, hgap = rms(fit0.res_raw), rms(ho0)
     steps.append(DiagnosisStep(
         step=len(steps) + 1, effect="unexplained" if p < alpha else "none", parameters=(),
         values=np.zeros(0), sigmas=np.zeros(0), value=float("nan"), sigma=float("nan"), unit="",
-        statistic=f, p_value=p, criterion=LOF_CRITERION, significant=bool(p < alpha),
+        statistic=f, p_value=p, criterion=LOF_CRITERION + suffix, significant=bool(p < alpha),
         delta_bic=float("nan"), explained_fraction=float("nan"), confounded_with=(),
         gap_before_mps=gap,
         gap_after_mps=gap, heldout_gap_before_mps=hgap, heldout_gap_after_mps=hgap,

