@@ -542,14 +542,13 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     minus the flight's own B minus A. Returns ``n`` lists of (M, 3) arrays, legs in id order
     (fewer when A fails on more than ``n`` of ``2 n`` perturbed logs, e.g. its alignment).
     """
-    tuning = imu_tuning(config)
+    si = imu_tuning(config).noise()
     # the drift as configured: the calibration's REML level of it reads low (it hits its lower
     # bound on paper_vehicle flights with a 0.05 deg/h drift, 0.31 for 0.5 deg/h on
     # paper_flight), and a null without the drift cries wolf (docs/diagnose.md)
-    gm_tau = tuning.gyro_gm_tau_s
-    gm_sigma = np.radians(tuning.gyro_gm_sigma_dph) / 3600.0
+    gm_tau, gm_sigma = si.gyro_gm_tau_s, si.gyro_gm_sigma_radps
     if config.pairs.diagnose_null_imu_noise == "grade":
-        arw, vrw = np.radians(tuning.gyro_arw_dpsh) / 60.0, tuning.accel_vrw_mpsph / 60.0
+        arw, vrw = si.gyro_arw_radpsqrts, si.accel_vrw_mpspsqrts
     else:
         arw, vrw = null_model.imu_white_noise_from_samples(
             log.imu.time_ns, log.imu.w_ib_b_radps, log.imu.f_ib_b_mps2)
@@ -602,7 +601,7 @@ def diagnose(calib_run: CalibrationRun, imu: ImuIncrements, reference: Reference
     replays = [calib_run.replays[i] for i in sorted(calib_run.replays)]
     # B's residuals carry the gyro angle random walk, correlated along each leg: weighting them
     # as white noise would make every F-test too liberal
-    arw_radpsqrts = np.radians(imu_tuning(config).gyro_arw_dpsh) / 60.0
+    arw_radpsqrts = imu_tuning(config).noise().gyro_arw_radpsqrts
     return run_diagnosis(
         replays, imu=imu, reference=reference,
         replay_kwargs={"accel_compensation": config.replay.accel_compensation},

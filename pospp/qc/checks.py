@@ -23,11 +23,12 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.stats import chi2
 
 from pospp import earth
+from pospp.rotation import DEG_PER_H_RADPS
 
 STATUS_ORDER = ("ok", "partial", "degraded", "failed")
 """Run statuses from best to worst."""
 
-_DPH = math.pi / 180.0 / 3600.0  # rad/s per deg/h
+_DPH = DEG_PER_H_RADPS
 
 
 @dataclass(frozen=True)
