@@ -28,7 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from pospp import earth, rotation
 from pospp.calib.replay import interpolate_trajectory
-from pospp.nav.filter import NavSolution, _rpy_cov
+from pospp.nav.filter import NavSolution, rpy_covariance
 from pospp.nav.smoother import interpolation_weights
 
 __all__ = ["SensorPoses", "sensor_poses"]
@@ -120,7 +120,7 @@ def sensor_poses(solution: NavSolution, t_s: ArrayLike, *, lever_b_m: ArrayLike 
     out = {
         "lat_rad": lat, "lon_rad": lon, "height_m": h, "v_n_mps": v, "q_ns": q_ns,
         "rpy_rad": rpy, "pos_sigma_ned_m": sig(pos_cov), "vel_sigma_ned_mps": sig(vel_cov),
-        "rpy_sigma_rad": sig(_rpy_cov(q_ns, att_cov)), "att_sigma_ned_rad": sig(att_cov),
+        "rpy_sigma_rad": sig(rpy_covariance(q_ns, att_cov)), "att_sigma_ned_rad": sig(att_cov),
     }
     for k, val in out.items():
         val = np.array(val, dtype=float)

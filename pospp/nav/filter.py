@@ -281,7 +281,7 @@ def _grid_epochs(t: NDArray, k0: int, interval_s: float | None) -> NDArray:
     return np.unique(np.maximum(k, k0))
 
 
-def _rpy_cov(q_nb: NDArray, att_cov: NDArray) -> NDArray:
+def rpy_covariance(q_nb: NDArray, att_cov: NDArray) -> NDArray:
     """Covariance of [roll, pitch, yaw] errors from the phi covariance (d rpy = -E^-1 phi)."""
     rpy = rotation.euler_from_quat(q_nb)
     cz, sz = np.cos(rpy[:, 2]), np.sin(rpy[:, 2])
@@ -301,7 +301,7 @@ def _rpy_cov(q_nb: NDArray, att_cov: NDArray) -> NDArray:
 def _solution(time_ns, t_s, states, diag, blocks) -> NavSolution:
     att_cov, vel_cov, pos_cov = blocks
     q = states[:, 6:10]
-    rpy_cov = _rpy_cov(q, att_cov)
+    rpy_cov = rpy_covariance(q, att_cov)
     return NavSolution(
         time_ns=time_ns, t_s=t_s, lat_rad=states[:, 0].copy(), lon_rad=states[:, 1].copy(),
         height_m=states[:, 2].copy(), v_n_mps=states[:, 3:6].copy(), q_nb=q.copy(),
