@@ -144,7 +144,9 @@ def _qc_section(qc: pd.DataFrame | None, summary: pd.DataFrame | None) -> list[s
     ordered = pd.concat([failed, qc[qc.passed.astype(bool)]])
     cols = [c for c in ("check", "passed", "value", "threshold", "unit", "severity", "measure")
             if c in ordered]  # runs written before a column existed still render
-    parts.append(_table(ordered[cols], left=("check", "measure")))
+    # 'severity' is the status a failure of the check imposes, not the check's outcome
+    shown = ordered[cols].rename(columns={"severity": "status if failed"})
+    parts.append(_table(shown, left=("check", "measure")))
     return parts
 
 
