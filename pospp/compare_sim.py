@@ -222,7 +222,10 @@ def compare_sim_run(run_dir: str | Path, *, out: str | Path | None = None,
     """
     run, meta, path, config = pipeline.reopen_run(run_dir)
     log = pipeline.ingest(path, config)
-    comp, tpl = compare_log(log, config, max_steps=max_steps)
+    try:
+        comp, tpl = compare_log(log, config, max_steps=max_steps)
+    except ValueError as exc:  # e.g. a flight too short or too slow to simulate along
+        raise ValueError(f"{run}: cannot compare {path.name} with its simulation: {exc}") from exc
     out_meta = {k: meta[k] for k in ("input_file", "input_sha256", "config")}
     out_meta["vehicle"] = tpl.vehicle
     parquet_tables.write_table(run / "sim_comparison.parquet", comparison_columns(comp),
