@@ -179,9 +179,23 @@ def log_stats(log: mcap_reader.FlightLog, config: PipelineConfig, *, vehicle: st
         est = pipeline.navigate(log, est_cfg, options=opts)
     except ValueError:
         est = None
-    t_imu = (log.imu.time_ns - int(log.imu.time_ns[0])) * 1e-9
+    epoch = int(log.imu.time_ns[0])
+    t_imu = (log.imu.time_ns - epoch) * 1e-9
     return flight_stats(t_imu, log.imu.w_ib_b_radps, log.imu.f_ib_b_mps2, nav, est,
-                        vehicle=vehicle), nav
+                        vehicle=vehicle, gnss_sigma=reported_sigmas(log, epoch)), nav
+
+
+def reported_sigmas(log: mcap_reader.FlightLog, epoch_ns: int
+                    ) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """The records' reported NED sigmas: kind (0 position, 1 velocity) -> (times [s from
+    ``epoch_ns``], (M, 3) sigmas [m, m/s])."""
+    out = {}
+    for kind, tab, cov in ((0, log.fix, log.fix.pos_cov_ned_m2),
+                           (1, log.vel, log.vel.vel_cov_ned_m2ps2)):
+        if len(tab):
+            out[kind] = ((tab.time_ns - epoch_ns) * 1e-9,
+                         np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2), 0.0, None)))
+    return out
 
 
 def simulate_stats(tpl: FlightTemplate, config: PipelineConfig

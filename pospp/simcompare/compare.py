@@ -9,8 +9,8 @@ model is fitted by weighted least squares on its linear statistics (slopes: iden
 trial simulation, :mod:`pospp.simcompare.effects`); an effect is admissible when its fitted
 u differs from zero (chi-square test, level ``alpha`` / number of candidates). Each
 admissible effect is added with its fitted size and the flight re-simulated; the one with the
-least sum of z^2 over all statistics after (plus 2 per parameter, as AIC) is kept, and the gaps
-after are recorded. A target that no
+least sum of z^2 after (plus 2 per parameter, as AIC) over the statistics that some candidate
+of the step moves is kept, and the gaps after are recorded. A target that no
 admissible effect explains, or whose gap the added effect does not shrink, is
 ``unexplained`` and left out of later targets. The loop stops when no target is left or after
 ``max_steps``.
@@ -174,6 +174,9 @@ def compare_flights(measured: FlightStats, simulate: SimulateFn, imu: ImuErrorMo
         target = targets[0].statistic
         cands = [e for e in library if target in e.explains and e.name not in added]
         tried = []
+        # the statistics the choice is about: those some candidate moves (the others only
+        # add noise to the score)
+        moved = {st for e in cands for st in e.explains}
         for e in cands:
             fit = _fit(e, cur, sim, simulate, imu, gnss, ctx)
             if fit is None:
@@ -184,7 +187,7 @@ def compare_flights(measured: FlightStats, simulate: SimulateFn, imu: ImuErrorMo
             imu2, gnss2 = e.apply(imu, gnss, u, ctx)
             sim2 = simulate(imu2, gnss2)
             after = gaps(measured, sim2, alpha=alpha)
-            score = sum(g.z ** 2 for g in after.values()) + 2.0 * len(u)
+            score = sum(g.z ** 2 for n, g in after.items() if n in moved) + 2.0 * len(u)
             tried.append((score, e, u, cov, imu2, gnss2, sim2, after))
         if not tried:
             steps.append(Step(k, target, "unexplained", (), (), (), "", cur, cur))
