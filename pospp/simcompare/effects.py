@@ -44,6 +44,9 @@ from pospp.sim.sensors import UG_MPS2, ImuErrorModel
 
 __all__ = ["SimEffect", "LIBRARY", "EffectContext", "library_by_name"]
 
+ACCEL_RAMP_TRIAL_MPS3 = 1e-4
+"""Trial ramp of ``accel_bias_change`` [m/s^3] (about 37 000 ug/h): A's smoothed bias follows
+only part of a ramp (its bias random walk lags), so the slope is measured, not the identity."""
 COLOURED_GNSS_TAU_S = 60.0
 """Correlation time of the coloured GNSS position error the library adds [s]."""
 
@@ -199,8 +202,8 @@ LIBRARY: tuple[SimEffect, ...] = (
               ((5.0 * DEG_PER_H_RADPS) ** 2,), True, _instability),
     SimEffect("accel_bias_change", tuple(f"ramp_{a}" for a in _XYZ), "ug/h", UG_MPS2 / 3600.0,
               tuple(f"a_accel_trend_{a}" for a in _XYZ),
-              (*(f"a_accel_trend_{a}" for a in _XYZ), "a_accel_bias_wander"), None, False,
-              _accel_change),
+              (*(f"a_accel_trend_{a}" for a in _XYZ), "a_accel_bias_wander"),
+              (ACCEL_RAMP_TRIAL_MPS3,) * 3, False, _accel_change),
 )
 """The library, in a fixed order."""
 

@@ -26,7 +26,13 @@ from pospp.sim.sensors import ImuErrorModel, imu_grade, imu_model_file
 from pospp.sim.trajectory import MotionSample
 from pospp.simcompare.compare import gaps
 from pospp.simcompare.effects import mounting_misalignment_arcsec
-from pospp.simcompare.stats import FlightStats, Stat
+from pospp.simcompare.stats import (
+    FlightStats,
+    Stat,
+    allan_products,
+    ljung_box,
+    lowband_share,
+)
 from pospp.simcompare.tables import comparison_columns, model_toml
 
 CONFIG = config_from_dict({"imu": {"grade": "tactical"}})
@@ -121,6 +127,61 @@ def test_coloured_gnss_error_statistics():
     assert "pos_gm_sigma_m" not in g0.as_dict() and "pos_gm_sigma_m" in g1.as_dict()
 
 
+def test_ljung_box_null_distribution_and_closed_form():
+    """White series: Q / h has the chi-square_h / h distribution (mean 1, variance 2 / h;
+    1000 series of 120, margins 4 sigma of the sample moments). An AR(1) series: Q equals
+    the textbook sum from numpy's correlate, and a stamp gap removes the pairs across it
+    (the same sum without them)."""
+    rng = np.random.default_rng(7)
+    h = 5
+    t = np.arange(120.0)
+    q = np.array([ljung_box(rng.standard_normal(120), t, h) for _ in range(1000)])
+    assert abs(q.mean() - 1.0) < 4 * np.sqrt(2 / h / 1000) + 0.02  # + small-sample bias
+    assert q.var() == pytest.approx(2 / h, rel=4 * np.sqrt(2 / 999) + 0.1)
+    assert np.mean(q > sps.chi2.ppf(0.95, h) / h) == pytest.approx(0.05, abs=0.025)
+    x = np.zeros(200)
+    e = rng.standard_normal(200)
+    for i in range(1, 200):
+        x[i] = 0.6 * x[i - 1] + e[i]
+    y = x - x.mean()
+    r = np.correlate(y, y, "full")[199:] / np.sum(y * y)
+    n = 200
+    q_ref = n * (n + 2) * sum(r[k] ** 2 / (n - k) for k in range(1, h + 1)) / h
+    assert ljung_box(x, np.arange(200.0), h) == pytest.approx(q_ref, rel=1e-12)
+    t_gap = np.arange(200.0) + np.where(np.arange(200) >= 100, 50.0, 0.0)
+    r_gap = [sum(y[i] * y[i + k] for i in range(n - k) if (i < 100) == (i + k < 100))
+             / np.sum(y * y) for k in range(h + 1)]
+    q_gap = n * (n + 2) * sum(r_gap[k] ** 2 / (n - k) for k in range(1, h + 1)) / h
+    assert ljung_box(x, t_gap, h) == pytest.approx(q_gap, rel=1e-12)
+
+
+def test_allan_products_white_noise_closed_form():
+    """White noise of variance s^2 per sample: Allan variance s^2 dt / tau (non-overlapping
+    estimator, margin 4 sigma of the mean of the products); clusters never
+    straddle a stretch that the mask breaks."""
+    rng = np.random.default_rng(3)
+    dt, s = 0.01, 0.3
+    t = np.arange(0.0, 1000.0, dt)
+    x = s * rng.standard_normal((t.size, 3))
+    mask = np.ones(t.size, bool)
+    for tau in (0.1, 1.0):
+        _, d = allan_products(t, x, mask, tau)
+        # each product is a mean of 3 scaled chi-square_1: relative sigma sqrt(2 / (3 N))
+        assert d.mean() == pytest.approx(s * s * dt / tau, rel=4 * np.sqrt(2 / (3 * d.size)))
+    mask[::1000] = False  # stretches of 999 samples: 9 clusters of 1 s each, 8 products
+    ta, d = allan_products(t, x, mask, 1.0)
+    assert d.size == 100 * 8 and ta.size == d.size
+
+
+def test_lowband_share_white_and_slow():
+    """Periodogram share below a quarter of Nyquist: 1/4 for white noise (200 series of 64,
+    margin 4 sigma of the mean), near 1 for a slow sinusoid."""
+    rng = np.random.default_rng(11)
+    w = np.array([lowband_share(rng.standard_normal(64)) for _ in range(200)])
+    assert w.mean() == pytest.approx(0.25, abs=4 * w.std() / np.sqrt(200) + 0.01)
+    assert lowband_share(np.sin(2 * np.pi * np.arange(64) / 32.0)) > 0.95
+
+
 def test_model_toml_round_trip(tmp_path):
     imu = replace(imu_grade("tactical"), accel_vibration_rms_mps2=(0.5, 0.5, 0.5),
                   vibration_freq_hz=8.0, gyro_misalign_arcsec=(1.0, 2, 3, 4, 5, 6))
@@ -186,6 +247,29 @@ def test_hidden_mounting_misalignment_named_and_sized():
     s = named(comp, "mounting_misalignment")
     assert np.allclose(s.size, np.degrees(rho) * 3600.0, rtol=0.25)
     assert abs(s.after[s.target].z) < abs(s.before[s.target].z) / 10
+
+
+def test_hidden_coloured_gnss_named_and_sized():
+    """Gauss-Markov GNSS position error 0.3 m horizontal (0.45 m vertical, 60 s): named
+    first, the horizontal sigma within 25 %, the target gap shrinks. (A's vertical
+    accelerometer bias then absorbs part of the coloured vertical error, beyond A's own
+    sigma, so a later step may add `accel_bias_change`: docs/compare_sim.md, limits.)"""
+    comp, _ = compare_log(measured(gnss=GnssModel(pos_gm_sigma_m=(0.3, 0.45))), CONFIG)
+    s = comp.steps[0]
+    assert s.effect == "coloured_gnss", [(x.target, x.effect) for x in comp.steps]
+    assert s.size[0] == pytest.approx(0.3, rel=0.25)
+    assert abs(s.after[s.target].z) < abs(s.before[s.target].z) / 2
+
+
+def test_hidden_accel_bias_change_named_and_sized():
+    """Vertical accelerometer bias ramp of 30 000 ug/h (0.25 mg over the flight): named, the
+    z ramp within 25 % (slope measured by a trial simulation), the target gap shrinks."""
+    comp, _ = compare_log(measured(replace(imu_grade("tactical"),
+                                           accel_bias_drift_ugph=(0.0, 0.0, 3e4))), CONFIG)
+    s = named(comp, "accel_bias_change")
+    assert s.size[2] == pytest.approx(3e4, rel=0.25)
+    assert abs(s.after[s.target].z) < abs(s.before[s.target].z) / 2
+    assert comp.effects_added == ("accel_bias_change",)
 
 
 def test_outsider_is_unexplained():
