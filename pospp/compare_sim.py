@@ -246,8 +246,8 @@ def compare_sim_run(run_dir: str | Path, *, out: str | Path | None = None,
                                "sim_comparison", metadata=out_meta)
     named = ", ".join(comp.effects_added) or "none"
     header = (f"pospp compare-sim of {path.name}: effects added: {named}.\n"
-              f"Simulate with: pospp simulate --imu-grade THIS_FILE.toml ...; [gnss] holds "
-              f"the GNSS model (pospp.sim.gnss.GnssModel fields).")
+              f"Simulate with: pospp simulate --model THIS_FILE.toml ... ([imu]: "
+              f"pospp.sim.sensors.ImuErrorModel fields, [gnss]: pospp.sim.gnss.GnssModel).")
     report_files.write_text(Path(out) if out else run / "sim_model.toml",
                             model_toml(comp.imu_model, comp.gnss_model, header=header))
     pipeline._render_report(run)

@@ -293,3 +293,40 @@ def test_null_flights_false_alarms():
         if comp.steps:
             alarms.append((seed, comp.steps[0].target, comp.steps[0].effect))
     assert len(alarms) <= 3, alarms
+
+
+def test_simulate_reads_the_model_file(tmp_path):
+    """``pospp simulate --model sim_model.toml``: the IMU model from [imu] and the GNSS model
+    from [gnss] (time offset, coloured error, noise, lever arm) as written by compare-sim;
+    an option given on the command line replaces the file's value; unknown keys are refused."""
+    import json
+
+    from click.testing import CliRunner
+
+    from pospp.cli import main
+    from pospp.io.simulation_files import gnss_model_from_params, imu_error_model_from_params
+
+    imu = replace(imu_grade("tactical"), accel_vibration_rms_mps2=(0.3, 0.3, 0.3),
+                  vibration_freq_hz=8.0)
+    gnss = GnssModel(rate_hz=2.0, pos_noise_m=(0.2, 0.3), time_offset_s=0.04,
+                     lever_arm_b_m=(0.5, -0.3, 0.1), pos_gm_sigma_m=(0.2, 0.3),
+                     reported_pos_sigma_m=(1.0, 2.0))
+    model = tmp_path / "sim_model.toml"
+    model.write_text(model_toml(imu, gnss, header="test"))
+    prof = tmp_path / "short.toml"  # 30 s at 20 Hz
+    prof.write_text('name = "short"\nimu_rate_hz = 20\n[start]\nlat_deg = 30.0\n'
+                    'lon_deg = 114.0\nheight_m = 50.0\nheading_deg = 0.0\n[[segment]]\n'
+                    'type = "accelerate"\nto_speed_mps = 10.0\nduration_s = 30.0\n')
+    sim = ["simulate", "--profile", str(prof), "--model", str(model)]
+    r = CliRunner().invoke(main, [*sim, "-o", str(tmp_path / "a.mcap")])
+    assert r.exit_code == 0, r.output
+    params = json.loads((tmp_path / "a.params.json").read_text())
+    assert gnss_model_from_params(params) == gnss
+    assert imu_error_model_from_params(params) == imu
+    r = CliRunner().invoke(main, [*sim, "--gnss-rate-hz", "5", "-o", str(tmp_path / "b.mcap")])
+    assert r.exit_code == 0, r.output
+    params = json.loads((tmp_path / "b.params.json").read_text())
+    assert gnss_model_from_params(params) == replace(gnss, rate_hz=5.0)
+    model.write_text(model.read_text() + "bogus_key = 1\n")
+    r = CliRunner().invoke(main, [*sim, "-o", str(tmp_path / "c.mcap")])
+    assert r.exit_code != 0 and "bogus_key" in r.output
