@@ -161,6 +161,7 @@ def _accel_change(imu, gnss, u, ctx):
 
 
 _XYZ = ("x", "y", "z")
+_LEGS = ("legs_bma_ms", "legs_bma_heldout_ms")
 _IMU_SPECTRUM = tuple(f"imu_band_{s}_{b}" for s in ("accel", "gyro") for b in ("lo", "hi"))
 
 
@@ -177,32 +178,34 @@ LIBRARY: tuple[SimEffect, ...] = (
               ("gnss_vel_dot_accel", "a_lever_x", "a_lever_y", "att_offset_pitch"),
               ("gnss_vel_dot_accel", "a_lever_x", "a_lever_y", "att_offset_pitch",
                "gnss_vel_nis", "gnss_pos_nis", "gnss_vel_norm_n", "gnss_vel_norm_e",
-               "gnss_vel_lb_n", "gnss_vel_lb_e", "gnss_vel_lowband"), (0.05,), False,
+               "gnss_vel_lb_n", "gnss_vel_lb_e", "gnss_vel_lowband", *_LEGS), (0.05,), False,
               _time_offset),
     SimEffect("lever_arm", tuple(f"lever_{a}" for a in _XYZ), "m", 1.0,
               tuple(f"a_lever_{a}" for a in _XYZ),
               (*(f"a_lever_{a}" for a in _XYZ), "gnss_pos_nis", "gnss_vel_nis",
-               *_norm("pos"), *_norm("vel")), None, False, _lever),
+               *_norm("pos"), *_norm("vel"), *_LEGS), None, False, _lever),
     SimEffect("scale_factor", (*(f"gyro_sf_{a}" for a in _XYZ),
                                *(f"accel_sf_{a}" for a in _XYZ)), "ppm", 1e-6,
               (*(f"a_gyro_sf_{a}" for a in _XYZ), *(f"a_accel_sf_{a}" for a in _XYZ)),
               (*(f"a_gyro_sf_{a}" for a in _XYZ), *(f"a_accel_sf_{a}" for a in _XYZ),
-               "gnss_vel_nis", "gnss_vel_norm_n", "gnss_vel_norm_e"), None, False, _scale),
+               "gnss_vel_nis", "gnss_vel_norm_n", "gnss_vel_norm_e", *_LEGS), None, False,
+              _scale),
     SimEffect("mounting_misalignment", tuple(f"rho_{a}" for a in _XYZ), "arcsec", ARCSEC_RAD,
               ("att_offset_roll", "att_offset_pitch", "att_offset_yaw"),
-              ("att_offset_roll", "att_offset_pitch", "att_offset_yaw"), None, False,
+              ("att_offset_roll", "att_offset_pitch", "att_offset_yaw", *_LEGS), None, False,
               _mounting),
     SimEffect("coloured_gnss", ("pos_gm_var_h",), "m", 1.0, ("gnss_pos_lag1", "gnss_pos_nis"),
               ("gnss_pos_lag1", "gnss_pos_nis", *_norm("pos"),
                *(f"gnss_pos_lb_{a}" for a in "ned"), "gnss_pos_lowband"), (0.04,), True,
               _coloured),
     SimEffect("bias_instability", ("gyro_gm_var",), "deg/h", DEG_PER_H_RADPS,
-              ("a_gyro_bias_wander", "imu_avar_gyro_10s"),
-              ("a_gyro_bias_wander", "imu_avar_gyro_10s", *(f"a_gyro_trend_{a}" for a in _XYZ)),
+              ("a_gyro_bias_wander", "imu_avar_gyro_10s", *_LEGS),
+              ("a_gyro_bias_wander", "imu_avar_gyro_10s", *(f"a_gyro_trend_{a}" for a in _XYZ),
+               *_LEGS),
               ((5.0 * DEG_PER_H_RADPS) ** 2,), True, _instability),
     SimEffect("accel_bias_change", tuple(f"ramp_{a}" for a in _XYZ), "ug/h", UG_MPS2 / 3600.0,
               tuple(f"a_accel_trend_{a}" for a in _XYZ),
-              (*(f"a_accel_trend_{a}" for a in _XYZ), "a_accel_bias_wander"),
+              (*(f"a_accel_trend_{a}" for a in _XYZ), "a_accel_bias_wander", *_LEGS),
               (ACCEL_RAMP_TRIAL_MPS3,) * 3, False, _accel_change),
 )
 """The library, in a fixed order."""

@@ -67,6 +67,12 @@ Statistics (name: series, unit)
 ``a_accel_bias_wander``
     Mean over axes of (b_a(t) - mean b_a)^2 of A's smoothed accelerometer bias [m^2/s^4]
     (as ``a_gyro_bias_wander``, 4 blocks).
+``legs_bma_ms`` / ``legs_bma_heldout_ms``
+    Only on flights with straight legs: B minus A on the legs, the leg-based workflow's own
+    statistics (:class:`pospp.diagnose.workflow.LegGap`): per leg, the mean square of the
+    horizontal velocity residual after the base calibration model, and of the
+    leave-one-leg-out prediction error [m^2/s^2]; batch means over the legs
+    (:func:`leg_stats`).
 """
 
 from __future__ import annotations
@@ -81,7 +87,7 @@ from pospp import rotation
 from pospp.nav.filter import FilterResult
 
 __all__ = ["FlightStats", "Stat", "STAT_UNITS", "flight_stats", "dominant_frequency_hz",
-           "ljung_box", "lowband_share", "allan_products", "steady_mask"]
+           "ljung_box", "lowband_share", "allan_products", "steady_mask", "leg_stats"]
 
 N_BLOCKS = 10
 """Blocks of the batch-means sigma for fast statistics."""
@@ -117,6 +123,7 @@ STAT_UNITS = {
     "imu_band_gyro_lo": "rad2/s2", "imu_band_gyro_hi": "rad2/s2",
     **{f"a_gyro_trend_{a}": "rad/s2" for a in "xyz"},
     "a_accel_bias_wander": "m2/s4",
+    "legs_bma_ms": "m2/s2", "legs_bma_heldout_ms": "m2/s2",
 }
 """Every statistic and its unit (SI)."""
 
@@ -282,6 +289,14 @@ def _band_blocks(t_s: NDArray, hp: NDArray, t0: float, t1: float, n_blocks: int,
         lo.append(float(p[(f >= 1.0) & (f < fs / 4)].sum() * df))
         hi.append(float(p[f >= fs / 4].sum() * df))
     return lo, hi
+
+
+def leg_stats(gap_mps: NDArray, heldout_gap_mps: NDArray) -> dict[str, Stat]:
+    """``legs_bma_ms`` and ``legs_bma_heldout_ms`` from the per-leg residual RMS of B minus A
+    after the base model and of its held-out prediction [m/s] (one value per leg; batch
+    means over the legs, legs - 1 dof)."""
+    return {"legs_bma_ms": _from_blocks(list(np.square(gap_mps))),
+            "legs_bma_heldout_ms": _from_blocks(list(np.square(heldout_gap_mps)))}
 
 
 def _nearest(ts: NDArray, t: NDArray) -> NDArray:

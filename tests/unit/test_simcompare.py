@@ -68,6 +68,22 @@ def measured(imu: ImuErrorModel | None = None, gnss: GnssModel | None = None, *,
     return FlightLog(sim.imu, sim.fix, vel, "hidden-effect flight")
 
 
+def leg_track(n_legs: int = 4, leg_s: float = 60.0, turn_s: float = 20.0,
+              speed_mps: float = 10.0):
+    """Straight back-and-forth legs: 10 s to reach 10 m/s, then ``n_legs`` legs of
+    ``leg_s`` (heading 0 / 180 deg) joined by smooth U-turns of ``turn_s``; 10 Hz."""
+    dt = 0.1
+    t = np.arange(0.0, 10.0 + n_legs * leg_s + (n_legs - 1) * turn_s + dt / 2, dt)
+    sp = np.clip(t / 10.0, 0.0, 1.0) * speed_mps
+    hd = np.zeros_like(t)
+    for k in range(1, n_legs):
+        x = np.clip((t - 10.0 - k * leg_s - (k - 1) * turn_s) / turn_s, 0.0, 1.0)
+        hd += np.pi * (3 * x ** 2 - 2 * x ** 3)
+    lat = np.radians(30.0) + np.cumsum(sp * np.cos(hd)) * dt / 6.37e6
+    lon = np.radians(114.0) + np.cumsum(sp * np.sin(hd)) * dt / (6.37e6 * np.cos(np.radians(30)))
+    return t, lat, lon, np.full(t.shape, 50.0)
+
+
 def named(comp, effect):
     steps = [s for s in comp.steps if s.effect == effect]
     assert steps, f"{effect} not named: {[(s.target, s.effect) for s in comp.steps]}"
@@ -282,17 +298,37 @@ def test_outsider_is_unexplained():
     assert comp.effects_added == ()
 
 
+def test_legs_b_minus_a_statistics():
+    """A flight with 4 straight legs: B minus A on the legs (the leg-based workflow's base-
+    model residual and held-out error) is compared, with 3 dof (4 legs); a hidden
+    50 deg/h Gauss-Markov gyro drift (600 s) makes B minus A's mean square on the legs more
+    than 10 times the simulated one (the configured drift is 0.5 deg/h). With 4 legs of
+    different drift the batch-means sigma is wide, so this alone is not significant
+    (docs/compare_sim.md, limits)."""
+    t, lat, lon, h = leg_track()
+    imu = replace(imu_grade("tactical"), gyro_gm_sigma_dph=(50.0,) * 3)
+    sim = simulate_along(t, lat, lon, h, imu_grade=imu, gnss=GnssModel(), seed=1,
+                         imu_rate_hz=50.0)
+    comp, _ = compare_log(FlightLog(sim.imu, sim.fix, sim.vel, "legs"), CONFIG, max_steps=0)
+    g = comp.base["legs_bma_ms"]
+    assert g.measured > 10 * g.simulated > 0 and g.z > 0
+    assert "legs_bma_heldout_ms" in comp.base
+    comp0, _ = compare_log(measured(seed=5, duration_s=60.0), CONFIG, max_steps=0)
+    assert not any(n.startswith("legs_") for n in comp0.base)  # no legs, no statistic
+
+
 @pytest.mark.slow
 def test_null_flights_false_alarms():
-    """Null flights (the configured model is the truth; 24 seeds, 120 s): the gap tests run at
-    a family-wise 1 %; an effect or `unexplained` named on at most 3 of 24 seeds (binomial:
-    P(>= 4 | p = 0.05) = 3 %, so this fails when the false-alarm rate is well above 5 %)."""
+    """Null flights (the configured model is the truth; 60 seeds, 120 s): the gap tests run at
+    a family-wise 1 %; an effect or `unexplained` named on at most 6 of 60 seeds (binomial:
+    P(>= 7 | p = 0.05) = 3 %, so this fails when the false-alarm rate is well above 5 %)."""
     alarms = []
-    for seed in range(100, 124):
+    for seed in range(100, 160):
         comp, _ = compare_log(measured(seed=seed, duration_s=120.0), CONFIG, max_steps=1)
         if comp.steps:
             alarms.append((seed, comp.steps[0].target, comp.steps[0].effect))
-    assert len(alarms) <= 3, alarms
+    assert sps.binom.sf(6, 60, 0.05) < 0.035
+    assert len(alarms) <= 6, alarms
 
 
 def test_simulate_reads_the_model_file(tmp_path):
