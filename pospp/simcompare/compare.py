@@ -10,10 +10,13 @@ trial simulation, :mod:`pospp.simcompare.effects`); an effect is admissible when
 u differs from zero (chi-square test, level ``alpha`` / number of candidates). Each
 admissible effect is added with its fitted size and the flight re-simulated; the one with the
 least sum of z^2 after (plus 2 per parameter, as AIC) over the statistics that some candidate
-of the step moves is kept, and the gaps after are recorded. A target that no
+of the step moves is kept, and the gaps after are recorded. A multi-parameter effect adds
+only its components at least ``MIN_COMPONENT_Z`` sigma from zero (the others are reported as
+0 with their sigma). A target that no
 admissible effect explains, or whose gap the added effect does not shrink, is
-``unexplained`` and left out of later targets. The loop stops when no target is left or after
-``max_steps``.
+``unexplained`` and left out of later targets (a step of its own, which does not count
+against ``max_steps``). The loop stops when no target is left or ``max_steps`` effects have
+been added.
 """
 
 from __future__ import annotations
@@ -33,6 +36,10 @@ __all__ = ["ALPHA", "Comparison", "Gap", "compare_flights", "gaps"]
 
 ALPHA = 0.01
 """Family-wise significance level of the gap tests (Holm-Bonferroni)."""
+MIN_COMPONENT_Z = 2.0
+"""A multi-parameter effect adds only the components of its fit at least this many sigma
+from zero (the others stay 0: e.g. the horizontal accelerometer ramps, which A's bias
+estimate hardly sees)."""
 
 SimulateFn = Callable[[ImuErrorModel, GnssModel], FlightStats]
 
@@ -166,11 +173,13 @@ def compare_flights(measured: FlightStats, simulate: SimulateFn, imu: ImuErrorMo
     steps: list[Step] = []
     added: list[str] = []
     dropped: set[str] = set()
-    for k in range(1, max_steps + 1):
+    k = 0
+    while len(added) < max_steps:
         targets = sorted((g for g in cur.values() if g.significant and g.statistic not in dropped),
                          key=lambda g: -abs(g.z))
         if not targets:
             break
+        k += 1
         target = targets[0].statistic
         cands = [e for e in library if target in e.explains and e.name not in added]
         tried = []
@@ -184,10 +193,13 @@ def compare_flights(measured: FlightStats, simulate: SimulateFn, imu: ImuErrorMo
             u, cov, chi_u = fit
             if sps.chi2.sf(chi_u, len(u)) > alpha / max(len(cands), 1):
                 continue
+            if len(u) > 1:  # components within MIN_COMPONENT_Z sigma of zero are not added
+                u = np.where(np.abs(u) >= MIN_COMPONENT_Z * np.sqrt(np.diag(cov)), u, 0.0)
             imu2, gnss2 = e.apply(imu, gnss, u, ctx)
             sim2 = simulate(imu2, gnss2)
             after = gaps(measured, sim2, alpha=alpha)
-            score = sum(g.z ** 2 for n, g in after.items() if n in moved) + 2.0 * len(u)
+            score = (sum(g.z ** 2 for n, g in after.items() if n in moved)
+                     + 2.0 * np.count_nonzero(u))
             tried.append((score, e, u, cov, imu2, gnss2, sim2, after))
         if not tried:
             steps.append(Step(k, target, "unexplained", (), (), (), "", cur, cur))
