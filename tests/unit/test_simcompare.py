@@ -32,6 +32,7 @@ from pospp.simcompare.stats import (
     allan_products,
     ljung_box,
     lowband_share,
+    steady_mask,
 )
 from pospp.simcompare.tables import comparison_columns, model_toml
 
@@ -187,6 +188,13 @@ def test_allan_products_white_noise_closed_form():
     mask[::1000] = False  # stretches of 999 samples: 9 clusters of 1 s each, 8 products
     ta, d = allan_products(t, x, mask, 1.0)
     assert d.size == 100 * 8 and ta.size == d.size
+    # steady parts: 10 m/s north, then a 1 m/s^2 brake for 5 s, then a 6 deg/s turn for 5 s
+    ts = np.arange(0.0, 30.0, 0.1)
+    v = np.zeros((ts.size, 3))
+    v[:, 0] = 10.0 - np.clip(ts - 10.0, 0.0, 5.0)
+    yaw = np.radians(6.0) * np.clip(ts - 20.0, 0.0, 5.0)
+    ok = steady_mask(ts, v, yaw, np.array([5.0, 12.0, 17.0, 22.0, 28.0]))
+    assert ok.tolist() == [True, False, True, False, True]
 
 
 def test_lowband_share_white_and_slow():
