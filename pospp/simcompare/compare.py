@@ -25,6 +25,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy import stats as sps
 
 from pospp.sim.gnss import GnssModel
@@ -127,30 +128,59 @@ class Comparison:
     effects_added: tuple[str, ...] = field(default=())
 
 
+def _wls(h: NDArray, g: NDArray, w: NDArray):
+    a = h.T @ (h * w[:, None])
+    if not np.all(np.isfinite(a)) or np.linalg.matrix_rank(a) < h.shape[1]:
+        return None
+    cov = np.linalg.inv(a)
+    u = cov @ (h.T @ (w * g))
+    return u, cov, float(u @ a @ u)
+
+
 def _fit(effect: SimEffect, gap: dict[str, Gap], base: FlightStats, simulate: SimulateFn,
          imu: ImuErrorModel, gnss: GnssModel, ctx: EffectContext):
+    """Weighted least squares of the effect's parameters on its fit statistics' gaps:
+    (u, cov, chi-square of u against zero), or None when they do not determine u.
+
+    Slopes: the identity (``trial`` None), one trial simulation per parameter, or, for an
+    effect with ``screen``, the identity to choose the parameters at least
+    ``MIN_COMPONENT_Z`` sigma from zero and a trial simulation for those only (the others
+    keep the identity fit's sigma and a value of 0).
+    """
     names = [s for s in effect.fit_stats if s in gap]
     if not names:
         return None
     p = len(effect.params)
-    if effect.trial is None:
-        h = np.eye(len(effect.fit_stats), p)[[effect.fit_stats.index(s) for s in names]]
-    else:
-        h = np.zeros((len(names), p))
-        for j, size in enumerate(effect.trial):
-            u = np.zeros(p)
-            u[j] = size
-            sim = simulate(*effect.apply(imu, gnss, u, ctx))
-            h[:, j] = [(sim.stats[s].value - base.stats[s].value) / size for s in names]
     g = np.array([gap[s].gap for s in names])
     w = 1.0 / np.array([gap[s].sigma for s in names]) ** 2
-    a = h.T @ (h * w[:, None])
-    if not np.all(np.isfinite(a)) or np.linalg.matrix_rank(a) < p:
-        return None
-    cov = np.linalg.inv(a)
-    u = cov @ (h.T @ (w * g))
-    chi_u = float(u @ a @ u)
-    return u, cov, chi_u
+    eye = np.eye(len(effect.fit_stats), p)[[effect.fit_stats.index(s) for s in names]]
+    if effect.trial is None:
+        return _wls(eye, g, w)
+    cols = list(range(p))
+    cov0 = None
+    if effect.screen:
+        fit0 = _wls(eye, g, w)
+        if fit0 is None:
+            return None
+        u0, cov0, _ = fit0
+        cols = [j for j in range(p) if abs(u0[j]) >= MIN_COMPONENT_Z * np.sqrt(cov0[j, j])]
+        if not cols:
+            return None
+    h = np.zeros((len(names), len(cols)))
+    for k, j in enumerate(cols):
+        u = np.zeros(p)
+        u[j] = effect.trial[j]
+        sim = simulate(*effect.apply(imu, gnss, u, ctx))
+        h[:, k] = [(sim.stats[s].value - base.stats[s].value) / effect.trial[j] for s in names]
+    fit = _wls(h, g, w)
+    if fit is None or cov0 is None:
+        return fit
+    uc, covc, chi = fit
+    u = np.zeros(p)
+    u[cols] = uc
+    cov = np.diag(np.diag(cov0))
+    cov[np.ix_(cols, cols)] = covc
+    return u, cov, chi
 
 
 def compare_flights(measured: FlightStats, simulate: SimulateFn, imu: ImuErrorModel,
