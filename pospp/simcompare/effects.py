@@ -8,7 +8,9 @@ and how the slope d stat / d u is found:
 * ``known``: the statistic is algorithm A's own estimate of the parameter (lever arm, scale
   factors, accelerometer bias trend, attitude offset), so the slope is the identity;
 * ``trial``: the slope is measured by simulating once with a trial size per parameter,
-  with the same random numbers as the base simulation (common random numbers).
+  with the same random numbers as the base simulation (common random numbers);
+* ``screen`` (scale factors): A's estimates choose the parameters (identity fit, at least
+  2 sigma), and a trial simulation measures the slope of those only.
 
 Variance-type effects (vibration, coloured GNSS error, bias instability) add a variance u to
 the model's: the model's RMS becomes sqrt(rms_0^2 + u); their size is reported as
