@@ -50,6 +50,7 @@ from pospp.qc.checks import comparison_text
 from pospp.qc.stage import QualityReport, qc_columns, quality_checks, worst_status
 from pospp.report import figures
 from pospp.report.html import render_report
+from pospp.types import FLU_TO_FRD
 
 ProgressFn = Callable[[str, float], None]
 """Progress callback: (stage name, fraction of the whole run done in [0, 1])."""
@@ -92,7 +93,7 @@ def sensor_to_body_dcm(sensor_frame: str, mounting_rpy_deg: tuple[float, float, 
     FRD; C_mount (roll, pitch, yaw of the sensor case in the body, z-y-x) is the residual
     mounting rotation, identity when the IMU is aligned with the body.
     """
-    axes = {"flu": mcap_reader.FLU_TO_FRD, "frd": np.eye(3)}[sensor_frame]
+    axes = {"flu": FLU_TO_FRD, "frd": np.eye(3)}[sensor_frame]
     return rotation.dcm_from_euler(np.radians(mounting_rpy_deg)) @ axes
 
 

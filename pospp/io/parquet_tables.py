@@ -22,7 +22,6 @@ import os
 import uuid
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -32,13 +31,13 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from pospp import __version__
+from pospp.types import ReferenceTrajectory
 
 __all__ = [
     "EXTENSIBLE_TABLES",
     "SCHEMA_VERSION",
     "TABLES",
     "Column",
-    "ReferenceTrajectory",
     "atomic_path",
     "read_metadata",
     "read_reference_trajectory",
@@ -559,32 +558,6 @@ def read_metadata(path: str | Path) -> dict[str, Any]:
 
 
 # --------------------------------------------------------------------------- reference
-
-
-@dataclass(frozen=True)
-class ReferenceTrajectory:
-    """A reference trajectory (simulation truth or a higher-grade system).
-
-    Attributes
-    ----------
-    time_ns : (N,) int64
-    lat_rad, lon_rad, height_m : (N,) float64
-        WGS-84 geodetic position of the IMU [rad, rad, m above the ellipsoid].
-    v_n_mps : (N, 3) float64
-        Velocity in NED [m/s].
-    rpy_rad : (N, 3) float64
-        [roll, pitch, yaw] of b (FRD) w.r.t. n (NED), z-y-x [rad]; yaw as stored.
-    """
-
-    time_ns: np.ndarray
-    lat_rad: np.ndarray
-    lon_rad: np.ndarray
-    height_m: np.ndarray
-    v_n_mps: np.ndarray
-    rpy_rad: np.ndarray
-
-    def __len__(self) -> int:
-        return int(self.time_ns.shape[0])
 
 
 def read_reference_trajectory(path: str | Path) -> ReferenceTrajectory:

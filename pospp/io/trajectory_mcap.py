@@ -31,8 +31,8 @@ from mcap.writer import CompressionType, Writer
 
 from pospp import __version__, earth, rotation
 from pospp.io import ros_messages as rm
-from pospp.io.mcap_reader import ENU_TO_NED, FLU_TO_FRD
 from pospp.io.parquet_tables import atomic_path
+from pospp.types import ENU_TO_NED, FLU_TO_FRD
 
 __all__ = ["thin_indices", "write_trajectory_mcap"]
 

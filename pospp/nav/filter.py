@@ -340,13 +340,13 @@ def run_integrated_navigation(
 
     Parameters
     ----------
-    imu : pospp.io.mcap_reader.ImuSamples
+    imu : pospp.types.ImuSamples
         ``time_ns`` (N,) int64, ``w_ib_b_radps`` (N, 3), ``f_ib_b_mps2`` (N, 3): mean rate and
         specific force over the interval ending at each stamp, body FRD.
-    gnss_fixes : pospp.io.mcap_reader.GnssFixes
+    gnss_fixes : pospp.types.GnssFixes
         ``time_ns`` (M,), ``lat_rad``, ``lon_rad``, ``height_m`` (M,), ``pos_cov_ned_m2``
         (M, 3, 3): antenna positions (WGS-84) with their NED covariance.
-    gnss_velocities : pospp.io.mcap_reader.GnssVelocities or None
+    gnss_velocities : pospp.types.GnssVelocities or None
         ``time_ns`` (V,), ``v_n_mps`` (V, 3), ``vel_cov_ned_m2ps2`` (V, 3, 3): antenna velocity.
     tuning : ImuTuning or preset name
         IMU noise model (:mod:`pospp.nav.tuning`).

@@ -249,3 +249,27 @@ def increments_from_rates(
     w = np.asarray(w_ib_b_radps, dtype=float)
     f = np.asarray(f_ib_b_mps2, dtype=float)
     return t_s, w[1:] * dt[:, None], f[1:] * dt[:, None]
+
+
+def interpolate_trajectory(traj: Trajectory, t_s: NDArray) -> Trajectory:
+    """Trajectory at new times: linear in position and velocity, slerp-free small-step attitude.
+
+    Attitude is interpolated by the rotation vector between the bracketing quaternions, so it
+    is exact for constant-rate rotation between samples.
+    """
+    t_s = np.asarray(t_s, dtype=float)
+    i = np.clip(np.searchsorted(traj.t_s, t_s, side="right") - 1, 0, len(traj) - 2)
+    w = (t_s - traj.t_s[i]) / (traj.t_s[i + 1] - traj.t_s[i])
+    w = np.clip(w, 0.0, 1.0)
+
+    def lin(a: NDArray) -> NDArray:
+        ww = w.reshape((-1,) + (1,) * (a.ndim - 1))
+        return a[i] * (1 - ww) + a[i + 1] * ww
+
+    q0, q1 = traj.q_nb[i], traj.q_nb[i + 1]
+    dq = rotation.quat_multiply(rotation.quat_conjugate(q0), q1)
+    rv = rotation.rotvec_from_quat(dq) * w[:, None]
+    q = rotation.quat_multiply(q0, rotation.quat_from_rotvec(rv))
+    return Trajectory(
+        t_s, lin(traj.lat_rad), lin(traj.lon_rad), lin(traj.height_m), lin(traj.v_n_mps), q
+    )

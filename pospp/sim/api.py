@@ -24,14 +24,13 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from pospp import __version__, rotation
-from pospp.io.mcap_reader import GnssFixes, GnssVelocities, ImuSamples
-from pospp.io.parquet_tables import ReferenceTrajectory
 from pospp.nav.strapdown import Trajectory
 from pospp.sim.gnss import GnssModel, simulate_gnss
 from pospp.sim.imu import Motion, exact_increments, quat_nb_from_euler
 from pospp.sim.profile import MissionProfile, load_profile, plan_mission
 from pospp.sim.sensors import ImuErrorModel, RealisedImuErrors, apply_imu_errors, imu_grade
 from pospp.sim.trajectory import ProfileMotion, SplineMotion
+from pospp.types import GnssFixes, GnssVelocities, ImuSamples, ReferenceTrajectory
 
 __all__ = [
     "DEFAULT_START_TIME_NS",
@@ -39,6 +38,8 @@ __all__ = [
     "ImuErrorModel",
     "Simulation",
     "TrueLeg",
+    "gnss_model_from_params",
+    "imu_error_model_from_params",
     "imu_grade",
     "load_profile",
     "simulate",
@@ -177,10 +178,37 @@ class Simulation:
         k = np.arange(int(np.floor((last - first - offset_s * 1e9) * rate_hz * 1e-9)) + 1)
         return first + np.round((offset_s + k / rate_hz) * 1e9).astype(np.int64)
 
-    def state_at_first_imu_stamp(self):
-        """The true NavState at the first IMU stamp (initial state for ``increments_from_rates``
-        output, which drops the first sample)."""
-        return self.truth.state(1)
+    def realised_bias(self, rate_hz: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The realised IMU biases (constant + ramp + Gauss-Markov, white noise excluded) at
+        the truth epochs of ``rate_hz``: the bias of the IMU interval ending at each epoch.
+
+        Returns
+        -------
+        time_ns : (M,) int64
+        gyro_bias_b_radps, accel_bias_b_mps2 : (M, 3) float64
+            Body FRD [rad/s], [m/s^2].
+        """
+        dt_ns = int(self.params["time"]["imu_dt_ns"])
+        step = round(1e9 / rate_hz) // dt_ns
+        j = np.arange(0, len(self.truth), step)
+        k = np.maximum(j - 1, 0)  # interval ending at epoch j
+        return (self.truth_time_ns[j], self.imu_errors.gyro_bias_radps[k],
+                self.imu_errors.accel_bias_mps2[k])
+
+
+def imu_error_model_from_params(params: dict[str, Any]) -> ImuErrorModel:
+    """The injected :class:`ImuErrorModel` of a params dict (``config.imu_errors``; read by
+    ``pospp.io.simulation_files.read_params``)."""
+    d = params["config"]["imu_errors"]
+    known = ImuErrorModel.__dataclass_fields__
+    return ImuErrorModel.from_dict({k: v for k, v in d.items() if k in known})
+
+
+def gnss_model_from_params(params: dict[str, Any]) -> GnssModel:
+    """The :class:`GnssModel` of a params dict written by pospp (``config.gnss``)."""
+    d = dict(params["config"]["gnss"])
+    d["outages_s"] = tuple(tuple(x) for x in d.get("outages_s", ()))
+    return GnssModel.from_dict(d)
 
 
 def _resolve_grade(g: str | ImuErrorModel) -> tuple[str, ImuErrorModel]:

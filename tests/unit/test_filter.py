@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from pospp import earth, rotation
-from pospp.io.mcap_reader import GnssFixes, GnssVelocities, ImuSamples
 from pospp.nav.filter import FilterOptions, run_integrated_navigation
 from pospp.nav.tuning import tuning_preset
+from pospp.types import GnssFixes, GnssVelocities, ImuSamples
 
 LAT, LON, H = math.radians(45.0), math.radians(7.0), 300.0
 RPY = np.radians([1.5, -2.0, 130.0])

@@ -15,6 +15,7 @@ import pospp
 from pospp.io import parquet_tables as pt
 from pospp.io.errors import IngestIssue
 from pospp.outputs import issue_message, messages_table
+from pospp.types import ReferenceTrajectory
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -205,7 +206,7 @@ def test_ingest_issues_become_messages(tmp_path: Path) -> None:
 def test_reference_trajectory_round_trip(tmp_path: Path) -> None:
     rng = np.random.default_rng(4)
     n = 50
-    ref = pt.ReferenceTrajectory(
+    ref = ReferenceTrajectory(
         time_ns=1_717_200_000_000_000_000 + np.arange(n, dtype=np.int64) * 10**8,
         lat_rad=np.deg2rad(40 + rng.normal(0, 1e-3, n)),
         lon_rad=np.deg2rad(116 + rng.normal(0, 1e-3, n)),

@@ -18,10 +18,10 @@ import pytest
 from pospp import earth
 from pospp.config import PipelineConfig
 from pospp.io import parquet_tables
-from pospp.io.mcap_reader import FLU_TO_FRD
 from pospp.qc import checks as qc
 from pospp.qc.stage import QualityReport, config_problems, qc_columns, worst_status
 from pospp.report.summary import qc_lines
+from pospp.types import FLU_TO_FRD
 
 LAT = math.radians(34.25)
 DPH = math.pi / 180.0 / 3600.0

@@ -51,10 +51,10 @@ from pospp.io.converters.ansfl_quadrotor import (
     _root_and_path,
     dji_gnss,
 )
-from pospp.io.mcap_reader import ImuSamples
 from pospp.io.mcap_writer import write_flight_log
-from pospp.io.parquet_tables import ReferenceTrajectory, write_reference_trajectory
+from pospp.io.parquet_tables import write_reference_trajectory
 from pospp.nav.mounting import MountingOptions, estimate_mounting
+from pospp.types import ImuSamples, ReferenceTrajectory
 
 __all__ = ["convert_ansfl_dot_raw", "raw_files"]
 

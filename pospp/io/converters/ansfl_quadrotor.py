@@ -55,10 +55,10 @@ from pospp.io.converters._common import (
     require_file,
     seconds_to_ns,
 )
-from pospp.io.mcap_reader import GnssFixes, GnssVelocities, ImuSamples
 from pospp.io.mcap_writer import write_flight_log
-from pospp.io.parquet_tables import ReferenceTrajectory, write_reference_trajectory
+from pospp.io.parquet_tables import write_reference_trajectory
 from pospp.nav.mounting import MountingEstimate, MountingOptions, estimate_mounting
+from pospp.types import GnssFixes, GnssVelocities, ImuSamples, ReferenceTrajectory
 
 __all__ = ["convert_ansfl_quadrotor", "estimate_unit_mounting"]
 

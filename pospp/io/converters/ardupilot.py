@@ -47,8 +47,8 @@ from pospp.io.converters._common import (
     read_csv,
     require_file,
 )
-from pospp.io.mcap_reader import GnssFixes, GnssVelocities, ImuSamples
 from pospp.io.mcap_writer import write_flight_log
+from pospp.types import GnssFixes, GnssVelocities, ImuSamples
 
 __all__ = ["convert_ardupilot"]
 

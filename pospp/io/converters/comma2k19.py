@@ -51,10 +51,10 @@ from pospp.io.converters._common import (
     require_file,
     velocity_from_positions,
 )
-from pospp.io.mcap_reader import GnssFixes, GnssVelocities, ImuSamples
 from pospp.io.mcap_writer import write_flight_log
-from pospp.io.parquet_tables import ReferenceTrajectory, write_reference_trajectory
+from pospp.io.parquet_tables import write_reference_trajectory
 from pospp.nav.mounting import MountingOptions, estimate_mounting
+from pospp.types import GnssFixes, GnssVelocities, ImuSamples, ReferenceTrajectory
 
 __all__ = ["convert_comma2k19"]
 

@@ -41,7 +41,8 @@ from pospp.io.converters._common import (
     seconds_to_ns,
     velocity_from_positions,
 )
-from pospp.io.parquet_tables import ReferenceTrajectory, write_reference_trajectory
+from pospp.io.parquet_tables import write_reference_trajectory
+from pospp.types import ReferenceTrajectory
 
 __all__ = ["convert_kfgins_rtk", "convert_navego_reference"]
 
