@@ -51,6 +51,7 @@ from pospp.qc.stage import QualityReport, qc_columns, quality_checks, worst_stat
 from pospp.report import figures
 from pospp.report.html import render_report
 from pospp.types import FLU_TO_FRD
+from pospp.units import t_s_from_time_ns
 
 ProgressFn = Callable[[str, float], None]
 """Progress callback: (stage name, fraction of the whole run done in [0, 1])."""
@@ -434,7 +435,7 @@ def _event_poses(log: mcap_reader.FlightLog, solution: nav_filter.NavSolution, n
     epoch_ns = int(log.imu.time_ns[0])
     sc = config.sensor
     poses = sensor_events.sensor_poses(
-        solution, outputs.time_ns_to_t_s(log.events_ns, epoch_ns), lever_b_m=sc.lever_arm_m,
+        solution, t_s_from_time_ns(log.events_ns, epoch_ns), lever_b_m=sc.lever_arm_m,
         c_bs=rotation.dcm_from_euler(np.radians(sc.boresight_rpy_deg)))
     n_out = int(np.count_nonzero(~poses.inside))
     if n_out:

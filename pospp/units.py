@@ -22,6 +22,7 @@ __all__ = [
     "DEG_PER_H_RADPS",
     "DEG_PER_SQRT_H_RAD_PER_SQRT_S",
     "G0_MPS2",
+    "MPS_PER_SQRT_H_MPS_PER_SQRT_S",
     "NS_PER_S",
     "S_PER_NS",
     "UG_MPS2",
@@ -38,6 +39,8 @@ DEG_PER_H_RADPS = np.pi / 180.0 / 3600.0
 """One degree per hour [rad/s]."""
 DEG_PER_SQRT_H_RAD_PER_SQRT_S = np.pi / 180.0 / 60.0
 """One deg/sqrt(h) (angle random walk) [rad/sqrt(s)]: (pi/180) / sqrt(3600 s)."""
+MPS_PER_SQRT_H_MPS_PER_SQRT_S = 1.0 / 60.0
+"""One m/s/sqrt(h) (velocity random walk) [m/s/sqrt(s)]."""
 ARCSEC_RAD = np.pi / 180.0 / 3600.0
 """One arc second [rad]."""
 NS_PER_S = 1_000_000_000

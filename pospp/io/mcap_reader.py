@@ -73,10 +73,10 @@ from pospp.types import (
     empty_velocities,
     rotate_covariance,
 )
+from pospp.units import G0_MPS2, S_PER_NS
 
 __all__ = ["FlightLog", "read_flight_log"]
 
-G_MPS2 = 9.80665  # standard gravity, only for the units-plausibility check
 _GAP_FACTOR = 3.0  # an IMU interval longer than this many nominal intervals is a gap
 _MAX_LISTED = 100  # at most this many individual gap / rate-change issues
 
@@ -236,11 +236,11 @@ def _check_imu_units(w: np.ndarray, f: np.ndarray, topic: str, path: str) -> Non
     if 0.5 < fmed < 1.5:
         raise IngestError(
             f"median |linear_acceleration| = {fmed:.4f}: looks like g, not m/s^2 "
-            f"(expected about {G_MPS2:.2f} m/s^2)", file=path, topic=topic,
+            f"(expected about {G0_MPS2:.2f} m/s^2)", file=path, topic=topic,
         )
-    if not 0.5 * G_MPS2 < fmed < 1.5 * G_MPS2:
+    if not 0.5 * G0_MPS2 < fmed < 1.5 * G0_MPS2:
         raise IngestError(
-            f"median |linear_acceleration| = {fmed:.4g} m/s^2, expected about {G_MPS2:.2f} "
+            f"median |linear_acceleration| = {fmed:.4g} m/s^2, expected about {G0_MPS2:.2f} "
             "m/s^2 (specific force of a vehicle near the Earth's surface)",
             file=path, topic=topic,
         )
@@ -273,13 +273,13 @@ def _check_rate_units_against_gnss(imu: ImuSamples, vel: GnssVelocities, topic: 
     if len(vel) < _MIN_TURN_INTERVALS + 1 or len(imu) < 3:
         return
     t = imu.time_ns
-    dt = np.diff(t, prepend=t[0] - (t[1] - t[0])) * 1e-9
+    dt = np.diff(t, prepend=t[0] - (t[1] - t[0])) * S_PER_NS
     cum = np.vstack([np.zeros((1, 3)), np.cumsum(imu.w_ib_b_radps * dt[:, None], axis=0)])
     tv = vel.time_ns
     speed = np.hypot(vel.v_n_mps[:, 0], vel.v_n_mps[:, 1])
     course = np.arctan2(vel.v_n_mps[:, 1], vel.v_n_mps[:, 0])
     dpsi = np.angle(np.exp(1j * np.diff(course)))
-    dtv = np.diff(tv) * 1e-9
+    dtv = np.diff(tv) * S_PER_NS
     ok = (speed[:-1] > _COURSE_SPEED_MIN_MPS) & (speed[1:] > _COURSE_SPEED_MIN_MPS)
     ok &= (tv[:-1] >= t[0]) & (tv[1:] <= t[-1]) & (dtv > 0)
     ok &= np.abs(dpsi) > _TURN_RATE_MIN_RADPS * np.where(dtv > 0, dtv, 1.0)

@@ -33,6 +33,7 @@ from pospp import __version__, earth, rotation
 from pospp.io import ros_messages as rm
 from pospp.io.parquet_tables import atomic_path
 from pospp.types import ENU_TO_NED, FLU_TO_FRD
+from pospp.units import time_ns_from_t_s
 
 __all__ = ["thin_indices", "write_trajectory_mcap"]
 
@@ -68,7 +69,7 @@ def write_trajectory_mcap(path: str | Path, solution: Any, epoch_ns: int, *,
     keep = thin_indices(solution.t_s, rate_hz)
     t_s = solution.t_s[keep]
     n = len(t_s)
-    time_ns = np.int64(epoch_ns) + np.round(t_s * 1e9).astype(np.int64)
+    time_ns = time_ns_from_t_s(t_s, epoch_ns)
     lat, lon, h = solution.lat_rad[keep], solution.lon_rad[keep], solution.height_m[keep]
     q_nb = solution.q_nb[keep]
     var_ned = solution.pos_sigma_ned_m[keep] ** 2
@@ -140,7 +141,7 @@ def _leg_paths(legs: Any, solution: Any, epoch_ns: int, *, r_enu_of: Any, q_of: 
     """(stamp, Path payload) per leg: the solution's poses at about 1 Hz over the leg."""
     if legs is None or len(legs) == 0:
         return []
-    sol_ns = np.int64(epoch_ns) + np.round(solution.t_s * 1e9).astype(np.int64)
+    sol_ns = time_ns_from_t_s(solution.t_s, epoch_ns)
     step = thin_indices(solution.t_s, _LEG_PATH_RATE_HZ)
     out = []
     for start, end in zip(np.asarray(legs["start_ns"], np.int64),

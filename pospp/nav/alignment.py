@@ -46,6 +46,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from pospp import earth, rotation
 from pospp.nav.tuning import NoiseParameters
+from pospp.units import G0_MPS2
 
 
 @dataclass(frozen=True)
@@ -138,7 +139,7 @@ def static_windows(
     fw = f[: nw * m].reshape(nw, m, 3)
     ww = w[: nw * m].reshape(nw, m, 3)
     tw = t[: nw * m].reshape(nw, m)
-    lat_g = 9.80665
+    lat_g = G0_MPS2
     ok = (
         (fw.std(axis=1).max(axis=1) < options.max_accel_std_mps2)
         & (ww.std(axis=1).max(axis=1) < options.max_gyro_std_radps)

@@ -74,6 +74,7 @@ from pospp.nav.alignment import AlignmentOptions, AlignmentResult, align
 from pospp.nav.filter_input import GnssRejection
 from pospp.nav.strapdown import Trajectory
 from pospp.nav.tuning import ImuTuning, NoiseParameters, tuning_preset
+from pospp.units import t_s_from_time_ns, time_ns_from_t_s
 
 MEAS_KINDS = ("position", "velocity", "zupt")
 
@@ -394,8 +395,8 @@ def run_integrated_navigation(
     lever0 = np.zeros(3) if lever_arm_b_m is None else np.asarray(lever_arm_b_m, dtype=float)
     if lever0.shape != (3,) or not np.isfinite(lever0).all():
         raise ValueError(f"lever_arm_b_m: expected 3 finite numbers, got {lever_arm_b_m!r}")
-    fix_ts = (fix_t_ns[keep_f] - np.int64(epoch_ns)).astype(float) * 1e-9
-    vel_ts = (vel_t_ns[keep_v] - np.int64(epoch_ns)).astype(float) * 1e-9
+    fix_ts = t_s_from_time_ns(fix_t_ns[keep_f], epoch_ns)
+    vel_ts = t_s_from_time_ns(vel_t_ns[keep_v], epoch_ns)
     al = align(t, w, f, fix_ts, fix_val[keep_f], fix_cov[keep_f], vel_ts, vel_val[keep_v],
                noise, lever_arm_b_m=lever0, options=options.alignment)
     k0 = al.k_start
@@ -414,7 +415,7 @@ def run_integrated_navigation(
         times.append(zt)
         zs.append(np.zeros((zt.shape[0], 3)))
         rs.append(np.tile(np.eye(3) * options.zupt_sigma_mps**2, (zt.shape[0], 1, 1)))
-        src.append(np.int64(epoch_ns) + np.round(zt * 1e9).astype(np.int64))
+        src.append(time_ns_from_t_s(zt, epoch_ns))
     m_type = np.concatenate(types).astype(np.int64)
     m_t = np.concatenate(times)
     m_z = np.concatenate(zs)

@@ -17,6 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from pospp.units import t_s_from_time_ns
+
 
 @dataclass(frozen=True)
 class GnssRejection:
@@ -66,7 +68,7 @@ def imu_epochs(
         k = int(np.argmax(dt_ns <= 0)) + 1
         raise ValueError(f"imu: time not increasing at sample {k}: time_ns {time_ns[k]} after "
                          f"{time_ns[k - 1]}")
-    t = (time_ns - np.int64(epoch_ns)).astype(float) * 1e-9
+    t = t_s_from_time_ns(time_ns, epoch_ns)
     dt = np.diff(t)
     dt_med = float(np.median(dt))
     too_long = dt > max_gap_s
@@ -87,7 +89,7 @@ def screen_gnss(
 ) -> NDArray:
     """Entry checks of GNSS records; returns the indices kept (sorted by time), floors cov."""
     n = time_ns.shape[0]
-    t_s = (time_ns - np.int64(epoch_ns)).astype(float) * 1e-9
+    t_s = t_s_from_time_ns(time_ns, epoch_ns)
     reason = np.full(n, "", dtype=object)
     value = np.full(n, math.nan)
     bad_val = ~np.isfinite(values).all(axis=1)

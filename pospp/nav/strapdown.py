@@ -20,6 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from pospp import rotation
 from pospp.nav import _kernels
+from pospp.units import S_PER_NS, t_s_from_time_ns
 
 
 @dataclass(frozen=True)
@@ -244,8 +245,8 @@ def increments_from_rates(
     dtheta_b_rad, dv_b_mps : ndarray, shape (N - 1, 3)
     """
     t_ns = np.asarray(time_ns, dtype=np.int64)
-    t_s = (t_ns - np.int64(epoch_ns)).astype(float) * 1e-9
-    dt = np.diff(t_ns).astype(float) * 1e-9
+    t_s = t_s_from_time_ns(t_ns, epoch_ns)
+    dt = np.diff(t_ns) * S_PER_NS
     w = np.asarray(w_ib_b_radps, dtype=float)
     f = np.asarray(f_ib_b_mps2, dtype=float)
     return t_s, w[1:] * dt[:, None], f[1:] * dt[:, None]

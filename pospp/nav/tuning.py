@@ -29,10 +29,8 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
-from pospp.earth import STANDARD_GRAVITY_MPS2
-from pospp.rotation import DEG_PER_H_RADPS
+from pospp.units import DEG_PER_H_RADPS, UG_MPS2
 
-UG_MPS2 = 1e-6 * STANDARD_GRAVITY_MPS2
 """One micro-g [m/s^2] (conventional g0)."""
 
 

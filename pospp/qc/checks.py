@@ -23,7 +23,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.stats import chi2
 
 from pospp import earth
-from pospp.rotation import DEG_PER_H_RADPS
+from pospp.units import DEG_PER_H_RADPS, NS_PER_S
 
 STATUS_ORDER = ("ok", "partial", "degraded", "failed")
 """Run statuses from best to worst."""
@@ -92,7 +92,7 @@ def _na(name: str, stage: str, why: str, unit: str, threshold: float = math.nan)
 
 
 def _toff(t_s: float | None) -> int | None:
-    return None if t_s is None or not math.isfinite(t_s) else int(round(t_s * 1e9))
+    return None if t_s is None or not math.isfinite(t_s) else int(round(t_s * NS_PER_S))
 
 
 # =============================================================================================

@@ -23,6 +23,7 @@ from pospp.nav.alignment import static_windows
 from pospp.nav.tuning import tuning_from_config
 from pospp.qc import checks as qc
 from pospp.qc.checks import Check
+from pospp.units import t_s_from_time_ns
 
 
 @dataclass(frozen=True)
@@ -125,10 +126,10 @@ def quality_checks(log: Any, nav: Any, calib_run: Any, config: Any, *, c_bs: Any
     """
     imu = log.imu
     epoch_ns = int(imu.time_ns[0])
-    t = (imu.time_ns - np.int64(epoch_ns)).astype(float) * 1e-9
+    t = t_s_from_time_ns(imu.time_ns, epoch_ns)
     w, f = imu.w_ib_b_radps, imu.f_ib_b_mps2
-    vel_t = (log.vel.time_ns - np.int64(epoch_ns)).astype(float) * 1e-9
-    fix_t = (log.fix.time_ns - np.int64(epoch_ns)).astype(float) * 1e-9
+    vel_t = t_s_from_time_ns(log.vel.time_ns, epoch_ns)
+    fix_t = t_s_from_time_ns(log.fix.time_ns, epoch_ns)
     out: list[Check] = [qc.config_sanity(config_problems(config))]
 
     # --- completeness -------------------------------------------------------------------------

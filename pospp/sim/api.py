@@ -31,6 +31,7 @@ from pospp.sim.profile import MissionProfile, load_profile, plan_mission
 from pospp.sim.sensors import ImuErrorModel, RealisedImuErrors, apply_imu_errors, imu_grade
 from pospp.sim.trajectory import ProfileMotion, SplineMotion
 from pospp.types import GnssFixes, GnssVelocities, ImuSamples, ReferenceTrajectory
+from pospp.units import DEG_PER_H_RADPS, UG_MPS2, time_ns_from_t_s
 
 __all__ = [
     "DEFAULT_START_TIME_NS",
@@ -148,7 +149,7 @@ class Simulation:
     @property
     def truth_time_ns(self) -> np.ndarray:
         """Stamps of the truth epochs [ns]."""
-        return np.int64(self.start_time_ns) + np.round(self.truth.t_s * 1e9).astype(np.int64)
+        return time_ns_from_t_s(self.truth.t_s, self.start_time_ns)
 
     def truth_reference(self, rate_hz: float = 10.0) -> ReferenceTrajectory:
         """The truth decimated to ``rate_hz`` (which must divide the IMU rate)."""
@@ -299,8 +300,8 @@ def _generate(
         "gyro_matrix_frd": realised.gyro_matrix.tolist(),
         "accel_matrix_frd": realised.accel_matrix.tolist(),
         "realised_gyro_bias_at_start_dph": list(
-            realised.gyro_bias_radps[0] / rotation.DEG_PER_H_RADPS),
-        "realised_accel_bias_at_start_ug": list(realised.accel_bias_mps2[0] / 9.80665e-6),
+            realised.gyro_bias_radps[0] / DEG_PER_H_RADPS),
+        "realised_accel_bias_at_start_ug": list(realised.accel_bias_mps2[0] / UG_MPS2),
     })
     gn = gnss.as_dict()
     gn.update({"lever_arm_flu_m": list(np.asarray(gnss.lever_arm_b_m) * flu),

@@ -37,10 +37,11 @@ from scipy.interpolate import UnivariateSpline
 
 from pospp import earth
 from pospp.sim.profile import MissionPlan
+from pospp.units import G0_MPS2
 
 __all__ = ["MotionSample", "ProfileMotion", "SplineMotion", "G_BANK_MPS2"]
 
-G_BANK_MPS2 = 9.80665
+G_BANK_MPS2 = G0_MPS2
 """Gravity in the coordinated-turn bank law tan(roll) = v psi' / g (a definition, not physics)."""
 
 _GL4_X, _GL4_W = np.polynomial.legendre.leggauss(4)
