@@ -297,8 +297,8 @@ def export(run_dir: str, fmt: str, rate_hz: float | None, out_file: str | None,
 @click.option("--option", "options", multiple=True, metavar="KEY=VALUE",
               help="Converter option, e.g. --option path=3 --option imu=avg (repeatable).")
 def convert(source: str, out_mcap: str, fmt: str | None, options: tuple[str, ...]) -> None:
-    """Convert a measured log to the MCAP data contract (pospp.io.converters.convert)."""
-    from pospp.io.converters import convert as run_convert
+    """Convert a measured log to the MCAP data contract (pospp.convert.convert)."""
+    from pospp.convert import convert as run_convert
 
     kw: dict[str, object] = {}
     for item in options:

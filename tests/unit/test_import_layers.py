@@ -24,15 +24,10 @@ LAYERS: tuple[frozenset[str], ...] = (
     frozenset({"sim", "calib", "qc", "evaluate"}),
     frozenset({"diagnose", "simcompare", "report"}),
     frozenset({"config"}),
-    frozenset({"pipeline"}),
+    frozenset({"pipeline", "convert"}),
     frozenset({"batch", "compare_sim"}),
     frozenset({"cli"}),
 )
-
-
-PENDING = {"io/converters/_common.py", "io/converters/ansfl_dot_raw.py",
-           "io/converters/ansfl_quadrotor.py", "io/converters/comma2k19.py"}
-"""Converters still calling nav.mounting while converting (issue 17 item 2, next commit)."""
 
 
 def _layer_of(top: str) -> int:
@@ -81,8 +76,6 @@ def test_imports_run_downward(path: Path) -> None:
     rel = path.relative_to(PACKAGE).with_suffix("").parts
     own = "pospp" if rel == ("__init__",) else rel[0]
     own_layer = _layer_of(own)
-    if str(path.relative_to(PACKAGE)) in PENDING:
-        pytest.xfail("issue 17 item 2")
     bad = []
     for line, module in _imports(path):
         top = _top(module)

@@ -37,20 +37,18 @@ import numpy as np
 from pospp.io.converters._common import (
     SECONDS_PER_WEEK,
     ConversionError,
-    ConversionReport,
+    ParsedLog,
     check_gravity,
     check_increasing,
     diag_cov,
     gps_to_unix_ns,
     lag_by_correlation,
-    median_rate_hz,
     read_csv,
     require_file,
 )
-from pospp.io.mcap_writer import write_flight_log
 from pospp.types import GnssFixes, GnssVelocities, ImuSamples
 
-__all__ = ["convert_ardupilot"]
+__all__ = ["parse_ardupilot"]
 
 UERE_M = 3.0
 """Nominal user equivalent range error of a 2013 single-frequency receiver [m] (assumption)."""
@@ -62,22 +60,19 @@ def _heading_rate(t_s, w, att_t_s, roll_deg, pitch_deg):
     return (w[:, 1] * np.sin(r) + w[:, 2] * np.cos(r)) / np.cos(p)
 
 
-def convert_ardupilot(
+def parse_ardupilot(
     source: str | Path,
-    out_mcap: str | Path,
     *,
     geoid_undulation_m: float | None = None,
     gnss_latency_s: float | None = None,
     min_speed_for_lag_mps: float = 8.0,
-) -> ConversionReport:
-    """Convert the ArduPlane CSV export in folder ``source`` to an MCAP flight log.
+) -> ParsedLog:
+    """Parse the ArduPlane CSV export in folder ``source`` into the data contract.
 
     Parameters
     ----------
     source : path-like
         Folder with ``imu.csv``, ``gps.csv`` and ``att.csv``.
-    out_mcap : path-like
-        MCAP file to write.
     geoid_undulation_m : float, optional
         N (ellipsoid minus MSL) at the site [m]; when None the MSL height is written.
     gnss_latency_s : float, optional
@@ -88,7 +83,7 @@ def convert_ardupilot(
 
     Returns
     -------
-    ConversionReport
+    ParsedLog
     """
     src = Path(source)
     imu_p, gps_p, att_p = (require_file(src, n) for n in ("imu.csv", "gps.csv", "att.csv"))
@@ -180,13 +175,9 @@ def convert_ardupilot(
         "axes": axes, "gnss_latency_s": f"{latency:.4f}",
         "gnss_sigma": f"pos HDOP*{UERE_M}/sqrt2 m horizontal, x2 vertical; vel 0.3/0.5 m/s",
     }
-    out = write_flight_log(out_mcap, samples, fix, vel, imu_frame_id="base_link",
-                           metadata=meta)
-    return ConversionReport(
-        fmt="ardupilot_csv", source=str(src), mcap_path=str(out), reference_path=None,
-        n_imu=len(samples), n_fix=n_fix, n_vel=n_fix, n_reference=0,
-        imu_rate_hz=median_rate_hz(imu_ns), gnss_rate_hz=median_rate_hz(fix_ns),
-        start_ns=int(min(imu_ns[0], fix_ns[0])), end_ns=int(max(imu_ns[-1], fix_ns[-1])),
+    return ParsedLog(
+        fmt="ardupilot_csv", source=str(src), imu=samples, fix=fix, vel=vel, reference=None,
         time_system=time_system, height_datum=datum, imu_convention=imu_conv, axes=axes,
-        checks=checks, notes=tuple(notes), warnings=tuple(warnings),
+        metadata=meta, imu_frame_id="base_link", checks=checks, notes=tuple(notes),
+        warnings=tuple(warnings),
     )

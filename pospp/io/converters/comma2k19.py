@@ -40,45 +40,41 @@ from pospp import earth, rotation
 from pospp.io.converters._common import (
     SECONDS_PER_WEEK,
     ConversionError,
-    ConversionReport,
+    MountingInput,
+    ParsedLog,
     check_gravity,
     check_increasing,
     diag_cov,
     gps_to_unix_ns,
-    median_rate_hz,
     read_csv,
-    reference_path_for,
     require_file,
     velocity_from_positions,
 )
-from pospp.io.mcap_writer import write_flight_log
-from pospp.io.parquet_tables import write_reference_trajectory
-from pospp.nav.mounting import MountingOptions, estimate_mounting
 from pospp.types import GnssFixes, GnssVelocities, ImuSamples, ReferenceTrajectory
 
-__all__ = ["convert_comma2k19"]
+__all__ = ["parse_comma2k19"]
 
 
-def convert_comma2k19(
+def parse_comma2k19(
     source: str | Path,
-    out_mcap: str | Path,
     *,
     gyro: str = "calibrated",
-) -> ConversionReport:
-    """Convert a comma2k19 CSV export in folder ``source`` to MCAP + reference Parquet.
+) -> ParsedLog:
+    """Parse a comma2k19 CSV export in folder ``source`` into the data contract.
+
+    The device-to-car mounting is not estimated here: ``mounting`` holds its inputs, and
+    ``pospp.convert`` reports the estimate (not applied).
 
     Parameters
     ----------
     source : path-like
         Folder with ``imu.csv``, ``gnss_ublox.csv`` and ``pose_reference.csv``.
-    out_mcap : path-like
-        MCAP to write; the reference goes to ``<stem>.reference.parquet`` beside it.
     gyro : {"calibrated", "uncalibrated"}
         Which gyro columns to write (module docstring).
 
     Returns
     -------
-    ConversionReport
+    ParsedLog
     """
     if gyro not in ("calibrated", "uncalibrated"):
         raise ValueError(f"gyro must be 'calibrated' or 'uncalibrated'; got {gyro!r}")
@@ -163,17 +159,12 @@ def convert_comma2k19(
                          vel_cov_ned_m2ps2=diag_cov([0.2, 0.2, 0.5], n_fix))
     samples = ImuSamples(time_ns=imu_ns, w_ib_b_radps=w, f_ib_b_mps2=f, frame_id="device")
     # device-to-car mounting (reported, not applied): level + forward axis from the GNSS track
-    notes: list[str] = []
-    mounting = None
-    try:
-        mounting = estimate_mounting(
-            (imu_ns - fix_ns[0]) * 1e-9, f, t_fix_s, v_n, lat_rad=float(lat_g[0]),
-            height_m=float(h_g[0]),
-            options=MountingOptions(window_s=1.0, max_static_accel_mps2=0.3,
-                                    min_horizontal_accel_mps2=0.3),
-        )
-    except ValueError as exc:
-        notes.append(f"device-to-car mounting not estimated: {exc}")
+    mounting = MountingInput(
+        t_s=(imu_ns - fix_ns[0]) * 1e-9, f_s_mps2=f, t_vel_s=t_fix_s, v_n_mps=v_n,
+        lat_rad=float(lat_g[0]), height_m=float(h_g[0]), body_rpy_rad=None,
+        options={"window_s": 1.0, "max_static_accel_mps2": 0.3,
+                 "min_horizontal_accel_mps2": 0.3},
+        apply=False, description="device-to-car mounting")
     time_system = ("UTC ns since the Unix epoch: boot s + (GPS - boot) offset of the pose "
                    "records, GPS -> UTC minus 18 leap seconds; GNSS stamped at its utc_ms")
     datum = "WGS-84 ellipsoid (u-blox alt_m checked against the ECEF reference)"
@@ -183,16 +174,11 @@ def convert_comma2k19(
             "time_system": time_system, "height_datum": datum, "imu_convention": imu_conv,
             "axes": axes, "gyro": gyro,
             "gnss_sigma": "nominal: pos 2/2/4 m NED, vel 0.2/0.2/0.5 m/s (vd from heights)"}
-    out = write_flight_log(out_mcap, samples, fix, vel, imu_frame_id="device", metadata=meta)
-    ref_path = write_reference_trajectory(
-        reference_path_for(out), ref,
-        metadata={"source": str(pose_p), "frame": "device FRD w.r.t. NED",
-                  "time_system": "UTC ns from GPS week/TOW minus 18 s"})
-    return ConversionReport(
-        fmt="comma2k19", source=str(src), mcap_path=str(out), reference_path=str(ref_path),
-        n_imu=len(samples), n_fix=n_fix, n_vel=n_fix, n_reference=len(ref),
-        imu_rate_hz=median_rate_hz(imu_ns), gnss_rate_hz=median_rate_hz(fix_ns),
-        start_ns=int(min(imu_ns[0], fix_ns[0])), end_ns=int(max(imu_ns[-1], fix_ns[-1])),
+    return ParsedLog(
+        fmt="comma2k19", source=str(src), imu=samples, fix=fix, vel=vel, reference=ref,
         time_system=time_system, height_datum=datum, imu_convention=imu_conv, axes=axes,
-        mounting=mounting, checks=checks, notes=tuple(notes),
+        metadata=meta, reference_metadata={
+            "source": str(pose_p), "frame": "device FRD w.r.t. NED",
+            "time_system": "UTC ns from GPS week/TOW minus 18 s"},
+        imu_frame_id="device", checks=checks, mounting=mounting,
     )
