@@ -326,9 +326,10 @@ class PipelineConfig:
             object.__setattr__(self, "legs", dataclasses.replace(self.legs, **changes))
         # omitted [gnss] sigma floors take the grade's defaults too
         floors = GNSS_SIGMA_FLOORS_BY_GRADE.get(grade)
-        gnss_changes = {k: v for k, v in zip(("pos_sigma_floor_m", "vel_sigma_floor_mps"),
-                                             floors or (None, None), strict=True)
-                        if getattr(self.gnss, k) is None}
+        gnss_changes: dict[str, Any] = {
+            k: v for k, v in zip(("pos_sigma_floor_m", "vel_sigma_floor_mps"),
+                                 floors or (None, None), strict=True)
+            if getattr(self.gnss, k) is None}
         if gnss_changes:
             if floors is None:
                 raise ConfigError(f"imu.grade: expected one of "

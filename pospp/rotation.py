@@ -24,11 +24,11 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
 
-def _wxyz_to_xyzw(q: NDArray) -> NDArray:
+def _wxyz_to_xyzw(q: ArrayLike) -> NDArray:
     return np.roll(np.asarray(q, dtype=float), -1, axis=-1)
 
 
-def _xyzw_to_wxyz(q: NDArray) -> NDArray:
+def _xyzw_to_wxyz(q: ArrayLike) -> NDArray:
     return np.roll(np.asarray(q, dtype=float), 1, axis=-1)
 
 

@@ -146,7 +146,7 @@ def static_windows(
         & (np.abs(np.linalg.norm(fw.mean(axis=1), axis=1) - lat_g)
            < options.max_gravity_mismatch_mps2)
     )
-    if gnss_vel_t_s is not None and gnss_v_n_mps is not None and len(gnss_vel_t_s):
+    if gnss_vel_t_s is not None and gnss_v_n_mps is not None and np.size(gnss_vel_t_s):
         tv = np.asarray(gnss_vel_t_s, dtype=float)
         speed = np.linalg.norm(np.asarray(gnss_v_n_mps, dtype=float), axis=1)
         idx = np.searchsorted(tw[:, 0], tv, side="right") - 1
@@ -289,7 +289,7 @@ def align(
             at_rest = ft <= t_stop
             llh = np.median(fllh[at_rest], axis=0)
             c_nb = rotation.dcm_from_euler(rpy)
-            lat, lon, h = _imu_position(*llh, c_nb, lever, np.zeros(3), 0.0)
+            lat, lon, h = _imu_position(llh[0], llh[1], llh[2], c_nb, lever, np.zeros(3), 0.0)
             pos_sig = np.sqrt(np.clip(np.median(np.diagonal(fcov[at_rest], axis1=1, axis2=2),
                                                 axis=0), 1e-6, None))
             return AlignmentResult(
@@ -327,7 +327,8 @@ def align(
         k = _nearest(t, vt[i])
         rpy = motion_attitude(vv[i])
         c_nb = rotation.dcm_from_euler(rpy)
-        lat, lon, h = _imu_position(*fllh[jf], c_nb, lever, vv[i], t[k] - ft[jf])
+        lat, lon, h = _imu_position(fllh[jf, 0], fllh[jf, 1], fllh[jf, 2], c_nb, lever, vv[i],
+                                    t[k] - ft[jf])
         tilt = math.radians(options.motion_tilt_sigma_deg)
         return AlignmentResult(
             method="motion", k_start=k, t_s=float(t[k]), lat_rad=float(lat), lon_rad=float(lon),

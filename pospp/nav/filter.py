@@ -453,8 +453,8 @@ def _record_outcomes(meas: MeasurementRecords, fw: ForwardArrays,
     rejections.sort(key=lambda r: (r.time_ns, r.kind))
     n_updates = {name: int(np.count_nonzero((st == STATUS_USED) & (kind == i)))
                  for i, name in enumerate(MEAS_KINDS)}
-    for i, name in enumerate(MEAS_KINDS[:2]):
-        n_updates[f"{name}_reset"] = int(np.count_nonzero((st == STATUS_RESET) & (kind == i)))
+    for j, name in enumerate(MEAS_KINDS[:2]):
+        n_updates[f"{name}_reset"] = int(np.count_nonzero((st == STATUS_RESET) & (kind == j)))
     resets = tuple((float(meas.t_s[i]), MEAS_KINDS[kind[i]])
                    for i in np.flatnonzero(st == STATUS_RESET))
     return _Outcome(tuple(rejections), n_updates, resets)

@@ -28,6 +28,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import Any
 
 from pospp.units import DEG_PER_H_RADPS, UG_MPS2
 
@@ -127,7 +128,7 @@ class ImuTuning:
         if unknown:
             raise ValueError(
                 f"ImuTuning: unknown field(s) {unknown}; expected some of {sorted(names)}")
-        changes = {k: float(v) for k, v in overrides.items() if v is not None}
+        changes: dict[str, Any] = {k: float(v) for k, v in overrides.items() if v is not None}
         return dataclasses.replace(self, **changes)
 
     def noise(self) -> NoiseParameters:

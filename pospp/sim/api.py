@@ -29,7 +29,7 @@ from pospp.sim.gnss import GnssModel, simulate_gnss
 from pospp.sim.imu import Motion, exact_increments, quat_nb_from_euler
 from pospp.sim.profile import MissionProfile, load_profile, plan_mission
 from pospp.sim.sensors import ImuErrorModel, RealisedImuErrors, apply_imu_errors, imu_grade
-from pospp.sim.trajectory import ProfileMotion, SplineMotion
+from pospp.sim.trajectory import MotionSample, ProfileMotion, SplineMotion
 from pospp.types import GnssFixes, GnssVelocities, ImuSamples, ReferenceTrajectory
 from pospp.units import DEG_PER_H_RADPS, UG_MPS2, time_ns_from_t_s
 
@@ -439,7 +439,7 @@ class _ShiftedMotion:
         self.motion = motion
         self.t0 = t0
 
-    def evaluate(self, t_s: ArrayLike):
+    def evaluate(self, t_s: ArrayLike) -> MotionSample:
         m = self.motion.evaluate(np.asarray(t_s, dtype=float) + self.t0)
         return type(m)(np.asarray(t_s, dtype=float), *(getattr(m, f) for f in (
             "lat_rad", "lon_rad", "height_m", "v_n_mps", "a_n_mps2", "rpy_rad",

@@ -170,10 +170,9 @@ class ProfileMotion:
     def position(self, t_s: ArrayLike) -> tuple[NDArray, NDArray, NDArray]:
         """(lat_rad, lon_rad, height_m) at ``t_s``."""
         t = np.asarray(t_s, dtype=float)
-        return tuple(
-            _hermite(t, 0.0, self._step, y, dy)
-            for y, dy in zip(self._grid, self._grid_d, strict=True)
-        )
+        lat, lon, h = (_hermite(t, 0.0, self._step, y, dy)
+                       for y, dy in zip(self._grid, self._grid_d, strict=True))
+        return lat, lon, h
 
     def evaluate(self, t_s: ArrayLike) -> MotionSample:
         """Full :class:`MotionSample` at times ``t_s`` [s from the mission start], shape (M,)."""

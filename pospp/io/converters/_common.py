@@ -111,7 +111,7 @@ class MountingInput:
     lat_rad: float
     height_m: float
     body_rpy_rad: NDArray | None
-    options: dict[str, float]
+    options: dict[str, Any]
     apply: bool
     description: str
 

@@ -33,6 +33,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
 
 from pospp.io.converters._common import (
     SECONDS_PER_WEEK,
@@ -54,7 +55,8 @@ UERE_M = 3.0
 """Nominal user equivalent range error of a 2013 single-frequency receiver [m] (assumption)."""
 
 
-def _heading_rate(t_s, w, att_t_s, roll_deg, pitch_deg):
+def _heading_rate(t_s: NDArray, w: NDArray, att_t_s: NDArray, roll_deg: NDArray,
+                  pitch_deg: NDArray) -> NDArray:
     r = np.radians(np.interp(t_s, att_t_s, roll_deg))
     p = np.radians(np.interp(t_s, att_t_s, pitch_deg))
     return (w[:, 1] * np.sin(r) + w[:, 2] * np.cos(r)) / np.cos(p)
