@@ -383,6 +383,73 @@ def _assemble_events(a: dict, col: Collector, issues: list[IngestIssue]) -> np.n
     return _check_order(a, col.topic, col.path, drop_duplicates=True, issues=issues)["time_ns"]
 
 
+def _check_read_arguments(path: str, max_chunk_bytes: int, imu_topic: str, fix_topic: str,
+                          vel_topic: str, events_topic: str) -> None:
+    """Chunk cap a positive integer, the file present, the topics distinct."""
+    if isinstance(max_chunk_bytes, bool) or not isinstance(max_chunk_bytes, int | np.integer) \
+            or max_chunk_bytes <= 0:
+        raise ValueError(f"max_chunk_bytes must be a positive integer, got {max_chunk_bytes!r}")
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"MCAP file not found: {path}")
+    if len({imu_topic, fix_topic, vel_topic}) != 3 or events_topic in (imu_topic, fix_topic,
+                                                                       vel_topic):
+        raise ValueError(f"topics must differ: {imu_topic!r}, {fix_topic!r}, {vel_topic!r}"
+                         + (f", {events_topic!r}" if events_topic else ""))
+
+
+def _check_topics(scan: Scan, cols: dict[str, Collector], path: str,
+                  required: tuple[str, str], vel_topic: str, events_topic: str,
+                  issues: list[IngestIssue], note: str, broken: list[IngestIssue]) -> None:
+    """Required topics present (else IngestError listing the available ones); an absent
+    velocity or events topic and generically decoded messages noted in ``issues``."""
+    available = ", ".join(f"{t} ({s})" for t, s in sorted(scan.topics.items())) or "none"
+    for topic in required:
+        if topic not in scan.topics:
+            raise IngestError(
+                f"required topic {topic!r} ({cols[topic].spec.type_name}) not found; "
+                f"available topics: {available}{note}", file=path, topic=topic,
+                byte_offset=broken[0].byte_offset if broken else None, issues=tuple(issues),
+            )
+    if vel_topic not in scan.topics:
+        issues.append(IngestIssue(
+            "warning", path, vel_topic, None, None,
+            f"optional topic {vel_topic!r} not found (no GNSS velocity); available: {available}",
+        ))
+    if events_topic and events_topic not in scan.topics:
+        issues.append(IngestIssue(
+            "info", path, events_topic, None, None,
+            f"events topic {events_topic!r} not found (no trigger events); available: "
+            f"{available}",
+        ))
+    for col in cols.values():
+        if col.slow_messages and col.spec is not EVENT_SPEC:
+            issues.append(IngestIssue(
+                "info", path, col.topic, None, None,
+                f"{col.slow_messages} message(s) decoded by the generic decoder (not "
+                "little-endian plain CDR, or an unexpected layout)",
+            ))
+
+
+def _assemble_all(
+    cols: dict[str, Collector], topics: tuple[str, str, str], events_topic: str,
+    c_bs: np.ndarray, start_ns: int | None, end_ns: int | None, check_units: bool,
+    issues: list[IngestIssue],
+) -> tuple[ImuSamples, GnssFixes, GnssVelocities, np.ndarray | None]:
+    """The windowed, checked IMU, fixes, velocities and event stamps (None: no events topic)."""
+    imu_topic, fix_topic, vel_topic = topics
+    imu = _assemble_imu(_window(cols[imu_topic].arrays(), start_ns, end_ns),
+                        cols[imu_topic], c_bs, check_units, issues)
+    fix = _assemble_fix(_window(cols[fix_topic].arrays(), start_ns, end_ns),
+                        cols[fix_topic], issues)
+    vel = _assemble_vel(_window(cols[vel_topic].arrays(), start_ns, end_ns),
+                        cols[vel_topic], issues)
+    if check_units and len(vel):
+        _check_rate_units_against_gnss(imu, vel, imu_topic, cols[imu_topic].path)
+    events_ns = _assemble_events(_window(cols[events_topic].arrays(), start_ns, end_ns),
+                                 cols[events_topic], issues) if events_topic else None
+    return imu, fix, vel, events_ns
+
+
 def read_flight_log(
     path: str | Path,
     *,
@@ -438,15 +505,7 @@ def read_flight_log(
     """
     path = str(path)
     c = check_dcm(c_bs)
-    if isinstance(max_chunk_bytes, bool) or not isinstance(max_chunk_bytes, int | np.integer) \
-            or max_chunk_bytes <= 0:
-        raise ValueError(f"max_chunk_bytes must be a positive integer, got {max_chunk_bytes!r}")
-    if not Path(path).is_file():
-        raise FileNotFoundError(f"MCAP file not found: {path}")
-    if len({imu_topic, fix_topic, vel_topic}) != 3 or events_topic in (imu_topic, fix_topic,
-                                                                       vel_topic):
-        raise ValueError(f"topics must differ: {imu_topic!r}, {fix_topic!r}, {vel_topic!r}"
-                         + (f", {events_topic!r}" if events_topic else ""))
+    _check_read_arguments(path, max_chunk_bytes, imu_topic, fix_topic, vel_topic, events_topic)
     cols = {
         imu_topic: Collector(imu_topic, IMU_SPEC, path),
         fix_topic: Collector(fix_topic, FIX_SPEC, path),
@@ -457,45 +516,14 @@ def read_flight_log(
     scan = Scan(path, cols, max_chunk_bytes=max_chunk_bytes)
     scan.run()
     issues = list(scan.issues)
-    available = ", ".join(f"{t} ({s})" for t, s in sorted(scan.topics.items())) or "none"
     broken = [i for i in issues if i.severity == "error"]
     note = f" (the file is truncated or corrupt: {broken[0]})" if broken else ""
-    for topic in (imu_topic, fix_topic):
-        if topic not in scan.topics:
-            raise IngestError(
-                f"required topic {topic!r} ({cols[topic].spec.type_name}) not found; "
-                f"available topics: {available}{note}", file=path, topic=topic,
-                byte_offset=broken[0].byte_offset if broken else None, issues=tuple(issues),
-            )
-    if vel_topic not in scan.topics:
-        issues.append(IngestIssue(
-            "warning", path, vel_topic, None, None,
-            f"optional topic {vel_topic!r} not found (no GNSS velocity); available: {available}",
-        ))
-    if events_topic and events_topic not in scan.topics:
-        issues.append(IngestIssue(
-            "info", path, events_topic, None, None,
-            f"events topic {events_topic!r} not found (no trigger events); available: "
-            f"{available}",
-        ))
-    for col in cols.values():
-        if col.slow_messages and col.spec is not EVENT_SPEC:
-            issues.append(IngestIssue(
-                "info", path, col.topic, None, None,
-                f"{col.slow_messages} message(s) decoded by the generic decoder (not "
-                "little-endian plain CDR, or an unexpected layout)",
-            ))
+    _check_topics(scan, cols, path, (imu_topic, fix_topic), vel_topic, events_topic, issues,
+                  note, broken)
     try:
-        imu = _assemble_imu(_window(cols[imu_topic].arrays(), start_ns, end_ns),
-                            cols[imu_topic], c, check_units, issues)
-        fix = _assemble_fix(_window(cols[fix_topic].arrays(), start_ns, end_ns),
-                            cols[fix_topic], issues)
-        vel = _assemble_vel(_window(cols[vel_topic].arrays(), start_ns, end_ns),
-                            cols[vel_topic], issues)
-        if check_units and len(vel):
-            _check_rate_units_against_gnss(imu, vel, imu_topic, path)
-        events_ns = _assemble_events(_window(cols[events_topic].arrays(), start_ns, end_ns),
-                                     cols[events_topic], issues) if events_topic else None
+        imu, fix, vel, events_ns = _assemble_all(cols, (imu_topic, fix_topic, vel_topic),
+                                                 events_topic, c, start_ns, end_ns,
+                                                 check_units, issues)
     except IngestError as exc:
         raise IngestError(
             exc.reason + note, file=exc.file, topic=exc.topic, index=exc.index,

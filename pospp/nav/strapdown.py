@@ -62,12 +62,6 @@ class NavState:
             [[self.lat_rad, self.lon_rad, self.height_m], self.v_n_mps, self.q_nb]
         ).astype(float)
 
-    @classmethod
-    def from_vector(cls, x: ArrayLike) -> NavState:
-        """Inverse of :meth:`as_vector`."""
-        x = np.asarray(x, dtype=float)
-        return cls(float(x[0]), float(x[1]), float(x[2]), x[3:6].copy(), x[6:10].copy())
-
 
 @dataclass(frozen=True)
 class Trajectory:

@@ -82,6 +82,30 @@ def _read_dot(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     return t_us * 1e-6, num[ok, 1:4], np.radians(num[ok, 4:7]), int((~ok).sum())
 
 
+def _clock_offsets(root: Path, unit: int, dot_p: Path, t_dev: np.ndarray, f_s: np.ndarray,
+                   w_s: np.ndarray) -> tuple[list[float], list[float]]:
+    """(UTC - DOT clock) offset from each processed path of ``unit`` found verbatim in the
+    recording (matched on exact sample values), and each path's (UTC - log time) offset."""
+    offsets: list[float] = []
+    path_utc_offsets: list[float] = []
+    acc_x = f_s[:, 0]
+    for p in _available_paths(root):
+        gt, im, _ = _read_path(root, p, unit)
+        row = min(5, len(im) - 1)
+        hit = np.flatnonzero((np.abs(acc_x - im["Acc_X"].iloc[row]) < 1e-7)
+                             & (np.abs(np.degrees(w_s[:, 2]) - im["Gyr_Z"].iloc[row]) < 1e-7))
+        if hit.size != 1:
+            continue
+        log_ms = gt["time(millisecond)"].to_numpy(dtype=float)
+        utc_off, _ = _log_to_utc_offset_s(root, log_ms[0] * 1e-3, log_ms[-1] * 1e-3)
+        offsets.append(float(log_ms[0] * 1e-3 + im["time"].iloc[row] + utc_off - t_dev[hit[0]]))
+        path_utc_offsets.append(utc_off)
+    if not offsets:
+        raise ConversionError(f"{dot_p}: no processed path of unit {unit} found in this "
+                              "recording; cannot place its clock on UTC")
+    return offsets, path_utc_offsets
+
+
 def parse_ansfl_dot_raw(
     source: str | Path,
     *,
@@ -122,23 +146,7 @@ def parse_ansfl_dot_raw(
     t_dev, f_s, w_s, n_dropped = _read_dot(dot_p)
     g_med = check_gravity(dot_p, f_s, "Acc_* expected in m/s^2")
     # clock: processed paths of this unit found verbatim in the recording
-    offsets: list[float] = []
-    path_utc_offsets: list[float] = []
-    acc_x = f_s[:, 0]
-    for p in _available_paths(root):
-        gt, im, _ = _read_path(root, p, unit)
-        row = min(5, len(im) - 1)
-        hit = np.flatnonzero((np.abs(acc_x - im["Acc_X"].iloc[row]) < 1e-7)
-                             & (np.abs(np.degrees(w_s[:, 2]) - im["Gyr_Z"].iloc[row]) < 1e-7))
-        if hit.size != 1:
-            continue
-        log_ms = gt["time(millisecond)"].to_numpy(dtype=float)
-        utc_off, _ = _log_to_utc_offset_s(root, log_ms[0] * 1e-3, log_ms[-1] * 1e-3)
-        offsets.append(float(log_ms[0] * 1e-3 + im["time"].iloc[row] + utc_off - t_dev[hit[0]]))
-        path_utc_offsets.append(utc_off)
-    if not offsets:
-        raise ConversionError(f"{dot_p}: no processed path of unit {unit} found in this "
-                              "recording; cannot place its clock on UTC")
+    offsets, path_utc_offsets = _clock_offsets(root, unit, dot_p, t_dev, f_s, w_s)
     dev_to_utc = float(np.median(offsets))
     utc_imu = t_dev + dev_to_utc
     # Airdata rows over the recording; the log time base jumps (docs/realdata.md), so the
