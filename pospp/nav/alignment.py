@@ -224,6 +224,51 @@ def _imu_position(lat, lon, h, c_nb, lever_b, v_ant_n, dt_s):
     )
 
 
+def _motion_alignment(t: NDArray, ft: NDArray, fllh: NDArray, fcov: NDArray, vt: NDArray,
+                      vv: NDArray, lever: NDArray, options: AlignmentOptions,
+                      static_end: float | None, sigma_gc: float) -> AlignmentResult | None:
+    """Alignment at the first steady GNSS velocity above ``min_speed_mps`` whose fix agrees
+    with the next one (attitude from the velocity); None when there is none."""
+    if vt.shape[0] < 2:
+        raise ValueError("alignment: no static period and fewer than 2 GNSS velocities")
+    speed_h = np.hypot(vv[:, 0], vv[:, 1])
+    acc = np.zeros(vt.shape[0])
+    acc[1:] = np.linalg.norm(np.diff(vv, axis=0), axis=1) / np.maximum(np.diff(vt), 1e-3)
+    acc_next = np.append(acc[1:], np.inf)
+    cand = np.flatnonzero(
+        (speed_h > options.min_speed_mps)
+        & (acc_next < options.max_accel_for_motion_mps2)
+        & (vt >= t[0]) & (vt <= t[-1])
+    )
+    for i in cand:
+        jf = _nearest(ft, vt[i])
+        if abs(ft[jf] - vt[i]) > 0.5 or jf + 1 >= ft.shape[0]:
+            continue
+        # the fix must agree with the next one moved back by the GNSS velocity (no outlier)
+        r_m, r_n = earth.principal_radii_m(fllh[jf, 0])
+        d_ned = np.array([(fllh[jf + 1, 0] - fllh[jf, 0]) * (r_m + fllh[jf, 2]),
+                          (fllh[jf + 1, 1] - fllh[jf, 1]) * (r_n + fllh[jf, 2])
+                          * math.cos(fllh[jf, 0]),
+                          -(fllh[jf + 1, 2] - fllh[jf, 2])])
+        if np.linalg.norm(d_ned - vv[i] * (ft[jf + 1] - ft[jf])) > options.max_fix_mismatch_m:
+            continue
+        k = _nearest(t, vt[i])
+        rpy = motion_attitude(vv[i])
+        c_nb = rotation.dcm_from_euler(rpy)
+        lat, lon, h = _imu_position(fllh[jf, 0], fllh[jf, 1], fllh[jf, 2], c_nb, lever, vv[i],
+                                    t[k] - ft[jf])
+        tilt = math.radians(options.motion_tilt_sigma_deg)
+        return AlignmentResult(
+            method="motion", k_start=k, t_s=float(t[k]), lat_rad=float(lat), lon_rad=float(lon),
+            height_m=float(h), v_n_mps=vv[i].copy(), rpy_rad=rpy,
+            rpy_sigma_rad=np.array([tilt, tilt, math.radians(options.motion_heading_sigma_deg)]),
+            pos_sigma_ned_m=np.sqrt(np.clip(np.diag(fcov[jf]), 1e-6, None)) + 0.5,
+            vel_sigma_ned_mps=np.full(3, options.motion_velocity_sigma_mps),
+            static_end_s=static_end, heading_sigma_gyrocompass_rad=sigma_gc,
+        )
+    return None
+
+
 def align(
     t_s: ArrayLike,
     w_ib_b_radps: ArrayLike,
@@ -301,43 +346,9 @@ def align(
             )
 
     # ---- in motion: first steady GNSS velocity above min speed -------------------------------
-    if vt.shape[0] < 2:
-        raise ValueError("alignment: no static period and fewer than 2 GNSS velocities")
-    speed_h = np.hypot(vv[:, 0], vv[:, 1])
-    acc = np.zeros(vt.shape[0])
-    acc[1:] = np.linalg.norm(np.diff(vv, axis=0), axis=1) / np.maximum(np.diff(vt), 1e-3)
-    acc_next = np.append(acc[1:], np.inf)
-    cand = np.flatnonzero(
-        (speed_h > options.min_speed_mps)
-        & (acc_next < options.max_accel_for_motion_mps2)
-        & (vt >= t[0]) & (vt <= t[-1])
-    )
-    for i in cand:
-        jf = _nearest(ft, vt[i])
-        if abs(ft[jf] - vt[i]) > 0.5 or jf + 1 >= ft.shape[0]:
-            continue
-        # the fix must agree with the next one moved back by the GNSS velocity (no outlier)
-        r_m, r_n = earth.principal_radii_m(fllh[jf, 0])
-        d_ned = np.array([(fllh[jf + 1, 0] - fllh[jf, 0]) * (r_m + fllh[jf, 2]),
-                          (fllh[jf + 1, 1] - fllh[jf, 1]) * (r_n + fllh[jf, 2])
-                          * math.cos(fllh[jf, 0]),
-                          -(fllh[jf + 1, 2] - fllh[jf, 2])])
-        if np.linalg.norm(d_ned - vv[i] * (ft[jf + 1] - ft[jf])) > options.max_fix_mismatch_m:
-            continue
-        k = _nearest(t, vt[i])
-        rpy = motion_attitude(vv[i])
-        c_nb = rotation.dcm_from_euler(rpy)
-        lat, lon, h = _imu_position(fllh[jf, 0], fllh[jf, 1], fllh[jf, 2], c_nb, lever, vv[i],
-                                    t[k] - ft[jf])
-        tilt = math.radians(options.motion_tilt_sigma_deg)
-        return AlignmentResult(
-            method="motion", k_start=k, t_s=float(t[k]), lat_rad=float(lat), lon_rad=float(lon),
-            height_m=float(h), v_n_mps=vv[i].copy(), rpy_rad=rpy,
-            rpy_sigma_rad=np.array([tilt, tilt, math.radians(options.motion_heading_sigma_deg)]),
-            pos_sigma_ned_m=np.sqrt(np.clip(np.diag(fcov[jf]), 1e-6, None)) + 0.5,
-            vel_sigma_ned_mps=np.full(3, options.motion_velocity_sigma_mps),
-            static_end_s=static_end, heading_sigma_gyrocompass_rad=sigma_gc,
-        )
+    result = _motion_alignment(t, ft, fllh, fcov, vt, vv, lever, options, static_end, sigma_gc)
+    if result is not None:
+        return result
     raise ValueError(
         "alignment: no static period of at least "
         f"{options.min_static_s} s with a resolvable heading and no steady GNSS velocity above "

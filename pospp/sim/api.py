@@ -228,6 +228,71 @@ def _rate_dt_ns(imu_rate_hz: float) -> int:
     return dt_ns
 
 
+def _truth(motion: Motion, t_s: np.ndarray, progress: ProgressFn | None) -> Trajectory:
+    """The true IMU state at the epochs ``t_s``, in blocks of 200 000 epochs."""
+    n1 = t_s.shape[0]
+    lat, lon, hgt = np.empty(n1), np.empty(n1), np.empty(n1)
+    v_n, q_nb = np.empty((n1, 3)), np.empty((n1, 4))
+    for a in range(0, n1, 200_000):
+        s = slice(a, a + 200_000)
+        m = motion.evaluate(t_s[s])
+        lat[s], lon[s], hgt[s], v_n[s] = m.lat_rad, m.lon_rad, m.height_m, m.v_n_mps
+        q_nb[s] = quat_nb_from_euler(m.rpy_rad)
+        if progress is not None:
+            progress("truth", min(1.0, (a + 200_000) / n1))
+    return Trajectory(t_s, lat, lon, hgt, v_n, q_nb)
+
+
+def _params(*, grade_name: str, model: ImuErrorModel, realised: RealisedImuErrors,
+            gnss: GnssModel, n_fix: int, seed: int, imu_rate_hz: float, start_time_ns: int,
+            dt_ns: int, n: int, n_sub: int, n_gl: int, extra_params: dict[str, Any],
+            legs: tuple[TrueLeg, ...], timings: dict[str, float]) -> dict[str, Any]:
+    """The JSON-ready record of everything injected (layout mirrors the reference cases)."""
+    g = model.as_dict()
+    flu = np.array([1.0, -1.0, -1.0])
+    imu_err = dict(g)
+    imu_err.update({
+        "grade": grade_name,
+        "gyro_bias_flu_dph": list(np.asarray(model.gyro_bias_dph) * flu),
+        "accel_bias_flu_ug": list(np.asarray(model.accel_bias_ug) * flu),
+        "gyro_matrix_frd": realised.gyro_matrix.tolist(),
+        "accel_matrix_frd": realised.accel_matrix.tolist(),
+        "realised_gyro_bias_at_start_dph": list(
+            realised.gyro_bias_radps[0] / DEG_PER_H_RADPS),
+        "realised_accel_bias_at_start_ug": list(realised.accel_bias_mps2[0] / UG_MPS2),
+    })
+    gn = gnss.as_dict()
+    gn.update({"lever_arm_flu_m": list(np.asarray(gnss.lever_arm_b_m) * flu),
+               "n_epochs": n_fix,
+               "reported_pos_sigma_m": [max(x, 1e-3) for x in gnss.pos_noise_m],
+               "reported_vel_sigma_mps": [max(x, 1e-3) for x in gnss.vel_noise_mps]})
+    return {
+        "generator": {"name": "pospp.sim", "version": __version__},
+        "config": {"imu_grade": grade_name, "imu_rate_hz": imu_rate_hz, "seed": seed,
+                   "imu_errors": g, "gnss": gnss.as_dict(), "start_time_ns": start_time_ns,
+                   "n_sub": n_sub, "n_gl": n_gl, **extra_params.get("config", {})},
+        "seed": seed,
+        "time": {
+            "start_time_ns": start_time_ns, "imu_rate_hz": imu_rate_hz, "imu_dt_ns": dt_ns,
+            "n_imu_messages": n, "duration_s": n * dt_ns * 1e-9,
+            "end_time_ns": start_time_ns + n * dt_ns,
+            "first_imu_stamp_ns": start_time_ns + dt_ns,
+        },
+        "conventions": CONVENTIONS,
+        **{k: v for k, v in extra_params.items() if k != "config"},
+        "legs": [lg.as_dict() for lg in legs],
+        "imu_errors": imu_err,
+        "gnss": gn,
+        "gravity": {"model": "WGS-84 normal gravity, TR8350.2 Eq. 4-1 and 4-3 "
+                             "(pospp.earth.normal_gravity_mps2)"},
+        "numerics": {
+            "quadrature": f"composite Gauss-Legendre, {n_sub} sub-intervals x {n_gl} nodes "
+                          "per IMU interval",
+            "timings_s": timings,
+        },
+    }
+
+
 def _generate(
     name: str,
     motion: Motion,
@@ -278,61 +343,13 @@ def _generate(
     if progress is not None:
         progress("gnss", 1.0)
     tick("gnss_s")
-    lat, lon, hgt = np.empty(n + 1), np.empty(n + 1), np.empty(n + 1)
-    v_n, q_nb = np.empty((n + 1, 3)), np.empty((n + 1, 4))
-    for a in range(0, n + 1, 200_000):
-        s = slice(a, a + 200_000)
-        m = motion.evaluate(t_s[s])
-        lat[s], lon[s], hgt[s], v_n[s] = m.lat_rad, m.lon_rad, m.height_m, m.v_n_mps
-        q_nb[s] = quat_nb_from_euler(m.rpy_rad)
-        if progress is not None:
-            progress("truth", min(1.0, (a + 200_000) / (n + 1)))
-    truth = Trajectory(t_s, lat, lon, hgt, v_n, q_nb)
+    truth = _truth(motion, t_s, progress)
     tick("truth_s")
     legs = legs_fn(truth)
-    g = model.as_dict()
-    flu = np.array([1.0, -1.0, -1.0])
-    imu_err = dict(g)
-    imu_err.update({
-        "grade": grade_name,
-        "gyro_bias_flu_dph": list(np.asarray(model.gyro_bias_dph) * flu),
-        "accel_bias_flu_ug": list(np.asarray(model.accel_bias_ug) * flu),
-        "gyro_matrix_frd": realised.gyro_matrix.tolist(),
-        "accel_matrix_frd": realised.accel_matrix.tolist(),
-        "realised_gyro_bias_at_start_dph": list(
-            realised.gyro_bias_radps[0] / DEG_PER_H_RADPS),
-        "realised_accel_bias_at_start_ug": list(realised.accel_bias_mps2[0] / UG_MPS2),
-    })
-    gn = gnss.as_dict()
-    gn.update({"lever_arm_flu_m": list(np.asarray(gnss.lever_arm_b_m) * flu),
-               "n_epochs": len(fix),
-               "reported_pos_sigma_m": [max(x, 1e-3) for x in gnss.pos_noise_m],
-               "reported_vel_sigma_mps": [max(x, 1e-3) for x in gnss.vel_noise_mps]})
-    params: dict[str, Any] = {
-        "generator": {"name": "pospp.sim", "version": __version__},
-        "config": {"imu_grade": grade_name, "imu_rate_hz": imu_rate_hz, "seed": seed,
-                   "imu_errors": g, "gnss": gnss.as_dict(), "start_time_ns": start_time_ns,
-                   "n_sub": n_sub, "n_gl": n_gl, **extra_params.get("config", {})},
-        "seed": seed,
-        "time": {
-            "start_time_ns": start_time_ns, "imu_rate_hz": imu_rate_hz, "imu_dt_ns": dt_ns,
-            "n_imu_messages": n, "duration_s": n * dt_ns * 1e-9,
-            "end_time_ns": start_time_ns + n * dt_ns,
-            "first_imu_stamp_ns": start_time_ns + dt_ns,
-        },
-        "conventions": CONVENTIONS,
-        **{k: v for k, v in extra_params.items() if k != "config"},
-        "legs": [lg.as_dict() for lg in legs],
-        "imu_errors": imu_err,
-        "gnss": gn,
-        "gravity": {"model": "WGS-84 normal gravity, TR8350.2 Eq. 4-1 and 4-3 "
-                             "(pospp.earth.normal_gravity_mps2)"},
-        "numerics": {
-            "quadrature": f"composite Gauss-Legendre, {n_sub} sub-intervals x {n_gl} nodes "
-                          "per IMU interval",
-            "timings_s": timings,
-        },
-    }
+    params = _params(grade_name=grade_name, model=model, realised=realised, gnss=gnss,
+                     n_fix=len(fix), seed=seed, imu_rate_hz=imu_rate_hz,
+                     start_time_ns=start_time_ns, dt_ns=dt_ns, n=n, n_sub=n_sub, n_gl=n_gl,
+                     extra_params=extra_params, legs=legs, timings=timings)
     return Simulation(name, imu, fix, vel, truth, int(start_time_ns), legs, realised, params)
 
 
