@@ -42,6 +42,7 @@ from pospp.diagnose.workflow import diagnose as run_diagnosis
 from pospp.evaluate import evaluation_rows, solution_errors
 from pospp.io import mcap_reader, parquet_tables, report_files, run_folder, trajectory_mcap
 from pospp.io.errors import IngestError
+from pospp.io.files import sha256_file
 from pospp.nav import events as sensor_events
 from pospp.nav import filter as nav_filter
 from pospp.nav import tuning as nav_tuning
@@ -266,7 +267,7 @@ def run(
     """
     book = _Progress(progress)  # the run's clock starts here: wall_time_s is all of run()
     target = run_folder.check_target(out_dir, input_file=mcap_path, force=force)
-    sha = parquet_tables.sha256_file(mcap_path) if Path(mcap_path).is_file() else ""
+    sha = sha256_file(mcap_path) if Path(mcap_path).is_file() else ""
     stage = run_folder.new_staging(target)
     try:
         outcome = _run_stages(mcap_path, sha, config, stage, book)
@@ -674,7 +675,7 @@ def reopen_run(run_dir: str | Path) -> tuple[Path, dict[str, Any], Path, Pipelin
     path = Path(meta["input_file"])
     if not path.is_file():
         raise FileNotFoundError(f"{run}: the run's input {path} is no longer there")
-    if parquet_tables.sha256_file(path) != meta["input_sha256"]:
+    if sha256_file(path) != meta["input_sha256"]:
         raise ValueError(f"{run}: the run's input {path} changed since the run (SHA-256)")
     return run, meta, path, config_from_dict(meta["config"], source=f"{run}/summary.parquet")
 

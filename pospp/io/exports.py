@@ -33,7 +33,7 @@ import numpy as np
 import pandas as pd
 
 from pospp.io import parquet_tables, run_folder
-from pospp.io.parquet_tables import atomic_path
+from pospp.io.files import atomic_path
 
 __all__ = ["FORMATS", "LEAP_SECONDS", "SBET_FIELDS", "export_run", "gps_week_seconds",
            "sbet_records", "write_csv", "write_geojson", "write_kml", "write_sbet"]

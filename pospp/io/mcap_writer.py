@@ -27,7 +27,7 @@ import numpy as np
 from mcap.writer import CompressionType, Writer
 
 from pospp.io import ros_messages as rm
-from pospp.io.parquet_tables import atomic_path
+from pospp.io.files import atomic_path
 from pospp.types import (
     ENU_TO_NED,
     FLU_TO_FRD,

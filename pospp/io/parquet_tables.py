@@ -16,12 +16,8 @@ never sees half a file and an interrupted run leaves the previous file intact.
 
 from __future__ import annotations
 
-import hashlib
 import json
-import os
-import uuid
-from collections.abc import Iterator, Mapping
-from contextlib import contextmanager
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -31,6 +27,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from pospp import __version__
+from pospp.io.files import atomic_path
 from pospp.types import ReferenceTrajectory
 
 __all__ = [
@@ -38,14 +35,12 @@ __all__ = [
     "SCHEMA_VERSION",
     "TABLES",
     "Column",
-    "atomic_path",
     "read_metadata",
     "read_reference_trajectory",
     "read_table",
     "render_all_schemas_markdown",
     "render_schema_markdown",
     "schema",
-    "sha256_file",
     "write_reference_trajectory",
     "write_table",
 ]
@@ -387,48 +382,6 @@ def schema(name: str) -> pa.Schema:
     if name not in TABLES:
         raise KeyError(f"unknown table {name!r}; known: {sorted(TABLES)}")
     return pa.schema([_field(c) for c in TABLES[name]])
-
-
-# --------------------------------------------------------------------------- files
-
-
-@contextmanager
-def atomic_path(path: str | Path) -> Iterator[Path]:
-    """Yield a temporary path next to ``path``; on success fsync it and ``os.replace`` it.
-
-    On any exception the temporary file is removed and ``path`` is left untouched.
-    """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
-    try:
-        yield tmp
-        fd = os.open(tmp, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    try:  # make the rename durable; not possible on every platform
-        dfd = os.open(path.parent, os.O_RDONLY)
-        try:
-            os.fsync(dfd)
-        finally:
-            os.close(dfd)
-    except OSError:
-        pass
-
-
-def sha256_file(path: str | Path, *, chunk_bytes: int = 1 << 20) -> str:
-    """SHA-256 hex digest of a file, read in chunks (constant memory)."""
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        while block := f.read(chunk_bytes):
-            h.update(block)
-    return h.hexdigest()
 
 
 def _columns_of(data: pd.DataFrame | Mapping[str, Any]) -> dict[str, Any]:

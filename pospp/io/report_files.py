@@ -7,7 +7,8 @@ from typing import Any
 
 import pandas as pd
 
-from pospp.io.parquet_tables import TABLES, atomic_path, read_table
+from pospp.io.files import atomic_path
+from pospp.io.parquet_tables import TABLES, read_table
 
 __all__ = ["read_run_tables", "write_figure", "write_text"]
 

@@ -26,8 +26,9 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from pospp.io.files import atomic_path
 from pospp.io.mcap_writer import write_flight_log
-from pospp.io.parquet_tables import atomic_path, write_reference_trajectory
+from pospp.io.parquet_tables import write_reference_trajectory
 from pospp.types import GnssFixes, GnssVelocities, ImuSamples, ReferenceTrajectory
 from pospp.units import DEG_PER_H_RADPS, UG_MPS2
 

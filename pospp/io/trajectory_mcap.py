@@ -31,7 +31,7 @@ from mcap.writer import CompressionType, Writer
 
 from pospp import __version__, earth, rotation
 from pospp.io import ros_messages as rm
-from pospp.io.parquet_tables import atomic_path
+from pospp.io.files import atomic_path
 from pospp.types import ENU_TO_NED, FLU_TO_FRD
 from pospp.units import time_ns_from_t_s
 

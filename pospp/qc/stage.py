@@ -22,6 +22,7 @@ from pospp import earth, rotation
 from pospp.nav.alignment import static_windows
 from pospp.nav.tuning import tuning_from_config
 from pospp.qc import checks as qc
+from pospp.qc import time_offset
 from pospp.qc.checks import Check
 from pospp.units import t_s_from_time_ns
 
@@ -171,16 +172,16 @@ def quality_checks(log: Any, nav: Any, calib_run: Any, config: Any, *, c_bs: Any
     if rec is not None:
         gnss = (rec.kind <= 1) & ((rec.status == 0) | (rec.status == 1) | (rec.status == 2))
         out.append(qc.nis_band(rec.t_s[gnss], rec.nis[gnss]))
-    est = qc.estimate_time_offset(t, _down_rate(t, w, sol), v_t, v_n)
-    out.append(qc.gnss_time_offset(est))
+    est = time_offset.estimate_time_offset(t, _down_rate(t, w, sol), v_t, v_n)
+    out.append(time_offset.gnss_time_offset(est))
     lev = lever_estimate if lever_estimate is not None else (
         nav.lever_arm if nav.lever_arm.estimated else None)
     if lev is None:
-        out.append(qc._na("lever_arm", "navigate", "no lever-arm estimate", "m",
+        out.append(qc.skip("lever_arm", "navigate", "no lever-arm estimate", "m",
                           qc.LEVER_ARM_MAX_M))
     else:
         speed = np.hypot(sol.v_n_mps[:, 0], sol.v_n_mps[:, 1])
-        moving = speed > qc.TIME_OFFSET_MIN_SPEED_MPS
+        moving = speed > time_offset.TIME_OFFSET_MIN_SPEED_MPS
         out.append(qc.lever_arm(config.gnss.lever_arm_m, lev.lever_b_m, lev.sigma_b_m,
                                 observable=qc.lever_arm_observable(sol.rpy_rad),
                                 mean_speed_mps=float(speed[moving].mean()) if moving.any()

@@ -14,6 +14,7 @@ import pytest
 import pospp
 from pospp.io import parquet_tables as pt
 from pospp.io.errors import IngestIssue
+from pospp.io.files import sha256_file
 from pospp.outputs import issue_message, messages_table
 from pospp.types import ReferenceTrajectory
 
@@ -127,7 +128,7 @@ def test_sha256_file_matches_hashlib_known_value(tmp_path: Path) -> None:
     p = tmp_path / "abc"
     p.write_bytes(b"abc")
     # FIPS 180-2 test vector for "abc"
-    assert pt.sha256_file(p, chunk_bytes=2) == (
+    assert sha256_file(p, chunk_bytes=2) == (
         "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad")
 
 
