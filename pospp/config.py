@@ -22,7 +22,11 @@ import typing
 from dataclasses import dataclass, field
 from enum import Enum, StrEnum
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # the stages' option types (imported where used: `pospp --help` stays light)
+    from pospp.nav.filter import FilterOptions
+    from pospp.nav.tuning import ImuTuning
 
 
 class ConfigError(ValueError):
@@ -198,6 +202,16 @@ class ImuConfig:
     accel_vrw_mpsph: float | None = _key(None, ge=0.0)
     accel_gm_sigma_ug: float | None = _key(None, ge=0.0)
     accel_gm_tau_s: float | None = _key(None, gt=0.0)
+
+    def tuning(self) -> ImuTuning:
+        """The filter tuning of this section: the ``grade`` preset
+        (:func:`pospp.nav.tuning.tuning_preset`) with every key that is not ``None``
+        overriding the preset value."""
+        from pospp.nav.tuning import tuning_preset
+
+        overrides = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
+                     if f.name != "grade"}
+        return tuning_preset(self.grade, **overrides)
 
 
 @dataclass(frozen=True)
@@ -399,6 +413,29 @@ class PipelineConfig:
             sec = getattr(self, section)
             if getattr(sec, key) is None:
                 object.__setattr__(self, section, dataclasses.replace(sec, **{key: value}))
+
+    def filter_options(self) -> FilterOptions:
+        """Algorithm A's :class:`pospp.nav.filter.FilterOptions` of this configuration.
+
+        From ``[gnss]`` pos_sigma_floor_m, vel_sigma_floor_mps, use_velocity, gate_probability
+        and ``[filter]`` smoother, max_imu_gap_s, gate_reset_s, static_alignment_s (->
+        ``alignment.max_static_alignment_s``); everything else keeps its default. The lever
+        arm, its estimation and the output rate are arguments of
+        :func:`pospp.nav.filter.run_integrated_navigation` (``[gnss]`` lever_arm_m,
+        estimate_lever_arm, ``[filter]`` output_rate_hz); the tuning is ``imu.tuning()``.
+        """
+        from pospp.nav.alignment import AlignmentOptions
+        from pospp.nav.filter import FilterOptions
+
+        g, f = self.gnss, self.filter
+        assert g.pos_sigma_floor_m is not None and g.vel_sigma_floor_mps is not None
+        return FilterOptions(
+            pos_sigma_floor_m=g.pos_sigma_floor_m, vel_sigma_floor_mps=g.vel_sigma_floor_mps,
+            use_velocity=g.use_velocity, gate_probability=g.gate_probability,
+            smoother=f.smoother,
+            alignment=AlignmentOptions(max_static_alignment_s=f.static_alignment_s),
+            max_imu_gap_s=f.max_imu_gap_s, gate_reset_s=f.gate_reset_s,
+        )
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)

@@ -133,7 +133,7 @@ def ingest(path: str | Path, config: PipelineConfig) -> mcap_reader.FlightLog:
 
 def imu_tuning(config: PipelineConfig) -> nav_tuning.ImuTuning:
     """The filter's IMU noise model: the grade preset with the [imu] overrides."""
-    return nav_tuning.tuning_from_config(config.imu)
+    return config.imu.tuning()
 
 
 def navigate(
@@ -157,7 +157,7 @@ def navigate(
             gyro_bias_correction_b_radps, dtype=float))
     g, f = config.gnss, config.filter
     if options is None:
-        options = nav_filter.options_from_config(config)
+        options = config.filter_options()
     if lever_arm_b_m is None:
         lever_arm_b_m = g.lever_arm_m
     return nav_filter.run_integrated_navigation(
@@ -467,7 +467,7 @@ def quality_control(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     if not config.gnss.estimate_lever_arm:
         try:
             rerun = replace(config, gnss=replace(config.gnss, estimate_lever_arm=True))
-            opts = replace(nav_filter.options_from_config(config), smoother=False,
+            opts = replace(config.filter_options(), smoother=False,
                            lever_arm_sigma_m=QC_LEVER_ARM_SIGMA_M)
             from pospp.qc.checks import lever_arm_observable
 

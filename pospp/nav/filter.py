@@ -504,26 +504,6 @@ def _bias_history(t_s: NDArray, sens: NDArray, bias_var: NDArray, diag: NDArray,
     )
 
 
-def options_from_config(config) -> FilterOptions:
-    """:class:`FilterOptions` from a pipeline configuration (:class:`pospp.config.PipelineConfig`).
-
-    Maps ``[gnss]`` pos_sigma_floor_m, vel_sigma_floor_mps, use_velocity, gate_probability,
-    ``[filter]`` smoother, max_imu_gap_s, gate_reset_s and static_alignment_s (->
-    ``alignment.max_static_alignment_s``);
-    everything else keeps its default. The lever arm, its estimation and the output rate are
-    arguments of :func:`run_integrated_navigation` (``[gnss]`` lever_arm_m,
-    estimate_lever_arm, ``[filter]`` output_rate_hz), the tuning comes from
-    :func:`pospp.nav.tuning.tuning_from_config` (``[imu]``).
-    """
-    g, f = config.gnss, config.filter
-    return FilterOptions(
-        pos_sigma_floor_m=g.pos_sigma_floor_m, vel_sigma_floor_mps=g.vel_sigma_floor_mps,
-        use_velocity=g.use_velocity, gate_probability=g.gate_probability, smoother=f.smoother,
-        alignment=AlignmentOptions(max_static_alignment_s=f.static_alignment_s),
-        max_imu_gap_s=f.max_imu_gap_s, gate_reset_s=f.gate_reset_s,
-    )
-
-
 def reference_solution(
     result: FilterResult, *, which: str = "smoothed"
 ) -> tuple[Trajectory, NDArray, NDArray]:
@@ -557,6 +537,6 @@ def reference_solution(
 __all__ = [
     "BiasHistory", "FilterOptions", "FilterResult", "GnssRejection", "InnovationRecord",
     "LeverArmEstimate",
-    "NavSolution", "options_from_config", "reference_solution",
+    "NavSolution", "reference_solution",
     "run_integrated_navigation",
 ]

@@ -234,13 +234,3 @@ def tuning_preset(grade: str, **overrides: float | None) -> ImuTuning:
         names = sorted([*PRESETS, *ALIASES])
         raise ValueError(f"unknown IMU grade {grade!r}; expected one of {names}") from None
     return base.with_overrides(**overrides)
-
-
-def tuning_from_config(imu_config) -> ImuTuning:
-    """The tuning of a pipeline ``[imu]`` section (:class:`pospp.config.ImuConfig`).
-
-    The ``grade`` preset with every key that is not ``None`` overriding the preset value.
-    """
-    values = dict(vars(imu_config))
-    grade = values.pop("grade")
-    return tuning_preset(grade, **values)

@@ -20,7 +20,6 @@ from numpy.typing import NDArray
 
 from pospp import earth, rotation
 from pospp.nav.alignment import static_windows
-from pospp.nav.tuning import tuning_from_config
 from pospp.qc import checks as qc
 from pospp.qc import time_offset
 from pospp.qc.checks import Check
@@ -149,7 +148,7 @@ def quality_checks(log: Any, nav: Any, calib_run: Any, config: Any, *, c_bs: Any
     dt = float(np.median(np.diff(t))) if t.shape[0] > 1 else 0.0
     out.append(qc.gravity_magnitude(f, static, lat0, h0,
                                     window_n=int(round(1.0 / dt)) if dt > 0 else 1))
-    noise = tuning_from_config(config.imu).noise()
+    noise = config.imu.tuning().noise()
     sb = math.hypot(noise.gyro_turn_on_sigma_radps, noise.gyro_gm_sigma_radps) \
         or noise.gyro_bias_sigma_radps
     out.append(qc.earth_rate(w, f, static, dt, lat0, gyro_bias_sigma_radps=sb,
