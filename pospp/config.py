@@ -24,6 +24,8 @@ from enum import Enum, StrEnum
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from pospp.calib.segment import LegThresholds
+
 if TYPE_CHECKING:  # the stages' option types (imported where used: `pospp --help` stays light)
     from pospp.nav.filter import FilterOptions
     from pospp.nav.tuning import ImuTuning
@@ -267,7 +269,8 @@ class GradeDefaults:
     squares (10 s spacing) and calibrate nothing."""
 
 
-_NAVIGATION = GradeDefaults(0.01, 0.005, 300.0, 15.0)
+_LEG = LegThresholds()
+_NAVIGATION = GradeDefaults(0.01, 0.005, _LEG.min_duration_s, _LEG.duration_tolerance_s)
 _MEMS = GradeDefaults(0.2, 0.5, 30.0, 5.0)
 GRADE_DEFAULTS: dict[Grade, GradeDefaults] = {
     Grade.FLIGHT: _NAVIGATION,
@@ -291,24 +294,34 @@ LEG_DURATION_TOLERANCE_BY_GRADE_S: dict[str, float] = {
 
 @dataclass(frozen=True)
 class LegsConfig:
-    """[legs]: straight uniform leg thresholds (see pospp.calib.segment.LegThresholds).
-    Omitted, ``min_duration_s`` and ``duration_tolerance_s`` take the ``[imu] grade``'s
-    defaults: flight and vehicle 300 s and 15 s, tactical and mems 30 s and 5 s
-    (``LEG_MIN_DURATION_BY_GRADE_S``, ``LEG_DURATION_TOLERANCE_BY_GRADE_S``); explicit values
-    win.
+    """[legs]: straight uniform leg thresholds, the fields of
+    :class:`pospp.calib.segment.LegThresholds` (its defaults; :meth:`thresholds` gives the
+    stage's options). Omitted, ``min_duration_s`` and ``duration_tolerance_s`` take the
+    ``[imu] grade``'s defaults: flight and vehicle 300 s and 15 s, tactical and mems 30 s and
+    5 s (:data:`GRADE_DEFAULTS`); explicit values win.
     """
 
     min_duration_s: float | None = _key(None, gt=0.0)
     duration_tolerance_s: float | None = _key(None, ge=0.0)
-    max_duration_s: float = _key(1800.0, gt=0.0)
-    max_heading_rate_dps: float = _key(0.2, gt=0.0)
-    max_heading_spread_deg: float = _key(2.0, gt=0.0, le=180.0)
-    max_speed_std_mps: float = _key(0.5, gt=0.0)
-    max_acceleration_mps2: float = _key(0.05, gt=0.0)
-    max_vertical_speed_mps: float = _key(1.0, gt=0.0)
-    min_speed_mps: float = _key(3.0, ge=0.0)
-    trim_s: float = _key(2.0, ge=0.0)
-    smoothing_s: float = _key(5.0, ge=0.0)
+    max_duration_s: float = _key(_LEG.max_duration_s, gt=0.0)
+    max_heading_rate_dps: float = _key(_LEG.max_heading_rate_dps, gt=0.0)
+    max_heading_spread_deg: float = _key(_LEG.max_heading_spread_deg, gt=0.0, le=180.0)
+    max_speed_std_mps: float = _key(_LEG.max_speed_std_mps, gt=0.0)
+    max_acceleration_mps2: float = _key(_LEG.max_acceleration_mps2, gt=0.0)
+    max_vertical_speed_mps: float = _key(_LEG.max_vertical_speed_mps, gt=0.0)
+    min_speed_mps: float = _key(_LEG.min_speed_mps, ge=0.0)
+    trim_s: float = _key(_LEG.trim_s, ge=0.0)
+    smoothing_s: float = _key(_LEG.smoothing_s, ge=0.0)
+
+    def thresholds(self) -> LegThresholds:
+        """The leg segmentation's options (every key of this section; a key
+        :class:`LegThresholds` does not have raises TypeError, so a rename cannot be lost).
+        The grade defaults are filled in by :class:`PipelineConfig`."""
+        values = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        if values["min_duration_s"] is None or values["duration_tolerance_s"] is None:
+            raise ConfigError("legs: min_duration_s / duration_tolerance_s unset (a LegsConfig "
+                              "outside a PipelineConfig has no [imu] grade to default from)")
+        return LegThresholds(**values)
 
 
 @dataclass(frozen=True)
