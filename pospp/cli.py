@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 import sys
 from pathlib import Path
+from typing import Any
 
 # One BLAS thread, set before numpy loads OpenBLAS: the calibration's many small dense solves
 # run 5-60x slower when OpenBLAS threads compete with numba for 2 cores (docs/benchmarks.md).
@@ -62,7 +63,7 @@ def _exit_code_for(exc: BaseException) -> int:
 class _Cli(click.Group):
     """The command group: turns any error of a command into one line and an exit status."""
 
-    def main(self, args=None, prog_name=None, complete_var=None,  # noqa: ANN001
+    def main(self, args=None, prog_name=None, complete_var=None,  # type: ignore[override]
              standalone_mode: bool = True, **extra: object) -> object:
         if not standalone_mode:
             return super().main(args, prog_name, complete_var, False, **extra)
@@ -275,7 +276,8 @@ def simulate(ctx: click.Context, preset: str | None, profile_file: str | None, i
             gnss = replace(from_file, **over)
     bar = _StageBar()
     try:
-        sim = run_simulation(profile_file or preset, imu_grade=grade, gnss=gnss, seed=seed,
+        source: str = profile_file or preset or ""
+        sim = run_simulation(source, imu_grade=grade, gnss=gnss, seed=seed,
                              imu_rate_hz=imu_rate_hz, progress=bar)
     finally:
         bar.close()
@@ -323,10 +325,10 @@ def export(run_dir: str, fmt: str, rate_hz: float | None, out_file: str | None,
 @click.option("--option", "options", multiple=True, metavar="KEY=VALUE",
               help="Converter option, e.g. --option path=3 --option imu=avg (repeatable).")
 def convert(source: str, out_mcap: str, fmt: str | None, options: tuple[str, ...]) -> None:
-    """Convert a measured log to the MCAP data contract (pospp.io.converters.convert)."""
-    from pospp.io.converters import convert as run_convert
+    """Convert a measured log to the MCAP data contract (pospp.convert.convert)."""
+    from pospp.convert import convert as run_convert
 
-    kw: dict[str, object] = {}
+    kw: dict[str, Any] = {}
     for item in options:
         key, sep, value = item.partition("=")
         if not sep:

@@ -202,7 +202,7 @@ def log_stats(log: mcap_reader.FlightLog, config: PipelineConfig, *, vehicle: st
         nav = pipeline.navigate(log, config)
     est_cfg = replace(config, gnss=replace(config.gnss, estimate_lever_arm=True),
                       filter=replace(config.filter, estimate_scale_factors=True))
-    opts = replace(nav_filter.options_from_config(config), smoother=False)
+    opts = replace(config.filter_options(), smoother=False)
     try:
         est = pipeline.navigate(log, est_cfg, options=opts)
     except ValueError:

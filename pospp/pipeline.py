@@ -42,6 +42,7 @@ from pospp.diagnose.workflow import diagnose as run_diagnosis
 from pospp.evaluate import evaluation_rows, solution_errors
 from pospp.io import mcap_reader, parquet_tables, report_files, run_folder, trajectory_mcap
 from pospp.io.errors import IngestError
+from pospp.io.files import sha256_file
 from pospp.nav import events as sensor_events
 from pospp.nav import filter as nav_filter
 from pospp.nav import tuning as nav_tuning
@@ -50,6 +51,8 @@ from pospp.qc.checks import comparison_text
 from pospp.qc.stage import QualityReport, qc_columns, quality_checks, worst_status
 from pospp.report import figures
 from pospp.report.html import render_report
+from pospp.types import FLU_TO_FRD
+from pospp.units import t_s_from_time_ns
 
 ProgressFn = Callable[[str, float], None]
 """Progress callback: (stage name, fraction of the whole run done in [0, 1])."""
@@ -92,7 +95,7 @@ def sensor_to_body_dcm(sensor_frame: str, mounting_rpy_deg: tuple[float, float, 
     FRD; C_mount (roll, pitch, yaw of the sensor case in the body, z-y-x) is the residual
     mounting rotation, identity when the IMU is aligned with the body.
     """
-    axes = {"flu": mcap_reader.FLU_TO_FRD, "frd": np.eye(3)}[sensor_frame]
+    axes = {"flu": FLU_TO_FRD, "frd": np.eye(3)}[sensor_frame]
     return rotation.dcm_from_euler(np.radians(mounting_rpy_deg)) @ axes
 
 
@@ -130,7 +133,7 @@ def ingest(path: str | Path, config: PipelineConfig) -> mcap_reader.FlightLog:
 
 def imu_tuning(config: PipelineConfig) -> nav_tuning.ImuTuning:
     """The filter's IMU noise model: the grade preset with the [imu] overrides."""
-    return nav_tuning.tuning_from_config(config.imu)
+    return config.imu.tuning()
 
 
 def navigate(
@@ -154,7 +157,7 @@ def navigate(
             gyro_bias_correction_b_radps, dtype=float))
     g, f = config.gnss, config.filter
     if options is None:
-        options = nav_filter.options_from_config(config)
+        options = config.filter_options()
     if lever_arm_b_m is None:
         lever_arm_b_m = g.lever_arm_m
     return nav_filter.run_integrated_navigation(
@@ -264,7 +267,7 @@ def run(
     """
     book = _Progress(progress)  # the run's clock starts here: wall_time_s is all of run()
     target = run_folder.check_target(out_dir, input_file=mcap_path, force=force)
-    sha = parquet_tables.sha256_file(mcap_path) if Path(mcap_path).is_file() else ""
+    sha = sha256_file(mcap_path) if Path(mcap_path).is_file() else ""
     stage = run_folder.new_staging(target)
     try:
         outcome = _run_stages(mcap_path, sha, config, stage, book)
@@ -440,7 +443,7 @@ def _event_poses(log: mcap_reader.FlightLog, solution: nav_filter.NavSolution, n
     epoch_ns = int(log.imu.time_ns[0])
     sc = config.sensor
     poses = sensor_events.sensor_poses(
-        solution, outputs.time_ns_to_t_s(log.events_ns, epoch_ns), lever_b_m=sc.lever_arm_m,
+        solution, t_s_from_time_ns(log.events_ns, epoch_ns), lever_b_m=sc.lever_arm_m,
         c_bs=rotation.dcm_from_euler(np.radians(sc.boresight_rpy_deg)))
     n_out = int(np.count_nonzero(~poses.inside))
     if n_out:
@@ -471,7 +474,7 @@ def quality_control(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     if not config.gnss.estimate_lever_arm:
         try:
             rerun = replace(config, gnss=replace(config.gnss, estimate_lever_arm=True))
-            opts = replace(nav_filter.options_from_config(config), smoother=False,
+            opts = replace(config.filter_options(), smoother=False,
                            lever_arm_sigma_m=QC_LEVER_ARM_SIGMA_M)
             from pospp.qc.checks import lever_arm_observable
 
@@ -522,7 +525,7 @@ def calibrate(imu: ImuIncrements, nav: nav_filter.FilterResult,
     tuning = imu_tuning(config)
     gm = bool(np.isfinite(tuning.gyro_gm_tau_s) and tuning.gyro_gm_sigma_dph > 0)
     return calibrate_flight(
-        imu, reference, legs_cfg=config.legs, replay_cfg=config.replay,
+        imu, reference, legs_cfg=config.legs.thresholds(), replay_cfg=config.replay,
         pairs_cfg=config.pairs, gyro_arw_dpsh=tuning.gyro_arw_dpsh,
         noise=config.pairs.noise, noise_step_s=config.pairs.noise_step_s,
         estimate_gyro_z=config.pairs.estimate_gyro_z,
@@ -692,7 +695,7 @@ def reopen_run(run_dir: str | Path) -> tuple[Path, dict[str, Any], Path, Pipelin
     path = Path(meta["input_file"])
     if not path.is_file():
         raise FileNotFoundError(f"{run}: the run's input {path} is no longer there")
-    if parquet_tables.sha256_file(path) != meta["input_sha256"]:
+    if sha256_file(path) != meta["input_sha256"]:
         raise ValueError(f"{run}: the run's input {path} changed since the run (SHA-256)")
     return run, meta, path, config_from_dict(meta["config"], source=f"{run}/summary.parquet")
 

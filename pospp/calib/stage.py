@@ -30,9 +30,9 @@ from pospp.calib.replay import ImuIncrements, LegReplay, ReferenceSolution, repl
 from pospp.calib.segment import Leg, LegThresholds, find_legs
 from pospp.calib.solve import FORMULATIONS, Calibration, gm_noise_operator, noise_basis
 from pospp.nav.closed_form import PAPER_FROM_NED
-from pospp.rotation import ARCSEC_RAD, DEG_PER_H_RADPS
+from pospp.units import ARCSEC_RAD, DEG_PER_H_RADPS
+from pospp.units import DEG_PER_SQRT_H_RAD_PER_SQRT_S as _DPSH_RADPSQRTS
 
-_DPSH_RADPSQRTS = np.pi / 180.0 / 60.0
 """One deg/sqrt(h) in rad/sqrt(s)."""
 COMPENSATIONS = ("constant", "per_leg", "causal")
 _REML_STEP_S = 20.0

@@ -35,9 +35,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pospp import earth
-from pospp.io.mcap_reader import GnssFixes, GnssVelocities
 from pospp.sim.imu import Motion, dcm_nb_from_euler
 from pospp.sim.trajectory import MotionSample
+from pospp.types import GnssFixes, GnssVelocities
 
 __all__ = ["GnssModel", "antenna_state", "gnss_model_file", "simulate_gnss"]
 

@@ -40,9 +40,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from pospp.rotation import ARCSEC_RAD, DEG_PER_H_RADPS
 from pospp.sim.gnss import GnssModel
-from pospp.sim.sensors import UG_MPS2, ImuErrorModel
+from pospp.sim.sensors import ImuErrorModel
+from pospp.units import ARCSEC_RAD, DEG_PER_H_RADPS, UG_MPS2
 
 __all__ = ["SimEffect", "LIBRARY", "EffectContext", "library_by_name"]
 

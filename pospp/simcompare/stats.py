@@ -85,6 +85,7 @@ from scipy.ndimage import uniform_filter1d
 
 from pospp import rotation
 from pospp.nav.filter import FilterResult
+from pospp.units import G0_MPS2
 
 __all__ = ["FlightStats", "Stat", "STAT_UNITS", "flight_stats", "dominant_frequency_hz",
            "ljung_box", "lowband_share", "allan_products", "steady_mask", "leg_stats"]
@@ -399,7 +400,7 @@ def flight_stats(imu_time_s: NDArray, w_ib_b_radps: NDArray, f_ib_b_mps2: NDArra
     track = np.arctan2(v[:, 1], v[:, 0])
     if vehicle == "aircraft":
         turn = np.gradient(np.unwrap(track), sol.t_s)
-        roll0 = np.arctan(speed * turn / 9.80665)
+        roll0 = np.arctan(speed * turn / G0_MPS2)
     else:
         roll0 = np.zeros_like(speed)
     pitch0 = np.zeros_like(speed) if vehicle == "car" else np.arctan2(-v[:, 2], speed)
