@@ -95,17 +95,22 @@ def null_flight_diagnosis(seed: int, n_null: int = N_NULL):
 
 
 @pytest.mark.slow
-def test_null_flights_close_none_at_the_stated_rate():
-    # measured (the same draws): none in 33 of 40 (paper_flight 11 / 14, paper_vehicle 12 / 13,
-    # tactical 10 / 13), the nominal F-test unexplained in 38 of 40. The issue asks for 95 %:
-    # not reached (docs/diagnose.md); this asserts what holds, with a margin.
-    closing, nominal = {g: [] for g in GRADES}, []
+def test_null_flights_close_none_at_the_stated_rate_and_sigmas_are_honest():
+    # measured (these draws): none in 39 of 40 (paper_flight 14 / 14, paper_vehicle 12 / 13,
+    # tactical 13 / 13), the nominal F-test unexplained in 39 of 40; calibrated bias error /
+    # sigma RMS 1.39, 78 of 80 within 3 sigma. The issue asks for >= 95 % none (38 of 40),
+    # error / sigma RMS in 0.7-1.5 and >= 95 % within 3 sigma: asserted as stated, no margin
+    # beyond the one alarm and the two 3-sigma misses these draws leave.
+    closing, nominal, zs = {g: [] for g in GRADES}, [], []
     for seed in range(40):
-        d, d0 = null_flight_diagnosis(seed)
+        d, d0, z = null_flight_diagnosis(seed)
         assert set(d.named) <= MAY_BE_NAMED
         closing[GRADES[seed % 3]].append(d.conclusion)
         nominal.append(d0.conclusion)
+        zs.append(z)
     assert nominal.count("unexplained") >= 34
     total = sum(c.count("none") for c in closing.values())
-    assert total >= 30, closing
-    assert closing["paper_vehicle"].count("none") >= 11, closing
+    assert total >= 38, closing
+    z = np.asarray(zs)
+    assert 0.7 <= float(np.sqrt(np.mean(z**2))) <= 1.5, z
+    assert np.mean(np.abs(z) < 3.0) >= 0.95, z
