@@ -267,15 +267,22 @@ class GradeDefaults:
     """``[legs] duration_tolerance_s``: a leg flown for min_duration_s is detected 3-5 s
     shorter; legs shorter than 20 s detected hold a single epoch of the gyro random-walk least
     squares (10 s spacing) and calibrate nothing."""
+    leg_settle_s: float
+    """``[legs] settle_s``: 60 s for the navigation and tactical grades (a tactical null flight
+    whose first leg began 2 s after A's motion alignment carried a 481 mm/s B-minus-A gap, A's
+    unconverged state, not noise: docs/diagnose.md); 0 for MEMS, whose measured logs fly
+    30-60 s legs soon after take-off (the quadrotor's first leg would be lost; not measured
+    otherwise)."""
 
 
 _LEG = LegThresholds()
-_NAVIGATION = GradeDefaults(0.01, 0.005, _LEG.min_duration_s, _LEG.duration_tolerance_s)
-_MEMS = GradeDefaults(0.2, 0.5, 30.0, 5.0)
+_NAVIGATION = GradeDefaults(0.01, 0.005, _LEG.min_duration_s, _LEG.duration_tolerance_s,
+                            _LEG.settle_s)
+_MEMS = GradeDefaults(0.2, 0.5, 30.0, 5.0, 0.0)
 GRADE_DEFAULTS: dict[Grade, GradeDefaults] = {
     Grade.FLIGHT: _NAVIGATION,
     Grade.VEHICLE: _NAVIGATION,
-    Grade.TACTICAL: GradeDefaults(0.01, 0.005, 30.0, 5.0),
+    Grade.TACTICAL: GradeDefaults(0.01, 0.005, 30.0, 5.0, _LEG.settle_s),
     Grade.MEMS: _MEMS,
     Grade.CONSUMER: _MEMS,
 }
@@ -312,17 +319,20 @@ class LegsConfig:
     min_speed_mps: float = _key(_LEG.min_speed_mps, ge=0.0)
     trim_s: float = _key(_LEG.trim_s, ge=0.0)
     smoothing_s: float = _key(_LEG.smoothing_s, ge=0.0)
-    settle_s: float = _key(_LEG.settle_s, ge=0.0)
+    settle_s: float | None = _key(None, ge=0.0)
     """A leg starts at least this long after A's first epoch [s]: B from a state A has not
-    yet converged on carries A's alignment error (docs/calibration.md)."""
+    yet converged on carries A's alignment error (docs/diagnose.md); omitted: the grade's
+    default (:data:`GRADE_DEFAULTS`)."""
 
     def thresholds(self) -> LegThresholds:
         """The leg segmentation's options (every key of this section; a key
         :class:`LegThresholds` does not have raises TypeError, so a rename cannot be lost).
         The grade defaults are filled in by :class:`PipelineConfig`."""
         values = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
-        if values["min_duration_s"] is None or values["duration_tolerance_s"] is None:
-            raise ConfigError("legs: min_duration_s / duration_tolerance_s unset (a LegsConfig "
+        if any(values[k] is None for k in ("min_duration_s", "duration_tolerance_s",
+                                           "settle_s")):
+            raise ConfigError("legs: min_duration_s / duration_tolerance_s / settle_s unset (a "
+                              "LegsConfig "
                               "outside a PipelineConfig has no [imu] grade to default from)")
         return LegThresholds(**values)
 
@@ -429,6 +439,7 @@ class PipelineConfig:
         d = GRADE_DEFAULTS[Grade(grade)]
         for section, key, value in (("legs", "min_duration_s", d.leg_min_duration_s),
                                     ("legs", "duration_tolerance_s", d.leg_duration_tolerance_s),
+                                    ("legs", "settle_s", d.leg_settle_s),
                                     ("gnss", "pos_sigma_floor_m", d.pos_sigma_floor_m),
                                     ("gnss", "vel_sigma_floor_mps", d.vel_sigma_floor_mps)):
             sec = getattr(self, section)

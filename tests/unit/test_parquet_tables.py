@@ -52,7 +52,7 @@ UNITLESS = {"solution", "leg_id", "pair_id", "leg_a", "leg_b", "used", "reason",
             "confounded_with", "parameters", "parameter_values", "parameter_sigmas", "model",
             "kind", "calibration_reason",
             "check", "measure", "passed", "suggestion", "qc_failed_checks", "qc_suggestions",
-            "calibration_formulation", "not_observable",
+            "calibration_formulation", "calibration_sigma_source", "not_observable",
             "event_id", "inside"}
 # Long-form tables: 'value' / 'sigma' carry the unit named in the row's 'unit' column.
 ROW_UNIT = {"value", "sigma", "threshold"}
