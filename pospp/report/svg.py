@@ -674,10 +674,11 @@ def _draw_artist(a: dict[str, Any], fx: Any, fy: Any, x0: float, w: float, log: 
             if not np.isfinite(hv):
                 continue
             left, right = float(fx(xc - a["w"] / 2)), float(fx(xc + a["w"] / 2))
-            base = float(fy(0.0)) if not log else float(fy(10.0 ** -300))
+            # from zero (linear) or from far below the axes (log), clipped to the axes
+            base = float(fy(0.0)) if not log else float(fy(1e-300))
             top = float(fy(hv))
-            if not np.isfinite(base):
-                base = float(fy(np.nan))
+            if not (np.isfinite(base) and np.isfinite(top)):
+                continue
             out.append(f'<rect x="{_f(left)}" y="{_f(min(base, top))}" '
                        f'width="{_f(right - left)}" height="{_f(abs(top - base))}" '
                        f'{_paint(a["color"], "fill")}/>')
@@ -719,16 +720,24 @@ def _draw_legend(ax: Axes, box: tuple[float, float, float, float], fx: Any, fy: 
     corners = {"upper right": (x0 + w - bw - pad, y0 + pad),
                "upper left": (x0 + pad, y0 + pad),
                "lower left": (x0 + pad, y0 + h - bh - pad),
-               "lower right": (x0 + w - bw - pad, y0 + h - bh - pad)}
+               "lower right": (x0 + w - bw - pad, y0 + h - bh - pad),
+               "center right": (x0 + w - bw - pad, y0 + (h - bh) / 2),
+               "center left": (x0 + pad, y0 + (h - bh) / 2),
+               "upper center": (x0 + (w - bw) / 2, y0 + pad),
+               "lower center": (x0 + (w - bw) / 2, y0 + h - bh - pad)}
     if leg["loc"] in corners:
         lx, ly = corners[leg["loc"]]
-    else:  # "best": the corner covering the fewest drawn points
-        pts = [(fx(a["x"]), fy(a["y"])) for a in ax._artists if a["kind"] in ("line",
-                                                                                "errorbar")]
+    else:  # "best": the corner covering the least of the lines (sampled along each)
+        pts = []
+        for a in ax._artists:
+            if a["kind"] in ("line", "errorbar") and len(a["x"]):
+                u = np.linspace(0.0, len(a["x"]) - 1.0, 400)
+                k = np.arange(len(a["x"]), dtype=float)
+                pts.append((np.interp(u, k, fx(a["x"])), np.interp(u, k, fy(a["y"]))))
         px = np.concatenate([p[0] for p in pts]) if pts else np.array([])
         py = np.concatenate([p[1] for p in pts]) if pts else np.array([])
         best = None
-        for name in ("upper right", "upper left", "lower left", "lower right"):
+        for name in corners:  # matplotlib's order of preference
             cx, cy = corners[name]
             n = int(np.sum((px >= cx) & (px <= cx + bw) & (py >= cy) & (py <= cy + bh)))
             if best is None or n < best[0]:
