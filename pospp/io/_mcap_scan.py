@@ -201,7 +201,9 @@ class Collector:
             hdr[ok_hdr] = _gather(buf, starts[ok_hdr], 0, 16)
             le = ok_hdr & (hdr[:, 0] == 0) & (hdr[:, 1] == 1)
             flen = hdr[:, 12:16].copy().view("<u4")[:, 0].astype(np.int64)
-            for fl in np.unique(flen[le]):
+            fls = flen[le]
+            one = len(fls) > 0 and bool((fls == fls[0]).all())  # the usual case: one length
+            for fl in (fls[:1] if one else np.unique(fls)):
                 dt = _cdr_dtype(self.spec.layout, int(fl))
                 grp = np.flatnonzero(le & (flen == fl) & (plen == dt.itemsize))
                 if grp.size == 0 or not self._layout_ok(channel_id, buf, starts, grp[0], dt):
