@@ -382,6 +382,7 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
         comp = navigate(log, config,
                         gyro_bias_correction_b_radps=calib_run.gyro_bias_b_radps)
         solutions["compensated"] = comp.smoothed if comp.smoothed is not None else comp.forward
+        del comp  # the rest of the second A pass (forward, biases, innovations) is not used
 
     # --- diagnosis -----------------------------------------------------------------------------
     book.stage("diagnose")
@@ -582,6 +583,8 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                                sigma_floor_mps=rc.sigma_floor_mps,
                                transition_step=int(rc.transition_step)).dv_n_mps
                     - calib_run.replays[i].dv_n_mps for i in ids])
+        # freed before the next realisation is made (else two are alive at the peak)
+        del log_r, nav_r, ref_r, imu_r
     return out
 
 
