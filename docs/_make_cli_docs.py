@@ -7,6 +7,7 @@ that both files are in sync.
 from __future__ import annotations
 
 import dataclasses
+import enum
 import inspect
 import typing
 from pathlib import Path
@@ -120,11 +121,13 @@ def pipelines_markdown() -> str:
                   "| key | type | default | choices | limits |", "|---|---|---|---|---|"]
         sub = typing.get_type_hints(cls)
         for g in dataclasses.fields(cls):
-            choices = cfg._CHOICES.get((f.name, g.name))
-            ch = ", ".join(f"`{c}`" for c in choices) if choices else ""
+            tp = sub[g.name]
+            is_enum = isinstance(tp, type) and issubclass(tp, enum.Enum)
+            ch = ", ".join(f"`{m.value}`" for m in tp) if is_enum else ""
             lim = cfg.limits_of(cls, g.name).describe()
-            lines.append(f"| `{g.name}` | {_type_name(sub[g.name])} | `{g.default!r}` | {ch} "
-                         f"| {lim} |")
+            default = g.default.value if isinstance(g.default, enum.Enum) else g.default
+            lines.append(f"| `{g.name}` | {'str' if is_enum else _type_name(tp)} | "
+                         f"`{default!r}` | {ch} | {lim} |")
         lines.append("")
     return "\n".join(lines)
 

@@ -30,7 +30,7 @@ from pospp.calib.replay import ImuIncrements, ReferenceSolution  # noqa: E402
 from pospp.calib.solve import noise_basis  # noqa: E402
 from pospp.calib.stage import calibrate_flight  # noqa: E402
 from pospp.config import config_from_dict, load_config  # noqa: E402
-from pospp.io.converters import convert  # noqa: E402
+from pospp.convert import convert  # noqa: E402
 from pospp.io.mcap_reader import read_flight_log  # noqa: E402
 from pospp.io.parquet_tables import read_reference_trajectory  # noqa: E402
 from pospp.io.simulation_files import write_simulation  # noqa: E402

@@ -57,7 +57,7 @@ def margins(names):
                                 "gnss": {"lever_arm_m": p["gnss"]["lever_arm_m"]}})
         _qc(f"{name} (true GNSS offset {p['gnss'].get('time_offset_s')} s)", rc / f"{name}.mcap",
             cfg)
-    from pospp.io.converters import convert
+    from pospp.convert import convert
     out = REPO / "out" / "qc_realdata"
     out.mkdir(parents=True, exist_ok=True)
     data = SHARED / "data"

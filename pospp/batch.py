@@ -37,6 +37,7 @@ import pandas as pd
 
 from pospp.config import PipelineConfig, config_from_dict
 from pospp.io import parquet_tables, run_folder
+from pospp.io.files import sha256_file
 
 MAX_RUN_NAME_LEN = 160
 """Longest run-folder name (longer ones keep their start and end in a path hash)."""
@@ -162,7 +163,7 @@ def process_one(mcap_path: str, config_dict: dict[str, Any], out_root: str,
     t0 = time.perf_counter()
     sha = ""
     try:
-        sha = parquet_tables.sha256_file(path)
+        sha = sha256_file(path)
         run_dir = Path(out_root) / name
         if not force and already_done(run_dir, config, sha):
             done = parquet_tables.read_table(run_dir / "summary.parquet").iloc[0]

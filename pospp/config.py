@@ -4,6 +4,10 @@ Every section of a pipeline file (pipelines/*.toml) maps to one frozen dataclass
 key is a field with a unit suffix. Unknown sections or keys, and values of the wrong type,
 raise :class:`ConfigError` naming the file, the key, what was expected and what was found.
 Omitted keys take the documented defaults, so an empty file is a valid configuration.
+
+Choices are string enums (``enum.StrEnum``: each member equals its string, so ``cfg.pairs.mode
+== "adjacent"`` holds), listed once here; the per-grade defaults are one table,
+:data:`GRADE_DEFAULTS`.
 """
 
 from __future__ import annotations
@@ -16,8 +20,15 @@ import tomllib
 import types
 import typing
 from dataclasses import dataclass, field
+from enum import Enum, StrEnum
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+from pospp.calib.segment import LegThresholds
+
+if TYPE_CHECKING:  # the stages' option types (imported where used: `pospp --help` stays light)
+    from pospp.nav.filter import FilterOptions
+    from pospp.nav.tuning import ImuTuning
 
 
 class ConfigError(ValueError):
@@ -80,6 +91,68 @@ def limits_of(cls: type, name: str) -> Limits:
     return f.metadata.get("limits", Limits())
 
 
+class SensorFrame(StrEnum):
+    """Axes of the logged IMU."""
+
+    FLU = "flu"  # ROS REP-103
+    FRD = "frd"
+
+
+class Grade(StrEnum):
+    """IMU grade: the filter tuning preset and the per-grade defaults (:data:`GRADE_DEFAULTS`)."""
+
+    FLIGHT = "flight"
+    VEHICLE = "vehicle"
+    TACTICAL = "tactical"
+    MEMS = "mems"
+    CONSUMER = "consumer"
+
+
+class ReplayReference(StrEnum):
+    """Solution of algorithm A that B starts from and is compared with."""
+
+    SMOOTHED = "smoothed"
+    FORWARD = "forward"
+
+
+class AccelCompensation(StrEnum):
+    """Accelerometer bias in B: A's estimate removed, or raw (as the paper)."""
+
+    FILTER = "filter"
+    NONE = "none"
+
+
+class PairMode(StrEnum):
+    ADJACENT = "adjacent"
+    ALL = "all"
+
+
+class Formulation(StrEnum):
+    BODY = "body"
+    PAPER = "paper"
+
+
+class Transition(StrEnum):
+    NUMERICAL = "numerical"
+    CLOSED_FORM = "closed_form"
+
+
+class NoiseModel(StrEnum):
+    GYRO_RW = "gyro_rw"
+    WHITE = "white"
+
+
+class NullImuNoise(StrEnum):
+    MEASURED = "measured"
+    GRADE = "grade"
+
+
+class CompensationMode(StrEnum):
+    CAUSAL = "causal"
+    PER_LEG = "per_leg"
+    CONSTANT = "constant"
+
+
 @dataclass(frozen=True)
 class InputConfig:
     """[input]: topics of the MCAP file and the IMU mounting."""
@@ -87,7 +160,7 @@ class InputConfig:
     imu_topic: str = _key("/imu/data", min_len=1, max_len=256)
     fix_topic: str = _key("/gnss/fix", min_len=1, max_len=256)
     vel_topic: str = _key("/gnss/vel", min_len=1, max_len=256)
-    sensor_frame: str = "flu"
+    sensor_frame: SensorFrame = SensorFrame.FLU
     """Axes of the logged IMU: "flu" (ROS REP-103) or "frd"."""
     mounting_rpy_deg: tuple[float, float, float] = _key((0.0, 0.0, 0.0), ge=-360.0, le=360.0)
     """Extra rotation of the IMU case w.r.t. the body (roll, pitch, yaw of sensor in body)."""
@@ -121,8 +194,8 @@ class SensorConfig:
 class ImuConfig:
     """[imu]: the IMU grade and optional overrides of its noise model (filter tuning)."""
 
-    grade: str = "flight"
-    """Preset: "flight", "vehicle", "tactical" or "mems"."""
+    grade: Grade = Grade.FLIGHT
+    """Preset: "flight", "vehicle", "tactical", "mems" or "consumer"."""
     gyro_bias_sigma_dph: float | None = _key(None, ge=0.0)
     gyro_arw_dpsh: float | None = _key(None, ge=0.0)
     gyro_gm_sigma_dph: float | None = _key(None, ge=0.0)
@@ -131,6 +204,16 @@ class ImuConfig:
     accel_vrw_mpsph: float | None = _key(None, ge=0.0)
     accel_gm_sigma_ug: float | None = _key(None, ge=0.0)
     accel_gm_tau_s: float | None = _key(None, gt=0.0)
+
+    def tuning(self) -> ImuTuning:
+        """The filter tuning of this section: the ``grade`` preset
+        (:func:`pospp.nav.tuning.tuning_preset`) with every key that is not ``None``
+        overriding the preset value."""
+        from pospp.nav.tuning import tuning_preset
+
+        overrides = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
+                     if f.name != "grade"}
+        return tuning_preset(self.grade, **overrides)
 
 
 @dataclass(frozen=True)
@@ -165,72 +248,89 @@ class FilterConfig:
     """Add gyro and accelerometer scale-factor states to algorithm A."""
 
 
+@dataclass(frozen=True)
+class GradeDefaults:
+    """The keys whose default depends on the ``[imu] grade`` (an explicit value wins)."""
+
+    pos_sigma_floor_m: float
+    """``[gnss]``: a MEMS filter trusts the receivers' nominal sigmas too much: on the measured
+    logs (docs/results.md) the innovation gate then locks the GNSS out (quadrotor 0.70 -> 0.11
+    m forward with a 0.2 m floor; ArduPilot 31 -> 9.8 m with 1 m/s); navigation grades keep the
+    receivers' sigmas."""
+    vel_sigma_floor_mps: float
+    leg_min_duration_s: float
+    """``[legs] min_duration_s``: the paper's 5 min for the flight and vehicle grades; for
+    tactical and MEMS the shortest flown leg whose pair calibration of the horizontal body gyro
+    bias has a sigma below a third of the grade's turn-on bias and errors within 3 sigma of the
+    injected value (simulated back-and-forth legs, docs/results.md "Shortest usable leg")."""
+    leg_duration_tolerance_s: float
+    """``[legs] duration_tolerance_s``: a leg flown for min_duration_s is detected 3-5 s
+    shorter; legs shorter than 20 s detected hold a single epoch of the gyro random-walk least
+    squares (10 s spacing) and calibrate nothing."""
+
+
+_LEG = LegThresholds()
+_NAVIGATION = GradeDefaults(0.01, 0.005, _LEG.min_duration_s, _LEG.duration_tolerance_s)
+_MEMS = GradeDefaults(0.2, 0.5, 30.0, 5.0)
+GRADE_DEFAULTS: dict[Grade, GradeDefaults] = {
+    Grade.FLIGHT: _NAVIGATION,
+    Grade.VEHICLE: _NAVIGATION,
+    Grade.TACTICAL: GradeDefaults(0.01, 0.005, 30.0, 5.0),
+    Grade.MEMS: _MEMS,
+    Grade.CONSUMER: _MEMS,
+}
+"""The per-grade defaults, one row per ``[imu] grade`` (the one table)."""
+
 GNSS_SIGMA_FLOORS_BY_GRADE: dict[str, tuple[float, float]] = {
-    "flight": (0.01, 0.005),
-    "vehicle": (0.01, 0.005),
-    "tactical": (0.01, 0.005),
-    "mems": (0.2, 0.5),
-    "consumer": (0.2, 0.5),
-}
-"""Default ``[gnss]`` (pos_sigma_floor_m, vel_sigma_floor_mps) per ``[imu] grade``. A MEMS
-filter trusts the receivers' nominal sigmas too much: on the measured logs (docs/results.md)
-the innovation gate then locks the GNSS out (quadrotor 0.70 -> 0.11 m forward with a 0.2 m
-floor; ArduPilot 31 -> 9.8 m with 1 m/s); navigation grades keep the receivers' sigmas."""
-
+    g.value: (d.pos_sigma_floor_m, d.vel_sigma_floor_mps) for g, d in GRADE_DEFAULTS.items()}
+"""View of :data:`GRADE_DEFAULTS`: (pos_sigma_floor_m, vel_sigma_floor_mps) per grade."""
 LEG_MIN_DURATION_BY_GRADE_S: dict[str, float] = {
-    "flight": 300.0,
-    "vehicle": 300.0,
-    "tactical": 30.0,
-    "mems": 30.0,
-    "consumer": 30.0,
-}
-"""Default ``[legs] min_duration_s`` per ``[imu] grade`` [s]: the paper's 5 min for the flight
-and vehicle grades; for tactical and MEMS the shortest flown leg whose pair calibration of the
-horizontal body gyro bias has a sigma below a third of the grade's turn-on bias and errors
-within 3 sigma of the injected value (simulated back-and-forth legs, docs/results.md
-"Shortest usable leg")."""
-
+    g.value: d.leg_min_duration_s for g, d in GRADE_DEFAULTS.items()}
+"""View of :data:`GRADE_DEFAULTS`: ``[legs] min_duration_s`` per grade [s]."""
 LEG_DURATION_TOLERANCE_BY_GRADE_S: dict[str, float] = {
-    "flight": 15.0,
-    "vehicle": 15.0,
-    "tactical": 5.0,
-    "mems": 5.0,
-    "consumer": 5.0,
-}
-"""Default ``[legs] duration_tolerance_s`` per ``[imu] grade`` [s]: a leg flown for
-min_duration_s is detected 3-5 s shorter; legs shorter than 20 s detected hold a single epoch
-of the gyro random-walk least squares (10 s spacing) and calibrate nothing."""
+    g.value: d.leg_duration_tolerance_s for g, d in GRADE_DEFAULTS.items()}
+"""View of :data:`GRADE_DEFAULTS`: ``[legs] duration_tolerance_s`` per grade [s]."""
 
 
 @dataclass(frozen=True)
 class LegsConfig:
-    """[legs]: straight uniform leg thresholds (see pospp.calib.segment.LegThresholds).
-    Omitted, ``min_duration_s`` and ``duration_tolerance_s`` take the ``[imu] grade``'s
-    defaults: flight and vehicle 300 s and 15 s, tactical and mems 30 s and 5 s
-    (``LEG_MIN_DURATION_BY_GRADE_S``, ``LEG_DURATION_TOLERANCE_BY_GRADE_S``); explicit values
-    win.
+    """[legs]: straight uniform leg thresholds, the fields of
+    :class:`pospp.calib.segment.LegThresholds` (its defaults; :meth:`thresholds` gives the
+    stage's options). Omitted, ``min_duration_s`` and ``duration_tolerance_s`` take the
+    ``[imu] grade``'s defaults: flight and vehicle 300 s and 15 s, tactical and mems 30 s and
+    5 s (:data:`GRADE_DEFAULTS`); explicit values win.
     """
 
     min_duration_s: float | None = _key(None, gt=0.0)
     duration_tolerance_s: float | None = _key(None, ge=0.0)
-    max_duration_s: float = _key(1800.0, gt=0.0)
-    max_heading_rate_dps: float = _key(0.2, gt=0.0)
-    max_heading_spread_deg: float = _key(2.0, gt=0.0, le=180.0)
-    max_speed_std_mps: float = _key(0.5, gt=0.0)
-    max_acceleration_mps2: float = _key(0.05, gt=0.0)
-    max_vertical_speed_mps: float = _key(1.0, gt=0.0)
-    min_speed_mps: float = _key(3.0, ge=0.0)
-    trim_s: float = _key(2.0, ge=0.0)
-    smoothing_s: float = _key(5.0, ge=0.0)
+    max_duration_s: float = _key(_LEG.max_duration_s, gt=0.0)
+    max_heading_rate_dps: float = _key(_LEG.max_heading_rate_dps, gt=0.0)
+    max_heading_spread_deg: float = _key(_LEG.max_heading_spread_deg, gt=0.0, le=180.0)
+    max_speed_std_mps: float = _key(_LEG.max_speed_std_mps, gt=0.0)
+    max_acceleration_mps2: float = _key(_LEG.max_acceleration_mps2, gt=0.0)
+    max_vertical_speed_mps: float = _key(_LEG.max_vertical_speed_mps, gt=0.0)
+    min_speed_mps: float = _key(_LEG.min_speed_mps, ge=0.0)
+    trim_s: float = _key(_LEG.trim_s, ge=0.0)
+    smoothing_s: float = _key(_LEG.smoothing_s, ge=0.0)
+
+    def thresholds(self) -> LegThresholds:
+        """The leg segmentation's options (every key of this section; a key
+        :class:`LegThresholds` does not have raises TypeError, so a rename cannot be lost).
+        The grade defaults are filled in by :class:`PipelineConfig`."""
+        values = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        if values["min_duration_s"] is None or values["duration_tolerance_s"] is None:
+            raise ConfigError("legs: min_duration_s / duration_tolerance_s unset (a LegsConfig "
+                              "outside a PipelineConfig has no [imu] grade to default from)")
+        return LegThresholds(**values)
 
 
 @dataclass(frozen=True)
 class ReplayConfig:
     """[replay]: algorithm B."""
 
-    reference: str = "smoothed"
+    reference: ReplayReference = ReplayReference.SMOOTHED
     """A solution B starts from and is compared with: "smoothed" (default) or "forward"."""
-    accel_compensation: str = "filter"
+    accel_compensation: AccelCompensation = AccelCompensation.FILTER
     """"filter": remove A's accelerometer bias estimate; "none": raw, as the paper."""
     sample_rate_hz: float = _key(1.0, gt=0.0, le=1000.0)
     sigma_floor_mps: float = _key(0.005, gt=0.0)
@@ -242,14 +342,14 @@ class ReplayConfig:
 class PairsConfig:
     """[pairs]: pairing policy and calibration."""
 
-    mode: str = "adjacent"
+    mode: PairMode = PairMode.ADJACENT
     max_cond_scaled: float = _key(1.0e4, gt=1.0)
     min_dheading_deg: float = _key(30.0, ge=0.0, le=180.0)
-    formulation: str = "body"
+    formulation: Formulation = Formulation.BODY
     """Formulation used for compensation: "body" or "paper" (both are always reported)."""
-    transition: str = "numerical"
+    transition: Transition = Transition.NUMERICAL
     """"numerical" (F(t) along B) or "closed_form" (paper Eq. 10/13 with corrected signs)."""
-    noise: str = "gyro_rw"
+    noise: NoiseModel = NoiseModel.GYRO_RW
     """Residual model of the least squares: "gyro_rw" (B's error driven by the gyro random
     walk and, when the grade has one, its Gauss-Markov drift; docs/calibration.md) or
     "white"."""
@@ -257,14 +357,19 @@ class PairsConfig:
     """Spacing of the samples the correlated-noise least squares uses [s]."""
     estimate_gyro_z: bool = False
     """Also estimate the vertical body gyro bias (weakly observable on level legs)."""
-    diagnose_null_realisations: int = _key(10, ge=0, le=1000)
-    """Null realisations of B minus A that calibrate the diagnosis's tests (A re-run on the
-    flight with white IMU and GNSS noise added; docs/diagnose.md); 0: the nominal F
-    distribution (cries wolf on flights with GNSS noise)."""
-    diagnose_null_imu_noise: str = "measured"
+    null_realisations: int = _key(10, ge=0, le=1000)
+    """Null realisations of B minus A (A re-run on the flight with IMU and GNSS noise added;
+    docs/diagnose.md): they give the calibration its covariance and calibrate the diagnosis's
+    tests. 0: the least squares' formal covariance and the nominal F distribution (which
+    cries wolf on flights with GNSS noise)."""
+    diagnose_alpha: float = _key(0.05, gt=0.0, lt=0.5)
+    """Significance level of the diagnosis's tests (each candidate Bonferroni-corrected within
+    its step; the closing lack of fit at this level). On null flights the closing row says
+    "none" in at least 1 - alpha of runs (docs/diagnose.md, the null Monte Carlo)."""
+    null_imu_noise: NullImuNoise = NullImuNoise.MEASURED
     """White IMU noise injected into the null realisations: "measured" (density read from the
     IMU samples' second differences) or "grade" (the [imu] grade's ARW / VRW). The [imu]
-    Gauss-Markov gyro drift is injected in both."""
+    Gauss-Markov gyro drift and accelerometer bias are injected in both."""
 
 
 @dataclass(frozen=True)
@@ -273,7 +378,7 @@ class CompensationConfig:
 
     rerun_filter: bool = True
     """Re-run algorithm A with the calibrated gyro bias removed (the compensated trajectory)."""
-    mode: str = "causal"
+    mode: CompensationMode = CompensationMode.CAUSAL
     """How B is re-run: "causal" (A's forward, causal gyro-bias estimate inside each leg,
     fused with the calibrated bias as its prior: best on legs held out of the fit,
     docs/calibration.md section 9), "per_leg" (the constant bias plus the Gauss-Markov
@@ -312,28 +417,43 @@ class PipelineConfig:
     sensor: SensorConfig = field(default_factory=SensorConfig)
 
     def __post_init__(self) -> None:
-        # omitted [legs] min_duration_s / duration_tolerance_s take the [imu] grade's defaults
+        # omitted grade-dependent keys ([legs] min_duration_s / duration_tolerance_s, [gnss]
+        # sigma floors) take the [imu] grade's row of GRADE_DEFAULTS
         grade = self.imu.grade
-        changes = {}
-        for key, table in (("min_duration_s", LEG_MIN_DURATION_BY_GRADE_S),
-                           ("duration_tolerance_s", LEG_DURATION_TOLERANCE_BY_GRADE_S)):
-            if getattr(self.legs, key) is None:
-                if grade not in table:
-                    raise ConfigError(
-                        f"imu.grade: expected one of {list(table)}, got {grade!r}")
-                changes[key] = table[grade]
-        if changes:
-            object.__setattr__(self, "legs", dataclasses.replace(self.legs, **changes))
-        # omitted [gnss] sigma floors take the grade's defaults too
-        floors = GNSS_SIGMA_FLOORS_BY_GRADE.get(grade)
-        gnss_changes = {k: v for k, v in zip(("pos_sigma_floor_m", "vel_sigma_floor_mps"),
-                                             floors or (None, None), strict=True)
-                        if getattr(self.gnss, k) is None}
-        if gnss_changes:
-            if floors is None:
-                raise ConfigError(f"imu.grade: expected one of "
-                                  f"{list(GNSS_SIGMA_FLOORS_BY_GRADE)}, got {grade!r}")
-            object.__setattr__(self, "gnss", dataclasses.replace(self.gnss, **gnss_changes))
+        if grade not in GRADE_DEFAULTS:
+            raise ConfigError(f"imu.grade: expected one of {[g.value for g in Grade]}, "
+                              f"got {grade!r}")
+        d = GRADE_DEFAULTS[Grade(grade)]
+        for section, key, value in (("legs", "min_duration_s", d.leg_min_duration_s),
+                                    ("legs", "duration_tolerance_s", d.leg_duration_tolerance_s),
+                                    ("gnss", "pos_sigma_floor_m", d.pos_sigma_floor_m),
+                                    ("gnss", "vel_sigma_floor_mps", d.vel_sigma_floor_mps)):
+            sec = getattr(self, section)
+            if getattr(sec, key) is None:
+                object.__setattr__(self, section, dataclasses.replace(sec, **{key: value}))
+
+    def filter_options(self) -> FilterOptions:
+        """Algorithm A's :class:`pospp.nav.filter.FilterOptions` of this configuration.
+
+        From ``[gnss]`` pos_sigma_floor_m, vel_sigma_floor_mps, use_velocity, gate_probability
+        and ``[filter]`` smoother, max_imu_gap_s, gate_reset_s, static_alignment_s (->
+        ``alignment.max_static_alignment_s``); everything else keeps its default. The lever
+        arm, its estimation and the output rate are arguments of
+        :func:`pospp.nav.filter.run_integrated_navigation` (``[gnss]`` lever_arm_m,
+        estimate_lever_arm, ``[filter]`` output_rate_hz); the tuning is ``imu.tuning()``.
+        """
+        from pospp.nav.alignment import AlignmentOptions
+        from pospp.nav.filter import FilterOptions
+
+        g, f = self.gnss, self.filter
+        assert g.pos_sigma_floor_m is not None and g.vel_sigma_floor_mps is not None
+        return FilterOptions(
+            pos_sigma_floor_m=g.pos_sigma_floor_m, vel_sigma_floor_mps=g.vel_sigma_floor_mps,
+            use_velocity=g.use_velocity, gate_probability=g.gate_probability,
+            smoother=f.smoother,
+            alignment=AlignmentOptions(max_static_alignment_s=f.static_alignment_s),
+            max_imu_gap_s=f.max_imu_gap_s, gate_reset_s=f.gate_reset_s,
+        )
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -341,20 +461,6 @@ class PipelineConfig:
     def to_json(self) -> str:
         """Canonical JSON (sorted keys): hashed for caching and stored in output metadata."""
         return json.dumps(self.to_dict(), sort_keys=True)
-
-
-_CHOICES = {
-    ("input", "sensor_frame"): ("flu", "frd"),
-    ("imu", "grade"): ("flight", "vehicle", "tactical", "mems", "consumer"),
-    ("replay", "reference"): ("smoothed", "forward"),
-    ("replay", "accel_compensation"): ("filter", "none"),
-    ("pairs", "mode"): ("adjacent", "all"),
-    ("pairs", "formulation"): ("body", "paper"),
-    ("pairs", "transition"): ("numerical", "closed_form"),
-    ("pairs", "noise"): ("gyro_rw", "white"),
-    ("pairs", "diagnose_null_imu_noise"): ("measured", "grade"),
-    ("compensation", "mode"): ("causal", "per_leg", "constant"),
-}
 
 
 def _short(value: Any, n: int = 60) -> str:
@@ -376,6 +482,11 @@ def _convert(value: Any, tp: Any, where: str) -> Any:
                               f"got {_short(value)}")
         pairs = enumerate(zip(value, args, strict=True))
         return tuple(_convert(v, a, f"{where}[{i}]") for i, (v, a) in pairs)
+    if isinstance(tp, type) and issubclass(tp, Enum):
+        members = [m.value for m in tp]
+        if not isinstance(value, str) or value not in members:
+            raise ConfigError(f"{where}: expected one of {members}, got {_short(value)}")
+        return tp(value)
     if tp is bool:
         if not isinstance(value, bool):
             raise ConfigError(f"{where}: expected true or false, got {_short(value)}")
@@ -426,9 +537,6 @@ def config_from_dict(data: dict[str, Any], *, source: str = "<dict>") -> Pipelin
             for i, item in enumerate(sub[k] if isinstance(sub[k], tuple) else (sub[k],)):
                 if item is not None:
                     limits.check(item, f"{where}[{i}]" if isinstance(sub[k], tuple) else where)
-            choices = _CHOICES.get((key, k))
-            if choices is not None and sub[k] not in choices:
-                raise ConfigError(f"{where}: expected one of {list(choices)}, got {_short(sub[k])}")
         kwargs[key] = cls(**sub)
     inp = kwargs.get("input")
     if inp is not None and inp.start_s is not None and inp.end_s is not None \

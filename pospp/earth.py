@@ -47,8 +47,6 @@ SOMIGLIANA_K = (WGS84_B_M * GAMMA_POLE_MPS2) / (WGS84_A_M * GAMMA_EQUATOR_MPS2) 
 """Somigliana's constant k [-]."""
 GRAVITY_M_RATIO = EARTH_RATE_RADPS**2 * WGS84_A_M**2 * WGS84_B_M / WGS84_GM_M3PS2
 """m = omega^2 a^2 b / GM [-] (TR8350.2 Eq. 4-3)."""
-STANDARD_GRAVITY_MPS2 = 9.80665
-"""Conventional standard gravity g0 [m/s^2], used only for unit conversions (ug, g)."""
 
 
 def radii_formula(lat):

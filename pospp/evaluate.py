@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation, Slerp
 
 from pospp import earth, rotation
+from pospp.units import ARCSEC_RAD
 
 
 @dataclass(frozen=True)
@@ -111,8 +112,8 @@ _METRIC_UNITS = {
     "horizontal_rms_m": ("horizontal_rms", "m", 1.0),
     "vel_horizontal_rms_mps": ("vel_horizontal_rms", "m/s", 1.0),
     "vd_rms_mps": ("vd_rms", "m/s", 1.0),
-    "roll_pitch_rms_rad": ("roll_pitch_rms", "arcsec", 1.0 / rotation.ARCSEC_RAD),
-    "heading_rms_rad": ("heading_rms", "arcsec", 1.0 / rotation.ARCSEC_RAD),
+    "roll_pitch_rms_rad": ("roll_pitch_rms", "arcsec", 1.0 / ARCSEC_RAD),
+    "heading_rms_rad": ("heading_rms", "arcsec", 1.0 / ARCSEC_RAD),
 }
 
 

@@ -14,17 +14,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-_NS_PER_S = 1_000_000_000
-
-
-def t_s_to_time_ns(t_s: Any, epoch_ns: int) -> np.ndarray:
-    """Run seconds -> int64 nanoseconds (the one conversion back to file time)."""
-    return np.int64(epoch_ns) + np.round(np.asarray(t_s, dtype=float) * 1e9).astype(np.int64)
-
-
-def time_ns_to_t_s(time_ns: Any, epoch_ns: int) -> np.ndarray:
-    """int64 nanoseconds -> run seconds (difference in integers first: no precision loss)."""
-    return (np.asarray(time_ns, dtype=np.int64) - np.int64(epoch_ns)) * 1e-9
+from pospp.units import DEG_PER_H_RADPS, NS_PER_S, UG_MPS2, time_ns_from_t_s
 
 
 def trajectory_table(solutions: Mapping[str, Any], epoch_ns: int) -> pd.DataFrame:
@@ -37,7 +27,7 @@ def trajectory_table(solutions: Mapping[str, Any], epoch_ns: int) -> pd.DataFram
         rpy = np.degrees(sol.rpy_rad)
         rpy_sig = np.degrees(sol.rpy_sigma_rad)
         blocks.append(pd.DataFrame({
-            "time_ns": t_s_to_time_ns(sol.t_s, epoch_ns),
+            "time_ns": time_ns_from_t_s(sol.t_s, epoch_ns),
             "solution": name,
             "lat_deg": np.degrees(sol.lat_rad),
             "lon_deg": np.degrees(sol.lon_rad),
@@ -61,10 +51,6 @@ def trajectory_table(solutions: Mapping[str, Any], epoch_ns: int) -> pd.DataFram
     return pd.concat(blocks, ignore_index=True)
 
 
-UG_MPS2 = 9.80665e-6
-"""One micro-g [m/s^2] (standard gravity 9.80665 m/s^2, as in pospp.nav.tuning)."""
-
-
 def bias_table(histories: Mapping[str, Any], epoch_ns: int, *, rate_hz: float = 1.0
                ) -> pd.DataFrame:
     """biases.parquet: algorithm A's estimated sensor errors over time, one block per solution.
@@ -83,9 +69,9 @@ def bias_table(histories: Mapping[str, Any], epoch_ns: int, *, rate_hz: float = 
         if len(hist.t_s) > 1:
             step = max(1, int(round(1.0 / (rate_hz * float(np.median(np.diff(hist.t_s)))))))
         h = type(hist)(**{k: v[::step] for k, v in vars(hist).items()})
-        cols: dict[str, Any] = {"time_ns": t_s_to_time_ns(h.t_s, epoch_ns), "solution": name}
-        gyro_dph = np.degrees(h.gyro_b_radps) * 3600.0
-        gyro_sig_dph = np.degrees(h.gyro_sigma_b_radps) * 3600.0
+        cols: dict[str, Any] = {"time_ns": time_ns_from_t_s(h.t_s, epoch_ns), "solution": name}
+        gyro_dph = h.gyro_b_radps / DEG_PER_H_RADPS
+        gyro_sig_dph = h.gyro_sigma_b_radps / DEG_PER_H_RADPS
         for k, ax in enumerate("xyz"):
             cols[f"gyro_bias_{ax}_dph"] = gyro_dph[:, k]
             cols[f"gyro_bias_{ax}_sigma_dph"] = gyro_sig_dph[:, k]
@@ -163,11 +149,11 @@ def filter_event_messages(resets: Iterable[tuple[float, str]],
     rows = []
     for t_s, kind in resets:
         rows.append({"severity": "warning", "stage": "navigate",
-                     "time_ns": int(t_s_to_time_ns(t_s, epoch_ns)),
+                     "time_ns": int(time_ns_from_t_s(t_s, epoch_ns)),
                      "text": f"{kind} covariance reset after a run of gated GNSS records"})
     for t_s, gap_s in imu_gaps:
         rows.append({"severity": "warning", "stage": "navigate",
-                     "time_ns": int(t_s_to_time_ns(t_s, epoch_ns)),
+                     "time_ns": int(time_ns_from_t_s(t_s, epoch_ns)),
                      "text": f"IMU gap of {gap_s:.3f} s bridged"})
     return rows
 
@@ -187,10 +173,10 @@ def log_summary(log: Any) -> dict[str, Any]:
     t = log.imu.time_ns
     dt = np.diff(t)
     return {
-        "duration_s": float((t[-1] - t[0]) / _NS_PER_S),
+        "duration_s": float((t[-1] - t[0]) / NS_PER_S),
         "n_imu_samples": int(len(log.imu)),
         "n_gnss_fixes": int(len(log.fix)),
-        "imu_rate_hz": float(_NS_PER_S / np.median(dt)) if dt.size else float("nan"),
+        "imu_rate_hz": float(NS_PER_S / np.median(dt)) if dt.size else float("nan"),
     }
 
 

@@ -34,7 +34,7 @@ import pandas as pd
 from pospp import outputs, rotation
 from pospp.calib.observability import observability_table
 from pospp.calib.replay import ImuIncrements, ReferenceSolution, replay_leg
-from pospp.calib.stage import CalibrationRun, calibrate_flight
+from pospp.calib.stage import CalibrationRun, calibrate_flight, with_null_covariance
 from pospp.config import PipelineConfig, config_from_dict
 from pospp.diagnose import null_model
 from pospp.diagnose.workflow import Diagnosis, diagnosis_columns, residual_curve_columns
@@ -42,6 +42,7 @@ from pospp.diagnose.workflow import diagnose as run_diagnosis
 from pospp.evaluate import evaluation_rows, solution_errors
 from pospp.io import mcap_reader, parquet_tables, report_files, run_folder, trajectory_mcap
 from pospp.io.errors import IngestError
+from pospp.io.files import sha256_file
 from pospp.nav import events as sensor_events
 from pospp.nav import filter as nav_filter
 from pospp.nav import tuning as nav_tuning
@@ -50,12 +51,14 @@ from pospp.qc.checks import comparison_text
 from pospp.qc.stage import QualityReport, qc_columns, quality_checks, worst_status
 from pospp.report import figures
 from pospp.report.html import render_report
+from pospp.types import FLU_TO_FRD
+from pospp.units import t_s_from_time_ns
 
 ProgressFn = Callable[[str, float], None]
 """Progress callback: (stage name, fraction of the whole run done in [0, 1])."""
 
-STAGES = ("ingest", "navigate", "calibrate", "compensate", "diagnose", "qc", "write",
-          "report")
+STAGES = ("ingest", "navigate", "calibrate", "null_realisations", "compensate", "diagnose", "qc",
+          "write", "report")
 
 
 @dataclass(frozen=True)
@@ -92,7 +95,7 @@ def sensor_to_body_dcm(sensor_frame: str, mounting_rpy_deg: tuple[float, float, 
     FRD; C_mount (roll, pitch, yaw of the sensor case in the body, z-y-x) is the residual
     mounting rotation, identity when the IMU is aligned with the body.
     """
-    axes = {"flu": mcap_reader.FLU_TO_FRD, "frd": np.eye(3)}[sensor_frame]
+    axes = {"flu": FLU_TO_FRD, "frd": np.eye(3)}[sensor_frame]
     return rotation.dcm_from_euler(np.radians(mounting_rpy_deg)) @ axes
 
 
@@ -130,7 +133,7 @@ def ingest(path: str | Path, config: PipelineConfig) -> mcap_reader.FlightLog:
 
 def imu_tuning(config: PipelineConfig) -> nav_tuning.ImuTuning:
     """The filter's IMU noise model: the grade preset with the [imu] overrides."""
-    return nav_tuning.tuning_from_config(config.imu)
+    return config.imu.tuning()
 
 
 def navigate(
@@ -154,7 +157,7 @@ def navigate(
             gyro_bias_correction_b_radps, dtype=float))
     g, f = config.gnss, config.filter
     if options is None:
-        options = nav_filter.options_from_config(config)
+        options = config.filter_options()
     if lever_arm_b_m is None:
         lever_arm_b_m = g.lever_arm_m
     return nav_filter.run_integrated_navigation(
@@ -264,7 +267,7 @@ def run(
     """
     book = _Progress(progress)  # the run's clock starts here: wall_time_s is all of run()
     target = run_folder.check_target(out_dir, input_file=mcap_path, force=force)
-    sha = parquet_tables.sha256_file(mcap_path) if Path(mcap_path).is_file() else ""
+    sha = sha256_file(mcap_path) if Path(mcap_path).is_file() else ""
     stage = run_folder.new_staging(target)
     try:
         outcome = _run_stages(mcap_path, sha, config, stage, book)
@@ -376,6 +379,13 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
         book.note("warning", "calibrate", calib_run.reason)
     status = "ok" if calib_run.calibrated else "partial"
 
+    # --- null realisations of B minus A: the calibration's sigmas and the diagnosis's null ----
+    null_dv = None
+    if calib_run.calibrated and config.pairs.null_realisations > 0:
+        book.stage("null_realisations")
+        null_dv = null_realisations(log, nav, calib_run, config, config.pairs.null_realisations)
+        calib_run = with_null_covariance(calib_run, null_dv)
+
     # --- compensation: A re-run with the calibrated gyro bias ---------------------------------
     book.stage("compensate")
     if calib_run.calibrated and config.compensation.rerun_filter:
@@ -389,7 +399,7 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
     diagnosis = None
     if config.outputs.diagnose and calib_run.calibrated:
         try:
-            diagnosis = diagnose(calib_run, imu, reference, config, log=log, nav=nav)
+            diagnosis = diagnose(calib_run, imu, reference, config, null_dv=null_dv)
         except ValueError as exc:
             book.note("warning", "diagnose", f"no diagnosis: {exc}")
             status = "partial"
@@ -434,7 +444,7 @@ def _event_poses(log: mcap_reader.FlightLog, solution: nav_filter.NavSolution, n
     epoch_ns = int(log.imu.time_ns[0])
     sc = config.sensor
     poses = sensor_events.sensor_poses(
-        solution, outputs.time_ns_to_t_s(log.events_ns, epoch_ns), lever_b_m=sc.lever_arm_m,
+        solution, t_s_from_time_ns(log.events_ns, epoch_ns), lever_b_m=sc.lever_arm_m,
         c_bs=rotation.dcm_from_euler(np.radians(sc.boresight_rpy_deg)))
     n_out = int(np.count_nonzero(~poses.inside))
     if n_out:
@@ -465,7 +475,7 @@ def quality_control(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     if not config.gnss.estimate_lever_arm:
         try:
             rerun = replace(config, gnss=replace(config.gnss, estimate_lever_arm=True))
-            opts = replace(nav_filter.options_from_config(config), smoother=False,
+            opts = replace(config.filter_options(), smoother=False,
                            lever_arm_sigma_m=QC_LEVER_ARM_SIGMA_M)
             from pospp.qc.checks import lever_arm_observable
 
@@ -516,7 +526,7 @@ def calibrate(imu: ImuIncrements, nav: nav_filter.FilterResult,
     tuning = imu_tuning(config)
     gm = bool(np.isfinite(tuning.gyro_gm_tau_s) and tuning.gyro_gm_sigma_dph > 0)
     return calibrate_flight(
-        imu, reference, legs_cfg=config.legs, replay_cfg=config.replay,
+        imu, reference, legs_cfg=config.legs.thresholds(), replay_cfg=config.replay,
         pairs_cfg=config.pairs, gyro_arw_dpsh=tuning.gyro_arw_dpsh,
         noise=config.pairs.noise, noise_step_s=config.pairs.noise_step_s,
         estimate_gyro_z=config.pairs.estimate_gyro_z,
@@ -536,55 +546,65 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                       seed: int = 0) -> list[list[np.ndarray]]:
     """B minus A's null realisations along this flight (pospp.diagnose.null_model).
 
-    Each: the log with IMU noise (white: ``[pairs] diagnose_null_imu_noise`` "measured", the
+    Each: the log with IMU noise (white: ``[pairs] null_imu_noise`` "measured", the
     density read from the samples, or "grade", the configured ARW / VRW; plus the configured
-    Gauss-Markov gyro drift, ``[imu] gyro_gm_sigma_dph`` / ``gyro_gm_tau_s``) and GNSS noise
-    at the level of A's innovations, A re-run exactly as configured, B replayed on the same legs,
-    minus the flight's own B minus A. Returns ``n`` lists of (M, 3) arrays, legs in id order
-    (fewer when A fails on more than ``n`` of ``2 n`` perturbed logs, e.g. its alignment).
+    Gauss-Markov gyro drift and accelerometer bias, ``[imu] gyro_gm_sigma_dph`` /
+    ``gyro_gm_tau_s`` / ``accel_gm_sigma_ug`` / ``accel_gm_tau_s``) and GNSS noise
+    at the level of the flight's GNSS minus A (:func:`null_model.gnss_noise_from_residuals`),
+    added to the base from A's alignment point on; A re-run exactly as configured, B replayed
+    on the same legs (same start and end times), minus the base's own B minus A. The base is
+    the flight with its GNSS replaced by A's solution at the antenna
+    (:func:`pospp.diagnose.null_model.gnss_on_solution`). Returns ``n`` lists of (M, 3)
+    arrays, legs in id order (fewer when A fails on more than ``n`` of ``2 n`` perturbed
+    logs).
     """
     si = imu_tuning(config).noise()
     # the drift as configured: the calibration's REML level of it reads low (it hits its lower
     # bound on paper_vehicle flights with a 0.05 deg/h drift, 0.31 for 0.5 deg/h on
     # paper_flight), and a null without the drift cries wolf (docs/diagnose.md)
     gm_tau, gm_sigma = si.gyro_gm_tau_s, si.gyro_gm_sigma_radps
-    if config.pairs.diagnose_null_imu_noise == "grade":
+    if config.pairs.null_imu_noise == "grade":
         arw, vrw = si.gyro_arw_radpsqrts, si.accel_vrw_mpspsqrts
     else:
         arw, vrw = null_model.imu_white_noise_from_samples(
             log.imu.time_ns, log.imu.w_ib_b_radps, log.imu.f_ib_b_mps2)
-    if nav.innovations is None:
-        raise ValueError("null realisations need A's innovation record")
-    inn = nav.innovations
-    pos_sig, vel_sig = null_model.gnss_noise_from_innovations(inn.t_s, inn.kind, inn.status,
-                                                              inn.dz_ned)
-    noise = null_model.NullNoise(
-        gyro_arw_radpsqrts=float(arw), accel_vrw_mpspsqrts=float(vrw),
-        gyro_gm_sigma_radps=float(gm_sigma), gyro_gm_tau_s=float(gm_tau),
-        pos_sigma_ned_m=pos_sig, vel_sigma_ned_mps=vel_sig)
     ids = sorted(calib_run.replays)
     legs = {leg.leg_id: leg for leg in calib_run.legs}
     rc = config.replay
-    rng = np.random.default_rng(seed)
     which = rc.reference if nav.smoothed is not None else "forward"
+
+    def b_minus_a(log_r: mcap_reader.FlightLog) -> list[np.ndarray]:
+        nav_r = navigate(log_r, config)
+        ref_r = ReferenceSolution(*nav_filter.reference_solution(nav_r, which=which))
+        imu_r = imu_increments(log_r)
+        return [replay_leg(imu_r, ref_r, legs[i],
+                           accel_compensation=rc.accel_compensation,
+                           sample_rate_hz=rc.sample_rate_hz, sigma_floor_mps=rc.sigma_floor_mps,
+                           transition_step=int(rc.transition_step)).dv_n_mps for i in ids]
+
+    # the base: the flight with its GNSS replaced by A's solution at the antenna
+    # (null_model.gnss_on_solution: noise on top of the flight's own GNSS noise is not linear)
+    solution = nav.smoothed if which == "smoothed" and nav.smoothed is not None else nav.forward
+    base = null_model.gnss_on_solution(log, solution, int(log.imu.time_ns[0]),
+                                       nav.lever_arm.lever_b_m)
+    pos_sig, vel_sig = null_model.gnss_noise_from_residuals(log, base)
+    noise = null_model.NullNoise(
+        gyro_arw_radpsqrts=float(arw), accel_vrw_mpspsqrts=float(vrw),
+        gyro_gm_sigma_radps=float(gm_sigma), gyro_gm_tau_s=float(gm_tau),
+        accel_gm_sigma_mps2=float(si.accel_gm_sigma_mps2), accel_gm_tau_s=float(si.accel_gm_tau_s),
+        pos_sigma_ned_m=pos_sig, vel_sigma_ned_mps=vel_sig)
+    base_dv = b_minus_a(base)
+    t_align_ns = int(log.imu.time_ns[0]) + round(nav.alignment.t_s * 1e9)
+    rng = np.random.default_rng(seed)
     out: list[list[np.ndarray]] = []
     for _ in range(2 * n):  # a realisation whose A fails (alignment) is skipped
         if len(out) == n:
             break
-        log_r = null_model.perturb_log(log, noise, rng)
         try:
-            nav_r = navigate(log_r, config)
+            dv = b_minus_a(null_model.perturb_log(base, noise, rng, from_time_ns=t_align_ns))
         except ValueError:
             continue
-        ref_r = ReferenceSolution(*nav_filter.reference_solution(nav_r, which=which))
-        imu_r = imu_increments(log_r)
-        out.append([replay_leg(imu_r, ref_r, legs[i], accel_compensation=rc.accel_compensation,
-                               sample_rate_hz=rc.sample_rate_hz,
-                               sigma_floor_mps=rc.sigma_floor_mps,
-                               transition_step=int(rc.transition_step)).dv_n_mps
-                    - calib_run.replays[i].dv_n_mps for i in ids])
-        # freed before the next realisation is made (else two are alive at the peak)
-        del log_r, nav_r, ref_r, imu_r
+        out.append([d - d0 for d, d0 in zip(dv, base_dv, strict=True)])
     return out
 
 
@@ -595,10 +615,10 @@ def diagnose(calib_run: CalibrationRun, imu: ImuIncrements, reference: Reference
     """Model-discrepancy workflow on the calibrated run's B-minus-A curves (pospp.diagnose).
 
     Every test's null distribution is calibrated on ``null_dv`` (:func:`null_realisations`)
-    when given, else on ``[pairs] diagnose_null_realisations`` realisations made here when
-    the log and A's result are given (seed 0: a run is reproducible).
+    when given, else on ``[pairs] null_realisations`` realisations made here when the log and
+    A's result are given (seed 0: a run is reproducible).
     """
-    n_null = config.pairs.diagnose_null_realisations
+    n_null = config.pairs.null_realisations
     if null_dv is None and n_null > 0 and log is not None and nav is not None:
         null_dv = null_realisations(log, nav, calib_run, config, n_null)
     replays = [calib_run.replays[i] for i in sorted(calib_run.replays)]
@@ -610,6 +630,7 @@ def diagnose(calib_run: CalibrationRun, imu: ImuIncrements, reference: Reference
         replay_kwargs={"accel_compensation": config.replay.accel_compensation},
         base_formulation=config.pairs.formulation, base_transition=config.pairs.transition,
         noise="gyro_rw", gyro_arw_radpsqrts=arw_radpsqrts, null_dv=null_dv,
+        alpha=config.pairs.diagnose_alpha,
     )
 
 
@@ -675,7 +696,7 @@ def reopen_run(run_dir: str | Path) -> tuple[Path, dict[str, Any], Path, Pipelin
     path = Path(meta["input_file"])
     if not path.is_file():
         raise FileNotFoundError(f"{run}: the run's input {path} is no longer there")
-    if parquet_tables.sha256_file(path) != meta["input_sha256"]:
+    if sha256_file(path) != meta["input_sha256"]:
         raise ValueError(f"{run}: the run's input {path} changed since the run (SHA-256)")
     return run, meta, path, config_from_dict(meta["config"], source=f"{run}/summary.parquet")
 
@@ -698,8 +719,11 @@ def diagnose_run(run_dir: str | Path, *, progress: ProgressFn | None = None) -> 
     calib_run, reference = calibrate(imu, nav, config)
     if not calib_run.calibrated:
         raise ValueError(f"{run}: no calibration to diagnose: {calib_run.reason}")
+    book.stage("null_realisations")
+    null_dv = (null_realisations(log, nav, calib_run, config, config.pairs.null_realisations)
+               if config.pairs.null_realisations > 0 else None)
     book.stage("diagnose")
-    diagnosis = diagnose(calib_run, imu, reference, config, log=log, nav=nav)
+    diagnosis = diagnose(calib_run, imu, reference, config, null_dv=null_dv)
     book.stage("write")
     out_meta = {k: meta[k] for k in ("input_file", "input_sha256", "config")}
     parquet_tables.write_table(run / "diagnosis.parquet", diagnosis_columns(diagnosis),

@@ -23,17 +23,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
-ARCSEC_RAD = np.pi / 180.0 / 3600.0
-"""One arc second [rad]."""
-DEG_PER_H_RADPS = np.pi / 180.0 / 3600.0
-"""One degree per hour [rad/s]."""
 
-
-def _wxyz_to_xyzw(q: NDArray) -> NDArray:
+def _wxyz_to_xyzw(q: ArrayLike) -> NDArray:
     return np.roll(np.asarray(q, dtype=float), -1, axis=-1)
 
 
-def _xyzw_to_wxyz(q: NDArray) -> NDArray:
+def _xyzw_to_wxyz(q: ArrayLike) -> NDArray:
     return np.roll(np.asarray(q, dtype=float), 1, axis=-1)
 
 

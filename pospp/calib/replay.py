@@ -132,30 +132,6 @@ def reference_from_trajectory(
     return ReferenceSolution(trajectory, sig, per_epoch(accel_bias_b_mps2, "accel_bias_b_mps2"))
 
 
-def interpolate_trajectory(traj: strapdown.Trajectory, t_s: NDArray) -> strapdown.Trajectory:
-    """Trajectory at new times: linear in position and velocity, slerp-free small-step attitude.
-
-    Attitude is interpolated by the rotation vector between the bracketing quaternions, so it
-    is exact for constant-rate rotation between samples.
-    """
-    t_s = np.asarray(t_s, dtype=float)
-    i = np.clip(np.searchsorted(traj.t_s, t_s, side="right") - 1, 0, len(traj) - 2)
-    w = (t_s - traj.t_s[i]) / (traj.t_s[i + 1] - traj.t_s[i])
-    w = np.clip(w, 0.0, 1.0)
-
-    def lin(a: NDArray) -> NDArray:
-        ww = w.reshape((-1,) + (1,) * (a.ndim - 1))
-        return a[i] * (1 - ww) + a[i + 1] * ww
-
-    q0, q1 = traj.q_nb[i], traj.q_nb[i + 1]
-    dq = rotation.quat_multiply(rotation.quat_conjugate(q0), q1)
-    rv = rotation.rotvec_from_quat(dq) * w[:, None]
-    q = rotation.quat_multiply(q0, rotation.quat_from_rotvec(rv))
-    return strapdown.Trajectory(
-        t_s, lin(traj.lat_rad), lin(traj.lon_rad), lin(traj.height_m), lin(traj.v_n_mps), q
-    )
-
-
 def replay_leg(
     imu: ImuIncrements,
     reference: ReferenceSolution,
@@ -200,7 +176,7 @@ def replay_leg(
     if k1 - k0 < 10:
         raise ValueError(f"leg {leg.leg_id}: fewer than 10 IMU epochs between its start and end")
     ref_traj = reference.trajectory
-    a0 = interpolate_trajectory(ref_traj, np.array([t_imu[k0]]))
+    a0 = strapdown.interpolate_trajectory(ref_traj, np.array([t_imu[k0]]))
     c_nb0 = rotation.dcm_from_quat(a0.q_nb[0])
     if attitude_correction_n_rad is not None:
         c_nb0 = rotation.dcm_from_rotvec(np.asarray(attitude_correction_n_rad)) @ c_nb0
@@ -230,8 +206,8 @@ def replay_leg(
     # sample times: every 1/sample_rate from B's start, within the leg
     t0 = float(t_imu[k0])
     ts = np.arange(0.0, t_imu[k1] - t0 + 1e-9, 1.0 / sample_rate_hz)
-    b_s = interpolate_trajectory(b, t0 + ts)
-    a_s = interpolate_trajectory(ref_traj, t0 + ts)
+    b_s = strapdown.interpolate_trajectory(b, t0 + ts)
+    a_s = strapdown.interpolate_trajectory(ref_traj, t0 + ts)
     dv = b_s.v_n_mps - a_s.v_n_mps
     dr = earth.llh_difference_ned_m(
         b_s.lat_rad, b_s.lon_rad, b_s.height_m, a_s.lat_rad, a_s.lon_rad, a_s.height_m

@@ -82,17 +82,12 @@ from pospp import earth, rotation
 from pospp.calib.replay import ImuIncrements, LegReplay, ReferenceSolution, replay_leg
 from pospp.calib.solve import leg_sensitivities
 from pospp.nav.error_model import BG, DR, DV, PHI
+from pospp.units import ARCSEC_RAD, UG_MPS2
+from pospp.units import DEG_PER_H_RADPS as DEG_PER_H
+from pospp.units import G0_MPS2 as GRAVITY_MPS2
 
-DEG_PER_H = np.pi / 180.0 / 3600.0
-"""1 deg/h in rad/s."""
-UG_MPS2 = 9.80665e-6
-"""1 micro-g in m/s^2 (standard gravity, ISO 80000-3)."""
-ARCSEC_RAD = np.pi / 180.0 / 3600.0
-"""1 arcsec in rad."""
 ACCEL_SETTLING_S = 1200.0
 """Default time constant of the accelerometer-bias warm-up of ``accel_bias_change`` [s]."""
-GRAVITY_MPS2 = 9.80665
-"""Standard gravity [m/s^2], to express a gravity gradient as a deflection gradient."""
 
 
 @dataclass(frozen=True)

@@ -31,9 +31,10 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from numpy.typing import ArrayLike
 
 from pospp.io import parquet_tables, run_folder
-from pospp.io.parquet_tables import atomic_path
+from pospp.io.files import atomic_path
 
 __all__ = ["FORMATS", "LEAP_SECONDS", "SBET_FIELDS", "export_run", "gps_week_seconds",
            "sbet_records", "write_csv", "write_geojson", "write_kml", "write_sbet"]
@@ -68,7 +69,7 @@ _LEAP_FROM_NS = np.array([int(dt.datetime.fromisoformat(d).replace(tzinfo=dt.UTC
 _LEAP_S = np.array([n for _, n in LEAP_SECONDS], np.int64)
 
 
-def gps_week_seconds(time_ns: Any) -> tuple[np.ndarray, np.ndarray]:
+def gps_week_seconds(time_ns: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """UTC nanoseconds (Unix epoch) -> (GPS week, GPS seconds of week [s]).
 
     ``gps_ns = utc_ns - 1980-01-06 + leap(utc)``; week = gps_ns // 604800 s.

@@ -49,7 +49,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -63,109 +62,26 @@ from pospp.io._mcap_scan import (
     Scan,
 )
 from pospp.io.errors import IngestError, IngestIssue
+from pospp.types import (
+    ENU_TO_NED,
+    FLU_TO_FRD,
+    GnssFixes,
+    GnssVelocities,
+    ImuSamples,
+    apply_rotation,
+    check_dcm,
+    empty_velocities,
+    rotate_covariance,
+)
+from pospp.units import G0_MPS2, S_PER_NS
 
-__all__ = [
-    "ENU_TO_NED",
-    "FLU_TO_FRD",
-    "FlightLog",
-    "GnssFixes",
-    "GnssVelocities",
-    "ImuSamples",
-    "apply_rotation",
-    "check_dcm",
-    "empty_velocities",
-    "read_flight_log",
-    "rotate_covariance",
-]
+__all__ = ["FlightLog", "read_flight_log"]
 
-FLU_TO_FRD = np.diag([1.0, -1.0, -1.0])
-"""C_bs for a REP-103 FLU sensor and an FRD body: x_b = x_s, y_b = -y_s, z_b = -z_s."""
-FLU_TO_FRD.setflags(write=False)
-
-ENU_TO_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
-"""T with v_ned = T @ v_enu (T is its own inverse and transpose)."""
-ENU_TO_NED.setflags(write=False)
-
-G_MPS2 = 9.80665  # standard gravity, only for the units-plausibility check
 _GAP_FACTOR = 3.0  # an IMU interval longer than this many nominal intervals is a gap
 _MAX_LISTED = 100  # at most this many individual gap / rate-change issues
 
 
 # --------------------------------------------------------------------------- public data
-
-
-@dataclass(frozen=True)
-class ImuSamples:
-    """IMU samples in the body frame (FRD) after the mounting rotation.
-
-    Attributes
-    ----------
-    time_ns : (N,) int64
-        End of each sampling interval (``header.stamp``) [ns].
-    w_ib_b_radps : (N, 3) float64
-        Mean angular rate of b w.r.t. inertial space over the interval, resolved in b [rad/s].
-    f_ib_b_mps2 : (N, 3) float64
-        Mean specific force over the interval, resolved in b [m/s^2] (about [0, 0, -g] level).
-    frame_id : str
-        ``header.frame_id`` of the sensor as logged (informational).
-    """
-
-    time_ns: np.ndarray
-    w_ib_b_radps: np.ndarray
-    f_ib_b_mps2: np.ndarray
-    frame_id: str = ""
-
-    def __len__(self) -> int:
-        return int(self.time_ns.shape[0])
-
-
-@dataclass(frozen=True)
-class GnssFixes:
-    """GNSS antenna positions.
-
-    Attributes
-    ----------
-    time_ns : (M,) int64
-    lat_rad, lon_rad : (M,) float64
-        Geodetic latitude and longitude (WGS-84) [rad].
-    height_m : (M,) float64
-        Height above the WGS-84 ellipsoid [m].
-    pos_cov_ned_m2 : (M, 3, 3) float64
-        Position covariance in NED [m^2].
-    status : (M,) int8
-        ``sensor_msgs/NavSatStatus.status`` (0 fix, 1 SBAS, 2 GBAS; -1 no-fix is dropped).
-    """
-
-    time_ns: np.ndarray
-    lat_rad: np.ndarray
-    lon_rad: np.ndarray
-    height_m: np.ndarray
-    pos_cov_ned_m2: np.ndarray
-    status: np.ndarray
-
-    def __len__(self) -> int:
-        return int(self.time_ns.shape[0])
-
-
-@dataclass(frozen=True)
-class GnssVelocities:
-    """GNSS antenna velocities.
-
-    Attributes
-    ----------
-    time_ns : (K,) int64
-    v_n_mps : (K, 3) float64
-        Velocity in NED [m/s].
-    vel_cov_ned_m2ps2 : (K, 3, 3) float64
-        Velocity covariance in NED [m^2/s^2].
-    """
-
-    time_ns: np.ndarray
-    v_n_mps: np.ndarray
-    vel_cov_ned_m2ps2: np.ndarray
-
-    def __len__(self) -> int:
-        return int(self.time_ns.shape[0])
 
 
 @dataclass(frozen=True)
@@ -200,53 +116,6 @@ class FlightLog:
     events_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     """Header stamps of the trigger events (``events_topic``), int64 ns, sorted (empty when
     no events topic was asked for or found)."""
-
-
-def empty_velocities() -> GnssVelocities:
-    """A GnssVelocities with no samples."""
-    return GnssVelocities(
-        np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3, 3))
-    )
-
-
-def apply_rotation(c_ab: np.ndarray, v_b: np.ndarray) -> np.ndarray:
-    """``v_a = C_ab @ v_b`` for rows of ``v_b`` (N, 3).
-
-    A signed permutation (entries in {-1, 0, 1}, e.g. FLU->FRD, ENU->NED) is applied by
-    indexing and sign flips, so it is exact and invertible bit for bit (no ``0 * x`` sums that
-    turn -0.0 into +0.0); any other DCM by matrix product.
-    """
-    c = np.asarray(c_ab, dtype=float)
-    v = np.asarray(v_b, dtype=float)
-    nz = c != 0.0
-    if np.all(np.isin(c, (-1.0, 0.0, 1.0))) and np.all(nz.sum(axis=1) == 1):
-        cols = np.argmax(nz, axis=1)
-        return v[..., cols] * c[np.arange(3), cols]
-    return v @ c.T
-
-
-def rotate_covariance(c_ab: np.ndarray, p_b: np.ndarray) -> np.ndarray:
-    """``P_a = C_ab P_b C_ab^T`` for (N, 3, 3) stacks.
-
-    Exact for signed permutations (ENU/NED, FLU/FRD), signed zeros included, so that writing
-    and reading a covariance round-trips bit for bit.
-    """
-    p_c = apply_rotation(c_ab, p_b)  # rows of P rotated: P C^T
-    return np.swapaxes(apply_rotation(c_ab, np.swapaxes(p_c, -1, -2)), -1, -2)  # C (P C^T)
-
-
-def check_dcm(c_bs: Any, name: str = "c_bs") -> np.ndarray:
-    """Validate a DCM: shape (3, 3), orthonormal to 1e-9, determinant +1."""
-    c = np.asarray(c_bs, dtype=float)
-    if c.shape != (3, 3):
-        raise ValueError(f"{name} must have shape (3, 3), got {c.shape}")
-    err = np.abs(c @ c.T - np.eye(3)).max()
-    if err > 1e-9 or np.linalg.det(c) < 0:
-        raise ValueError(
-            f"{name} must be a rotation (orthonormal, det +1); got |C C^T - I|max={err:.2e}, "
-            f"det={np.linalg.det(c):+.6f}"
-        )
-    return c
 
 
 # --------------------------------------------------------------------------- checks & assembly
@@ -367,11 +236,11 @@ def _check_imu_units(w: np.ndarray, f: np.ndarray, topic: str, path: str) -> Non
     if 0.5 < fmed < 1.5:
         raise IngestError(
             f"median |linear_acceleration| = {fmed:.4f}: looks like g, not m/s^2 "
-            f"(expected about {G_MPS2:.2f} m/s^2)", file=path, topic=topic,
+            f"(expected about {G0_MPS2:.2f} m/s^2)", file=path, topic=topic,
         )
-    if not 0.5 * G_MPS2 < fmed < 1.5 * G_MPS2:
+    if not 0.5 * G0_MPS2 < fmed < 1.5 * G0_MPS2:
         raise IngestError(
-            f"median |linear_acceleration| = {fmed:.4g} m/s^2, expected about {G_MPS2:.2f} "
+            f"median |linear_acceleration| = {fmed:.4g} m/s^2, expected about {G0_MPS2:.2f} "
             "m/s^2 (specific force of a vehicle near the Earth's surface)",
             file=path, topic=topic,
         )
@@ -404,13 +273,13 @@ def _check_rate_units_against_gnss(imu: ImuSamples, vel: GnssVelocities, topic: 
     if len(vel) < _MIN_TURN_INTERVALS + 1 or len(imu) < 3:
         return
     t = imu.time_ns
-    dt = np.diff(t, prepend=t[0] - (t[1] - t[0])) * 1e-9
+    dt = np.diff(t, prepend=t[0] - (t[1] - t[0])) * S_PER_NS
     cum = np.vstack([np.zeros((1, 3)), np.cumsum(imu.w_ib_b_radps * dt[:, None], axis=0)])
     tv = vel.time_ns
     speed = np.hypot(vel.v_n_mps[:, 0], vel.v_n_mps[:, 1])
     course = np.arctan2(vel.v_n_mps[:, 1], vel.v_n_mps[:, 0])
     dpsi = np.angle(np.exp(1j * np.diff(course)))
-    dtv = np.diff(tv) * 1e-9
+    dtv = np.diff(tv) * S_PER_NS
     ok = (speed[:-1] > _COURSE_SPEED_MIN_MPS) & (speed[1:] > _COURSE_SPEED_MIN_MPS)
     ok &= (tv[:-1] >= t[0]) & (tv[1:] <= t[-1]) & (dtv > 0)
     ok &= np.abs(dpsi) > _TURN_RATE_MIN_RADPS * np.where(dtv > 0, dtv, 1.0)
@@ -514,6 +383,73 @@ def _assemble_events(a: dict, col: Collector, issues: list[IngestIssue]) -> np.n
     return _check_order(a, col.topic, col.path, drop_duplicates=True, issues=issues)["time_ns"]
 
 
+def _check_read_arguments(path: str, max_chunk_bytes: int, imu_topic: str, fix_topic: str,
+                          vel_topic: str, events_topic: str) -> None:
+    """Chunk cap a positive integer, the file present, the topics distinct."""
+    if isinstance(max_chunk_bytes, bool) or not isinstance(max_chunk_bytes, int | np.integer) \
+            or max_chunk_bytes <= 0:
+        raise ValueError(f"max_chunk_bytes must be a positive integer, got {max_chunk_bytes!r}")
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"MCAP file not found: {path}")
+    if len({imu_topic, fix_topic, vel_topic}) != 3 or events_topic in (imu_topic, fix_topic,
+                                                                       vel_topic):
+        raise ValueError(f"topics must differ: {imu_topic!r}, {fix_topic!r}, {vel_topic!r}"
+                         + (f", {events_topic!r}" if events_topic else ""))
+
+
+def _check_topics(scan: Scan, cols: dict[str, Collector], path: str,
+                  required: tuple[str, str], vel_topic: str, events_topic: str,
+                  issues: list[IngestIssue], note: str, broken: list[IngestIssue]) -> None:
+    """Required topics present (else IngestError listing the available ones); an absent
+    velocity or events topic and generically decoded messages noted in ``issues``."""
+    available = ", ".join(f"{t} ({s})" for t, s in sorted(scan.topics.items())) or "none"
+    for topic in required:
+        if topic not in scan.topics:
+            raise IngestError(
+                f"required topic {topic!r} ({cols[topic].spec.type_name}) not found; "
+                f"available topics: {available}{note}", file=path, topic=topic,
+                byte_offset=broken[0].byte_offset if broken else None, issues=tuple(issues),
+            )
+    if vel_topic not in scan.topics:
+        issues.append(IngestIssue(
+            "warning", path, vel_topic, None, None,
+            f"optional topic {vel_topic!r} not found (no GNSS velocity); available: {available}",
+        ))
+    if events_topic and events_topic not in scan.topics:
+        issues.append(IngestIssue(
+            "info", path, events_topic, None, None,
+            f"events topic {events_topic!r} not found (no trigger events); available: "
+            f"{available}",
+        ))
+    for col in cols.values():
+        if col.slow_messages and col.spec is not EVENT_SPEC:
+            issues.append(IngestIssue(
+                "info", path, col.topic, None, None,
+                f"{col.slow_messages} message(s) decoded by the generic decoder (not "
+                "little-endian plain CDR, or an unexpected layout)",
+            ))
+
+
+def _assemble_all(
+    cols: dict[str, Collector], topics: tuple[str, str, str], events_topic: str,
+    c_bs: np.ndarray, start_ns: int | None, end_ns: int | None, check_units: bool,
+    issues: list[IngestIssue],
+) -> tuple[ImuSamples, GnssFixes, GnssVelocities, np.ndarray | None]:
+    """The windowed, checked IMU, fixes, velocities and event stamps (None: no events topic)."""
+    imu_topic, fix_topic, vel_topic = topics
+    imu = _assemble_imu(_window(cols[imu_topic].arrays(), start_ns, end_ns),
+                        cols[imu_topic], c_bs, check_units, issues)
+    fix = _assemble_fix(_window(cols[fix_topic].arrays(), start_ns, end_ns),
+                        cols[fix_topic], issues)
+    vel = _assemble_vel(_window(cols[vel_topic].arrays(), start_ns, end_ns),
+                        cols[vel_topic], issues)
+    if check_units and len(vel):
+        _check_rate_units_against_gnss(imu, vel, imu_topic, cols[imu_topic].path)
+    events_ns = _assemble_events(_window(cols[events_topic].arrays(), start_ns, end_ns),
+                                 cols[events_topic], issues) if events_topic else None
+    return imu, fix, vel, events_ns
+
+
 def read_flight_log(
     path: str | Path,
     *,
@@ -569,15 +505,7 @@ def read_flight_log(
     """
     path = str(path)
     c = check_dcm(c_bs)
-    if isinstance(max_chunk_bytes, bool) or not isinstance(max_chunk_bytes, int | np.integer) \
-            or max_chunk_bytes <= 0:
-        raise ValueError(f"max_chunk_bytes must be a positive integer, got {max_chunk_bytes!r}")
-    if not Path(path).is_file():
-        raise FileNotFoundError(f"MCAP file not found: {path}")
-    if len({imu_topic, fix_topic, vel_topic}) != 3 or events_topic in (imu_topic, fix_topic,
-                                                                       vel_topic):
-        raise ValueError(f"topics must differ: {imu_topic!r}, {fix_topic!r}, {vel_topic!r}"
-                         + (f", {events_topic!r}" if events_topic else ""))
+    _check_read_arguments(path, max_chunk_bytes, imu_topic, fix_topic, vel_topic, events_topic)
     cols = {
         imu_topic: Collector(imu_topic, IMU_SPEC, path),
         fix_topic: Collector(fix_topic, FIX_SPEC, path),
@@ -588,45 +516,14 @@ def read_flight_log(
     scan = Scan(path, cols, max_chunk_bytes=max_chunk_bytes)
     scan.run()
     issues = list(scan.issues)
-    available = ", ".join(f"{t} ({s})" for t, s in sorted(scan.topics.items())) or "none"
     broken = [i for i in issues if i.severity == "error"]
     note = f" (the file is truncated or corrupt: {broken[0]})" if broken else ""
-    for topic in (imu_topic, fix_topic):
-        if topic not in scan.topics:
-            raise IngestError(
-                f"required topic {topic!r} ({cols[topic].spec.type_name}) not found; "
-                f"available topics: {available}{note}", file=path, topic=topic,
-                byte_offset=broken[0].byte_offset if broken else None, issues=tuple(issues),
-            )
-    if vel_topic not in scan.topics:
-        issues.append(IngestIssue(
-            "warning", path, vel_topic, None, None,
-            f"optional topic {vel_topic!r} not found (no GNSS velocity); available: {available}",
-        ))
-    if events_topic and events_topic not in scan.topics:
-        issues.append(IngestIssue(
-            "info", path, events_topic, None, None,
-            f"events topic {events_topic!r} not found (no trigger events); available: "
-            f"{available}",
-        ))
-    for col in cols.values():
-        if col.slow_messages and col.spec is not EVENT_SPEC:
-            issues.append(IngestIssue(
-                "info", path, col.topic, None, None,
-                f"{col.slow_messages} message(s) decoded by the generic decoder (not "
-                "little-endian plain CDR, or an unexpected layout)",
-            ))
+    _check_topics(scan, cols, path, (imu_topic, fix_topic), vel_topic, events_topic, issues,
+                  note, broken)
     try:
-        imu = _assemble_imu(_window(cols[imu_topic].arrays(), start_ns, end_ns),
-                            cols[imu_topic], c, check_units, issues)
-        fix = _assemble_fix(_window(cols[fix_topic].arrays(), start_ns, end_ns),
-                            cols[fix_topic], issues)
-        vel = _assemble_vel(_window(cols[vel_topic].arrays(), start_ns, end_ns),
-                            cols[vel_topic], issues)
-        if check_units and len(vel):
-            _check_rate_units_against_gnss(imu, vel, imu_topic, path)
-        events_ns = _assemble_events(_window(cols[events_topic].arrays(), start_ns, end_ns),
-                                     cols[events_topic], issues) if events_topic else None
+        imu, fix, vel, events_ns = _assemble_all(cols, (imu_topic, fix_topic, vel_topic),
+                                                 events_topic, c, start_ns, end_ns,
+                                                 check_units, issues)
     except IngestError as exc:
         raise IngestError(
             exc.reason + note, file=exc.file, topic=exc.topic, index=exc.index,

@@ -27,7 +27,8 @@ import numpy as np
 from mcap.writer import CompressionType, Writer
 
 from pospp.io import ros_messages as rm
-from pospp.io.mcap_reader import (
+from pospp.io.files import atomic_path
+from pospp.types import (
     ENU_TO_NED,
     FLU_TO_FRD,
     GnssFixes,
@@ -37,7 +38,6 @@ from pospp.io.mcap_reader import (
     check_dcm,
     rotate_covariance,
 )
-from pospp.io.parquet_tables import atomic_path
 
 __all__ = ["write_flight_log"]
 

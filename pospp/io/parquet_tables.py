@@ -16,13 +16,8 @@ never sees half a file and an interrupted run leaves the previous file intact.
 
 from __future__ import annotations
 
-import hashlib
 import json
-import os
-import uuid
-from collections.abc import Iterator, Mapping
-from contextlib import contextmanager
-from dataclasses import dataclass
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -32,21 +27,20 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from pospp import __version__
+from pospp.io.files import atomic_path
+from pospp.types import ReferenceTrajectory
 
 __all__ = [
     "EXTENSIBLE_TABLES",
     "SCHEMA_VERSION",
     "TABLES",
     "Column",
-    "ReferenceTrajectory",
-    "atomic_path",
     "read_metadata",
     "read_reference_trajectory",
     "read_table",
     "render_all_schemas_markdown",
     "render_schema_markdown",
     "schema",
-    "sha256_file",
     "write_reference_trajectory",
     "write_table",
 ]
@@ -184,6 +178,9 @@ TABLES: dict[str, list[Column]] = {
           for name, extra in (("ingest", " (with checking the run folder and hashing the "
                                          "input)"),
                               ("navigate", " (algorithm A)"), ("calibrate", ""),
+                              ("null_realisations", " (A re-run on the noise draws that "
+                                                    "give the calibration its sigmas and the "
+                                                    "diagnosis its null)"),
                               ("compensate", ""), ("diagnose", ""),
                               ("qc", " (quality checks)"),
                               ("write", " (tables and trajectory MCAP)"),
@@ -192,6 +189,10 @@ TABLES: dict[str, list[Column]] = {
                     "(empty: all passed; qc.parquet)")),
         _opt(Column("qc_suggestions", _S, "", "'; '-joined 'check: what the data suggest' of "
                     "the failed QC checks")),
+        _opt(Column("calibration_sigma_source", _S, "", "where the calibration's sigmas come "
+                    "from: 'null_realisations' (the least squares re-run on B minus A's null "
+                    "realisations, [pairs] null_realisations) or 'least_squares' (its formal "
+                    "covariance)")),
         _opt(Column("calibration_formulation", _S, "", "formulation of the calibration applied "
                     "('body' or 'paper')")),
         *[_opt(Column(f"gyro_bias_{ax}{kind}_dph", _F, "deg/h", f"calibrated gyro bias, body "
@@ -390,48 +391,6 @@ def schema(name: str) -> pa.Schema:
     return pa.schema([_field(c) for c in TABLES[name]])
 
 
-# --------------------------------------------------------------------------- files
-
-
-@contextmanager
-def atomic_path(path: str | Path) -> Iterator[Path]:
-    """Yield a temporary path next to ``path``; on success fsync it and ``os.replace`` it.
-
-    On any exception the temporary file is removed and ``path`` is left untouched.
-    """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
-    try:
-        yield tmp
-        fd = os.open(tmp, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    try:  # make the rename durable; not possible on every platform
-        dfd = os.open(path.parent, os.O_RDONLY)
-        try:
-            os.fsync(dfd)
-        finally:
-            os.close(dfd)
-    except OSError:
-        pass
-
-
-def sha256_file(path: str | Path, *, chunk_bytes: int = 1 << 20) -> str:
-    """SHA-256 hex digest of a file, read in chunks (constant memory)."""
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        while block := f.read(chunk_bytes):
-            h.update(block)
-    return h.hexdigest()
-
-
 def _columns_of(data: pd.DataFrame | Mapping[str, Any]) -> dict[str, Any]:
     if isinstance(data, pd.DataFrame):
         return {str(c): data[c] for c in data.columns}
@@ -559,32 +518,6 @@ def read_metadata(path: str | Path) -> dict[str, Any]:
 
 
 # --------------------------------------------------------------------------- reference
-
-
-@dataclass(frozen=True)
-class ReferenceTrajectory:
-    """A reference trajectory (simulation truth or a higher-grade system).
-
-    Attributes
-    ----------
-    time_ns : (N,) int64
-    lat_rad, lon_rad, height_m : (N,) float64
-        WGS-84 geodetic position of the IMU [rad, rad, m above the ellipsoid].
-    v_n_mps : (N, 3) float64
-        Velocity in NED [m/s].
-    rpy_rad : (N, 3) float64
-        [roll, pitch, yaw] of b (FRD) w.r.t. n (NED), z-y-x [rad]; yaw as stored.
-    """
-
-    time_ns: np.ndarray
-    lat_rad: np.ndarray
-    lon_rad: np.ndarray
-    height_m: np.ndarray
-    v_n_mps: np.ndarray
-    rpy_rad: np.ndarray
-
-    def __len__(self) -> int:
-        return int(self.time_ns.shape[0])
 
 
 def read_reference_trajectory(path: str | Path) -> ReferenceTrajectory:

@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import pandas as pd
 
-from pospp.io.parquet_tables import TABLES, atomic_path, read_table
+from pospp.io.files import atomic_path
+from pospp.io.parquet_tables import TABLES, read_table
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 __all__ = ["read_run_tables", "write_figure", "write_text"]
 
@@ -28,7 +32,7 @@ def write_text(path: str | Path, text: str) -> Path:
     return Path(path)
 
 
-def write_figure(path: str | Path, figure: Any, *, dpi: int = 100) -> Path:
+def write_figure(path: str | Path, figure: Figure, *, dpi: int = 100) -> Path:
     """Save a matplotlib figure as PNG atomically and close it."""
     import matplotlib.pyplot as plt
 

@@ -369,6 +369,7 @@ def _with_leading_count(inner: np.ndarray, fields: tuple) -> np.ndarray:
     the body start) field by field, exactly as ``cdr_dtype`` lays them.
     """
     dt = inner.dtype
+    assert dt.fields is not None  # a structured dtype
     names = ["encap", "count", "sec", "nanosec", "frame_id_len", "frame_id"]
     formats: list = [("u1", (4,)), "<u4", "<i4", "<u4", "<u4",
                      ("u1", dt.fields["frame_id"][0].shape)]

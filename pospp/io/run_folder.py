@@ -34,7 +34,8 @@ from types import TracebackType
 from typing import Any
 
 from pospp import __version__
-from pospp.io.parquet_tables import TABLES, atomic_path
+from pospp.io.files import atomic_path
+from pospp.io.parquet_tables import TABLES
 
 __all__ = ["MARKER", "BatchLock", "RunFolderError", "check_target", "discard",
            "display_path", "display_text", "new_staging", "read_marker", "require_run_folder",

@@ -20,21 +20,41 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from pospp.io.files import atomic_path
 from pospp.io.mcap_writer import write_flight_log
-from pospp.io.parquet_tables import atomic_path, write_reference_trajectory
-from pospp.rotation import DEG_PER_H_RADPS
-from pospp.sim.api import Simulation
-from pospp.sim.gnss import GnssModel
-from pospp.sim.sensors import UG_MPS2, ImuErrorModel
+from pospp.io.parquet_tables import write_reference_trajectory
+from pospp.types import GnssFixes, GnssVelocities, ImuSamples, ReferenceTrajectory
+from pospp.units import DEG_PER_H_RADPS, UG_MPS2
 
-__all__ = ["gnss_model_from_params", "imu_error_model_from_params", "read_bias_table",
-           "read_params", "write_simulation"]
+__all__ = ["SimulationRecord", "read_bias_table", "read_params", "write_simulation"]
+
+
+class SimulationRecord(Protocol):
+    """What :func:`write_simulation` needs of a simulation (``pospp.sim.api.Simulation`` is
+    one; io does not import sim)."""
+
+    @property
+    def name(self) -> str: ...
+    @property
+    def imu(self) -> ImuSamples: ...
+    @property
+    def fix(self) -> GnssFixes: ...
+    @property
+    def vel(self) -> GnssVelocities: ...
+    @property
+    def params(self) -> dict[str, Any]: ...
+
+    def truth_reference(self, rate_hz: float = 10.0) -> ReferenceTrajectory: ...
+
+    def trigger_stamps_ns(self, rate_hz: float) -> np.ndarray: ...
+
+    def realised_bias(self, rate_hz: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
 
 _BIAS_META = {
     b"pospp.generator": b"pospp.sim",
@@ -43,14 +63,11 @@ _BIAS_META = {
 }
 
 
-def _write_bias(path: Path, sim: Simulation, rate_hz: float) -> None:
-    dt_ns = int(sim.params["time"]["imu_dt_ns"])
-    step = round(1e9 / rate_hz) // dt_ns
-    j = np.arange(0, len(sim.truth), step)
-    k = np.maximum(j - 1, 0)  # interval ending at epoch j
-    g = sim.imu_errors.gyro_bias_radps[k] / DEG_PER_H_RADPS
-    a = sim.imu_errors.accel_bias_mps2[k] / UG_MPS2
-    cols = {"time_ns": pa.array(sim.truth_time_ns[j], pa.int64())}
+def _write_bias(path: Path, sim: SimulationRecord, rate_hz: float) -> None:
+    time_ns, gyro_bias_b_radps, accel_bias_b_mps2 = sim.realised_bias(rate_hz)
+    g = gyro_bias_b_radps / DEG_PER_H_RADPS
+    a = accel_bias_b_mps2 / UG_MPS2
+    cols = {"time_ns": pa.array(time_ns, pa.int64())}
     for i, ax in enumerate("xyz"):
         cols[f"gyro_bias_{ax}_dph"] = pa.array(g[:, i], pa.float64())
     for i, ax in enumerate("xyz"):
@@ -77,7 +94,7 @@ def _json_default(o: Any) -> Any:
 
 
 def write_simulation(
-    sim: Simulation, out_dir: str | Path, name: str | None = None, *,
+    sim: SimulationRecord, out_dir: str | Path, name: str | None = None, *,
     truth_rate_hz: float = 10.0, events_rate_hz: float | None = None,
     events_topic: str = "/events",
 ) -> dict[str, Path]:
@@ -133,17 +150,3 @@ def read_params(path: str | Path) -> dict[str, Any]:
     """Read a NAME.params.json (ours or the reference simulator's)."""
     with open(path) as fh:
         return json.load(fh)
-
-
-def imu_error_model_from_params(params: dict[str, Any]) -> ImuErrorModel:
-    """The injected :class:`ImuErrorModel` of a params dict (``config.imu_errors``)."""
-    d = params["config"]["imu_errors"]
-    known = ImuErrorModel.__dataclass_fields__
-    return ImuErrorModel.from_dict({k: v for k, v in d.items() if k in known})
-
-
-def gnss_model_from_params(params: dict[str, Any]) -> GnssModel:
-    """The :class:`GnssModel` of a params dict written by pospp (``config.gnss``)."""
-    d = dict(params["config"]["gnss"])
-    d["outages_s"] = tuple(tuple(x) for x in d.get("outages_s", ()))
-    return GnssModel.from_dict(d)

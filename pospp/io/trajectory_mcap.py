@@ -23,16 +23,22 @@ D = FRD<-FLU (both signed permutations).
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 from mcap.writer import CompressionType, Writer
+from numpy.typing import ArrayLike, NDArray
 
 from pospp import __version__, earth, rotation
 from pospp.io import ros_messages as rm
-from pospp.io.mcap_reader import ENU_TO_NED, FLU_TO_FRD
-from pospp.io.parquet_tables import atomic_path
+from pospp.io.files import atomic_path
+from pospp.types import ENU_TO_NED, FLU_TO_FRD
+from pospp.units import time_ns_from_t_s
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = ["thin_indices", "write_trajectory_mcap"]
 
@@ -55,8 +61,35 @@ def _register(writer: Writer, topic: str, name: str, text: str) -> int:
     return writer.register_channel(topic=topic, message_encoding="cdr", schema_id=sid)
 
 
-def write_trajectory_mcap(path: str | Path, solution: Any, epoch_ns: int, *,
-                          rate_hz: float | None = None, legs: Any = None,
+class SolutionLike(Protocol):
+    """What the writer reads of a navigation solution (``pospp.nav.filter.NavSolution`` is one;
+    io does not import nav): time-major arrays, NED, rad, SI."""
+
+    @property
+    def t_s(self) -> NDArray: ...
+    @property
+    def lat_rad(self) -> NDArray: ...
+    @property
+    def lon_rad(self) -> NDArray: ...
+    @property
+    def height_m(self) -> NDArray: ...
+    @property
+    def v_n_mps(self) -> NDArray: ...
+    @property
+    def q_nb(self) -> NDArray: ...
+    @property
+    def pos_sigma_ned_m(self) -> NDArray: ...
+    @property
+    def pos_cov_ned_m2(self) -> NDArray: ...
+    @property
+    def vel_cov_ned_m2ps2(self) -> NDArray: ...
+    @property
+    def att_cov_ned_rad2(self) -> NDArray: ...
+
+
+def write_trajectory_mcap(path: str | Path, solution: SolutionLike, epoch_ns: int, *,
+                          rate_hz: float | None = None,
+                          legs: Mapping[str, ArrayLike] | pd.DataFrame | None = None,
                           metadata: dict[str, Any] | None = None) -> Path:
     """Write ``solution`` (a NavSolution: t_s, lat/lon/height, q_nb, covariances) to MCAP.
 
@@ -68,7 +101,7 @@ def write_trajectory_mcap(path: str | Path, solution: Any, epoch_ns: int, *,
     keep = thin_indices(solution.t_s, rate_hz)
     t_s = solution.t_s[keep]
     n = len(t_s)
-    time_ns = np.int64(epoch_ns) + np.round(t_s * 1e9).astype(np.int64)
+    time_ns = time_ns_from_t_s(t_s, epoch_ns)
     lat, lon, h = solution.lat_rad[keep], solution.lon_rad[keep], solution.height_m[keep]
     q_nb = solution.q_nb[keep]
     var_ned = solution.pos_sigma_ned_m[keep] ** 2
@@ -135,12 +168,14 @@ def write_trajectory_mcap(path: str | Path, solution: Any, epoch_ns: int, *,
     return out
 
 
-def _leg_paths(legs: Any, solution: Any, epoch_ns: int, *, r_enu_of: Any, q_of: Any
+def _leg_paths(legs: Mapping[str, ArrayLike] | pd.DataFrame | None, solution: SolutionLike,
+               epoch_ns: int, *, r_enu_of: Callable[[NDArray], NDArray],
+               q_of: Callable[[NDArray], NDArray]
                ) -> list[tuple[int, bytes]]:
     """(stamp, Path payload) per leg: the solution's poses at about 1 Hz over the leg."""
     if legs is None or len(legs) == 0:
         return []
-    sol_ns = np.int64(epoch_ns) + np.round(solution.t_s * 1e9).astype(np.int64)
+    sol_ns = time_ns_from_t_s(solution.t_s, epoch_ns)
     step = thin_indices(solution.t_s, _LEG_PATH_RATE_HZ)
     out = []
     for start, end in zip(np.asarray(legs["start_ns"], np.int64),

@@ -7,6 +7,22 @@ gated GNSS/ZUPT updates with closed-loop feedback, and the storage of outputs an
 nodes. The models, the state layout and the meaning of every array are documented in
 :mod:`pospp.nav.filter` and docs/filter.md; the public entry point is
 :func:`pospp.nav.filter.run_integrated_navigation`.
+
+The loop (:func:`forward_kernel`) calls one compiled helper per job, each tested alone against
+numpy (tests/unit/test_filter_kernel.py):
+
+- :func:`correct_increments`, :func:`decay_gauss_markov`: the sensor-error model;
+- :func:`propagate_covariance`: Phi = I + F T + (F T)^2 / 2, P <- Phi P Phi^T + Q_d;
+- :func:`measurement_model`: innovation dz (predicted minus measured) and H;
+- :func:`innovation_covariance`: S = H P H^T + R and its inverse (the one place S is made);
+- :func:`reset_block`: the covariance reset after ``gate_reset_s`` of gated records;
+- :func:`kalman_update`: K = P H^T S^-1, dx = K dz, Joseph form;
+- :func:`feedback`: closed-loop correction of the nominal state and sensor errors;
+- :func:`store_output`, :func:`store_node`: the output and smoother-node arrays.
+
+Error-state blocks are named once in :mod:`pospp.nav.error_model` (``I_PHI`` ... ``I_BA``), the
+nominal state in :mod:`pospp.nav._kernels` (``X_POS``, ``X_VEL``, ``X_QUAT``), the nominal
+sensor errors below (``SENS_*``), the record status codes below (``STATUS_*``).
 """
 
 from __future__ import annotations
@@ -17,10 +33,21 @@ import numpy as np
 from numba import njit
 
 from pospp.nav import _kernels, smoother
-from pospp.nav.error_model import fill_f_matrix
+from pospp.nav._kernels import STATE_SIZE, X_POS, X_QUAT, X_VEL
+from pospp.nav.error_model import I_BA, I_BG, I_DR, I_DV, I_PHI, N_STATES, fill_f_matrix
 
 MEAS_POSITION, MEAS_VELOCITY, MEAS_ZUPT = 0, 1, 2
+"""Kinds of measurement record (index into ``MEAS_KINDS``)."""
+MEAS_KINDS = ("position", "velocity", "zupt")
 FLAG_NODE, FLAG_OUTPUT = 1, 2
+"""Bits of the per-epoch flags: smoother node, output epoch."""
+STATUS_USED, STATUS_GATED, STATUS_RESET, STATUS_BEFORE_START = 0, 1, 2, 3
+"""Status of each measurement record: used; refused by the innovation gate; used after a
+covariance reset (``gate_reset_s``); before the filter start (alignment)."""
+SENS_BG, SENS_BA, SENS_SG, SENS_SA, SENS_GM_G, SENS_GM_A = 0, 3, 6, 9, 12, 15
+"""Offsets in the nominal sensor-error vector (float64[18]): constant gyro and accel bias,
+gyro and accel scale factor, Gauss-Markov gyro and accel bias."""
+N_SENS = 18
 
 
 @njit(cache=True)
@@ -54,272 +81,350 @@ def _inv3(s, out):
 
 
 @njit(cache=True)
-def forward_kernel(
-    t, w_imu, f_imu, k0, x0, p0, lever0, i_gm, inv_tau, i_sf, i_l, flags, m_k, m_type, m_z,
-    m_r, m_dt, prop_steps, q_diag, gate, reset_after_s, m_status, m_nis, m_dz, out_x, out_diag,
-    out_blk, out_sens,
-    out_bvar, out_lever, node_k, node_pp, node_pu, node_phi, node_dx,
-):
+def correct_increments(w_b, f_b, sens, dt, dth_c, dv_c):
+    """Sensor-error-corrected increments over ``dt`` [s] into ``dth_c`` [rad], ``dv_c`` [m/s].
+
+    ``dtheta = (w - b_g - b_g,gm) dt / (1 + s_g)``, ``dv = (f - b_a - b_a,gm) dt / (1 + s_a)``.
+    """
+    for a in range(3):
+        dth_c[a] = (w_b[a] - sens[SENS_BG + a] - sens[SENS_GM_G + a]) * dt \
+            / (1.0 + sens[SENS_SG + a])
+        dv_c[a] = (f_b[a] - sens[SENS_BA + a] - sens[SENS_GM_A + a]) * dt \
+            / (1.0 + sens[SENS_SA + a])
+
+
+@njit(cache=True)
+def decay_gauss_markov(sens, dt, inv_tau):
+    """Nominal Gauss-Markov biases decay over ``dt``: ``b <- b exp(-dt / tau)``."""
+    dg = math.exp(-dt * inv_tau[0])
+    da = math.exp(-dt * inv_tau[1])
+    for a in range(3):
+        sens[SENS_GM_G + a] *= dg
+        sens[SENS_GM_A + a] *= da
+
+
+@njit(cache=True)
+def propagate_covariance(p, phi_acc, x, fm, wm, t_acc, qc, i_gm, i_sf, inv_tau):
+    """One covariance step over ``t_acc`` [s] with mean specific force ``fm`` and rate ``wm``.
+
+    ``Phi = I + F T + (F T)^2 / 2`` with F the 15-state ``fill_f_matrix`` extended by the
+    optional columns (``phi' += -C_nb (b_g,gm + diag(w) s_g)``, ``dv' += C_nb (b_a,gm +
+    diag(f) s_a)``, ``b_gm' = -b_gm / tau``); ``P <- Phi P Phi^T + (Phi Q_c Phi^T + Q_c) T / 2``
+    (symmetrised). Returns the new P and ``Phi @ phi_acc``.
+    """
+    n = p.shape[0]
+    c_nb = np.empty((3, 3))
+    _kernels.dcm_from_quat_into(x[X_QUAT:X_QUAT + 4], c_nb)
+    f15 = np.zeros((N_STATES, N_STATES))
+    fill_f_matrix(x[X_POS], x[X_POS + 2], x[X_VEL:X_VEL + 3], c_nb, fm, 0.0, 0.0, f15)
+    ff = np.zeros((n, n))
+    for a in range(N_STATES):
+        for b in range(N_STATES):
+            ff[a, b] = f15[a, b] * t_acc
+    if i_gm >= 0:
+        for a in range(3):
+            for b in range(3):
+                ff[I_PHI + a, i_gm + b] = -c_nb[a, b] * t_acc
+                ff[I_DV + a, i_gm + 3 + b] = c_nb[a, b] * t_acc
+            ff[i_gm + a, i_gm + a] = -inv_tau[0] * t_acc
+            ff[i_gm + 3 + a, i_gm + 3 + a] = -inv_tau[1] * t_acc
+    if i_sf >= 0:
+        for a in range(3):
+            for b in range(3):
+                ff[I_PHI + a, i_sf + b] = -c_nb[a, b] * wm[b] * t_acc
+                ff[I_DV + a, i_sf + 3 + b] = c_nb[a, b] * fm[b] * t_acc
+    phi = np.eye(n) + ff + 0.5 * np.dot(ff, ff)
+    pq = np.dot(np.dot(phi, qc), phi.T)
+    p_new = np.dot(np.dot(phi, p), phi.T) + (0.5 * t_acc) * (pq + qc)
+    return 0.5 * (p_new + p_new.T), np.dot(phi, phi_acc)
+
+
+@njit(cache=True)
+def measurement_model(kind, x, lever, w_b, z, dt_meas, i_gm, i_sf, i_l, h_mat, dz):
+    """Innovation ``dz`` (predicted minus measured) and ``H`` (zeroed here) of one record.
+
+    Position: ``dz = r + C l + v_a dt_meas - z`` (NED m), ``H = [[(C l) x], 0, I, 0, 0 ...
+    (, C)]``. Velocity and ZUPT (z = 0): ``dz = v + C (w x l) - w_in x (C l) - z``, ``H =
+    [[(C (w x l)) x], I, 0, -C [l x], 0 (, -C [l x], 0) (, -C [l x] diag(w), 0) (, C [w x] -
+    [w_in x] C)]`` (module docstring of :mod:`pospp.nav.filter`).
+    """
+    c_nb = np.empty((3, 3))
+    _kernels.dcm_from_quat_into(x[X_QUAT:X_QUAT + 4], c_nb)
+    cl = np.empty(3)
+    for a in range(3):
+        cl[a] = c_nb[a, 0] * lever[0] + c_nb[a, 1] * lever[1] + c_nb[a, 2] * lever[2]
+    lat, h = x[X_POS], x[X_POS + 2]
+    wie, wen = _kernels.nav_rates(lat, h, x[X_VEL], x[X_VEL + 1])
+    win = np.array([wie[0] + wen[0], wie[1] + wen[1], wie[2] + wen[2]])
+    cwl = np.dot(c_nb, np.cross(w_b, lever))
+    wcl = np.cross(win, cl)
+    v_ant = np.empty(3)
+    for a in range(3):
+        v_ant[a] = x[X_VEL + a] + cwl[a] - wcl[a]
+    h_mat[:, :] = 0.0
+    if kind == MEAS_POSITION:
+        r_m, r_n = _kernels._radii(lat)
+        d0 = (z[0] - lat) * (r_m + h)
+        d1 = (z[1] - x[X_POS + 1]) * (r_n + h) * math.cos(lat)
+        d2 = -(z[2] - h)
+        dz[0] = cl[0] - d0 + v_ant[0] * dt_meas
+        dz[1] = cl[1] - d1 + v_ant[1] * dt_meas
+        dz[2] = cl[2] - d2 + v_ant[2] * dt_meas
+        _skew_into(cl, h_mat, 0, I_PHI, 1.0)
+        for a in range(3):
+            h_mat[a, I_DR + a] = 1.0
+        if i_l >= 0:
+            for a in range(3):
+                for b in range(3):
+                    h_mat[a, i_l + b] = c_nb[a, b]
+        return
+    for a in range(3):
+        dz[a] = v_ant[a] - z[a]
+    _skew_into(cwl, h_mat, 0, I_PHI, 1.0)
+    for a in range(3):
+        h_mat[a, I_DV + a] = 1.0
+    sl = np.zeros((3, 3))
+    _skew_into(lever, sl, 0, 0, 1.0)
+    csl = np.dot(c_nb, sl)
+    for a in range(3):
+        for b in range(3):
+            h_mat[a, I_BG + b] = -csl[a, b]  # -C [l x] (gyro bias)
+            if i_gm >= 0:
+                h_mat[a, i_gm + b] = -csl[a, b]
+            if i_sf >= 0:
+                h_mat[a, i_sf + b] = -csl[a, b] * w_b[b]  # -C [l x] diag(w)
+    if i_l >= 0:
+        sw = np.zeros((3, 3))
+        _skew_into(w_b, sw, 0, 0, 1.0)
+        swin = np.zeros((3, 3))
+        _skew_into(win, swin, 0, 0, 1.0)
+        hl = np.dot(c_nb, sw) - np.dot(swin, c_nb)
+        for a in range(3):
+            for b in range(3):
+                h_mat[a, i_l + b] = hl[a, b]
+
+
+@njit(cache=True)
+def innovation_covariance(p, h_mat, r, s_inv):
+    """``S = H P H^T + R`` inverted into ``s_inv``; returns ``(P H^T, invertible)``."""
+    ph = np.dot(p, h_mat.T)  # (n, 3)
+    s_full = np.dot(h_mat, ph) + r
+    s_mat = np.empty((3, 3))
+    for a in range(3):
+        for b in range(3):
+            s_mat[a, b] = s_full[a, b]
+    return ph, _inv3(s_mat, s_inv)
+
+
+@njit(cache=True)
+def normalised_innovation(dz, s_inv):
+    """NIS ``dz^T S^-1 dz`` (3 dof)."""
+    nis = 0.0
+    for a in range(3):
+        for b in range(3):
+            nis += dz[a] * s_inv[a, b] * dz[b]
+    return nis
+
+
+@njit(cache=True)
+def reset_block(p, blk, dz, r):
+    """Re-initialise the 3-state block at ``blk`` from one record: uncorrelated with the rest,
+    variance ``dz^2 + R`` per axis (after ``gate_reset_s`` of gated records)."""
+    n = p.shape[0]
+    for a in range(3):
+        for b in range(n):
+            p[blk + a, b] = 0.0
+            p[b, blk + a] = 0.0
+        p[blk + a, blk + a] = dz[a] * dz[a] + r[a, a]
+
+
+@njit(cache=True)
+def kalman_update(p, ph, s_inv, h_mat, dz, r):
+    """``K = P H^T S^-1``, ``dx = K dz``, Joseph form ``P = (I - K H) P (I - K H)^T + K R K^T``
+    (symmetrised). Returns ``(P, dx)``."""
+    n = p.shape[0]
+    kg = np.dot(ph, s_inv)  # (n, 3)
+    dxk = np.dot(kg, dz)
+    ikh = np.eye(n) - np.dot(kg, h_mat)
+    p_new = np.dot(np.dot(ikh, p), ikh.T) + np.dot(np.dot(kg, r), kg.T)  # Joseph
+    return 0.5 * (p_new + p_new.T), dxk
+
+
+@njit(cache=True)
+def feedback(x, xp, sens, lever, dxk, i_gm, i_sf, i_l):
+    """Closed-loop feedback of an update ``dxk`` (error state reset to zero afterwards).
+
+    Nominal state corrected (:func:`pospp.nav.smoother.apply_correction`); the previous epoch
+    ``xp`` (used by the next strapdown step's extrapolation) moved by the same position and
+    velocity correction; sensor errors accumulated; lever arm ``l <- l - dl``.
+    """
+    x_old0, x_old1, x_old2 = x[X_POS], x[X_POS + 1], x[X_POS + 2]
+    smoother.apply_correction(x, dxk)
+    xp[X_POS] += x[X_POS] - x_old0
+    xp[X_POS + 1] += x[X_POS + 1] - x_old1
+    xp[X_POS + 2] += x[X_POS + 2] - x_old2
+    for a in range(3):
+        xp[X_VEL + a] -= dxk[I_DV + a]
+        sens[SENS_BG + a] += dxk[I_BG + a]
+        sens[SENS_BA + a] += dxk[I_BA + a]
+        if i_gm >= 0:
+            sens[SENS_GM_G + a] += dxk[i_gm + a]
+            sens[SENS_GM_A + a] += dxk[i_gm + 3 + a]
+        if i_sf >= 0:
+            sens[SENS_SG + a] += dxk[i_sf + a]
+            sens[SENS_SA + a] += dxk[i_sf + 3 + a]
+        if i_l >= 0:
+            lever[a] -= dxk[i_l + a]
+
+
+@njit(cache=True)
+def store_output(i_out, x, p, sens, lever, i_gm, outs):
+    """Row ``i_out`` of the outputs ``(x, diag P, [phi, dv, dr] blocks, sensor errors, total
+    bias variance, lever)``; the total bias is constant + Gauss-Markov."""
+    out_x, out_diag, out_blk, out_sens, out_bvar, out_lever = outs
+    n = p.shape[0]
+    out_x[i_out] = x
+    for a in range(n):
+        out_diag[i_out, a] = p[a, a]
+    for ib, blk in enumerate((I_PHI, I_DV, I_DR)):
+        for a in range(3):
+            for b in range(3):
+                out_blk[i_out, ib, a, b] = p[blk + a, blk + b]
+    for a in range(SENS_GM_G):
+        out_sens[i_out, a] = sens[a]
+    for a in range(6):  # total bias = constant + Gauss-Markov, and its variance
+        out_bvar[i_out, a] = p[I_BG + a, I_BG + a]
+        if i_gm >= 0:
+            out_sens[i_out, SENS_BG + a] += sens[SENS_GM_G + a]
+            out_bvar[i_out, a] += p[i_gm + a, i_gm + a] + 2.0 * p[I_BG + a, i_gm + a]
+    for a in range(3):
+        out_lever[i_out, a] = lever[a]
+
+
+@njit(cache=True)
+def store_node(i_node, k, p_upd, phi_acc, dx_tot, nodes):
+    """Smoother node ``i_node`` at epoch ``k``: updated P, Phi since the last node, the summed
+    feedback of the epoch (the predicted P was stored before the updates)."""
+    node_k, node_pp, node_pu, node_phi, node_dx = nodes
+    node_k[i_node] = k
+    node_pu[i_node] = p_upd
+    node_phi[i_node] = phi_acc
+    node_dx[i_node] = dx_tot
+
+
+@njit(cache=True)
+def _update_epoch(k, im, t, x, xp, p, sens, lever, w_b, meas, meas_out, gate, reset_after_s,
+                  t_ok, i_gm, i_sf, i_l, dx_tot):
+    """All measurement records of epoch ``k`` from index ``im``: model, gate (or reset),
+    update, feedback. Returns the new P and the index after the epoch's records."""
+    m_k, m_type, m_z, m_r, m_dt = meas
+    m_status, m_nis, m_dz = meas_out
+    n = p.shape[0]
+    h_mat = np.zeros((3, n))
+    dz = np.empty(3)
+    s_inv = np.empty((3, 3))
+    while im < m_k.shape[0] and m_k[im] == k:
+        kind = m_type[im]
+        measurement_model(kind, x, lever, w_b, m_z[im], m_dt[im], i_gm, i_sf, i_l, h_mat, dz)
+        ph, ok = innovation_covariance(p, h_mat, m_r[im], s_inv)
+        nis = normalised_innovation(dz, s_inv) if ok else math.inf
+        m_nis[im] = nis
+        for a in range(3):
+            m_dz[im, a] = dz[a]
+        status = STATUS_USED
+        if not (nis <= gate):
+            if kind == MEAS_ZUPT or not (t[k] - t_ok[kind] > reset_after_s):
+                m_status[im] = STATUS_GATED
+                im += 1
+                continue
+            # every GNSS record of this kind gated for reset_after_s: the filter, not GNSS,
+            # has lost its way. Re-initialise the position (velocity) block from this record
+            # and accept it ungated.
+            status = STATUS_RESET
+            reset_block(p, I_DR if kind == MEAS_POSITION else I_DV, dz, m_r[im])
+            ph, ok = innovation_covariance(p, h_mat, m_r[im], s_inv)
+            if not ok:
+                m_status[im] = STATUS_GATED
+                im += 1
+                continue
+        t_ok[kind] = t[k]
+        m_status[im] = status
+        p, dxk = kalman_update(p, ph, s_inv, h_mat, dz, m_r[im])
+        feedback(x, xp, sens, lever, dxk, i_gm, i_sf, i_l)
+        for a in range(n):
+            dx_tot[a] += dxk[a]
+        im += 1
+    return p, im
+
+
+@njit(cache=True)
+def forward_kernel(t, w_imu, f_imu, k0, x0, p0, lever0, layout, inv_tau, flags, meas,
+                   meas_out, prop_steps, q_diag, gate, reset_after_s, outs, nodes):
     """Closed-loop forward pass over IMU epochs ``k0 .. N-1`` (module docstring).
 
-    ``w_imu[k]``, ``f_imu[k]``: mean rates over (t[k-1], t[k]]. ``i_gm`` / ``i_sf`` / ``i_l``:
-    index of the first Gauss-Markov bias / scale-factor / lever-arm state, -1 when absent;
-    ``inv_tau`` = [1 / tau_gyro, 1 / tau_accel] of the Gauss-Markov states [1/s].
-    ``m_status``: 0 used, 1 gated, 2 used after a covariance reset, 3 before the start.
-    ``m_nis``, ``m_dz``: NIS and innovation (predicted minus measured, NED) of each record.
+    ``w_imu[k]``, ``f_imu[k]``: mean rates over (t[k-1], t[k]]. ``layout = (i_gm, i_sf,
+    i_l)``: index of the first Gauss-Markov bias / scale-factor / lever-arm state, -1 when
+    absent; ``inv_tau`` = [1 / tau_gyro, 1 / tau_accel] of the Gauss-Markov states [1/s].
+    ``meas = (m_k, m_type, m_z, m_r, m_dt)`` the records sorted by epoch; ``meas_out =
+    (m_status, m_nis, m_dz)``: ``STATUS_*`` code, NIS and innovation (predicted minus measured,
+    NED) of each record. ``outs`` / ``nodes``: see :func:`store_output` / :func:`store_node`.
     Fills the output and node arrays; returns (nodes used, outputs used).
     """
+    i_gm, i_sf, i_l = layout
+    m_k = meas[0]
+    m_status = meas_out[0]
     n = p0.shape[0]
-    n_ep = t.shape[0]
-    n_meas = m_k.shape[0]
-    x = x0.copy()
-    xp = x0.copy()
-    xn = np.empty(10)
-    # nominal sensor errors: constant gyro bias, accel bias, gyro and accel scale factors,
-    # Gauss-Markov gyro and accel biases (decaying with their time constants)
-    sens = np.zeros(18)
+    x, xp, xn = x0.copy(), x0.copy(), np.empty(STATE_SIZE)
+    sens = np.zeros(N_SENS)
     lever = lever0.copy()
     p = p0.copy()
-    eye = np.eye(n)
     phi_acc = np.eye(n)
-    f15 = np.zeros((15, 15))
-    ff = np.zeros((n, n))
-    qc = np.zeros((n, n))
-    for i in range(n):
-        qc[i, i] = q_diag[i]
-    fsum = np.zeros(3)
-    wsum = np.zeros(3)
-    t_acc = 0.0
-    steps = 0
-    dth_p = np.zeros(3)
-    dv_p = np.zeros(3)
-    dth_c = np.zeros(3)
-    dv_c = np.zeros(3)
-    w_b = np.zeros(3)
-    fm = np.zeros(3)
-    wm = np.zeros(3)
-    c_nb = np.empty((3, 3))
-    h_mat = np.zeros((3, n))
-    s_mat = np.empty((3, 3))
-    s_inv = np.empty((3, 3))
-    dz = np.empty(3)
-    cl = np.empty(3)
-    sl = np.zeros((3, 3))
+    qc = np.diag(q_diag)
+    fsum, wsum = np.zeros(3), np.zeros(3)
+    dth_p, dv_p, dth_c, dv_c, w_b = (np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3),
+                                     np.zeros(3))
     dx_tot = np.zeros(n)
     t_ok = np.full(3, t[k0])  # last accepted record of each kind
-    im = 0
-    while im < n_meas and m_k[im] < k0:
-        m_status[im] = 3  # before the filter start
+    t_acc, steps, im, i_out, i_node = 0.0, 0, 0, 0, 0
+    while im < m_k.shape[0] and m_k[im] < k0:
+        m_status[im] = STATUS_BEFORE_START
         im += 1
-    i_out = 0
-    i_node = 0
-    for k in range(k0, n_ep):
+    for k in range(k0, t.shape[0]):
         if k > k0:
             dt = t[k] - t[k - 1]
-            for a in range(3):
-                dth_c[a] = (w_imu[k, a] - sens[a] - sens[12 + a]) * dt / (1.0 + sens[6 + a])
-                dv_c[a] = (f_imu[k, a] - sens[3 + a] - sens[15 + a]) * dt / (1.0 + sens[9 + a])
+            correct_increments(w_imu[k], f_imu[k], sens, dt, dth_c, dv_c)
             if i_gm >= 0:
-                dg = math.exp(-dt * inv_tau[0])
-                da = math.exp(-dt * inv_tau[1])
-                for a in range(3):
-                    sens[12 + a] *= dg
-                    sens[15 + a] *= da
+                decay_gauss_markov(sens, dt, inv_tau)
             extrap = 0.0 if k - 1 == k0 else 0.5 * dt / (t[k - 1] - t[k - 2])
             _kernels.strapdown_step(x, xp, dth_c, dv_c, dth_p, dv_p, dt, extrap, xn)
-            for a in range(10):
-                xp[a] = x[a]
-                x[a] = xn[a]
+            xp[:] = x
+            x[:] = xn
             for a in range(3):
-                dth_p[a] = dth_c[a]
-                dv_p[a] = dv_c[a]
+                dth_p[a], dv_p[a] = dth_c[a], dv_c[a]
                 fsum[a] += dv_c[a]
                 wsum[a] += dth_c[a]
                 w_b[a] = dth_c[a] / dt
             t_acc += dt
             steps += 1
-        has_meas = im < n_meas and m_k[im] == k
-        flag = flags[k]
-        is_node = (flag & FLAG_NODE) != 0 or has_meas or k == k0
-        is_out = (flag & FLAG_OUTPUT) != 0
-        # ---- covariance propagation: Phi = I + F T + (F T)^2 / 2, trapezoidal Q_d ------------
+        has_meas = im < m_k.shape[0] and m_k[im] == k
+        is_node = (flags[k] & FLAG_NODE) != 0 or has_meas or k == k0
+        is_out = (flags[k] & FLAG_OUTPUT) != 0
         if steps > 0 and (steps >= prop_steps or has_meas or is_node or is_out):
-            _kernels.dcm_from_quat_into(x[6:10], c_nb)
-            for a in range(3):
-                fm[a] = fsum[a] / t_acc
-                wm[a] = wsum[a] / t_acc
-            fill_f_matrix(x[0], x[2], x[3:6], c_nb, fm, 0.0, 0.0, f15)
-            for a in range(15):
-                for b in range(15):
-                    ff[a, b] = f15[a, b] * t_acc
-            if i_gm >= 0:
-                for a in range(3):
-                    for b in range(3):
-                        ff[a, i_gm + b] = -c_nb[a, b] * t_acc
-                        ff[3 + a, i_gm + 3 + b] = c_nb[a, b] * t_acc
-                    ff[i_gm + a, i_gm + a] = -inv_tau[0] * t_acc
-                    ff[i_gm + 3 + a, i_gm + 3 + a] = -inv_tau[1] * t_acc
-            if i_sf >= 0:
-                for a in range(3):
-                    for b in range(3):
-                        ff[a, i_sf + b] = -c_nb[a, b] * wm[b] * t_acc
-                        ff[3 + a, i_sf + 3 + b] = c_nb[a, b] * fm[b] * t_acc
-            phi = eye + ff + 0.5 * np.dot(ff, ff)
-            pq = np.dot(np.dot(phi, qc), phi.T)
-            p = np.dot(np.dot(phi, p), phi.T) + (0.5 * t_acc) * (pq + qc)
-            p = 0.5 * (p + p.T)
-            phi_acc = np.dot(phi, phi_acc)
+            p, phi_acc = propagate_covariance(p, phi_acc, x, fsum / t_acc, wsum / t_acc, t_acc,
+                                              qc, i_gm, i_sf, inv_tau)
             fsum[:] = 0.0
             wsum[:] = 0.0
-            t_acc = 0.0
-            steps = 0
+            t_acc, steps = 0.0, 0
         if is_node:
-            node_pp[i_node] = p
+            nodes[1][i_node] = p  # predicted covariance
         dx_tot[:] = 0.0
-        # ---- measurement updates (predicted minus measured = H dx + noise) ---------------------
-        while im < n_meas and m_k[im] == k:
-            kind = m_type[im]
-            _kernels.dcm_from_quat_into(x[6:10], c_nb)
-            for a in range(3):
-                cl[a] = c_nb[a, 0] * lever[0] + c_nb[a, 1] * lever[1] + c_nb[a, 2] * lever[2]
-            lat, h = x[0], x[2]
-            wie, wen = _kernels.nav_rates(lat, h, x[3], x[4])
-            win = np.array([wie[0] + wen[0], wie[1] + wen[1], wie[2] + wen[2]])
-            cwl = np.dot(c_nb, np.cross(w_b, lever))
-            wcl = np.cross(win, cl)
-            v_ant = np.empty(3)
-            for a in range(3):
-                v_ant[a] = x[3 + a] + cwl[a] - wcl[a]
-            h_mat[:, :] = 0.0
-            if kind == MEAS_POSITION:
-                r_m, r_n = _kernels._radii(lat)
-                d0 = (m_z[im, 0] - lat) * (r_m + h)
-                d1 = (m_z[im, 1] - x[1]) * (r_n + h) * math.cos(lat)
-                d2 = -(m_z[im, 2] - h)
-                dz[0] = cl[0] - d0 + v_ant[0] * m_dt[im]
-                dz[1] = cl[1] - d1 + v_ant[1] * m_dt[im]
-                dz[2] = cl[2] - d2 + v_ant[2] * m_dt[im]
-                _skew_into(cl, h_mat, 0, 0, 1.0)
-                for a in range(3):
-                    h_mat[a, 6 + a] = 1.0
-                if i_l >= 0:
-                    for a in range(3):
-                        for b in range(3):
-                            h_mat[a, i_l + b] = c_nb[a, b]
-            else:  # velocity or ZUPT (z = 0)
-                for a in range(3):
-                    dz[a] = v_ant[a] - m_z[im, a]
-                _skew_into(cwl, h_mat, 0, 0, 1.0)
-                for a in range(3):
-                    h_mat[a, 3 + a] = 1.0
-                _skew_into(lever, sl, 0, 0, 1.0)
-                csl = np.dot(c_nb, sl)
-                for a in range(3):
-                    for b in range(3):
-                        h_mat[a, 9 + b] = -csl[a, b]  # -C [l x] (gyro bias)
-                        if i_gm >= 0:
-                            h_mat[a, i_gm + b] = -csl[a, b]
-                        if i_sf >= 0:
-                            h_mat[a, i_sf + b] = -csl[a, b] * w_b[b]  # -C [l x] diag(w)
-                if i_l >= 0:
-                    sw = np.zeros((3, 3))
-                    _skew_into(w_b, sw, 0, 0, 1.0)
-                    swin = np.zeros((3, 3))
-                    _skew_into(win, swin, 0, 0, 1.0)
-                    hl = np.dot(c_nb, sw) - np.dot(swin, c_nb)
-                    for a in range(3):
-                        for b in range(3):
-                            h_mat[a, i_l + b] = hl[a, b]
-            ph = np.dot(p, h_mat.T)  # (n, 3)
-            s_full = np.dot(h_mat, ph) + m_r[im]
-            for a in range(3):
-                for b in range(3):
-                    s_mat[a, b] = s_full[a, b]
-            nis = math.inf
-            if _inv3(s_mat, s_inv):
-                nis = 0.0
-                for a in range(3):
-                    for b in range(3):
-                        nis += dz[a] * s_inv[a, b] * dz[b]
-            m_nis[im] = nis
-            for a in range(3):
-                m_dz[im, a] = dz[a]
-            status = 0
-            if not (nis <= gate):
-                if kind == MEAS_ZUPT or not (t[k] - t_ok[kind] > reset_after_s):
-                    m_status[im] = 1
-                    im += 1
-                    continue
-                # every GNSS record of this kind gated for reset_after_s: the filter, not GNSS,
-                # has lost its way. Re-initialise the position (velocity) block from this
-                # record (uncorrelated, variance dz^2 + R) and accept it ungated.
-                status = 2
-                blk = 6 if kind == MEAS_POSITION else 3
-                for a in range(3):
-                    for b in range(n):
-                        p[blk + a, b] = 0.0
-                        p[b, blk + a] = 0.0
-                    p[blk + a, blk + a] = dz[a] * dz[a] + m_r[im, a, a]
-                ph = np.dot(p, h_mat.T)
-                s_full = np.dot(h_mat, ph) + m_r[im]
-                for a in range(3):
-                    for b in range(3):
-                        s_mat[a, b] = s_full[a, b]
-                if not _inv3(s_mat, s_inv):
-                    m_status[im] = 1
-                    im += 1
-                    continue
-            t_ok[kind] = t[k]
-            m_status[im] = status
-            kg = np.dot(ph, s_inv)  # (n, 3)
-            dxk = np.dot(kg, dz)
-            ikh = eye - np.dot(kg, h_mat)
-            p = np.dot(np.dot(ikh, p), ikh.T) + np.dot(np.dot(kg, m_r[im]), kg.T)  # Joseph
-            p = 0.5 * (p + p.T)
-            # ---- closed-loop feedback, error state reset to zero ---------------------------
-            x_old0, x_old1, x_old2 = x[0], x[1], x[2]
-            smoother.apply_correction(x, dxk)
-            xp[0] += x[0] - x_old0
-            xp[1] += x[1] - x_old1
-            xp[2] += x[2] - x_old2
-            for a in range(3):
-                xp[3 + a] -= dxk[3 + a]
-                sens[a] += dxk[9 + a]
-                sens[3 + a] += dxk[12 + a]
-                if i_gm >= 0:
-                    sens[12 + a] += dxk[i_gm + a]
-                    sens[15 + a] += dxk[i_gm + 3 + a]
-                if i_sf >= 0:
-                    sens[6 + a] += dxk[i_sf + a]
-                    sens[9 + a] += dxk[i_sf + 3 + a]
-                if i_l >= 0:
-                    lever[a] -= dxk[i_l + a]
-            for a in range(n):
-                dx_tot[a] += dxk[a]
-            im += 1
+        p, im = _update_epoch(k, im, t, x, xp, p, sens, lever, w_b, meas, meas_out, gate,
+                              reset_after_s, t_ok, i_gm, i_sf, i_l, dx_tot)
         if is_node:
-            node_k[i_node] = k
-            node_pu[i_node] = p
-            node_phi[i_node] = phi_acc
-            node_dx[i_node] = dx_tot
+            store_node(i_node, k, p, phi_acc, dx_tot, nodes)
             phi_acc = np.eye(n)
             i_node += 1
         if is_out:
-            out_x[i_out] = x
-            for a in range(n):
-                out_diag[i_out, a] = p[a, a]
-            for blk in range(3):
-                for a in range(3):
-                    for b in range(3):
-                        out_blk[i_out, blk, a, b] = p[3 * blk + a, 3 * blk + b]
-            for a in range(12):
-                out_sens[i_out, a] = sens[a]
-            for a in range(6):  # total bias = constant + Gauss-Markov, and its variance
-                out_bvar[i_out, a] = p[9 + a, 9 + a]
-                if i_gm >= 0:
-                    out_sens[i_out, a] += sens[12 + a]
-                    out_bvar[i_out, a] += p[i_gm + a, i_gm + a] + 2.0 * p[9 + a, i_gm + a]
-            for a in range(3):
-                out_lever[i_out, a] = lever[a]
+            store_output(i_out, x, p, sens, lever, i_gm, outs)
             i_out += 1
     return i_node, i_out

@@ -54,6 +54,9 @@ first omitted terms, a^6 / 46080 and a^6 / 645120, are under 3e-23, far below do
 
 STATE_SIZE = 10
 
+X_POS, X_VEL, X_QUAT = 0, 3, 6
+"""First index of [lat_rad, lon_rad, height_m], v_n_mps and q_nb in the state vector."""
+
 
 @njit(cache=True)
 def quat_mul(p0, p1, p2, p3, q0, q1, q2, q3):

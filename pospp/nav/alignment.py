@@ -46,6 +46,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from pospp import earth, rotation
 from pospp.nav.tuning import NoiseParameters
+from pospp.units import G0_MPS2
 
 
 @dataclass(frozen=True)
@@ -138,14 +139,14 @@ def static_windows(
     fw = f[: nw * m].reshape(nw, m, 3)
     ww = w[: nw * m].reshape(nw, m, 3)
     tw = t[: nw * m].reshape(nw, m)
-    lat_g = 9.80665
+    lat_g = G0_MPS2
     ok = (
         (fw.std(axis=1).max(axis=1) < options.max_accel_std_mps2)
         & (ww.std(axis=1).max(axis=1) < options.max_gyro_std_radps)
         & (np.abs(np.linalg.norm(fw.mean(axis=1), axis=1) - lat_g)
            < options.max_gravity_mismatch_mps2)
     )
-    if gnss_vel_t_s is not None and gnss_v_n_mps is not None and len(gnss_vel_t_s):
+    if gnss_vel_t_s is not None and gnss_v_n_mps is not None and np.size(gnss_vel_t_s):
         tv = np.asarray(gnss_vel_t_s, dtype=float)
         speed = np.linalg.norm(np.asarray(gnss_v_n_mps, dtype=float), axis=1)
         idx = np.searchsorted(tw[:, 0], tv, side="right") - 1
@@ -223,6 +224,51 @@ def _imu_position(lat, lon, h, c_nb, lever_b, v_ant_n, dt_s):
     )
 
 
+def _motion_alignment(t: NDArray, ft: NDArray, fllh: NDArray, fcov: NDArray, vt: NDArray,
+                      vv: NDArray, lever: NDArray, options: AlignmentOptions,
+                      static_end: float | None, sigma_gc: float) -> AlignmentResult | None:
+    """Alignment at the first steady GNSS velocity above ``min_speed_mps`` whose fix agrees
+    with the next one (attitude from the velocity); None when there is none."""
+    if vt.shape[0] < 2:
+        raise ValueError("alignment: no static period and fewer than 2 GNSS velocities")
+    speed_h = np.hypot(vv[:, 0], vv[:, 1])
+    acc = np.zeros(vt.shape[0])
+    acc[1:] = np.linalg.norm(np.diff(vv, axis=0), axis=1) / np.maximum(np.diff(vt), 1e-3)
+    acc_next = np.append(acc[1:], np.inf)
+    cand = np.flatnonzero(
+        (speed_h > options.min_speed_mps)
+        & (acc_next < options.max_accel_for_motion_mps2)
+        & (vt >= t[0]) & (vt <= t[-1])
+    )
+    for i in cand:
+        jf = _nearest(ft, vt[i])
+        if abs(ft[jf] - vt[i]) > 0.5 or jf + 1 >= ft.shape[0]:
+            continue
+        # the fix must agree with the next one moved back by the GNSS velocity (no outlier)
+        r_m, r_n = earth.principal_radii_m(fllh[jf, 0])
+        d_ned = np.array([(fllh[jf + 1, 0] - fllh[jf, 0]) * (r_m + fllh[jf, 2]),
+                          (fllh[jf + 1, 1] - fllh[jf, 1]) * (r_n + fllh[jf, 2])
+                          * math.cos(fllh[jf, 0]),
+                          -(fllh[jf + 1, 2] - fllh[jf, 2])])
+        if np.linalg.norm(d_ned - vv[i] * (ft[jf + 1] - ft[jf])) > options.max_fix_mismatch_m:
+            continue
+        k = _nearest(t, vt[i])
+        rpy = motion_attitude(vv[i])
+        c_nb = rotation.dcm_from_euler(rpy)
+        lat, lon, h = _imu_position(fllh[jf, 0], fllh[jf, 1], fllh[jf, 2], c_nb, lever, vv[i],
+                                    t[k] - ft[jf])
+        tilt = math.radians(options.motion_tilt_sigma_deg)
+        return AlignmentResult(
+            method="motion", k_start=k, t_s=float(t[k]), lat_rad=float(lat), lon_rad=float(lon),
+            height_m=float(h), v_n_mps=vv[i].copy(), rpy_rad=rpy,
+            rpy_sigma_rad=np.array([tilt, tilt, math.radians(options.motion_heading_sigma_deg)]),
+            pos_sigma_ned_m=np.sqrt(np.clip(np.diag(fcov[jf]), 1e-6, None)) + 0.5,
+            vel_sigma_ned_mps=np.full(3, options.motion_velocity_sigma_mps),
+            static_end_s=static_end, heading_sigma_gyrocompass_rad=sigma_gc,
+        )
+    return None
+
+
 def align(
     t_s: ArrayLike,
     w_ib_b_radps: ArrayLike,
@@ -288,7 +334,7 @@ def align(
             at_rest = ft <= t_stop
             llh = np.median(fllh[at_rest], axis=0)
             c_nb = rotation.dcm_from_euler(rpy)
-            lat, lon, h = _imu_position(*llh, c_nb, lever, np.zeros(3), 0.0)
+            lat, lon, h = _imu_position(llh[0], llh[1], llh[2], c_nb, lever, np.zeros(3), 0.0)
             pos_sig = np.sqrt(np.clip(np.median(np.diagonal(fcov[at_rest], axis1=1, axis2=2),
                                                 axis=0), 1e-6, None))
             return AlignmentResult(
@@ -300,42 +346,9 @@ def align(
             )
 
     # ---- in motion: first steady GNSS velocity above min speed -------------------------------
-    if vt.shape[0] < 2:
-        raise ValueError("alignment: no static period and fewer than 2 GNSS velocities")
-    speed_h = np.hypot(vv[:, 0], vv[:, 1])
-    acc = np.zeros(vt.shape[0])
-    acc[1:] = np.linalg.norm(np.diff(vv, axis=0), axis=1) / np.maximum(np.diff(vt), 1e-3)
-    acc_next = np.append(acc[1:], np.inf)
-    cand = np.flatnonzero(
-        (speed_h > options.min_speed_mps)
-        & (acc_next < options.max_accel_for_motion_mps2)
-        & (vt >= t[0]) & (vt <= t[-1])
-    )
-    for i in cand:
-        jf = _nearest(ft, vt[i])
-        if abs(ft[jf] - vt[i]) > 0.5 or jf + 1 >= ft.shape[0]:
-            continue
-        # the fix must agree with the next one moved back by the GNSS velocity (no outlier)
-        r_m, r_n = earth.principal_radii_m(fllh[jf, 0])
-        d_ned = np.array([(fllh[jf + 1, 0] - fllh[jf, 0]) * (r_m + fllh[jf, 2]),
-                          (fllh[jf + 1, 1] - fllh[jf, 1]) * (r_n + fllh[jf, 2])
-                          * math.cos(fllh[jf, 0]),
-                          -(fllh[jf + 1, 2] - fllh[jf, 2])])
-        if np.linalg.norm(d_ned - vv[i] * (ft[jf + 1] - ft[jf])) > options.max_fix_mismatch_m:
-            continue
-        k = _nearest(t, vt[i])
-        rpy = motion_attitude(vv[i])
-        c_nb = rotation.dcm_from_euler(rpy)
-        lat, lon, h = _imu_position(*fllh[jf], c_nb, lever, vv[i], t[k] - ft[jf])
-        tilt = math.radians(options.motion_tilt_sigma_deg)
-        return AlignmentResult(
-            method="motion", k_start=k, t_s=float(t[k]), lat_rad=float(lat), lon_rad=float(lon),
-            height_m=float(h), v_n_mps=vv[i].copy(), rpy_rad=rpy,
-            rpy_sigma_rad=np.array([tilt, tilt, math.radians(options.motion_heading_sigma_deg)]),
-            pos_sigma_ned_m=np.sqrt(np.clip(np.diag(fcov[jf]), 1e-6, None)) + 0.5,
-            vel_sigma_ned_mps=np.full(3, options.motion_velocity_sigma_mps),
-            static_end_s=static_end, heading_sigma_gyrocompass_rad=sigma_gc,
-        )
+    result = _motion_alignment(t, ft, fllh, fcov, vt, vv, lever, options, static_end, sigma_gc)
+    if result is not None:
+        return result
     raise ValueError(
         "alignment: no static period of at least "
         f"{options.min_static_s} s with a resolvable heading and no steady GNSS velocity above "

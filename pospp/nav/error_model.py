@@ -41,7 +41,11 @@ _radii = njit(cache=True)(radii_formula)
 _gravity_gradient = njit(cache=True)(gravity_gradient_formula)
 
 N_STATES = 15
-PHI, DV, DR, BG, BA = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), slice(12, 15)
+I_PHI, I_DV, I_DR, I_BG, I_BA = 0, 3, 6, 9, 12
+"""First index of each 3-state block of the 15-state error vector (the names every kernel
+uses): misalignment phi_n, velocity error dv_n, position error dr_n (NED m), gyro bias, accel
+bias."""
+PHI, DV, DR, BG, BA = (slice(i, i + 3) for i in (I_PHI, I_DV, I_DR, I_BG, I_BA))
 """Slices of the 15-state error vector."""
 
 
@@ -111,9 +115,9 @@ def fill_f_matrix(lat, h, v_n, c_nb, f_b, inv_tau_g, inv_tau_a, f_out):
     f_out[2, 1] = -win[0]
     for i in range(3):
         for j in range(3):
-            f_out[i, 3 + j] = dwen_dv[i, j]
-            f_out[i, 6 + j] = dwie_dr[i, j] + dwen_dr[i, j]
-            f_out[i, 9 + j] = -c_nb[i, j]
+            f_out[I_PHI + i, I_DV + j] = dwen_dv[i, j]
+            f_out[I_PHI + i, I_DR + j] = dwie_dr[i, j] + dwen_dr[i, j]
+            f_out[I_PHI + i, I_BG + j] = -c_nb[i, j]
     # --- velocity rows ----------------------------------------------------------------------
     # [f_n x]
     f_out[3, 1] = -f_n[2]
@@ -137,9 +141,9 @@ def fill_f_matrix(lat, h, v_n, c_nb, f_b, inv_tau_g, inv_tau_a, f_out):
             for k in range(3):
                 acc_v += sv[i, k] * dwen_dv[k, j]
                 acc_r += sv[i, k] * (2.0 * dwie_dr[k, j] + dwen_dr[k, j])
-            f_out[3 + i, 3 + j] += acc_v
-            f_out[3 + i, 6 + j] = acc_r
-            f_out[3 + i, 12 + j] = c_nb[i, j]
+            f_out[I_DV + i, I_DV + j] += acc_v
+            f_out[I_DV + i, I_DR + j] = acc_r
+            f_out[I_DV + i, I_BA + j] = c_nb[i, j]
     # normal gravity at the computed position: dg_D = dgamma/dlat dlat + dgamma/dh dh with
     # dlat = dr_N / (R_M + h), dh = -dr_D (exact gradients; dgamma/dh ~ -3.08e-6 /s^2 gives the
     # unstable vertical channel)
@@ -153,11 +157,11 @@ def fill_f_matrix(lat, h, v_n, c_nb, f_b, inv_tau_g, inv_tau_a, f_out):
     f_out[7, 7] = -(vd + vn * tl) / rn
     f_out[7, 8] = ve / rn
     for i in range(3):
-        f_out[6 + i, 3 + i] = 1.0
+        f_out[I_DR + i, I_DV + i] = 1.0
     # --- sensor biases ----------------------------------------------------------------------
     for i in range(3):
-        f_out[9 + i, 9 + i] = -inv_tau_g
-        f_out[12 + i, 12 + i] = -inv_tau_a
+        f_out[I_BG + i, I_BG + i] = -inv_tau_g
+        f_out[I_BA + i, I_BA + i] = -inv_tau_a
 
 
 def f_matrix(

@@ -27,9 +27,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pospp import earth, rotation
-from pospp.calib.replay import interpolate_trajectory
 from pospp.nav.filter import NavSolution, rpy_covariance
 from pospp.nav.smoother import interpolation_weights
+from pospp.nav.strapdown import interpolate_trajectory
 
 __all__ = ["SensorPoses", "sensor_poses"]
 

@@ -58,24 +58,29 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.stats import chi2
 
 from pospp import rotation
 from pospp.nav import filter_input, smoother
 from pospp.nav._filter_kernel import (
-    FLAG_NODE,
-    FLAG_OUTPUT,
-    MEAS_POSITION,
-    MEAS_VELOCITY,
-    MEAS_ZUPT,
-    forward_kernel,
+    MEAS_KINDS,
+    STATUS_BEFORE_START,
+    STATUS_GATED,
+    STATUS_RESET,
+    STATUS_USED,
 )
 from pospp.nav.alignment import AlignmentOptions, AlignmentResult, align
-from pospp.nav.filter_input import GnssRejection
+from pospp.nav.error_model import DR, DV, PHI
+from pospp.nav.filter_input import GnssRejection, MeasurementRecords
+from pospp.nav.filter_state import (
+    ForwardArrays,
+    StateLayout,
+    forward_pass,
+    state_layout,
+    total_bias_map,
+)
 from pospp.nav.strapdown import Trajectory
 from pospp.nav.tuning import ImuTuning, NoiseParameters, tuning_preset
-
-MEAS_KINDS = ("position", "velocity", "zupt")
+from pospp.types import GnssFixes, GnssVelocities, ImuSamples
 
 
 # =============================================================================================
@@ -269,18 +274,6 @@ class FilterResult:
     """NIS and innovation of every processed GNSS/ZUPT record (pospp.qc reads them)."""
 
 
-def _grid_epochs(t: NDArray, k0: int, interval_s: float | None) -> NDArray:
-    """IMU epoch indices (>= k0, unique) nearest the multiples of ``interval_s`` in t_s."""
-    if interval_s is None:
-        return np.arange(k0, t.shape[0])
-    g0 = math.ceil(t[k0] / interval_s - 1e-9)
-    g1 = math.floor(t[-1] / interval_s + 1e-9)
-    grid = np.arange(g0, g1 + 1) * interval_s
-    k = np.clip(np.searchsorted(t, grid), 1, t.shape[0] - 1)
-    k = np.where(np.abs(t[k - 1] - grid) <= np.abs(t[k] - grid), k - 1, k)
-    return np.unique(np.maximum(k, k0))
-
-
 def rpy_covariance(q_nb: NDArray, att_cov: NDArray) -> NDArray:
     """Covariance of [roll, pitch, yaw] errors from the phi covariance (d rpy = -E^-1 phi)."""
     rpy = rotation.euler_from_quat(q_nb)
@@ -324,9 +317,9 @@ def _noise(tuning: ImuTuning | str) -> NoiseParameters:
 # Top level
 # =============================================================================================
 def run_integrated_navigation(
-    imu,
-    gnss_fixes,
-    gnss_velocities,
+    imu: ImuSamples,
+    gnss_fixes: GnssFixes,
+    gnss_velocities: GnssVelocities | None,
     tuning: ImuTuning | str,
     *,
     epoch_ns: int | None = None,
@@ -340,13 +333,13 @@ def run_integrated_navigation(
 
     Parameters
     ----------
-    imu : pospp.io.mcap_reader.ImuSamples
+    imu : pospp.types.ImuSamples
         ``time_ns`` (N,) int64, ``w_ib_b_radps`` (N, 3), ``f_ib_b_mps2`` (N, 3): mean rate and
         specific force over the interval ending at each stamp, body FRD.
-    gnss_fixes : pospp.io.mcap_reader.GnssFixes
+    gnss_fixes : pospp.types.GnssFixes
         ``time_ns`` (M,), ``lat_rad``, ``lon_rad``, ``height_m`` (M,), ``pos_cov_ned_m2``
         (M, 3, 3): antenna positions (WGS-84) with their NED covariance.
-    gnss_velocities : pospp.io.mcap_reader.GnssVelocities or None
+    gnss_velocities : pospp.types.GnssVelocities or None
         ``time_ns`` (V,), ``v_n_mps`` (V, 3), ``vel_cov_ned_m2ps2`` (V, 3, 3): antenna velocity.
     tuning : ImuTuning or preset name
         IMU noise model (:mod:`pospp.nav.tuning`).
@@ -380,227 +373,120 @@ def run_integrated_navigation(
         epoch_ns = int(imu_t_ns[0]) if imu_t_ns.shape[0] else 0
     t, imu_gaps = filter_input.imu_epochs(imu_t_ns, w, f, epoch_ns,
                                           options.max_imu_gap_intervals, options.max_imu_gap_s)
-
-    rejections: list[GnssRejection] = []
-    (fix_t_ns, fix_val, fix_cov), (vel_t_ns, vel_val, vel_cov) = filter_input.gnss_arrays(
-        gnss_fixes, gnss_velocities, options.use_velocity)
-    t_lo, t_hi = t[0] - options.max_gnss_imu_offset_s, t[-1] + options.max_gnss_imu_offset_s
-    keep_f = filter_input.screen_gnss(
-        "position", fix_t_ns, fix_val, fix_cov, options.pos_sigma_floor_m,
-        options.max_pos_sigma_m, t_lo, t_hi, epoch_ns, rejections)
-    keep_v = filter_input.screen_gnss(
-        "velocity", vel_t_ns, vel_val, vel_cov, options.vel_sigma_floor_mps,
-        options.max_vel_sigma_mps, t_lo, t_hi, epoch_ns, rejections)
     lever0 = np.zeros(3) if lever_arm_b_m is None else np.asarray(lever_arm_b_m, dtype=float)
     if lever0.shape != (3,) or not np.isfinite(lever0).all():
         raise ValueError(f"lever_arm_b_m: expected 3 finite numbers, got {lever_arm_b_m!r}")
-    fix_ts = (fix_t_ns[keep_f] - np.int64(epoch_ns)).astype(float) * 1e-9
-    vel_ts = (vel_t_ns[keep_v] - np.int64(epoch_ns)).astype(float) * 1e-9
-    al = align(t, w, f, fix_ts, fix_val[keep_f], fix_cov[keep_f], vel_ts, vel_val[keep_v],
-               noise, lever_arm_b_m=lever0, options=options.alignment)
-    k0 = al.k_start
-
-    # ---- measurement list, sorted by IMU epoch ---------------------------------------------
-    types = [np.full(keep_f.shape[0], MEAS_POSITION), np.full(keep_v.shape[0], MEAS_VELOCITY)]
-    times = [fix_ts, vel_ts]
-    zs = [fix_val[keep_f], vel_val[keep_v]]
-    rs = [fix_cov[keep_f], vel_cov[keep_v]]
-    src = [fix_t_ns[keep_f], vel_t_ns[keep_v]]
-    if options.zupt and al.method == "static" and al.static_end_s is not None:
-        zt = np.arange(t[0], al.static_end_s - options.alignment.window_s,
-                       options.zupt_interval_s)
-        zt = zt[zt > t[0]]
-        types.append(np.full(zt.shape[0], MEAS_ZUPT))
-        times.append(zt)
-        zs.append(np.zeros((zt.shape[0], 3)))
-        rs.append(np.tile(np.eye(3) * options.zupt_sigma_mps**2, (zt.shape[0], 1, 1)))
-        src.append(np.int64(epoch_ns) + np.round(zt * 1e9).astype(np.int64))
-    m_type = np.concatenate(types).astype(np.int64)
-    m_t = np.concatenate(times)
-    m_z = np.concatenate(zs)
-    m_r = np.concatenate(rs)
-    m_src = np.concatenate(src)
-    k_near = np.clip(np.searchsorted(t, m_t), 1, t.shape[0] - 1)
-    k_near = np.where(np.abs(t[k_near - 1] - m_t) <= np.abs(t[k_near] - m_t), k_near - 1, k_near)
-    m_dt = m_t - t[k_near]
-    far = np.abs(m_dt) > options.max_gnss_imu_offset_s
-    for i in np.flatnonzero(far):
-        rejections.append(GnssRejection(int(m_src[i]), float(m_t[i]), MEAS_KINDS[m_type[i]],
-                                        "no IMU epoch within max_gnss_imu_offset_s",
-                                        float(m_dt[i])))
-    order = np.lexsort((m_type, k_near))
-    order = order[~far[order]]
-    m_type, m_t, m_src = m_type[order], m_t[order], m_src[order]
-    m_z = np.ascontiguousarray(m_z[order])
-    m_r = np.ascontiguousarray(m_r[order])
-    m_k = k_near[order].astype(np.int64)
-    m_dt = np.ascontiguousarray(m_dt[order])
-
-    # ---- epochs: outputs and smoother nodes -------------------------------------------------
-    flags = np.zeros(t.shape[0], dtype=np.int64)
-    out_k = _grid_epochs(t, k0, None if output_rate_hz is None else 1.0 / output_rate_hz)
-    flags[out_k] |= FLAG_OUTPUT
-    flags[_grid_epochs(t, k0, options.smoother_node_interval_s)] |= FLAG_NODE
-    flags[t.shape[0] - 1] |= FLAG_NODE
-    flags[m_k[m_k >= k0]] |= FLAG_NODE
-    flags[k0] |= FLAG_NODE
-    n_nodes = int(np.count_nonzero(flags[k0:] & FLAG_NODE))
-
-    # ---- state layout, initial covariance and noise ------------------------------------------
-    lay = _layout(options.gauss_markov_states, estimate_scale_factors, estimate_lever_arm)
-    p0_diag, q_diag = _initial_covariance_and_noise(lay, noise, al, options)
-    p0 = np.diag(p0_diag)
-    n = lay.n
-    prop_steps = max(1, int(round(options.propagation_interval_s / float(np.median(np.diff(t))))))
-    gate = float(chi2.ppf(options.gate_probability, 3))
-    x0 = np.concatenate([[al.lat_rad, al.lon_rad, al.height_m], al.v_n_mps,
-                         rotation.quat_from_euler(al.rpy_rad)])
-    inv_tau = np.array([1.0 / noise.gyro_gm_tau_s, 1.0 / noise.accel_gm_tau_s])
-
-    n_meas = m_k.shape[0]
-    n_out = out_k.shape[0]
-    m_status = np.full(n_meas, -1, dtype=np.int64)
-    m_nis = np.full(n_meas, np.nan)
-    m_dz = np.full((n_meas, 3), np.nan)
-    out_x = np.empty((n_out, 10))
-    out_diag = np.empty((n_out, n))
-    out_blk = np.empty((n_out, 3, 3, 3))
-    out_sens = np.empty((n_out, 12))
-    out_bvar = np.empty((n_out, 6))
-    out_lever = np.empty((n_out, 3))
-    node_k = np.empty(n_nodes, dtype=np.int64)
-    node_pp = np.empty((n_nodes, n, n))
-    node_pu = np.empty((n_nodes, n, n))
-    node_phi = np.empty((n_nodes, n, n))
-    node_dx = np.empty((n_nodes, n))
-    used_nodes, used_out = forward_kernel(
-        t, w, f, k0, x0, p0, lever0.copy(), lay.i_gm, inv_tau, lay.i_sf, lay.i_l, flags, m_k,
-        m_type, m_z, m_r, m_dt, prop_steps, q_diag, gate, options.gate_reset_s, m_status, m_nis,
-        m_dz, out_x, out_diag,
-        out_blk, out_sens, out_bvar, out_lever, node_k, node_pp, node_pu, node_phi, node_dx,
-    )
-    if used_nodes != n_nodes or used_out != n_out:
-        raise RuntimeError(f"filter kernel: node/output count mismatch ({used_nodes} vs "
-                           f"{n_nodes}, {used_out} vs {n_out})")
-    for i in np.flatnonzero(m_status == 1):
-        rejections.append(GnssRejection(int(m_src[i]), float(m_t[i]), MEAS_KINDS[m_type[i]],
-                                        f"innovation gate (NIS > {gate:.2f})", float(m_nis[i])))
-    for i in np.flatnonzero(m_status == 3):
-        rejections.append(GnssRejection(int(m_src[i]), float(m_t[i]), MEAS_KINDS[m_type[i]],
-                                        "before the filter start (alignment)", math.nan))
-    rejections.sort(key=lambda r: (r.time_ns, r.kind))
-    n_updates = {kind: int(np.count_nonzero((m_status == 0) & (m_type == i)))
-                 for i, kind in enumerate(MEAS_KINDS)}
-    for i, kind in enumerate(MEAS_KINDS[:2]):
-        n_updates[f"{kind}_reset"] = int(np.count_nonzero((m_status == 2) & (m_type == i)))
-    resets = tuple((float(m_t[i]), MEAS_KINDS[m_type[i]]) for i in np.flatnonzero(m_status == 2))
-
-    # ---- results -------------------------------------------------------------------------------
-    out_t = t[out_k]
-    out_tns = imu_t_ns[out_k]
-    i_sf, i_l = lay.i_sf, lay.i_l
-    fwd = _solution(out_tns, out_t, out_x, out_diag,
-                    [out_blk[:, 0].copy(), out_blk[:, 1].copy(), out_blk[:, 2].copy()])
-    fwd_bias = _bias_history(out_t, out_sens, out_bvar, out_diag, i_sf)
-    lever_est = out_lever[-1].copy()
-    lever_sig = np.sqrt(out_diag[-1, i_l:i_l + 3]) if i_l >= 0 else np.zeros(3)
-    smoothed = None
-    sm_bias = None
+    rejections: list[GnssRejection] = []
+    al, meas = _align_and_measurements(t, w, f, gnss_fixes, gnss_velocities, epoch_ns, noise,
+                                       lever0, options, rejections)
+    lay = state_layout(options.gauss_markov_states, estimate_scale_factors, estimate_lever_arm)
+    fw = forward_pass(t, w, f, al, noise, lay, lever0, meas, output_rate_hz, options)
+    outcome = _record_outcomes(meas, fw, rejections)
+    out_tns = imu_t_ns[fw.out_k]
+    fwd, fwd_bias, lever = _forward_results(t, fw, lay, out_tns)
+    smoothed = sm_bias = None
     if options.smoother:
-        e_plus, e_minus, p_s = smoother.rts_smooth(node_pp, node_pu, node_phi, node_dx)
-        del node_pp, node_phi
-        node_t = t[node_k]
-        err = smoother.interpolate_errors(node_t, e_plus, e_minus, out_t)
-        diag_s, blocks_s = smoother.interpolate_covariance_blocks(
-            node_t, p_s, out_t, (slice(0, 3), slice(3, 6), slice(6, 9)))
-        states_s = smoother.correct_states(out_x, np.ascontiguousarray(err))
-        smoothed = _solution(out_tns, out_t, states_s, diag_s, blocks_s)
-        # total bias error (constant + Gauss-Markov) and its smoothed variance
-        tb = _total_bias_map(lay)
-        sens_s = out_sens.copy()
-        sens_s[:, :6] += err @ tb.T
-        if i_sf >= 0:
-            sens_s[:, 6:] += err[:, i_sf:i_sf + 6]
-        bvar_nodes = np.einsum("ij,kjl,il->ki", tb, p_s, tb)
-        i, a = smoother.interpolation_weights(node_t, out_t)
-        nxt = np.minimum(i + 1, node_t.shape[0] - 1)
-        bvar_s = (1.0 - a)[:, None] * bvar_nodes[i] + a[:, None] * bvar_nodes[nxt]
-        sm_bias = _bias_history(out_t, sens_s, bvar_s, diag_s, i_sf)
-        if i_l >= 0:
-            lever_est = out_lever[0] - err[0, i_l:i_l + 3]
-            lever_sig = np.sqrt(diag_s[0, i_l:i_l + 3])
+        smoothed, sm_bias, lever_s = _smoothed(t, fw, lay, out_tns)
+        lever = lever if lever_s is None else lever_s
     return FilterResult(
         forward=fwd, smoothed=smoothed, forward_biases=fwd_bias, smoothed_biases=sm_bias,
-        rejections=tuple(rejections),
-        lever_arm=LeverArmEstimate(lever_est, lever_sig, i_l >= 0),
-        alignment=al, n_updates=n_updates, gate_nis=gate, resets=resets, imu_gaps=imu_gaps,
-        innovations=InnovationRecord(m_t.copy(), m_type.copy(), m_status.copy(), m_nis, m_dz),
+        rejections=outcome.rejections, lever_arm=LeverArmEstimate(*lever, lay.i_l >= 0),
+        alignment=al, n_updates=outcome.n_updates, gate_nis=fw.gate, resets=outcome.resets,
+        imu_gaps=imu_gaps,
+        innovations=InnovationRecord(meas.t_s.copy(), meas.kind.copy(), fw.m_status.copy(),
+                                     fw.m_nis, fw.m_dz),
     )
+
+
+def _forward_results(t: NDArray, fw: ForwardArrays, lay: StateLayout, out_tns: NDArray
+                     ) -> tuple[NavSolution, BiasHistory, tuple[NDArray, NDArray]]:
+    """The forward solution, its biases, and the lever arm (last epoch) with its sigma."""
+    out_t = t[fw.out_k]
+    fwd = _solution(out_tns, out_t, fw.out_x, fw.out_diag,
+                    [fw.out_blk[:, 0].copy(), fw.out_blk[:, 1].copy(), fw.out_blk[:, 2].copy()])
+    fwd_bias = _bias_history(out_t, fw.out_sens, fw.out_bvar, fw.out_diag, lay.i_sf)
+    lever_sig = np.sqrt(fw.out_diag[-1, lay.i_l:lay.i_l + 3]) if lay.i_l >= 0 else np.zeros(3)
+    return fwd, fwd_bias, (fw.out_lever[-1].copy(), lever_sig)
+
+
+def _align_and_measurements(
+    t: NDArray, w: NDArray, f: NDArray, fixes: GnssFixes, vels: GnssVelocities | None,
+    epoch_ns: int, noise: NoiseParameters, lever0: NDArray, options: FilterOptions,
+    rejections: list[GnssRejection],
+) -> tuple[AlignmentResult, MeasurementRecords]:
+    """Screen the GNSS records, align, and list the measurements (ZUPTs over a static start)."""
+    gnss = filter_input.screened_gnss(fixes, vels, t, epoch_ns, options, rejections)
+    al = align(t, w, f, gnss.fix_t_s, gnss.fix_llh, gnss.fix_cov, gnss.vel_t_s, gnss.vel_n,
+               noise, lever_arm_b_m=lever0, options=options.alignment)
+    zupt_t_s = None
+    if options.zupt and al.method == "static" and al.static_end_s is not None:
+        zupt_t_s = np.arange(t[0], al.static_end_s - options.alignment.window_s,
+                             options.zupt_interval_s)
+        zupt_t_s = zupt_t_s[zupt_t_s > t[0]]
+    meas = filter_input.measurement_records(gnss, zupt_t_s, options.zupt_sigma_mps, t,
+                                            epoch_ns, options.max_gnss_imu_offset_s,
+                                            rejections)
+    return al, meas
 
 
 @dataclass(frozen=True)
-class _Layout:
-    """Where the optional state blocks start (-1: absent) and the state count."""
-
-    n: int
-    i_gm: int
-    i_sf: int
-    i_l: int
+class _Outcome:
+    rejections: tuple[GnssRejection, ...]
+    n_updates: dict[str, int]
+    resets: tuple[tuple[float, str], ...]
 
 
-def _layout(gauss_markov: bool, scale_factors: bool, lever_arm: bool) -> _Layout:
-    n = 15
-    i_gm = i_sf = i_l = -1
-    if gauss_markov:
-        i_gm, n = n, n + 6
-    if scale_factors:
-        i_sf, n = n, n + 6
-    if lever_arm:
-        i_l, n = n, n + 3
-    return _Layout(n, i_gm, i_sf, i_l)
+def _record_outcomes(meas: MeasurementRecords, fw: ForwardArrays,
+                     rejections: list[GnssRejection]) -> _Outcome:
+    """Rejections (entry checks, gate, before the start) sorted by time; updates per kind;
+    covariance resets."""
+    st, kind = fw.m_status, meas.kind
+    for i in np.flatnonzero(st == STATUS_GATED):
+        rejections.append(GnssRejection(int(meas.time_ns[i]), float(meas.t_s[i]),
+                                        MEAS_KINDS[kind[i]],
+                                        f"innovation gate (NIS > {fw.gate:.2f})",
+                                        float(fw.m_nis[i])))
+    for i in np.flatnonzero(st == STATUS_BEFORE_START):
+        rejections.append(GnssRejection(int(meas.time_ns[i]), float(meas.t_s[i]),
+                                        MEAS_KINDS[kind[i]],
+                                        "before the filter start (alignment)", math.nan))
+    rejections.sort(key=lambda r: (r.time_ns, r.kind))
+    n_updates = {name: int(np.count_nonzero((st == STATUS_USED) & (kind == i)))
+                 for i, name in enumerate(MEAS_KINDS)}
+    for j, name in enumerate(MEAS_KINDS[:2]):
+        n_updates[f"{name}_reset"] = int(np.count_nonzero((st == STATUS_RESET) & (kind == j)))
+    resets = tuple((float(meas.t_s[i]), MEAS_KINDS[kind[i]])
+                   for i in np.flatnonzero(st == STATUS_RESET))
+    return _Outcome(tuple(rejections), n_updates, resets)
 
 
-def _initial_covariance_and_noise(lay: _Layout, noise: NoiseParameters, al: AlignmentResult,
-                                  options: FilterOptions) -> tuple[NDArray, NDArray]:
-    """Diagonal P0 and continuous-time noise PSD Q_c of the state layout (docs/filter.md)."""
-    p0 = np.zeros(lay.n)
-    q = np.zeros(lay.n)
-    p0[0:3] = al.rpy_sigma_rad**2
-    p0[3:6] = al.vel_sigma_ned_mps**2
-    p0[6:9] = al.pos_sigma_ned_m**2
-    q[0:3] = noise.gyro_arw_radpsqrts**2
-    q[3:6] = noise.accel_vrw_mpspsqrts**2
-    if lay.i_gm >= 0:
-        # constant part: no process noise; Gauss-Markov part: 2 sigma^2 / tau. A floor of
-        # 1e-3 of the turn-on sigma keeps P invertible for the smoother when a sigma is 0.
-        sg = max(noise.gyro_gm_sigma_radps, 1e-3 * noise.gyro_turn_on_sigma_radps, 1e-15)
-        sa = max(noise.accel_gm_sigma_mps2, 1e-3 * noise.accel_turn_on_sigma_mps2, 1e-15)
-        p0[9:12] = max(noise.gyro_turn_on_sigma_radps, 1e-15) ** 2
-        p0[12:15] = max(noise.accel_turn_on_sigma_mps2, 1e-15) ** 2
-        p0[lay.i_gm:lay.i_gm + 3] = sg**2
-        p0[lay.i_gm + 3:lay.i_gm + 6] = sa**2
-        q[lay.i_gm:lay.i_gm + 3] = 2.0 * sg**2 / noise.gyro_gm_tau_s
-        q[lay.i_gm + 3:lay.i_gm + 6] = 2.0 * sa**2 / noise.accel_gm_tau_s
-    else:
-        p0[9:12] = noise.gyro_bias_sigma_radps**2
-        p0[12:15] = noise.accel_bias_sigma_mps2**2
-        q[9:12] = noise.gyro_bias_psd_radps2ps
-        q[12:15] = noise.accel_bias_psd_mps4ps
+def _smoothed(t: NDArray, fw: ForwardArrays, lay: StateLayout, out_tns: NDArray
+              ) -> tuple[NavSolution, BiasHistory, tuple[NDArray, NDArray] | None]:
+    """RTS smoother over the nodes: the smoothed solution, biases and (when estimated) lever
+    arm with its sigma."""
+    out_t = t[fw.out_k]
+    e_plus, e_minus, p_s = smoother.rts_smooth(fw.node_pp, fw.node_pu, fw.node_phi, fw.node_dx)
+    node_t = t[fw.node_k]
+    err = smoother.interpolate_errors(node_t, e_plus, e_minus, out_t)
+    diag_s, blocks_s = smoother.interpolate_covariance_blocks(node_t, p_s, out_t, (PHI, DV, DR))
+    states_s = smoother.correct_states(fw.out_x, np.ascontiguousarray(err))
+    smoothed = _solution(out_tns, out_t, states_s, diag_s, blocks_s)
+    # total bias error (constant + Gauss-Markov) and its smoothed variance
+    tb = total_bias_map(lay)
+    sens_s = fw.out_sens.copy()
+    sens_s[:, :6] += err @ tb.T
     if lay.i_sf >= 0:
-        p0[lay.i_sf:lay.i_sf + 3] = max(noise.gyro_sf_sigma, 1e-12) ** 2
-        p0[lay.i_sf + 3:lay.i_sf + 6] = max(noise.accel_sf_sigma, 1e-12) ** 2
+        sens_s[:, 6:] += err[:, lay.i_sf:lay.i_sf + 6]
+    bvar_nodes = np.einsum("ij,kjl,il->ki", tb, p_s, tb)
+    i, a = smoother.interpolation_weights(node_t, out_t)
+    nxt = np.minimum(i + 1, node_t.shape[0] - 1)
+    bvar_s = (1.0 - a)[:, None] * bvar_nodes[i] + a[:, None] * bvar_nodes[nxt]
+    sm_bias = _bias_history(out_t, sens_s, bvar_s, diag_s, lay.i_sf)
+    lever = None
     if lay.i_l >= 0:
-        p0[lay.i_l:lay.i_l + 3] = options.lever_arm_sigma_m**2
-    return p0, q
-
-
-def _total_bias_map(lay: _Layout) -> NDArray:
-    """(6, n) matrix taking the error state to the total [gyro, accel] bias error."""
-    tb = np.zeros((6, lay.n))
-    tb[:, 9:15] = np.eye(6)
-    if lay.i_gm >= 0:
-        tb[:, lay.i_gm:lay.i_gm + 6] = np.eye(6)
-    return tb
+        lever = (fw.out_lever[0] - err[0, lay.i_l:lay.i_l + 3],
+                 np.sqrt(diag_s[0, lay.i_l:lay.i_l + 3]))
+    return smoothed, sm_bias, lever
 
 
 def _bias_history(t_s: NDArray, sens: NDArray, bias_var: NDArray, diag: NDArray, i_sf: int
@@ -615,26 +501,6 @@ def _bias_history(t_s: NDArray, sens: NDArray, bias_var: NDArray, diag: NDArray,
         accel_b_mps2=sens[:, 3:6].copy(), accel_sigma_b_mps2=bsig[:, 3:6].copy(),
         gyro_sf=sens[:, 6:9].copy(), gyro_sf_sigma=sf_sig[:, 0:3].copy(),
         accel_sf=sens[:, 9:12].copy(), accel_sf_sigma=sf_sig[:, 3:6].copy(),
-    )
-
-
-def options_from_config(config) -> FilterOptions:
-    """:class:`FilterOptions` from a pipeline configuration (:class:`pospp.config.PipelineConfig`).
-
-    Maps ``[gnss]`` pos_sigma_floor_m, vel_sigma_floor_mps, use_velocity, gate_probability,
-    ``[filter]`` smoother, max_imu_gap_s, gate_reset_s and static_alignment_s (->
-    ``alignment.max_static_alignment_s``);
-    everything else keeps its default. The lever arm, its estimation and the output rate are
-    arguments of :func:`run_integrated_navigation` (``[gnss]`` lever_arm_m,
-    estimate_lever_arm, ``[filter]`` output_rate_hz), the tuning comes from
-    :func:`pospp.nav.tuning.tuning_from_config` (``[imu]``).
-    """
-    g, f = config.gnss, config.filter
-    return FilterOptions(
-        pos_sigma_floor_m=g.pos_sigma_floor_m, vel_sigma_floor_mps=g.vel_sigma_floor_mps,
-        use_velocity=g.use_velocity, gate_probability=g.gate_probability, smoother=f.smoother,
-        alignment=AlignmentOptions(max_static_alignment_s=f.static_alignment_s),
-        max_imu_gap_s=f.max_imu_gap_s, gate_reset_s=f.gate_reset_s,
     )
 
 
@@ -671,6 +537,6 @@ def reference_solution(
 __all__ = [
     "BiasHistory", "FilterOptions", "FilterResult", "GnssRejection", "InnovationRecord",
     "LeverArmEstimate",
-    "NavSolution", "options_from_config", "reference_solution",
+    "NavSolution", "reference_solution",
     "run_integrated_navigation",
 ]

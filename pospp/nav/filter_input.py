@@ -13,9 +13,24 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
+
+from pospp.nav._filter_kernel import (
+    FLAG_NODE,
+    FLAG_OUTPUT,
+    MEAS_KINDS,
+    MEAS_POSITION,
+    MEAS_VELOCITY,
+    MEAS_ZUPT,
+)
+from pospp.types import GnssFixes, GnssVelocities
+from pospp.units import t_s_from_time_ns, time_ns_from_t_s
+
+if TYPE_CHECKING:
+    from pospp.nav.filter import FilterOptions
 
 
 @dataclass(frozen=True)
@@ -66,7 +81,7 @@ def imu_epochs(
         k = int(np.argmax(dt_ns <= 0)) + 1
         raise ValueError(f"imu: time not increasing at sample {k}: time_ns {time_ns[k]} after "
                          f"{time_ns[k - 1]}")
-    t = (time_ns - np.int64(epoch_ns)).astype(float) * 1e-9
+    t = t_s_from_time_ns(time_ns, epoch_ns)
     dt = np.diff(t)
     dt_med = float(np.median(dt))
     too_long = dt > max_gap_s
@@ -87,7 +102,7 @@ def screen_gnss(
 ) -> NDArray:
     """Entry checks of GNSS records; returns the indices kept (sorted by time), floors cov."""
     n = time_ns.shape[0]
-    t_s = (time_ns - np.int64(epoch_ns)).astype(float) * 1e-9
+    t_s = t_s_from_time_ns(time_ns, epoch_ns)
     reason = np.full(n, "", dtype=object)
     value = np.full(n, math.nan)
     bad_val = ~np.isfinite(values).all(axis=1)
@@ -134,7 +149,8 @@ def screen_gnss(
     return keep
 
 
-def gnss_arrays(fixes, vels, use_velocity: bool):
+def gnss_arrays(fixes: GnssFixes, vels: GnssVelocities | None, use_velocity: bool
+                ) -> tuple[tuple[NDArray, NDArray, NDArray], tuple[NDArray, NDArray, NDArray]]:
     """Raw GNSS arrays: (fix time_ns, [lat, lon, h], cov), (vel time_ns, v_n, cov)."""
     fix_t = np.asarray(fixes.time_ns, dtype=np.int64)
     fix_val = np.column_stack([np.asarray(fixes.lat_rad, dtype=float),
@@ -148,3 +164,118 @@ def gnss_arrays(fixes, vels, use_velocity: bool):
     vel_val = np.asarray(vels.v_n_mps, dtype=float).reshape(-1, 3)
     vel_cov = np.array(vels.vel_cov_ned_m2ps2, dtype=float).reshape(-1, 3, 3)
     return (fix_t, fix_val, fix_cov), (vel_t, vel_val, vel_cov)
+
+
+@dataclass(frozen=True)
+class ScreenedGnss:
+    """The GNSS records kept by :func:`screen_gnss` (covariances floored), by time."""
+
+    fix_time_ns: NDArray
+    fix_t_s: NDArray
+    fix_llh: NDArray
+    """[lat_rad, lon_rad, height_m] (M, 3)."""
+    fix_cov: NDArray
+    vel_time_ns: NDArray
+    vel_t_s: NDArray
+    vel_n: NDArray
+    vel_cov: NDArray
+
+
+def screened_gnss(fixes: GnssFixes, vels: GnssVelocities | None, t: NDArray, epoch_ns: int,
+                  options: FilterOptions, rejections: list[GnssRejection]) -> ScreenedGnss:
+    """Entry checks of the fixes and velocities (``options``: floors, sigma limits, the IMU
+    span widened by ``max_gnss_imu_offset_s``); refused records go to ``rejections``."""
+    (fix_t_ns, fix_val, fix_cov), (vel_t_ns, vel_val, vel_cov) = gnss_arrays(
+        fixes, vels, options.use_velocity)
+    t_lo, t_hi = t[0] - options.max_gnss_imu_offset_s, t[-1] + options.max_gnss_imu_offset_s
+    keep_f = screen_gnss(
+        "position", fix_t_ns, fix_val, fix_cov, options.pos_sigma_floor_m,
+        options.max_pos_sigma_m, t_lo, t_hi, epoch_ns, rejections)
+    keep_v = screen_gnss(
+        "velocity", vel_t_ns, vel_val, vel_cov, options.vel_sigma_floor_mps,
+        options.max_vel_sigma_mps, t_lo, t_hi, epoch_ns, rejections)
+    return ScreenedGnss(
+        fix_time_ns=fix_t_ns[keep_f], fix_t_s=t_s_from_time_ns(fix_t_ns[keep_f], epoch_ns),
+        fix_llh=fix_val[keep_f], fix_cov=fix_cov[keep_f],
+        vel_time_ns=vel_t_ns[keep_v], vel_t_s=t_s_from_time_ns(vel_t_ns[keep_v], epoch_ns),
+        vel_n=vel_val[keep_v], vel_cov=vel_cov[keep_v])
+
+
+@dataclass(frozen=True)
+class MeasurementRecords:
+    """The measurement records of the forward pass, sorted by (IMU epoch, kind).
+
+    ``kind`` (``MEAS_POSITION`` / ``MEAS_VELOCITY`` / ``MEAS_ZUPT``), ``t_s`` record time,
+    ``time_ns`` its stamp, ``z`` value ([lat, lon, h] or v_n, zero for ZUPTs), ``r`` its NED
+    covariance, ``k`` the nearest IMU epoch and ``dt_s`` = record time - epoch time.
+    """
+
+    kind: NDArray
+    t_s: NDArray
+    time_ns: NDArray
+    z: NDArray
+    r: NDArray
+    k: NDArray
+    dt_s: NDArray
+
+
+def measurement_records(gnss: ScreenedGnss, zupt_t_s: NDArray | None, zupt_sigma_mps: float,
+                        t: NDArray, epoch_ns: int, max_offset_s: float,
+                        rejections: list[GnssRejection]) -> MeasurementRecords:
+    """Fixes, velocities and ZUPTs (at ``zupt_t_s``) as one list at their nearest IMU epochs;
+    a record further than ``max_offset_s`` from every epoch is refused (``rejections``)."""
+    kinds = [np.full(gnss.fix_t_s.shape[0], MEAS_POSITION),
+             np.full(gnss.vel_t_s.shape[0], MEAS_VELOCITY)]
+    times = [gnss.fix_t_s, gnss.vel_t_s]
+    zs = [gnss.fix_llh, gnss.vel_n]
+    rs = [gnss.fix_cov, gnss.vel_cov]
+    src = [gnss.fix_time_ns, gnss.vel_time_ns]
+    if zupt_t_s is not None:
+        kinds.append(np.full(zupt_t_s.shape[0], MEAS_ZUPT))
+        times.append(zupt_t_s)
+        zs.append(np.zeros((zupt_t_s.shape[0], 3)))
+        rs.append(np.tile(np.eye(3) * zupt_sigma_mps**2, (zupt_t_s.shape[0], 1, 1)))
+        src.append(time_ns_from_t_s(zupt_t_s, epoch_ns))
+    m_type = np.concatenate(kinds).astype(np.int64)
+    m_t = np.concatenate(times)
+    m_src = np.concatenate(src)
+    k_near = np.clip(np.searchsorted(t, m_t), 1, t.shape[0] - 1)
+    k_near = np.where(np.abs(t[k_near - 1] - m_t) <= np.abs(t[k_near] - m_t), k_near - 1, k_near)
+    m_dt = m_t - t[k_near]
+    far = np.abs(m_dt) > max_offset_s
+    for i in np.flatnonzero(far):
+        rejections.append(GnssRejection(int(m_src[i]), float(m_t[i]), MEAS_KINDS[m_type[i]],
+                                        "no IMU epoch within max_gnss_imu_offset_s",
+                                        float(m_dt[i])))
+    order = np.lexsort((m_type, k_near))
+    order = order[~far[order]]
+    return MeasurementRecords(
+        kind=m_type[order], t_s=m_t[order], time_ns=m_src[order],
+        z=np.ascontiguousarray(np.concatenate(zs)[order]),
+        r=np.ascontiguousarray(np.concatenate(rs)[order]),
+        k=k_near[order].astype(np.int64), dt_s=np.ascontiguousarray(m_dt[order]))
+
+
+def grid_epochs(t: NDArray, k0: int, interval_s: float | None) -> NDArray:
+    """IMU epoch indices (>= k0, unique) nearest the multiples of ``interval_s`` in t_s."""
+    if interval_s is None:
+        return np.arange(k0, t.shape[0])
+    g0 = math.ceil(t[k0] / interval_s - 1e-9)
+    g1 = math.floor(t[-1] / interval_s + 1e-9)
+    grid = np.arange(g0, g1 + 1) * interval_s
+    k = np.clip(np.searchsorted(t, grid), 1, t.shape[0] - 1)
+    k = np.where(np.abs(t[k - 1] - grid) <= np.abs(t[k] - grid), k - 1, k)
+    return np.unique(np.maximum(k, k0))
+
+
+def epoch_flags(t: NDArray, k0: int, m_k: NDArray, output_rate_hz: float | None,
+                 node_interval_s: float) -> tuple[NDArray, NDArray]:
+    """Per-epoch ``FLAG_OUTPUT`` / ``FLAG_NODE`` bits, and the output epochs."""
+    flags = np.zeros(t.shape[0], dtype=np.int64)
+    out_k = grid_epochs(t, k0, None if output_rate_hz is None else 1.0 / output_rate_hz)
+    flags[out_k] |= FLAG_OUTPUT
+    flags[grid_epochs(t, k0, node_interval_s)] |= FLAG_NODE
+    flags[t.shape[0] - 1] |= FLAG_NODE
+    flags[m_k[m_k >= k0]] |= FLAG_NODE
+    flags[k0] |= FLAG_NODE
+    return flags, out_k

@@ -148,6 +148,99 @@ def _unit(v: NDArray) -> NDArray:
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
+@dataclass(frozen=True)
+class _Windows:
+    """Per-window means: measured specific force (sensor), expected (body), NED acceleration,
+    usable windows (full, no data gap) and windows whose heading is known."""
+
+    f_s: NDArray
+    f_b_expected: NDArray
+    a_n: NDArray
+    valid: NDArray
+    yaw_known: NDArray
+
+
+def _windows(imu_t_s: ArrayLike, f_s_mps2: ArrayLike, vel_t_s: ArrayLike, v_n_mps: ArrayLike,
+             lat_rad: float, height_m: float, body_rpy_rad: ArrayLike | None,
+             opt: MountingOptions) -> _Windows:
+    """Window means of ``f_s`` and of ``f_b = C_bn (a_n - g_n)`` (module docstring)."""
+    t = np.asarray(imu_t_s, dtype=float)
+    f = np.asarray(f_s_mps2, dtype=float)
+    tv = np.asarray(vel_t_s, dtype=float)
+    v = np.asarray(v_n_mps, dtype=float)
+    if f.shape != (t.size, 3):
+        raise ValueError(f"f_s_mps2 must have shape ({t.size}, 3); got {f.shape}")
+    if v.shape != (tv.size, 3):
+        raise ValueError(f"v_n_mps must have shape ({tv.size}, 3); got {v.shape}")
+    start = max(t[0], tv[0])
+    stop = min(t[-1], tv[-1])
+    edges = np.arange(start, stop + 1e-9, opt.window_s)
+    if edges.size < 3:
+        raise ValueError(f"IMU and velocity overlap only {stop - start:.2f} s; need at least "
+                         f"{2 * opt.window_s} s")
+    f_w, n_w = window_means(t, f, edges)
+    # mean acceleration over each window from the velocity at its ends
+    v0 = np.stack([np.interp(edges[:-1], tv, v[:, i]) for i in range(3)], axis=1)
+    v1 = np.stack([np.interp(edges[1:], tv, v[:, i]) for i in range(3)], axis=1)
+    a_n = (v1 - v0) / opt.window_s
+    centre = 0.5 * (edges[:-1] + edges[1:])
+    v_c = np.stack([np.interp(centre, tv, v[:, i]) for i in range(3)], axis=1)
+    g = float(earth.normal_gravity_mps2(lat_rad, height_m))
+    f_n = a_n - np.array([0.0, 0.0, g])
+    if body_rpy_rad is None:
+        yaw = np.arctan2(v_c[:, 1], v_c[:, 0])
+        rpy = np.column_stack([np.zeros_like(yaw), np.zeros_like(yaw), yaw])
+        yaw_known = np.hypot(v_c[:, 0], v_c[:, 1]) > opt.min_speed_mps
+    else:
+        rpy_in = np.asarray(body_rpy_rad, dtype=float)
+        if rpy_in.shape != (tv.size, 3):
+            raise ValueError(f"body_rpy_rad must have shape ({tv.size}, 3); got {rpy_in.shape}")
+        rpy = np.column_stack([
+            np.interp(centre, tv, rpy_in[:, 0]),
+            np.interp(centre, tv, rpy_in[:, 1]),
+            np.interp(centre, tv, np.unwrap(rpy_in[:, 2])),
+        ])
+        yaw_known = np.ones(centre.size, dtype=bool)
+    c_bn = np.swapaxes(rotation.dcm_from_euler(rpy), -1, -2)
+    f_b_exp = np.einsum("kij,kj->ki", c_bn, f_n)
+    # windows must be (nearly) full: a window straddling a data gap has a wrong mean, and the
+    # velocity interpolated across a gap gives a wrong acceleration
+    valid = n_w >= 0.8 * np.median(n_w[n_w > 0]) if np.any(n_w > 0) else n_w > 0
+    if tv.size > 1:
+        dt_v = np.diff(tv)
+        gap = dt_v > 3.0 * np.median(dt_v)
+        for lo, hi in zip(tv[:-1][gap], tv[1:][gap], strict=True):
+            valid &= (edges[1:] <= lo) | (edges[:-1] >= hi)
+    return _Windows(f_w, f_b_exp, a_n, valid, yaw_known)
+
+
+def _forward_axis(win: _Windows, c_1: NDArray, k: NDArray, opt: MountingOptions
+                  ) -> tuple[float, float, float, int]:
+    """Turn psi about the levelled up axis ``k`` (weighted circular mean of the per-window
+    angles), its scatter and sigma, and the number of windows used."""
+    x = win.f_s @ c_1.T
+    y = win.f_b_expected
+    x_h = x - np.outer(x @ k, k)
+    y_h = y - np.outer(y @ k, k)
+    acc_h = np.linalg.norm(y_h, axis=1)
+    moving = win.valid & win.yaw_known & (acc_h > opt.min_horizontal_accel_mps2)
+    n_moving = int(moving.sum())
+    if n_moving < opt.min_moving_windows:
+        raise ValueError(f"the forward axis needs at least {opt.min_moving_windows} windows "
+                         f"with horizontal acceleration > {opt.min_horizontal_accel_mps2} m/s^2 "
+                         f"at known heading; found {n_moving}")
+    xm, ym = x_h[moving], y_h[moving]
+    psi_k = np.arctan2(np.cross(xm, ym) @ k, np.sum(xm * ym, axis=1))
+    w = acc_h[moving] ** 2
+    cs = np.sum(w * np.cos(psi_k)) / w.sum()
+    sn = np.sum(w * np.sin(psi_k)) / w.sum()
+    psi = math.atan2(sn, cs)
+    dpsi = (psi_k - psi + np.pi) % (2.0 * np.pi) - np.pi
+    scatter = float(np.sqrt(np.sum(w * dpsi**2) / w.sum()))
+    n_eff = float(w.sum() ** 2 / np.sum(w**2))
+    return psi, scatter, scatter / math.sqrt(n_eff), n_moving
+
+
 def estimate_mounting(
     imu_t_s: ArrayLike,
     f_s_mps2: ArrayLike,
@@ -188,89 +281,22 @@ def estimate_mounting(
         Shapes wrong, or too few static windows (levelling) or too few windows with
         horizontal acceleration (forward axis), with the counts found.
     """
-    t = np.asarray(imu_t_s, dtype=float)
-    f = np.asarray(f_s_mps2, dtype=float)
-    tv = np.asarray(vel_t_s, dtype=float)
-    v = np.asarray(v_n_mps, dtype=float)
-    if f.shape != (t.size, 3):
-        raise ValueError(f"f_s_mps2 must have shape ({t.size}, 3); got {f.shape}")
-    if v.shape != (tv.size, 3):
-        raise ValueError(f"v_n_mps must have shape ({tv.size}, 3); got {v.shape}")
+    win = _windows(imu_t_s, f_s_mps2, vel_t_s, v_n_mps, lat_rad, height_m, body_rpy_rad,
+                   options)
     opt = options
-    start = max(t[0], tv[0])
-    stop = min(t[-1], tv[-1])
-    edges = np.arange(start, stop + 1e-9, opt.window_s)
-    if edges.size < 3:
-        raise ValueError(f"IMU and velocity overlap only {stop - start:.2f} s; need at least "
-                         f"{2 * opt.window_s} s")
-    f_w, n_w = window_means(t, f, edges)
-    # mean acceleration over each window from the velocity at its ends
-    v0 = np.stack([np.interp(edges[:-1], tv, v[:, i]) for i in range(3)], axis=1)
-    v1 = np.stack([np.interp(edges[1:], tv, v[:, i]) for i in range(3)], axis=1)
-    a_n = (v1 - v0) / opt.window_s
-    centre = 0.5 * (edges[:-1] + edges[1:])
-    v_c = np.stack([np.interp(centre, tv, v[:, i]) for i in range(3)], axis=1)
-    g = float(earth.normal_gravity_mps2(lat_rad, height_m))
-    f_n = a_n - np.array([0.0, 0.0, g])
-    if body_rpy_rad is None:
-        yaw = np.arctan2(v_c[:, 1], v_c[:, 0])
-        rpy = np.column_stack([np.zeros_like(yaw), np.zeros_like(yaw), yaw])
-        yaw_known = np.hypot(v_c[:, 0], v_c[:, 1]) > opt.min_speed_mps
-    else:
-        rpy_in = np.asarray(body_rpy_rad, dtype=float)
-        if rpy_in.shape != (tv.size, 3):
-            raise ValueError(f"body_rpy_rad must have shape ({tv.size}, 3); got {rpy_in.shape}")
-        rpy = np.column_stack([
-            np.interp(centre, tv, rpy_in[:, 0]),
-            np.interp(centre, tv, rpy_in[:, 1]),
-            np.interp(centre, tv, np.unwrap(rpy_in[:, 2])),
-        ])
-        yaw_known = np.ones(centre.size, dtype=bool)
-    c_bn = np.swapaxes(rotation.dcm_from_euler(rpy), -1, -2)
-    f_b_exp = np.einsum("kij,kj->ki", c_bn, f_n)
-    # windows must be (nearly) full: a window straddling a data gap has a wrong mean, and the
-    # velocity interpolated across a gap gives a wrong acceleration
-    valid = n_w >= 0.8 * np.median(n_w[n_w > 0]) if np.any(n_w > 0) else n_w > 0
-    if tv.size > 1:
-        dt_v = np.diff(tv)
-        gap = dt_v > 3.0 * np.median(dt_v)
-        for lo, hi in zip(tv[:-1][gap], tv[1:][gap], strict=True):
-            valid &= (edges[1:] <= lo) | (edges[:-1] >= hi)
-    static = valid & (np.linalg.norm(a_n, axis=1) < opt.max_static_accel_mps2)
+    static = win.valid & (np.linalg.norm(win.a_n, axis=1) < opt.max_static_accel_mps2)
     n_static = int(static.sum())
     if n_static < opt.min_static_windows:
         raise ValueError(f"levelling needs at least {opt.min_static_windows} windows with "
                          f"|a_n| < {opt.max_static_accel_mps2} m/s^2; found {n_static}")
     # step 1: levelling (shortest arc between mean directions)
-    u_s = _unit(f_w[static])
-    u_b = _unit(f_b_exp[static])
-    u_s_mean = _unit(u_s.mean(axis=0))
+    u_s = _unit(win.f_s[static])
+    u_b = _unit(win.f_b_expected[static])
     u_b_mean = _unit(u_b.mean(axis=0))
-    c_1 = _shortest_arc(u_s_mean, u_b_mean)
+    c_1 = _shortest_arc(_unit(u_s.mean(axis=0)), u_b_mean)
     # step 2: forward axis, rotation psi about u_b_mean
-    k = u_b_mean
-    x = f_w @ c_1.T
-    y = f_b_exp
-    x_h = x - np.outer(x @ k, k)
-    y_h = y - np.outer(y @ k, k)
-    acc_h = np.linalg.norm(y_h, axis=1)
-    moving = valid & yaw_known & (acc_h > opt.min_horizontal_accel_mps2)
-    n_moving = int(moving.sum())
-    if n_moving < opt.min_moving_windows:
-        raise ValueError(f"the forward axis needs at least {opt.min_moving_windows} windows "
-                         f"with horizontal acceleration > {opt.min_horizontal_accel_mps2} m/s^2 "
-                         f"at known heading; found {n_moving}")
-    xm, ym = x_h[moving], y_h[moving]
-    psi_k = np.arctan2(np.cross(xm, ym) @ k, np.sum(xm * ym, axis=1))
-    w = acc_h[moving] ** 2
-    cs = np.sum(w * np.cos(psi_k)) / w.sum()
-    sn = np.sum(w * np.sin(psi_k)) / w.sum()
-    psi = math.atan2(sn, cs)
-    dpsi = (psi_k - psi + np.pi) % (2.0 * np.pi) - np.pi
-    scatter = float(np.sqrt(np.sum(w * dpsi**2) / w.sum()))
-    n_eff = float(w.sum() ** 2 / np.sum(w**2))
-    heading_sigma = scatter / math.sqrt(n_eff)
-    c_bs = rotation.dcm_from_rotvec(psi * k) @ c_1
+    psi, scatter, heading_sigma, n_moving = _forward_axis(win, c_1, u_b_mean, opt)
+    c_bs = rotation.dcm_from_rotvec(psi * u_b_mean) @ c_1
     # levelling residual with the final rotation (psi turns about k, so for a level body it
     # equals the step-1 residual; with a varying body attitude it is the honest figure)
     lev = u_s @ c_bs.T

@@ -38,7 +38,8 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from pospp.nav._kernels import _radii, quat_from_rotvec, quat_mul
+from pospp.nav._kernels import X_POS, X_QUAT, X_VEL, _radii, quat_from_rotvec, quat_mul
+from pospp.nav.error_model import I_DR, I_DV, I_PHI
 
 
 @njit(cache=True)
@@ -132,21 +133,21 @@ def apply_correction(x, dx):
     lat -= dr_N / (R_M + h), lon -= dr_E / ((R_N + h) cos lat), h += dr_D, v -= dv_n and
     q_nb <- exp(phi) * q_nb, since C_nb,true = (I + [phi x]) C_nb,computed.
     """
-    lat, h = x[0], x[2]
+    lat, h = x[X_POS], x[X_POS + 2]
     r_m, r_n = _radii(lat)
-    x[0] = lat - dx[6] / (r_m + h)
-    x[1] = x[1] - dx[7] / ((r_n + h) * math.cos(lat))
-    x[2] = h + dx[8]
-    x[3] -= dx[3]
-    x[4] -= dx[4]
-    x[5] -= dx[5]
-    qe = quat_from_rotvec(dx[0], dx[1], dx[2])
-    q = quat_mul(qe[0], qe[1], qe[2], qe[3], x[6], x[7], x[8], x[9])
+    x[X_POS] = lat - dx[I_DR] / (r_m + h)
+    x[X_POS + 1] = x[X_POS + 1] - dx[I_DR + 1] / ((r_n + h) * math.cos(lat))
+    x[X_POS + 2] = h + dx[I_DR + 2]
+    for i in range(3):
+        x[X_VEL + i] -= dx[I_DV + i]
+    qe = quat_from_rotvec(dx[I_PHI], dx[I_PHI + 1], dx[I_PHI + 2])
+    q = quat_mul(qe[0], qe[1], qe[2], qe[3], x[X_QUAT], x[X_QUAT + 1], x[X_QUAT + 2],
+                 x[X_QUAT + 3])
     nrm = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
     if q[0] < 0.0:
         nrm = -nrm
     for i in range(4):
-        x[6 + i] = q[i] / nrm
+        x[X_QUAT + i] = q[i] / nrm
 
 
 @njit(cache=True)

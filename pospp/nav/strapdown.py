@@ -20,6 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from pospp import rotation
 from pospp.nav import _kernels
+from pospp.units import S_PER_NS, t_s_from_time_ns
 
 
 @dataclass(frozen=True)
@@ -60,12 +61,6 @@ class NavState:
         return np.concatenate(
             [[self.lat_rad, self.lon_rad, self.height_m], self.v_n_mps, self.q_nb]
         ).astype(float)
-
-    @classmethod
-    def from_vector(cls, x: ArrayLike) -> NavState:
-        """Inverse of :meth:`as_vector`."""
-        x = np.asarray(x, dtype=float)
-        return cls(float(x[0]), float(x[1]), float(x[2]), x[3:6].copy(), x[6:10].copy())
 
 
 @dataclass(frozen=True)
@@ -244,8 +239,32 @@ def increments_from_rates(
     dtheta_b_rad, dv_b_mps : ndarray, shape (N - 1, 3)
     """
     t_ns = np.asarray(time_ns, dtype=np.int64)
-    t_s = (t_ns - np.int64(epoch_ns)).astype(float) * 1e-9
-    dt = np.diff(t_ns).astype(float) * 1e-9
+    t_s = t_s_from_time_ns(t_ns, epoch_ns)
+    dt = np.diff(t_ns) * S_PER_NS
     w = np.asarray(w_ib_b_radps, dtype=float)
     f = np.asarray(f_ib_b_mps2, dtype=float)
     return t_s, w[1:] * dt[:, None], f[1:] * dt[:, None]
+
+
+def interpolate_trajectory(traj: Trajectory, t_s: NDArray) -> Trajectory:
+    """Trajectory at new times: linear in position and velocity, slerp-free small-step attitude.
+
+    Attitude is interpolated by the rotation vector between the bracketing quaternions, so it
+    is exact for constant-rate rotation between samples.
+    """
+    t_s = np.asarray(t_s, dtype=float)
+    i = np.clip(np.searchsorted(traj.t_s, t_s, side="right") - 1, 0, len(traj) - 2)
+    w = (t_s - traj.t_s[i]) / (traj.t_s[i + 1] - traj.t_s[i])
+    w = np.clip(w, 0.0, 1.0)
+
+    def lin(a: NDArray) -> NDArray:
+        ww = w.reshape((-1,) + (1,) * (a.ndim - 1))
+        return a[i] * (1 - ww) + a[i + 1] * ww
+
+    q0, q1 = traj.q_nb[i], traj.q_nb[i + 1]
+    dq = rotation.quat_multiply(rotation.quat_conjugate(q0), q1)
+    rv = rotation.rotvec_from_quat(dq) * w[:, None]
+    q = rotation.quat_multiply(q0, rotation.quat_from_rotvec(rv))
+    return Trajectory(
+        t_s, lin(traj.lat_rad), lin(traj.lon_rad), lin(traj.height_m), lin(traj.v_n_mps), q
+    )

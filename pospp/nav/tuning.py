@@ -28,11 +28,10 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import Any
 
-from pospp.earth import STANDARD_GRAVITY_MPS2
-from pospp.rotation import DEG_PER_H_RADPS
+from pospp.units import DEG_PER_H_RADPS, UG_MPS2
 
-UG_MPS2 = 1e-6 * STANDARD_GRAVITY_MPS2
 """One micro-g [m/s^2] (conventional g0)."""
 
 
@@ -129,7 +128,7 @@ class ImuTuning:
         if unknown:
             raise ValueError(
                 f"ImuTuning: unknown field(s) {unknown}; expected some of {sorted(names)}")
-        changes = {k: float(v) for k, v in overrides.items() if v is not None}
+        changes: dict[str, Any] = {k: float(v) for k, v in overrides.items() if v is not None}
         return dataclasses.replace(self, **changes)
 
     def noise(self) -> NoiseParameters:
@@ -235,13 +234,3 @@ def tuning_preset(grade: str, **overrides: float | None) -> ImuTuning:
         names = sorted([*PRESETS, *ALIASES])
         raise ValueError(f"unknown IMU grade {grade!r}; expected one of {names}") from None
     return base.with_overrides(**overrides)
-
-
-def tuning_from_config(imu_config) -> ImuTuning:
-    """The tuning of a pipeline ``[imu]`` section (:class:`pospp.config.ImuConfig`).
-
-    The ``grade`` preset with every key that is not ``None`` overriding the preset value.
-    """
-    values = dict(vars(imu_config))
-    grade = values.pop("grade")
-    return tuning_preset(grade, **values)

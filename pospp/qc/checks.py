@@ -23,7 +23,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.stats import chi2
 
 from pospp import earth
-from pospp.rotation import DEG_PER_H_RADPS
+from pospp.units import DEG_PER_H_RADPS, NS_PER_S
 
 STATUS_ORDER = ("ok", "partial", "degraded", "failed")
 """Run statuses from best to worst."""
@@ -86,13 +86,13 @@ def run_status(checks: tuple[Check, ...] | list[Check]) -> str:
     return STATUS_ORDER[worst]
 
 
-def _na(name: str, stage: str, why: str, unit: str, threshold: float = math.nan) -> Check:
+def skip(name: str, stage: str, why: str, unit: str, threshold: float = math.nan) -> Check:
     return Check(name, stage, f"not applicable: {why}", math.nan, threshold, unit, True,
                  "degraded")
 
 
 def _toff(t_s: float | None) -> int | None:
-    return None if t_s is None or not math.isfinite(t_s) else int(round(t_s * 1e9))
+    return None if t_s is None or not math.isfinite(t_s) else int(round(t_s * NS_PER_S))
 
 
 # =============================================================================================
@@ -134,7 +134,7 @@ def gravity_direction(f_b_mps2: ArrayLike, static: ArrayLike | None, c_bs: Array
     f = np.asarray(f_b_mps2, dtype=float)
     st = None if static is None else np.asarray(static, dtype=bool)
     if f.shape[0] == 0:
-        return _na("gravity_direction", "ingest", "no IMU samples", "deg",
+        return skip("gravity_direction", "ingest", "no IMU samples", "deg",
                    GRAVITY_DIRECTION_MAX_DEG)
     where = "static windows"
     if st is not None and st.any():
@@ -177,7 +177,7 @@ def gravity_magnitude(f_b_mps2: ArrayLike, static: ArrayLike | None, lat_rad: fl
     """
     f = np.asarray(f_b_mps2, dtype=float)
     if f.shape[0] == 0:
-        return _na("gravity_magnitude", "ingest", "no IMU samples", "m/s^2")
+        return skip("gravity_magnitude", "ingest", "no IMU samples", "m/s^2")
     g = float(earth.normal_gravity_mps2(lat_rad, height_m))
     st = None if static is None else np.asarray(static, dtype=bool)
     if st is not None and st.any():
@@ -240,14 +240,14 @@ def earth_rate(w_b_radps: ArrayLike, f_b_mps2: ArrayLike, static: ArrayLike | No
     n_st = sum(b - a for a, b in segs)
     t_static = n_st * dt_s
     if t_static < EARTH_RATE_MIN_STATIC_S:
-        return _na("earth_rate", "ingest", f"{t_static:.0f} s at rest in stretches of >= "
+        return skip("earth_rate", "ingest", f"{t_static:.0f} s at rest in stretches of >= "
                    f"{EARTH_RATE_MIN_SEGMENT_S:.0f} s (< {EARTH_RATE_MIN_STATIC_S:.0f} s)",
                    "deg/h")
     sigma = math.hypot(gyro_bias_sigma_radps, gyro_arw_radpsqrts / math.sqrt(t_static))
     thr = EARTH_RATE_SIGMAS * sigma
     om = earth.EARTH_RATE_RADPS
     if thr > 0.5 * om:
-        return _na("earth_rate", "ingest", f"the IMU grade cannot see it ({thr / _DPH:.1f} "
+        return skip("earth_rate", "ingest", f"the IMU grade cannot see it ({thr / _DPH:.1f} "
                    f"deg/h threshold, Earth rate {om / _DPH:.1f} deg/h)", "deg/h", thr / _DPH)
     wd_h = np.zeros((len(segs), 2))
     for j, (a, b) in enumerate(segs):
@@ -296,7 +296,7 @@ def nis_band(t_s: ArrayLike, nis: ArrayLike, dof: int = 3) -> Check:
     t, v = t[ok], np.minimum(v[ok], 1e12)
     n_win = v.shape[0] // NIS_WINDOW
     if n_win < 1:
-        return _na("gnss_nis", "navigate", f"{v.shape[0]} GNSS updates (< {NIS_WINDOW})", "1",
+        return skip("gnss_nis", "navigate", f"{v.shape[0]} GNSS updates (< {NIS_WINDOW})", "1",
                    NIS_MAX_FRACTION)
     vw = v[: n_win * NIS_WINDOW].reshape(n_win, NIS_WINDOW).mean(axis=1)
     upper = chi2.ppf(NIS_WINDOW_PROBABILITY, dof * NIS_WINDOW) / NIS_WINDOW
@@ -336,7 +336,7 @@ def gnss_jumps(fix_t_s: ArrayLike, r_n_m: ArrayLike, vel_t_s: ArrayLike, v_n_mps
     tv = np.asarray(vel_t_s, dtype=float)
     v = np.asarray(v_n_mps, dtype=float)
     if t.shape[0] < 2 or tv.shape[0] < 2:
-        return _na("gnss_jumps", "ingest", "fewer than two GNSS fixes or velocities", "m",
+        return skip("gnss_jumps", "ingest", "fewer than two GNSS fixes or velocities", "m",
                    GNSS_JUMP_BASE_M)
     vi = np.column_stack([np.interp(t, tv, v[:, a]) for a in range(3)])
     dt = np.diff(t)
@@ -354,130 +354,6 @@ def gnss_jumps(fix_t_s: ArrayLike, r_n_m: ArrayLike, vel_t_s: ArrayLike, v_n_mps
                  "largest GNSS position step not explained by the velocity, less "
                  f"{GNSS_JUMP_ACCEL_MPS2:.0f} m/s^2 dt^2/2", float(e[k]), GNSS_JUMP_BASE_M, "m",
                  passed, "degraded", sug, _toff(float(t[k + 1])))
-
-
-TIME_OFFSET_MAX_S = 0.1
-"""Largest GNSS-IMU time offset accepted [s]."""
-TIME_OFFSET_SIGMAS = 5.0
-"""An offset must also be this many of its sigmas away from 0 to fail."""
-TIME_OFFSET_SEARCH_S = 5.0
-"""Offsets searched: [-5, 5] s."""
-TIME_OFFSET_MIN_SPEED_MPS = 3.0
-"""Course over ground is used where the horizontal speed is above this."""
-TIME_OFFSET_MIN_EXPLAINED = 0.5
-"""The check applies only when the yaw rate explains at least this share (R^2) of the course
-changes: a vehicle that flies sideways (multirotor) turns its course without its heading."""
-
-
-@dataclass(frozen=True)
-class TimeOffsetEstimate:
-    """GNSS stamp minus true measurement time [s] (positive: GNSS lags the IMU)."""
-
-    offset_s: float
-    sigma_s: float
-    n_intervals: int
-    residual_rms_rad: float
-    explained: float
-    """Share of the course changes' variance the integrated yaw rate explains (R^2)."""
-
-
-def estimate_time_offset(imu_t_s: ArrayLike, w_d_radps: ArrayLike, vel_t_s: ArrayLike,
-                         v_n_mps: ArrayLike) -> TimeOffsetEstimate | None:
-    """GNSS-IMU time offset from the turns: course change against integrated yaw rate.
-
-    The course over ground chi = atan2(v_E, v_N) of the GNSS velocity turns with the vehicle:
-    between records k and k+1, chi_k+1 - chi_k = Psi(t_k+1 - tau) - Psi(t_k - tau), where
-    Psi(t) = integral of the IMU's vertical rotation rate w_d (body w.r.t. NED about down, from
-    A's attitude) and tau the GNSS stamp minus the true time. tau minimises the sum of squared
-    misfits: a grid over +-TIME_OFFSET_SEARCH_S (0.02 s), a parabola through the best three,
-    one refit without 6-MAD outliers (a jump or a course flip at low speed). sigma from the
-    residual scatter and the sensitivity d(misfit)/d tau. None when fewer than 20 usable
-    intervals.
-
-    Parameters
-    ----------
-    imu_t_s : (N,) IMU interval ends [s]
-    w_d_radps : (N,) mean rotation rate about the NED down axis over each interval [rad/s]
-    vel_t_s, v_n_mps : (K,), (K, 3) GNSS velocity (antenna, NED) [s, m/s]
-    """
-    t = np.asarray(imu_t_s, dtype=float)
-    wd = np.asarray(w_d_radps, dtype=float)
-    tv = np.asarray(vel_t_s, dtype=float)
-    v = np.asarray(v_n_mps, dtype=float)
-    if t.shape[0] < 3 or tv.shape[0] < 3:
-        return None
-    psi = np.concatenate([[0.0], np.cumsum(wd[1:] * np.diff(t))])
-    speed = np.hypot(v[:, 0], v[:, 1])
-    chi = np.arctan2(v[:, 1], v[:, 0])
-    dchi = np.angle(np.exp(1j * np.diff(chi)))
-    dtv = np.diff(tv)
-    med = float(np.median(dtv))
-    ok = ((speed[:-1] > TIME_OFFSET_MIN_SPEED_MPS) & (speed[1:] > TIME_OFFSET_MIN_SPEED_MPS)
-          & (dtv < 1.5 * med) & (tv[:-1] - TIME_OFFSET_SEARCH_S > t[0])
-          & (tv[1:] + TIME_OFFSET_SEARCH_S < t[-1]))
-    if int(ok.sum()) < 20:
-        return None
-    t0, t1, dchi = tv[:-1][ok], tv[1:][ok], dchi[ok]
-
-    def resid(tau: float, keep: NDArray) -> NDArray:
-        return dchi[keep] - (np.interp(t1[keep] - tau, t, psi) - np.interp(t0[keep] - tau, t,
-                                                                            psi))
-
-    def fit(keep: NDArray) -> float:
-        grid = np.arange(-TIME_OFFSET_SEARCH_S, TIME_OFFSET_SEARCH_S + 1e-9, 0.02)
-        cost = np.array([np.sum(resid(g, keep) ** 2) for g in grid])
-        i = int(np.clip(np.argmin(cost), 1, grid.shape[0] - 2))
-        c0, c1, c2 = cost[i - 1], cost[i], cost[i + 1]
-        den = c0 - 2.0 * c1 + c2
-        shift = 0.5 * (c0 - c2) / den if den > 0 else 0.0
-        return float(grid[i] + np.clip(shift, -1.0, 1.0) * 0.02)
-
-    keep = np.ones(dchi.shape[0], dtype=bool)
-    tau = fit(keep)
-    r = resid(tau, keep)
-    mad = 1.4826 * float(np.median(np.abs(r - np.median(r))))
-    keep = np.abs(r) <= max(6.0 * mad, 1e-6)
-    if int(keep.sum()) < 20:
-        return None
-    tau = fit(keep)
-    r = resid(tau, keep)
-    h = 0.05
-    sens = (resid(tau + h, keep) - resid(tau - h, keep)) / (2.0 * h)
-    info = float(np.sum(sens**2))
-    rms = float(np.sqrt(np.mean(r**2)))
-    sigma = rms / math.sqrt(info) if info > 0 else math.inf
-    tot = float(np.sum((dchi[keep] - dchi[keep].mean()) ** 2))
-    explained = 1.0 - float(np.sum(r**2)) / tot if tot > 0 else 0.0
-    return TimeOffsetEstimate(tau, sigma, int(keep.sum()), rms, explained)
-
-
-def gnss_time_offset(est: TimeOffsetEstimate | None) -> Check:
-    """Check of :func:`estimate_time_offset`: |tau| <= TIME_OFFSET_MAX_S or within 5 sigma.
-
-    Not applicable when the flight has too few turns to see it (sigma above a third of the
-    threshold, or no estimate) or when the course does not follow the heading (R^2 below
-    TIME_OFFSET_MIN_EXPLAINED).
-    """
-    name, thr = "gnss_time_offset", TIME_OFFSET_MAX_S
-    if est is None:
-        return _na(name, "navigate", "too few GNSS velocities while moving", "s", thr)
-    if not est.sigma_s < thr / 3.0:
-        return _na(name, "navigate", f"too little turning to see it (sigma {est.sigma_s:.2g} "
-                   "s)", "s", thr)
-    if not est.explained >= TIME_OFFSET_MIN_EXPLAINED:
-        return _na(name, "navigate", f"the course does not follow the heading (R^2 "
-                   f"{est.explained:.2f}; sideways flight?)", "s", thr)
-    tau = est.offset_s
-    passed = abs(tau) <= thr or abs(tau) <= TIME_OFFSET_SIGMAS * est.sigma_s
-    sug = ""
-    if not passed:
-        word = "lags" if tau > 0 else "leads"
-        sug = (f"GNSS {word} the IMU by about {abs(tau):.1f} s ({tau:+.2f} +- {est.sigma_s:.2f} "
-               "s from the turns): fix the GNSS stamps (receiver latency, clock) before the run")
-    return Check(name, "navigate",
-                 "|GNSS stamp minus IMU time| from course changes against the integrated yaw "
-                 f"rate ({est.n_intervals} intervals, sigma {est.sigma_s:.3f} s)", abs(tau), thr,
-                 "s", passed, "degraded", sug)
 
 
 LEVER_ARM_MAX_M = 0.2
@@ -523,9 +399,9 @@ def lever_arm(configured_b_m: ArrayLike, estimated_b_m: ArrayLike, sigma_b_m: Ar
     sig = np.asarray(sigma_b_m, dtype=float)
     obs = np.asarray(observable, dtype=bool)
     if not np.isfinite(est).all():
-        return _na("lever_arm", "navigate", "no lever-arm estimate", "m", LEVER_ARM_MAX_M)
+        return skip("lever_arm", "navigate", "no lever-arm estimate", "m", LEVER_ARM_MAX_M)
     if not obs.any():
-        return _na("lever_arm", "navigate", "no turn and no tilt change to reveal it", "m",
+        return skip("lever_arm", "navigate", "no turn and no tilt change to reveal it", "m",
                    LEVER_ARM_MAX_M)
     d = np.abs(cfg - est)
     seen = (d > LEVER_ARM_SIGMAS * sig) & obs
@@ -597,7 +473,7 @@ def compensation_gain(dv_before_mps: float, dv_after_mps: float) -> Check:
     that makes B worse is wrong (wrong signs, frames or a model that does not fit).
     """
     if not (math.isfinite(dv_before_mps) and math.isfinite(dv_after_mps)):
-        return _na("compensation", "compensate", "no compensation", "m/s",
+        return skip("compensation", "compensate", "no compensation", "m/s",
                    COMPENSATION_MARGIN_MPS)
     d = dv_after_mps - dv_before_mps
     passed = d <= COMPENSATION_MARGIN_MPS

@@ -20,9 +20,10 @@ from numpy.typing import NDArray
 
 from pospp import earth, rotation
 from pospp.nav.alignment import static_windows
-from pospp.nav.tuning import tuning_from_config
 from pospp.qc import checks as qc
+from pospp.qc import time_offset
 from pospp.qc.checks import Check
+from pospp.units import t_s_from_time_ns
 
 
 @dataclass(frozen=True)
@@ -125,10 +126,10 @@ def quality_checks(log: Any, nav: Any, calib_run: Any, config: Any, *, c_bs: Any
     """
     imu = log.imu
     epoch_ns = int(imu.time_ns[0])
-    t = (imu.time_ns - np.int64(epoch_ns)).astype(float) * 1e-9
+    t = t_s_from_time_ns(imu.time_ns, epoch_ns)
     w, f = imu.w_ib_b_radps, imu.f_ib_b_mps2
-    vel_t = (log.vel.time_ns - np.int64(epoch_ns)).astype(float) * 1e-9
-    fix_t = (log.fix.time_ns - np.int64(epoch_ns)).astype(float) * 1e-9
+    vel_t = t_s_from_time_ns(log.vel.time_ns, epoch_ns)
+    fix_t = t_s_from_time_ns(log.fix.time_ns, epoch_ns)
     out: list[Check] = [qc.config_sanity(config_problems(config))]
 
     # --- completeness -------------------------------------------------------------------------
@@ -147,7 +148,7 @@ def quality_checks(log: Any, nav: Any, calib_run: Any, config: Any, *, c_bs: Any
     dt = float(np.median(np.diff(t))) if t.shape[0] > 1 else 0.0
     out.append(qc.gravity_magnitude(f, static, lat0, h0,
                                     window_n=int(round(1.0 / dt)) if dt > 0 else 1))
-    noise = tuning_from_config(config.imu).noise()
+    noise = config.imu.tuning().noise()
     sb = math.hypot(noise.gyro_turn_on_sigma_radps, noise.gyro_gm_sigma_radps) \
         or noise.gyro_bias_sigma_radps
     out.append(qc.earth_rate(w, f, static, dt, lat0, gyro_bias_sigma_radps=sb,
@@ -170,16 +171,16 @@ def quality_checks(log: Any, nav: Any, calib_run: Any, config: Any, *, c_bs: Any
     if rec is not None:
         gnss = (rec.kind <= 1) & ((rec.status == 0) | (rec.status == 1) | (rec.status == 2))
         out.append(qc.nis_band(rec.t_s[gnss], rec.nis[gnss]))
-    est = qc.estimate_time_offset(t, _down_rate(t, w, sol), v_t, v_n)
-    out.append(qc.gnss_time_offset(est))
+    est = time_offset.estimate_time_offset(t, _down_rate(t, w, sol), v_t, v_n)
+    out.append(time_offset.gnss_time_offset(est))
     lev = lever_estimate if lever_estimate is not None else (
         nav.lever_arm if nav.lever_arm.estimated else None)
     if lev is None:
-        out.append(qc._na("lever_arm", "navigate", "no lever-arm estimate", "m",
+        out.append(qc.skip("lever_arm", "navigate", "no lever-arm estimate", "m",
                           qc.LEVER_ARM_MAX_M))
     else:
         speed = np.hypot(sol.v_n_mps[:, 0], sol.v_n_mps[:, 1])
-        moving = speed > qc.TIME_OFFSET_MIN_SPEED_MPS
+        moving = speed > time_offset.TIME_OFFSET_MIN_SPEED_MPS
         out.append(qc.lever_arm(config.gnss.lever_arm_m, lev.lever_b_m, lev.sigma_b_m,
                                 observable=qc.lever_arm_observable(sol.rpy_rad),
                                 mean_speed_mps=float(speed[moving].mean()) if moving.any()

@@ -19,6 +19,7 @@ import numpy as np
 import pandas as pd
 
 from pospp.report import svg
+from pospp.units import ARCSEC_RAD
 
 Figure = Any  # a matplotlib Figure or a pospp.report.svg.Figure
 
@@ -244,7 +245,7 @@ def evaluation_errors(errors: dict, *, t0_ns: int | None = None, skip_s: float =
     fig, axes = subplots(backend, 4, 1, figsize=(10, 8), sharex=True)
     fig.subplots_adjust(left=0.1, right=0.98, bottom=0.07, top=0.95, hspace=0.12)
     t0 = t0_ns if t0_ns is not None else min(int(e.time_ns[0]) for e in errors.values())
-    arcsec = np.pi / 180.0 / 3600.0
+    arcsec = ARCSEC_RAD
     for name, e in errors.items():
         keep = e.time_ns >= e.time_ns[0] + int(round(skip_s * 1e9))
         step = max(1, -(-int(keep.sum()) // 4000))

@@ -24,14 +24,14 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from pospp import __version__, rotation
-from pospp.io.mcap_reader import GnssFixes, GnssVelocities, ImuSamples
-from pospp.io.parquet_tables import ReferenceTrajectory
 from pospp.nav.strapdown import Trajectory
 from pospp.sim.gnss import GnssModel, simulate_gnss
 from pospp.sim.imu import Motion, exact_increments, quat_nb_from_euler
 from pospp.sim.profile import MissionProfile, load_profile, plan_mission
 from pospp.sim.sensors import ImuErrorModel, RealisedImuErrors, apply_imu_errors, imu_grade
-from pospp.sim.trajectory import ProfileMotion, SplineMotion
+from pospp.sim.trajectory import MotionSample, ProfileMotion, SplineMotion
+from pospp.types import GnssFixes, GnssVelocities, ImuSamples, ReferenceTrajectory
+from pospp.units import DEG_PER_H_RADPS, UG_MPS2, time_ns_from_t_s
 
 __all__ = [
     "DEFAULT_START_TIME_NS",
@@ -39,6 +39,8 @@ __all__ = [
     "ImuErrorModel",
     "Simulation",
     "TrueLeg",
+    "gnss_model_from_params",
+    "imu_error_model_from_params",
     "imu_grade",
     "load_profile",
     "simulate",
@@ -147,7 +149,7 @@ class Simulation:
     @property
     def truth_time_ns(self) -> np.ndarray:
         """Stamps of the truth epochs [ns]."""
-        return np.int64(self.start_time_ns) + np.round(self.truth.t_s * 1e9).astype(np.int64)
+        return time_ns_from_t_s(self.truth.t_s, self.start_time_ns)
 
     def truth_reference(self, rate_hz: float = 10.0) -> ReferenceTrajectory:
         """The truth decimated to ``rate_hz`` (which must divide the IMU rate)."""
@@ -177,10 +179,37 @@ class Simulation:
         k = np.arange(int(np.floor((last - first - offset_s * 1e9) * rate_hz * 1e-9)) + 1)
         return first + np.round((offset_s + k / rate_hz) * 1e9).astype(np.int64)
 
-    def state_at_first_imu_stamp(self):
-        """The true NavState at the first IMU stamp (initial state for ``increments_from_rates``
-        output, which drops the first sample)."""
-        return self.truth.state(1)
+    def realised_bias(self, rate_hz: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The realised IMU biases (constant + ramp + Gauss-Markov, white noise excluded) at
+        the truth epochs of ``rate_hz``: the bias of the IMU interval ending at each epoch.
+
+        Returns
+        -------
+        time_ns : (M,) int64
+        gyro_bias_b_radps, accel_bias_b_mps2 : (M, 3) float64
+            Body FRD [rad/s], [m/s^2].
+        """
+        dt_ns = int(self.params["time"]["imu_dt_ns"])
+        step = round(1e9 / rate_hz) // dt_ns
+        j = np.arange(0, len(self.truth), step)
+        k = np.maximum(j - 1, 0)  # interval ending at epoch j
+        return (self.truth_time_ns[j], self.imu_errors.gyro_bias_radps[k],
+                self.imu_errors.accel_bias_mps2[k])
+
+
+def imu_error_model_from_params(params: dict[str, Any]) -> ImuErrorModel:
+    """The injected :class:`ImuErrorModel` of a params dict (``config.imu_errors``; read by
+    ``pospp.io.simulation_files.read_params``)."""
+    d = params["config"]["imu_errors"]
+    known = ImuErrorModel.__dataclass_fields__
+    return ImuErrorModel.from_dict({k: v for k, v in d.items() if k in known})
+
+
+def gnss_model_from_params(params: dict[str, Any]) -> GnssModel:
+    """The :class:`GnssModel` of a params dict written by pospp (``config.gnss``)."""
+    d = dict(params["config"]["gnss"])
+    d["outages_s"] = tuple(tuple(x) for x in d.get("outages_s", ()))
+    return GnssModel.from_dict(d)
 
 
 def _resolve_grade(g: str | ImuErrorModel) -> tuple[str, ImuErrorModel]:
@@ -197,6 +226,71 @@ def _rate_dt_ns(imu_rate_hz: float) -> int:
         raise ValueError(f"imu_rate_hz {imu_rate_hz} does not give a whole number of "
                          "nanoseconds per interval")
     return dt_ns
+
+
+def _truth(motion: Motion, t_s: np.ndarray, progress: ProgressFn | None) -> Trajectory:
+    """The true IMU state at the epochs ``t_s``, in blocks of 200 000 epochs."""
+    n1 = t_s.shape[0]
+    lat, lon, hgt = np.empty(n1), np.empty(n1), np.empty(n1)
+    v_n, q_nb = np.empty((n1, 3)), np.empty((n1, 4))
+    for a in range(0, n1, 200_000):
+        s = slice(a, a + 200_000)
+        m = motion.evaluate(t_s[s])
+        lat[s], lon[s], hgt[s], v_n[s] = m.lat_rad, m.lon_rad, m.height_m, m.v_n_mps
+        q_nb[s] = quat_nb_from_euler(m.rpy_rad)
+        if progress is not None:
+            progress("truth", min(1.0, (a + 200_000) / n1))
+    return Trajectory(t_s, lat, lon, hgt, v_n, q_nb)
+
+
+def _params(*, grade_name: str, model: ImuErrorModel, realised: RealisedImuErrors,
+            gnss: GnssModel, n_fix: int, seed: int, imu_rate_hz: float, start_time_ns: int,
+            dt_ns: int, n: int, n_sub: int, n_gl: int, extra_params: dict[str, Any],
+            legs: tuple[TrueLeg, ...], timings: dict[str, float]) -> dict[str, Any]:
+    """The JSON-ready record of everything injected (layout mirrors the reference cases)."""
+    g = model.as_dict()
+    flu = np.array([1.0, -1.0, -1.0])
+    imu_err = dict(g)
+    imu_err.update({
+        "grade": grade_name,
+        "gyro_bias_flu_dph": list(np.asarray(model.gyro_bias_dph) * flu),
+        "accel_bias_flu_ug": list(np.asarray(model.accel_bias_ug) * flu),
+        "gyro_matrix_frd": realised.gyro_matrix.tolist(),
+        "accel_matrix_frd": realised.accel_matrix.tolist(),
+        "realised_gyro_bias_at_start_dph": list(
+            realised.gyro_bias_radps[0] / DEG_PER_H_RADPS),
+        "realised_accel_bias_at_start_ug": list(realised.accel_bias_mps2[0] / UG_MPS2),
+    })
+    gn = gnss.as_dict()
+    gn.update({"lever_arm_flu_m": list(np.asarray(gnss.lever_arm_b_m) * flu),
+               "n_epochs": n_fix,
+               "reported_pos_sigma_m": [max(x, 1e-3) for x in gnss.pos_noise_m],
+               "reported_vel_sigma_mps": [max(x, 1e-3) for x in gnss.vel_noise_mps]})
+    return {
+        "generator": {"name": "pospp.sim", "version": __version__},
+        "config": {"imu_grade": grade_name, "imu_rate_hz": imu_rate_hz, "seed": seed,
+                   "imu_errors": g, "gnss": gnss.as_dict(), "start_time_ns": start_time_ns,
+                   "n_sub": n_sub, "n_gl": n_gl, **extra_params.get("config", {})},
+        "seed": seed,
+        "time": {
+            "start_time_ns": start_time_ns, "imu_rate_hz": imu_rate_hz, "imu_dt_ns": dt_ns,
+            "n_imu_messages": n, "duration_s": n * dt_ns * 1e-9,
+            "end_time_ns": start_time_ns + n * dt_ns,
+            "first_imu_stamp_ns": start_time_ns + dt_ns,
+        },
+        "conventions": CONVENTIONS,
+        **{k: v for k, v in extra_params.items() if k != "config"},
+        "legs": [lg.as_dict() for lg in legs],
+        "imu_errors": imu_err,
+        "gnss": gn,
+        "gravity": {"model": "WGS-84 normal gravity, TR8350.2 Eq. 4-1 and 4-3 "
+                             "(pospp.earth.normal_gravity_mps2)"},
+        "numerics": {
+            "quadrature": f"composite Gauss-Legendre, {n_sub} sub-intervals x {n_gl} nodes "
+                          "per IMU interval",
+            "timings_s": timings,
+        },
+    }
 
 
 def _generate(
@@ -249,61 +343,13 @@ def _generate(
     if progress is not None:
         progress("gnss", 1.0)
     tick("gnss_s")
-    lat, lon, hgt = np.empty(n + 1), np.empty(n + 1), np.empty(n + 1)
-    v_n, q_nb = np.empty((n + 1, 3)), np.empty((n + 1, 4))
-    for a in range(0, n + 1, 200_000):
-        s = slice(a, a + 200_000)
-        m = motion.evaluate(t_s[s])
-        lat[s], lon[s], hgt[s], v_n[s] = m.lat_rad, m.lon_rad, m.height_m, m.v_n_mps
-        q_nb[s] = quat_nb_from_euler(m.rpy_rad)
-        if progress is not None:
-            progress("truth", min(1.0, (a + 200_000) / (n + 1)))
-    truth = Trajectory(t_s, lat, lon, hgt, v_n, q_nb)
+    truth = _truth(motion, t_s, progress)
     tick("truth_s")
     legs = legs_fn(truth)
-    g = model.as_dict()
-    flu = np.array([1.0, -1.0, -1.0])
-    imu_err = dict(g)
-    imu_err.update({
-        "grade": grade_name,
-        "gyro_bias_flu_dph": list(np.asarray(model.gyro_bias_dph) * flu),
-        "accel_bias_flu_ug": list(np.asarray(model.accel_bias_ug) * flu),
-        "gyro_matrix_frd": realised.gyro_matrix.tolist(),
-        "accel_matrix_frd": realised.accel_matrix.tolist(),
-        "realised_gyro_bias_at_start_dph": list(
-            realised.gyro_bias_radps[0] / rotation.DEG_PER_H_RADPS),
-        "realised_accel_bias_at_start_ug": list(realised.accel_bias_mps2[0] / 9.80665e-6),
-    })
-    gn = gnss.as_dict()
-    gn.update({"lever_arm_flu_m": list(np.asarray(gnss.lever_arm_b_m) * flu),
-               "n_epochs": len(fix),
-               "reported_pos_sigma_m": [max(x, 1e-3) for x in gnss.pos_noise_m],
-               "reported_vel_sigma_mps": [max(x, 1e-3) for x in gnss.vel_noise_mps]})
-    params: dict[str, Any] = {
-        "generator": {"name": "pospp.sim", "version": __version__},
-        "config": {"imu_grade": grade_name, "imu_rate_hz": imu_rate_hz, "seed": seed,
-                   "imu_errors": g, "gnss": gnss.as_dict(), "start_time_ns": start_time_ns,
-                   "n_sub": n_sub, "n_gl": n_gl, **extra_params.get("config", {})},
-        "seed": seed,
-        "time": {
-            "start_time_ns": start_time_ns, "imu_rate_hz": imu_rate_hz, "imu_dt_ns": dt_ns,
-            "n_imu_messages": n, "duration_s": n * dt_ns * 1e-9,
-            "end_time_ns": start_time_ns + n * dt_ns,
-            "first_imu_stamp_ns": start_time_ns + dt_ns,
-        },
-        "conventions": CONVENTIONS,
-        **{k: v for k, v in extra_params.items() if k != "config"},
-        "legs": [lg.as_dict() for lg in legs],
-        "imu_errors": imu_err,
-        "gnss": gn,
-        "gravity": {"model": "WGS-84 normal gravity, TR8350.2 Eq. 4-1 and 4-3 "
-                             "(pospp.earth.normal_gravity_mps2)"},
-        "numerics": {
-            "quadrature": f"composite Gauss-Legendre, {n_sub} sub-intervals x {n_gl} nodes "
-                          "per IMU interval",
-            "timings_s": timings,
-        },
-    }
+    params = _params(grade_name=grade_name, model=model, realised=realised, gnss=gnss,
+                     n_fix=len(fix), seed=seed, imu_rate_hz=imu_rate_hz,
+                     start_time_ns=start_time_ns, dt_ns=dt_ns, n=n, n_sub=n_sub, n_gl=n_gl,
+                     extra_params=extra_params, legs=legs, timings=timings)
     return Simulation(name, imu, fix, vel, truth, int(start_time_ns), legs, realised, params)
 
 
@@ -410,7 +456,7 @@ class _ShiftedMotion:
         self.motion = motion
         self.t0 = t0
 
-    def evaluate(self, t_s: ArrayLike):
+    def evaluate(self, t_s: ArrayLike) -> MotionSample:
         m = self.motion.evaluate(np.asarray(t_s, dtype=float) + self.t0)
         return type(m)(np.asarray(t_s, dtype=float), *(getattr(m, f) for f in (
             "lat_rad", "lon_rad", "height_m", "v_n_mps", "a_n_mps2", "rpy_rad",

@@ -58,6 +58,7 @@ from pathlib import Path
 from typing import Any
 
 from pospp.sim.ramps import RampSchedule, WanderSchedule
+from pospp.units import G0_MPS2
 
 __all__ = [
     "MissionProfile",
@@ -473,7 +474,7 @@ class _Planner:
                     side = -side
 
 
-_G_BANK_MPS2 = 9.80665
+_G_BANK_MPS2 = G0_MPS2
 """Gravity used in the coordinated-turn bank law tan(bank) = v r / g (a definition)."""
 
 

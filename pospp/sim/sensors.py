@@ -53,20 +53,17 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import lfilter
 
-from pospp.earth import STANDARD_GRAVITY_MPS2
-from pospp.rotation import ARCSEC_RAD, DEG_PER_H_RADPS
+from pospp.units import (
+    ARCSEC_RAD,
+    DEG_PER_H_RADPS,
+    DEG_PER_SQRT_H_RAD_PER_SQRT_S,
+    MPS_PER_SQRT_H_MPS_PER_SQRT_S,
+    UG_MPS2,
+)
 
 __all__ = ["ImuErrorModel", "RealisedImuErrors", "apply_imu_errors", "imu_grade", "grade_names",
            "imu_model_file",
            "vibration_increments", "VIBRATION_TONES"]
-
-UG_MPS2 = 1e-6 * STANDARD_GRAVITY_MPS2
-"""One micro-g [m/s^2] (g0 = 9.80665 m/s^2)."""
-DEG_PER_SQRT_H_RAD_PER_SQRT_S = np.pi / 180.0 / 60.0
-"""1 deg/sqrt(h) in rad/sqrt(s)."""
-MPS_PER_SQRT_H_MPS_PER_SQRT_S = 1.0 / 60.0
-"""1 m/s/sqrt(h) in m/s/sqrt(s)."""
-
 
 def _zeros3() -> tuple[float, float, float]:
     return (0.0, 0.0, 0.0)

@@ -37,10 +37,11 @@ from scipy.interpolate import UnivariateSpline
 
 from pospp import earth
 from pospp.sim.profile import MissionPlan
+from pospp.units import G0_MPS2
 
 __all__ = ["MotionSample", "ProfileMotion", "SplineMotion", "G_BANK_MPS2"]
 
-G_BANK_MPS2 = 9.80665
+G_BANK_MPS2 = G0_MPS2
 """Gravity in the coordinated-turn bank law tan(roll) = v psi' / g (a definition, not physics)."""
 
 _GL4_X, _GL4_W = np.polynomial.legendre.leggauss(4)
@@ -169,10 +170,9 @@ class ProfileMotion:
     def position(self, t_s: ArrayLike) -> tuple[NDArray, NDArray, NDArray]:
         """(lat_rad, lon_rad, height_m) at ``t_s``."""
         t = np.asarray(t_s, dtype=float)
-        return tuple(
-            _hermite(t, 0.0, self._step, y, dy)
-            for y, dy in zip(self._grid, self._grid_d, strict=True)
-        )
+        lat, lon, h = (_hermite(t, 0.0, self._step, y, dy)
+                       for y, dy in zip(self._grid, self._grid_d, strict=True))
+        return lat, lon, h
 
     def evaluate(self, t_s: ArrayLike) -> MotionSample:
         """Full :class:`MotionSample` at times ``t_s`` [s from the mission start], shape (M,)."""

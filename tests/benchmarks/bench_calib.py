@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pospp import rotation
+from pospp import rotation, units
 from pospp.calib.compensate import compensate_legs
 from pospp.calib.replay import ImuIncrements, reference_from_trajectory, replay_leg
 from pospp.calib.solve import calibrate
@@ -28,7 +28,7 @@ from pospp.nav.strapdown import Trajectory, increments_from_rates
 
 REF = Path(__file__).resolve().parents[2].parent / "shared" / "reference_cases"
 NAME = "flight_survey_errors"
-DPH = rotation.DEG_PER_H_RADPS
+DPH = units.DEG_PER_H_RADPS
 
 
 def main() -> None:

@@ -59,8 +59,8 @@ TOPICS = ("/imu/data", "/gnss/fix", "/gnss/vel")
 
 
 def build(path: Path, *, duration_s: float = 5400.0, rate_hz: float = 200.0) -> None:
-    from pospp.io.mcap_reader import GnssFixes, GnssVelocities, ImuSamples
     from pospp.io.mcap_writer import write_flight_log
+    from pospp.types import GnssFixes, GnssVelocities, ImuSamples
 
     rng = np.random.default_rng(20240601)
     n = int(duration_s * rate_hz)

@@ -24,11 +24,11 @@ from pathlib import Path
 import numpy as np
 
 from pospp import pipeline, rotation
-from pospp.calib.replay import interpolate_trajectory
 from pospp.config import load_config
 from pospp.diagnose.workflow import diagnose
 from pospp.io.parquet_tables import read_reference_trajectory
 from pospp.nav import strapdown
+from pospp.nav.strapdown import interpolate_trajectory
 
 ROOT = Path(__file__).resolve().parents[2]
 CASES = ROOT.parent / "shared" / "reference_cases"

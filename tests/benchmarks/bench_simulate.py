@@ -23,7 +23,7 @@ import time
 
 import numpy as np
 
-from pospp import earth, rotation
+from pospp import earth, rotation, units
 from pospp.io.simulation_files import write_simulation
 from pospp.nav.strapdown import increments_from_rates, integrate
 from pospp.sim.api import simulate
@@ -74,7 +74,7 @@ def _closure(sim, window_s: float | None) -> tuple[float, float, float]:
                                         tr.lat_rad[s], tr.lon_rad[s], tr.height_m[s])
         att = rotation.angle_between_rad(out.c_nb, rotation.dcm_from_quat(tr.q_nb[s]))
         worst = np.maximum(worst, [np.abs(dp).max(), np.abs(out.v_n_mps - tr.v_n_mps[s]).max(),
-                                   att.max() / rotation.ARCSEC_RAD])
+                                   att.max() / units.ARCSEC_RAD])
     return tuple(worst)
 
 

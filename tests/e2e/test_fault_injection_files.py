@@ -28,6 +28,7 @@ from pospp import pipeline
 from pospp.cli import main
 from pospp.config import load_config
 from pospp.io import parquet_tables, run_folder
+from pospp.io.files import sha256_file
 from pospp.io.mcap_reader import read_flight_log
 from pospp.io.mcap_writer import write_flight_log
 
@@ -165,7 +166,7 @@ def test_failed_rerun_says_failed_and_keeps_no_table_of_the_earlier_run(flight, 
     assert sorted(p.name for p in out.iterdir()) == [run_folder.MARKER, "messages.parquet",
                                                      "summary.parquet"]
     assert parquet_tables.read_metadata(out / "summary.parquet")["input_sha256"] == \
-        parquet_tables.sha256_file(bad)
+        sha256_file(bad)
 
 
 # -------------------------------------------------------------------------- kill -9

@@ -22,6 +22,7 @@ from click.testing import CliRunner
 
 from pospp.cli import main
 from pospp.io import parquet_tables
+from pospp.io.files import sha256_file
 from pospp.io.mcap_reader import read_flight_log
 from pospp.io.mcap_writer import write_flight_log
 
@@ -54,7 +55,7 @@ def test_sample_run_writes_every_table_with_its_schema(sample_run):
         assert path.is_file(), name
         meta = parquet_tables.read_metadata(path)
         assert meta["schema_name"] == name
-        assert meta["input_sha256"] == parquet_tables.sha256_file(SAMPLE)
+        assert meta["input_sha256"] == sha256_file(SAMPLE)
         assert meta["config"]["name"] == "sample"
         assert parquet_tables.schema(name).names[0] in parquet_tables.read_table(path)
     assert (sample_run / "report.html").stat().st_size > 50_000
@@ -197,7 +198,7 @@ def test_truncated_file_ends_non_ok_and_keeps_no_table_of_the_earlier_run(sample
     assert code == 0, text
     s = parquet_tables.read_table(out / "summary.parquet").iloc[0]
     assert s.status == "partial" and "no straight" in s.calibration_reason
-    assert set(_tables_of(out).values()) == {parquet_tables.sha256_file(good)}
+    assert set(_tables_of(out).values()) == {sha256_file(good)}
     cut = tmp_path / "cut.mcap"
     data = good.read_bytes()
     cut.write_bytes(data[: len(data) // 3])
@@ -209,7 +210,7 @@ def test_truncated_file_ends_non_ok_and_keeps_no_table_of_the_earlier_run(sample
     # every table in the folder is the cut file's: nothing of the first run is left
     tables = _tables_of(out)
     assert "summary" in tables and "messages" in tables
-    assert set(tables.values()) == {parquet_tables.sha256_file(cut)}, tables
+    assert set(tables.values()) == {sha256_file(cut)}, tables
     status = parquet_tables.read_table(out / "summary.parquet").status.iloc[0]
     assert status != "ok"
     if importlib.util.find_spec("pospp.qc") is None:
@@ -287,7 +288,7 @@ def test_rerun_into_a_folder_leaves_no_stale_table(sample_log, tmp_path):
     assert code == 0, text
     legs = parquet_tables.read_table(out / "legs.parquet")
     assert len(legs) == 0
-    assert set(_tables_of(out).values()) == {parquet_tables.sha256_file(path)}
+    assert set(_tables_of(out).values()) == {sha256_file(path)}
     assert not (out / "diagnosis.parquet").exists()
 
 

@@ -17,7 +17,8 @@ import pytest
 
 from pospp import earth
 from pospp.calib.segment import LegThresholds, find_legs
-from pospp.io.converters import ConversionError, convert, detect_format
+from pospp.convert import convert
+from pospp.io.converters import ConversionError, detect_format
 from pospp.io.converters._common import lag_by_correlation, velocity_from_positions
 from pospp.io.mcap_reader import read_flight_log
 from pospp.io.parquet_tables import read_reference_trajectory

@@ -29,7 +29,7 @@ from pospp.config import (
     config_from_dict,
     load_config,
 )
-from pospp.io.converters import convert
+from pospp.convert import convert
 from pospp.io.mcap_reader import read_flight_log
 
 REPO = Path(__file__).resolve().parents[2]

@@ -13,7 +13,7 @@ import json
 import numpy as np
 import pytest
 
-from pospp import rotation
+from pospp import rotation, units
 from pospp.calib.compensate import compensate_legs
 from pospp.calib.pairs import PairPolicy
 from pospp.calib.replay import ImuIncrements, reference_from_trajectory, replay_leg
@@ -26,7 +26,7 @@ from pospp.nav.strapdown import Trajectory, increments_from_rates
 pytestmark = [pytest.mark.reference, pytest.mark.slow]
 
 NAME = "flight_survey_errors"
-DPH = rotation.DEG_PER_H_RADPS
+DPH = units.DEG_PER_H_RADPS
 
 
 @pytest.fixture(scope="module")

@@ -16,14 +16,14 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pospp import earth, rotation
+from pospp import earth, rotation, units
 from pospp.io.mcap_reader import read_flight_log
 from pospp.nav import error_model as em
 from pospp.nav import strapdown
 
 pytestmark = pytest.mark.reference
 
-ARCSEC = rotation.ARCSEC_RAD
+ARCSEC = units.ARCSEC_RAD
 
 
 def test_vehicle_errorfree_closes_from_the_truths_first_state(reference_cases):
@@ -93,8 +93,8 @@ def test_flight_survey_static_injected_biases_have_the_documented_signs(referenc
     t_s = (t_ns - epoch_ns) * 1e-9
     dth = imu.w_ib_b_radps[keep] * dt[:, None]
     dv = imu.f_ib_b_mps2[keep] * dt[:, None]
-    b_g = np.asarray(params["imu_errors"]["gyro_bias_dph"]) * rotation.DEG_PER_H_RADPS
-    b_a = np.asarray(params["imu_errors"]["accel_bias_ug"]) * 1e-6 * earth.STANDARD_GRAVITY_MPS2
+    b_g = np.asarray(params["imu_errors"]["gyro_bias_dph"]) * units.DEG_PER_H_RADPS
+    b_a = np.asarray(params["imu_errors"]["accel_bias_ug"]) * 1e-6 * units.G0_MPS2
     r0 = truth.iloc[0]
     x0 = strapdown.NavState.from_euler(
         np.radians(r0.lat_deg), np.radians(r0.lon_deg), r0.height_m,

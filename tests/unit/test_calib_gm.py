@@ -15,7 +15,7 @@ import pytest
 from _gm_mission import run_once
 from _truth_imu import rhumb_line
 
-from pospp import rotation
+from pospp import rotation, units
 from pospp.calib.replay import ImuIncrements, reference_from_trajectory, replay_leg
 from pospp.calib.segment import Leg
 from pospp.calib.solve import _gm_covariance, calibrate, gm_noise_operator, noise_basis
@@ -23,7 +23,7 @@ from pospp.calib.stage import calibrate_flight
 from pospp.nav.error_model import BG
 from pospp.nav.strapdown import Trajectory
 
-DPH = rotation.DEG_PER_H_RADPS
+DPH = units.DEG_PER_H_RADPS
 LAT = np.radians(40.0)
 H_M = 2600.0
 V_MPS = 60.0

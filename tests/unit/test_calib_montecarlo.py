@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pospp import rotation
+from pospp import units
 from pospp.calib.compensate import compensate_legs
 from pospp.calib.replay import ImuIncrements, reference_from_trajectory, replay_leg
 from pospp.calib.segment import find_legs
@@ -27,7 +27,7 @@ from pospp.sim.api import ImuErrorModel, simulate
 
 pytestmark = pytest.mark.slow
 
-DPH = rotation.DEG_PER_H_RADPS
+DPH = units.DEG_PER_H_RADPS
 SEEDS = range(8)
 DURATION_S = {"vehicle": 1300.0, "flight": 2350.0}
 RATE_HZ = {"vehicle": 50.0, "flight": 25.0, "grid": 25.0}

@@ -14,14 +14,14 @@ import numpy as np
 import pytest
 from _truth_imu import rhumb_line, weaving_flight, weaving_truth_state
 
-from pospp import rotation
+from pospp import rotation, units
 from pospp.calib.replay import ImuIncrements, reference_from_trajectory, replay_leg
 from pospp.calib.segment import Leg
 from pospp.calib.solve import calibrate, leg_sensitivities
 from pospp.nav.strapdown import Trajectory
 
-DPH = rotation.DEG_PER_H_RADPS
-ASEC = rotation.ARCSEC_RAD
+DPH = units.DEG_PER_H_RADPS
+ASEC = units.ARCSEC_RAD
 LAT = np.radians(40.0)
 H_M = 2600.0
 V_MPS = 60.0

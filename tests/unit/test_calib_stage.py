@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from _truth_imu import rhumb_line, stationary
 
-from pospp import rotation
+from pospp import rotation, units
 from pospp.calib.observability import condition_grid, observability_table
 from pospp.calib.pairs import PairPolicy
 from pospp.calib.replay import ImuIncrements, reference_from_trajectory
@@ -128,8 +128,8 @@ def test_legs_of_a_few_seconds_never_crash_the_stage(tmp_path):
     # truth is zero: the bias comes out at 3e-5 deg/h (measured; asserted < 1e-3 deg/h), with
     # a sigma that says how little two 8 s legs tell (measured 470 and 780 deg/h)
     assert run.reason == "ok" and run.calibrated and run.pairs[0].used, run.reason
-    assert np.all(np.abs(run.gyro_bias_b_radps) < 1e-3 * rotation.DEG_PER_H_RADPS)
-    sig_dph = run.gyro_bias_sigma_b_radps[0:2] / rotation.DEG_PER_H_RADPS
+    assert np.all(np.abs(run.gyro_bias_b_radps) < 1e-3 * units.DEG_PER_H_RADPS)
+    sig_dph = run.gyro_bias_sigma_b_radps[0:2] / units.DEG_PER_H_RADPS
     assert np.all((sig_dph > 100.0) & np.isfinite(sig_dph)), sig_dph
     # B over 8 s of exact data: errors of the mechanization only (measured 2e-10 m/s)
     assert all(i.vel_before_mps < 1e-6 and i.vel_after_mps < 1e-6 for i in run.improvements)
@@ -153,7 +153,7 @@ def test_causal_compensation_removes_a_known_changing_bias_and_uses_no_later_dat
         def gyro_bias_b_radps(self, c_nb=None):
             return np.zeros(3)
 
-    dph = rotation.DEG_PER_H_RADPS
+    dph = units.DEG_PER_H_RADPS
     tr = rhumb_line(LAT, 1000.0, 60.0, 0.5, 10.0, 340.0)
     n = tr.t_s.size
     mid = 0.5 * (tr.t_s[1:] + tr.t_s[:-1])

@@ -11,12 +11,12 @@ import pytest
 from _truth_imu import rhumb_line, weaving_flight, weaving_truth_state
 from scipy.linalg import expm
 
-from pospp import earth, rotation
+from pospp import earth, rotation, units
 from pospp.nav import closed_form, strapdown
 from pospp.nav import error_model as em
 
-ARCSEC = rotation.ARCSEC_RAD
-UG = 1e-6 * earth.STANDARD_GRAVITY_MPS2
+ARCSEC = units.ARCSEC_RAD
+UG = 1e-6 * units.G0_MPS2
 
 # --- an independent statement of the continuous-time NED navigation equations ------------------
 # x = (lat, lon, h, v_n, C_nb); errors as pospp defines them (computed minus true, phi with
@@ -153,7 +153,7 @@ def leg_300s():
 CASES = {
     "tilt": dict(phi=np.array([60.0, -40.0, 0.0]) * ARCSEC),
     "heading": dict(phi=np.array([0.0, 0.0, math.radians(0.1)])),
-    "gyro_bias": dict(b_g=np.array([0.5, -0.3, 0.2]) * rotation.DEG_PER_H_RADPS),
+    "gyro_bias": dict(b_g=np.array([0.5, -0.3, 0.2]) * units.DEG_PER_H_RADPS),
     "accel_bias": dict(b_a=np.array([100.0, -80.0, 50.0]) * UG),
 }
 
@@ -205,7 +205,7 @@ def test_numerical_transition_beats_the_closed_form_on_a_weaving_leg():
     for phi0, b_g in (
         (np.array([60.0, -40.0, 0.0]) * ARCSEC, np.zeros(3)),
         (np.array([0.0, 0.0, math.radians(0.1)]), np.zeros(3)),
-        (np.zeros(3), np.array([0.5, -0.3, 0.2]) * rotation.DEG_PER_H_RADPS),
+        (np.zeros(3), np.array([0.5, -0.3, 0.2]) * units.DEG_PER_H_RADPS),
     ):
         x_err = strapdown.NavState(lat, 0.0, 1000.0, tr.v_n_mps.copy(), rotation.quat_from_dcm(
             rotation.dcm_from_rotvec(-phi0) @ tr.c_nb))

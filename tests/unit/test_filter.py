@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from pospp import earth, rotation
-from pospp.io.mcap_reader import GnssFixes, GnssVelocities, ImuSamples
 from pospp.nav.filter import FilterOptions, run_integrated_navigation
 from pospp.nav.tuning import tuning_preset
+from pospp.types import GnssFixes, GnssVelocities, ImuSamples
 
 LAT, LON, H = math.radians(45.0), math.radians(7.0), 300.0
 RPY = np.radians([1.5, -2.0, 130.0])
@@ -263,12 +263,11 @@ def test_paper_flight_mission_from_pospp_sim_meets_the_issue_targets():
 
 def test_options_from_pipeline_config():
     from pospp.config import config_from_dict
-    from pospp.nav.filter import options_from_config
 
     cfg = config_from_dict({"gnss": {"pos_sigma_floor_m": 0.2, "use_velocity": False,
                                      "gate_probability": 0.999},
                             "filter": {"smoother": False, "static_alignment_s": 90.0}})
-    opt = options_from_config(cfg)
+    opt = cfg.filter_options()
     assert (opt.pos_sigma_floor_m, opt.use_velocity, opt.gate_probability, opt.smoother) == (
         0.2, False, 0.999, False)
     assert opt.alignment.max_static_alignment_s == 90.0

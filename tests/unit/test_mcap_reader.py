@@ -18,14 +18,9 @@ from mcap.writer import CompressionType, Writer
 
 from pospp.io import ros_messages as rm
 from pospp.io.errors import IngestError
-from pospp.io.mcap_reader import (
-    FLU_TO_FRD,
-    GnssFixes,
-    GnssVelocities,
-    ImuSamples,
-    read_flight_log,
-)
+from pospp.io.mcap_reader import read_flight_log
 from pospp.io.mcap_writer import write_flight_log
+from pospp.types import FLU_TO_FRD, GnssFixes, GnssVelocities, ImuSamples
 
 T0_NS = 1_717_200_000_000_000_000
 G_MPS2 = 9.80665

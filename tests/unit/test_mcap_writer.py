@@ -18,16 +18,16 @@ from hypothesis.extra import numpy as hnp
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from pospp.io.mcap_reader import (
+from pospp.io.mcap_reader import read_flight_log
+from pospp.io.mcap_writer import write_flight_log
+from pospp.types import (
     ENU_TO_NED,
     FLU_TO_FRD,
     GnssFixes,
     GnssVelocities,
     ImuSamples,
     apply_rotation,
-    read_flight_log,
 )
-from pospp.io.mcap_writer import write_flight_log
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_mcap_reader import make_log  # noqa: E402

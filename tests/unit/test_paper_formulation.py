@@ -21,15 +21,15 @@ import pytest
 from _truth_imu import rhumb_line
 from scipy.linalg import expm
 
-from pospp import earth, rotation
+from pospp import earth, rotation, units
 from pospp.calib.replay import ImuIncrements, reference_from_trajectory, replay_leg
 from pospp.calib.segment import Leg
 from pospp.calib.solve import calibrate
 from pospp.nav import closed_form as cf
 from pospp.nav.strapdown import Trajectory
 
-DPH = rotation.DEG_PER_H_RADPS
-ASEC = rotation.ARCSEC_RAD
+DPH = units.DEG_PER_H_RADPS
+ASEC = units.ARCSEC_RAD
 LAT = np.radians(34.25)
 H_M = 2600.0
 V_MPS = 60.0

@@ -14,7 +14,9 @@ import pytest
 import pospp
 from pospp.io import parquet_tables as pt
 from pospp.io.errors import IngestIssue
+from pospp.io.files import sha256_file
 from pospp.outputs import issue_message, messages_table
+from pospp.types import ReferenceTrajectory
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -126,7 +128,7 @@ def test_sha256_file_matches_hashlib_known_value(tmp_path: Path) -> None:
     p = tmp_path / "abc"
     p.write_bytes(b"abc")
     # FIPS 180-2 test vector for "abc"
-    assert pt.sha256_file(p, chunk_bytes=2) == (
+    assert sha256_file(p, chunk_bytes=2) == (
         "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad")
 
 
@@ -205,7 +207,7 @@ def test_ingest_issues_become_messages(tmp_path: Path) -> None:
 def test_reference_trajectory_round_trip(tmp_path: Path) -> None:
     rng = np.random.default_rng(4)
     n = 50
-    ref = pt.ReferenceTrajectory(
+    ref = ReferenceTrajectory(
         time_ns=1_717_200_000_000_000_000 + np.arange(n, dtype=np.int64) * 10**8,
         lat_rad=np.deg2rad(40 + rng.normal(0, 1e-3, n)),
         lon_rad=np.deg2rad(116 + rng.normal(0, 1e-3, n)),

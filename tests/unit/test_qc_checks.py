@@ -18,10 +18,11 @@ import pytest
 from pospp import earth
 from pospp.config import PipelineConfig
 from pospp.io import parquet_tables
-from pospp.io.mcap_reader import FLU_TO_FRD
 from pospp.qc import checks as qc
+from pospp.qc import time_offset
 from pospp.qc.stage import QualityReport, config_problems, qc_columns, worst_status
 from pospp.report.summary import qc_lines
+from pospp.types import FLU_TO_FRD
 
 LAT = math.radians(34.25)
 DPH = math.pi / 180.0 / 3600.0
@@ -163,10 +164,10 @@ def _track(tau_s: float, *, noise_rad: float = 0.0, seed: int = 5):
 
 @pytest.mark.parametrize("tau", [0.0, 0.2, 2.0, -0.5])
 def test_time_offset_from_the_turns(tau):
-    est = qc.estimate_time_offset(*_track(tau, noise_rad=0.002))
+    est = time_offset.estimate_time_offset(*_track(tau, noise_rad=0.002))
     assert est is not None and est.explained > 0.9
     assert abs(est.offset_s - tau) < max(5.0 * est.sigma_s, 0.01), est
-    check = qc.gnss_time_offset(est)
+    check = time_offset.gnss_time_offset(est)
     assert check.passed == (abs(tau) < 0.1)
     if tau == 2.0:
         assert "GNSS lags the IMU by about 2.0 s" in check.suggestion
@@ -176,11 +177,11 @@ def test_time_offset_from_the_turns(tau):
 
 def test_time_offset_not_applicable_without_turns_or_when_flying_sideways():
     t, w_d, tv, v = _track(0.0)
-    assert qc.gnss_time_offset(qc.estimate_time_offset(t, 0.0 * w_d, tv, v[:, [0, 0, 2]]
-                                                       )).passed
+    still = time_offset.estimate_time_offset(t, 0.0 * w_d, tv, v[:, [0, 0, 2]])
+    assert time_offset.gnss_time_offset(still).passed
     # yaw without course change (a multirotor turning on the spot while it flies north)
-    est = qc.estimate_time_offset(t, w_d, tv, np.tile([5.0, 0.0, 0.0], (tv.shape[0], 1)))
-    chk = qc.gnss_time_offset(est)
+    est = time_offset.estimate_time_offset(t, w_d, tv, np.tile([5.0, 0.0, 0.0], (tv.shape[0], 1)))
+    chk = time_offset.gnss_time_offset(est)
     assert chk.passed and "course does not follow" in chk.statistic
 
 

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pospp.report import figures, svg
+from pospp.report import _svg_draw, figures, svg
 from pospp.report.html import render_report
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -113,7 +113,7 @@ def test_decimation_keeps_every_column_extreme() -> None:
     n = 50_000
     px = np.linspace(10.0, 710.0, n)
     py = np.cumsum(rng.normal(size=n))
-    keep = svg._decimate(px, py)
+    keep = _svg_draw._decimate(px, py)
     assert len(keep) < n / 10
     col = np.floor(px)
     for c in np.unique(col)[::37]:  # brute force over a sample of columns

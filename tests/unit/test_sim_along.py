@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pospp import earth, rotation
+from pospp import earth, rotation, units
 from pospp.nav.strapdown import increments_from_rates, integrate
 from pospp.sim.api import simulate_along
 from pospp.sim.profile import parse_profile, plan_mission
@@ -69,7 +69,7 @@ def test_car_along_a_drive_closes_and_follows_the_input(drive):
     att = rotation.angle_between_rad(out.c_nb, rotation.dcm_from_quat(sim.truth.q_nb[1:]))
     assert np.abs(dp).max() < 0.01
     assert np.abs(out.v_n_mps - sim.truth.v_n_mps[1:]).max() < 1e-3
-    assert att.max() / rotation.ARCSEC_RAD < 0.5
+    assert att.max() / units.ARCSEC_RAD < 0.5
 
 
 def test_aircraft_mode_banks_in_turns(drive):

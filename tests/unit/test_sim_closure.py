@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pospp import earth, rotation
+from pospp import earth, rotation, units
 from pospp.io.mcap_reader import read_flight_log
 from pospp.nav.strapdown import increments_from_rates, integrate
 from pospp.sim.api import simulate
@@ -31,7 +31,7 @@ def _errors(out, truth, sl):
                                     truth.lon_rad[sl], truth.height_m[sl])
     dv = out.v_n_mps - truth.v_n_mps[sl]
     att = rotation.angle_between_rad(out.c_nb, rotation.dcm_from_quat(truth.q_nb[sl]))
-    return (np.abs(dp).max(), np.abs(dv).max(), att.max() / rotation.ARCSEC_RAD)
+    return (np.abs(dp).max(), np.abs(dv).max(), att.max() / units.ARCSEC_RAD)
 
 
 def _closure(sim, window_s=None):

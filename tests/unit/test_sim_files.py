@@ -9,14 +9,8 @@ from mcap_ros2.reader import read_ros2_messages
 
 from pospp.io.mcap_reader import read_flight_log
 from pospp.io.parquet_tables import read_reference_trajectory
-from pospp.io.simulation_files import (
-    gnss_model_from_params,
-    imu_error_model_from_params,
-    read_bias_table,
-    read_params,
-    write_simulation,
-)
-from pospp.sim.api import simulate
+from pospp.io.simulation_files import read_bias_table, read_params, write_simulation
+from pospp.sim.api import gnss_model_from_params, imu_error_model_from_params, simulate
 from pospp.sim.gnss import GnssModel
 
 GNSS = GnssModel(rate_hz=2.0, lever_arm_b_m=(0.5, 0.2, -1.2), time_offset_s=0.01,

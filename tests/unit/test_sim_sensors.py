@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pospp.rotation import ARCSEC_RAD, DEG_PER_H_RADPS
 from pospp.sim.imu import exact_increments
 from pospp.sim.profile import parse_profile, plan_mission
-from pospp.sim.sensors import UG_MPS2, ImuErrorModel, apply_imu_errors, grade_names, imu_grade
+from pospp.sim.sensors import ImuErrorModel, apply_imu_errors, grade_names, imu_grade
 from pospp.sim.trajectory import ProfileMotion
+from pospp.units import ARCSEC_RAD, DEG_PER_H_RADPS, UG_MPS2
 
 
 def _static(n, dt):

@@ -11,8 +11,7 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from pospp.io.simulation_files import imu_error_model_from_params
-from pospp.sim.api import simulate
+from pospp.sim.api import imu_error_model_from_params, simulate
 from pospp.sim.profile import parse_profile
 from pospp.sim.sensors import ImuErrorModel, apply_imu_errors, imu_grade, vibration_increments
 

@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 from _truth_imu import TruthImu, oscillating_attitude, rhumb_line, stationary
 
-from pospp import earth, rotation
+from pospp import earth, rotation, units
 from pospp.nav import closed_form, strapdown
 
-ARCSEC = rotation.ARCSEC_RAD
+ARCSEC = units.ARCSEC_RAD
 ARCMIN = 60.0 * ARCSEC
 
 

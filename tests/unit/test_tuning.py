@@ -7,7 +7,7 @@ import math
 import pytest
 
 from pospp.config import ImuConfig
-from pospp.nav.tuning import PRESETS, ImuTuning, tuning_from_config, tuning_preset
+from pospp.nav.tuning import PRESETS, ImuTuning, tuning_preset
 
 
 def test_unit_conversions():
@@ -55,7 +55,7 @@ def test_overrides_are_validated():
 
 def test_from_pipeline_config():
     cfg = ImuConfig(grade="vehicle", accel_bias_sigma_ug=7.0)
-    tun = tuning_from_config(cfg)
+    tun = cfg.tuning()
     assert isinstance(tun, ImuTuning)
     assert tun.accel_bias_sigma_ug == 7.0
     assert tun.gyro_bias_sigma_dph == PRESETS["vehicle"].gyro_bias_sigma_dph

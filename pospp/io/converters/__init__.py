@@ -1,12 +1,15 @@
 """Converters of measured logs to pospp's data contract (MCAP flight log + reference Parquet).
 
-One module per source format; :func:`convert` picks one by name or by the files present and
-returns a :class:`ConversionReport` (no printing: the CLI renders the report). Every converter
-writes through ``pospp.io.mcap_writer.write_flight_log`` (IMU in body FRD, mean rate and specific
-force over the interval ending at the stamp, UTC int64 ns stamps, GNSS lat / lon in rad with
-ellipsoidal height and NED covariances) and ``pospp.io.parquet_tables.
-write_reference_trajectory``. Per-dataset units, frames, time systems and assumptions:
-docs/realdata.md and each module's docstring.
+One module per source format. Converters only parse: :func:`parse` picks one by name or by the
+files present and returns a :class:`ParsedLog` (IMU mean rate and specific force over the
+interval ending at the stamp, UTC int64 ns stamps, GNSS lat / lon in rad with ellipsoidal height
+and NED covariances, the reference trajectory). Where the IMU mounting is unknown the IMU stays in
+sensor axes and ``ParsedLog.mounting`` holds the inputs of its estimate; ``pospp.convert`` (the
+convert command) runs the estimate in the numeric layer (``pospp.nav.mounting``), applies it with
+:func:`apply_mounting`, and writes with :func:`write_parsed` (``write_flight_log`` and
+``write_reference_trajectory``), returning a :class:`ConversionReport` (no printing: the CLI
+renders the report). Per-dataset units, frames, time systems and assumptions: docs/realdata.md
+and each module's docstring.
 
 Formats (``FORMATS`` keys)
 --------------------------
@@ -25,48 +28,56 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from pospp.io.converters._common import ConversionError, ConversionReport
+from pospp.io.converters._common import (
+    ConversionError,
+    ConversionReport,
+    MountingInput,
+    ParsedLog,
+    apply_mounting,
+    write_parsed,
+)
 
-__all__ = ["FORMATS", "ConversionError", "ConversionReport", "convert", "detect_format"]
-
-
-def _ardupilot(src: Path, out: Path, **kw: Any) -> ConversionReport:
-    from pospp.io.converters.ardupilot import convert_ardupilot
-
-    return convert_ardupilot(src, out, **kw)
-
-
-def _comma(src: Path, out: Path, **kw: Any) -> ConversionReport:
-    from pospp.io.converters.comma2k19 import convert_comma2k19
-
-    return convert_comma2k19(src, out, **kw)
+__all__ = ["FORMATS", "ConversionError", "ConversionReport", "MountingInput", "ParsedLog",
+           "apply_mounting", "detect_format", "parse", "write_parsed"]
 
 
-def _quad(src: Path, out: Path, **kw: Any) -> ConversionReport:
-    from pospp.io.converters.ansfl_quadrotor import convert_ansfl_quadrotor
+def _ardupilot(src: Path, **kw: Any) -> ParsedLog:
+    from pospp.io.converters.ardupilot import parse_ardupilot
 
-    return convert_ansfl_quadrotor(src, out, **kw)
-
-
-def _quad_raw(src: Path, out: Path, **kw: Any) -> ConversionReport:
-    from pospp.io.converters.ansfl_dot_raw import convert_ansfl_dot_raw
-
-    return convert_ansfl_dot_raw(src, out, **kw)
+    return parse_ardupilot(src, **kw)
 
 
-def _kfgins(src: Path, out: Path, **kw: Any) -> ConversionReport:
-    from pospp.io.converters.gnss_reference import convert_kfgins_rtk
+def _comma(src: Path, **kw: Any) -> ParsedLog:
+    from pospp.io.converters.comma2k19 import parse_comma2k19
 
-    return convert_kfgins_rtk(src, out, **kw)
-
-
-def _navego(src: Path, out: Path, **kw: Any) -> ConversionReport:
-    from pospp.io.converters.gnss_reference import convert_navego_reference
-
-    return convert_navego_reference(src, out, **kw)
+    return parse_comma2k19(src, **kw)
 
 
-FORMATS: dict[str, Callable[..., ConversionReport]] = {
+def _quad(src: Path, **kw: Any) -> ParsedLog:
+    from pospp.io.converters.ansfl_quadrotor import parse_ansfl_quadrotor
+
+    return parse_ansfl_quadrotor(src, **kw)
+
+
+def _quad_raw(src: Path, **kw: Any) -> ParsedLog:
+    from pospp.io.converters.ansfl_dot_raw import parse_ansfl_dot_raw
+
+    return parse_ansfl_dot_raw(src, **kw)
+
+
+def _kfgins(src: Path, **kw: Any) -> ParsedLog:
+    from pospp.io.converters.gnss_reference import parse_kfgins_rtk
+
+    return parse_kfgins_rtk(src, **kw)
+
+
+def _navego(src: Path, **kw: Any) -> ParsedLog:
+    from pospp.io.converters.gnss_reference import parse_navego_reference
+
+    return parse_navego_reference(src, **kw)
+
+
+FORMATS: dict[str, Callable[..., ParsedLog]] = {
     "ardupilot_csv": _ardupilot,
     "comma2k19": _comma,
     "ansfl_quadrotor": _quad,
@@ -74,7 +85,7 @@ FORMATS: dict[str, Callable[..., ConversionReport]] = {
     "kfgins_rtk": _kfgins,
     "navego_reference": _navego,
 }
-"""Format name -> converter ``(source, out, **options) -> ConversionReport``."""
+"""Format name -> parser ``(source, **options) -> ParsedLog``."""
 
 
 def detect_format(source: str | Path) -> str:
@@ -110,31 +121,19 @@ def detect_format(source: str | Path) -> str:
                           f"{sorted(FORMATS)}")
 
 
-def convert(
-    source_dir_or_file: str | Path,
-    out_mcap: str | Path,
-    *,
-    fmt: str | None = None,
-    **options: Any,
-) -> ConversionReport:
-    """Convert a measured log to an MCAP flight log (and a reference Parquet where it has one).
+def parse(source_dir_or_file: str | Path, *, fmt: str | None = None,
+          **options: Any) -> ParsedLog:
+    """Parse a measured log into the data contract (nothing is written, nothing estimated).
 
     Parameters
     ----------
     source_dir_or_file : path-like
         The dataset folder (or, for the reference-only formats, the file).
-    out_mcap : path-like
-        MCAP to write. A reference goes to ``<stem>.reference.parquet`` beside it; formats
-        without IMU write only that reference (or ``out_mcap`` itself if it ends in .parquet).
     fmt : str, optional
         A key of :data:`FORMATS`; detected from the files when None.
     **options
-        Keyword options of the chosen converter (e.g. ``path=3, imu=2`` for
+        Keyword options of the chosen parser (e.g. ``path=3, imu=2`` for
         ``ansfl_quadrotor``; ``gps_week=`` for ``kfgins_rtk``; ``geoid_undulation_m=``).
-
-    Returns
-    -------
-    ConversionReport
 
     Raises
     ------
@@ -145,6 +144,4 @@ def convert(
     name = fmt if fmt is not None else detect_format(src)
     if name not in FORMATS:
         raise ConversionError(f"unknown format {name!r}; known: {sorted(FORMATS)}")
-    out = Path(out_mcap)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    return FORMATS[name](src, out, **options)
+    return FORMATS[name](src, **options)

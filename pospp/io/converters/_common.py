@@ -16,16 +16,18 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
 from pospp import earth
-from pospp.nav.mounting import MountingEstimate
+from pospp.io.mcap_writer import write_flight_log
+from pospp.io.parquet_tables import write_reference_trajectory
+from pospp.types import GnssFixes, GnssVelocities, ImuSamples, ReferenceTrajectory
 
 GPS_EPOCH_UNIX_S = 315964800
 """1980-01-06T00:00:00 UTC as Unix seconds (start of GPS time)."""
@@ -59,6 +61,107 @@ class ConversionError(ValueError):
     """A source file is missing, malformed or inconsistent; the message names file and fault."""
 
 
+class MountingLike(Protocol):
+    """What the converters read of a mounting estimate (``pospp.nav.mounting.MountingEstimate``
+    is one; io does not import nav)."""
+
+    @property
+    def c_bs(self) -> NDArray: ...
+    @property
+    def rpy_rad(self) -> NDArray: ...
+    @property
+    def tilt_sigma_rad(self) -> float: ...
+    @property
+    def heading_sigma_rad(self) -> float: ...
+    @property
+    def levelling_residual_rad(self) -> float: ...
+    @property
+    def heading_scatter_rad(self) -> float: ...
+
+
+@dataclass(frozen=True)
+class MountingInput:
+    """The parsed data a mounting estimate needs; the converter makes no estimate (issue 17:
+    converters only parse). ``pospp.convert`` passes these to
+    ``pospp.nav.mounting.estimate_mounting`` (same argument names).
+
+    Attributes
+    ----------
+    t_s, f_s_mps2 : (N,), (N, 3)
+        IMU times [s, any origin shared with ``t_vel_s``] and specific force in sensor axes.
+    t_vel_s, v_n_mps : (M,), (M, 3)
+        Velocity times [s] and NED velocity [m/s].
+    lat_rad, height_m : float
+        Where (for gravity).
+    body_rpy_rad : (M, 3) or None
+        Body attitude at ``t_vel_s`` (yaw unwrapped); None: level, yaw along the course.
+    options : dict
+        Keyword options of ``pospp.nav.mounting.MountingOptions`` for this source.
+    apply : bool
+        True: the IMU of the parsed log is in sensor axes and is rotated into body FRD by the
+        estimate; False: the estimate is only reported (a failure becomes a note).
+    description : str
+        What is estimated from what, for the notes.
+    """
+
+    t_s: NDArray
+    f_s_mps2: NDArray
+    t_vel_s: NDArray
+    v_n_mps: NDArray
+    lat_rad: float
+    height_m: float
+    body_rpy_rad: NDArray | None
+    options: dict[str, Any]
+    apply: bool
+    description: str
+
+
+@dataclass(frozen=True)
+class HeadingRateCheck:
+    """Inputs of the timing check run once the body axes are known: the IMU heading rate
+    ``(w_y sin(roll) + w_z cos(roll)) / cos(pitch)`` against the reference yaw rate, both as 1 s
+    moving means, aligned by :func:`lag_by_correlation`. Times [s] on one base."""
+
+    t_imu_s: NDArray
+    t_ref_s: NDArray
+    rpy_ref_rad: NDArray
+    """Reference attitude at ``t_ref_s``, yaw unwrapped."""
+    max_lag_s: float
+
+
+@dataclass(frozen=True)
+class ParsedLog:
+    """A source parsed into the data contract, not yet written (``write_parsed`` writes it).
+
+    ``imu`` is in body FRD, or in sensor axes when ``mounting.apply`` (``apply_mounting``
+    rotates it). The text fields and ``checks`` / ``notes`` / ``warnings`` go to the
+    :class:`ConversionReport`; ``metadata`` to the MCAP, ``reference_metadata`` to the
+    reference Parquet.
+    """
+
+    fmt: str
+    source: str
+    imu: ImuSamples | None
+    fix: GnssFixes | None
+    vel: GnssVelocities | None
+    reference: ReferenceTrajectory | None
+    time_system: str
+    height_datum: str
+    imu_convention: str
+    axes: str
+    metadata: dict[str, str] = field(default_factory=dict)
+    reference_metadata: dict[str, Any] = field(default_factory=dict)
+    imu_frame_id: str = "imu_link"
+    gnss_frame_id: str = "gnss_antenna"
+    checks: dict[str, float] = field(default_factory=dict)
+    notes: tuple[str, ...] = ()
+    warnings: tuple[str, ...] = ()
+    mounting: MountingInput | None = None
+    heading_check: HeadingRateCheck | None = None
+    reference_only_out: bool = False
+    """True for the reference-only formats: ``out`` ending in .parquet is the reference."""
+
+
 @dataclass(frozen=True)
 class ConversionReport:
     """What a converter wrote and what it found (no printing; the CLI renders this).
@@ -87,8 +190,9 @@ class ConversionReport:
         stamp".
     axes : str
         How the source axes map to body FRD.
-    mounting : MountingEstimate or None
-        Estimated sensor -> body rotation, where the mounting was unknown.
+    mounting : MountingLike or None
+        Estimated sensor -> body rotation, where the mounting was unknown (a
+        ``pospp.nav.mounting.MountingEstimate``, made by ``pospp.convert``).
     checks : dict of str to float
         Measured realism figures (names carry units).
     notes, warnings : tuple of str
@@ -110,7 +214,7 @@ class ConversionReport:
     height_datum: str
     imu_convention: str
     axes: str
-    mounting: MountingEstimate | None = None
+    mounting: MountingLike | None = None
     checks: dict[str, float] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
     warnings: tuple[str, ...] = ()
@@ -286,3 +390,96 @@ def lag_by_correlation(
         if c > best[1]:
             best = (float(lag), c)
     return best
+
+
+# --------------------------------------------------------------------------- write
+
+
+def _moving_mean_1s(t_s: NDArray, x: NDArray) -> NDArray:
+    k = max(1, int(round(1.0 / float(np.median(np.diff(t_s))))))
+    return np.convolve(x, np.ones(k) / k, mode="same")
+
+
+def heading_rate_lag(check: HeadingRateCheck, w_ib_b_radps: NDArray) -> tuple[float, float]:
+    """(lag [s], correlation) of the IMU heading rate against the reference yaw rate."""
+    rpy = check.rpy_ref_rad
+    r_i = np.interp(check.t_imu_s, check.t_ref_s, rpy[:, 0])
+    p_i = np.interp(check.t_imu_s, check.t_ref_s, rpy[:, 1])
+    hr = (w_ib_b_radps[:, 1] * np.sin(r_i) + w_ib_b_radps[:, 2] * np.cos(r_i)) / np.cos(p_i)
+    yaw_rate = np.gradient(rpy[:, 2], check.t_ref_s)
+    t0 = check.t_ref_s[0]
+    return lag_by_correlation(
+        check.t_imu_s - t0, _moving_mean_1s(check.t_imu_s, hr), check.t_ref_s - t0,
+        _moving_mean_1s(check.t_ref_s, yaw_rate), max_lag_s=check.max_lag_s, step_s=0.01)
+
+
+def apply_mounting(parsed: ParsedLog, mounting: MountingLike) -> ParsedLog:
+    """Rotate a sensor-axes IMU into body FRD by ``C_bs`` (``f_b = C_bs f_s``), run the
+    heading-rate check, and say so in the axes text, metadata, checks and notes."""
+    if parsed.imu is None or parsed.mounting is None or not parsed.mounting.apply:
+        raise ValueError(f"{parsed.fmt}: no sensor-axes IMU to rotate")
+    c_bs = np.asarray(mounting.c_bs, dtype=float)
+    imu = parsed.imu
+    w_b = imu.w_ib_b_radps @ c_bs.T
+    f_b = imu.f_ib_b_mps2 @ c_bs.T
+    axes = (f"{parsed.axes} rotated to body FRD by the estimated C_bs "
+            f"(rpy_deg {np.degrees(mounting.rpy_rad).round(2).tolist()})")
+    checks = dict(parsed.checks)
+    checks["mean_f_b_z_mps2"] = float(f_b[:, 2].mean())
+    if parsed.heading_check is not None:
+        lag, corr = heading_rate_lag(parsed.heading_check, w_b)
+        checks["imu_lag_vs_reference_s"] = lag
+        checks["heading_rate_correlation"] = corr
+    metadata = {
+        **parsed.metadata, "axes": axes, "c_bs_estimated": repr(np.round(c_bs, 9).tolist()),
+        "mounting_tilt_sigma_deg": f"{np.degrees(mounting.tilt_sigma_rad):.3f}",
+        "mounting_heading_sigma_deg": f"{np.degrees(mounting.heading_sigma_rad):.3f}",
+    }
+    note = (f"{parsed.mounting.description} (levelling residual "
+            f"{np.degrees(mounting.levelling_residual_rad):.2f} deg, heading scatter "
+            f"{np.degrees(mounting.heading_scatter_rad):.2f} deg)")
+    return replace(
+        parsed, imu=ImuSamples(imu.time_ns, w_b, f_b, imu.frame_id), axes=axes,
+        metadata=metadata, checks=checks, notes=(note, *parsed.notes),
+    )
+
+
+def write_parsed(parsed: ParsedLog, out: str | Path, *,
+                 mounting: MountingLike | None = None) -> ConversionReport:
+    """Write the MCAP (when the source has an IMU) and the reference Parquet (when it has one).
+
+    ``out`` is the MCAP; the reference goes to ``<stem>.reference.parquet`` beside it. For the
+    reference-only formats, ``out`` ending in .parquet is the reference itself.
+    """
+    out_p = Path(out)
+    mcap_path = ref_path = None
+    if parsed.imu is not None and parsed.fix is not None:
+        mcap_path = write_flight_log(out_p, parsed.imu, parsed.fix, parsed.vel,
+                                     imu_frame_id=parsed.imu_frame_id,
+                                     gnss_frame_id=parsed.gnss_frame_id,
+                                     metadata=parsed.metadata)
+    if parsed.reference is not None:
+        target = out_p if parsed.reference_only_out and out_p.suffix == ".parquet" \
+            else reference_path_for(mcap_path or out_p)
+        ref_path = write_reference_trajectory(target, parsed.reference,
+                                              metadata=parsed.reference_metadata)
+    spans = (parsed.imu, parsed.fix) if parsed.imu is not None else (parsed.reference,)
+    streams = [x.time_ns for x in spans if x is not None]
+    gnss_ns = parsed.fix.time_ns if parsed.fix is not None else (
+        parsed.reference.time_ns if parsed.reference is not None else np.zeros(0, np.int64))
+    return ConversionReport(
+        fmt=parsed.fmt, source=parsed.source,
+        mcap_path=None if mcap_path is None else str(mcap_path),
+        reference_path=None if ref_path is None else str(ref_path),
+        n_imu=0 if parsed.imu is None else len(parsed.imu),
+        n_fix=0 if parsed.fix is None else len(parsed.fix),
+        n_vel=0 if parsed.vel is None else len(parsed.vel),
+        n_reference=0 if parsed.reference is None else len(parsed.reference),
+        imu_rate_hz=float("nan") if parsed.imu is None else median_rate_hz(parsed.imu.time_ns),
+        gnss_rate_hz=median_rate_hz(gnss_ns),
+        start_ns=int(min(int(t[0]) for t in streams)) if streams else None,
+        end_ns=int(max(int(t[-1]) for t in streams)) if streams else None,
+        time_system=parsed.time_system, height_datum=parsed.height_datum,
+        imu_convention=parsed.imu_convention, axes=parsed.axes, mounting=mounting,
+        checks=parsed.checks, notes=parsed.notes, warnings=parsed.warnings,
+    )

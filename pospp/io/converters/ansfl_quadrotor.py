@@ -8,8 +8,9 @@ Conversion
 ----------
 - IMU: Xsens DOT sensor axes s (not stated relative to the airframe; z is roughly up: about
   +9.5 m/s^2 on z in level flight), specific force m/s^2, rate deg/s -> rad/s. The mounting
-  C_bs of the chosen unit is unknown and is estimated with :mod:`pospp.nav.mounting` from the
-  windows of all four paths together (one mounting per unit for the whole flight), using the
+  C_bs of the chosen unit is unknown; :func:`unit_mounting_input` gathers the windows of all
+  four paths together for ``pospp.convert`` to estimate it with :mod:`pospp.nav.mounting`
+  (one mounting per unit for the whole flight), using the
   drone's own attitude (roll, pitch, compass heading) as the body attitude, since the drone does
   not always fly nose first (path 4 flies backwards). The IMU is written in body FRD, rotated by
   that estimate; the estimate and its quality figures go into the report and the MCAP metadata.
@@ -44,29 +45,30 @@ import pandas as pd
 from pospp import earth
 from pospp.io.converters._common import (
     ConversionError,
-    ConversionReport,
+    HeadingRateCheck,
+    MountingInput,
+    ParsedLog,
     check_gravity,
     check_increasing,
     diag_cov,
-    lag_by_correlation,
-    median_rate_hz,
     read_csv,
-    reference_path_for,
     require_file,
     seconds_to_ns,
 )
-from pospp.io.mcap_reader import GnssFixes, GnssVelocities, ImuSamples
-from pospp.io.mcap_writer import write_flight_log
-from pospp.io.parquet_tables import ReferenceTrajectory, write_reference_trajectory
-from pospp.nav.mounting import MountingEstimate, MountingOptions, estimate_mounting
+from pospp.types import GnssFixes, GnssVelocities, ImuSamples, ReferenceTrajectory
 
-__all__ = ["convert_ansfl_quadrotor", "estimate_unit_mounting"]
+__all__ = ["parse_ansfl_quadrotor", "unit_mounting_input"]
 
 _GT_COLS = ["time(millisecond)", "latitude", "longitude", "altitude_above_seaLevel(meters)",
             "xSpeed(m/s)", "ySpeed(m/s)", "zSpeed(m/s)", "roll(degrees)", "pitch(degrees)",
             "compass_heading(degrees)"]
 _IMU_COLS = ["time", "Acc_X", "Acc_Y", "Acc_Z", "Gyr_X", "Gyr_Y", "Gyr_Z"]
 
+
+
+QUADROTOR_MOUNTING_OPTIONS = {"window_s": 0.5, "max_static_accel_mps2": 0.3,
+                              "min_horizontal_accel_mps2": 0.3, "min_speed_mps": 0.0}
+"""Mounting-estimate options for the DOT units on the quadrotor (hover and short pushes)."""
 
 
 def dji_height(h_m: np.ndarray, geoid_undulation_m: float | None
@@ -172,10 +174,8 @@ def _gt_arrays(gt: pd.DataFrame) -> dict[str, np.ndarray]:
     }
 
 
-def estimate_unit_mounting(
-    source: str | Path, imu: int | str = 1, *, options: MountingOptions | None = None
-) -> MountingEstimate:
-    """Estimate C_bs of one DOT unit (or the average) from all processed paths together.
+def unit_mounting_input(source: str | Path, imu: int | str = 1) -> MountingInput:
+    """The mounting-estimate inputs of one DOT unit (or the average) from all processed paths.
 
     Windows of every path are stacked on the common log time base; the body attitude is the
     drone's roll, pitch and compass heading (module docstring).
@@ -193,46 +193,43 @@ def estimate_unit_mounting(
         rr.append(a["rpy"])
         if lat0 is None:
             lat0, h0 = float(a["lat_rad"][0]), float(a["h_m"][0])
-    if not ts:
+    if not ts or lat0 is None or h0 is None:
         raise ConversionError(f"{root / 'processed'}: no path_N folders")
-    opt = options or MountingOptions(window_s=0.5, max_static_accel_mps2=0.3,
-                                     min_horizontal_accel_mps2=0.3, min_speed_mps=0.0)
     rpy = np.concatenate(rr)
     rpy[:, 2] = np.unwrap(rpy[:, 2])
-    return estimate_mounting(np.concatenate(ts), np.concatenate(fs), np.concatenate(tv),
-                             np.concatenate(vv), lat_rad=lat0, height_m=h0, body_rpy_rad=rpy,
-                             options=opt)
+    return MountingInput(
+        t_s=np.concatenate(ts), f_s_mps2=np.concatenate(fs), t_vel_s=np.concatenate(tv),
+        v_n_mps=np.concatenate(vv), lat_rad=lat0, height_m=h0, body_rpy_rad=rpy,
+        options=dict(QUADROTOR_MOUNTING_OPTIONS), apply=True,
+        description=f"unit {imu}: mounting estimated from all paths")
 
 
-def convert_ansfl_quadrotor(
+def parse_ansfl_quadrotor(
     source: str | Path,
-    out_mcap: str | Path,
     *,
     path: int | None = None,
     imu: int | str = 1,
     geoid_undulation_m: float | None = None,
-    mounting: MountingEstimate | None = None,
-) -> ConversionReport:
-    """Convert one processed path of the ANSFL quadrotor set to MCAP + reference Parquet.
+) -> ParsedLog:
+    """Parse one processed path of the ANSFL quadrotor set into the data contract.
+
+    The IMU stays in the DOT's sensor axes; ``mounting`` holds the inputs of its estimate (all
+    paths of the unit) and ``pospp.convert`` rotates it into body FRD.
 
     Parameters
     ----------
     source : path-like
         The dataset folder (``processed/``, ``raw/``) or one ``processed/path_N`` folder.
-    out_mcap : path-like
-        MCAP to write; the reference goes to ``<stem>.reference.parquet`` beside it.
     path : int, optional
         Path number 1..4 (default 1, or the folder's own number).
     imu : int or "avg"
         DOT unit 1..4, or "avg" for the authors' average of the four.
     geoid_undulation_m : float, optional
         Added to the logged altitude when given (module docstring).
-    mounting : MountingEstimate, optional
-        A mounting to apply instead of estimating one (e.g. from a longer recording).
 
     Returns
     -------
-    ConversionReport
+    ParsedLog
     """
     if imu != "avg" and imu not in (1, 2, 3, 4):
         raise ValueError(f"imu must be 1, 2, 3, 4 or 'avg'; got {imu!r}")
@@ -243,74 +240,49 @@ def convert_ansfl_quadrotor(
     f_s = im[["Acc_X", "Acc_Y", "Acc_Z"]].to_numpy(dtype=float)
     w_s = np.radians(im[["Gyr_X", "Gyr_Y", "Gyr_Z"]].to_numpy(dtype=float))
     g_med = check_gravity(imu_p, f_s, "Acc_* expected in m/s^2")
-    if mounting is None:
-        mounting = estimate_unit_mounting(root, imu)
-    c_bs = mounting.c_bs
-    f_b = f_s @ c_bs.T
-    w_b = w_s @ c_bs.T
     offset_s, half_width_s = _log_to_utc_offset_s(root, a["log_s"][0], a["log_s"][-1])
     imu_ns = seconds_to_ns(t_imu_log + offset_s)
     gt_ns = seconds_to_ns(a["log_s"] + offset_s)
-    checks: dict[str, float] = {"gravity_median_mps2": g_med,
-                                "utc_offset_half_width_s": half_width_s}
-    checks["mean_f_b_z_mps2"] = float(f_b[:, 2].mean())
-    # timing / sign check: IMU heading rate versus the reference yaw rate
     rpy = a["rpy"]
-    r_i = np.interp(t_imu_log, a["log_s"], rpy[:, 0])
-    p_i = np.interp(t_imu_log, a["log_s"], rpy[:, 1])
-    hr = (w_b[:, 1] * np.sin(r_i) + w_b[:, 2] * np.cos(r_i)) / np.cos(p_i)
-    yaw_rate = np.gradient(np.unwrap(rpy[:, 2]), a["log_s"])
-    # 1 s moving means: the vibration of the airframe swamps the raw rates
-    k_imu = max(1, int(round(1.0 / float(np.median(np.diff(t_imu_log))))))
-    k_ref = max(1, int(round(1.0 / float(np.median(np.diff(a["log_s"]))))))
-    lag, corr = lag_by_correlation(
-        t_imu_log, np.convolve(hr, np.ones(k_imu) / k_imu, mode="same"), a["log_s"],
-        np.convolve(yaw_rate, np.ones(k_ref) / k_ref, mode="same"), max_lag_s=0.5, step_s=0.01)
-    checks["imu_lag_vs_reference_s"] = lag
-    checks["heading_rate_correlation"] = corr
+    rpy_unwrapped = rpy.copy()
+    rpy_unwrapped[:, 2] = np.unwrap(rpy[:, 2])
     fix, vel, h, datum, warnings = dji_gnss(a, gt_ns, geoid_undulation_m)
-    n = gt_ns.size
-    samples = ImuSamples(time_ns=imu_ns, w_ib_b_radps=w_b, f_ib_b_mps2=f_b,
+    samples = ImuSamples(time_ns=imu_ns, w_ib_b_radps=w_s, f_ib_b_mps2=f_s,
                          frame_id=f"xsens_dot_{imu}")
     ref = ReferenceTrajectory(time_ns=gt_ns, lat_rad=a["lat_rad"], lon_rad=a["lon_rad"],
                               height_m=h, v_n_mps=a["v_n"], rpy_rad=rpy)
     time_system = ("UTC ns since the Unix epoch: Airdata log time + (datetime(utc) - log "
                    f"time) offset, +-{half_width_s:.2f} s")
     imu_conv = "DOT SDI output taken as the mean over the interval ending at the stamp"
-    axes = (f"Xsens DOT sensor axes rotated to body FRD by the estimated C_bs "
-            f"(rpy_deg {np.degrees(mounting.rpy_rad).round(2).tolist()})")
     meta = {
         "converter": "pospp.io.converters.ansfl_quadrotor", "source": str(imu_p),
         "path": str(p), "imu": str(imu), "time_system": time_system, "height_datum": datum,
-        "imu_convention": imu_conv, "axes": axes,
-        "c_bs_estimated": repr(np.round(c_bs, 9).tolist()),
-        "mounting_tilt_sigma_deg": f"{np.degrees(mounting.tilt_sigma_rad):.3f}",
-        "mounting_heading_sigma_deg": f"{np.degrees(mounting.heading_sigma_rad):.3f}",
+        "imu_convention": imu_conv,
         "gnss": "DJI RTK GNSS/INS solution (also the reference)",
     }
-    out = write_flight_log(out_mcap, samples, fix, vel, imu_frame_id=samples.frame_id,
-                           gnss_frame_id="dji_rtk", metadata=meta)
-    ref_path = write_reference_trajectory(
-        reference_path_for(out), ref,
-        metadata={"source": str(root / "processed" / f"path_{p}" / "GTExtended.csv"),
-                  "frame": "DJI body FRD w.r.t. NED (compass heading as yaw)",
-                  "time_system": time_system, "height_datum": datum})
     lat0 = float(a["lat_rad"][0])
-    checks["reference_speed_max_mps"] = float(np.hypot(a["v_n"][:, 0], a["v_n"][:, 1]).max())
-    checks["gravity_model_mps2"] = float(earth.normal_gravity_mps2(lat0, float(h[0])))
-    return ConversionReport(
-        fmt="ansfl_quadrotor", source=str(root), mcap_path=str(out), reference_path=str(ref_path),
-        n_imu=len(samples), n_fix=n, n_vel=n, n_reference=len(ref),
-        imu_rate_hz=median_rate_hz(imu_ns), gnss_rate_hz=median_rate_hz(gt_ns),
-        start_ns=int(min(imu_ns[0], gt_ns[0])), end_ns=int(max(imu_ns[-1], gt_ns[-1])),
-        time_system=time_system, height_datum=datum, imu_convention=imu_conv, axes=axes,
-        mounting=mounting, checks=checks, warnings=tuple(warnings),
+    checks: dict[str, float] = {
+        "gravity_median_mps2": g_med, "utc_offset_half_width_s": half_width_s,
+        "reference_speed_max_mps": float(np.hypot(a["v_n"][:, 0], a["v_n"][:, 1]).max()),
+        "gravity_model_mps2": float(earth.normal_gravity_mps2(lat0, float(h[0]))),
+    }
+    mounting = unit_mounting_input(root, imu)
+    return ParsedLog(
+        fmt="ansfl_quadrotor", source=str(root), imu=samples, fix=fix, vel=vel, reference=ref,
+        time_system=time_system, height_datum=datum, imu_convention=imu_conv,
+        axes="Xsens DOT sensor axes", metadata=meta, reference_metadata={
+            "source": str(root / "processed" / f"path_{p}" / "GTExtended.csv"),
+            "frame": "DJI body FRD w.r.t. NED (compass heading as yaw)",
+            "time_system": time_system, "height_datum": datum},
+        imu_frame_id=samples.frame_id, gnss_frame_id="dji_rtk", checks=checks,
+        warnings=tuple(warnings),
         notes=tuple(x for x in (
-            f"path {p}, unit {imu}; mounting estimated from all paths (levelling residual "
-            f"{np.degrees(mounting.levelling_residual_rad):.2f} deg, heading scatter "
-            f"{np.degrees(mounting.heading_scatter_rad):.2f} deg)",
+            f"path {p}",
             "IMUAvg is the authors' average of the raw outputs of the four units; their "
             "estimated mountings agree within about 2 deg (docs/realdata.md)"
             if imu == "avg" else "") if x),
+        mounting=mounting,
+        heading_check=HeadingRateCheck(t_imu_s=t_imu_log, t_ref_s=a["log_s"],
+                                       rpy_ref_rad=rpy_unwrapped, max_lag_s=0.5),
     )
 

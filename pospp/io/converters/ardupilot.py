@@ -33,51 +33,101 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
 
 from pospp.io.converters._common import (
     SECONDS_PER_WEEK,
     ConversionError,
-    ConversionReport,
+    ParsedLog,
     check_gravity,
     check_increasing,
     diag_cov,
     gps_to_unix_ns,
     lag_by_correlation,
-    median_rate_hz,
     read_csv,
     require_file,
 )
-from pospp.io.mcap_reader import GnssFixes, GnssVelocities, ImuSamples
-from pospp.io.mcap_writer import write_flight_log
+from pospp.types import GnssFixes, GnssVelocities, ImuSamples
 
-__all__ = ["convert_ardupilot"]
+__all__ = ["parse_ardupilot"]
 
 UERE_M = 3.0
 """Nominal user equivalent range error of a 2013 single-frequency receiver [m] (assumption)."""
 
 
-def _heading_rate(t_s, w, att_t_s, roll_deg, pitch_deg):
+def _heading_rate(t_s: NDArray, w: NDArray, att_t_s: NDArray, roll_deg: NDArray,
+                  pitch_deg: NDArray) -> NDArray:
     r = np.radians(np.interp(t_s, att_t_s, roll_deg))
     p = np.radians(np.interp(t_s, att_t_s, pitch_deg))
     return (w[:, 1] * np.sin(r) + w[:, 2] * np.cos(r)) / np.cos(p)
 
 
-def convert_ardupilot(
+def _gnss_lag_s(t_boot: NDArray, w: NDArray, att: pd.DataFrame, t_meas_boot: NDArray,
+                spd: NDArray, crs: NDArray, min_speed_mps: float, checks: dict[str, float],
+                warnings: list[str]) -> float:
+    """Delay of the GNSS epochs ``t_meas_boot`` (boot base, before latency) that aligns the
+    GNSS course rate with the IMU heading rate over the fast flight (NaN and a warning when
+    there is too little of it)."""
+    att_t = att["time_boot_ms"].to_numpy(dtype=float) * 1e-3
+    hr = _heading_rate(t_boot, w, att_t, att["roll_deg"].to_numpy(float),
+                       att["pitch_deg"].to_numpy(float))
+    course_rate = np.gradient(np.unwrap(crs), t_meas_boot)
+    fast = spd > min_speed_mps
+    if fast.sum() <= 50:
+        warnings.append("too little fast flight to estimate the GNSS latency")
+        return float("nan")
+    lo, hi = t_meas_boot[fast][0], t_meas_boot[fast][-1]
+    sel = (t_meas_boot >= lo) & (t_meas_boot <= hi)
+    lag, corr = lag_by_correlation(t_boot, hr, t_meas_boot[sel], course_rate[sel],
+                                   max_lag_s=1.0)
+    checks["gnss_lag_estimate_s"] = lag
+    checks["heading_rate_correlation"] = corr
+    return lag
+
+
+def _gnss_records(gps: pd.DataFrame, fix_ns: NDArray, v_n: NDArray,
+                  geoid_undulation_m: float | None, warnings: list[str]
+                  ) -> tuple[GnssFixes, GnssVelocities, str]:
+    """Fixes (sigma from HDOP x ``UERE_M``), velocities (nominal sigma) and the height datum
+    (MSL unless the geoid undulation is given: then a warning)."""
+    height = gps["alt_m"].to_numpy(dtype=float)
+    if geoid_undulation_m is None:
+        datum = "mean sea level (u-blox hMSL); geoid undulation NOT applied"
+        warnings.append("height_m is above mean sea level, not the WGS-84 ellipsoid: no geoid "
+                        "undulation known for the site; pass geoid_undulation_m")
+    else:
+        height = height + geoid_undulation_m
+        datum = f"WGS-84 ellipsoid = MSL + N, N = {geoid_undulation_m} m (given)"
+    hdop = gps["hdop"].to_numpy(dtype=float)
+    s_h = hdop * UERE_M / math.sqrt(2.0)
+    n_fix = len(gps)
+    fix = GnssFixes(
+        time_ns=fix_ns,
+        lat_rad=np.radians(gps["lat_deg"].to_numpy(dtype=float)),
+        lon_rad=np.radians(gps["lon_deg"].to_numpy(dtype=float)),
+        height_m=height,
+        pos_cov_ned_m2=diag_cov(np.column_stack([s_h, s_h, 2.0 * s_h]), n_fix),
+        status=np.zeros(n_fix, dtype=np.int8),
+    )
+    vel = GnssVelocities(time_ns=fix_ns, v_n_mps=v_n,
+                         vel_cov_ned_m2ps2=diag_cov([0.3, 0.3, 0.5], n_fix))
+    return fix, vel, datum
+
+
+def parse_ardupilot(
     source: str | Path,
-    out_mcap: str | Path,
     *,
     geoid_undulation_m: float | None = None,
     gnss_latency_s: float | None = None,
     min_speed_for_lag_mps: float = 8.0,
-) -> ConversionReport:
-    """Convert the ArduPlane CSV export in folder ``source`` to an MCAP flight log.
+) -> ParsedLog:
+    """Parse the ArduPlane CSV export in folder ``source`` into the data contract.
 
     Parameters
     ----------
     source : path-like
         Folder with ``imu.csv``, ``gps.csv`` and ``att.csv``.
-    out_mcap : path-like
-        MCAP file to write.
     geoid_undulation_m : float, optional
         N (ellipsoid minus MSL) at the site [m]; when None the MSL height is written.
     gnss_latency_s : float, optional
@@ -88,7 +138,7 @@ def convert_ardupilot(
 
     Returns
     -------
-    ConversionReport
+    ParsedLog
     """
     src = Path(source)
     imu_p, gps_p, att_p = (require_file(src, n) for n in ("imu.csv", "gps.csv", "att.csv"))
@@ -125,50 +175,16 @@ def convert_ardupilot(
     crs = np.radians(gps["ground_course_deg"].to_numpy(dtype=float))
     v_n = np.column_stack([spd * np.cos(crs), spd * np.sin(crs),
                            gps["vz_m_s"].to_numpy(dtype=float)])
-    # latency: align GNSS course rate with the IMU heading rate (both on the boot time base)
-    t_meas_boot = gps_s - offset_s  # GNSS epochs on the boot base, before latency
-    att_t = att["time_boot_ms"].to_numpy(dtype=float) * 1e-3
-    hr = _heading_rate(t_boot, w, att_t, att["roll_deg"].to_numpy(float),
-                       att["pitch_deg"].to_numpy(float))
-    course_rate = np.gradient(np.unwrap(crs), t_meas_boot)
-    fast = spd > min_speed_for_lag_mps
     checks: dict[str, float] = {"gravity_median_mps2": g_med}
-    if fast.sum() > 50:
-        lo, hi = t_meas_boot[fast][0], t_meas_boot[fast][-1]
-        sel = (t_meas_boot >= lo) & (t_meas_boot <= hi)
-        lag, corr = lag_by_correlation(t_boot, hr, t_meas_boot[sel], course_rate[sel],
-                                       max_lag_s=1.0)
-        checks["gnss_lag_estimate_s"] = lag
-        checks["heading_rate_correlation"] = corr
-    else:
-        lag = float("nan")
-        warnings.append("too little fast flight to estimate the GNSS latency")
+    # latency: align GNSS course rate with the IMU heading rate (both on the boot time base)
+    lag = _gnss_lag_s(t_boot, w, att, gps_s - offset_s, spd, crs, min_speed_for_lag_mps,
+                      checks, warnings)
     latency = gnss_latency_s if gnss_latency_s is not None else (lag if np.isfinite(lag) else 0.0)
     checks["gnss_latency_applied_s"] = latency
     imu_gps_s = t_boot + offset_s + latency
     imu_ns = gps_to_unix_ns(imu_gps_s)
     fix_ns = gps_to_unix_ns(gps_s)
-    height = gps["alt_m"].to_numpy(dtype=float)
-    if geoid_undulation_m is None:
-        datum = "mean sea level (u-blox hMSL); geoid undulation NOT applied"
-        warnings.append("height_m is above mean sea level, not the WGS-84 ellipsoid: no geoid "
-                        "undulation known for the site; pass geoid_undulation_m")
-    else:
-        height = height + geoid_undulation_m
-        datum = f"WGS-84 ellipsoid = MSL + N, N = {geoid_undulation_m} m (given)"
-    hdop = gps["hdop"].to_numpy(dtype=float)
-    s_h = hdop * UERE_M / math.sqrt(2.0)
-    n_fix = len(gps)
-    fix = GnssFixes(
-        time_ns=fix_ns,
-        lat_rad=np.radians(gps["lat_deg"].to_numpy(dtype=float)),
-        lon_rad=np.radians(gps["lon_deg"].to_numpy(dtype=float)),
-        height_m=height,
-        pos_cov_ned_m2=diag_cov(np.column_stack([s_h, s_h, 2.0 * s_h]), n_fix),
-        status=np.zeros(n_fix, dtype=np.int8),
-    )
-    vel = GnssVelocities(time_ns=fix_ns, v_n_mps=v_n,
-                         vel_cov_ned_m2ps2=diag_cov([0.3, 0.3, 0.5], n_fix))
+    fix, vel, datum = _gnss_records(gps, fix_ns, v_n, geoid_undulation_m, warnings)
     samples = ImuSamples(time_ns=imu_ns, w_ib_b_radps=w, f_ib_b_mps2=f, frame_id="base_link")
     time_system = ("UTC ns since the Unix epoch: IMU boot ms + median(GPS - boot) + GNSS "
                    "latency, GPS -> UTC with the leap seconds in force (16 s)")
@@ -180,13 +196,9 @@ def convert_ardupilot(
         "axes": axes, "gnss_latency_s": f"{latency:.4f}",
         "gnss_sigma": f"pos HDOP*{UERE_M}/sqrt2 m horizontal, x2 vertical; vel 0.3/0.5 m/s",
     }
-    out = write_flight_log(out_mcap, samples, fix, vel, imu_frame_id="base_link",
-                           metadata=meta)
-    return ConversionReport(
-        fmt="ardupilot_csv", source=str(src), mcap_path=str(out), reference_path=None,
-        n_imu=len(samples), n_fix=n_fix, n_vel=n_fix, n_reference=0,
-        imu_rate_hz=median_rate_hz(imu_ns), gnss_rate_hz=median_rate_hz(fix_ns),
-        start_ns=int(min(imu_ns[0], fix_ns[0])), end_ns=int(max(imu_ns[-1], fix_ns[-1])),
+    return ParsedLog(
+        fmt="ardupilot_csv", source=str(src), imu=samples, fix=fix, vel=vel, reference=None,
         time_system=time_system, height_datum=datum, imu_convention=imu_conv, axes=axes,
-        checks=checks, notes=tuple(notes), warnings=tuple(warnings),
+        metadata=meta, imu_frame_id="base_link", checks=checks, notes=tuple(notes),
+        warnings=tuple(warnings),
     )

@@ -35,50 +35,98 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 
 from pospp import earth, rotation
 from pospp.io.converters._common import (
     SECONDS_PER_WEEK,
     ConversionError,
-    ConversionReport,
+    MountingInput,
+    ParsedLog,
     check_gravity,
     check_increasing,
     diag_cov,
     gps_to_unix_ns,
-    median_rate_hz,
     read_csv,
-    reference_path_for,
     require_file,
     velocity_from_positions,
 )
-from pospp.io.mcap_reader import GnssFixes, GnssVelocities, ImuSamples
-from pospp.io.mcap_writer import write_flight_log
-from pospp.io.parquet_tables import ReferenceTrajectory, write_reference_trajectory
-from pospp.nav.mounting import MountingOptions, estimate_mounting
+from pospp.types import GnssFixes, GnssVelocities, ImuSamples, ReferenceTrajectory
 
-__all__ = ["convert_comma2k19"]
+__all__ = ["parse_comma2k19"]
 
 
-def convert_comma2k19(
+def _pose_reference(pose: pd.DataFrame, pose_p: Path, ref_ns: np.ndarray,
+                    checks: dict[str, float]) -> ReferenceTrajectory:
+    """The ECEF pose records as a reference trajectory (NED velocity, z-y-x attitude); the
+    quaternion's forward axis must lie along the velocity."""
+    r_e = pose[["ecef_x_m", "ecef_y_m", "ecef_z_m"]].to_numpy(dtype=float)
+    v_e = pose[["ecef_vx_m_s", "ecef_vy_m_s", "ecef_vz_m_s"]].to_numpy(dtype=float)
+    lat, lon, h = earth.ecef_to_llh(r_e)
+    c_en = earth.dcm_en(lat, lon)
+    v_n_ref = np.einsum("nji,nj->ni", c_en, v_e)
+    q_eb = pose[["q_w", "q_x", "q_y", "q_z"]].to_numpy(dtype=float)
+    c_eb = rotation.dcm_from_quat(q_eb)
+    fwd_cos = float(np.median(np.sum(c_eb[:, :, 0] * v_e, axis=1)
+                              / np.linalg.norm(v_e, axis=1)))
+    if fwd_cos < 0.9:
+        raise ConversionError(f"{pose_p}: the quaternion's forward axis is not along the "
+                              f"velocity (median cosine {fwd_cos:.3f}); convention changed?")
+    checks["reference_forward_axis_cosine"] = fwd_cos
+    c_nb = np.einsum("nji,njk->nik", c_en, c_eb)
+    ref = ReferenceTrajectory(time_ns=ref_ns, lat_rad=lat, lon_rad=lon, height_m=h,
+                              v_n_mps=v_n_ref, rpy_rad=rotation.euler_from_dcm(c_nb))
+    return ref
+
+
+def _ublox_gnss(gnss: pd.DataFrame, gnss_p: Path, fix_ns: np.ndarray,
+                ref: ReferenceTrajectory, checks: dict[str, float]
+                ) -> tuple[GnssFixes, GnssVelocities]:
+    """The u-blox records as fixes and velocities (nominal sigmas; vertical velocity from the
+    heights); alt_m must be ellipsoidal (checked against the reference)."""
+    lat_g = np.radians(gnss["lat_deg"].to_numpy(dtype=float))
+    lon_g = np.radians(gnss["lon_deg"].to_numpy(dtype=float))
+    h_g = gnss["alt_m"].to_numpy(dtype=float)
+    t_fix_s = (fix_ns - fix_ns[0]) * 1e-9
+    h_ref_at_fix = np.interp(t_fix_s, (ref.time_ns - fix_ns[0]) * 1e-9, ref.height_m)
+    checks["ublox_alt_minus_ellipsoidal_ref_m"] = float(np.median(h_g - h_ref_at_fix))
+    if abs(checks["ublox_alt_minus_ellipsoidal_ref_m"]) > 10.0:
+        raise ConversionError(f"{gnss_p}: alt_m differs from the reference's ellipsoidal height "
+                              f"by {checks['ublox_alt_minus_ellipsoidal_ref_m']:.1f} m; is it "
+                              "MSL? (expected ellipsoidal)")
+    spd = gnss["speed_m_s"].to_numpy(dtype=float)
+    brg = np.radians(gnss["bearing_deg"].to_numpy(dtype=float))
+    vd = velocity_from_positions(t_fix_s, lat_g, lon_g, h_g)[:, 2]
+    v_n = np.column_stack([spd * np.cos(brg), spd * np.sin(brg), vd])
+    n_fix = len(fix_ns)
+    fix = GnssFixes(time_ns=fix_ns, lat_rad=lat_g, lon_rad=lon_g, height_m=h_g,
+                    pos_cov_ned_m2=diag_cov([2.0, 2.0, 4.0], n_fix),
+                    status=np.zeros(n_fix, dtype=np.int8))
+    vel = GnssVelocities(time_ns=fix_ns, v_n_mps=v_n,
+                         vel_cov_ned_m2ps2=diag_cov([0.2, 0.2, 0.5], n_fix))
+    return fix, vel
+
+
+def parse_comma2k19(
     source: str | Path,
-    out_mcap: str | Path,
     *,
     gyro: str = "calibrated",
-) -> ConversionReport:
-    """Convert a comma2k19 CSV export in folder ``source`` to MCAP + reference Parquet.
+) -> ParsedLog:
+    """Parse a comma2k19 CSV export in folder ``source`` into the data contract.
+
+    The device-to-car mounting is not estimated here: ``mounting`` holds its inputs, and
+    ``pospp.convert`` reports the estimate (not applied).
 
     Parameters
     ----------
     source : path-like
         Folder with ``imu.csv``, ``gnss_ublox.csv`` and ``pose_reference.csv``.
-    out_mcap : path-like
-        MCAP to write; the reference goes to ``<stem>.reference.parquet`` beside it.
     gyro : {"calibrated", "uncalibrated"}
         Which gyro columns to write (module docstring).
 
     Returns
     -------
-    ConversionReport
+    ParsedLog
     """
     if gyro not in ("calibrated", "uncalibrated"):
         raise ValueError(f"gyro must be 'calibrated' or 'uncalibrated'; got {gyro!r}")
@@ -123,57 +171,17 @@ def convert_comma2k19(
     utc_on_boot_s = (fix_ns - ref_ns[0]) * 1e-9 + t_pose[0]
     checks["ublox_arrival_latency_s"] = float(np.median(gnss["t_boot_s"].to_numpy(float)
                                                         - utc_on_boot_s))
-    # reference
-    r_e = pose[["ecef_x_m", "ecef_y_m", "ecef_z_m"]].to_numpy(dtype=float)
-    v_e = pose[["ecef_vx_m_s", "ecef_vy_m_s", "ecef_vz_m_s"]].to_numpy(dtype=float)
-    lat, lon, h = earth.ecef_to_llh(r_e)
-    c_en = earth.dcm_en(lat, lon)
-    v_n_ref = np.einsum("nji,nj->ni", c_en, v_e)
-    q_eb = pose[["q_w", "q_x", "q_y", "q_z"]].to_numpy(dtype=float)
-    c_eb = rotation.dcm_from_quat(q_eb)
-    fwd_cos = float(np.median(np.sum(c_eb[:, :, 0] * v_e, axis=1)
-                              / np.linalg.norm(v_e, axis=1)))
-    if fwd_cos < 0.9:
-        raise ConversionError(f"{pose_p}: the quaternion's forward axis is not along the "
-                              f"velocity (median cosine {fwd_cos:.3f}); convention changed?")
-    checks["reference_forward_axis_cosine"] = fwd_cos
-    c_nb = np.einsum("nji,njk->nik", c_en, c_eb)
-    ref = ReferenceTrajectory(time_ns=ref_ns, lat_rad=lat, lon_rad=lon, height_m=h,
-                              v_n_mps=v_n_ref, rpy_rad=rotation.euler_from_dcm(c_nb))
-    # GNSS
-    lat_g = np.radians(gnss["lat_deg"].to_numpy(dtype=float))
-    lon_g = np.radians(gnss["lon_deg"].to_numpy(dtype=float))
-    h_g = gnss["alt_m"].to_numpy(dtype=float)
+    ref = _pose_reference(pose, pose_p, ref_ns, checks)
+    fix, vel = _ublox_gnss(gnss, gnss_p, fix_ns, ref, checks)
     t_fix_s = (fix_ns - fix_ns[0]) * 1e-9
-    h_ref_at_fix = np.interp(t_fix_s, (ref_ns - fix_ns[0]) * 1e-9, h)
-    checks["ublox_alt_minus_ellipsoidal_ref_m"] = float(np.median(h_g - h_ref_at_fix))
-    if abs(checks["ublox_alt_minus_ellipsoidal_ref_m"]) > 10.0:
-        raise ConversionError(f"{gnss_p}: alt_m differs from the reference's ellipsoidal height "
-                              f"by {checks['ublox_alt_minus_ellipsoidal_ref_m']:.1f} m; is it "
-                              "MSL? (expected ellipsoidal)")
-    spd = gnss["speed_m_s"].to_numpy(dtype=float)
-    brg = np.radians(gnss["bearing_deg"].to_numpy(dtype=float))
-    vd = velocity_from_positions(t_fix_s, lat_g, lon_g, h_g)[:, 2]
-    v_n = np.column_stack([spd * np.cos(brg), spd * np.sin(brg), vd])
-    n_fix = len(fix_ns)
-    fix = GnssFixes(time_ns=fix_ns, lat_rad=lat_g, lon_rad=lon_g, height_m=h_g,
-                    pos_cov_ned_m2=diag_cov([2.0, 2.0, 4.0], n_fix),
-                    status=np.zeros(n_fix, dtype=np.int8))
-    vel = GnssVelocities(time_ns=fix_ns, v_n_mps=v_n,
-                         vel_cov_ned_m2ps2=diag_cov([0.2, 0.2, 0.5], n_fix))
     samples = ImuSamples(time_ns=imu_ns, w_ib_b_radps=w, f_ib_b_mps2=f, frame_id="device")
     # device-to-car mounting (reported, not applied): level + forward axis from the GNSS track
-    notes: list[str] = []
-    mounting = None
-    try:
-        mounting = estimate_mounting(
-            (imu_ns - fix_ns[0]) * 1e-9, f, t_fix_s, v_n, lat_rad=float(lat_g[0]),
-            height_m=float(h_g[0]),
-            options=MountingOptions(window_s=1.0, max_static_accel_mps2=0.3,
-                                    min_horizontal_accel_mps2=0.3),
-        )
-    except ValueError as exc:
-        notes.append(f"device-to-car mounting not estimated: {exc}")
+    mounting = MountingInput(
+        t_s=(imu_ns - fix_ns[0]) * 1e-9, f_s_mps2=f, t_vel_s=t_fix_s, v_n_mps=vel.v_n_mps,
+        lat_rad=float(fix.lat_rad[0]), height_m=float(fix.height_m[0]), body_rpy_rad=None,
+        options={"window_s": 1.0, "max_static_accel_mps2": 0.3,
+                 "min_horizontal_accel_mps2": 0.3},
+        apply=False, description="device-to-car mounting")
     time_system = ("UTC ns since the Unix epoch: boot s + (GPS - boot) offset of the pose "
                    "records, GPS -> UTC minus 18 leap seconds; GNSS stamped at its utc_ms")
     datum = "WGS-84 ellipsoid (u-blox alt_m checked against the ECEF reference)"
@@ -183,16 +191,11 @@ def convert_comma2k19(
             "time_system": time_system, "height_datum": datum, "imu_convention": imu_conv,
             "axes": axes, "gyro": gyro,
             "gnss_sigma": "nominal: pos 2/2/4 m NED, vel 0.2/0.2/0.5 m/s (vd from heights)"}
-    out = write_flight_log(out_mcap, samples, fix, vel, imu_frame_id="device", metadata=meta)
-    ref_path = write_reference_trajectory(
-        reference_path_for(out), ref,
-        metadata={"source": str(pose_p), "frame": "device FRD w.r.t. NED",
-                  "time_system": "UTC ns from GPS week/TOW minus 18 s"})
-    return ConversionReport(
-        fmt="comma2k19", source=str(src), mcap_path=str(out), reference_path=str(ref_path),
-        n_imu=len(samples), n_fix=n_fix, n_vel=n_fix, n_reference=len(ref),
-        imu_rate_hz=median_rate_hz(imu_ns), gnss_rate_hz=median_rate_hz(fix_ns),
-        start_ns=int(min(imu_ns[0], fix_ns[0])), end_ns=int(max(imu_ns[-1], fix_ns[-1])),
+    return ParsedLog(
+        fmt="comma2k19", source=str(src), imu=samples, fix=fix, vel=vel, reference=ref,
         time_system=time_system, height_datum=datum, imu_convention=imu_conv, axes=axes,
-        mounting=mounting, checks=checks, notes=tuple(notes),
+        metadata=meta, reference_metadata={
+            "source": str(pose_p), "frame": "device FRD w.r.t. NED",
+            "time_system": "UTC ns from GPS week/TOW minus 18 s"},
+        imu_frame_id="device", checks=checks, mounting=mounting,
     )

@@ -31,26 +31,19 @@ import pandas as pd
 from pospp.io.converters._common import (
     SECONDS_PER_WEEK,
     ConversionError,
-    ConversionReport,
+    ParsedLog,
     check_increasing,
     gps_to_unix_ns,
     kinematic_attitude,
-    median_rate_hz,
     read_csv,
-    reference_path_for,
     seconds_to_ns,
     velocity_from_positions,
 )
-from pospp.io.parquet_tables import ReferenceTrajectory, write_reference_trajectory
+from pospp.types import ReferenceTrajectory
 
-__all__ = ["convert_kfgins_rtk", "convert_navego_reference"]
+__all__ = ["parse_kfgins_rtk", "parse_navego_reference"]
 
 _NO_IMU = "no IMU in the source"
-
-
-def _out_path(out: str | Path) -> Path:
-    p = Path(out)
-    return p if p.suffix == ".parquet" else reference_path_for(p)
 
 
 def _stamps(tow_s: np.ndarray, gps_week: int | None) -> tuple[np.ndarray, str]:
@@ -69,17 +62,13 @@ def _source_file(source: Path, name: str) -> Path:
     return p
 
 
-def convert_kfgins_rtk(
-    source: str | Path, out: str | Path, *, gps_week: int | None = None
-) -> ConversionReport:
-    """Convert the KF-GINS ``GNSS-RTK.txt`` to the reference Parquet format (module docstring).
+def parse_kfgins_rtk(source: str | Path, *, gps_week: int | None = None) -> ParsedLog:
+    """Parse the KF-GINS ``GNSS-RTK.txt`` into a reference trajectory (module docstring).
 
     Parameters
     ----------
     source : path-like
         ``GNSS-RTK.txt`` or a folder holding it.
-    out : path-like
-        ``.parquet`` to write, or an MCAP-style name whose ``<stem>.reference.parquet`` is used.
     gps_week : int, optional
         GPS week of the data (not in the file).
     """
@@ -113,15 +102,12 @@ def convert_kfgins_rtk(
         "rtk_std_median_ned_m": repr(np.median(std, axis=0).round(4).tolist()),
         "rtk_std_max_ned_m": repr(std.max(axis=0).round(4).tolist()),
     }
-    out_p = write_reference_trajectory(_out_path(out), ref, metadata=meta)
     warnings = () if gps_week is not None else (
         "GPS week unknown: time_ns is GPS seconds of week, not UTC",)
-    return ConversionReport(
-        fmt="kfgins_rtk", source=str(path), mcap_path=None, reference_path=str(out_p),
-        n_imu=0, n_fix=0, n_vel=0, n_reference=len(ref), imu_rate_hz=float("nan"),
-        gnss_rate_hz=median_rate_hz(time_ns), start_ns=int(time_ns[0]),
-        end_ns=int(time_ns[-1]), time_system=time_system,
-        height_datum="WGS-84 ellipsoid", imu_convention=_NO_IMU, axes=_NO_IMU,
+    return ParsedLog(
+        fmt="kfgins_rtk", source=str(path), imu=None, fix=None, vel=None, reference=ref,
+        time_system=time_system, height_datum="WGS-84 ellipsoid", imu_convention=_NO_IMU,
+        axes=_NO_IMU, reference_metadata=meta, reference_only_out=True,
         checks={"rtk_std_north_median_m": float(np.median(std[:, 0])),
                 "rtk_std_down_median_m": float(np.median(std[:, 2])),
                 "duration_s": float(tow[-1] - tow[0])},
@@ -130,10 +116,8 @@ def convert_kfgins_rtk(
     )
 
 
-def convert_navego_reference(
-    source: str | Path, out: str | Path, *, gps_week: int | None = None
-) -> ConversionReport:
-    """Convert NaveGo's ``ref.csv`` (Inertial Explorer reference) to the reference Parquet."""
+def parse_navego_reference(source: str | Path, *, gps_week: int | None = None) -> ParsedLog:
+    """Parse NaveGo's ``ref.csv`` (Inertial Explorer reference) into a reference trajectory."""
     path = _source_file(Path(source), "ref.csv")
     cols = ["gps_tow_s", "lat_deg", "lon_deg", "h_m", "vn_m_s", "ve_m_s", "vd_m_s",
             "roll_deg", "pitch_deg", "yaw_deg"]
@@ -146,16 +130,13 @@ def convert_navego_reference(
         lon_rad=np.radians(df["lon_deg"].to_numpy(float)), height_m=df["h_m"].to_numpy(float),
         v_n_mps=df[["vn_m_s", "ve_m_s", "vd_m_s"]].to_numpy(float),
         rpy_rad=np.radians(df[["roll_deg", "pitch_deg", "yaw_deg"]].to_numpy(float)))
-    out_p = write_reference_trajectory(_out_path(out), ref, metadata={
-        "source": str(path), "time_system": time_system,
-        "height_datum": "WGS-84 ellipsoid (NaveGo reference)",
-        "attitude": "Ekinox body w.r.t. NED from Inertial Explorer"})
-    return ConversionReport(
-        fmt="navego_reference", source=str(path), mcap_path=None, reference_path=str(out_p),
-        n_imu=0, n_fix=0, n_vel=0, n_reference=len(ref), imu_rate_hz=float("nan"),
-        gnss_rate_hz=median_rate_hz(time_ns), start_ns=int(time_ns[0]),
-        end_ns=int(time_ns[-1]), time_system=time_system, height_datum="WGS-84 ellipsoid",
-        imu_convention=_NO_IMU, axes=_NO_IMU,
+    return ParsedLog(
+        fmt="navego_reference", source=str(path), imu=None, fix=None, vel=None, reference=ref,
+        time_system=time_system, height_datum="WGS-84 ellipsoid", imu_convention=_NO_IMU,
+        axes=_NO_IMU, reference_only_out=True, reference_metadata={
+            "source": str(path), "time_system": time_system,
+            "height_datum": "WGS-84 ellipsoid (NaveGo reference)",
+            "attitude": "Ekinox body w.r.t. NED from Inertial Explorer"},
         warnings=() if gps_week is not None else (
             "GPS week unknown: time_ns is GPS seconds of week, not UTC",),
     )
