@@ -312,6 +312,9 @@ class LegsConfig:
     min_speed_mps: float = _key(_LEG.min_speed_mps, ge=0.0)
     trim_s: float = _key(_LEG.trim_s, ge=0.0)
     smoothing_s: float = _key(_LEG.smoothing_s, ge=0.0)
+    settle_s: float = _key(_LEG.settle_s, ge=0.0)
+    """A leg starts at least this long after A's first epoch [s]: B from a state A has not
+    yet converged on carries A's alignment error (docs/calibration.md)."""
 
     def thresholds(self) -> LegThresholds:
         """The leg segmentation's options (every key of this section; a key

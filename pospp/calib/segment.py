@@ -38,6 +38,10 @@ class LegThresholds:
     trim_s: float = 2.0
     smoothing_s: float = 5.0
     rate_hz: float = 1.0
+    settle_s: float = 60.0
+    """A leg starts no earlier than this after the first epoch of the trajectory (A's start):
+    B started from a state A has not yet converged on (its alignment's tilt and heading
+    error) carries a deterministic error that no noise model or calibration term covers."""
 
 
 @dataclass(frozen=True)
@@ -124,6 +128,7 @@ def find_legs(
         & (speed > th.min_speed_mps)
         & (np.abs(accel) < th.max_acceleration_mps2)
         & (np.abs(vd_s) < th.max_vertical_speed_mps)
+        & (grid >= t_s[0] + th.settle_s)
     )
     legs: list[Leg] = []
     trim = int(round(th.trim_s * th.rate_hz))

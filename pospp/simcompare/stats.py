@@ -84,7 +84,7 @@ from numpy.typing import NDArray
 from scipy.ndimage import uniform_filter1d
 
 from pospp import rotation
-from pospp.nav.filter import FilterResult
+from pospp.nav.filter import BiasHistory, FilterResult, NavSolution
 from pospp.units import G0_MPS2
 
 __all__ = ["FlightStats", "Stat", "STAT_UNITS", "flight_stats", "dominant_frequency_hz",
@@ -351,7 +351,22 @@ def flight_stats(imu_time_s: NDArray, w_ib_b_radps: NDArray, f_ib_b_mps2: NDArra
     bias = nav.smoothed_biases if nav.smoothed_biases is not None else nav.forward_biases
     t0, t1 = float(sol.t_s[0]), float(sol.t_s[-1])
     out: dict[str, Stat] = {}
-    # --- GNSS innovations ---------------------------------------------------------------------
+    out.update(_innovation_stats(nav, sol, t0, t1, n_blocks, gnss_sigma))
+    imu, peak = _imu_stats(imu_time_s, w_ib_b_radps, f_ib_b_mps2, sol, t0, t1, n_blocks)
+    out.update(imu)
+    out.update(_attitude_stats(sol, t0, t1, vehicle, min_speed_mps))
+    out.update(_bias_stats(bias))
+    if nav_est is not None:
+        out.update(_estimate_stats(nav_est))
+    return FlightStats(out, peak)
+
+
+def _innovation_stats(nav: FilterResult, sol: NavSolution, t0: float, t1: float,
+                      n_blocks: int, gnss_sigma: dict[int, tuple[NDArray, NDArray]] | None
+                      ) -> dict[str, Stat]:
+    """A's GNSS innovations: NIS, lag-1 products, velocity x acceleration, normalised per
+    channel, Ljung-Box per channel, low-band share (module docstring)."""
+    out: dict[str, Stat] = {}
     acc = np.gradient(sol.v_n_mps, sol.t_s, axis=0)
     for name, kind in (("pos", 0), ("vel", 1)):
         t, nis, dz = _innov(nav, kind)
@@ -377,10 +392,18 @@ def flight_stats(imu_time_s: NDArray, w_ib_b_radps: NDArray, f_ib_b_mps2: NDArra
         out[f"gnss_{name}_lowband"] = _from_blocks(
             [np.mean([lowband_share(dz[bl == b, i]) for i in range(2)])
              for b in range(n_blocks)])
-    # --- IMU high-frequency content ----------------------------------------------------------
+    return out
+
+
+def _imu_stats(imu_time_s: NDArray, w_ib_b_radps: NDArray, f_ib_b_mps2: NDArray,
+               sol: NavSolution, t0: float, t1: float, n_blocks: int
+               ) -> tuple[dict[str, Stat], float]:
+    """The IMU's high-frequency content, band powers and Allan variance on steady parts, and
+    the dominant vibration frequency [Hz]."""
+    out: dict[str, Stat] = {}
+    rpy = rotation.euler_from_quat(sol.q_nb)
     dt = float(np.median(np.diff(imu_time_s)))
     win = max(3, round(1.0 / dt) | 1)
-    rpy = rotation.euler_from_quat(sol.q_nb)
     steady = steady_mask(sol.t_s, sol.v_n_mps, rpy[:, 2], imu_time_s)
     for name, x in (("accel", f_ib_b_mps2), ("gyro", w_ib_b_radps)):
         hp = x - uniform_filter1d(x, win, axis=0, mode="nearest")
@@ -394,7 +417,14 @@ def flight_stats(imu_time_s: NDArray, w_ib_b_radps: NDArray, f_ib_b_mps2: NDArra
             out[f"imu_avar_{name}_{tau:.0f}s"] = _batch(
                 ta, da, t0, t1, n_blocks if tau < 5.0 else N_BLOCKS_SLOW)
     peak = dominant_frequency_hz(f_ib_b_mps2, dt)
-    # --- A's attitude against the simulation's attitude model (mounting) --------------------
+    return out, peak
+
+
+def _attitude_stats(sol: NavSolution, t0: float, t1: float, vehicle: str,
+                    min_speed_mps: float) -> dict[str, Stat]:
+    """A's attitude against the simulation's attitude model (the mounting statistics)."""
+    out: dict[str, Stat] = {}
+    rpy = rotation.euler_from_quat(sol.q_nb)
     v = sol.v_n_mps
     speed = np.hypot(v[:, 0], v[:, 1])
     track = np.arctan2(v[:, 1], v[:, 0])
@@ -412,7 +442,12 @@ def flight_stats(imu_time_s: NDArray, w_ib_b_radps: NDArray, f_ib_b_mps2: NDArra
         x = np.where(mov, offs[i], np.nan)
         out[f"att_offset_{name}"] = _batch(sol.t_s, x, t0, t1, N_BLOCKS_SLOW,
                                            floor=float(att_sig[i]))
-    # --- A's sensor-error estimates over time --------------------------------------------------
+    return out
+
+
+def _bias_stats(bias: BiasHistory) -> dict[str, Stat]:
+    """A's sensor-error estimates over time: wander and trend per axis."""
+    out: dict[str, Stat] = {}
     bg = bias.gyro_b_radps
     out["a_gyro_bias_wander"] = _batch(
         bias.t_s, np.mean((bg - bg.mean(axis=0)) ** 2, axis=1), float(bias.t_s[0]),
@@ -432,13 +467,18 @@ def flight_stats(imu_time_s: NDArray, w_ib_b_radps: NDArray, f_ib_b_mps2: NDArra
             s_end = np.hypot(sb[0, i], sb[-1, i])
             out[f"a_{kind}_trend_{a}"] = Stat(slope, float(s_end / span) if span > 0
                                               else np.nan, np.inf)
-    if nav_est is not None:
-        la = nav_est.lever_arm
-        fb = nav_est.forward_biases
-        for i, a in enumerate("xyz"):
-            out[f"a_lever_{a}"] = Stat(float(la.lever_b_m[i]), float(la.sigma_b_m[i]), np.inf)
-            out[f"a_gyro_sf_{a}"] = Stat(float(fb.gyro_sf[-1, i]), float(fb.gyro_sf_sigma[-1, i]),
-                                         np.inf)
-            out[f"a_accel_sf_{a}"] = Stat(float(fb.accel_sf[-1, i]),
-                                          float(fb.accel_sf_sigma[-1, i]), np.inf)
-    return FlightStats(out, peak)
+    return out
+
+
+def _estimate_stats(nav_est: FilterResult) -> dict[str, Stat]:
+    """Lever arm and scale factors of A's forward pass with those states."""
+    out: dict[str, Stat] = {}
+    la = nav_est.lever_arm
+    fb = nav_est.forward_biases
+    for i, a in enumerate("xyz"):
+        out[f"a_lever_{a}"] = Stat(float(la.lever_b_m[i]), float(la.sigma_b_m[i]), np.inf)
+        out[f"a_gyro_sf_{a}"] = Stat(float(fb.gyro_sf[-1, i]), float(fb.gyro_sf_sigma[-1, i]),
+                                     np.inf)
+        out[f"a_accel_sf_{a}"] = Stat(float(fb.accel_sf[-1, i]),
+                                      float(fb.accel_sf_sigma[-1, i]), np.inf)
+    return out

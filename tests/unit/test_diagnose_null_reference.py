@@ -2,8 +2,9 @@
 with pospp's own A as the reference (issue 12).
 
 pipelines/flight.toml with each case's lever arm from its params.json; the pipeline's
-``diagnose`` with 8 null realisations (A re-run on the flight with white IMU noise read from
-the samples, GNSS noise at the innovations' level; pospp.diagnose.null_model). The cases hold
+``diagnose`` with 8 null realisations (A re-run on the flight, its GNSS replaced by A's solution,
+with white IMU noise read from the samples and GNSS noise at the level of the residuals to A;
+pospp.diagnose.null_model), which also give the calibration its sigmas. The cases hold
 nothing outside the base model (flight_null_200hz, flight_survey_errors) or one hidden GNSS
 time offset of 15 ms (flight_time_offset_200hz). The nominal F-test says ``unexplained`` on all
 three (lack-of-fit F 34, 12.6, 396).
@@ -15,9 +16,11 @@ import json
 import tempfile
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from pospp import pipeline
+from pospp.calib.stage import with_null_covariance
 from pospp.config import load_config
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -39,19 +42,25 @@ def _run(cases: Path, name: str, extra: str = ""):
     run, ref = pipeline.calibrate(imu, nav, cfg)
     assert run.calibrated, run.reason
     null = pipeline.null_realisations(log, nav, run, cfg, 8, seed=2)
+    honest = with_null_covariance(run, null)
+    true_b = np.radians(np.asarray(params["imu_errors"]["gyro_bias_dph"], float)) / 3600.0
+    z = ((honest.gyro_bias_b_radps - true_b) / honest.gyro_bias_sigma_b_radps)[:2]
     return (pipeline.diagnose(run, imu, ref, cfg, null_dv=null),
-            pipeline.diagnose(run, imu, ref, cfg))
+            pipeline.diagnose(run, imu, ref, cfg), z)
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["flight_null_200hz", "flight_survey_errors"])
 def test_null_flights_close_none(reference_cases, name):
-    calibrated, nominal = _run(reference_cases, name)
+    calibrated, nominal, z = _run(reference_cases, name)
     assert nominal.conclusion == "unexplained"  # the false alarm this calibration removes
     assert calibrated.conclusion == "none", calibrated.steps
     assert set(calibrated.named) <= {"body_fixed_gyro_bias", "vertical_gyro_drift",
                                      "earth_rate_coupling"}
     assert calibrated.steps[-1].criterion == "lack_of_fit_F_null_calibrated"
+    # the calibrated body gyro bias (x, y) within 3 sigma of the simulated one, the sigma
+    # from the same 8 null realisations (calib.stage.with_null_covariance)
+    assert np.all(np.abs(z) < 3.0), z
 
 
 @pytest.mark.slow
@@ -59,7 +68,10 @@ def test_time_offset_is_not_swallowed_by_the_null(reference_cases):
     # with the drift switched off (the data hold none), the 15 ms offset's gap stands far
     # outside the null; the offset itself is not named: on these three straight legs the
     # observability screen drops it (docs/diagnose.md)
-    calibrated, _ = _run(reference_cases, "flight_time_offset_200hz",
-                         "gyro_gm_sigma_dph = 0.0\n")
+    calibrated, _, _ = _run(reference_cases, "flight_time_offset_200hz",
+                            "gyro_gm_sigma_dph = 0.0\n")
+    # measured: F 26 against a null of 6-16 (8 realisations), p 0.019 by the predictive t
+    # (the earlier null, made on top of the flight's own GNSS noise, was too narrow: p 4e-52
+    # there came with false alarms on null flights; docs/diagnose.md)
     assert calibrated.conclusion == "unexplained"
-    assert calibrated.steps[-1].p_value < 1e-6
+    assert calibrated.steps[-1].p_value < 0.05

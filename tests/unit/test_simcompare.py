@@ -348,7 +348,7 @@ def test_simulate_reads_the_model_file(tmp_path):
     from click.testing import CliRunner
 
     from pospp.cli import main
-    from pospp.io.simulation_files import gnss_model_from_params, imu_error_model_from_params
+    from pospp.sim.api import gnss_model_from_params, imu_error_model_from_params
 
     imu = replace(imu_grade("tactical"), accel_vibration_rms_mps2=(0.3, 0.3, 0.3),
                   vibration_freq_hz=8.0)
