@@ -6,12 +6,12 @@ Run on demand (not collected by pytest)::
 
 ``pospp run sample_data/sample_flight.mcap -p pipelines/sample.toml -o /tmp/... --force`` in a
 fresh process each time (numba's cache warm: one untimed run first), with ``[pairs]
-diagnose_null_realisations`` set to each ``--null`` value (a copy of the pipeline file), so
+null_realisations`` set to each ``--null`` value (a copy of the pipeline file), so
 that the null realisations' share of the diagnose stage shows. Per run: the command's wall
 time from outside, its CPU time (user + system of the child, from ``wait4``), the summary's
-``wall_time_s`` (``pipeline.run`` only: start-up and imports are the difference) and
-``stage_<name>_s``. Best run (by CPU) per setting; the load average beside it. Prints markdown
-for docs/benchmarks.md.
+``wall_time_s`` (``pipeline.run`` only: start-up and imports are the difference) and every
+``stage_<name>_s`` column. Best run (by CPU) per setting; the load average beside it. Prints
+markdown for docs/benchmarks.md.
 """
 
 from __future__ import annotations
@@ -30,12 +30,11 @@ import pandas as pd
 REPO = Path(__file__).resolve().parents[2]
 SAMPLE = REPO / "sample_data" / "sample_flight.mcap"
 PIPELINE = REPO / "pipelines" / "sample.toml"
-STAGES = ("ingest", "navigate", "calibrate", "compensate", "diagnose", "qc", "write", "report")
 
 
 def _pipeline(n_null: int, folder: Path) -> Path:
     text = PIPELINE.read_text()
-    text = re.sub(r"\[pairs\]\n", f"[pairs]\ndiagnose_null_realisations = {n_null}\n", text,
+    text = re.sub(r"\[pairs\]\n", f"[pairs]\nnull_realisations = {n_null}\n", text,
                   count=1)
     out = folder / f"sample_null{n_null}.toml"
     out.write_text(text)
@@ -56,7 +55,7 @@ def _one(pipeline: Path, out: Path) -> dict:
     s = pd.read_parquet(out / "summary.parquet").iloc[0]
     return {"wall_s": wall, "cpu_s": usage.ru_utime + usage.ru_stime,
             "peak_mib": usage.ru_maxrss / 1024, "run_s": float(s.wall_time_s),
-            **{k: float(s.get(f"stage_{k}_s", float("nan"))) for k in STAGES},
+            "stages": {k[6:-2]: float(v) for k, v in s.items() if k.startswith("stage_")},
             "load": os.getloadavg()[0]}
 
 
@@ -76,13 +75,14 @@ def main() -> None:
             best["null"] = n_null
             best["walls"] = " / ".join(f"{r['wall_s']:.1f}" for r in runs)
             rows.append(best)
+    stages = list(dict.fromkeys(k for r in rows for k in r["stages"]))
     print("| null realisations | command wall [s] (runs) | CPU [s] | run() [s] | start-up "
-          "[s] | " + " | ".join(STAGES) + " | peak RSS [MiB] | load |")
-    print("|---:|---|---:|---:|---:|" + "---:|" * len(STAGES) + "---:|---:|")
+          "[s] | " + " | ".join(stages) + " | peak RSS [MiB] | load |")
+    print("|---:|---|---:|---:|---:|" + "---:|" * len(stages) + "---:|---:|")
     for r in rows:
         print(f"| {r['null']} | {r['wall_s']:.1f} ({r['walls']}) | {r['cpu_s']:.1f} | "
               f"{r['run_s']:.1f} | {r['wall_s'] - r['run_s']:.1f} | "
-              + " | ".join(f"{r[k]:.2f}" for k in STAGES)
+              + " | ".join(f"{r['stages'].get(k, float('nan')):.2f}" for k in stages)
               + f" | {r['peak_mib']:.0f} | {r['load']:.1f} |")
 
 
