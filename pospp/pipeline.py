@@ -392,6 +392,7 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
         comp = navigate(log, config,
                         gyro_bias_correction_b_radps=calib_run.gyro_bias_b_radps)
         solutions["compensated"] = comp.smoothed if comp.smoothed is not None else comp.forward
+        del comp  # the rest of the second A pass (forward, biases, innovations) is not used
 
     # --- diagnosis -----------------------------------------------------------------------------
     book.stage("diagnose")

@@ -16,6 +16,7 @@ uncompressed_size u64, uncompressed_crc u32, compression string, records_length 
 
 from __future__ import annotations
 
+import functools
 import struct
 import zlib
 from collections.abc import Callable
@@ -29,6 +30,7 @@ from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.records import Channel, Schema
 from mcap_ros2.decoder import DecoderFactory
+from numba import njit
 
 from pospp.io import ros_messages as rm
 from pospp.io.errors import IngestError, IngestIssue
@@ -98,8 +100,24 @@ few messages go through the generic decoder."""
 
 
 def _gather(buf: np.ndarray, starts: np.ndarray, offset: int, width: int) -> np.ndarray:
-    """Bytes ``buf[s + offset : s + offset + width]`` for every s in ``starts``: (n, width)."""
-    return buf[(starts + offset)[:, None] + np.arange(width)]
+    """Bytes ``buf[s + offset : s + offset + width]`` for every s in ``starts``: (n, width),
+    C-contiguous.
+
+    Rows taken from a sliding-window view of ``buf`` (one index per row, not per byte: about
+    ten times faster than an (n, width) index array); an index past the end raises
+    IndexError.
+    """
+    if width > len(buf):
+        raise IndexError(f"{width} bytes wanted from a buffer of {len(buf)}")
+    win = np.ndarray((len(buf) - width + 1, width), np.uint8, buffer=buf,
+                     strides=(buf.strides[0], buf.strides[0]))
+    return win[starts + offset]
+
+
+@functools.lru_cache(maxsize=256)
+def _cdr_dtype(layout: tuple[tuple[str, str, int], ...], frame_id_len: int) -> np.dtype:
+    """:func:`pospp.io.ros_messages.cdr_dtype`, built once per layout and frame_id length."""
+    return rm.cdr_dtype(layout, frame_id_len)
 
 
 def _field_values(buf: np.ndarray, starts: np.ndarray, dt: np.ndarray, name: str) -> np.ndarray:
@@ -165,12 +183,13 @@ class Collector:
         """Decode the Message records starting at ``pos`` (record offsets) in ``buf``."""
         n = len(pos)
         first_index = self.count
-        rec_len = _gather(buf, pos, 1, 8).copy().view("<u8")[:, 0].astype(np.int64)
-        log_time = _gather(buf, pos, 15, 8).copy().view("<u8")[:, 0].astype(np.int64)
+        head = _gather(buf, pos, 0, 23)  # opcode, length, channel, sequence, log time
+        rec_len = head[:, 1:9].copy().view("<u8")[:, 0].astype(np.int64)
+        log_time = head[:, 15:23].copy().view("<u8")[:, 0].astype(np.int64)
         starts = pos + 31  # opcode 1 + length 8 + channel 2 + sequence 4 + 2 x time 8
         plen = rec_len - 22
         out: dict[str, np.ndarray] = {"time_ns": np.zeros(n, np.int64), "log_time_ns": log_time}
-        probe = rm.cdr_dtype(self.spec.layout, 1)
+        probe = _cdr_dtype(self.spec.layout, 1)
         for name in self.spec.wanted:
             ftype = probe.fields[name][0]
             base = ftype.base if ftype.subdtype else ftype
@@ -182,18 +201,19 @@ class Collector:
             hdr[ok_hdr] = _gather(buf, starts[ok_hdr], 0, 16)
             le = ok_hdr & (hdr[:, 0] == 0) & (hdr[:, 1] == 1)
             flen = hdr[:, 12:16].copy().view("<u4")[:, 0].astype(np.int64)
-            for fl in np.unique(flen[le]):
-                dt = rm.cdr_dtype(self.spec.layout, int(fl))
+            fls = flen[le]
+            one = len(fls) > 0 and bool((fls == fls[0]).all())  # the usual case: one length
+            for fl in (fls[:1] if one else np.unique(fls)):
+                dt = _cdr_dtype(self.spec.layout, int(fl))
                 grp = np.flatnonzero(le & (flen == fl) & (plen == dt.itemsize))
                 if grp.size == 0 or not self._layout_ok(channel_id, buf, starts, grp[0], dt):
                     continue
+                # the whole payloads of the group at once, then each field from them
+                rec = _gather(buf, starts[grp], 0, dt.itemsize).view(dt)[:, 0]
                 for name in self.spec.wanted:
-                    out[name][grp] = _field_values(buf, starts[grp], dt, name)
-                sec = _field_values(buf, starts[grp], dt, "sec")
-                nsec = _field_values(buf, starts[grp], dt, "nanosec")
-                out["time_ns"][grp] = rm.stamp_ns(sec, nsec)
-                chars = _field_values(buf, starts[grp], dt, "frame_id")
-                self._note_frames(chars)
+                    out[name][grp] = rec[name]
+                out["time_ns"][grp] = rm.stamp_ns(rec["sec"], rec["nanosec"])
+                self._note_frames(rec["frame_id"])
                 slow[grp] = False
         for i in np.flatnonzero(slow):
             s, ln = int(starts[i]), int(plen[i])
@@ -273,6 +293,47 @@ header claims more is corrupt (or written with huge chunks: raise the cap), and 
 decompression may produce more than the smaller of this and what its header claims."""
 _LZ4_PIECE = 16 * 1024 * 1024  # lz4 output produced at a time beyond the first call
 _READ_PIECE = 1 << 20  # bytes read at a time when a byte range is only checksummed
+
+
+@njit(cache=True, nogil=True)
+def _walk_records(buf: np.ndarray) -> tuple:  # pragma: no cover - compiled
+    """Frame the records of ``buf`` (uint8): ``opcode u8, length u64, body`` each.
+
+    Returns (message count, message record offsets, their channel ids, Schema/Channel count,
+    their offsets, offset reached, status): status 0 when the walk ended exactly at the end,
+    1 when a record overruns the buffer (or a Message is too short for its channel id) at
+    the offset reached, 2 at a record with the reserved opcode 0 (zeros: a bomb's output
+    or a hole are not walked).
+    """
+    n = buf.shape[0]
+    msg_pos = np.empty(n // 9 + 1, np.int64)  # every record is at least 9 bytes
+    msg_ch = np.empty(n // 9 + 1, np.int64)
+    meta_pos = np.empty(n // 9 + 1, np.int64)
+    n_msg = 0
+    n_meta = 0
+    pos = 0
+    while pos < n:
+        if pos + 9 > n:
+            return n_msg, msg_pos, msg_ch, n_meta, meta_pos, pos, 1
+        ln = np.uint64(0)
+        for k in range(8):
+            ln |= np.uint64(buf[pos + 1 + k]) << np.uint64(8 * k)
+        if ln > np.uint64(n - pos - 9):
+            return n_msg, msg_pos, msg_ch, n_meta, meta_pos, pos, 1
+        op = buf[pos]
+        if op == 0x05:
+            if pos + 11 > n:
+                return n_msg, msg_pos, msg_ch, n_meta, meta_pos, pos, 1
+            msg_pos[n_msg] = pos
+            msg_ch[n_msg] = np.int64(buf[pos + 9]) | (np.int64(buf[pos + 10]) << 8)
+            n_msg += 1
+        elif op == 0x03 or op == 0x04:
+            meta_pos[n_meta] = pos
+            n_meta += 1
+        elif op == 0:
+            return n_msg, msg_pos, msg_ch, n_meta, meta_pos, pos, 2
+        pos += 9 + np.int64(ln)
+    return n_msg, msg_pos, msg_ch, n_meta, meta_pos, pos, 0
 
 
 class _Truncated(Exception):
@@ -484,46 +545,36 @@ class Scan:
     def _records(self, buf: bytes | bytearray, *, partial: bool = False) -> int:
         """Walk the records of a decompressed chunk (or a block of loose messages).
 
-        With ``partial`` (a truncated chunk), stop quietly at the first incomplete record.
-        Returns the number of bytes walked.
+        The framing is one compiled pass (:func:`_walk_records`); Schema and Channel records
+        are then read in order, and the messages dispatched by channel. With ``partial`` (a
+        truncated chunk), stop quietly at the first incomplete record. Returns the number of
+        bytes walked.
         """
-        pos, n = 0, len(buf)
-        by_channel: dict[int, list[int]] = {}
-        while pos < n:
-            end = n + 1 if pos + 9 > n else pos + 9 + _REC(buf, pos)[1]
-            if end > n:
-                if partial:
-                    break
-                raise ValueError(f"record overruns the chunk at offset {pos}")
-            op = buf[pos]
-            if op == _OP_MESSAGE:
-                ch = _U16(buf, pos + 9)[0]
-                lst = by_channel.get(ch)
-                if lst is None:
-                    lst = by_channel[ch] = []
-                lst.append(pos)
-            elif op in (_OP_SCHEMA, _OP_CHANNEL):
-                self._meta(op, buf[pos + 9 : end])
-            elif op == 0:  # reserved: zeros (a bomb's output, or a hole) are not walked
-                if partial:
-                    break
-                raise ValueError(f"record with the reserved opcode 0x00 at offset {pos}")
-            pos = end
         arr = np.frombuffer(buf, dtype=np.uint8)
-        for ch, lst in by_channel.items():
+        n_msg, msg_pos, msg_ch, n_meta, meta_pos, pos, err = _walk_records(arr)
+        for p in meta_pos[:n_meta].tolist():
+            self._meta(buf[p], buf[p + 9 : p + 9 + _REC(buf, p)[1]])
+        if err and not partial:
+            raise ValueError(f"record overruns the chunk at offset {pos}" if err == 1 else
+                             f"record with the reserved opcode 0x00 at offset {pos}")
+        msg_pos, msg_ch = msg_pos[:n_msg], msg_ch[:n_msg]
+        if n_msg == 0:
+            return pos
+        chans, first = np.unique(msg_ch, return_index=True)
+        for ch in chans[np.argsort(first)].tolist():
             if ch not in self.route:
                 raise ValueError(f"message on channel {ch} before its Channel record")
-            self.read_counts[ch] = self.read_counts.get(ch, 0) + len(lst)
+            p = msg_pos if len(chans) == 1 else msg_pos[msg_ch == ch]
+            self.read_counts[ch] = self.read_counts.get(ch, 0) + len(p)
             col = self.route[ch]
             if col is None:
                 continue
-            p = np.asarray(lst, dtype=np.int64)
             for k in range(0, len(p), _GATHER_BATCH):
                 col.add(ch, arr, p[k : k + _GATHER_BATCH])
-            first = struct.unpack_from("<Q", buf, int(p[0]) + 15)[0]
-            last = struct.unpack_from("<Q", buf, int(p[-1]) + 15)[0]
-            self.first_log_time_ns = min(self.first_log_time_ns or first, first)
-            self.last_log_time_ns = max(self.last_log_time_ns or 0, last)
+            first_t = struct.unpack_from("<Q", buf, int(p[0]) + 15)[0]
+            last_t = struct.unpack_from("<Q", buf, int(p[-1]) + 15)[0]
+            self.first_log_time_ns = min(self.first_log_time_ns or first_t, first_t)
+            self.last_log_time_ns = max(self.last_log_time_ns or 0, last_t)
         return pos
 
     def _flush_loose(self) -> None:

@@ -3,22 +3,54 @@
 Nothing here reads or writes files: :mod:`pospp.report.html` embeds the figures, and
 :mod:`pospp.io` writes the page. Column names are the documented output schemas
 (docs/formats.md).
+
+Every figure function takes ``backend``: "mpl" (default) returns a matplotlib Figure (Agg;
+matplotlib is imported at the first such call), "svg" a :class:`pospp.report.svg.Figure`
+drawn by pospp's own SVG writer through the same calls. The HTML report uses "svg": drawn
+in milliseconds instead of 0.1-0.6 s per figure, and no matplotlib import in a run
+(docs/benchmarks.md, issue 18).
 """
 
 from __future__ import annotations
 
-import matplotlib
+from typing import Any
 
-matplotlib.use("Agg")
+import numpy as np
+import pandas as pd
 
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
+from pospp.report import svg
+from pospp.units import ARCSEC_RAD
 
-from pospp.units import ARCSEC_RAD  # noqa: E402
+Figure = Any  # a matplotlib Figure or a pospp.report.svg.Figure
 
 _R_M = 6371000.0  # mean Earth radius, only to draw a local map in metres
+
+# matplotlib's tab10, then tab20's lighter ten, then tab20b's and tab20c's even entries
+_LEG_PALETTE = (
+    "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f",
+    "#bcbd22", "#17becf", "#aec7e8", "#ffbb78", "#98df8a", "#ff9896", "#c5b0d5", "#c49c94",
+    "#f7b6d2", "#c7c7c7", "#dbdb8d", "#9edae5", "#393b79", "#6b6ecf", "#637939", "#b5cf6b",
+    "#8c6d31", "#e7ba52", "#843c39", "#d6616b", "#7b4173", "#ce6dbd", "#3182bd", "#9ecae1",
+    "#e6550d", "#fdae6b", "#31a354", "#a1d99b", "#756bb1", "#bcbddc", "#636363", "#bdbdbd")
+
+
+def pyplot() -> Any:
+    """matplotlib.pyplot with the Agg backend (imported at the first call: about 0.7 s)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def subplots(backend: str, *args: Any, **kw: Any) -> tuple[Any, Any]:
+    """``pyplot.subplots`` of the backend, "mpl" or "svg"."""
+    if backend == "svg":
+        return svg.subplots(*args, **kw)
+    if backend != "mpl":
+        raise ValueError(f"unknown figure backend {backend!r} (mpl, svg)")
+    return pyplot().subplots(*args, **kw)
 
 
 def _thin(df: pd.DataFrame, max_points: int = 4000) -> pd.DataFrame:
@@ -35,12 +67,11 @@ def _local_en_m(lat_deg: np.ndarray, lon_deg: np.ndarray, lat0: float, lon0: flo
 
 
 def leg_colors(n: int) -> list[tuple[float, float, float, float]]:
-    """``n`` colours for legs: tab10's ten, then tab20's lighter ten, then tab20b and tab20c
-    (50 distinct before any repeats; every leg is also labelled with its number)."""
-    tab20 = plt.get_cmap("tab20").colors
-    base = (list(plt.get_cmap("tab10").colors) + list(tab20[1::2])
-            + list(plt.get_cmap("tab20b").colors[::2]) + list(plt.get_cmap("tab20c").colors[::2]))
-    return [(*base[i % len(base)][:3], 1.0) for i in range(n)]
+    """``n`` colours for legs (RGBA in [0, 1]): tab10's ten, then tab20's lighter ten, then
+    tab20b and tab20c (40 distinct before any repeats; every leg is also labelled with its
+    number)."""
+    base = [tuple(int(h[i:i + 2], 16) / 255.0 for i in (1, 3, 5)) for h in _LEG_PALETTE]
+    return [(*base[i % len(base)], 1.0) for i in range(n)]
 
 
 def _label_ends(ax, curves: list[tuple[np.ndarray, np.ndarray, str, tuple]]) -> None:
@@ -55,9 +86,10 @@ def _unit(unit: str) -> str:
     return {"deg_per_h": "deg/h"}.get(unit, unit.replace("_per_", "/"))
 
 
-def trajectory_map(trajectory: pd.DataFrame, legs: pd.DataFrame) -> Figure:
+def trajectory_map(trajectory: pd.DataFrame, legs: pd.DataFrame, *, backend: str = "mpl"
+                   ) -> Figure:
     """Map of the smoothed (or forward) trajectory, legs coloured and numbered."""
-    fig, ax = plt.subplots(figsize=(7.5, 6.0))
+    fig, ax = subplots(backend, figsize=(7.5, 6.0))
     fig.subplots_adjust(left=0.1, right=0.97, bottom=0.09, top=0.93)
     sol = "smoothed" if (trajectory.solution == "smoothed").any() else "forward"
     tr = _thin(trajectory[trajectory.solution == sol], 3000)
@@ -82,7 +114,8 @@ def trajectory_map(trajectory: pd.DataFrame, legs: pd.DataFrame) -> Figure:
     return fig
 
 
-def leg_error_curves(leg_errors: pd.DataFrame, quantity: str) -> Figure:
+def leg_error_curves(leg_errors: pd.DataFrame, quantity: str, *, backend: str = "mpl"
+                     ) -> Figure:
     """B minus A per leg, before and after compensation (paper Fig. 8, 9, 13, 14), one scale
     per column so that before and after compare at a glance; each curve labelled with its leg.
 
@@ -90,7 +123,7 @@ def leg_error_curves(leg_errors: pd.DataFrame, quantity: str) -> Figure:
     """
     cols, unit = (("dvn_mps", "dve_mps"), "m/s") if quantity == "velocity" else (
         ("dpn_m", "dpe_m"), "m")
-    fig, axes = plt.subplots(2, 2, figsize=(10, 6.5), sharex=True, sharey="col")
+    fig, axes = subplots(backend, 2, 2, figsize=(10, 6.5), sharex=True, sharey="col")
     fig.subplots_adjust(left=0.08, right=0.97, bottom=0.08, top=0.9, hspace=0.25, wspace=0.2)
     ids = sorted(leg_errors.leg_id.unique())
     colors = dict(zip(ids, leg_colors(len(ids)), strict=True))
@@ -114,11 +147,12 @@ def leg_error_curves(leg_errors: pd.DataFrame, quantity: str) -> Figure:
     return fig
 
 
-def calibration_bars(calibration: pd.DataFrame) -> Figure:
+def calibration_bars(calibration: pd.DataFrame, *, backend: str = "mpl") -> Figure:
     """Calibrated values with 1-sigma error bars, per pair and formulation."""
     params = [p for p in ("gyro_bias_x", "gyro_bias_y", "eps_n", "eps_e")
               if p in set(calibration.parameter)]
-    fig, axes = plt.subplots(1, max(1, len(params)), figsize=(3.2 * max(1, len(params)), 3.8))
+    n_ax = max(1, len(params))
+    fig, axes = subplots(backend, 1, n_ax, figsize=(3.2 * n_ax, 3.8))
     fig.subplots_adjust(left=0.08, right=0.98, bottom=0.22, top=0.82, wspace=0.35)
     axes = np.atleast_1d(axes)
     for ax, p in zip(axes, params, strict=False):
@@ -140,9 +174,9 @@ def calibration_bars(calibration: pd.DataFrame) -> Figure:
     return fig
 
 
-def observability_curves(observability: pd.DataFrame) -> Figure:
+def observability_curves(observability: pd.DataFrame, *, backend: str = "mpl") -> Figure:
     """Condition number versus heading difference (Fig. 4) and speed difference (Fig. 5)."""
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 4))
+    fig, (a1, a2) = subplots(backend, 1, 2, figsize=(10, 4))
     d0 = observability[observability.dspeed_mps == 0.0]
     for form, g in d0.groupby("formulation"):
         a1.semilogy(g.dheading_deg, g.cond_scaled, "o-", ms=3, label=f"{form} (scaled)")
@@ -163,9 +197,9 @@ def observability_curves(observability: pd.DataFrame) -> Figure:
     return fig
 
 
-def trajectory_sigmas(trajectory: pd.DataFrame) -> Figure:
+def trajectory_sigmas(trajectory: pd.DataFrame, *, backend: str = "mpl") -> Figure:
     """Position and attitude standard deviations over time, forward versus smoothed."""
-    fig, (a1, a2) = plt.subplots(2, 1, figsize=(10, 5.5), sharex=True)
+    fig, (a1, a2) = subplots(backend, 2, 1, figsize=(10, 5.5), sharex=True)
     fig.subplots_adjust(left=0.09, right=0.98, bottom=0.1, top=0.97, hspace=0.1)
     t0 = trajectory.time_ns.min()
     for sol, g in trajectory.groupby("solution"):
@@ -185,9 +219,9 @@ def trajectory_sigmas(trajectory: pd.DataFrame) -> Figure:
     return fig
 
 
-def diagnosis_steps(diagnosis: pd.DataFrame) -> Figure:
+def diagnosis_steps(diagnosis: pd.DataFrame, *, backend: str = "mpl") -> Figure:
     """Gap before and after each step of the model-discrepancy workflow."""
-    fig, ax = plt.subplots(figsize=(7, 3.8))
+    fig, ax = subplots(backend, figsize=(7, 3.8))
     fig.subplots_adjust(left=0.1, right=0.98, bottom=0.25, top=0.95)
     x = np.arange(len(diagnosis))
     ax.bar(x - 0.2, diagnosis.gap_before_mps, 0.4, label="fit residual before")
@@ -200,15 +234,15 @@ def diagnosis_steps(diagnosis: pd.DataFrame) -> Figure:
     return fig
 
 
-def evaluation_errors(errors: dict, *, t0_ns: int | None = None, skip_s: float = 0.0
-                      ) -> Figure:
+def evaluation_errors(errors: dict, *, t0_ns: int | None = None, skip_s: float = 0.0,
+                      backend: str = "mpl") -> Figure:
     """Solution minus reference over time: horizontal position, velocity, tilt and heading.
 
     ``errors`` maps a solution name to a :class:`pospp.evaluate.SolutionErrors` (SI, NED).
     Epochs within ``skip_s`` of each solution's first are left out, as in the evaluation
     table, so that the alignment does not set the scale.
     """
-    fig, axes = plt.subplots(4, 1, figsize=(10, 8), sharex=True)
+    fig, axes = subplots(backend, 4, 1, figsize=(10, 8), sharex=True)
     fig.subplots_adjust(left=0.1, right=0.98, bottom=0.07, top=0.95, hspace=0.12)
     t0 = t0_ns if t0_ns is not None else min(int(e.time_ns[0]) for e in errors.values())
     arcsec = ARCSEC_RAD
@@ -234,10 +268,10 @@ def evaluation_errors(errors: dict, *, t0_ns: int | None = None, skip_s: float =
     return fig
 
 
-def diagnosis_curves(curves: pd.DataFrame) -> Figure:
+def diagnosis_curves(curves: pd.DataFrame, *, backend: str = "mpl") -> Figure:
     """The gap over time per leg: B minus A minus the model, before and after the diagnosis
     (fitted and held-out), horizontal magnitude; each leg labelled at its end."""
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), sharey=True)
+    fig, axes = subplots(backend, 1, 2, figsize=(10, 3.8), sharey=True)
     fig.subplots_adjust(left=0.08, right=0.97, bottom=0.14, top=0.9, wspace=0.08)
     ids = sorted(curves.leg_id.unique())
     colors = dict(zip(ids, leg_colors(len(ids)), strict=True))
@@ -260,7 +294,7 @@ def diagnosis_curves(curves: pd.DataFrame) -> Figure:
 
 
 def sensor_errors(biases: pd.DataFrame | None, calibrated: dict[str, tuple[float, float]],
-                  *, span_s: float | None = None) -> Figure:
+                  *, span_s: float | None = None, backend: str = "mpl") -> Figure:
     """Algorithm A's estimated gyro (and accelerometer) biases over time with their 1-sigma
     band, beside the calibrated constant gyro bias (dashed line and band).
 
@@ -270,8 +304,8 @@ def sensor_errors(biases: pd.DataFrame | None, calibrated: dict[str, tuple[float
     axis when there is no ``biases`` table).
     """
     has_accel = biases is not None and any(c.startswith("accel_bias") for c in biases)
-    fig, axes = plt.subplots(2 if has_accel else 1, 1, figsize=(10, 5.5 if has_accel else 3.2),
-                             sharex=True, squeeze=False)
+    fig, axes = subplots(backend, 2 if has_accel else 1, 1,
+                         figsize=(10, 5.5 if has_accel else 3.2), sharex=True, squeeze=False)
     axes = axes[:, 0]
     fig.subplots_adjust(left=0.09, right=0.98, bottom=0.12 if not has_accel else 0.08,
                         top=0.9, hspace=0.12)

@@ -2,7 +2,8 @@
 
 ``render_report(tables)`` takes a mapping of table name -> DataFrame (as read back from the
 run folder by :func:`pospp.io.parquet_tables.read_table`) and returns the HTML text; figures
-are embedded as base64 PNG so the page is a single file that opens anywhere.
+are drawn as SVG by :mod:`pospp.report.svg` and embedded as base64 data (a matplotlib figure,
+compare-sim's, as PNG) so the page is a single file that opens anywhere.
 """
 
 from __future__ import annotations
@@ -11,14 +12,13 @@ import base64
 import html
 import io
 from collections.abc import Mapping
+from typing import Any
 
-import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
-from matplotlib.figure import Figure
 
 from pospp.outputs import not_observable
-from pospp.report import figures
+from pospp.report import figures, svg
 from pospp.report.summary import (
     Headline,
     group_messages,
@@ -47,10 +47,20 @@ th{background:#eef;position:sticky;top:0}img{max-width:100%;height:auto;border:1
 """
 
 
-def _img(fig: Figure) -> str:
+_FIG = "svg"
+"""Backend of the report's figures (:mod:`pospp.report.figures`)."""
+
+
+def _img(fig: Any) -> str:
+    """The figure as an ``<img>`` with its data inline: SVG text (pospp.report.svg) or, for a
+    matplotlib figure, PNG at 80 dpi."""
+    if isinstance(fig, svg.Figure):
+        data = base64.b64encode(fig.to_svg().encode("utf-8")).decode("ascii")
+        return (f'<img alt="figure" width="{fig.width_px:.0f}" height="{fig.height_px:.0f}" '
+                f'src="data:image/svg+xml;base64,{data}"/>')
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=80)
-    plt.close(fig)
+    figures.pyplot().close(fig)
     data = base64.b64encode(buf.getvalue()).decode("ascii")
     return f'<img alt="figure" src="data:image/png;base64,{data}"/>'
 
@@ -207,7 +217,7 @@ def _calibration_section(cal: pd.DataFrame, h: Headline) -> list[str]:
     parts = ["<h2>Calibration</h2>"]
     if cal.empty:
         return [*parts, f"<p class='warn'>{html.escape(h.calibration_reason)}</p>"]
-    parts.append(_img(figures.calibration_bars(cal)))
+    parts.append(_img(figures.calibration_bars(cal, backend=_FIG)))
     joint = cal[cal.pair_id == -1]
     order = [(f != h.formulation, "_leg" in p, p == "phi_z", not p.startswith(("gyro", "eps")))
              for f, p in zip(joint.formulation, joint.parameter, strict=True)]
@@ -253,9 +263,9 @@ def _diagnosis_section(diag: pd.DataFrame, curves: pd.DataFrame | None) -> list[
              f"The lack-of-fit test finds no remaining structure (p = {last.p_value:.2g}).")
     parts = ["<h2>Model-discrepancy diagnosis</h2>", f"<p>{html.escape(text)}</p>"]
     if len(d) > 1:
-        parts.append(_img(figures.diagnosis_steps(d)))
+        parts.append(_img(figures.diagnosis_steps(d, backend=_FIG)))
     if curves is not None and not curves.empty:
-        parts.append(_img(figures.diagnosis_curves(curves)))
+        parts.append(_img(figures.diagnosis_curves(curves, backend=_FIG)))
     view = pd.DataFrame({
         "step": d.step, "effect": d.effect,
         "value \u00b1 1-sigma": [pm_text(r.value, r.sigma, r.unit).replace(" +- ", " \u00b1 ")
@@ -300,28 +310,29 @@ def render_report(tables: Mapping[str, pd.DataFrame], *, title: str = "pospp run
                       if e.name.startswith("gyro_bias")}
         span_s = None if traj is None or traj.empty else float(
             (traj.time_ns.max() - traj.time_ns.min()) * 1e-9)
-        parts.append(_img(figures.sensor_errors(biases, calibrated, span_s=span_s)))
+        parts.append(_img(figures.sensor_errors(biases, calibrated, span_s=span_s,
+                                                   backend=_FIG)))
         if biases is None or biases.empty:
             parts.append("<p class='muted'>biases.parquet (A's bias estimates) is not in this "
                          "run: only the calibrated values are drawn.</p>")
     if traj is not None and not traj.empty:
         parts.append("<h2>Trajectory and legs</h2>")
-        parts.append(_img(figures.trajectory_map(traj, legs if legs is not None else
-                                                 pd.DataFrame(columns=["leg_id", "start_ns",
-                                                                       "end_ns"]))))
+        no_legs = pd.DataFrame(columns=["leg_id", "start_ns", "end_ns"])
+        parts.append(_img(figures.trajectory_map(traj, legs if legs is not None else no_legs,
+                                                 backend=_FIG)))
     if legs is not None:
         parts.append("<h3>Legs</h3>" + _table(_with_times(legs, t0, ("start_ns", "end_ns"))))
     le = tables.get("leg_errors")
     if le is not None and not le.empty:
         parts.append("<h2>Algorithm B error per leg, before and after compensation</h2>")
-        parts.append(_img(figures.leg_error_curves(le, "velocity")))
-        parts.append(_img(figures.leg_error_curves(le, "position")))
+        parts.append(_img(figures.leg_error_curves(le, "velocity", backend=_FIG)))
+        parts.append(_img(figures.leg_error_curves(le, "position", backend=_FIG)))
     pairs = tables.get("pairs")
     if pairs is not None:
         parts.append("<h2>Pairs and observability</h2>" + _table(pairs, left=("reason",)))
     obs = tables.get("observability")
     if obs is not None and not obs.empty:
-        parts.append(_img(figures.observability_curves(obs)))
+        parts.append(_img(figures.observability_curves(obs, backend=_FIG)))
     diag = tables.get("diagnosis")
     if diag is not None and not diag.empty:
         parts.extend(_diagnosis_section(diag, tables.get("diagnosis_curves")))
@@ -334,7 +345,8 @@ def render_report(tables: Mapping[str, pd.DataFrame], *, title: str = "pospp run
         note = f" (first {skip.iloc[0]:g} s left out)" if len(skip) and skip.iloc[0] > 0 else ""
         parts.append(f"<h2>Against the reference{note}</h2>" + _table(wide.reset_index()))
     if traj is not None and not traj.empty:
-        parts.append("<h2>Algorithm A's uncertainty</h2>" + _img(figures.trajectory_sigmas(traj)))
+        parts.append("<h2>Algorithm A's uncertainty</h2>"
+                     + _img(figures.trajectory_sigmas(traj, backend=_FIG)))
     msgs = tables.get("messages")
     if msgs is not None:
         parts.extend(_messages_section(msgs, t0))
@@ -360,6 +372,7 @@ def sim_comparison_section(sc: pd.DataFrame | None) -> list[str]:
     base = stats[stats.step == 0].set_index("measure")
     last_step = int(stats.step.max())
     last = stats[stats.step == last_step].set_index("measure")
+    plt = figures.pyplot()
     fig, ax = plt.subplots(figsize=(9, 3.6))
     names = list(base.index)
     x = range(len(names))

@@ -11,14 +11,18 @@ untimed ``import pospp.pipeline`` first). Per flight the manifest's ``duration_s
 worker's time in ``process_one`` (hash, pipeline, report); the batch's overhead is what the
 wall time adds to that: start-up, imports and compiled-cache loading (once per process: the
 pool's workers are reused), the manifest. One ``pospp run`` of the same flight gives the
-single-flight overhead (its wall time minus the summary's ``wall_time_s``). Prints markdown
-for docs/benchmarks.md.
+single-flight overhead (its wall time minus the summary's ``wall_time_s``). CPU time (user +
+system of the batch process and its pool workers, which is what the load of the shared
+machine does not change much) is shown beside the wall time: with the same CPU per flight at
+``-j 2`` as at ``-j 1``, two free cores give twice the throughput. Prints markdown for
+docs/benchmarks.md.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import resource
 import shutil
 import statistics
 import subprocess
@@ -48,11 +52,23 @@ def _archive(n: int) -> Path:
     return folder
 
 
+_CPU = [0.0]
+"""CPU time [s] (user + system) of the last command timed, its pool workers included (the
+children's usage accrues to the batch process when it waits for them, then to us)."""
+
+
+def _children_cpu_s() -> float:
+    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return ru.ru_utime + ru.ru_stime
+
+
 def _timed(cmd: list[str]) -> float:
+    c0 = _children_cpu_s()
     t0 = time.perf_counter()
     res = subprocess.run(cmd, cwd=REPO, env=_env(), stdout=subprocess.DEVNULL,
                          stderr=subprocess.PIPE, text=True)
     wall = time.perf_counter() - t0
+    _CPU[0] = _children_cpu_s() - c0
     if res.returncode not in (0, 3):
         raise SystemExit(f"{' '.join(cmd)} failed ({res.returncode}): {res.stderr[-2000:]}")
     return wall
@@ -85,13 +101,14 @@ def main() -> None:
     archive = _archive(args.flights)
     load = lambda: " ".join(f"{x:.1f}" for x in os.getloadavg())  # noqa: E731
     wall, inner = single_run()
-    print(f"single `pospp run`: wall {wall:.2f} s, summary wall_time_s {inner:.2f} s, "
-          f"start-up + imports + cache loading + console {wall - inner:.2f} s "
+    print(f"single `pospp run`: wall {wall:.2f} s, CPU {_CPU[0]:.2f} s, summary wall_time_s "
+          f"{inner:.2f} s, start-up + imports + cache loading + console {wall - inner:.2f} s "
           f"(load average {load()})")
     print()
     print("| workers | flights | wall [s] | flights/min | vs -j 1 | median flight in worker [s] "
-          "| sum in workers [s] | overhead [s] | load average after |")
-    print("|---:|---:|---:|---:|---:|---:|---:|---:|---|")
+          "| sum in workers [s] | overhead [s] | CPU [s] | CPU per flight [s] | "
+          "load average after |")
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
     base = None
     for j in args.workers:
         wall, manifest = batch(archive, j)
@@ -101,7 +118,8 @@ def main() -> None:
         per = manifest.duration_s.to_numpy(dtype=float)
         overhead = wall - per.sum() / j
         print(f"| {j} | {n_ok}/{len(manifest)} | {wall:.1f} | {rate:.2f} | {rate / base:.2f}x "
-              f"| {statistics.median(per):.2f} | {per.sum():.1f} | {overhead:.1f} | {load()} |")
+              f"| {statistics.median(per):.2f} | {per.sum():.1f} | {overhead:.1f} | "
+              f"{_CPU[0]:.1f} | {_CPU[0] / max(1, n_ok):.2f} | {load()} |")
 
 
 if __name__ == "__main__":

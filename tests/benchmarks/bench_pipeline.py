@@ -27,22 +27,36 @@ CACHE = Path("/tmp/pospp_bench")
 
 _CHILD = r"""
 import json, resource, sys, time
+s0 = time.perf_counter(); sc0 = time.process_time()
 from pospp import pipeline
 from pospp.config import load_config
+def hwm_mib():
+    # the process's peak resident set so far (VmHWM), MiB
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024
+imports = {"wall_s": time.perf_counter() - s0, "cpu_s": time.process_time() - sc0,
+           "peak_rss_mib": hwm_mib()}
 t0 = time.perf_counter(); c0 = time.process_time()
-stages = {}
-last = [t0, None]
+stages, stages_cpu, stages_hwm = {}, {}, {}
+last = [t0, None, c0]
 def progress(stage, frac):
-    now = time.perf_counter()
+    now, cpu = time.perf_counter(), time.process_time()
     if last[1] is not None:
         stages[last[1]] = stages.get(last[1], 0.0) + now - last[0]
-    last[0], last[1] = now, stage
+        stages_cpu[last[1]] = stages_cpu.get(last[1], 0.0) + cpu - last[2]
+        stages_hwm[last[1]] = hwm_mib()  # peak so far, read when the stage ends
+    last[0], last[1], last[2] = now, stage, cpu
 out = pipeline.run(sys.argv[1], load_config(sys.argv[2]), sys.argv[3], progress=progress,
                    force=True)
+progress(None, 1.0)
 print(json.dumps({"wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0,
                   "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
                   "n_imu": out.summary["n_imu_samples"], "n_legs": out.summary.get("n_legs"),
-                  "status": out.status, "stages_s": stages}))
+                  "status": out.status, "stages_s": stages, "stages_cpu_s": stages_cpu,
+                  "stages_peak_rss_mib": stages_hwm, "imports": imports,
+                  "summary_wall_s": out.summary.get("wall_time_s")}))
 """
 
 
@@ -97,6 +111,20 @@ def main() -> None:
         print(f"| {r['minutes']:g} min | {r['n_imu']} | {r['n_legs']} | {r['wall_s']:.1f} | "
               f"{r['cpu_s']:.1f} | {1e6 * r['wall_s'] / r['n_imu']:.1f} | "
               f"{r['peak_rss_mib']:.0f} | {stages} |")
+    print()
+    print("Per stage: wall / CPU [s], peak RSS of the process at the stage's end [MiB] "
+          "(imports: before pipeline.run)")
+    names = list(dict.fromkeys(k for r in rows for k in r["stages_s"]))
+    print("| duration | imports | " + " | ".join(names) + " |")
+    print("|---|---|" + "---|" * len(names))
+    for r in rows:
+        imp = r["imports"]
+        cells = [f"{r['stages_s'].get(k, 0):.2f} / {r['stages_cpu_s'].get(k, 0):.2f}, "
+                 f"{r['stages_peak_rss_mib'].get(k, 0):.0f}" for k in names]
+        print(f"| {r['minutes']:g} min | {imp['wall_s']:.2f} / {imp['cpu_s']:.2f}, "
+              f"{imp['peak_rss_mib']:.0f} | " + " | ".join(cells) + " |")
+    print()
+    print(json.dumps(rows))
 
 
 if __name__ == "__main__":

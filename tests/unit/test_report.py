@@ -17,7 +17,7 @@ from pospp.batch import FlightOutcome, _read_manifest, _write_manifest
 from pospp.config import PipelineConfig
 from pospp.evaluate import SolutionErrors
 from pospp.outputs import NOT_OBSERVABLE_SIGMA, not_observable, velocity_gap_rms_mps
-from pospp.report import figures, html
+from pospp.report import figures, html, svg
 from pospp.report.html import render_report
 from pospp.report.summary import group_messages, headline, round_to_sigma, summary_text
 
@@ -90,7 +90,8 @@ def synthetic_tables(n_legs: int = 4, seed: int = 3) -> dict[str, pd.DataFrame]:
 def no_png(monkeypatch):
     """Figures are made but not drawn to PNG (the page text is what these tests read)."""
     def stub(fig) -> str:
-        plt.close(fig)
+        if not isinstance(fig, svg.Figure):
+            plt.close(fig)
         return "<img alt='figure'/>"
 
     monkeypatch.setattr(html, "_img", stub)

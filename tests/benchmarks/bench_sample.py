@@ -1,0 +1,90 @@
+"""Benchmark of the bundled sample run: ``pospp run`` wall and CPU, and each stage's time.
+
+Run on demand (not collected by pytest)::
+
+    python tests/benchmarks/bench_sample.py [--repeat 3] [--null 10 0]
+
+``pospp run sample_data/sample_flight.mcap -p pipelines/sample.toml -o /tmp/... --force`` in a
+fresh process each time (numba's cache warm: one untimed run first), with ``[pairs]
+null_realisations`` set to each ``--null`` value (a copy of the pipeline file), so
+that the null realisations' share of the diagnose stage shows. Per run: the command's wall
+time from outside, its CPU time (user + system of the child, from ``wait4``), the summary's
+``wall_time_s`` (``pipeline.run`` only: start-up and imports are the difference) and every
+``stage_<name>_s`` column. Best run (by CPU) per setting; the load average beside it. Prints
+markdown for docs/benchmarks.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import pandas as pd
+
+REPO = Path(__file__).resolve().parents[2]
+SAMPLE = REPO / "sample_data" / "sample_flight.mcap"
+PIPELINE = REPO / "pipelines" / "sample.toml"
+
+
+def _pipeline(n_null: int, folder: Path) -> Path:
+    text = PIPELINE.read_text()
+    text = re.sub(r"\[pairs\]\n", f"[pairs]\nnull_realisations = {n_null}\n", text,
+                  count=1)
+    out = folder / f"sample_null{n_null}.toml"
+    out.write_text(text)
+    return out
+
+
+def _one(pipeline: Path, out: Path) -> dict:
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+    cmd = [sys.executable, "-m", "pospp.cli", "run", str(SAMPLE), "-p", str(pipeline), "-o",
+           str(out), "--force"]
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(cmd, cwd=REPO, env=env, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - t0
+    if os.waitstatus_to_exitcode(status) not in (0, 3):
+        raise SystemExit(f"{' '.join(cmd)} failed")
+    s = pd.read_parquet(out / "summary.parquet").iloc[0]
+    return {"wall_s": wall, "cpu_s": usage.ru_utime + usage.ru_stime,
+            "peak_mib": usage.ru_maxrss / 1024, "run_s": float(s.wall_time_s),
+            "stages": {k[6:-2]: float(v) for k, v in s.items() if k.startswith("stage_")},
+            "load": os.getloadavg()[0]}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--null", type=int, nargs="+", default=[10, 0])
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        _one(PIPELINE, folder / "warm")  # numba's cache, page cache
+        rows = []
+        for n_null in args.null:
+            pipe = _pipeline(n_null, folder)
+            runs = [_one(pipe, folder / f"run_{n_null}") for _ in range(args.repeat)]
+            best = min(runs, key=lambda r: r["cpu_s"])
+            best["null"] = n_null
+            best["walls"] = " / ".join(f"{r['wall_s']:.1f}" for r in runs)
+            rows.append(best)
+    stages = list(dict.fromkeys(k for r in rows for k in r["stages"]))
+    print("| null realisations | command wall [s] (runs) | CPU [s] | run() [s] | start-up "
+          "[s] | " + " | ".join(stages) + " | peak RSS [MiB] | load |")
+    print("|---:|---|---:|---:|---:|" + "---:|" * len(stages) + "---:|---:|")
+    for r in rows:
+        print(f"| {r['null']} | {r['wall_s']:.1f} ({r['walls']}) | {r['cpu_s']:.1f} | "
+              f"{r['run_s']:.1f} | {r['wall_s'] - r['run_s']:.1f} | "
+              + " | ".join(f"{r['stages'].get(k, float('nan')):.2f}" for k in stages)
+              + f" | {r['peak_mib']:.0f} | {r['load']:.1f} |")
+
+
+if __name__ == "__main__":
+    main()
