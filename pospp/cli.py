@@ -270,9 +270,11 @@ def simulate(ctx: click.Context, preset: str | None, profile_file: str | None, i
         except (ValueError, TypeError) as exc:
             raise click.UsageError(str(exc)) from exc
         if from_file is not None:
-            over = {k: v for k, p, v in (("rate_hz", "gnss_rate_hz", gnss.rate_hz),
-                                         ("lever_arm_b_m", "lever_arm_m", gnss.lever_arm_b_m),
-                                         ("outages_s", "outages", gnss.outages_s)) if given(p)}
+            over: dict[str, Any] = {k: v for k, p, v in (("rate_hz", "gnss_rate_hz", gnss.rate_hz),
+                                                          ("lever_arm_b_m", "lever_arm_m",
+                                                           gnss.lever_arm_b_m),
+                                                          ("outages_s", "outages",
+                                                           gnss.outages_s)) if given(p)}
             gnss = replace(from_file, **over)
     bar = _StageBar()
     try:
