@@ -53,7 +53,7 @@ Steps
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -440,6 +440,7 @@ def diagnose(
     min_explained_fraction: float = 0.9,
     accel_settling_s: float = fx.ACCEL_SETTLING_S,
     null_dv: Sequence[Sequence[NDArray]] | None = None,
+    signatures: Mapping[str, Sequence[NDArray]] | None = None,
 ) -> Diagnosis:
     """Find, with evidence, what the calibration model is missing (module docstring).
 
@@ -497,6 +498,10 @@ def diagnose(
         p-value from these statistics' null distribution
         (:func:`pospp.diagnose.null_model.calibrated_p_value`) instead of the F distribution,
         and the criteria carry the suffix ``"_null_calibrated"``.
+    signatures : mapping, optional
+        Per effect id, per leg (order of ``replays``) a signature (M, 2, P) in SI parameters
+        that replaces the library's (:func:`pospp.diagnose.rerun.rerun_signatures`: the lever
+        arm and the GNSS time offset from A re-run, A's own response included).
 
     Returns
     -------
@@ -524,8 +529,14 @@ def diagnose(
     ctx = None
     if imu is not None and reference is not None:
         ctx = fx.ReplayContext(imu, reference, dict(replay_kwargs or {}))
-    not_evaluated = tuple(e for e in wanted
-                          if e not in in_base and ctx is None and e == "time_offset")
+    given = dict(signatures or {})
+    for e, sg in given.items():
+        fx.effect_by_id(e)
+        if len(sg) != len(replays) or any(np.shape(a)[0] != r.t_s.size
+                                           for a, r in zip(sg, replays, strict=True)):
+            raise ValueError(f"signatures[{e!r}]: expected one (M, 2, P) array per leg")
+    not_evaluated = tuple(e for e in wanted if e not in in_base and ctx is None
+                          and e == "time_offset" and e not in given)
     pool = [fx.effect_by_id(e) for e in wanted if e not in in_base and e not in not_evaluated]
 
     if noise == "white":
@@ -552,8 +563,10 @@ def diagnose(
     suffix = "_null_calibrated" if null is not None else ""
     terms = _base_terms(replays, base_formulation, base_transition)
     lof = _lof_term(replays, lof_terms)
-    fixed_sigs = {e.effect_id: fx.signatures(e.effect_id, replays, context=ctx,
-                                             accel_settling_s=accel_settling_s)
+    fixed_sigs = {e.effect_id: [np.asarray(a, dtype=float) for a in given[e.effect_id]]
+                  if e.effect_id in given else
+                  fx.signatures(e.effect_id, replays, context=ctx,
+                                accel_settling_s=accel_settling_s)
                   for e in pool if e.effect_id != "earth_rate_coupling"}
 
     base_fit = prob.fit(terms)
