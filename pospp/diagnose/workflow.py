@@ -63,7 +63,15 @@ from pospp.calib.replay import ImuIncrements, LegReplay, ReferenceSolution
 from pospp.calib.solve import NoiseModel, calibrate, fit_noise_model, leg_sensitivities
 from pospp.diagnose import effects as fx
 from pospp.diagnose._linear import Fit, Problem, Term, bic, f_test, rms
+from pospp.diagnose.locate import GapLocation, horizon_worth, locate_gap, lof_basis
 from pospp.diagnose.null_model import calibrated_p_value
+from pospp.diagnose.tables import (  # noqa: F401  (the tables' home before issue 17)
+    DIAGNOSIS_COLUMNS,
+    candidate_columns,
+    diagnosis_columns,
+    leg_gap_columns,
+    residual_curve_columns,
+)
 
 BASE_FORMULATIONS = ("body", "paper")
 BASE_TRANSITIONS = ("numerical", "closed_form")
@@ -94,6 +102,8 @@ class CandidateTest:
     gap_after_mps: float
     heldout_gap_after_mps: float
     significant: bool
+    gap_horizon_mps: float = float("nan")
+    gap_horizon_m: float = float("nan")
 
 
 @dataclass(frozen=True)
@@ -130,6 +140,17 @@ class DiagnosisStep:
         RMS of B minus A minus the model (all legs, N and E) before and after the step [m/s].
     heldout_gap_before_mps, heldout_gap_after_mps : float
         The same for leave-one-leg-out predictions [m/s].
+    horizon_s : float
+        The horizon (median last sample time of the legs) [s since the leg start].
+    gap_horizon_mps, gap_horizon_m : float
+        What the row is worth (:mod:`pospp.diagnose.locate`): the part of B's velocity error
+        at the horizon that the named effect causes beyond what the model before it absorbs
+        (its residual minus the residual with the effect), and its integral (position), RMS
+        over the legs; on the closing row the same for the structured gap (the final model's
+        residual minus that with the lack-of-fit basis) [m/s, m].
+    residual_horizon_mps, residual_horizon_m : float
+        The calibration's own residual (B minus A minus the base model) measured the same way
+        [m/s, m]: the scale the row's worth is compared against.
     """
 
     step: int
@@ -151,6 +172,11 @@ class DiagnosisStep:
     gap_after_mps: float
     heldout_gap_before_mps: float
     heldout_gap_after_mps: float
+    horizon_s: float = float("nan")
+    gap_horizon_mps: float = float("nan")
+    gap_horizon_m: float = float("nan")
+    residual_horizon_mps: float = float("nan")
+    residual_horizon_m: float = float("nan")
 
 
 @dataclass(frozen=True)
@@ -195,6 +221,10 @@ class Diagnosis:
         Per leg, measured minus modelled [dv_N, dv_E] with the base and the final model.
     heldout_before_n_mps, heldout_after_n_mps : tuple of ndarray, shape (M - 1, 2)
         The same for the leave-one-leg-out predictions.
+    location : GapLocation or None
+        Where the structured gap of the final model sits (legs, channel, part of the leg,
+        basis function) and its size at the horizon; None unless the closing row is
+        "unexplained" (:func:`pospp.diagnose.locate.locate_gap`).
     """
 
     base_formulation: str
@@ -211,6 +241,7 @@ class Diagnosis:
     residuals_after_n_mps: tuple[NDArray, ...] = field(repr=False)
     heldout_before_n_mps: tuple[NDArray, ...] = field(repr=False)
     heldout_after_n_mps: tuple[NDArray, ...] = field(repr=False)
+    location: GapLocation | None = None
 
     @property
     def named(self) -> tuple[str, ...]:
@@ -260,9 +291,7 @@ def _lof_term(reps: Sequence[LegReplay], k: int) -> list[Term]:
     terms = []
     for i, r in enumerate(reps):
         t = r.t_s[1:]
-        u = (t - t[0]) / max(t[-1] - t[0], 1e-9)
-        basis = np.hstack([np.polynomial.legendre.legvander(2.0 * u - 1.0, LOF_DEGREE),
-                           np.cos(np.pi * np.outer(u, np.arange(1, k)))])
+        basis, _ = lof_basis(t, k, LOF_DEGREE)
         w = basis.shape[1]
         blk = np.zeros((t.size, 2, 2 * w))
         blk[:, 0, :w] = basis
@@ -571,6 +600,12 @@ def diagnose(
 
     base_fit = prob.fit(terms)
     base_ho = prob.heldout(terms)
+    t_legs = [r.t_s[1:] for r in replays]
+
+    def worth(curves: Sequence[NDArray]):
+        return horizon_worth(t_legs, [np.reshape(c, (-1, 2)) for c in curves], ids)
+
+    calib_worth = worth(base_fit.res_raw)
     fit0, ho0 = base_fit, base_ho
     steps: list[DiagnosisStep] = []
     tests: list[CandidateTest] = []
@@ -610,6 +645,8 @@ def diagnose(
             frac = float(excess / lof_excess) if lof_excess > 0 else 0.0
             trials.append(dict(eff=eff, term=term, fit=fit1, ho=ho1, f=f, p=p, r=r, vals=vals,
                                sigs=sigs_, size=size, size_sig=size_sig, frac=frac,
+                               worth=worth([a - b for a, b in zip(fit0.res_raw,
+                                                                  fit1.res_raw, strict=True)]),
                                dbic=bic(fit1.rss_w, n, fit1.rank) - bic(fit0.rss_w, n,
                                                                            fit0.rank)))
         m = max(len(trials), 1)
@@ -618,7 +655,7 @@ def diagnose(
             tests.append(CandidateTest(
                 step, tr["eff"].effect_id, tr["r"], tr["size"], tr["size_sig"], tr["eff"].unit,
                 tr["f"], tr["p"], float(tr["dbic"]), tr["frac"], rms(tr["fit"].res_raw),
-                rms(tr["ho"]), tr["sig"]))
+                rms(tr["ho"]), tr["sig"], tr["worth"].dv_mps, tr["worth"].dr_m))
         good = [tr for tr in trials if tr["sig"] and tr["frac"] >= min_explained_fraction]
         if not good:
             good = _pair_explaining(prob, terms, fit0, trials, lof, lof_excess, s2_lof, alpha,
@@ -646,6 +683,9 @@ def diagnose(
             confounded_with=tuple(confounded), gap_before_mps=gap0,
             gap_after_mps=rms(best["fit"].res_raw),
             heldout_gap_before_mps=hgap0, heldout_gap_after_mps=rms(best["ho"]),
+            horizon_s=calib_worth.horizon_s, gap_horizon_mps=best["worth"].dv_mps,
+            gap_horizon_m=best["worth"].dr_m, residual_horizon_mps=calib_worth.dv_mps,
+            residual_horizon_m=calib_worth.dr_m,
         ))
         terms = terms + [best["term"]]
         fit0, ho0 = best["fit"], best["ho"]
@@ -655,6 +695,11 @@ def diagnose(
     if null is not None:
         p = null.p_value(f, p, terms, terms + lof)
     gap, hgap = rms(fit0.res_raw), rms(ho0)
+    structured = [(a - b).reshape(-1, 2)
+                  for a, b in zip(fit0.res_raw, fit_lof.res_raw, strict=True)]
+    gap_worth = worth(structured)
+    location = (locate_gap(t_legs, structured, ids, lof_terms=lof_terms, degree=LOF_DEGREE)
+                if p < alpha else None)
     steps.append(DiagnosisStep(
         step=len(steps) + 1, effect="unexplained" if p < alpha else "none", parameters=(),
         values=np.zeros(0), sigmas=np.zeros(0), value=float("nan"), sigma=float("nan"), unit="",
@@ -662,6 +707,9 @@ def diagnose(
         delta_bic=float("nan"), explained_fraction=float("nan"), confounded_with=(),
         gap_before_mps=gap,
         gap_after_mps=gap, heldout_gap_before_mps=hgap, heldout_gap_after_mps=hgap,
+        horizon_s=calib_worth.horizon_s, gap_horizon_mps=gap_worth.dv_mps,
+        gap_horizon_m=gap_worth.dr_m, residual_horizon_mps=calib_worth.dv_mps,
+        residual_horizon_m=calib_worth.dr_m,
     ))
     legs = tuple(
         LegGap(
@@ -683,95 +731,5 @@ def diagnose(
         residuals_after_n_mps=tuple(x.reshape(-1, 2) for x in fit0.res_raw),
         heldout_before_n_mps=tuple(x.reshape(-1, 2) for x in base_ho),
         heldout_after_n_mps=tuple(x.reshape(-1, 2) for x in ho0),
+        location=location,
     )
-
-
-# --------------------------------------------------------------------------------------------
-# tables (dicts of arrays; pospp.io writes them)
-
-DIAGNOSIS_COLUMNS = (
-    "step", "effect", "value", "sigma", "unit", "statistic", "p_value", "criterion",
-    "significant", "delta_bic", "explained_fraction", "gap_before_mps", "gap_after_mps",
-    "heldout_gap_before_mps", "heldout_gap_after_mps", "confounded_with", "parameters",
-    "parameter_values", "parameter_sigmas",
-)
-"""Columns of diagnosis.parquet, in order."""
-
-
-def diagnosis_columns(diagnosis: Diagnosis) -> dict[str, NDArray]:
-    """diagnosis.parquet as a dict of arrays, one row per step (:data:`DIAGNOSIS_COLUMNS`).
-
-    ``confounded_with``, ``parameters``, ``parameter_values``, ``parameter_sigmas`` are
-    ";"-joined strings (values in the row's ``unit``) so that the table stays flat.
-    """
-    s = diagnosis.steps
-
-    def join(a) -> str:
-        return ";".join(f"{float(v):.6g}" for v in a)
-
-    return {
-        "step": np.array([x.step for x in s], dtype=np.int64),
-        "effect": np.array([x.effect for x in s], dtype=object),
-        "value": np.array([x.value for x in s], dtype=float),
-        "sigma": np.array([x.sigma for x in s], dtype=float),
-        "unit": np.array([x.unit for x in s], dtype=object),
-        "statistic": np.array([x.statistic for x in s], dtype=float),
-        "p_value": np.array([x.p_value for x in s], dtype=float),
-        "criterion": np.array([x.criterion for x in s], dtype=object),
-        "significant": np.array([x.significant for x in s], dtype=bool),
-        "delta_bic": np.array([x.delta_bic for x in s], dtype=float),
-        "explained_fraction": np.array([x.explained_fraction for x in s], dtype=float),
-        "gap_before_mps": np.array([x.gap_before_mps for x in s], dtype=float),
-        "gap_after_mps": np.array([x.gap_after_mps for x in s], dtype=float),
-        "heldout_gap_before_mps": np.array([x.heldout_gap_before_mps for x in s], dtype=float),
-        "heldout_gap_after_mps": np.array([x.heldout_gap_after_mps for x in s], dtype=float),
-        "confounded_with": np.array([";".join(x.confounded_with) for x in s], dtype=object),
-        "parameters": np.array([";".join(x.parameters) for x in s], dtype=object),
-        "parameter_values": np.array([join(x.values) for x in s], dtype=object),
-        "parameter_sigmas": np.array([join(x.sigmas) for x in s], dtype=object),
-    }
-
-
-def candidate_columns(diagnosis: Diagnosis) -> dict[str, NDArray]:
-    """Every candidate test (one row per step and candidate) as a dict of arrays."""
-    c = diagnosis.candidates
-    names = ("step", "effect", "n_parameters", "value", "sigma", "unit", "statistic", "p_value",
-             "delta_bic", "explained_fraction", "gap_after_mps", "heldout_gap_after_mps",
-             "significant")
-    return {k: np.array([getattr(x, k) for x in c]) for k in names}
-
-
-def leg_gap_columns(diagnosis: Diagnosis) -> dict[str, NDArray]:
-    """Per-leg gaps before (base model) and after (final model), with the thirds of each leg."""
-    g = diagnosis.legs
-    out = {k: np.array([getattr(x, k) for x in g]) for k in (
-        "leg_id", "start_s", "duration_s", "heading_deg", "speed_mps", "gap_before_mps",
-        "gap_after_mps", "heldout_gap_before_mps", "heldout_gap_after_mps")}
-    for j, ph in enumerate(("early", "middle", "late")):
-        out[f"gap_{ph}_before_mps"] = np.array([x.phase_gap_before_mps[j] for x in g])
-        out[f"gap_{ph}_after_mps"] = np.array([x.phase_gap_after_mps[j] for x in g])
-    return out
-
-
-def residual_curve_columns(diagnosis: Diagnosis) -> dict[str, NDArray]:
-    """B minus A minus the model over time, long form, for figures of the gap shrinking.
-
-    Columns: leg_id, t_s (since the leg start), model ("before": base model, "after": final
-    model), kind ("fit": all legs fitted, "heldout": leave-one-leg-out prediction), dvn_mps,
-    dve_mps.
-    """
-    parts: dict[str, list[NDArray]] = {k: [] for k in ("leg_id", "t_s", "model", "kind",
-                                                        "dvn_mps", "dve_mps")}
-    curves = (("before", "fit", diagnosis.residuals_before_n_mps),
-              ("after", "fit", diagnosis.residuals_after_n_mps),
-              ("before", "heldout", diagnosis.heldout_before_n_mps),
-              ("after", "heldout", diagnosis.heldout_after_n_mps))
-    for model, kind, res in curves:
-        for leg, t, r in zip(diagnosis.legs, diagnosis.t_s, res, strict=True):
-            parts["leg_id"].append(np.full(t.size, leg.leg_id, dtype=np.int64))
-            parts["t_s"].append(t)
-            parts["model"].append(np.full(t.size, model, dtype=object))
-            parts["kind"].append(np.full(t.size, kind, dtype=object))
-            parts["dvn_mps"].append(r[:, 0])
-            parts["dve_mps"].append(r[:, 1])
-    return {k: np.concatenate(v) for k, v in parts.items()}
