@@ -390,6 +390,8 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
     if config.outputs.diagnose and calib_run.calibrated:
         try:
             diagnosis = diagnose(calib_run, imu, reference, config, log=log, nav=nav)
+            if diagnosis.location is not None:  # "unexplained": where the gap sits (issue 12)
+                book.note("warning", "diagnose", diagnosis.location.text)
         except ValueError as exc:
             book.note("warning", "diagnose", f"no diagnosis: {exc}")
             status = "partial"
