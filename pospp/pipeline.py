@@ -37,7 +37,7 @@ from pospp.calib.replay import ImuIncrements, ReferenceSolution, replay_leg
 from pospp.calib.stage import CalibrationRun, calibrate_flight
 from pospp.config import PipelineConfig, config_from_dict
 from pospp.diagnose import null_model
-from pospp.diagnose.rerun import rerun_signatures
+from pospp.diagnose.rerun import PIPELINE_RERUN, rerun_signatures
 from pospp.diagnose.workflow import Diagnosis, diagnosis_columns, residual_curve_columns
 from pospp.diagnose.workflow import diagnose as run_diagnosis
 from pospp.evaluate import evaluation_rows, solution_errors
@@ -602,9 +602,11 @@ def diagnose(calib_run: CalibrationRun, imu: ImuIncrements, reference: Reference
     if null_dv is None and n_null > 0 and log is not None and nav is not None:
         null_dv = null_realisations(log, nav, calib_run, config, n_null)
     replays = [calib_run.replays[i] for i in sorted(calib_run.replays)]
-    # lever arm and GNSS time offset: A's own response to them, by re-running A (issue 12)
-    sigs = rerun_signatures(log, nav, calib_run, config) if log is not None and nav is not None \
-        else None
+    # lever arm, GNSS time offset, gyro scale factor: A's own response to them, by re-running
+    # A (issue 12)
+    # (3 + 1 + 3 A runs; the warm-up's re-run is left out: absorbed by A's bias estimate)
+    sigs = rerun_signatures(log, nav, calib_run, config, PIPELINE_RERUN) \
+        if log is not None and nav is not None else None
     # B's residuals carry the gyro angle random walk, correlated along each leg: weighting them
     # as white noise would make every F-test too liberal
     arw_radpsqrts = imu_tuning(config).noise().gyro_arw_radpsqrts
