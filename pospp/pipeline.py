@@ -37,7 +37,13 @@ from pospp.calib.replay import ImuIncrements, ReferenceSolution, replay_leg
 from pospp.calib.stage import CalibrationRun, calibrate_flight
 from pospp.config import PipelineConfig, config_from_dict
 from pospp.diagnose import null_model
-from pospp.diagnose.rerun import PIPELINE_RERUN, rerun_signatures
+from pospp.diagnose.rerun import (
+    PIPELINE_RERUN,
+    REFINE_ITERATIONS,
+    first_estimates,
+    refine_signatures,
+    rerun_signatures,
+)
 from pospp.diagnose.workflow import Diagnosis, diagnosis_columns, residual_curve_columns
 from pospp.diagnose.workflow import diagnose as run_diagnosis
 from pospp.evaluate import evaluation_rows, solution_errors
@@ -610,12 +616,22 @@ def diagnose(calib_run: CalibrationRun, imu: ImuIncrements, reference: Reference
     # B's residuals carry the gyro angle random walk, correlated along each leg: weighting them
     # as white noise would make every F-test too liberal
     arw_radpsqrts = imu_tuning(config).noise().gyro_arw_radpsqrts
-    return run_diagnosis(
-        replays, imu=imu, reference=reference,
-        replay_kwargs={"accel_compensation": config.replay.accel_compensation},
-        base_formulation=config.pairs.formulation, base_transition=config.pairs.transition,
-        noise="gyro_rw", gyro_arw_radpsqrts=arw_radpsqrts, null_dv=null_dv, signatures=sigs,
-    )
+    def run(signatures):
+        return run_diagnosis(
+            replays, imu=imu, reference=reference,
+            replay_kwargs={"accel_compensation": config.replay.accel_compensation},
+            base_formulation=config.pairs.formulation, base_transition=config.pairs.transition,
+            noise="gyro_rw", gyro_arw_radpsqrts=arw_radpsqrts, null_dv=null_dv,
+            signatures=signatures)
+
+    d, at = run(sigs), {}
+    for _ in range(REFINE_ITERATIONS if sigs else 0):
+        # A is not linear in a GNSS-side effect: secants through the current estimates
+        refined, at = refine_signatures(log, nav, calib_run, config, sigs, first_estimates(d), at)
+        if all(refined[k] is sigs[k] for k in sigs):
+            break
+        d, sigs = run(refined), refined
+    return d
 
 
 def evaluate_run(run_dir: str | Path, truth_file: str | Path, *, skip_s: float = 0.0

@@ -13,7 +13,8 @@ legs after the turns, the closed-form signature predicts 3 mm/s, and the workflo
 the lever arm. The exact first-order signature is A's own response, obtained the way the null
 realisations are (:func:`pospp.pipeline.null_realisations`): A re-run on the flight's log
 with the configuration perturbed, B replayed on the same legs, minus the flight's B minus A,
-divided by the perturbation (one-sided finite difference at the effect's plausible size)::
+divided by the perturbation (one-sided finite difference, step h = :data:`STEP_FRACTION`
+times the effect's plausible size)::
 
     S_j(t) = ((B - A)[log, config + h e_j](t) - (B - A)[log, config](t)) / h
 
@@ -36,6 +37,19 @@ from numpy.typing import NDArray
 
 from pospp.diagnose.effects import ACCEL_SETTLING_S, effect_by_id
 
+STEP_FRACTION = 1.0
+"""Finite-difference step as a fraction of ``Effect.plausible_si`` (20 ms, 0.5 m, 1000 ppm,
+100 ug). A's response is not linear (its chi-square gate rejects the fixes a large offset
+shifts, its attitude Jacobian depends on the configured lever arm): with this step a 12 ms
+GNSS offset is named 5 times in 5 and a 4 ms one reads -1.7 ms; with a tenth of it the 4 ms
+offset reads -3.8 ms and the 12 ms one -0.1 ms (measured, docs/diagnose.md "Power"), hence
+the secant refinement (:func:`refine_signatures`)."""
+REFINE_FRACTION = 0.05
+"""An estimate above this fraction of the plausible size gets a secant signature."""
+REFINE_ITERATIONS = 3
+"""Secant refinements the pipeline makes (each: one A run per effect and one diagnosis); it
+stops earlier when no estimate moves by more than :data:`REFINE_TOLERANCE` of itself."""
+REFINE_TOLERANCE = 0.05
 RERUN_EFFECTS = ("lever_arm", "time_offset", "gyro_scale_factor", "accel_bias_change")
 """Effects whose signature :func:`rerun_signatures` makes by re-running A."""
 PIPELINE_RERUN = ("lever_arm", "time_offset", "gyro_scale_factor")
@@ -94,7 +108,7 @@ def rerun_signatures(log, nav, calib_run, config, effect_ids=RERUN_EFFECTS, *,
 
     out: dict[str, list[NDArray]] = {}
     for eid in effect_ids:
-        h = effect_by_id(eid).plausible_si
+        h = STEP_FRACTION * effect_by_id(eid).plausible_si
         try:
             if eid == "lever_arm":
                 lever0 = np.asarray(config.gnss.lever_arm_m, dtype=float)
@@ -120,3 +134,79 @@ def rerun_signatures(log, nav, calib_run, config, effect_ids=RERUN_EFFECTS, *,
             continue
         out[eid] = [np.stack([c[k] for c in cols], axis=-1) / h for k in range(len(ids))]
     return out
+
+
+def refine_signatures(log, nav, calib_run, config, signatures: dict[str, list[NDArray]],
+                      estimates: dict[str, NDArray], at: dict[str, NDArray] | None = None
+                      ) -> tuple[dict[str, list[NDArray]], dict[str, NDArray]]:
+    """Secant signatures through the first estimates (A's response is not linear).
+
+    For each effect with an estimate p (SI, from a first diagnosis with ``signatures``) larger
+    than :data:`REFINE_FRACTION` of its plausible size, A is re-run with the estimate removed
+    (configured lever arm minus p; GNSS stamps moved back by p), which should bring B minus A
+    to the effect-free curve, and the direction u = p / |p| gets the secant column
+    ``s_u = ((B - A) - (B - A)[p removed]) / |p|`` (the effect's response from zero to p) in
+    place of the local derivative at the flight's state; the
+    directions orthogonal to u keep theirs: ``S' = S (I - u u^T) + s_u u^T``. A's chi-square
+    gate makes its response to a GNSS-side effect change regime with the size (measured:
+    a 12 ms GNSS offset is named 5 times in 5 with the 20 ms step and never with the 2 ms
+    one; a 4 ms offset reads -1.7 ms with the first, -3.8 ms with the second).
+    Effects without an estimate, or whose estimate moved by less than
+    :data:`REFINE_TOLERANCE` of itself since the secant in ``at`` was made, keep their
+    signature. Returns the signatures and the estimates their secants were made at.
+    """
+    from pospp import pipeline
+    from pospp.calib.replay import ReferenceSolution, replay_leg
+    from pospp.nav import filter as nav_filter
+
+    ids = sorted(calib_run.replays)
+    legs = {leg.leg_id: leg for leg in calib_run.legs}
+    rc = config.replay
+    which = rc.reference if nav.smoothed is not None else "forward"
+    out = dict(signatures)
+    at = dict(at or {})
+    for eid, p in estimates.items():
+        p = np.asarray(p, dtype=float)
+        size = float(np.linalg.norm(p))
+        if eid not in signatures or eid not in ("lever_arm", "time_offset") or \
+                not size > REFINE_FRACTION * effect_by_id(eid).plausible_si:
+            continue
+        prev = at.get(eid)
+        if prev is not None and np.linalg.norm(p - prev) <= REFINE_TOLERANCE * size:
+            continue
+        log_p, lever = log, None
+        if eid == "lever_arm":
+            lever = np.asarray(config.gnss.lever_arm_m, dtype=float) - p
+        else:
+            dt_ns = -int(round(float(p[0]) * 1e9))
+            log_p = replace(log, fix=replace(log.fix, time_ns=log.fix.time_ns - dt_ns),
+                            vel=replace(log.vel, time_ns=log.vel.time_ns - dt_ns))
+        try:
+            nav_p = pipeline.navigate(log_p, config, lever_arm_b_m=lever)
+        except ValueError:
+            continue
+        ref_p = ReferenceSolution(*nav_filter.reference_solution(nav_p, which=which))
+        imu = pipeline.imu_increments(log_p)
+        u = p / size
+        new = []
+        for k, i in enumerate(ids):
+            s_u = -(replay_leg(imu, ref_p, legs[i], accel_compensation=rc.accel_compensation,
+                              sample_rate_hz=rc.sample_rate_hz,
+                              sigma_floor_mps=rc.sigma_floor_mps,
+                              transition_step=int(rc.transition_step)).dv_n_mps[:, 0:2]
+                   - calib_run.replays[i].dv_n_mps[:, 0:2]) / size
+            s = signatures[eid][k]
+            new.append(s - np.einsum("mcp,p,q->mcq", s, u, u) + s_u[:, :, None] * u)
+        out[eid] = new
+        at[eid] = p
+    return out, at
+
+
+def first_estimates(diagnosis) -> dict[str, NDArray]:
+    """Each re-run effect's first-step candidate estimate, SI (for :func:`refine_signatures`)."""
+    out = {}
+    for c in diagnosis.candidates:
+        if c.step == 1 and c.effect in RERUN_EFFECTS and np.size(c.values):
+            out[c.effect] = np.asarray(c.values, dtype=float) * effect_by_id(c.effect).si_per_unit
+    return out
+

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
 from numpy.typing import NDArray
 
 from pospp.diagnose.locate import GapLocation
@@ -31,6 +32,8 @@ class CandidateTest:
     significant: bool
     gap_horizon_mps: float = float("nan")
     gap_horizon_m: float = float("nan")
+    values: NDArray = field(default_factory=lambda: np.zeros(0))
+    """Per-parameter estimates, display unit (the observable directions' minimum norm)."""
 
 
 @dataclass(frozen=True)

@@ -475,7 +475,8 @@ def diagnose(
             tests.append(CandidateTest(
                 step, tr["eff"].effect_id, tr["r"], tr["size"], tr["size_sig"], tr["eff"].unit,
                 tr["f"], tr["p"], float(tr["dbic"]), tr["frac"], rms(tr["fit"].res_raw),
-                rms(tr["ho"]), tr["sig"], tr["worth"].dv_mps, tr["worth"].dr_m))
+                rms(tr["ho"]), tr["sig"], tr["worth"].dv_mps, tr["worth"].dr_m,
+                np.asarray(tr["vals"], dtype=float)))
         good = [tr for tr in trials if tr["sig"] and tr["frac"] >= min_explained_fraction]
         if not good:
             good = _pair_explaining(prob, terms, fit0, trials, lof, lof_excess, s2_lof, alpha,
