@@ -117,14 +117,18 @@ def power(seeds: int, sizes) -> None:
         runs = []
         for s in range(1, seeds + 1):
             t0 = time.time()
-            runs.append(tp.power_run(eff, size, s))
+            runs.append(tp.power_run(None if eff == "none" else eff, size, s))
+            if eff == "none":
+                d = runs[-1].diagnosis
+                print(f"  null seed {s}: named {d.named}, closing {d.conclusion} "
+                      f"(p = {d.steps[-1].p_value:.3g})", file=sys.stderr)
             print(f"  {eff} {size} seed {s}: {time.time() - t0:.1f} s", file=sys.stderr)
         named = sum(r.named for r in runs)
         ok = sum(r.within_20pct for r in runs)
         est = ", ".join(f"{r.estimate:.3g}" for r in runs)
         concl = ", ".join(sorted({r.diagnosis.conclusion for r in runs}))
-        print(f"| {eff} | {size:g} {tp.EFFECT_UNITS[eff]} | {named} | {ok} | {est} | {concl} |",
-              flush=True)
+        unit = tp.EFFECT_UNITS.get(eff, "")
+        print(f"| {eff} | {size:g} {unit} | {named} | {ok} | {est} | {concl} |", flush=True)
 
 
 def main() -> None:
