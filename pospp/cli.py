@@ -232,21 +232,47 @@ def report(run_dir: str) -> None:
               help="GNSS antenna position in the body frame FRD [m].")
 @click.option("--outage", "outages", nargs=2, type=float, multiple=True,
               help="GNSS outage START_S END_S from the mission start (repeatable).")
+@click.option("--model", "model_file", type=click.Path(exists=True, dir_okay=False),
+              default=None,
+              help="Model TOML with [imu] and [gnss] tables (pospp compare-sim's "
+                   "sim_model.toml): the IMU and GNSS models from it. --imu-grade, "
+                   "--gnss-rate-hz, --lever-arm-m and --outage given explicitly replace its "
+                   "values.")
 @click.option("-o", "--out", "out_mcap", required=True, type=click.Path(dir_okay=False),
               help="Output MCAP; NAME.truth.parquet and NAME.params.json are written beside.")
-def simulate(preset: str | None, profile_file: str | None, imu_grade: str, seed: int,
-             imu_rate_hz: float | None, gnss_rate_hz: float,
-             lever_arm_m: tuple[float, float, float], outages: tuple, out_mcap: str) -> None:
+@click.pass_context
+def simulate(ctx: click.Context, preset: str | None, profile_file: str | None, imu_grade: str,
+             seed: int, imu_rate_hz: float | None, gnss_rate_hz: float,
+             lever_arm_m: tuple[float, float, float], outages: tuple, model_file: str | None,
+             out_mcap: str) -> None:
     """Simulate a mission with exact IMU increments and known truth (pospp.sim.simulate)."""
+    from dataclasses import replace
+
     from pospp.io.simulation_files import write_simulation
     from pospp.sim.api import simulate as run_simulation
-    from pospp.sim.gnss import GnssModel
+    from pospp.sim.gnss import GnssModel, gnss_model_file
 
     if (preset is None) == (profile_file is None):
         raise click.UsageError("give exactly one of --preset and --profile")
+
+    def given(name: str) -> bool:
+        return ctx.get_parameter_source(name) != click.core.ParameterSource.DEFAULT
+
+    if model_file is not None and not given("imu_grade"):
+        imu_grade = model_file
     grade = {"flight": "paper_flight", "vehicle": "paper_vehicle"}.get(imu_grade, imu_grade)
     gnss = GnssModel(rate_hz=gnss_rate_hz, lever_arm_b_m=lever_arm_m,
                      outages_s=tuple(tuple(o) for o in outages))
+    if model_file is not None:
+        try:
+            from_file = gnss_model_file(model_file)
+        except (ValueError, TypeError) as exc:
+            raise click.UsageError(str(exc)) from exc
+        if from_file is not None:
+            over = {k: v for k, p, v in (("rate_hz", "gnss_rate_hz", gnss.rate_hz),
+                                         ("lever_arm_b_m", "lever_arm_m", gnss.lever_arm_b_m),
+                                         ("outages_s", "outages", gnss.outages_s)) if given(p)}
+            gnss = replace(from_file, **over)
     bar = _StageBar()
     try:
         sim = run_simulation(profile_file or preset, imu_grade=grade, gnss=gnss, seed=seed,
@@ -402,7 +428,7 @@ def compare_sim(run_dir: str, out_model: str | None, max_steps: int) -> None:
     Simulates the run's flight along A's trajectory with the configured IMU grade, compares
     statistics every flight has, names the library effect that explains the largest
     significant gap, adds it and repeats (pospp.compare_sim, docs/compare_sim.md). Writes the
-    fitted model as a TOML file that pospp simulate --imu-grade accepts.
+    fitted model as a TOML file that pospp simulate --model accepts.
     """
     from pospp.compare_sim import compare_sim_run
 

@@ -24,7 +24,7 @@ from pospp.sim.api import simulate_along
 from pospp.sim.gnss import GnssModel
 from pospp.sim.sensors import ImuErrorModel, imu_grade
 from pospp.simcompare.compare import Comparison, compare_flights
-from pospp.simcompare.stats import FlightStats, flight_stats
+from pospp.simcompare.stats import FlightStats, Stat, flight_stats, leg_stats
 from pospp.simcompare.tables import comparison_columns, model_toml
 
 __all__ = ["SIM_GRADES", "FlightTemplate", "compare_sim_run", "flight_template",
@@ -36,6 +36,9 @@ RESIDUAL_NOISE_FACTOR = 1.5
 """The simulated GNSS white noise is at most this times the records' RMS about A's smoothed
 solution (which follows part of the noise, so the factor keeps a consistent receiver's
 reported sigma)."""
+MIN_LEGS = 3
+"""B minus A on legs is compared only on flights with at least this many legs (the
+leave-one-leg-out prediction needs them)."""
 SIM_SEED = 20261123
 """Seed of every simulation of one comparison (common random numbers across its steps)."""
 
@@ -164,12 +167,37 @@ def simulate_log(tpl: FlightTemplate, imu: ImuErrorModel, gnss: GnssModel, *,
     return mcap_reader.FlightLog(ims, sim.fix, vel, "simulation")
 
 
+def bma_leg_stats(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
+                  config: PipelineConfig) -> dict[str, Stat]:
+    """B minus A on the flight's legs, as the leg-based workflow sees them: the calibration
+    stage as configured, then :func:`pospp.diagnose.workflow.diagnose` with its base model
+    only (the pipeline's formulation, transition and gyro-random-walk weighting; no
+    candidates), whose per-leg gaps give :func:`pospp.simcompare.stats.leg_stats`. Empty
+    when the flight has fewer than 3 legs or no calibration."""
+    from pospp.diagnose.workflow import diagnose
+
+    imu = pipeline.imu_increments(log)
+    try:
+        calib_run, _ = pipeline.calibrate(imu, nav, config)
+    except ValueError:
+        return {}
+    if not calib_run.calibrated or len(calib_run.replays) < MIN_LEGS:
+        return {}
+    replays = [calib_run.replays[i] for i in sorted(calib_run.replays)]
+    d = diagnose(replays, base_formulation=config.pairs.formulation,
+                 base_transition=config.pairs.transition, noise="gyro_rw",
+                 gyro_arw_radpsqrts=pipeline.imu_tuning(config).noise().gyro_arw_radpsqrts,
+                 effects=(), max_steps=0)
+    return leg_stats(np.array([g.gap_before_mps for g in d.legs]),
+                     np.array([g.heldout_gap_before_mps for g in d.legs]))
+
+
 def log_stats(log: mcap_reader.FlightLog, config: PipelineConfig, *, vehicle: str,
               nav: nav_filter.FilterResult | None = None
               ) -> tuple[FlightStats, nav_filter.FilterResult]:
     """Run A as configured (unless ``nav`` is given) and once more forward with lever-arm and
     scale-factor states, and return the flight's statistics (A's time axis: from the log's
-    first IMU stamp)."""
+    first IMU stamp), with B minus A on its legs where it has legs."""
     if nav is None:
         nav = pipeline.navigate(log, config)
     est_cfg = replace(config, gnss=replace(config.gnss, estimate_lever_arm=True),
@@ -179,9 +207,24 @@ def log_stats(log: mcap_reader.FlightLog, config: PipelineConfig, *, vehicle: st
         est = pipeline.navigate(log, est_cfg, options=opts)
     except ValueError:
         est = None
-    t_imu = (log.imu.time_ns - int(log.imu.time_ns[0])) * 1e-9
-    return flight_stats(t_imu, log.imu.w_ib_b_radps, log.imu.f_ib_b_mps2, nav, est,
-                        vehicle=vehicle), nav
+    epoch = int(log.imu.time_ns[0])
+    t_imu = (log.imu.time_ns - epoch) * 1e-9
+    fs = flight_stats(t_imu, log.imu.w_ib_b_radps, log.imu.f_ib_b_mps2, nav, est,
+                      vehicle=vehicle, gnss_sigma=reported_sigmas(log, epoch))
+    return FlightStats({**fs.stats, **bma_leg_stats(log, nav, config)}, fs.hf_peak_hz), nav
+
+
+def reported_sigmas(log: mcap_reader.FlightLog, epoch_ns: int
+                    ) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """The records' reported NED sigmas: kind (0 position, 1 velocity) -> (times [s from
+    ``epoch_ns``], (M, 3) sigmas [m, m/s])."""
+    out = {}
+    for kind, tab, cov in ((0, log.fix, log.fix.pos_cov_ned_m2),
+                           (1, log.vel, log.vel.vel_cov_ned_m2ps2)):
+        if len(tab):
+            out[kind] = ((tab.time_ns - epoch_ns) * 1e-9,
+                         np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2), 0.0, None)))
+    return out
 
 
 def simulate_stats(tpl: FlightTemplate, config: PipelineConfig
@@ -232,8 +275,8 @@ def compare_sim_run(run_dir: str | Path, *, out: str | Path | None = None,
                                "sim_comparison", metadata=out_meta)
     named = ", ".join(comp.effects_added) or "none"
     header = (f"pospp compare-sim of {path.name}: effects added: {named}.\n"
-              f"Simulate with: pospp simulate --imu-grade THIS_FILE.toml ...; [gnss] holds "
-              f"the GNSS model (pospp.sim.gnss.GnssModel fields).")
+              f"Simulate with: pospp simulate --model THIS_FILE.toml ... ([imu]: "
+              f"pospp.sim.sensors.ImuErrorModel fields, [gnss]: pospp.sim.gnss.GnssModel).")
     report_files.write_text(Path(out) if out else run / "sim_model.toml",
                             model_toml(comp.imu_model, comp.gnss_model, header=header))
     pipeline._render_report(run)

@@ -257,11 +257,16 @@ class PairsConfig:
     """Spacing of the samples the correlated-noise least squares uses [s]."""
     estimate_gyro_z: bool = False
     """Also estimate the vertical body gyro bias (weakly observable on level legs)."""
-    diagnose_null_realisations: int = _key(10, ge=0, le=1000)
-    """Null realisations of B minus A that calibrate the diagnosis's tests (A re-run on the
-    flight with white IMU and GNSS noise added; docs/diagnose.md); 0: the nominal F
-    distribution (cries wolf on flights with GNSS noise)."""
-    diagnose_null_imu_noise: str = "measured"
+    null_realisations: int = _key(10, ge=0, le=1000)
+    """Null realisations of B minus A (A re-run on the flight with IMU and GNSS noise added;
+    docs/diagnose.md): they give the calibration its covariance and calibrate the diagnosis's
+    tests. 0: the least squares' formal covariance and the nominal F distribution (which
+    cries wolf on flights with GNSS noise)."""
+    diagnose_alpha: float = _key(0.05, gt=0.0, lt=0.5)
+    """Significance level of the diagnosis's tests (each candidate Bonferroni-corrected within
+    its step; the closing lack of fit at this level). On null flights the closing row says
+    "none" in at least 1 - alpha of runs (docs/diagnose.md, the null Monte Carlo)."""
+    null_imu_noise: str = "measured"
     """White IMU noise injected into the null realisations: "measured" (density read from the
     IMU samples' second differences) or "grade" (the [imu] grade's ARW / VRW). The [imu]
     Gauss-Markov gyro drift is injected in both."""
@@ -352,7 +357,7 @@ _CHOICES = {
     ("pairs", "formulation"): ("body", "paper"),
     ("pairs", "transition"): ("numerical", "closed_form"),
     ("pairs", "noise"): ("gyro_rw", "white"),
-    ("pairs", "diagnose_null_imu_noise"): ("measured", "grade"),
+    ("pairs", "null_imu_noise"): ("measured", "grade"),
     ("compensation", "mode"): ("causal", "per_leg", "constant"),
 }
 

@@ -34,7 +34,7 @@ import pandas as pd
 from pospp import outputs, rotation
 from pospp.calib.observability import observability_table
 from pospp.calib.replay import ImuIncrements, ReferenceSolution, replay_leg
-from pospp.calib.stage import CalibrationRun, calibrate_flight
+from pospp.calib.stage import CalibrationRun, calibrate_flight, with_null_covariance
 from pospp.config import PipelineConfig, config_from_dict
 from pospp.diagnose import null_model
 from pospp.diagnose.rerun import (
@@ -61,8 +61,8 @@ from pospp.report.html import render_report
 ProgressFn = Callable[[str, float], None]
 """Progress callback: (stage name, fraction of the whole run done in [0, 1])."""
 
-STAGES = ("ingest", "navigate", "calibrate", "compensate", "diagnose", "qc", "write",
-          "report")
+STAGES = ("ingest", "navigate", "calibrate", "null_realisations", "compensate", "diagnose", "qc",
+          "write", "report")
 
 
 @dataclass(frozen=True)
@@ -383,6 +383,13 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
         book.note("warning", "calibrate", calib_run.reason)
     status = "ok" if calib_run.calibrated else "partial"
 
+    # --- null realisations of B minus A: the calibration's sigmas and the diagnosis's null ----
+    null_dv = None
+    if calib_run.calibrated and config.pairs.null_realisations > 0:
+        book.stage("null_realisations")
+        null_dv = null_realisations(log, nav, calib_run, config, config.pairs.null_realisations)
+        calib_run = with_null_covariance(calib_run, null_dv)
+
     # --- compensation: A re-run with the calibrated gyro bias ---------------------------------
     book.stage("compensate")
     if calib_run.calibrated and config.compensation.rerun_filter:
@@ -395,7 +402,8 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
     diagnosis = None
     if config.outputs.diagnose and calib_run.calibrated:
         try:
-            diagnosis = diagnose(calib_run, imu, reference, config, log=log, nav=nav)
+            diagnosis = diagnose(calib_run, imu, reference, config, log=log, nav=nav,
+                                 null_dv=null_dv)
             if diagnosis.location is not None:  # "unexplained": where the gap sits (issue 12)
                 book.note("warning", "diagnose", diagnosis.location.text)
         except ValueError as exc:
@@ -544,53 +552,65 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                       seed: int = 0) -> list[list[np.ndarray]]:
     """B minus A's null realisations along this flight (pospp.diagnose.null_model).
 
-    Each: the log with IMU noise (white: ``[pairs] diagnose_null_imu_noise`` "measured", the
+    Each: the log with IMU noise (white: ``[pairs] null_imu_noise`` "measured", the
     density read from the samples, or "grade", the configured ARW / VRW; plus the configured
-    Gauss-Markov gyro drift, ``[imu] gyro_gm_sigma_dph`` / ``gyro_gm_tau_s``) and GNSS noise
-    at the level of A's innovations, A re-run exactly as configured, B replayed on the same legs,
-    minus the flight's own B minus A. Returns ``n`` lists of (M, 3) arrays, legs in id order
-    (fewer when A fails on more than ``n`` of ``2 n`` perturbed logs, e.g. its alignment).
+    Gauss-Markov gyro drift and accelerometer bias, ``[imu] gyro_gm_sigma_dph`` /
+    ``gyro_gm_tau_s`` / ``accel_gm_sigma_ug`` / ``accel_gm_tau_s``) and GNSS noise
+    at the level of the flight's GNSS minus A (:func:`null_model.gnss_noise_from_residuals`),
+    added to the base from A's alignment point on; A re-run exactly as configured, B replayed
+    on the same legs (same start and end times), minus the base's own B minus A. The base is
+    the flight with its GNSS replaced by A's solution at the antenna
+    (:func:`pospp.diagnose.null_model.gnss_on_solution`). Returns ``n`` lists of (M, 3)
+    arrays, legs in id order (fewer when A fails on more than ``n`` of ``2 n`` perturbed
+    logs).
     """
     si = imu_tuning(config).noise()
     # the drift as configured: the calibration's REML level of it reads low (it hits its lower
     # bound on paper_vehicle flights with a 0.05 deg/h drift, 0.31 for 0.5 deg/h on
     # paper_flight), and a null without the drift cries wolf (docs/diagnose.md)
     gm_tau, gm_sigma = si.gyro_gm_tau_s, si.gyro_gm_sigma_radps
-    if config.pairs.diagnose_null_imu_noise == "grade":
+    if config.pairs.null_imu_noise == "grade":
         arw, vrw = si.gyro_arw_radpsqrts, si.accel_vrw_mpspsqrts
     else:
         arw, vrw = null_model.imu_white_noise_from_samples(
             log.imu.time_ns, log.imu.w_ib_b_radps, log.imu.f_ib_b_mps2)
-    if nav.innovations is None:
-        raise ValueError("null realisations need A's innovation record")
-    inn = nav.innovations
-    pos_sig, vel_sig = null_model.gnss_noise_from_innovations(inn.t_s, inn.kind, inn.status,
-                                                              inn.dz_ned)
-    noise = null_model.NullNoise(
-        gyro_arw_radpsqrts=float(arw), accel_vrw_mpspsqrts=float(vrw),
-        gyro_gm_sigma_radps=float(gm_sigma), gyro_gm_tau_s=float(gm_tau),
-        pos_sigma_ned_m=pos_sig, vel_sigma_ned_mps=vel_sig)
     ids = sorted(calib_run.replays)
     legs = {leg.leg_id: leg for leg in calib_run.legs}
     rc = config.replay
-    rng = np.random.default_rng(seed)
     which = rc.reference if nav.smoothed is not None else "forward"
+
+    def b_minus_a(log_r: mcap_reader.FlightLog) -> list[np.ndarray]:
+        nav_r = navigate(log_r, config)
+        ref_r = ReferenceSolution(*nav_filter.reference_solution(nav_r, which=which))
+        imu_r = imu_increments(log_r)
+        return [replay_leg(imu_r, ref_r, legs[i],
+                           accel_compensation=rc.accel_compensation,
+                           sample_rate_hz=rc.sample_rate_hz, sigma_floor_mps=rc.sigma_floor_mps,
+                           transition_step=int(rc.transition_step)).dv_n_mps for i in ids]
+
+    # the base: the flight with its GNSS replaced by A's solution at the antenna
+    # (null_model.gnss_on_solution: noise on top of the flight's own GNSS noise is not linear)
+    solution = nav.smoothed if which == "smoothed" and nav.smoothed is not None else nav.forward
+    base = null_model.gnss_on_solution(log, solution, int(log.imu.time_ns[0]),
+                                       nav.lever_arm.lever_b_m)
+    pos_sig, vel_sig = null_model.gnss_noise_from_residuals(log, base)
+    noise = null_model.NullNoise(
+        gyro_arw_radpsqrts=float(arw), accel_vrw_mpspsqrts=float(vrw),
+        gyro_gm_sigma_radps=float(gm_sigma), gyro_gm_tau_s=float(gm_tau),
+        accel_gm_sigma_mps2=float(si.accel_gm_sigma_mps2), accel_gm_tau_s=float(si.accel_gm_tau_s),
+        pos_sigma_ned_m=pos_sig, vel_sigma_ned_mps=vel_sig)
+    base_dv = b_minus_a(base)
+    t_align_ns = int(log.imu.time_ns[0]) + round(nav.alignment.t_s * 1e9)
+    rng = np.random.default_rng(seed)
     out: list[list[np.ndarray]] = []
     for _ in range(2 * n):  # a realisation whose A fails (alignment) is skipped
         if len(out) == n:
             break
-        log_r = null_model.perturb_log(log, noise, rng)
         try:
-            nav_r = navigate(log_r, config)
+            dv = b_minus_a(null_model.perturb_log(base, noise, rng, from_time_ns=t_align_ns))
         except ValueError:
             continue
-        ref_r = ReferenceSolution(*nav_filter.reference_solution(nav_r, which=which))
-        imu_r = imu_increments(log_r)
-        out.append([replay_leg(imu_r, ref_r, legs[i], accel_compensation=rc.accel_compensation,
-                               sample_rate_hz=rc.sample_rate_hz,
-                               sigma_floor_mps=rc.sigma_floor_mps,
-                               transition_step=int(rc.transition_step)).dv_n_mps
-                    - calib_run.replays[i].dv_n_mps for i in ids])
+        out.append([d - d0 for d, d0 in zip(dv, base_dv, strict=True)])
     return out
 
 
@@ -601,10 +621,10 @@ def diagnose(calib_run: CalibrationRun, imu: ImuIncrements, reference: Reference
     """Model-discrepancy workflow on the calibrated run's B-minus-A curves (pospp.diagnose).
 
     Every test's null distribution is calibrated on ``null_dv`` (:func:`null_realisations`)
-    when given, else on ``[pairs] diagnose_null_realisations`` realisations made here when
-    the log and A's result are given (seed 0: a run is reproducible).
+    when given, else on ``[pairs] null_realisations`` realisations made here when the log and
+    A's result are given (seed 0: a run is reproducible).
     """
-    n_null = config.pairs.diagnose_null_realisations
+    n_null = config.pairs.null_realisations
     if null_dv is None and n_null > 0 and log is not None and nav is not None:
         null_dv = null_realisations(log, nav, calib_run, config, n_null)
     replays = [calib_run.replays[i] for i in sorted(calib_run.replays)]
@@ -622,7 +642,7 @@ def diagnose(calib_run: CalibrationRun, imu: ImuIncrements, reference: Reference
             replay_kwargs={"accel_compensation": config.replay.accel_compensation},
             base_formulation=config.pairs.formulation, base_transition=config.pairs.transition,
             noise="gyro_rw", gyro_arw_radpsqrts=arw_radpsqrts, null_dv=null_dv,
-            signatures=signatures)
+            alpha=config.pairs.diagnose_alpha, signatures=signatures)
 
     d, at = run(sigs), {}
     for _ in range(REFINE_ITERATIONS if sigs else 0):
@@ -719,8 +739,11 @@ def diagnose_run(run_dir: str | Path, *, progress: ProgressFn | None = None) -> 
     calib_run, reference = calibrate(imu, nav, config)
     if not calib_run.calibrated:
         raise ValueError(f"{run}: no calibration to diagnose: {calib_run.reason}")
+    book.stage("null_realisations")
+    null_dv = (null_realisations(log, nav, calib_run, config, config.pairs.null_realisations)
+               if config.pairs.null_realisations > 0 else None)
     book.stage("diagnose")
-    diagnosis = diagnose(calib_run, imu, reference, config, log=log, nav=nav)
+    diagnosis = diagnose(calib_run, imu, reference, config, log=log, nav=nav, null_dv=null_dv)
     book.stage("write")
     out_meta = {k: meta[k] for k in ("input_file", "input_sha256", "config")}
     parquet_tables.write_table(run / "diagnosis.parquet", diagnosis_columns(diagnosis),

@@ -11,8 +11,8 @@ output tables' units (deg, arcsec, deg/h, int64 ns) at the edge.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -69,6 +69,12 @@ class CalibrationRun:
         "ok" or why no calibration was produced.
     messages : tuple of str
         Per-leg problems (replay failures) and notes.
+    solve_kwargs : Mapping
+        The least squares' settings (noise model, its fixed levels, bases) as the joint fit
+        used them: :func:`with_null_covariance` re-runs that fit on null realisations.
+    sigma_source : str
+        Where the chosen calibration's covariance comes from: "least_squares" (the GLS's
+        formal covariance) or "null_realisations" (:func:`with_null_covariance`).
     """
 
     legs: tuple[Leg, ...]
@@ -83,6 +89,8 @@ class CalibrationRun:
     misalignment_n_rad: Mapping[int, NDArray]
     reason: str
     messages: tuple[str, ...]
+    solve_kwargs: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
+    sigma_source: str = "least_squares"
 
     @property
     def calibrated(self) -> bool:
@@ -120,6 +128,7 @@ class CalibrationRun:
         if self.chosen is None:
             return out
         out["calibration_formulation"] = self.chosen.formulation
+        out["calibration_sigma_source"] = self.sigma_source
         for i, ax in enumerate("xyz"):
             sig = float(self.gyro_bias_sigma_b_radps[i]) / DEG_PER_H_RADPS
             known = np.isfinite(sig)
@@ -321,15 +330,8 @@ def calibrate_flight(
     chosen = next(c for c in joint if c.formulation == policy.formulation)
     first = replays[chosen.leg_ids[0]]
     bg = chosen.gyro_bias_b_radps(first.c_nb0)
-    if chosen.formulation == "body":
-        sig = np.full(3, np.inf)
-        for i, ax in enumerate("xyz"):
-            if f"gyro_bias_{ax}" in chosen.names:
-                sig[i] = chosen.sigma_of(f"gyro_bias_{ax}")
-    else:
-        cov_eps = chosen.cov[3:5, 3:5]
-        c_bn = first.c_nb0.T[:, 0:2]
-        sig = np.sqrt(np.diag(c_bn @ cov_eps @ c_bn.T))
+    sig = _gyro_bias_sigma_b_radps(chosen, first)
+    if chosen.formulation != "body":
         messages.append("paper formulation chosen: its nav-frame drift is rotated into the body "
                         f"with leg {first.leg.leg_id}'s attitude")
     history = None
@@ -344,7 +346,79 @@ def calibrate_flight(
         per_leg_drift=compensation == "per_leg", gyro_bias_history=history)
     mis = {i: chosen.misalignment_n_rad(i) for i in chosen.leg_ids}
     return CalibrationRun(legs, replays, pairs, joint, chosen, after, improvements, bg, sig, mis,
-                          "ok", tuple(messages))
+                          "ok", tuple(messages),
+                          solve_kwargs={**cal_kw, "transition": policy.transition})
+
+
+def _gyro_bias_sigma_b_radps(chosen: Calibration, first: LegReplay) -> NDArray:
+    """1-sigma of the calibrated body gyro bias (inf for an axis not estimated) [rad/s].
+
+    ``paper`` formulation: its navigation-frame drift covariance rotated into the body with
+    the first leg's attitude (``C_bn cov C_bn^T``).
+    """
+    if chosen.formulation == "body":
+        sig = np.full(3, np.inf)
+        for i, ax in enumerate("xyz"):
+            if f"gyro_bias_{ax}" in chosen.names:
+                sig[i] = chosen.sigma_of(f"gyro_bias_{ax}")
+        return sig
+    c_bn = first.c_nb0.T[:, 0:2]
+    return np.sqrt(np.diag(c_bn @ chosen.cov[3:5, 3:5] @ c_bn.T))
+
+
+MIN_NULL_REALISATIONS = 3
+"""Fewest null realisations :func:`with_null_covariance` turns into a covariance."""
+
+
+def with_null_covariance(run: CalibrationRun, null_dv: Sequence[Sequence[NDArray]]
+                         ) -> CalibrationRun:
+    """The chosen calibration's covariance from B minus A's null realisations (issue 12).
+
+    Each realisation ``d_r`` (one (M, 3) array per leg in id order, the replays' rows:
+    :func:`pospp.pipeline.null_realisations`) is B minus A's response to one draw of the
+    flight's noise: IMU white noise, the configured Gauss-Markov drift, GNSS noise, through
+    A's own gains and the legs' coupling through A's errors at the leg starts. The joint least
+    squares is re-run, unchanged (same pairs, formulation and noise settings), on the flight's
+    B minus A plus ``d_r``; the covariance of the estimate is the mean outer product of the
+    parameter changes::
+
+        dx_r = x(dv + d_r) - x(dv),   cov = (1 / R) sum_r dx_r dx_r^T
+
+    (a parametric bootstrap by perturbation: the estimator's own spread under the flight's
+    noise, where the GLS's formal covariance is only as honest as its noise model; the mean
+    of dx is zero by construction of the perturbation, so no degree of freedom is spent on
+    it). The chosen calibration (and its entry in ``joint``) gets this covariance; the gyro
+    bias sigma follows. With fewer than :data:`MIN_NULL_REALISATIONS` usable realisations,
+    or no calibration, the run is returned unchanged.
+
+    The compensation already applied is not redone: the causal compensation weighted A's
+    bias estimate against the GLS sigma (docs/calibration.md).
+    """
+    chosen = run.chosen
+    if chosen is None or len(null_dv) < MIN_NULL_REALISATIONS:
+        return run
+    ids = sorted(run.replays)
+    kw = dict(run.solve_kwargs)
+    transition = kw.pop("transition", chosen.transition)
+    dx = []
+    for real in null_dv:
+        reps = {i: replace(run.replays[i], dv_n_mps=run.replays[i].dv_n_mps + np.asarray(d))
+                for i, d in zip(ids, real, strict=True)}
+        cal = joint_calibration(reps, run.pairs, chosen.formulation, transition=transition,
+                                **kw)
+        if cal is not None and cal.names == chosen.names:
+            dx.append(cal.x - chosen.x)
+    if len(dx) < MIN_NULL_REALISATIONS:
+        return run
+    d = np.asarray(dx)
+    honest = replace(chosen, cov=d.T @ d / d.shape[0])
+    joint = tuple(honest if c is chosen else c for c in run.joint)
+    sig = _gyro_bias_sigma_b_radps(honest, run.replays[chosen.leg_ids[0]])
+    return replace(run, joint=joint, chosen=honest, gyro_bias_sigma_b_radps=sig,
+                   sigma_source="null_realisations",
+                   messages=run.messages + (
+                       f"calibration sigmas from {d.shape[0]} null realisations of B minus A "
+                       "(the least squares re-run on each)",))
 
 
 # --------------------------------------------------------------------------- table columns

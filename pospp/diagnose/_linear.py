@@ -51,6 +51,7 @@ class Problem:
     def __init__(self, replays: Sequence[LegReplay], white_scale: float, arw: float,
                  model: NoiseModel | None = None):
         self.reps = list(replays)
+        self.wcache: dict[int, list[NDArray]] | None = None
         self.z = [r.dv_n_mps[1:, 0:2].reshape(-1) for r in self.reps]
         self.sizes = [z.size for z in self.z]
         self.n = int(sum(self.sizes))
@@ -69,6 +70,14 @@ class Problem:
                 self.chol.append(None)
         self.zw = [self.whiten(i, z) for i, z in enumerate(self.z)]
 
+    def rewhitened(self, replays: Sequence[LegReplay], white_scale: float, arw: float
+                   ) -> Problem:
+        """The same design with other data and its own whitening (``replays``: the same legs
+        and rows, other ``dv_n_mps``); whitened blocks are cached on the new problem."""
+        other = Problem(replays, white_scale, arw)
+        other.wcache = {}
+        return other
+
     def with_data(self, z: Sequence[NDArray]) -> Problem:
         """The same design and whitening with other data (per leg, rows t > 0, [N, E])."""
         other = copy.copy(self)
@@ -83,7 +92,11 @@ class Problem:
         return linalg.solve_triangular(c, a, lower=True, check_finite=False)
 
     def wblocks(self, term: Term) -> list[NDArray]:
-        """Whitened blocks of a term (cached on the term)."""
+        """Whitened blocks of a term (cached on the term, or on a re-whitened problem)."""
+        if self.wcache is not None:
+            if id(term) not in self.wcache:
+                self.wcache[id(term)] = [self.whiten(i, b) for i, b in enumerate(term.blocks)]
+            return self.wcache[id(term)]
         if term.wblocks is None:
             term.wblocks = [self.whiten(i, b) for i, b in enumerate(term.blocks)]
         return term.wblocks

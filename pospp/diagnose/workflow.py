@@ -53,7 +53,8 @@ Steps
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -235,14 +236,24 @@ def _pair_explaining(prob: Problem, terms: list[Term], fit0: Fit, trials: list[d
 class _NullCalibration:
     """Each nested F-test's null distribution from B-minus-A null realisations.
 
-    The same design and whitening as the flight's problem, with the data replaced by each
-    realisation (:mod:`pospp.diagnose.null_model`); the flight's F gets the p-value of
+    The same design as the flight's problem, with the data replaced by each realisation
+    (:mod:`pospp.diagnose.null_model`) and, when ``whitening`` is given, the whitening
+    re-estimated on each realisation as it was on the flight (the statistic is then the
+    same function of the data on both); the flight's F gets the p-value of
     :func:`pospp.diagnose.null_model.calibrated_p_value` against the R null F statistics.
     """
 
-    def __init__(self, prob: Problem, null_dv: Sequence[Sequence[NDArray]]):
-        self.probs = [prob.with_data([np.asarray(d)[1:, 0:2] for d in real])
-                      for real in null_dv]
+    def __init__(self, prob: Problem, null_dv: Sequence[Sequence[NDArray]],
+                 whitening: Callable[[tuple[LegReplay, ...]], tuple[float, float]] | None = None):
+        if whitening is None:
+            self.probs = [prob.with_data([np.asarray(d)[1:, 0:2] for d in real])
+                          for real in null_dv]
+        else:
+            self.probs = []
+            for real in null_dv:
+                reps = tuple(replace(r, dv_n_mps=np.asarray(d))
+                             for r, d in zip(prob.reps, real, strict=True))
+                self.probs.append(prob.rewhitened(reps, *whitening(reps)))
         self._rss: dict[tuple[int, ...], list[tuple[float, int]]] = {}
 
     def _fits(self, terms: Sequence[Term]) -> list[tuple[float, int]]:
@@ -289,6 +300,7 @@ def diagnose(
     min_explained_fraction: float = 0.9,
     accel_settling_s: float = fx.ACCEL_SETTLING_S,
     null_dv: Sequence[Sequence[NDArray]] | None = None,
+    rewhiten_null: bool = True,
     signatures: Mapping[str, Sequence[NDArray]] | None = None,
 ) -> Diagnosis:
     """Find, with evidence, what the calibration model is missing (module docstring).
@@ -347,10 +359,15 @@ def diagnose(
         p-value from these statistics' null distribution
         (:func:`pospp.diagnose.null_model.calibrated_p_value`) instead of the F distribution,
         and the criteria carry the suffix ``"_null_calibrated"``.
+    rewhiten_null : bool
+        With ``noise="gyro_rw"``, re-estimate the whitening (REML variance factor) on each
+        null realisation as on the flight, so that the null statistic is the same function
+        of its data as the flight's (default); False: the flight's whitening on every
+        realisation.
     signatures : mapping, optional
         Per effect id, per leg (order of ``replays``) a signature (M, 2, P) in SI parameters
-        that replaces the library's (:func:`pospp.diagnose.rerun.rerun_signatures`: the lever
-        arm and the GNSS time offset from A re-run, A's own response included).
+        that replaces the library's (:func:`pospp.diagnose.rerun.rerun_signatures`: A re-run,
+        A's own response included).
 
     Returns
     -------
@@ -408,7 +425,13 @@ def diagnose(
             if len(real) != len(replays) or any(
                     np.shape(d)[0] != r.t_s.size for d, r in zip(real, replays, strict=True)):
                 raise ValueError("null_dv: expected one array per leg with the replays' rows")
-        null = _NullCalibration(prob, null_dv)
+        whitening = None
+        if noise == "gyro_rw" and rewhiten_null:
+            def whitening(reps: tuple[LegReplay, ...]) -> tuple[float, float]:
+                c = calibrate(reps, "body", noise="gyro_rw",
+                              gyro_arw_radpsqrts=gyro_arw_radpsqrts)
+                return c.variance_factor, c.gyro_arw_radpsqrts
+        null = _NullCalibration(prob, null_dv, whitening)
     suffix = "_null_calibrated" if null is not None else ""
     terms = _base_terms(replays, base_formulation, base_transition)
     lof = _lof_term(replays, lof_terms)

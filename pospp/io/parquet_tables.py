@@ -184,6 +184,9 @@ TABLES: dict[str, list[Column]] = {
           for name, extra in (("ingest", " (with checking the run folder and hashing the "
                                          "input)"),
                               ("navigate", " (algorithm A)"), ("calibrate", ""),
+                              ("null_realisations", " (A re-run on the noise draws that "
+                                                    "give the calibration its sigmas and the "
+                                                    "diagnosis its null)"),
                               ("compensate", ""), ("diagnose", ""),
                               ("qc", " (quality checks)"),
                               ("write", " (tables and trajectory MCAP)"),
@@ -192,6 +195,10 @@ TABLES: dict[str, list[Column]] = {
                     "(empty: all passed; qc.parquet)")),
         _opt(Column("qc_suggestions", _S, "", "'; '-joined 'check: what the data suggest' of "
                     "the failed QC checks")),
+        _opt(Column("calibration_sigma_source", _S, "", "where the calibration's sigmas come "
+                    "from: 'null_realisations' (the least squares re-run on B minus A's null "
+                    "realisations, [pairs] null_realisations) or 'least_squares' (its formal "
+                    "covariance)")),
         _opt(Column("calibration_formulation", _S, "", "formulation of the calibration applied "
                     "('body' or 'paper')")),
         *[_opt(Column(f"gyro_bias_{ax}{kind}_dph", _F, "deg/h", f"calibrated gyro bias, body "

@@ -39,7 +39,7 @@ from pospp.io.mcap_reader import GnssFixes, GnssVelocities
 from pospp.sim.imu import Motion, dcm_nb_from_euler
 from pospp.sim.trajectory import MotionSample
 
-__all__ = ["GnssModel", "antenna_state", "simulate_gnss"]
+__all__ = ["GnssModel", "antenna_state", "gnss_model_file", "simulate_gnss"]
 
 _POS_FLOOR_M = 1e-3
 _VEL_FLOOR_MPS = 1e-3
@@ -123,6 +123,26 @@ class GnssModel:
                 d.pop(k)
         return {k: ([list(x) for x in v] if k == "outages_s" else
                     (list(v) if isinstance(v, tuple) else v)) for k, v in d.items()}
+
+
+def gnss_model_file(path: str) -> GnssModel | None:
+    """The ``[gnss]`` table of a model TOML file (keys: the :class:`GnssModel` fields), None
+    when the file has none.
+
+    Written by ``pospp compare-sim`` (sim_model.toml, docs/compare_sim.md); its ``[imu]``
+    table is read by :func:`pospp.sim.sensors.imu_model_file`.
+    """
+    import tomllib
+
+    with open(path, "rb") as fh:
+        data = tomllib.load(fh)
+    if "gnss" not in data:
+        return None
+    known = set(GnssModel.__dataclass_fields__)
+    unknown = sorted(set(data["gnss"]) - known)
+    if unknown:
+        raise ValueError(f"{path}: unknown [gnss] keys {unknown}; known: {sorted(known)}")
+    return GnssModel.from_dict(data["gnss"])
 
 
 def antenna_state(m: MotionSample, lever_b_m: ArrayLike) -> tuple[NDArray, NDArray, NDArray,

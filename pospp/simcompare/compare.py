@@ -9,11 +9,14 @@ model is fitted by weighted least squares on its linear statistics (slopes: iden
 trial simulation, :mod:`pospp.simcompare.effects`); an effect is admissible when its fitted
 u differs from zero (chi-square test, level ``alpha`` / number of candidates). Each
 admissible effect is added with its fitted size and the flight re-simulated; the one with the
-least sum of z^2 over all statistics after (plus 2 per parameter, as AIC) is kept, and the gaps
-after are recorded. A target that no
+least sum of z^2 after (plus 2 per parameter, as AIC) over the statistics that some candidate
+of the step moves is kept, and the gaps after are recorded. A multi-parameter effect adds
+only its components at least ``MIN_COMPONENT_Z`` sigma from zero (the others are reported as
+0 with their sigma). A target that no
 admissible effect explains, or whose gap the added effect does not shrink, is
-``unexplained`` and left out of later targets. The loop stops when no target is left or after
-``max_steps``.
+``unexplained`` and left out of later targets (a step of its own, which does not count
+against ``max_steps``). The loop stops when no target is left or ``max_steps`` effects have
+been added.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy import stats as sps
 
 from pospp.sim.gnss import GnssModel
@@ -33,6 +37,10 @@ __all__ = ["ALPHA", "Comparison", "Gap", "compare_flights", "gaps"]
 
 ALPHA = 0.01
 """Family-wise significance level of the gap tests (Holm-Bonferroni)."""
+MIN_COMPONENT_Z = 2.0
+"""A multi-parameter effect adds only the components of its fit at least this many sigma
+from zero (the others stay 0: e.g. the horizontal accelerometer ramps, which A's bias
+estimate hardly sees)."""
 
 SimulateFn = Callable[[ImuErrorModel, GnssModel], FlightStats]
 
@@ -120,30 +128,59 @@ class Comparison:
     effects_added: tuple[str, ...] = field(default=())
 
 
+def _wls(h: NDArray, g: NDArray, w: NDArray):
+    a = h.T @ (h * w[:, None])
+    if not np.all(np.isfinite(a)) or np.linalg.matrix_rank(a) < h.shape[1]:
+        return None
+    cov = np.linalg.inv(a)
+    u = cov @ (h.T @ (w * g))
+    return u, cov, float(u @ a @ u)
+
+
 def _fit(effect: SimEffect, gap: dict[str, Gap], base: FlightStats, simulate: SimulateFn,
          imu: ImuErrorModel, gnss: GnssModel, ctx: EffectContext):
+    """Weighted least squares of the effect's parameters on its fit statistics' gaps:
+    (u, cov, chi-square of u against zero), or None when they do not determine u.
+
+    Slopes: the identity (``trial`` None), one trial simulation per parameter, or, for an
+    effect with ``screen``, the identity to choose the parameters at least
+    ``MIN_COMPONENT_Z`` sigma from zero and a trial simulation for those only (the others
+    keep the identity fit's sigma and a value of 0).
+    """
     names = [s for s in effect.fit_stats if s in gap]
     if not names:
         return None
     p = len(effect.params)
-    if effect.trial is None:
-        h = np.eye(len(effect.fit_stats), p)[[effect.fit_stats.index(s) for s in names]]
-    else:
-        h = np.zeros((len(names), p))
-        for j, size in enumerate(effect.trial):
-            u = np.zeros(p)
-            u[j] = size
-            sim = simulate(*effect.apply(imu, gnss, u, ctx))
-            h[:, j] = [(sim.stats[s].value - base.stats[s].value) / size for s in names]
     g = np.array([gap[s].gap for s in names])
     w = 1.0 / np.array([gap[s].sigma for s in names]) ** 2
-    a = h.T @ (h * w[:, None])
-    if not np.all(np.isfinite(a)) or np.linalg.matrix_rank(a) < p:
-        return None
-    cov = np.linalg.inv(a)
-    u = cov @ (h.T @ (w * g))
-    chi_u = float(u @ a @ u)
-    return u, cov, chi_u
+    eye = np.eye(len(effect.fit_stats), p)[[effect.fit_stats.index(s) for s in names]]
+    if effect.trial is None:
+        return _wls(eye, g, w)
+    cols = list(range(p))
+    cov0 = None
+    if effect.screen:
+        fit0 = _wls(eye, g, w)
+        if fit0 is None:
+            return None
+        u0, cov0, _ = fit0
+        cols = [j for j in range(p) if abs(u0[j]) >= MIN_COMPONENT_Z * np.sqrt(cov0[j, j])]
+        if not cols:
+            return None
+    h = np.zeros((len(names), len(cols)))
+    for k, j in enumerate(cols):
+        u = np.zeros(p)
+        u[j] = effect.trial[j]
+        sim = simulate(*effect.apply(imu, gnss, u, ctx))
+        h[:, k] = [(sim.stats[s].value - base.stats[s].value) / effect.trial[j] for s in names]
+    fit = _wls(h, g, w)
+    if fit is None or cov0 is None:
+        return fit
+    uc, covc, chi = fit
+    u = np.zeros(p)
+    u[cols] = uc
+    cov = np.diag(np.diag(cov0))
+    cov[np.ix_(cols, cols)] = covc
+    return u, cov, chi
 
 
 def compare_flights(measured: FlightStats, simulate: SimulateFn, imu: ImuErrorModel,
@@ -166,14 +203,19 @@ def compare_flights(measured: FlightStats, simulate: SimulateFn, imu: ImuErrorMo
     steps: list[Step] = []
     added: list[str] = []
     dropped: set[str] = set()
-    for k in range(1, max_steps + 1):
+    k = 0
+    while len(added) < max_steps:
         targets = sorted((g for g in cur.values() if g.significant and g.statistic not in dropped),
                          key=lambda g: -abs(g.z))
         if not targets:
             break
+        k += 1
         target = targets[0].statistic
         cands = [e for e in library if target in e.explains and e.name not in added]
         tried = []
+        # the statistics the choice is about: those some candidate moves (the others only
+        # add noise to the score)
+        moved = {st for e in cands for st in e.explains}
         for e in cands:
             fit = _fit(e, cur, sim, simulate, imu, gnss, ctx)
             if fit is None:
@@ -181,10 +223,13 @@ def compare_flights(measured: FlightStats, simulate: SimulateFn, imu: ImuErrorMo
             u, cov, chi_u = fit
             if sps.chi2.sf(chi_u, len(u)) > alpha / max(len(cands), 1):
                 continue
+            if len(u) > 1:  # components within MIN_COMPONENT_Z sigma of zero are not added
+                u = np.where(np.abs(u) >= MIN_COMPONENT_Z * np.sqrt(np.diag(cov)), u, 0.0)
             imu2, gnss2 = e.apply(imu, gnss, u, ctx)
             sim2 = simulate(imu2, gnss2)
             after = gaps(measured, sim2, alpha=alpha)
-            score = sum(g.z ** 2 for g in after.values()) + 2.0 * len(u)
+            score = (sum(g.z ** 2 for n, g in after.items() if n in moved)
+                     + 2.0 * np.count_nonzero(u))
             tried.append((score, e, u, cov, imu2, gnss2, sim2, after))
         if not tried:
             steps.append(Step(k, target, "unexplained", (), (), (), "", cur, cur))

@@ -38,6 +38,41 @@ Statistics (name: series, unit)
 ``a_lever_x/y/z``, ``a_gyro_sf_x/y/z``, ``a_accel_sf_x/y/z``
     The final estimates of a forward pass of A with lever-arm and scale-factor states
     [m, -], with A's 1-sigma.
+``gnss_pos_norm_n/e/d``, ``gnss_vel_norm_n/e/d``
+    Per channel, the innovation normalised by the record's reported sigma, squared:
+    (dz_i / sigma_i)^2 (batch means; only when the reported sigmas are given).
+``gnss_pos_lb_n/e/d``, ``gnss_vel_lb_n/e/d``
+    Whiteness per channel, Ljung-Box: in each block, Q = n (n + 2) sum_k=1..h r_k^2 / (n - k)
+    of the block's innovations (consecutive records, h = ``LB_LAGS``), divided by h; the
+    mean over the blocks (batch means; at most ``n_blocks`` blocks, with at least
+    ``LB_MIN_RECORDS_PER_LAG`` x h records each). For white innovations each block's Q is chi-square
+    with h dof, so the statistic has mean 1 (Ljung and Box 1978).
+``gnss_pos_lowband`` / ``gnss_vel_lowband``
+    Spectrum of the innovations: per block and horizontal channel, the share of the
+    periodogram's power (mean included) below a quarter of the record rate's Nyquist
+    frequency, averaged over N and E and over the blocks. White innovations: 1/4.
+``imu_avar_gyro_1s`` / ``_10s``, ``imu_avar_accel_1s`` / ``_10s``
+    Allan variance of the IMU at 1 s and 10 s [rad^2/s^2, m^2/s^4], on its steady parts
+    (static included): the stretches where A's smoothed acceleration is below
+    ``STEADY_ACCEL_MPS2`` and its yaw rate below ``STEADY_RATE_RADPS``. Within each stretch
+    the samples are averaged in consecutive clusters of tau, and each pair of neighbouring
+    clusters gives (y_j+1 - y_j)^2 / 2 (mean over the axes); batch means of these (4 blocks
+    at 10 s). White noise of variance s^2 per sample gives s^2 dt / tau.
+``imu_band_accel_lo`` / ``_hi``, ``imu_band_gyro_lo`` / ``_hi``
+    Spectrum of the high-passed IMU (as ``imu_hf_*``): per block, the Welch power of the
+    mean over axes integrated over [1 Hz, f_s / 4) and [f_s / 4, f_s / 2] [m^2/s^4,
+    rad^2/s^2]; batch means. A vibration line moves the band it falls in.
+``a_gyro_trend_x/y/z``
+    Least-squares slope of A's smoothed gyro bias [rad/s^2], sigma as ``a_accel_trend``.
+``a_accel_bias_wander``
+    Mean over axes of (b_a(t) - mean b_a)^2 of A's smoothed accelerometer bias [m^2/s^4]
+    (as ``a_gyro_bias_wander``, 4 blocks).
+``legs_bma_ms`` / ``legs_bma_heldout_ms``
+    Only on flights with straight legs: B minus A on the legs, the leg-based workflow's own
+    statistics (:class:`pospp.diagnose.workflow.LegGap`): per leg, the mean square of the
+    horizontal velocity residual after the base calibration model, and of the
+    leave-one-leg-out prediction error [m^2/s^2]; batch means over the legs
+    (:func:`leg_stats`).
 """
 
 from __future__ import annotations
@@ -51,12 +86,24 @@ from scipy.ndimage import uniform_filter1d
 from pospp import rotation
 from pospp.nav.filter import FilterResult
 
-__all__ = ["FlightStats", "Stat", "STAT_UNITS", "flight_stats", "dominant_frequency_hz"]
+__all__ = ["FlightStats", "Stat", "STAT_UNITS", "flight_stats", "dominant_frequency_hz",
+           "ljung_box", "lowband_share", "allan_products", "steady_mask", "leg_stats"]
 
 N_BLOCKS = 10
 """Blocks of the batch-means sigma for fast statistics."""
 N_BLOCKS_SLOW = 4
 """Blocks for slow statistics (attitude offsets, bias wander)."""
+LB_LAGS = 5
+"""Lags h of the Ljung-Box whiteness statistics."""
+LB_MIN_RECORDS_PER_LAG = 6
+"""Ljung-Box blocks: as many as ``n_blocks``, but at least this many records per lag in each
+(a 180 s flight at 1 Hz gets 6 blocks of 30 records)."""
+STEADY_ACCEL_MPS2 = 0.5
+"""A's smoothed acceleration below this (and its yaw rate below ``STEADY_RATE_RADPS``):
+the steady parts of the flight where the IMU's Allan variance is taken."""
+STEADY_RATE_RADPS = np.radians(3.0)
+AVAR_TAUS_S = (1.0, 10.0)
+"""Cluster times of the Allan-variance statistics [s]."""
 
 STAT_UNITS = {
     "gnss_pos_nis": "-", "gnss_vel_nis": "-", "gnss_pos_lag1": "-", "gnss_vel_lag1": "-",
@@ -67,6 +114,16 @@ STAT_UNITS = {
     **{f"a_lever_{a}": "m" for a in "xyz"},
     **{f"a_gyro_sf_{a}": "-" for a in "xyz"},
     **{f"a_accel_sf_{a}": "-" for a in "xyz"},
+    **{f"gnss_{k}_norm_{a}": "-" for k in ("pos", "vel") for a in "ned"},
+    **{f"gnss_{k}_lb_{a}": "-" for k in ("pos", "vel") for a in "ned"},
+    "gnss_pos_lowband": "-", "gnss_vel_lowband": "-",
+    "imu_avar_gyro_1s": "rad2/s2", "imu_avar_gyro_10s": "rad2/s2",
+    "imu_avar_accel_1s": "m2/s4", "imu_avar_accel_10s": "m2/s4",
+    "imu_band_accel_lo": "m2/s4", "imu_band_accel_hi": "m2/s4",
+    "imu_band_gyro_lo": "rad2/s2", "imu_band_gyro_hi": "rad2/s2",
+    **{f"a_gyro_trend_{a}": "rad/s2" for a in "xyz"},
+    "a_accel_bias_wander": "m2/s4",
+    "legs_bma_ms": "m2/s2", "legs_bma_heldout_ms": "m2/s2",
 }
 """Every statistic and its unit (SI)."""
 
@@ -117,6 +174,139 @@ def dominant_frequency_hz(x: NDArray, dt_s: float) -> float:
     return float(f[m][np.argmax(p[m])]) if m.any() else np.nan
 
 
+def _from_blocks(values: list[float]) -> Stat:
+    """Batch means of per-block values: mean, std / sqrt(k), k - 1 dof."""
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    if v.size < 2:
+        return Stat(float(v.mean()) if v.size else np.nan, np.nan, 0.0)
+    return Stat(float(v.mean()), float(np.std(v, ddof=1) / np.sqrt(v.size)), float(v.size - 1))
+
+
+def _block_of(t: NDArray, t0: float, t1: float, n_blocks: int) -> NDArray:
+    return np.minimum(((t - t0) / (t1 - t0) * n_blocks).astype(int), n_blocks - 1)
+
+
+def ljung_box(x: NDArray, t_s: NDArray, lags: int = LB_LAGS) -> float:
+    """Ljung-Box Q / h of one series (Ljung and Box 1978).
+
+    Q = n (n + 2) sum_{k=1..h} r_k^2 / (n - k), r_k = sum (x_i - xbar)(x_i+k - xbar) /
+    sum (x_i - xbar)^2, summed over the pairs whose stamps are k record intervals apart
+    (median interval, +- half of it: pairs across a gap are left out). For a white series
+    Q is chi-square with h dof, so Q / h has mean 1 and variance 2 / h. NaN when n < 4 h.
+    """
+    n = x.size
+    if n < 4 * lags:
+        return np.nan
+    y = x - x.mean()
+    den = float(np.sum(y * y))
+    if not den > 0:
+        return np.nan
+    dt = float(np.median(np.diff(t_s)))
+    q = 0.0
+    for k in range(1, lags + 1):
+        ok = np.abs(t_s[k:] - t_s[:-k] - k * dt) < 0.5 * dt
+        r = float(np.sum(y[k:][ok] * y[:-k][ok])) / den
+        q += r * r / (n - k)
+    return n * (n + 2) * q / lags
+
+
+def lowband_share(x: NDArray) -> float:
+    """Share of a series' one-sided periodogram power (mean included) at frequencies below a
+    quarter of the Nyquist frequency (records taken as equally spaced); about 1/4 for a
+    zero-mean white series. NaN for fewer than 8 samples."""
+    from scipy.signal import periodogram
+
+    if x.size < 8:
+        return np.nan
+    f, p = periodogram(x, detrend=False, scaling="spectrum")
+    tot = float(p.sum())
+    return float(p[f < 0.125].sum() / tot) if tot > 0 else np.nan
+
+
+def steady_mask(sol_t_s: NDArray, v_n_mps: NDArray, yaw_rad: NDArray, t_s: NDArray, *,
+                max_accel_mps2: float = STEADY_ACCEL_MPS2,
+                max_rate_radps: float = STEADY_RATE_RADPS) -> NDArray:
+    """True at the times ``t_s`` where A's smoothed acceleration |dv_n/dt| [m/s^2] and yaw
+    rate |dpsi/dt| [rad/s] are below the limits (static and steady parts)."""
+    if sol_t_s.size < 3:
+        return np.zeros(t_s.shape, bool)
+    acc = np.linalg.norm(np.gradient(v_n_mps, sol_t_s, axis=0), axis=1)
+    rate = np.abs(np.gradient(np.unwrap(yaw_rad), sol_t_s))
+    ok = ((acc < max_accel_mps2) & (rate < max_rate_radps)).astype(float)
+    return np.interp(t_s, sol_t_s, ok, left=0.0, right=0.0) > 0.999
+
+
+def allan_products(t_s: NDArray, x: NDArray, mask: NDArray, tau_s: float
+                   ) -> tuple[NDArray, NDArray]:
+    """Allan-variance products of a sampled signal on the stretches where ``mask`` holds.
+
+    Each stretch (consecutive samples, no gap above 1.5 intervals) is cut into clusters of
+    m = round(tau / dt) samples; neighbouring cluster means y_j give (y_j+1 - y_j)^2 / 2,
+    averaged over the columns of ``x`` (N, K). Their mean is the Allan variance at tau
+    (non-overlapping estimator). Returns the products and the times of the cluster
+    boundaries [s].
+    """
+    if t_s.size < 3:
+        return t_s[:0], t_s[:0]
+    dt = float(np.median(np.diff(t_s)))
+    m = max(1, round(tau_s / dt))
+    brk = np.flatnonzero(~mask[1:] | ~mask[:-1] | (np.diff(t_s) > 1.5 * dt)) + 1
+    starts = np.concatenate([[0], brk])
+    ends = np.concatenate([brk, [t_s.size]])
+    out_t, out_d = [], []
+    for a, b in zip(starts, ends, strict=True):
+        if not mask[a]:
+            continue
+        c = (b - a) // m
+        if c < 2:
+            continue
+        y = x[a:a + c * m].reshape(c, m, -1).mean(axis=1)
+        out_d.append(0.5 * np.mean(np.diff(y, axis=0) ** 2, axis=1))
+        out_t.append(t_s[a + m * np.arange(1, c)])
+    if not out_d:
+        return t_s[:0], t_s[:0]
+    return np.concatenate(out_t), np.concatenate(out_d)
+
+
+def _band_blocks(t_s: NDArray, hp: NDArray, t0: float, t1: float, n_blocks: int,
+                 dt_s: float) -> tuple[list[float], list[float]]:
+    """Per block, the Welch power of the high-passed IMU (mean over axes) over [1 Hz, fs/4)
+    and [fs/4, fs/2]."""
+    from scipy.signal import welch
+
+    b = _block_of(t_s, t0, t1, n_blocks)
+    inside = (t_s >= t0) & (t_s <= t1)
+    fs = 1.0 / dt_s
+    lo, hi = [], []
+    for i in range(n_blocks):
+        x = hp[inside & (b == i)]
+        if x.shape[0] < 8 / dt_s:
+            continue
+        f, p = welch(x, fs=fs, nperseg=min(x.shape[0], round(4.0 / dt_s)), axis=0)
+        p = p.mean(axis=1)
+        df = f[1] - f[0]
+        lo.append(float(p[(f >= 1.0) & (f < fs / 4)].sum() * df))
+        hi.append(float(p[f >= fs / 4].sum() * df))
+    return lo, hi
+
+
+def leg_stats(gap_mps: NDArray, heldout_gap_mps: NDArray) -> dict[str, Stat]:
+    """``legs_bma_ms`` and ``legs_bma_heldout_ms`` from the per-leg residual RMS of B minus A
+    after the base model and of its held-out prediction [m/s] (one value per leg; batch
+    means over the legs, legs - 1 dof)."""
+    return {"legs_bma_ms": _from_blocks(list(np.square(gap_mps))),
+            "legs_bma_heldout_ms": _from_blocks(list(np.square(heldout_gap_mps)))}
+
+
+def _nearest(ts: NDArray, t: NDArray) -> NDArray:
+    """Index of the nearest element of the sorted ``ts`` to each ``t``."""
+    if ts.size < 2:
+        return np.zeros(t.shape, int)
+    j = np.clip(np.searchsorted(ts, t), 1, ts.size - 1)
+    return j - ((t - ts[j - 1]) < (ts[j] - t))
+
+
 def _innov(nav: FilterResult, kind: int) -> tuple[NDArray, NDArray, NDArray]:
     inn = nav.innovations
     m = (inn.kind == kind) & ((inn.status == 0) | (inn.status == 2)) & np.isfinite(inn.nis)
@@ -136,7 +326,9 @@ def _lag1(t: NDArray, dz: NDArray) -> tuple[NDArray, NDArray]:
 def flight_stats(imu_time_s: NDArray, w_ib_b_radps: NDArray, f_ib_b_mps2: NDArray,
                  nav: FilterResult, nav_est: FilterResult | None, *,
                  vehicle: str = "car", min_speed_mps: float = 2.0,
-                 n_blocks: int = N_BLOCKS) -> FlightStats:
+                 n_blocks: int = N_BLOCKS,
+                 gnss_sigma: dict[int, tuple[NDArray, NDArray]] | None = None
+                 ) -> FlightStats:
     """Every statistic of the module docstring for one flight.
 
     Parameters
@@ -150,6 +342,9 @@ def flight_stats(imu_time_s: NDArray, w_ib_b_radps: NDArray, f_ib_b_mps2: NDArra
         statistics; left out when None).
     vehicle : {"car", "aircraft"}
         The simulation's attitude model (``att_offset``).
+    gnss_sigma : dict, optional
+        Measurement kind (0 position, 1 velocity) -> (record times [s], (M, 3) reported NED
+        sigmas [m, m/s]) for the ``gnss_*_norm_*`` statistics (left out when None).
     """
     sol = nav.smoothed if nav.smoothed is not None else nav.forward
     bias = nav.smoothed_biases if nav.smoothed_biases is not None else nav.forward_biases
@@ -166,16 +361,39 @@ def flight_stats(imu_time_s: NDArray, w_ib_b_radps: NDArray, f_ib_b_mps2: NDArra
             a = np.stack([np.interp(t, sol.t_s, acc[:, i]) for i in range(2)], axis=1)
             out["gnss_vel_dot_accel"] = _batch(t, np.sum(dz[:, :2] * a, axis=1), t0, t1,
                                                n_blocks)
+        if gnss_sigma is not None and kind in gnss_sigma and t.size:
+            ts, sg = gnss_sigma[kind]
+            j = _nearest(ts, t)
+            zn = dz / np.where(sg[j] > 0, sg[j], np.nan)
+            for i, a in enumerate("ned"):
+                out[f"gnss_{name}_norm_{a}"] = _batch(t, zn[:, i] ** 2, t0, t1, n_blocks)
+        nb = min(n_blocks, t.size // (LB_MIN_RECORDS_PER_LAG * LB_LAGS))
+        bl = _block_of(t, t0, t1, max(nb, 1))
+        for i, a in enumerate("ned"):
+            out[f"gnss_{name}_lb_{a}"] = _from_blocks(
+                [ljung_box(dz[bl == b, i], t[bl == b]) for b in range(nb)])
+        bl = _block_of(t, t0, t1, n_blocks)
+        out[f"gnss_{name}_lowband"] = _from_blocks(
+            [np.mean([lowband_share(dz[bl == b, i]) for i in range(2)])
+             for b in range(n_blocks)])
     # --- IMU high-frequency content ----------------------------------------------------------
     dt = float(np.median(np.diff(imu_time_s)))
     win = max(3, round(1.0 / dt) | 1)
+    rpy = rotation.euler_from_quat(sol.q_nb)
+    steady = steady_mask(sol.t_s, sol.v_n_mps, rpy[:, 2], imu_time_s)
     for name, x in (("accel", f_ib_b_mps2), ("gyro", w_ib_b_radps)):
         hp = x - uniform_filter1d(x, win, axis=0, mode="nearest")
         out[f"imu_hf_{name}_var"] = _batch(imu_time_s, np.mean(hp ** 2, axis=1), t0, t1,
                                            n_blocks)
+        lo, hi = _band_blocks(imu_time_s, hp, t0, t1, n_blocks, dt)
+        out[f"imu_band_{name}_lo"] = _from_blocks(lo)
+        out[f"imu_band_{name}_hi"] = _from_blocks(hi)
+        for tau in AVAR_TAUS_S:
+            ta, da = allan_products(imu_time_s, x, steady, tau)
+            out[f"imu_avar_{name}_{tau:.0f}s"] = _batch(
+                ta, da, t0, t1, n_blocks if tau < 5.0 else N_BLOCKS_SLOW)
     peak = dominant_frequency_hz(f_ib_b_mps2, dt)
     # --- A's attitude against the simulation's attitude model (mounting) --------------------
-    rpy = rotation.euler_from_quat(sol.q_nb)
     v = sol.v_n_mps
     speed = np.hypot(v[:, 0], v[:, 1])
     track = np.arctan2(v[:, 1], v[:, 0])
@@ -198,14 +416,21 @@ def flight_stats(imu_time_s: NDArray, w_ib_b_radps: NDArray, f_ib_b_mps2: NDArra
     out["a_gyro_bias_wander"] = _batch(
         bias.t_s, np.mean((bg - bg.mean(axis=0)) ** 2, axis=1), float(bias.t_s[0]),
         float(bias.t_s[-1]), N_BLOCKS_SLOW)
+    ba_ = bias.accel_b_mps2
+    out["a_accel_bias_wander"] = _batch(
+        bias.t_s, np.mean((ba_ - ba_.mean(axis=0)) ** 2, axis=1), float(bias.t_s[0]),
+        float(bias.t_s[-1]), N_BLOCKS_SLOW)
     tb = bias.t_s - bias.t_s.mean()
     span = float(bias.t_s[-1] - bias.t_s[0])
-    for i, a in enumerate("xyz"):
-        ba = bias.accel_b_mps2[:, i]
-        slope = float(np.sum(tb * (ba - ba.mean())) / np.sum(tb ** 2)) if span > 0 else np.nan
-        s_end = np.hypot(bias.accel_sigma_b_mps2[0, i], bias.accel_sigma_b_mps2[-1, i])
-        out[f"a_accel_trend_{a}"] = Stat(slope, float(s_end / span) if span > 0 else np.nan,
-                                         np.inf)
+    for kind, b, sb in (("accel", bias.accel_b_mps2, bias.accel_sigma_b_mps2),
+                        ("gyro", bias.gyro_b_radps, bias.gyro_sigma_b_radps)):
+        for i, a in enumerate("xyz"):
+            bi = b[:, i]
+            slope = (float(np.sum(tb * (bi - bi.mean())) / np.sum(tb ** 2)) if span > 0
+                     else np.nan)
+            s_end = np.hypot(sb[0, i], sb[-1, i])
+            out[f"a_{kind}_trend_{a}"] = Stat(slope, float(s_end / span) if span > 0
+                                              else np.nan, np.inf)
     if nav_est is not None:
         la = nav_est.lever_arm
         fb = nav_est.forward_biases

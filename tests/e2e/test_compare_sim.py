@@ -18,7 +18,8 @@ from pospp.sim.sensors import imu_grade
 
 def test_compare_sim_cli(tmp_path):
     t = np.arange(0.0, 180.01, 0.5)
-    sp = np.clip(t / 10.0, 0.0, 1.0) * 12.0 + 2.0 * np.sin(2 * np.pi * t / 60.0)
+    # speed swings of 0.8 m/s^2: a time offset's tau a is then told from a lever arm's tau v
+    sp = np.clip(t / 10.0, 0.0, 1.0) * 12.0 + 4.0 * np.sin(2 * np.pi * t / 30.0)
     hd = (np.radians(30.0) + 0.6 * np.sin(2 * np.pi * t / 70.0)
           + np.radians(90.0) * np.clip((t - 100.0) / 10.0, 0.0, 1.0))
     lat = np.radians(30.0) + np.cumsum(sp * np.cos(hd)) * 0.5 / 6.37e6

@@ -1,14 +1,17 @@
-"""False alarms of the null-calibrated diagnosis: a seeded Monte Carlo on pospp's simulator
-with pospp's own A as the reference (issue 12, item 2).
+"""False alarms of the null-calibrated diagnosis and the honesty of the calibration's sigmas:
+a seeded Monte Carlo on pospp's simulator with pospp's own A as the reference (issue 12,
+items 2 and 6).
 
 Each seed: a short survey flight (three 180 s legs at 60 m/s, two headings 180 deg apart and
 one 90 deg off, 50 Hz IMU) with one of the grades' errors (constant bias, Gauss-Markov drift,
 ARW: pospp/presets/imu.toml), GNSS at 1-10 Hz with horizontal noise log-uniform in 0.02-1 m
 (vertical twice, velocity half that in m/s); A and the calibration as the pipeline runs them
 (the grade's drift configured under [imu]); the pipeline's ``diagnose`` calibrated on 6 null
-realisations (pospp.diagnose.null_model). Nothing outside the base model is present, so the
+realisations (pospp.diagnose.null_model), which also give the calibration its covariance
+(pospp.calib.stage.with_null_covariance). Nothing outside the base model is present, so the
 closing row should be ``none`` at alpha = 0.05 (body bias, vertical drift and Earth-rate
-coupling may be named).
+coupling may be named), and the calibrated body gyro bias should sit within its sigma of the
+simulated constant bias as often as a normal error would.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ import numpy as np
 import pytest
 
 from pospp import pipeline
+from pospp.calib.stage import with_null_covariance
 from pospp.config import config_from_dict
 from pospp.sim.api import simulate
 from pospp.sim.gnss import GnssModel
@@ -28,6 +32,9 @@ GRADES = ("paper_flight", "paper_vehicle", "tactical")
 FILTER_GRADE = {"paper_flight": "flight", "paper_vehicle": "vehicle", "tactical": "tactical"}
 DRIFT = {"paper_flight": (0.5, 300.0), "paper_vehicle": (0.05, 300.0), "tactical": (0.5, 600.0)}
 """The simulator grades' Gauss-Markov gyro drift (sigma deg/h, tau s), configured under [imu]."""
+ACCEL_DRIFT = {"paper_flight": (0.0, 600.0), "paper_vehicle": (0.0, 600.0),
+               "tactical": (50.0, 600.0)}
+"""The same for the accelerometer bias (sigma ug, tau s)."""
 N_NULL = 6
 MAY_BE_NAMED = {"body_fixed_gyro_bias", "vertical_gyro_drift", "earth_rate_coupling"}
 
@@ -56,7 +63,8 @@ class _Log:
 
 
 def null_flight_diagnosis(seed: int, n_null: int = N_NULL):
-    """(calibrated Diagnosis, nominal Diagnosis) of one seeded null flight."""
+    """(calibrated Diagnosis, nominal Diagnosis, bias error / sigma (x, y)) of one seeded null
+    flight."""
     grade = GRADES[seed % len(GRADES)]
     rng = np.random.default_rng(1000 + seed)
     lvl = float(np.exp(rng.uniform(np.log(0.02), np.log(1.0))))
@@ -65,18 +73,25 @@ def null_flight_diagnosis(seed: int, n_null: int = N_NULL):
     sim = simulate(parse_profile(PROFILE), imu_grade=grade, gnss=gnss, seed=seed)
     cfg = config_from_dict({
         "imu": {"grade": FILTER_GRADE[grade], "gyro_gm_sigma_dph": DRIFT[grade][0],
-                "gyro_gm_tau_s": DRIFT[grade][1]},
+                "gyro_gm_tau_s": DRIFT[grade][1], "accel_gm_sigma_ug": ACCEL_DRIFT[grade][0],
+                "accel_gm_tau_s": ACCEL_DRIFT[grade][1]},
         "filter": {"output_rate_hz": 10.0, "smoother": True},
         "legs": {"min_duration_s": 120.0, "min_speed_mps": 20.0},
-        "replay": {"reference": "smoothed", "horizon_s": 180.0}})
+        "replay": {"reference": "smoothed", "horizon_s": 180.0},
+        "pairs": {"diagnose_alpha": 0.05}})
     log = _Log(sim.imu, sim.fix, sim.vel)
     nav = pipeline.navigate(log, cfg)
     imu = pipeline.imu_increments(log)
     run, ref = pipeline.calibrate(imu, nav, cfg)
     assert run.calibrated and len(run.replays) >= 2, run.reason
     null = pipeline.null_realisations(log, nav, run, cfg, n_null, seed=seed)
+    honest = with_null_covariance(run, null)
+    assert honest.sigma_source == "null_realisations"
+    true_b = np.radians(np.asarray(sim.params["imu_errors"]["gyro_bias_dph"], float)) / 3600.0
+    z = ((honest.gyro_bias_b_radps - true_b) / honest.gyro_bias_sigma_b_radps)[:2]
     return (pipeline.diagnose(run, imu, ref, cfg, null_dv=null),
-            pipeline.diagnose(run, imu, ref, cfg))
+            pipeline.diagnose(run, imu, ref, cfg),
+            z)
 
 
 @pytest.mark.slow

@@ -1,8 +1,9 @@
 """Null-calibrated tests of the discrepancy workflow (pospp.diagnose.null_model, issue 12).
 
-- The moment-matched null distribution against scipy's chi2 (closed form).
+- The predictive-t p-value: exact level for normal log statistics at R = 4, 6, 10 (a property
+  of Student's t, checked by simulation) and one value against scipy.
 - The IMU white-noise density read from second differences, on samples of smooth motion
-  plus white noise of known density; the GNSS level from innovations of known sigma.
+  plus white noise of known density; the GNSS level from residuals of known sigma, with jumps.
 - The perturbed log's noise against its stated sigmas (lat / lon to metres by the WGS-84
   radii computed here, not by pospp).
 - The workflow on B minus A drawn from a coloured model that its ``gyro_rw`` whitening gets
@@ -27,13 +28,21 @@ from pospp.diagnose.synthetic import survey_flight
 from pospp.diagnose.workflow import diagnose
 
 
-def test_calibrated_p_value_matches_scaled_chi2():
+def test_calibrated_p_value_is_exact_for_a_normal_log_statistic():
+    # the predictive Student t is exact when log F is normal: over many (R null draws, one
+    # new draw) from the same distribution, P(p < alpha) = alpha for every R (a property of
+    # the t distribution, checked here by simulation)
     rng = np.random.default_rng(3)
-    c, nu = 3.0, 6.0
-    null = c * rng.chisquare(nu, 4000) / nu
-    for q in (0.5, 0.05, 0.01):
-        f = c * stats.chi2.ppf(1.0 - q, nu) / nu
-        assert null_model.calibrated_p_value(f, null) == pytest.approx(q, rel=0.2)
+    for r in (4, 6, 10):
+        lg = rng.normal(2.0, 1.5, size=(20000, r + 1))
+        p = np.array([null_model.calibrated_p_value(float(np.exp(row[0])), np.exp(row[1:]))
+                      for row in lg])
+        for alpha in (0.05, 0.01):
+            assert np.mean(p < alpha) == pytest.approx(alpha, abs=4 * np.sqrt(alpha / 20000))
+    # one value against scipy's t written out: R = 5 draws, t = (log F - m) / (s sqrt(1.2))
+    null = np.exp(np.array([0.0, 1.0, 2.0, 3.0, 4.0]))
+    t = (np.log(60.0) - 2.0) / (np.std([0, 1, 2, 3, 4], ddof=1) * np.sqrt(1.2))
+    assert null_model.calibrated_p_value(60.0, null) == pytest.approx(stats.t.sf(t, 4))
     assert null_model.calibrated_p_value(float("nan"), null) == 1.0
     assert np.isnan(null_model.calibrated_p_value(1.0, np.array([1.0, np.nan])))
 
@@ -52,16 +61,22 @@ def test_imu_white_noise_density_from_second_differences():
     assert v == pytest.approx(vrw, rel=0.02)
 
 
-def test_gnss_noise_from_innovations():
+def test_gnss_noise_from_residuals_robust_rms():
     rng = np.random.default_rng(5)
-    n = 20000
-    kind = np.tile([0, 1], n // 2)
-    status = np.zeros(n, dtype=int)
-    status[::7] = 1  # gated records are left out
-    dz = rng.standard_normal((n, 3)) * np.where(kind[:, None] == 0, [0.1, 0.2, 0.3],
-                                                [0.01, 0.02, 0.03])
-    dz[status == 1] = 100.0
-    pos, vel = null_model.gnss_noise_from_innovations(np.arange(n), kind, status, dz)
+    m = 20000
+    lat0 = np.radians(40.0)
+    a, e2 = 6378137.0, 6.69437999014e-3  # WGS-84 radii written out here
+    s2 = np.sin(lat0) ** 2
+    rm, rn = a * (1 - e2) / (1 - e2 * s2) ** 1.5, a / np.sqrt(1 - e2 * s2)
+    e = rng.standard_normal((m, 3)) * [0.1, 0.2, 0.3]
+    e[::500] = 50.0  # jumps A would gate: left out
+    ev = rng.standard_normal((m, 3)) * [0.01, 0.02, 0.03]
+    base = _Log(None, _Fix(np.arange(m), np.full(m, lat0), np.full(m, 1.0), np.full(m, 500.0)),
+                _Vel(np.arange(m), np.zeros((m, 3))))
+    log = _Log(None, _Fix(np.arange(m), lat0 + e[:, 0] / (rm + 500.0),
+                          1.0 + e[:, 1] / ((rn + 500.0) * np.cos(lat0)), 500.0 - e[:, 2]),
+               _Vel(np.arange(m), ev))
+    pos, vel = null_model.gnss_noise_from_residuals(log, base)
     np.testing.assert_allclose(pos, [0.1, 0.2, 0.3], rtol=0.03)
     np.testing.assert_allclose(vel, [0.01, 0.02, 0.03], rtol=0.03)
 
@@ -119,6 +134,18 @@ def test_perturbed_log_has_the_stated_noise():
     # gyro: white part plus the Gauss-Markov part (variance adds)
     assert out.imu.w_ib_b_radps.var() == pytest.approx((2e-5 / np.sqrt(dt)) ** 2 + 1e-10,
                                                        rel=0.05)
+    # noise only from a time on (the flight's alignment point): nothing before it
+    t0 = int(log.imu.time_ns[n // 2])
+    late = null_model.perturb_log(log, noise, np.random.default_rng(7), from_time_ns=t0)
+    before = log.imu.time_ns < t0
+    assert not late.imu.w_ib_b_radps[before].any() and not late.imu.f_ib_b_mps2[before].any()
+    assert late.imu.w_ib_b_radps[~before].std() > 0
+    t1 = int(log.fix.time_ns[m // 2])  # (the fixes here are stamped 0 ... m ns)
+    late = null_model.perturb_log(log, noise, np.random.default_rng(7), from_time_ns=t1)
+    fb = log.fix.time_ns < t1
+    assert np.array_equal(late.fix.height_m[fb], log.fix.height_m[fb])
+    assert not late.vel.v_n_mps[fb].any()
+    assert np.std(late.fix.height_m[~fb]) == pytest.approx(0.3, rel=0.05)
 
 
 def test_gauss_markov_path_variance_and_correlation():
