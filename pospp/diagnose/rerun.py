@@ -58,6 +58,31 @@ the survey flights measured, A's accelerometer-bias estimate absorbs it and the 
 screen drops it either way)."""
 
 
+def _response(log_p, nav, calib_run, config, lever_b_m=None) -> list[NDArray]:
+    """(B - A)[log_p, lever] - (B - A)[flight] per leg (legs in id order), (M, 2) [m/s]."""
+    from pospp import pipeline  # the pipeline imports the workflow: import at call time
+    from pospp.calib.replay import ReferenceSolution, replay_leg
+    from pospp.nav import filter as nav_filter
+
+    rc = config.replay
+    which = rc.reference if nav.smoothed is not None else "forward"
+    legs = {leg.leg_id: leg for leg in calib_run.legs}
+    nav_p = pipeline.navigate(log_p, config, lever_arm_b_m=lever_b_m)
+    ref_p = ReferenceSolution(*nav_filter.reference_solution(nav_p, which=which))
+    imu = pipeline.imu_increments(log_p)
+    return [replay_leg(imu, ref_p, legs[i], accel_compensation=rc.accel_compensation,
+                       sample_rate_hz=rc.sample_rate_hz, sigma_floor_mps=rc.sigma_floor_mps,
+                       transition_step=int(rc.transition_step)).dv_n_mps[:, 0:2]
+            - calib_run.replays[i].dv_n_mps[:, 0:2] for i in sorted(calib_run.replays)]
+
+
+def _gnss_earlier(log, dt_s: float):
+    """The log with its GNSS fixes and velocities stamped ``dt_s`` earlier."""
+    dt_ns = int(round(dt_s * 1e9))
+    return replace(log, fix=replace(log.fix, time_ns=log.fix.time_ns - dt_ns),
+                   vel=replace(log.vel, time_ns=log.vel.time_ns - dt_ns))
+
+
 def rerun_signatures(log, nav, calib_run, config, effect_ids=RERUN_EFFECTS, *,
                      accel_settling_s: float = ACCEL_SETTLING_S) -> dict[str, list[NDArray]]:
     """Per effect, per leg (legs in id order) the signature (M, 2, P), SI parameters.
@@ -81,15 +106,10 @@ def rerun_signatures(log, nav, calib_run, config, effect_ids=RERUN_EFFECTS, *,
         ``effect_id -> [S_leg (M, 2, P)]``; an effect whose re-run fails (A's alignment) is
         left out.
     """
-    from pospp import pipeline  # the pipeline imports the workflow: import at call time
-    from pospp.calib.replay import ReferenceSolution, replay_leg
-    from pospp.nav import filter as nav_filter
-
-    ids = sorted(calib_run.replays)
-    legs = {leg.leg_id: leg for leg in calib_run.legs}
-    rc = config.replay
-    which = rc.reference if nav.smoothed is not None else "forward"
-    base = [calib_run.replays[i].dv_n_mps[:, 0:2] for i in ids]
+    bad = [e for e in effect_ids if e not in RERUN_EFFECTS]
+    if bad:
+        raise ValueError(f"effect_ids: {bad} have no re-run signature; expected a subset of "
+                         f"{RERUN_EFFECTS}")
     t_run_s = (log.imu.time_ns - log.imu.time_ns[0]) * 1e-9
 
     def imu_log(rates=None, forces=None):
@@ -98,13 +118,7 @@ def rerun_signatures(log, nav, calib_run, config, effect_ids=RERUN_EFFECTS, *,
         return replace(log, imu=imu_p)
 
     def response(log_p, lever_b_m=None) -> list[NDArray]:
-        nav_p = pipeline.navigate(log_p, config, lever_arm_b_m=lever_b_m)
-        ref_p = ReferenceSolution(*nav_filter.reference_solution(nav_p, which=which))
-        imu = pipeline.imu_increments(log_p)
-        return [replay_leg(imu, ref_p, legs[i], accel_compensation=rc.accel_compensation,
-                           sample_rate_hz=rc.sample_rate_hz, sigma_floor_mps=rc.sigma_floor_mps,
-                           transition_step=int(rc.transition_step)).dv_n_mps[:, 0:2] - b
-                for i, b in zip(ids, base, strict=True)]
+        return _response(log_p, nav, calib_run, config, lever_b_m)
 
     out: dict[str, list[NDArray]] = {}
     for eid in effect_ids:
@@ -114,25 +128,18 @@ def rerun_signatures(log, nav, calib_run, config, effect_ids=RERUN_EFFECTS, *,
                 lever0 = np.asarray(config.gnss.lever_arm_m, dtype=float)
                 cols = [response(log, lever0 + h * e) for e in np.eye(3)]
             elif eid == "time_offset":
-                dt_ns = int(round(h * 1e9))
-                log_p = replace(log, fix=replace(log.fix, time_ns=log.fix.time_ns - dt_ns),
-                                vel=replace(log.vel, time_ns=log.vel.time_ns - dt_ns))
-                cols = [response(log_p)]
+                cols = [response(_gnss_earlier(log, h))]
             elif eid == "gyro_scale_factor":
                 w = log.imu.w_ib_b_radps
                 cols = [response(imu_log(rates=w * (1.0 + h * e))) for e in np.eye(3)]
-            elif eid == "accel_bias_change":
+            else:  # accel_bias_change
                 f = log.imu.f_ib_b_mps2
                 warm = np.exp(-t_run_s / accel_settling_s)[:, None]
                 cols = [response(imu_log(forces=f + h * warm * e)) for e in np.eye(3)[:2]]
-            else:
-                raise ValueError(f"effect_ids: {eid!r} has no re-run signature; "
-                                 f"expected a subset of {RERUN_EFFECTS}")
-        except (ValueError, np.linalg.LinAlgError) as exc:
-            if "effect_ids" in str(exc):
-                raise
+        except (ValueError, np.linalg.LinAlgError):
             continue
-        out[eid] = [np.stack([c[k] for c in cols], axis=-1) / h for k in range(len(ids))]
+        out[eid] = [np.stack([c[k] for c in cols], axis=-1) / h
+                    for k in range(len(calib_run.replays))]
     return out
 
 
@@ -155,14 +162,6 @@ def refine_signatures(log, nav, calib_run, config, signatures: dict[str, list[ND
     :data:`REFINE_TOLERANCE` of itself since the secant in ``at`` was made, keep their
     signature. Returns the signatures and the estimates their secants were made at.
     """
-    from pospp import pipeline
-    from pospp.calib.replay import ReferenceSolution, replay_leg
-    from pospp.nav import filter as nav_filter
-
-    ids = sorted(calib_run.replays)
-    legs = {leg.leg_id: leg for leg in calib_run.legs}
-    rc = config.replay
-    which = rc.reference if nav.smoothed is not None else "forward"
     out = dict(signatures)
     at = dict(at or {})
     for eid, p in estimates.items():
@@ -174,28 +173,18 @@ def refine_signatures(log, nav, calib_run, config, signatures: dict[str, list[ND
         prev = at.get(eid)
         if prev is not None and np.linalg.norm(p - prev) <= REFINE_TOLERANCE * size:
             continue
-        log_p, lever = log, None
-        if eid == "lever_arm":
-            lever = np.asarray(config.gnss.lever_arm_m, dtype=float) - p
-        else:
-            dt_ns = -int(round(float(p[0]) * 1e9))
-            log_p = replace(log, fix=replace(log.fix, time_ns=log.fix.time_ns - dt_ns),
-                            vel=replace(log.vel, time_ns=log.vel.time_ns - dt_ns))
         try:
-            nav_p = pipeline.navigate(log_p, config, lever_arm_b_m=lever)
+            if eid == "lever_arm":
+                lever = np.asarray(config.gnss.lever_arm_m, dtype=float) - p
+                removed = _response(log, nav, calib_run, config, lever)
+            else:
+                removed = _response(_gnss_earlier(log, -float(p[0])), nav, calib_run, config)
         except ValueError:
             continue
-        ref_p = ReferenceSolution(*nav_filter.reference_solution(nav_p, which=which))
-        imu = pipeline.imu_increments(log_p)
         u = p / size
         new = []
-        for k, i in enumerate(ids):
-            s_u = -(replay_leg(imu, ref_p, legs[i], accel_compensation=rc.accel_compensation,
-                              sample_rate_hz=rc.sample_rate_hz,
-                              sigma_floor_mps=rc.sigma_floor_mps,
-                              transition_step=int(rc.transition_step)).dv_n_mps[:, 0:2]
-                   - calib_run.replays[i].dv_n_mps[:, 0:2]) / size
-            s = signatures[eid][k]
+        for s, r in zip(signatures[eid], removed, strict=True):
+            s_u = -r / size
             new.append(s - np.einsum("mcp,p,q->mcq", s, u, u) + s_u[:, :, None] * u)
         out[eid] = new
         at[eid] = p
