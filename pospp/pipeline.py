@@ -628,9 +628,8 @@ def diagnose(calib_run: CalibrationRun, imu: ImuIncrements, reference: Reference
     if null_dv is None and n_null > 0 and log is not None and nav is not None:
         null_dv = null_realisations(log, nav, calib_run, config, n_null)
     replays = [calib_run.replays[i] for i in sorted(calib_run.replays)]
-    # lever arm, GNSS time offset, gyro scale factor: A's own response to them, by re-running
-    # A (issue 12)
-    # (3 + 1 + 3 A runs; the warm-up's re-run is left out: absorbed by A's bias estimate)
+    # lever arm and GNSS time offset: A's own response to them, by re-running A (issue 12;
+    # 3 + 1 A runs)
     sigs = rerun_signatures(log, nav, calib_run, config, PIPELINE_RERUN) \
         if log is not None and nav is not None else None
     # B's residuals carry the gyro angle random walk, correlated along each leg: weighting them

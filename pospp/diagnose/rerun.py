@@ -52,10 +52,10 @@ stops earlier when no estimate moves by more than :data:`REFINE_TOLERANCE` of it
 REFINE_TOLERANCE = 0.05
 RERUN_EFFECTS = ("lever_arm", "time_offset", "gyro_scale_factor", "accel_bias_change")
 """Effects whose signature :func:`rerun_signatures` makes by re-running A."""
-PIPELINE_RERUN = ("lever_arm", "time_offset", "gyro_scale_factor")
-"""The ones the pipeline's diagnosis re-runs (7 A runs; the warm-up's re-run is left out: on
-the survey flights measured, A's accelerometer-bias estimate absorbs it and the observability
-screen drops it either way)."""
+PIPELINE_RERUN = ("lever_arm", "time_offset")
+"""The ones the pipeline's diagnosis re-runs (4 A runs). The scale factor's re-run (3 A runs)
+raised its F but named it in none of the flights measured, and the warm-up's is absorbed by
+A's accelerometer-bias estimate (docs/diagnose.md, "Power"): both are left to the caller."""
 
 
 def _response(log_p, nav, calib_run, config, lever_b_m=None) -> list[NDArray]:
@@ -192,10 +192,11 @@ def refine_signatures(log, nav, calib_run, config, signatures: dict[str, list[ND
 
 
 def first_estimates(diagnosis) -> dict[str, NDArray]:
-    """Each re-run effect's first-step candidate estimate, SI (for :func:`refine_signatures`)."""
+    """Each re-run effect's first-step estimate, SI, where its candidate was significant (for
+    :func:`refine_signatures`; a flight with nothing significant costs no refinement)."""
     out = {}
     for c in diagnosis.candidates:
-        if c.step == 1 and c.effect in RERUN_EFFECTS and np.size(c.values):
+        if c.step == 1 and c.significant and c.effect in RERUN_EFFECTS and np.size(c.values):
             out[c.effect] = np.asarray(c.values, dtype=float) * effect_by_id(c.effect).si_per_unit
     return out
 
