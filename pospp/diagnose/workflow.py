@@ -254,14 +254,14 @@ class _NullCalibration:
                 reps = tuple(replace(r, dv_n_mps=np.asarray(d))
                              for r, d in zip(prob.reps, real, strict=True))
                 self.probs.append(prob.rewhitened(reps, *whitening(reps)))
-        self._rss: dict[tuple[int, ...], list[tuple[float, int]]] = {}
+        self._rss: dict[tuple[int, ...], tuple[list[Term], list[tuple[float, int]]]] = {}
 
     def _fits(self, terms: Sequence[Term]) -> list[tuple[float, int]]:
         key = tuple(id(t) for t in terms)
-        if key not in self._rss:
+        if key not in self._rss:  # the entry holds the terms: freed ids could be reused
             fits = [q.fit(terms) for q in self.probs]
-            self._rss[key] = [(f.rss_w, f.rank) for f in fits]
-        return self._rss[key]
+            self._rss[key] = (list(terms), [(f.rss_w, f.rank) for f in fits])
+        return self._rss[key][1]
 
     def statistics(self, terms0: Sequence[Term], terms1: Sequence[Term]) -> NDArray:
         """The nested F of terms0 within terms1 on every realisation."""
