@@ -37,6 +37,13 @@ from pospp.calib.replay import ImuIncrements, ReferenceSolution, replay_leg
 from pospp.calib.stage import CalibrationRun, calibrate_flight, with_null_covariance
 from pospp.config import PipelineConfig, config_from_dict
 from pospp.diagnose import null_model
+from pospp.diagnose.rerun import (
+    PIPELINE_RERUN,
+    REFINE_ITERATIONS,
+    first_estimates,
+    refine_signatures,
+    rerun_signatures,
+)
 from pospp.diagnose.workflow import Diagnosis, diagnosis_columns, residual_curve_columns
 from pospp.diagnose.workflow import diagnose as run_diagnosis
 from pospp.evaluate import evaluation_rows, solution_errors
@@ -399,7 +406,10 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
     diagnosis = None
     if config.outputs.diagnose and calib_run.calibrated:
         try:
-            diagnosis = diagnose(calib_run, imu, reference, config, null_dv=null_dv)
+            diagnosis = diagnose(calib_run, imu, reference, config, log=log, nav=nav,
+                                 null_dv=null_dv)
+            if diagnosis.location is not None:  # "unexplained": where the gap sits (issue 12)
+                book.note("warning", "diagnose", diagnosis.location.text)
         except ValueError as exc:
             book.note("warning", "diagnose", f"no diagnosis: {exc}")
             status = "partial"
@@ -622,16 +632,29 @@ def diagnose(calib_run: CalibrationRun, imu: ImuIncrements, reference: Reference
     if null_dv is None and n_null > 0 and log is not None and nav is not None:
         null_dv = null_realisations(log, nav, calib_run, config, n_null)
     replays = [calib_run.replays[i] for i in sorted(calib_run.replays)]
+    # lever arm and GNSS time offset: A's own response to them, by re-running A (issue 12;
+    # 3 + 1 A runs)
+    sigs = rerun_signatures(log, nav, calib_run, config, PIPELINE_RERUN) \
+        if log is not None and nav is not None else None
     # B's residuals carry the gyro angle random walk, correlated along each leg: weighting them
     # as white noise would make every F-test too liberal
     arw_radpsqrts = imu_tuning(config).noise().gyro_arw_radpsqrts
-    return run_diagnosis(
-        replays, imu=imu, reference=reference,
-        replay_kwargs={"accel_compensation": config.replay.accel_compensation},
-        base_formulation=config.pairs.formulation, base_transition=config.pairs.transition,
-        noise="gyro_rw", gyro_arw_radpsqrts=arw_radpsqrts, null_dv=null_dv,
-        alpha=config.pairs.diagnose_alpha,
-    )
+    def run(signatures):
+        return run_diagnosis(
+            replays, imu=imu, reference=reference,
+            replay_kwargs={"accel_compensation": config.replay.accel_compensation},
+            base_formulation=config.pairs.formulation, base_transition=config.pairs.transition,
+            noise="gyro_rw", gyro_arw_radpsqrts=arw_radpsqrts, null_dv=null_dv,
+            alpha=config.pairs.diagnose_alpha, signatures=signatures)
+
+    d, at = run(sigs), {}
+    for _ in range(REFINE_ITERATIONS if sigs else 0):
+        # A is not linear in a GNSS-side effect: secants through the current estimates
+        refined, at = refine_signatures(log, nav, calib_run, config, sigs, first_estimates(d), at)
+        if all(refined[k] is sigs[k] for k in sigs):
+            break
+        d, sigs = run(refined), refined
+    return d
 
 
 def evaluate_run(run_dir: str | Path, truth_file: str | Path, *, skip_s: float = 0.0
@@ -723,7 +746,7 @@ def diagnose_run(run_dir: str | Path, *, progress: ProgressFn | None = None) -> 
     null_dv = (null_realisations(log, nav, calib_run, config, config.pairs.null_realisations)
                if config.pairs.null_realisations > 0 else None)
     book.stage("diagnose")
-    diagnosis = diagnose(calib_run, imu, reference, config, null_dv=null_dv)
+    diagnosis = diagnose(calib_run, imu, reference, config, log=log, nav=nav, null_dv=null_dv)
     book.stage("write")
     out_meta = {k: meta[k] for k in ("input_file", "input_sha256", "config")}
     parquet_tables.write_table(run / "diagnosis.parquet", diagnosis_columns(diagnosis),

@@ -94,9 +94,11 @@ class Problem:
     def wblocks(self, term: Term) -> list[NDArray]:
         """Whitened blocks of a term (cached on the term, or on a re-whitened problem)."""
         if self.wcache is not None:
+            # the entry holds the term: a freed term's id could be reused by a new one
             if id(term) not in self.wcache:
-                self.wcache[id(term)] = [self.whiten(i, b) for i, b in enumerate(term.blocks)]
-            return self.wcache[id(term)]
+                self.wcache[id(term)] = (term, [self.whiten(i, b)
+                                                for i, b in enumerate(term.blocks)])
+            return self.wcache[id(term)][1]
         if term.wblocks is None:
             term.wblocks = [self.whiten(i, b) for i, b in enumerate(term.blocks)]
         return term.wblocks

@@ -53,8 +53,8 @@ Steps
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -63,7 +63,16 @@ from pospp.calib.replay import ImuIncrements, LegReplay, ReferenceSolution
 from pospp.calib.solve import NoiseModel, calibrate, fit_noise_model, leg_sensitivities
 from pospp.diagnose import effects as fx
 from pospp.diagnose._linear import Fit, Problem, Term, bic, f_test, rms
+from pospp.diagnose.locate import horizon_worth, locate_gap, lof_basis
 from pospp.diagnose.null_model import calibrated_p_value
+from pospp.diagnose.results import CandidateTest, Diagnosis, DiagnosisStep, LegGap
+from pospp.diagnose.tables import (  # noqa: F401  (the tables' home before issue 17)
+    DIAGNOSIS_COLUMNS,
+    candidate_columns,
+    diagnosis_columns,
+    leg_gap_columns,
+    residual_curve_columns,
+)
 
 BASE_FORMULATIONS = ("body", "paper")
 BASE_TRANSITIONS = ("numerical", "closed_form")
@@ -71,163 +80,6 @@ CRITERION = "F_test_bonferroni_and_heldout"
 LOF_DEGREE = 4
 """Legendre degree of the polynomial part of the lack-of-fit basis."""
 LOF_CRITERION = "lack_of_fit_F"
-
-
-# --------------------------------------------------------------------------------------------
-# results
-
-
-@dataclass(frozen=True)
-class CandidateTest:
-    """One candidate tested at one step (display units in ``unit``)."""
-
-    step: int
-    effect: str
-    n_parameters: int
-    value: float
-    sigma: float
-    unit: str
-    statistic: float
-    p_value: float
-    delta_bic: float
-    explained_fraction: float
-    gap_after_mps: float
-    heldout_gap_after_mps: float
-    significant: bool
-
-
-@dataclass(frozen=True)
-class DiagnosisStep:
-    """One row of diagnosis.parquet.
-
-    Attributes
-    ----------
-    step : int
-        1, 2, ...; the final row (``effect`` "none" or "unexplained") closes the list.
-    effect : str
-        Library identifier, "none" or "unexplained".
-    parameters : tuple of str
-        Parameter names of the effect.
-    values, sigmas : ndarray, shape (P,)
-        Estimates and 1-sigma per parameter, display unit.
-    value, sigma : float
-        Size of the effect (the signed value of a one-parameter effect, the norm otherwise) and
-        its 1-sigma (delta method), display unit; NaN on the final row.
-    unit : str
-    statistic, p_value : float
-        F statistic and its p-value (lack-of-fit F on the final row).
-    criterion : str
-    significant : bool
-    delta_bic : float
-        BIC(with) - BIC(without) (negative favours the effect).
-    explained_fraction : float
-        Share of the structured gap (lack-of-fit basis) the effect explains.
-    confounded_with : tuple of str
-        Other significant candidates that these legs cannot tell apart from the named one (the
-        named effect adds nothing significant once one of them is in the model, nor the
-        reverse): the choice between them rests on the larger F only.
-    gap_before_mps, gap_after_mps : float
-        RMS of B minus A minus the model (all legs, N and E) before and after the step [m/s].
-    heldout_gap_before_mps, heldout_gap_after_mps : float
-        The same for leave-one-leg-out predictions [m/s].
-    """
-
-    step: int
-    effect: str
-    parameters: tuple[str, ...]
-    values: NDArray
-    sigmas: NDArray
-    value: float
-    sigma: float
-    unit: str
-    statistic: float
-    p_value: float
-    criterion: str
-    significant: bool
-    delta_bic: float
-    explained_fraction: float
-    confounded_with: tuple[str, ...]
-    gap_before_mps: float
-    gap_after_mps: float
-    heldout_gap_before_mps: float
-    heldout_gap_after_mps: float
-
-
-@dataclass(frozen=True)
-class LegGap:
-    """Where the gap sits: one leg, base model ("before") and final model ("after") [m/s]."""
-
-    leg_id: int
-    start_s: float
-    duration_s: float
-    heading_deg: float
-    speed_mps: float
-    gap_before_mps: float
-    gap_after_mps: float
-    heldout_gap_before_mps: float
-    heldout_gap_after_mps: float
-    phase_gap_before_mps: NDArray
-    phase_gap_after_mps: NDArray
-
-
-@dataclass(frozen=True)
-class Diagnosis:
-    """Result of :func:`diagnose`.
-
-    Attributes
-    ----------
-    base_formulation, base_transition : str
-    alpha : float
-    steps : tuple of DiagnosisStep
-        Named effects in order, then the closing row ("none" or "unexplained").
-    candidates : tuple of CandidateTest
-        Every candidate tested at every step.
-    legs : tuple of LegGap
-    in_base : tuple of str
-        Library effects already in the base model (not candidates).
-    unobservable : tuple of str
-        Effects these legs cannot reveal (observability screen at the first step).
-    not_evaluated : tuple of str
-        Effects skipped for lack of inputs (IMU increments and A's solution).
-    t_s : tuple of ndarray
-        Per leg, the sample times t > 0 [s since the leg start].
-    residuals_before_n_mps, residuals_after_n_mps : tuple of ndarray, shape (M - 1, 2)
-        Per leg, measured minus modelled [dv_N, dv_E] with the base and the final model.
-    heldout_before_n_mps, heldout_after_n_mps : tuple of ndarray, shape (M - 1, 2)
-        The same for the leave-one-leg-out predictions.
-    """
-
-    base_formulation: str
-    base_transition: str
-    alpha: float
-    steps: tuple[DiagnosisStep, ...]
-    candidates: tuple[CandidateTest, ...]
-    legs: tuple[LegGap, ...]
-    in_base: tuple[str, ...]
-    unobservable: tuple[str, ...]
-    not_evaluated: tuple[str, ...]
-    t_s: tuple[NDArray, ...] = field(repr=False)
-    residuals_before_n_mps: tuple[NDArray, ...] = field(repr=False)
-    residuals_after_n_mps: tuple[NDArray, ...] = field(repr=False)
-    heldout_before_n_mps: tuple[NDArray, ...] = field(repr=False)
-    heldout_after_n_mps: tuple[NDArray, ...] = field(repr=False)
-
-    @property
-    def named(self) -> tuple[str, ...]:
-        """Effects named and added, in order."""
-        return tuple(s.effect for s in self.steps if s.effect not in ("none", "unexplained"))
-
-    @property
-    def conclusion(self) -> str:
-        """"none" or "unexplained" (the closing row)."""
-        return self.steps[-1].effect
-
-    def step_of(self, effect_id: str) -> DiagnosisStep:
-        """The step that named an effect (KeyError otherwise)."""
-        for s in self.steps:
-            if s.effect == effect_id:
-                return s
-        raise KeyError(f"effect {effect_id!r} was not named; named: {self.named}")
 
 
 # --------------------------------------------------------------------------------------------
@@ -260,9 +112,7 @@ def _lof_term(reps: Sequence[LegReplay], k: int) -> list[Term]:
     terms = []
     for i, r in enumerate(reps):
         t = r.t_s[1:]
-        u = (t - t[0]) / max(t[-1] - t[0], 1e-9)
-        basis = np.hstack([np.polynomial.legendre.legvander(2.0 * u - 1.0, LOF_DEGREE),
-                           np.cos(np.pi * np.outer(u, np.arange(1, k)))])
+        basis, _ = lof_basis(t, k, LOF_DEGREE)
         w = basis.shape[1]
         blk = np.zeros((t.size, 2, 2 * w))
         blk[:, 0, :w] = basis
@@ -404,14 +254,14 @@ class _NullCalibration:
                 reps = tuple(replace(r, dv_n_mps=np.asarray(d))
                              for r, d in zip(prob.reps, real, strict=True))
                 self.probs.append(prob.rewhitened(reps, *whitening(reps)))
-        self._rss: dict[tuple[int, ...], list[tuple[float, int]]] = {}
+        self._rss: dict[tuple[int, ...], tuple[list[Term], list[tuple[float, int]]]] = {}
 
     def _fits(self, terms: Sequence[Term]) -> list[tuple[float, int]]:
         key = tuple(id(t) for t in terms)
-        if key not in self._rss:
+        if key not in self._rss:  # the entry holds the terms: freed ids could be reused
             fits = [q.fit(terms) for q in self.probs]
-            self._rss[key] = [(f.rss_w, f.rank) for f in fits]
-        return self._rss[key]
+            self._rss[key] = (list(terms), [(f.rss_w, f.rank) for f in fits])
+        return self._rss[key][1]
 
     def statistics(self, terms0: Sequence[Term], terms1: Sequence[Term]) -> NDArray:
         """The nested F of terms0 within terms1 on every realisation."""
@@ -451,6 +301,7 @@ def diagnose(
     accel_settling_s: float = fx.ACCEL_SETTLING_S,
     null_dv: Sequence[Sequence[NDArray]] | None = None,
     rewhiten_null: bool = True,
+    signatures: Mapping[str, Sequence[NDArray]] | None = None,
 ) -> Diagnosis:
     """Find, with evidence, what the calibration model is missing (module docstring).
 
@@ -513,6 +364,10 @@ def diagnose(
         null realisation as on the flight, so that the null statistic is the same function
         of its data as the flight's (default); False: the flight's whitening on every
         realisation.
+    signatures : mapping, optional
+        Per effect id, per leg (order of ``replays``) a signature (M, 2, P) in SI parameters
+        that replaces the library's (:func:`pospp.diagnose.rerun.rerun_signatures`: A re-run,
+        A's own response included).
 
     Returns
     -------
@@ -540,8 +395,14 @@ def diagnose(
     ctx = None
     if imu is not None and reference is not None:
         ctx = fx.ReplayContext(imu, reference, dict(replay_kwargs or {}))
-    not_evaluated = tuple(e for e in wanted
-                          if e not in in_base and ctx is None and e == "time_offset")
+    given = dict(signatures or {})
+    for e, sg in given.items():
+        fx.effect_by_id(e)
+        if len(sg) != len(replays) or any(np.shape(a)[0] != r.t_s.size
+                                           for a, r in zip(sg, replays, strict=True)):
+            raise ValueError(f"signatures[{e!r}]: expected one (M, 2, P) array per leg")
+    not_evaluated = tuple(e for e in wanted if e not in in_base and ctx is None
+                          and e == "time_offset" and e not in given)
     pool = [fx.effect_by_id(e) for e in wanted if e not in in_base and e not in not_evaluated]
 
     if noise == "white":
@@ -574,12 +435,20 @@ def diagnose(
     suffix = "_null_calibrated" if null is not None else ""
     terms = _base_terms(replays, base_formulation, base_transition)
     lof = _lof_term(replays, lof_terms)
-    fixed_sigs = {e.effect_id: fx.signatures(e.effect_id, replays, context=ctx,
-                                             accel_settling_s=accel_settling_s)
+    fixed_sigs = {e.effect_id: [np.asarray(a, dtype=float) for a in given[e.effect_id]]
+                  if e.effect_id in given else
+                  fx.signatures(e.effect_id, replays, context=ctx,
+                                accel_settling_s=accel_settling_s)
                   for e in pool if e.effect_id != "earth_rate_coupling"}
 
     base_fit = prob.fit(terms)
     base_ho = prob.heldout(terms)
+    t_legs = [r.t_s[1:] for r in replays]
+
+    def worth(curves: Sequence[NDArray]):
+        return horizon_worth(t_legs, [np.reshape(c, (-1, 2)) for c in curves], ids)
+
+    calib_worth = worth(base_fit.res_raw)
     fit0, ho0 = base_fit, base_ho
     steps: list[DiagnosisStep] = []
     tests: list[CandidateTest] = []
@@ -619,6 +488,8 @@ def diagnose(
             frac = float(excess / lof_excess) if lof_excess > 0 else 0.0
             trials.append(dict(eff=eff, term=term, fit=fit1, ho=ho1, f=f, p=p, r=r, vals=vals,
                                sigs=sigs_, size=size, size_sig=size_sig, frac=frac,
+                               worth=worth([a - b for a, b in zip(fit0.res_raw,
+                                                                  fit1.res_raw, strict=True)]),
                                dbic=bic(fit1.rss_w, n, fit1.rank) - bic(fit0.rss_w, n,
                                                                            fit0.rank)))
         m = max(len(trials), 1)
@@ -627,7 +498,8 @@ def diagnose(
             tests.append(CandidateTest(
                 step, tr["eff"].effect_id, tr["r"], tr["size"], tr["size_sig"], tr["eff"].unit,
                 tr["f"], tr["p"], float(tr["dbic"]), tr["frac"], rms(tr["fit"].res_raw),
-                rms(tr["ho"]), tr["sig"]))
+                rms(tr["ho"]), tr["sig"], tr["worth"].dv_mps, tr["worth"].dr_m,
+                np.asarray(tr["vals"], dtype=float)))
         good = [tr for tr in trials if tr["sig"] and tr["frac"] >= min_explained_fraction]
         if not good:
             good = _pair_explaining(prob, terms, fit0, trials, lof, lof_excess, s2_lof, alpha,
@@ -655,6 +527,9 @@ def diagnose(
             confounded_with=tuple(confounded), gap_before_mps=gap0,
             gap_after_mps=rms(best["fit"].res_raw),
             heldout_gap_before_mps=hgap0, heldout_gap_after_mps=rms(best["ho"]),
+            horizon_s=calib_worth.horizon_s, gap_horizon_mps=best["worth"].dv_mps,
+            gap_horizon_m=best["worth"].dr_m, residual_horizon_mps=calib_worth.dv_mps,
+            residual_horizon_m=calib_worth.dr_m,
         ))
         terms = terms + [best["term"]]
         fit0, ho0 = best["fit"], best["ho"]
@@ -664,6 +539,11 @@ def diagnose(
     if null is not None:
         p = null.p_value(f, p, terms, terms + lof)
     gap, hgap = rms(fit0.res_raw), rms(ho0)
+    structured = [(a - b).reshape(-1, 2)
+                  for a, b in zip(fit0.res_raw, fit_lof.res_raw, strict=True)]
+    gap_worth = worth(structured)
+    location = (locate_gap(t_legs, structured, ids, lof_terms=lof_terms, degree=LOF_DEGREE)
+                if p < alpha else None)
     steps.append(DiagnosisStep(
         step=len(steps) + 1, effect="unexplained" if p < alpha else "none", parameters=(),
         values=np.zeros(0), sigmas=np.zeros(0), value=float("nan"), sigma=float("nan"), unit="",
@@ -671,6 +551,9 @@ def diagnose(
         delta_bic=float("nan"), explained_fraction=float("nan"), confounded_with=(),
         gap_before_mps=gap,
         gap_after_mps=gap, heldout_gap_before_mps=hgap, heldout_gap_after_mps=hgap,
+        horizon_s=calib_worth.horizon_s, gap_horizon_mps=gap_worth.dv_mps,
+        gap_horizon_m=gap_worth.dr_m, residual_horizon_mps=calib_worth.dv_mps,
+        residual_horizon_m=calib_worth.dr_m,
     ))
     legs = tuple(
         LegGap(
@@ -692,95 +575,5 @@ def diagnose(
         residuals_after_n_mps=tuple(x.reshape(-1, 2) for x in fit0.res_raw),
         heldout_before_n_mps=tuple(x.reshape(-1, 2) for x in base_ho),
         heldout_after_n_mps=tuple(x.reshape(-1, 2) for x in ho0),
+        location=location,
     )
-
-
-# --------------------------------------------------------------------------------------------
-# tables (dicts of arrays; pospp.io writes them)
-
-DIAGNOSIS_COLUMNS = (
-    "step", "effect", "value", "sigma", "unit", "statistic", "p_value", "criterion",
-    "significant", "delta_bic", "explained_fraction", "gap_before_mps", "gap_after_mps",
-    "heldout_gap_before_mps", "heldout_gap_after_mps", "confounded_with", "parameters",
-    "parameter_values", "parameter_sigmas",
-)
-"""Columns of diagnosis.parquet, in order."""
-
-
-def diagnosis_columns(diagnosis: Diagnosis) -> dict[str, NDArray]:
-    """diagnosis.parquet as a dict of arrays, one row per step (:data:`DIAGNOSIS_COLUMNS`).
-
-    ``confounded_with``, ``parameters``, ``parameter_values``, ``parameter_sigmas`` are
-    ";"-joined strings (values in the row's ``unit``) so that the table stays flat.
-    """
-    s = diagnosis.steps
-
-    def join(a) -> str:
-        return ";".join(f"{float(v):.6g}" for v in a)
-
-    return {
-        "step": np.array([x.step for x in s], dtype=np.int64),
-        "effect": np.array([x.effect for x in s], dtype=object),
-        "value": np.array([x.value for x in s], dtype=float),
-        "sigma": np.array([x.sigma for x in s], dtype=float),
-        "unit": np.array([x.unit for x in s], dtype=object),
-        "statistic": np.array([x.statistic for x in s], dtype=float),
-        "p_value": np.array([x.p_value for x in s], dtype=float),
-        "criterion": np.array([x.criterion for x in s], dtype=object),
-        "significant": np.array([x.significant for x in s], dtype=bool),
-        "delta_bic": np.array([x.delta_bic for x in s], dtype=float),
-        "explained_fraction": np.array([x.explained_fraction for x in s], dtype=float),
-        "gap_before_mps": np.array([x.gap_before_mps for x in s], dtype=float),
-        "gap_after_mps": np.array([x.gap_after_mps for x in s], dtype=float),
-        "heldout_gap_before_mps": np.array([x.heldout_gap_before_mps for x in s], dtype=float),
-        "heldout_gap_after_mps": np.array([x.heldout_gap_after_mps for x in s], dtype=float),
-        "confounded_with": np.array([";".join(x.confounded_with) for x in s], dtype=object),
-        "parameters": np.array([";".join(x.parameters) for x in s], dtype=object),
-        "parameter_values": np.array([join(x.values) for x in s], dtype=object),
-        "parameter_sigmas": np.array([join(x.sigmas) for x in s], dtype=object),
-    }
-
-
-def candidate_columns(diagnosis: Diagnosis) -> dict[str, NDArray]:
-    """Every candidate test (one row per step and candidate) as a dict of arrays."""
-    c = diagnosis.candidates
-    names = ("step", "effect", "n_parameters", "value", "sigma", "unit", "statistic", "p_value",
-             "delta_bic", "explained_fraction", "gap_after_mps", "heldout_gap_after_mps",
-             "significant")
-    return {k: np.array([getattr(x, k) for x in c]) for k in names}
-
-
-def leg_gap_columns(diagnosis: Diagnosis) -> dict[str, NDArray]:
-    """Per-leg gaps before (base model) and after (final model), with the thirds of each leg."""
-    g = diagnosis.legs
-    out = {k: np.array([getattr(x, k) for x in g]) for k in (
-        "leg_id", "start_s", "duration_s", "heading_deg", "speed_mps", "gap_before_mps",
-        "gap_after_mps", "heldout_gap_before_mps", "heldout_gap_after_mps")}
-    for j, ph in enumerate(("early", "middle", "late")):
-        out[f"gap_{ph}_before_mps"] = np.array([x.phase_gap_before_mps[j] for x in g])
-        out[f"gap_{ph}_after_mps"] = np.array([x.phase_gap_after_mps[j] for x in g])
-    return out
-
-
-def residual_curve_columns(diagnosis: Diagnosis) -> dict[str, NDArray]:
-    """B minus A minus the model over time, long form, for figures of the gap shrinking.
-
-    Columns: leg_id, t_s (since the leg start), model ("before": base model, "after": final
-    model), kind ("fit": all legs fitted, "heldout": leave-one-leg-out prediction), dvn_mps,
-    dve_mps.
-    """
-    parts: dict[str, list[NDArray]] = {k: [] for k in ("leg_id", "t_s", "model", "kind",
-                                                        "dvn_mps", "dve_mps")}
-    curves = (("before", "fit", diagnosis.residuals_before_n_mps),
-              ("after", "fit", diagnosis.residuals_after_n_mps),
-              ("before", "heldout", diagnosis.heldout_before_n_mps),
-              ("after", "heldout", diagnosis.heldout_after_n_mps))
-    for model, kind, res in curves:
-        for leg, t, r in zip(diagnosis.legs, diagnosis.t_s, res, strict=True):
-            parts["leg_id"].append(np.full(t.size, leg.leg_id, dtype=np.int64))
-            parts["t_s"].append(t)
-            parts["model"].append(np.full(t.size, model, dtype=object))
-            parts["kind"].append(np.full(t.size, kind, dtype=object))
-            parts["dvn_mps"].append(r[:, 0])
-            parts["dve_mps"].append(r[:, 1])
-    return {k: np.concatenate(v) for k, v in parts.items()}

@@ -243,6 +243,23 @@ TABLES: dict[str, list[Column]] = {
         _opt(Column("parameters", _S, "", "';'-joined parameter names of the effect")),
         _opt(Column("parameter_values", _S, "", "';'-joined values, in the row's unit")),
         _opt(Column("parameter_sigmas", _S, "", "';'-joined 1-sigmas, in the row's unit")),
+        _opt(Column("horizon_s", _F, "s", "horizon: median last sample time of the legs")),
+        _opt(Column("gap_horizon_mps", _F, "m/s", "what the row is worth: B's velocity error "
+                    "at the horizon that the effect (closing row: the structured gap) adds to "
+                    "the model before it, RMS over the legs")),
+        _opt(Column("gap_horizon_m", _F, "m", "the same integrated over the leg (position)")),
+        _opt(Column("residual_horizon_mps", _F, "m/s", "the calibration's own residual at the "
+                    "horizon, RMS over the legs (the scale for gap_horizon_mps)")),
+        _opt(Column("residual_horizon_m", _F, "m", "the same integrated (position)")),
+        _opt(Column("gap_legs", _S, "", "closing row 'unexplained': ';'-joined legs carrying "
+                    "the structured gap (80 % of it, largest first)")),
+        _opt(Column("gap_channel", _S, "", "closing row 'unexplained': 'N', 'E' or 'N+E'")),
+        _opt(Column("gap_part", _S, "", "closing row 'unexplained': 'early', 'middle', "
+                    "'late' (or two joined by '+') or 'whole leg'")),
+        _opt(Column("gap_basis", _S, "", "closing row 'unexplained': the lack-of-fit basis "
+                    "function carrying most of the gap ('legendre_k', 'cos_k')")),
+        _opt(Column("gap_location", _S, "", "closing row 'unexplained': where the gap sits "
+                    "and its size at the horizon, one sentence")),
     ],
     "observability": [
         Column("formulation", _S, "", "'paper' or 'body'"),

@@ -261,6 +261,7 @@ def _diagnosis_section(diag: pd.DataFrame, curves: pd.DataFrame | None) -> list[
     text += ("The lack-of-fit test finds structure no tested effect explains "
              f"(p = {last.p_value:.2g})." if last.effect == "unexplained" else
              f"The lack-of-fit test finds no remaining structure (p = {last.p_value:.2g}).")
+    text += _diagnosis_worth_text(d)
     parts = ["<h2>Model-discrepancy diagnosis</h2>", f"<p>{html.escape(text)}</p>"]
     if len(d) > 1:
         parts.append(_img(figures.diagnosis_steps(d, backend=_FIG)))
@@ -279,6 +280,21 @@ def _diagnosis_section(diag: pd.DataFrame, curves: pd.DataFrame | None) -> list[
     })
     parts.append(_table(view))
     return parts
+
+
+def _diagnosis_worth_text(d: pd.DataFrame) -> str:
+    """What each row is worth at the horizon against the calibration's residual (issue 12)."""
+    if "gap_horizon_m" not in d or not np.isfinite(d.residual_horizon_m.iloc[-1]):
+        return ""
+    last = d.iloc[-1]
+    rows = [f"{r.effect} {1e3 * r.gap_horizon_mps:.3g} mm/s, {r.gap_horizon_m:.3g} m"
+            for r in d.itertuples() if np.isfinite(r.gap_horizon_m)]
+    text = (f" What each row is worth at the {last.horizon_s:.0f} s horizon (B's error it "
+            "causes beyond the model before it, RMS over the legs; closing row: the structured "
+            f"gap left): {'; '.join(rows)}, against the calibration's own residual of "
+            f"{1e3 * last.residual_horizon_mps:.3g} mm/s, {last.residual_horizon_m:.3g} m.")
+    where = last.get("gap_location", "") if last.effect == "unexplained" else ""
+    return text + (f" {where}" if isinstance(where, str) and where else "")
 
 
 def _messages_section(msgs: pd.DataFrame, t0_ns: int | None) -> list[str]:

@@ -74,7 +74,7 @@ def run_hashes(run_dir: Path) -> dict[str, str]:
 EXPECTED: dict[str, str] = {
     "trajectory": "77d577507275546d", "biases": "e58443785ee33d51", "legs": "b1a3f06a074d2366",
     "pairs": "3834678c775431a7", "calibration": "5835762fc2fa78e4",
-    "leg_errors": "33fd0c4842f86a50", "qc": "ad7307d0d5fb7054", "diagnosis": "f8e2e9c523370779",
+    "leg_errors": "33fd0c4842f86a50", "qc": "ad7307d0d5fb7054", "diagnosis": "ed2d5e16e18728ce",
     "diagnosis_curves": "b219d94fd5ea4c06", "messages": "e27b96c54ee94797",
     "summary": "a12325e1b7270737",
 }

@@ -60,6 +60,8 @@ ROW_UNIT = {"value", "sigma", "threshold"}
 ROW_UNIT |= {"gap_before", "gap_after", "sigma_gap", "measured", "simulated_before",
              "simulated_after"}
 UNITLESS |= {"z_before", "z_after", "p_before", "significant_before", "significant_after"}
+# diagnosis: where an unexplained gap sits (issue 12, item 4)
+UNITLESS |= {"gap_legs", "gap_channel", "gap_part", "gap_basis", "gap_location"}
 
 
 @pytest.mark.parametrize("name", sorted(PROMISED))

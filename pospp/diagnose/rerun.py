@@ -1,0 +1,202 @@
+"""Signatures of the GNSS-side effects by re-running algorithm A (issue 12, item 3).
+
+Frames and units: body FRD (b), NED (n), SI inside; the signatures are per leg (M, 2, P):
+d [dv_N, dv_E] / d p at the replay samples, p in SI (m for the lever arm, s for the offset).
+
+Why: an antenna lever arm the configuration gets wrong, or a GNSS time tag offset, does not
+only add A's kinematic error (``-C_nb (w_nb_b x dl)``, what :mod:`pospp.diagnose.effects`
+writes in closed form): A is a Kalman filter and smoother, and the mismatch of its GNSS
+measurements in every turn is read as attitude, heading and bias errors, which B then carries
+from each leg start. Measured on a simulated survey flight with a 1 m antenna offset
+configured as 0 (tests/unit/test_diagnose_power.py): B minus A moves by 50 mm/s RMS on the
+legs after the turns, the closed-form signature predicts 3 mm/s, and the workflow cannot name
+the lever arm. The exact first-order signature is A's own response, obtained the way the null
+realisations are (:func:`pospp.pipeline.null_realisations`): A re-run on the flight's log
+with the configuration perturbed, B replayed on the same legs, minus the flight's B minus A,
+divided by the perturbation (one-sided finite difference, step h = :data:`STEP_FRACTION`
+times the effect's plausible size)::
+
+    S_j(t) = ((B - A)[log, config + h e_j](t) - (B - A)[log, config](t)) / h
+
+``lever_arm`` (dl = configured minus true, FRD): the configured lever arm plus h e_j.
+``time_offset`` (IMU time tag minus GNSS time tag, tau): the GNSS fixes and velocities
+stamped h earlier (the IMU then reads late by h relative to them).
+``gyro_scale_factor`` (s, FRD): the IMU rates read ``(1 + h) w_j`` on axis j (A and B both
+re-run: the heading error a scale factor builds up in the turns reaches B through A's state
+at each leg start, which the in-leg forcing of :mod:`pospp.diagnose.effects` leaves out).
+``accel_bias_change`` (db, FRD x and y): the specific force reads ``f_j + h exp(-t / T)``,
+t from the first IMU stamp, T = ``accel_settling_s`` (A estimates the bias B then uses).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pospp.diagnose.effects import ACCEL_SETTLING_S, effect_by_id
+
+STEP_FRACTION = 1.0
+"""Finite-difference step as a fraction of ``Effect.plausible_si`` (20 ms, 0.5 m, 1000 ppm,
+100 ug). A's response is not linear (its chi-square gate rejects the fixes a large offset
+shifts, its attitude Jacobian depends on the configured lever arm): with this step a 12 ms
+GNSS offset is named 5 times in 5 and a 4 ms one reads -1.7 ms; with a tenth of it the 4 ms
+offset reads -3.8 ms and the 12 ms one -0.1 ms (measured, docs/diagnose.md "Power"), hence
+the secant refinement (:func:`refine_signatures`)."""
+REFINE_FRACTION = 0.05
+"""An estimate above this fraction of the plausible size gets a secant signature."""
+REFINE_ITERATIONS = 3
+"""Secant refinements the pipeline makes (each: one A run per effect and one diagnosis); it
+stops earlier when no estimate moves by more than :data:`REFINE_TOLERANCE` of itself."""
+REFINE_TOLERANCE = 0.05
+RERUN_EFFECTS = ("lever_arm", "time_offset", "gyro_scale_factor", "accel_bias_change")
+"""Effects whose signature :func:`rerun_signatures` makes by re-running A."""
+PIPELINE_RERUN = ("lever_arm", "time_offset")
+"""The ones the pipeline's diagnosis re-runs (4 A runs). The scale factor's re-run (3 A runs)
+raised its F but named it in none of the flights measured, and the warm-up's is absorbed by
+A's accelerometer-bias estimate (docs/diagnose.md, "Power"): both are left to the caller."""
+
+
+def _response(log_p, nav, calib_run, config, lever_b_m=None) -> list[NDArray]:
+    """(B - A)[log_p, lever] - (B - A)[flight] per leg (legs in id order), (M, 2) [m/s]."""
+    from pospp import pipeline  # the pipeline imports the workflow: import at call time
+    from pospp.calib.replay import ReferenceSolution, replay_leg
+    from pospp.nav import filter as nav_filter
+
+    rc = config.replay
+    which = rc.reference if nav.smoothed is not None else "forward"
+    legs = {leg.leg_id: leg for leg in calib_run.legs}
+    nav_p = pipeline.navigate(log_p, config, lever_arm_b_m=lever_b_m)
+    ref_p = ReferenceSolution(*nav_filter.reference_solution(nav_p, which=which))
+    imu = pipeline.imu_increments(log_p)
+    return [replay_leg(imu, ref_p, legs[i], accel_compensation=rc.accel_compensation,
+                       sample_rate_hz=rc.sample_rate_hz, sigma_floor_mps=rc.sigma_floor_mps,
+                       transition_step=int(rc.transition_step)).dv_n_mps[:, 0:2]
+            - calib_run.replays[i].dv_n_mps[:, 0:2] for i in sorted(calib_run.replays)]
+
+
+def _gnss_earlier(log, dt_s: float):
+    """The log with its GNSS fixes and velocities stamped ``dt_s`` earlier."""
+    dt_ns = int(round(dt_s * 1e9))
+    return replace(log, fix=replace(log.fix, time_ns=log.fix.time_ns - dt_ns),
+                   vel=replace(log.vel, time_ns=log.vel.time_ns - dt_ns))
+
+
+def rerun_signatures(log, nav, calib_run, config, effect_ids=RERUN_EFFECTS, *,
+                     accel_settling_s: float = ACCEL_SETTLING_S) -> dict[str, list[NDArray]]:
+    """Per effect, per leg (legs in id order) the signature (M, 2, P), SI parameters.
+
+    Parameters
+    ----------
+    log : FlightLog-like (``imu``, ``fix``, ``vel``)
+    nav : FilterResult
+        A on the flight (only whether the smoother ran matters).
+    calib_run : CalibrationRun
+        The flight's legs and B-minus-A replays.
+    config : PipelineConfig
+    effect_ids : sequence of str
+        Subset of :data:`RERUN_EFFECTS`.
+    accel_settling_s : float
+        Warm-up time constant of ``accel_bias_change`` [s] (the workflow's).
+
+    Returns
+    -------
+    dict
+        ``effect_id -> [S_leg (M, 2, P)]``; an effect whose re-run fails (A's alignment) is
+        left out.
+    """
+    bad = [e for e in effect_ids if e not in RERUN_EFFECTS]
+    if bad:
+        raise ValueError(f"effect_ids: {bad} have no re-run signature; expected a subset of "
+                         f"{RERUN_EFFECTS}")
+    t_run_s = (log.imu.time_ns - log.imu.time_ns[0]) * 1e-9
+
+    def imu_log(rates=None, forces=None):
+        imu_p = replace(log.imu, **({} if rates is None else {"w_ib_b_radps": rates}),
+                        **({} if forces is None else {"f_ib_b_mps2": forces}))
+        return replace(log, imu=imu_p)
+
+    def response(log_p, lever_b_m=None) -> list[NDArray]:
+        return _response(log_p, nav, calib_run, config, lever_b_m)
+
+    out: dict[str, list[NDArray]] = {}
+    for eid in effect_ids:
+        h = STEP_FRACTION * effect_by_id(eid).plausible_si
+        try:
+            if eid == "lever_arm":
+                lever0 = np.asarray(config.gnss.lever_arm_m, dtype=float)
+                cols = [response(log, lever0 + h * e) for e in np.eye(3)]
+            elif eid == "time_offset":
+                cols = [response(_gnss_earlier(log, h))]
+            elif eid == "gyro_scale_factor":
+                w = log.imu.w_ib_b_radps
+                cols = [response(imu_log(rates=w * (1.0 + h * e))) for e in np.eye(3)]
+            else:  # accel_bias_change
+                f = log.imu.f_ib_b_mps2
+                warm = np.exp(-t_run_s / accel_settling_s)[:, None]
+                cols = [response(imu_log(forces=f + h * warm * e)) for e in np.eye(3)[:2]]
+        except (ValueError, np.linalg.LinAlgError):
+            continue
+        out[eid] = [np.stack([c[k] for c in cols], axis=-1) / h
+                    for k in range(len(calib_run.replays))]
+    return out
+
+
+def refine_signatures(log, nav, calib_run, config, signatures: dict[str, list[NDArray]],
+                      estimates: dict[str, NDArray], at: dict[str, NDArray] | None = None
+                      ) -> tuple[dict[str, list[NDArray]], dict[str, NDArray]]:
+    """Secant signatures through the first estimates (A's response is not linear).
+
+    For each effect with an estimate p (SI, from a first diagnosis with ``signatures``) larger
+    than :data:`REFINE_FRACTION` of its plausible size, A is re-run with the estimate removed
+    (configured lever arm minus p; GNSS stamps moved back by p), which should bring B minus A
+    to the effect-free curve, and the direction u = p / |p| gets the secant column
+    ``s_u = ((B - A) - (B - A)[p removed]) / |p|`` (the effect's response from zero to p) in
+    place of the local derivative at the flight's state; the
+    directions orthogonal to u keep theirs: ``S' = S (I - u u^T) + s_u u^T``. A's chi-square
+    gate makes its response to a GNSS-side effect change regime with the size (measured:
+    a 12 ms GNSS offset is named 5 times in 5 with the 20 ms step and never with the 2 ms
+    one; a 4 ms offset reads -1.7 ms with the first, -3.8 ms with the second).
+    Effects without an estimate, or whose estimate moved by less than
+    :data:`REFINE_TOLERANCE` of itself since the secant in ``at`` was made, keep their
+    signature. Returns the signatures and the estimates their secants were made at.
+    """
+    out = dict(signatures)
+    at = dict(at or {})
+    for eid, p in estimates.items():
+        p = np.asarray(p, dtype=float)
+        size = float(np.linalg.norm(p))
+        if eid not in signatures or eid not in ("lever_arm", "time_offset") or \
+                not size > REFINE_FRACTION * effect_by_id(eid).plausible_si:
+            continue
+        prev = at.get(eid)
+        if prev is not None and np.linalg.norm(p - prev) <= REFINE_TOLERANCE * size:
+            continue
+        try:
+            if eid == "lever_arm":
+                lever = np.asarray(config.gnss.lever_arm_m, dtype=float) - p
+                removed = _response(log, nav, calib_run, config, lever)
+            else:
+                removed = _response(_gnss_earlier(log, -float(p[0])), nav, calib_run, config)
+        except ValueError:
+            continue
+        u = p / size
+        new = []
+        for s, r in zip(signatures[eid], removed, strict=True):
+            s_u = -r / size
+            new.append(s - np.einsum("mcp,p,q->mcq", s, u, u) + s_u[:, :, None] * u)
+        out[eid] = new
+        at[eid] = p
+    return out, at
+
+
+def first_estimates(diagnosis) -> dict[str, NDArray]:
+    """Each re-run effect's first-step estimate, SI, where its candidate was significant (for
+    :func:`refine_signatures`; a flight with nothing significant costs no refinement)."""
+    out = {}
+    for c in diagnosis.candidates:
+        if c.step == 1 and c.significant and c.effect in RERUN_EFFECTS and np.size(c.values):
+            out[c.effect] = np.asarray(c.values, dtype=float) * effect_by_id(c.effect).si_per_unit
+    return out
+

