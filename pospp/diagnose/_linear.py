@@ -51,7 +51,7 @@ class Problem:
     def __init__(self, replays: Sequence[LegReplay], white_scale: float, arw: float,
                  model: NoiseModel | None = None):
         self.reps = list(replays)
-        self.wcache: dict[int, list[NDArray]] | None = None
+        self.wcache: dict[int, tuple[Term, list[NDArray]]] | None = None
         self.z = [r.dv_n_mps[1:, 0:2].reshape(-1) for r in self.reps]
         self.sizes = [z.size for z in self.z]
         self.n = int(sum(self.sizes))

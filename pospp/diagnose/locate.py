@@ -201,7 +201,7 @@ def locate_gap(t_s: Sequence[NDArray], gaps: Sequence[NDArray], leg_ids: Sequenc
     parts = _pick(phase, list(PHASES), PHASE_SHARE)
     part = "whole leg" if len(parts) == 3 else "+".join(p for p in PHASES if p in parts)
     if basis_e:
-        bname = max(basis_e, key=basis_e.get)
+        bname = max(basis_e, key=lambda k: basis_e[k])
         bshare = basis_e[bname] / max(sum(basis_e.values()), 1e-300)
     else:
         bname, bshare = "", float("nan")

@@ -39,8 +39,8 @@ def diagnosis_columns(diagnosis: Diagnosis) -> dict[str, NDArray]:
     s = diagnosis.steps
     loc = diagnosis.location
 
-    def where(x, text: str) -> str:
-        return text if loc is not None and x is s[-1] else ""
+    def where(x, text: object) -> str:
+        return str(text) if loc is not None and x is s[-1] else ""
 
     def join(a) -> str:
         return ";".join(f"{float(v):.6g}" for v in a)
