@@ -634,7 +634,12 @@ def diagnose(calib_run: CalibrationRun, imu: ImuIncrements, reference: Reference
     replays = [calib_run.replays[i] for i in sorted(calib_run.replays)]
     # lever arm and GNSS time offset: A's own response to them, by re-running A (issue 12;
     # 3 + 1 A runs)
-    sigs = rerun_signatures(log, nav, calib_run, config, PIPELINE_RERUN) \
+    def a_as_configured(log_p: mcap_reader.FlightLog, lever_arm_b_m: Any = None
+                        ) -> nav_filter.FilterResult:
+        return navigate(log_p, config, lever_arm_b_m=lever_arm_b_m)
+
+    sigs = rerun_signatures(log, nav, calib_run, config, PIPELINE_RERUN,
+                            navigate=a_as_configured) \
         if log is not None and nav is not None else None
     # B's residuals carry the gyro angle random walk, correlated along each leg: weighting them
     # as white noise would make every F-test too liberal
@@ -650,7 +655,8 @@ def diagnose(calib_run: CalibrationRun, imu: ImuIncrements, reference: Reference
     d, at = run(sigs), {}
     for _ in range(REFINE_ITERATIONS if sigs else 0):
         # A is not linear in a GNSS-side effect: secants through the current estimates
-        refined, at = refine_signatures(log, nav, calib_run, config, sigs, first_estimates(d), at)
+        refined, at = refine_signatures(log, nav, calib_run, config, sigs, first_estimates(d), at,
+                                        navigate=a_as_configured)
         if all(refined[k] is sigs[k] for k in sigs):
             break
         d, sigs = run(refined), refined

@@ -30,12 +30,17 @@ t from the first IMU stamp, T = ``accel_settling_s`` (A estimates the bias B the
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
 from numpy.typing import NDArray
 
+from pospp.calib.replay import ImuIncrements, ReferenceSolution, replay_leg
 from pospp.diagnose.effects import ACCEL_SETTLING_S, effect_by_id
+from pospp.nav import filter as nav_filter
+from pospp.nav.filter import FilterResult
+from pospp.nav.strapdown import increments_from_rates
 
 STEP_FRACTION = 1.0
 """Finite-difference step as a fraction of ``Effect.plausible_si`` (20 ms, 0.5 m, 1000 ppm,
@@ -58,18 +63,23 @@ raised its F but named it in none of the flights measured, and the warm-up's is 
 A's accelerometer-bias estimate (docs/diagnose.md, "Power"): both are left to the caller."""
 
 
-def _response(log_p, nav, calib_run, config, lever_b_m=None) -> list[NDArray]:
-    """(B - A)[log_p, lever] - (B - A)[flight] per leg (legs in id order), (M, 2) [m/s]."""
-    from pospp import pipeline  # the pipeline imports the workflow: import at call time
-    from pospp.calib.replay import ReferenceSolution, replay_leg
-    from pospp.nav import filter as nav_filter
+Navigate = Callable[..., FilterResult]
+"""A as the run configures it: ``navigate(log, lever_arm_b_m=None) -> FilterResult`` (the
+pipeline's ``navigate`` with its configuration bound; the lever arm replaces the configured
+one when given)."""
 
+
+def _response(log_p, nav, calib_run, config, navigate: Navigate, lever_b_m=None
+              ) -> list[NDArray]:
+    """(B - A)[log_p, lever] - (B - A)[flight] per leg (legs in id order), (M, 2) [m/s]."""
     rc = config.replay
     which = rc.reference if nav.smoothed is not None else "forward"
     legs = {leg.leg_id: leg for leg in calib_run.legs}
-    nav_p = pipeline.navigate(log_p, config, lever_arm_b_m=lever_b_m)
+    nav_p = navigate(log_p, lever_arm_b_m=lever_b_m)
     ref_p = ReferenceSolution(*nav_filter.reference_solution(nav_p, which=which))
-    imu = pipeline.imu_increments(log_p)
+    t0 = int(log_p.imu.time_ns[0])
+    imu = ImuIncrements(*increments_from_rates(log_p.imu.time_ns, log_p.imu.w_ib_b_radps,
+                                               log_p.imu.f_ib_b_mps2, epoch_ns=t0))
     return [replay_leg(imu, ref_p, legs[i], accel_compensation=rc.accel_compensation,
                        sample_rate_hz=rc.sample_rate_hz, sigma_floor_mps=rc.sigma_floor_mps,
                        transition_step=int(rc.transition_step)).dv_n_mps[:, 0:2]
@@ -84,6 +94,7 @@ def _gnss_earlier(log, dt_s: float):
 
 
 def rerun_signatures(log, nav, calib_run, config, effect_ids=RERUN_EFFECTS, *,
+                     navigate: Navigate,
                      accel_settling_s: float = ACCEL_SETTLING_S) -> dict[str, list[NDArray]]:
     """Per effect, per leg (legs in id order) the signature (M, 2, P), SI parameters.
 
@@ -97,6 +108,8 @@ def rerun_signatures(log, nav, calib_run, config, effect_ids=RERUN_EFFECTS, *,
     config : PipelineConfig
     effect_ids : sequence of str
         Subset of :data:`RERUN_EFFECTS`.
+    navigate : callable
+        A as configured (:data:`Navigate`).
     accel_settling_s : float
         Warm-up time constant of ``accel_bias_change`` [s] (the workflow's).
 
@@ -118,7 +131,7 @@ def rerun_signatures(log, nav, calib_run, config, effect_ids=RERUN_EFFECTS, *,
         return replace(log, imu=imu_p)
 
     def response(log_p, lever_b_m=None) -> list[NDArray]:
-        return _response(log_p, nav, calib_run, config, lever_b_m)
+        return _response(log_p, nav, calib_run, config, navigate, lever_b_m)
 
     out: dict[str, list[NDArray]] = {}
     for eid in effect_ids:
@@ -144,7 +157,8 @@ def rerun_signatures(log, nav, calib_run, config, effect_ids=RERUN_EFFECTS, *,
 
 
 def refine_signatures(log, nav, calib_run, config, signatures: dict[str, list[NDArray]],
-                      estimates: dict[str, NDArray], at: dict[str, NDArray] | None = None
+                      estimates: dict[str, NDArray], at: dict[str, NDArray] | None = None,
+                      *, navigate: Navigate
                       ) -> tuple[dict[str, list[NDArray]], dict[str, NDArray]]:
     """Secant signatures through the first estimates (A's response is not linear).
 
@@ -176,9 +190,10 @@ def refine_signatures(log, nav, calib_run, config, signatures: dict[str, list[ND
         try:
             if eid == "lever_arm":
                 lever = np.asarray(config.gnss.lever_arm_m, dtype=float) - p
-                removed = _response(log, nav, calib_run, config, lever)
+                removed = _response(log, nav, calib_run, config, navigate, lever)
             else:
-                removed = _response(_gnss_earlier(log, -float(p[0])), nav, calib_run, config)
+                removed = _response(_gnss_earlier(log, -float(p[0])), nav, calib_run, config,
+                                    navigate)
         except ValueError:
             continue
         u = p / size

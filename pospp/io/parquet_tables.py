@@ -4,7 +4,7 @@ Every table pospp writes is declared once in ``TABLES`` (name -> list of ``Colum
 name, pyarrow type, unit, description, frame. The unit, frame and description go into each
 field's metadata; the table name, ``SCHEMA_VERSION`` and the pospp version go into the file's
 key-value metadata together with the caller's metadata (input hash, pipeline config, ...) as
-JSON. docs/formats.md renders the same dict (``render_schema_markdown``).
+JSON. docs/formats.md renders the same dict (:mod:`pospp.io.schema_docs`).
 
 Conventions (see ``pospp`` package docstring): NED navigation frame n, FRD body frame b,
 Euler z-y-x [roll, pitch, yaw] of b w.r.t. n with yaw clockwise from north, int64 ``time_ns``
@@ -38,8 +38,6 @@ __all__ = [
     "read_metadata",
     "read_reference_trajectory",
     "read_table",
-    "render_all_schemas_markdown",
-    "render_schema_markdown",
     "schema",
     "write_reference_trajectory",
     "write_table",
@@ -584,27 +582,3 @@ def write_reference_trajectory(
         "yaw_deg": np.mod(rpy[:, 2], 360.0),
     }
     return write_table(path, data, "reference", metadata=dict(metadata or {}))
-
-
-# --------------------------------------------------------------------------- docs
-
-
-def render_schema_markdown(name: str) -> str:
-    """A markdown table of one schema: column, type, unit, frame, required, description."""
-    lines = [
-        f"### {name}" + (" (extra columns allowed)" if name in EXTENSIBLE_TABLES else ""),
-        "",
-        "| column | type | unit | frame | required | description |",
-        "|---|---|---|---|---|---|",
-    ]
-    for c in TABLES[name]:
-        lines.append(
-            f"| `{c.name}` | {c.type} | {c.unit} | {c.frame} | "
-            f"{'yes' if c.required else 'no'} | {c.description} |"
-        )
-    return "\n".join(lines) + "\n"
-
-
-def render_all_schemas_markdown() -> str:
-    """All schemas, in ``TABLES`` order, for docs/formats.md."""
-    return "\n".join(render_schema_markdown(n) for n in TABLES)

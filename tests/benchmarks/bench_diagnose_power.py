@@ -56,7 +56,9 @@ def null_case(seed: int, gnss_pos_m: float, leg_s: float):
     imu = pipeline.imu_increments(log)
     run, ref = pipeline.calibrate(imu, nav, cfg)
     null = pipeline.null_realisations(log, nav, run, cfg, tp.N_NULL, seed=seed)
-    sigs = rerun_signatures(log, nav, run, cfg)
+    sigs = rerun_signatures(log, nav, run, cfg,
+                            navigate=lambda lg, lever_arm_b_m=None: pipeline.navigate(
+                                lg, cfg, lever_arm_b_m=lever_arm_b_m))
     return run, ref, imu, cfg, null, sigs
 
 

@@ -15,6 +15,7 @@ import pospp
 from pospp.io import parquet_tables as pt
 from pospp.io.errors import IngestIssue
 from pospp.io.files import sha256_file
+from pospp.io.schema_docs import render_all_schemas_markdown
 from pospp.outputs import issue_message, messages_table
 from pospp.types import ReferenceTrajectory
 
@@ -240,6 +241,6 @@ def test_docs_formats_md_holds_the_rendered_schemas() -> None:
     text = _formats_md()
     m = re.search(r"<!-- schemas:begin -->\n(.*)<!-- schemas:end -->", text, re.S)
     assert m, "markers <!-- schemas:begin --> / <!-- schemas:end --> missing in docs/formats.md"
-    assert m.group(1) == pt.render_all_schemas_markdown(), (
+    assert m.group(1) == render_all_schemas_markdown(), (
         "docs/formats.md is out of date: paste pospp.io.parquet_tables."
         "render_all_schemas_markdown() between the markers")
