@@ -276,13 +276,15 @@ class GradeDefaults:
 
 
 _LEG = LegThresholds()
+LEG_SETTLE_NAVIGATION_S = 60.0
+"""``[legs] settle_s`` of the navigation and tactical grades [s] (:class:`GradeDefaults`)."""
 _NAVIGATION = GradeDefaults(0.01, 0.005, _LEG.min_duration_s, _LEG.duration_tolerance_s,
-                            _LEG.settle_s)
+                            LEG_SETTLE_NAVIGATION_S)
 _MEMS = GradeDefaults(0.2, 0.5, 30.0, 5.0, 0.0)
 GRADE_DEFAULTS: dict[Grade, GradeDefaults] = {
     Grade.FLIGHT: _NAVIGATION,
     Grade.VEHICLE: _NAVIGATION,
-    Grade.TACTICAL: GradeDefaults(0.01, 0.005, 30.0, 5.0, _LEG.settle_s),
+    Grade.TACTICAL: GradeDefaults(0.01, 0.005, 30.0, 5.0, LEG_SETTLE_NAVIGATION_S),
     Grade.MEMS: _MEMS,
     Grade.CONSUMER: _MEMS,
 }

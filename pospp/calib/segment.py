@@ -38,10 +38,12 @@ class LegThresholds:
     trim_s: float = 2.0
     smoothing_s: float = 5.0
     rate_hz: float = 1.0
-    settle_s: float = 60.0
+    settle_s: float = 0.0
     """A leg starts no earlier than this after the first epoch of the trajectory (A's start):
     B started from a state A has not yet converged on (its alignment's tilt and heading
-    error) carries a deterministic error that no noise model or calibration term covers."""
+    error) carries a deterministic error that no noise model or calibration term covers.
+    0 here (a reference that is the truth needs none); the pipeline's ``[legs] settle_s``
+    takes the grade's default (pospp.config.GRADE_DEFAULTS: 60 s for navigation grades)."""
 
 
 @dataclass(frozen=True)

@@ -24,7 +24,9 @@ def test_legs_section_is_the_segmentation_options():
     assert (th.min_duration_s, th.duration_tolerance_s, th.min_speed_mps) == (
         GRADE_DEFAULTS[Grade.MEMS].leg_min_duration_s,
         GRADE_DEFAULTS[Grade.MEMS].leg_duration_tolerance_s, 5.0)
-    assert PipelineConfig().legs.thresholds() == LegThresholds()  # flight: the paper's values
+    # flight: the paper's values, and the pipeline's settling time after A's start
+    assert PipelineConfig().legs.thresholds() == dataclasses.replace(
+        LegThresholds(), settle_s=GRADE_DEFAULTS[Grade.FLIGHT].leg_settle_s)
 
 
 def test_unset_grade_keys_are_refused_outside_a_pipeline_config():
