@@ -17,6 +17,8 @@ simulated constant bias as often as a normal error would.
 from __future__ import annotations
 
 import dataclasses
+import multiprocessing as mp
+from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 import pytest
@@ -94,23 +96,29 @@ def null_flight_diagnosis(seed: int, n_null: int = N_NULL):
             z)
 
 
+def _seed_summary(seed: int) -> tuple[str, str, tuple[str, ...], str, list[float]]:
+    """(grade, closing row, named, nominal closing row, bias error / sigma x, y) of a seed."""
+    d, d0, z = null_flight_diagnosis(seed)
+    return GRADES[seed % 3], d.conclusion, d.named, d0.conclusion, [float(v) for v in z]
+
+
 @pytest.mark.slow
 def test_null_flights_close_none_at_the_stated_rate_and_sigmas_are_honest():
     # measured (these draws): none in 39 of 40 (paper_flight 14 / 14, paper_vehicle 12 / 13,
     # tactical 13 / 13), the nominal F-test unexplained in 39 of 40; calibrated bias error /
     # sigma RMS 1.39, 78 of 80 within 3 sigma. The issue asks for >= 95 % none (38 of 40),
     # error / sigma RMS in 0.7-1.5 and >= 95 % within 3 sigma: asserted as stated, no margin
-    # beyond the one alarm and the two 3-sigma misses these draws leave.
-    closing, nominal, zs = {g: [] for g in GRADES}, [], []
-    for seed in range(40):
-        d, d0, z = null_flight_diagnosis(seed)
-        assert set(d.named) <= MAY_BE_NAMED
-        closing[GRADES[seed % 3]].append(d.conclusion)
-        nominal.append(d0.conclusion)
-        zs.append(z)
+    # beyond the one alarm and the two 3-sigma misses these draws leave. The seeds are
+    # independent: two worker processes (the machine's two cores) share them.
+    with ProcessPoolExecutor(max_workers=2, mp_context=mp.get_context("fork")) as pool:
+        rows = list(pool.map(_seed_summary, range(40)))
+    closing = {g: [c for gg, c, *_ in rows if gg == g] for g in GRADES}
+    for _, _, named, _, _ in rows:
+        assert set(named) <= MAY_BE_NAMED
+    nominal = [r[3] for r in rows]
     assert nominal.count("unexplained") >= 34
     total = sum(c.count("none") for c in closing.values())
     assert total >= 38, closing
-    z = np.asarray(zs)
+    z = np.asarray([r[4] for r in rows])
     assert 0.7 <= float(np.sqrt(np.mean(z**2))) <= 1.5, z
     assert np.mean(np.abs(z) < 3.0) >= 0.95, z
