@@ -105,8 +105,9 @@ def leg_study(out: Path, stem: str, pipe: str, grade: str,
     for d in durations_s:
         for noise in ("gyro_rw", "white"):
             legs = replace(cfg.legs, min_duration_s=d, duration_tolerance_s=0.0)
-            r = calibrate_flight(imu, ref, legs_cfg=legs, replay_cfg=cfg.replay,
-                                 pairs_cfg=cfg.pairs, noise=noise,
+            r = calibrate_flight(imu, ref, legs_cfg=legs.thresholds(),
+                                 replay_cfg=cfg.replay.options(),
+                                 pairs_cfg=cfg.pairs.policy(), noise=noise,
                                  gyro_arw_dpsh=pipeline.imu_tuning(cfg).gyro_arw_dpsh)
             row = {"grade": grade, "min_duration_s": d, "noise": noise, "n_legs": len(r.legs),
                    "n_pairs_used": r.summary().get("n_pairs_used", 0)}
@@ -177,8 +178,9 @@ def leg_length_study(grade: str, leg_s: tuple[float, ...] = (10.0, 15.0, 20.0, 3
             _noise_step(step)
             row = {"grade": grade, "leg_flown_s": L, "model": label}
             try:
-                r = calibrate_flight(imu, ref, legs_cfg=cfg.legs, replay_cfg=cfg.replay,
-                                     pairs_cfg=cfg.pairs, noise=noise,
+                r = calibrate_flight(imu, ref, legs_cfg=cfg.legs.thresholds(),
+                                     replay_cfg=cfg.replay.options(),
+                                     pairs_cfg=cfg.pairs.policy(), noise=noise,
                                      gyro_arw_dpsh=pipeline.imu_tuning(cfg).gyro_arw_dpsh)
             except (IndexError, ValueError) as exc:
                 rows.append(row | {"result": f"fails: {type(exc).__name__}"})
@@ -222,8 +224,9 @@ def quad_what_if(out: Path) -> pd.DataFrame:
                                ("white", "white", 10.0)):
         _noise_step(step)
         try:
-            r = calibrate_flight(imu, ref, legs_cfg=cfg.legs, replay_cfg=cfg.replay,
-                                 pairs_cfg=cfg.pairs, noise=noise,
+            r = calibrate_flight(imu, ref, legs_cfg=cfg.legs.thresholds(),
+                                 replay_cfg=cfg.replay.options(),
+                                 pairs_cfg=cfg.pairs.policy(), noise=noise,
                                  gyro_arw_dpsh=pipeline.imu_tuning(cfg).gyro_arw_dpsh)
         finally:
             _noise_step(10.0)

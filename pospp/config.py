@@ -27,6 +27,8 @@ from typing import TYPE_CHECKING, Any
 from pospp.calib.segment import LegThresholds
 
 if TYPE_CHECKING:  # the stages' option types (imported where used: `pospp --help` stays light)
+    from pospp.calib.pairs import PairPolicy
+    from pospp.calib.replay import ReplayOptions
     from pospp.nav.filter import FilterOptions
     from pospp.nav.tuning import ImuTuning
 
@@ -268,16 +270,12 @@ class GradeDefaults:
     shorter; legs shorter than 20 s detected hold a single epoch of the gyro random-walk least
     squares (10 s spacing) and calibrate nothing."""
     leg_settle_s: float
-    """``[legs] settle_s``: 60 s for the navigation and tactical grades (a tactical null flight
-    whose first leg began 2 s after A's motion alignment carried a 481 mm/s B-minus-A gap, A's
-    unconverged state, not noise: docs/diagnose.md); 0 for MEMS, whose measured logs fly
-    30-60 s legs soon after take-off (the quadrotor's first leg would be lost; not measured
-    otherwise)."""
+    """``[legs] settle_s``: 60 s for navigation and tactical grades (A's unconverged state at a
+    leg start is not noise: docs/diagnose.md); 0 for MEMS (the quadrotor's first leg)."""
 
 
 _LEG = LegThresholds()
-LEG_SETTLE_NAVIGATION_S = 60.0
-"""``[legs] settle_s`` of the navigation and tactical grades [s] (:class:`GradeDefaults`)."""
+LEG_SETTLE_NAVIGATION_S = 60.0  # [legs] settle_s of the navigation and tactical grades [s]
 _NAVIGATION = GradeDefaults(0.01, 0.005, _LEG.min_duration_s, _LEG.duration_tolerance_s,
                             LEG_SETTLE_NAVIGATION_S)
 _MEMS = GradeDefaults(0.2, 0.5, 30.0, 5.0, 0.0)
@@ -322,9 +320,8 @@ class LegsConfig:
     trim_s: float = _key(_LEG.trim_s, ge=0.0)
     smoothing_s: float = _key(_LEG.smoothing_s, ge=0.0)
     settle_s: float | None = _key(None, ge=0.0)
-    """A leg starts at least this long after A's first epoch [s]: B from a state A has not
-    yet converged on carries A's alignment error (docs/diagnose.md); omitted: the grade's
-    default (:data:`GRADE_DEFAULTS`)."""
+    """A leg starts at least this long after A's first epoch [s] (A's alignment error is not
+    noise: docs/diagnose.md); omitted: the grade's default (:data:`GRADE_DEFAULTS`)."""
 
     def thresholds(self) -> LegThresholds:
         """The leg segmentation's options (every key of this section; a key
@@ -352,6 +349,14 @@ class ReplayConfig:
     horizon_s: float = _key(300.0, gt=0.0)
     transition_step: int = _key(10, ge=1, le=100000)
 
+    def options(self) -> ReplayOptions:
+        """The calibration stage's B settings: every key but ``reference`` (TypeError if one is
+        not a :class:`ReplayOptions` field: a rename cannot be lost)."""
+        from pospp.calib.replay import ReplayOptions
+        values = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        del values["reference"]
+        return ReplayOptions(**{**values, "accel_compensation": str(self.accel_compensation)})
+
 
 @dataclass(frozen=True)
 class PairsConfig:
@@ -373,18 +378,23 @@ class PairsConfig:
     estimate_gyro_z: bool = False
     """Also estimate the vertical body gyro bias (weakly observable on level legs)."""
     null_realisations: int = _key(10, ge=0, le=1000)
-    """Null realisations of B minus A (A re-run on the flight with IMU and GNSS noise added;
-    docs/diagnose.md): they give the calibration its covariance and calibrate the diagnosis's
-    tests. 0: the least squares' formal covariance and the nominal F distribution (which
-    cries wolf on flights with GNSS noise)."""
+    """Null realisations of B minus A (docs/diagnose.md): the calibration's covariance and the
+    diagnosis's null. 0: the least squares' formal covariance and the nominal F distribution
+    (which cries wolf on flights with GNSS noise)."""
     diagnose_alpha: float = _key(0.05, gt=0.0, lt=0.5)
-    """Significance level of the diagnosis's tests (each candidate Bonferroni-corrected within
-    its step; the closing lack of fit at this level). On null flights the closing row says
-    "none" in at least 1 - alpha of runs (docs/diagnose.md, the null Monte Carlo)."""
+    """Significance level of the diagnosis's tests (candidates Bonferroni-corrected per step;
+    on null flights "none" in at least 1 - alpha of runs: docs/diagnose.md)."""
     null_imu_noise: NullImuNoise = NullImuNoise.MEASURED
-    """White IMU noise injected into the null realisations: "measured" (density read from the
-    IMU samples' second differences) or "grade" (the [imu] grade's ARW / VRW). The [imu]
-    Gauss-Markov gyro drift and accelerometer bias are injected in both."""
+    """White IMU noise of the null realisations: "measured" (read from the samples' second
+    differences) or "grade" (the grade's ARW / VRW); the [imu] Gauss-Markov drifts in both."""
+
+    def policy(self) -> PairPolicy:
+        """The calibration stage's pairing policy (:class:`pospp.calib.pairs.PairPolicy`)."""
+        from pospp.calib.pairs import PairPolicy
+
+        return PairPolicy(mode=str(self.mode), max_cond_scaled=self.max_cond_scaled,
+                          min_dheading_deg=self.min_dheading_deg,
+                          formulation=str(self.formulation), transition=str(self.transition))
 
 
 @dataclass(frozen=True)

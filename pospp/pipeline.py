@@ -536,8 +536,8 @@ def calibrate(imu: ImuIncrements, nav: nav_filter.FilterResult,
     tuning = imu_tuning(config)
     gm = bool(np.isfinite(tuning.gyro_gm_tau_s) and tuning.gyro_gm_sigma_dph > 0)
     return calibrate_flight(
-        imu, reference, legs_cfg=config.legs.thresholds(), replay_cfg=config.replay,
-        pairs_cfg=config.pairs, gyro_arw_dpsh=tuning.gyro_arw_dpsh,
+        imu, reference, legs_cfg=config.legs.thresholds(), replay_cfg=config.replay.options(),
+        pairs_cfg=config.pairs.policy(), gyro_arw_dpsh=tuning.gyro_arw_dpsh,
         noise=config.pairs.noise, noise_step_s=config.pairs.noise_step_s,
         estimate_gyro_z=config.pairs.estimate_gyro_z,
         compensation=config.compensation.mode if gm or config.compensation.mode == "causal"

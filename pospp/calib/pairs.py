@@ -42,11 +42,6 @@ class PairPolicy:
     formulation: str = "body"
     transition: str = "numerical"
 
-    @classmethod
-    def from_config(cls, cfg: Any) -> PairPolicy:
-        """From any object with the fields of this class (e.g. ``PairsConfig``)."""
-        return cls(**{k: getattr(cfg, k) for k in cls.__dataclass_fields__ if hasattr(cfg, k)})
-
 
 @dataclass(frozen=True)
 class Pair:

@@ -27,6 +27,17 @@ from pospp.nav.error_model import transition_matrices
 
 
 @dataclass(frozen=True)
+class ReplayOptions:
+    """Algorithm B's settings in the calibration stage (config ``[replay]`` without its
+    ``reference``: :meth:`pospp.config.ReplayConfig.options`; units in the names)."""
+
+    accel_compensation: str = "filter"
+    sample_rate_hz: float = 1.0
+    sigma_floor_mps: float = 0.005
+    horizon_s: float = 300.0
+    transition_step: int = 10
+
+@dataclass(frozen=True)
 class ImuIncrements:
     """Raw IMU increments on a common epoch grid (body FRD).
 

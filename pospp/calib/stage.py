@@ -26,7 +26,13 @@ from pospp.calib.compensate import (
     prior_sigma_b_radps,
 )
 from pospp.calib.pairs import Pair, PairPolicy, evaluate_pairs
-from pospp.calib.replay import ImuIncrements, LegReplay, ReferenceSolution, replay_leg
+from pospp.calib.replay import (
+    ImuIncrements,
+    LegReplay,
+    ReferenceSolution,
+    ReplayOptions,
+    replay_leg,
+)
 from pospp.calib.segment import Leg, LegThresholds, find_legs
 from pospp.calib.solve import FORMULATIONS, Calibration, gm_noise_operator, noise_basis
 from pospp.nav.closed_form import PAPER_FROM_NED
@@ -156,21 +162,13 @@ class CalibrationRun:
         }
 
 
-def thresholds_from_config(cfg: Any) -> LegThresholds:
-    """LegThresholds from any object with (some of) its fields, e.g. ``LegsConfig``."""
-    if isinstance(cfg, LegThresholds):
-        return cfg
-    names = LegThresholds.__dataclass_fields__
-    return LegThresholds(**{k: getattr(cfg, k) for k in names if hasattr(cfg, k)})
-
-
 def calibrate_flight(
     imu: ImuIncrements,
     reference: ReferenceSolution,
     *,
-    legs_cfg: Any = None,
-    replay_cfg: Any = None,
-    pairs_cfg: Any = None,
+    legs_cfg: LegThresholds | None = None,
+    replay_cfg: ReplayOptions | None = None,
+    pairs_cfg: PairPolicy | None = None,
     formulations: tuple[str, ...] = FORMULATIONS,
     transition: str | None = None,
     noise: str = "gyro_rw",
@@ -192,12 +190,12 @@ def calibrate_flight(
     reference : ReferenceSolution
         Algorithm A (the smoothed solution by default: its errors at each leg start and along
         the leg are the smallest, and B minus A must be B's error).
-    legs_cfg : LegsConfig or LegThresholds, optional
-        Leg thresholds (defaults when None).
-    replay_cfg : ReplayConfig, optional
-        accel_compensation, sample_rate_hz, sigma_floor_mps, horizon_s, transition_step.
-    pairs_cfg : PairsConfig or PairPolicy, optional
-        mode, max_cond_scaled, min_dheading_deg, formulation (compensated), transition.
+    legs_cfg : LegThresholds, optional
+        Leg thresholds (defaults when None; ``PipelineConfig.legs.thresholds()``).
+    replay_cfg : ReplayOptions, optional
+        B's settings (defaults when None; ``PipelineConfig.replay.options()``).
+    pairs_cfg : PairPolicy, optional
+        Pairing policy (defaults when None; ``PipelineConfig.pairs.policy()``).
     formulations : tuple of str
         Formulations calibrated and reported ("paper", "body"); the compensation formulation
         is added if missing.
@@ -236,15 +234,12 @@ def calibrate_flight(
     -------
     CalibrationRun
     """
-    th = thresholds_from_config(legs_cfg if legs_cfg is not None else LegThresholds())
-    policy = PairPolicy.from_config(pairs_cfg) if pairs_cfg is not None else PairPolicy()
+    th = legs_cfg if legs_cfg is not None else LegThresholds()
+    policy = pairs_cfg if pairs_cfg is not None else PairPolicy()
     if transition is not None:
         policy = PairPolicy(policy.mode, policy.max_cond_scaled, policy.min_dheading_deg,
                             policy.formulation, transition)
-    rc = {"accel_compensation": "filter", "sample_rate_hz": 1.0, "sigma_floor_mps": 0.005,
-          "horizon_s": 300.0, "transition_step": 10}
-    if replay_cfg is not None:
-        rc.update({k: getattr(replay_cfg, k) for k in rc if hasattr(replay_cfg, k)})
+    rc = replay_cfg if replay_cfg is not None else ReplayOptions()
     forms = tuple(formulations) + (() if policy.formulation in formulations
                                    else (policy.formulation,))
     if compensation not in COMPENSATIONS:
@@ -273,9 +268,9 @@ def calibrate_flight(
     for leg in legs:
         try:
             replays[leg.leg_id] = replay_leg(
-                imu, reference, leg, accel_compensation=rc["accel_compensation"],
-                sample_rate_hz=rc["sample_rate_hz"], sigma_floor_mps=rc["sigma_floor_mps"],
-                transition_step=int(rc["transition_step"]))
+                imu, reference, leg, accel_compensation=rc.accel_compensation,
+                sample_rate_hz=rc.sample_rate_hz, sigma_floor_mps=rc.sigma_floor_mps,
+                transition_step=int(rc.transition_step))
         except ValueError as exc:
             messages.append(f"leg {leg.leg_id}: B replay failed: {exc}")
 
@@ -340,9 +335,9 @@ def calibrate_flight(
         history = (np.asarray(fb.t_s, dtype=float), causal_gyro_bias_b_radps(
             fb.gyro_b_radps, fb.gyro_sigma_b_radps, bg, prior_sigma_b_radps(sig, chosen)))
     after, improvements = compensate_legs(
-        imu, reference, replays, chosen, accel_compensation=rc["accel_compensation"],
-        horizon_s=rc["horizon_s"], transition_step=int(rc["transition_step"]),
-        sample_rate_hz=rc["sample_rate_hz"], sigma_floor_mps=rc["sigma_floor_mps"],
+        imu, reference, replays, chosen, accel_compensation=rc.accel_compensation,
+        horizon_s=rc.horizon_s, transition_step=int(rc.transition_step),
+        sample_rate_hz=rc.sample_rate_hz, sigma_floor_mps=rc.sigma_floor_mps,
         per_leg_drift=compensation == "per_leg", gyro_bias_history=history)
     mis = {i: chosen.misalignment_n_rad(i) for i in chosen.leg_ids}
     return CalibrationRun(legs, replays, pairs, joint, chosen, after, improvements, bg, sig, mis,

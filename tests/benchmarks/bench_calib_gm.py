@@ -44,7 +44,8 @@ def main() -> None:
     bias = pd.read_parquet(ROOT / "sample_data" / "sample_flight.bias.parquet")
     tb = (bias.time_ns.to_numpy() - epoch_ns) * 1e-9
     gb = bias[["gyro_bias_x_dph", "gyro_bias_y_dph", "gyro_bias_z_dph"]].to_numpy() * DPH
-    base = {"legs_cfg": cfg.legs, "replay_cfg": cfg.replay, "pairs_cfg": cfg.pairs,
+    base = {"legs_cfg": cfg.legs.thresholds(), "replay_cfg": cfg.replay.options(),
+            "pairs_cfg": cfg.pairs.policy(),
             "gyro_arw_dpsh": tun.gyro_arw_dpsh}
     variants = {
         "no drift model": {},

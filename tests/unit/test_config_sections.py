@@ -41,3 +41,19 @@ def test_config_gives_the_filter_options_and_tuning():
     assert opt.gate_reset_s == 12.0
     assert opt.pos_sigma_floor_m == GRADE_DEFAULTS[Grade.TACTICAL].pos_sigma_floor_m
     assert cfg.imu.tuning().gyro_gm_tau_s == 100.0
+
+
+def test_replay_and_pairs_sections_are_their_stages_options():
+    from pospp.calib.pairs import PairPolicy
+    from pospp.calib.replay import ReplayOptions
+
+    cfg = config_from_dict({"replay": {"horizon_s": 200.0, "accel_compensation": "none"},
+                            "pairs": {"mode": "all", "min_dheading_deg": 45.0}})
+    assert cfg.replay.options() == ReplayOptions(accel_compensation="none", horizon_s=200.0)
+    assert cfg.pairs.policy() == PairPolicy(mode="all", min_dheading_deg=45.0)
+    # every [replay] key but the pipeline's own 'reference' is a ReplayOptions field with
+    # the same default
+    stage = {f.name: f.default for f in dataclasses.fields(ReplayOptions)}
+    for f in dataclasses.fields(type(cfg.replay)):
+        if f.name != "reference":
+            assert f.name in stage and stage[f.name] == f.default, f.name
