@@ -5,29 +5,37 @@ increments as B between GNSS fixes, and its GNSS corrections drive what is left.
 modelling that process in closed form, the workflow's statistics are calibrated against null
 realisations of it made with pospp's own A (a parametric bootstrap by perturbation):
 
-1. Add to the flight's own IMU samples white gyro and accelerometer noise at the configured
-   grade's angle / velocity random walk, and to its GNSS fixes and velocities white noise at
-   the level A's own innovations show (:func:`gnss_noise_from_innovations`).
-2. Run A on the perturbed log exactly as on the flight (same configuration) and replay B on the
-   SAME legs (same start and end times).
-3. The realisation is the perturbed B minus A less the flight's B minus A::
+1. The base: the flight's log with its GNSS fixes and velocities replaced by A's own solution
+   at the antenna (:func:`gnss_on_solution`); the IMU is the flight's. Noise added on top of
+   the flight's own GNSS noise is noise at 1.4 times the level A is tuned for, and A's
+   response to it is not linear (its gate and resets): the null statistics then collapse.
+2. Add to the base, from A's alignment point on (the alignment is a decision, not a
+   response), white gyro and accelerometer noise at the density read from the samples
+   (:func:`imu_white_noise_from_samples`) or the grade's, the configured Gauss-Markov gyro
+   and accelerometer drift (:func:`gauss_markov_path`), and GNSS white noise at the level of
+   the flight's GNSS minus A (:func:`gnss_noise_from_residuals`).
+3. Run A on the perturbed log exactly as on the flight (same configuration) and replay B on the
+   SAME legs (same start and end times). The realisation is the perturbed B minus A less the
+   base's::
 
-       d_r(t) = (B - A)[log + noise_r](t) - (B - A)[log](t)
+       d_r(t) = (B - A)[base + noise_r](t) - (B - A)[base](t)
 
-   To first order in the noise, everything the flight holds (biases, misalignment, effects in
-   and outside the library) cancels and d_r is a draw of B minus A's noise response to the
-   injected noise, with the flight's own trajectory, GNSS rate, stamps and gaps, A's own gains
-   and the legs' coupling through A.
+   Everything the flight holds (biases, misalignment, effects in and outside the library)
+   cancels to first order, and d_r is a draw of B minus A's response to the noise, with the
+   flight's own trajectory, GNSS rate, stamps and gaps, A's own gains and the legs' coupling
+   through A.
 
 The workflow (:func:`pospp.diagnose.workflow.diagnose`, ``null_dv``) computes each statistic it
-uses (lack-of-fit F, each candidate's nested F) on the R realisations with the same design and
-whitening, and turns the flight's statistic into a p-value with the null distribution fitted by
-moments (:func:`calibrated_p_value`).
+uses (lack-of-fit F, each candidate's nested F) on the R realisations with the same design
+(the whitening re-estimated on each), and turns the flight's statistic into a p-value by the
+predictive Student t of log F (:func:`calibrated_p_value`). The calibration re-runs its least
+squares on each (:func:`pospp.calib.stage.with_null_covariance`) for its covariance.
 
-Assumed: the injected noise levels are the flight's (grade ARW / VRW as configured; GNSS from
-the innovations, which also carry A's predicted error, so they read high: conservative), the
-noise is white (no in-run drift: the grade's Gauss-Markov drift is not injected by default),
-and A is linear enough over the noise's size that the difference is the noise response.
+Assumed: the injected levels are the flight's (the configured drift: a drift the data do not
+hold makes the null conservative, one they hold and the configuration lacks makes it cry
+wolf), and A is linear over the noise's size around the base. Checked against an oracle (the
+same flight simulated anew) and by the null Monte Carlo: docs/diagnose.md, "The null, third
+version".
 
 No I/O. SI units.
 """
