@@ -109,7 +109,7 @@ def sensor_to_body_dcm(sensor_frame: str, mounting_rpy_deg: tuple[float, float, 
 def ingest(path: str | Path, config: PipelineConfig) -> mcap_reader.FlightLog:
     """Read and validate the flight log per the [input] section."""
     cfg = config.input
-    log = mcap_reader.read_flight_log(
+    return mcap_reader.read_flight_log(
         path,
         imu_topic=cfg.imu_topic,
         fix_topic=cfg.fix_topic,
@@ -117,25 +117,8 @@ def ingest(path: str | Path, config: PipelineConfig) -> mcap_reader.FlightLog:
         c_bs=sensor_to_body_dcm(cfg.sensor_frame, cfg.mounting_rpy_deg),
         max_chunk_bytes=int(cfg.max_chunk_mib * 2**20),
         events_topic=cfg.events_topic,
+        window_s=(cfg.start_s, cfg.end_s),
     )
-    if cfg.start_s is None and cfg.end_s is None:
-        return log
-    first = int(log.imu.time_ns[0])
-    lo = -np.inf if cfg.start_s is None else first + cfg.start_s * 1e9
-    hi = np.inf if cfg.end_s is None else first + cfg.end_s * 1e9
-
-    def keep(obj: Any) -> Any:
-        m = (obj.time_ns >= lo) & (obj.time_ns < hi)
-        return replace(obj, **{k: v[m] for k, v in vars(obj).items()
-                               if isinstance(v, np.ndarray) and v.shape[:1] == m.shape})
-
-    imu = keep(log.imu)
-    if len(imu) < 2:
-        raise IngestError(f"no IMU samples in the window [{cfg.start_s}, {cfg.end_s}) s "
-                          "after the first sample", file=str(path), topic=cfg.imu_topic)
-    ev = log.events_ns
-    return replace(log, imu=imu, fix=keep(log.fix), vel=keep(log.vel),
-                   events_ns=ev[(ev >= lo) & (ev < hi)])
 
 
 def imu_tuning(config: PipelineConfig) -> nav_tuning.ImuTuning:

@@ -73,7 +73,7 @@ from pospp.types import (
     empty_velocities,
     rotate_covariance,
 )
-from pospp.units import G0_MPS2, S_PER_NS
+from pospp.units import G0_MPS2, S_PER_NS, time_ns_from_t_s
 
 __all__ = ["FlightLog", "read_flight_log"]
 
@@ -133,6 +133,26 @@ def _window(a: dict[str, np.ndarray], start_ns: int | None, end_ns: int | None) 
     if keep.all():
         return a
     return {k: v[keep] for k, v in a.items()}
+
+
+def _absolute_window(
+    imu_time_ns: np.ndarray, start_ns: int | None, end_ns: int | None,
+    window_s: tuple[float | None, float | None],
+) -> tuple[int | None, int | None]:
+    """The window ``[start_ns, end_ns)`` intersected with ``window_s`` [s] after the file's
+    first IMU header stamp (the one place a time window is resolved; ``[input] start_s, end_s``).
+    """
+    start_s, end_s = window_s
+    if len(imu_time_ns) == 0 or (start_s is None and end_s is None):
+        return start_ns, end_ns
+    first_ns = int(imu_time_ns[0])
+    if start_s is not None:
+        lo = int(time_ns_from_t_s(start_s, first_ns))
+        start_ns = lo if start_ns is None else max(start_ns, lo)
+    if end_s is not None:
+        hi = int(time_ns_from_t_s(end_s, first_ns))
+        end_ns = hi if end_ns is None else min(end_ns, hi)
+    return start_ns, end_ns
 
 
 def _check_order(a: dict, topic: str, path: str, *, drop_duplicates: bool,
@@ -432,13 +452,18 @@ def _check_topics(scan: Scan, cols: dict[str, Collector], path: str,
 
 def _assemble_all(
     cols: dict[str, Collector], topics: tuple[str, str, str], events_topic: str,
-    c_bs: np.ndarray, start_ns: int | None, end_ns: int | None, check_units: bool,
-    issues: list[IngestIssue],
+    c_bs: np.ndarray, start_ns: int | None, end_ns: int | None,
+    window_s: tuple[float | None, float | None], check_units: bool, issues: list[IngestIssue],
 ) -> tuple[ImuSamples, GnssFixes, GnssVelocities, np.ndarray | None]:
     """The windowed, checked IMU, fixes, velocities and event stamps (None: no events topic)."""
     imu_topic, fix_topic, vel_topic = topics
-    imu = _assemble_imu(_window(cols[imu_topic].arrays(), start_ns, end_ns),
-                        cols[imu_topic], c_bs, check_units, issues)
+    imu_raw = cols[imu_topic].arrays()
+    start_ns, end_ns = _absolute_window(imu_raw["time_ns"], start_ns, end_ns, window_s)
+    imu = _assemble_imu(_window(imu_raw, start_ns, end_ns), cols[imu_topic], c_bs, check_units,
+                        issues)
+    if len(imu) < 2:
+        raise IngestError(f"{len(imu)} IMU sample in the time window [{start_ns}, {end_ns}) ns"
+                          " (at least 2 needed)", file=cols[imu_topic].path, topic=imu_topic)
     fix = _assemble_fix(_window(cols[fix_topic].arrays(), start_ns, end_ns),
                         cols[fix_topic], issues)
     vel = _assemble_vel(_window(cols[vel_topic].arrays(), start_ns, end_ns),
@@ -459,6 +484,7 @@ def read_flight_log(
     c_bs: np.ndarray = FLU_TO_FRD,
     start_ns: int | None = None,
     end_ns: int | None = None,
+    window_s: tuple[float | None, float | None] = (None, None),
     check_units: bool = True,
     max_chunk_bytes: int = MAX_CHUNK_BYTES,
     events_topic: str = "",
@@ -478,6 +504,10 @@ def read_flight_log(
         Mounting DCM, sensor s -> body b (FRD): ``w_ib_b = C_bs @ w_s``. Default FLU -> FRD.
     start_ns, end_ns : int, optional
         Keep samples whose header stamp is in ``[start_ns, end_ns)``.
+    window_s : (float or None, float or None)
+        Keep samples whose header stamp is ``[start, end)`` seconds after the file's first IMU
+        header stamp (config ``[input] start_s, end_s``); None: open. Intersected with
+        ``start_ns, end_ns``. At least two IMU samples must remain.
     check_units : bool
         Reject IMU data whose magnitudes look like g or deg/s (keyword, default True).
     max_chunk_bytes : int
@@ -523,7 +553,7 @@ def read_flight_log(
     try:
         imu, fix, vel, events_ns = _assemble_all(cols, (imu_topic, fix_topic, vel_topic),
                                                  events_topic, c, start_ns, end_ns,
-                                                 check_units, issues)
+                                                 window_s, check_units, issues)
     except IngestError as exc:
         raise IngestError(
             exc.reason + note, file=exc.file, topic=exc.topic, index=exc.index,

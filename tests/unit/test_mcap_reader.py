@@ -96,6 +96,26 @@ def test_time_window_keeps_stamps_in_half_open_interval(good_file: Path, log_par
     np.testing.assert_array_equal(log.fix.time_ns, expected_fix)
 
 
+def test_window_in_seconds_after_the_first_imu_stamp(good_file: Path, log_parts) -> None:
+    """``window_s`` (config ``[input] start_s, end_s``) counts from the first IMU stamp and
+    intersects an absolute window; fewer than two IMU samples left is an error."""
+    imu, fix, _ = log_parts
+    t0 = int(imu.time_ns[0])
+    t_s = (imu.time_ns - t0) * 1e-9
+    lo_s, hi_s = float(t_s[1000]), float(t_s[2000])
+    log = read_flight_log(good_file, window_s=(lo_s, hi_s))
+    keep = (imu.time_ns >= t0 + round(lo_s * 1e9)) & (imu.time_ns < t0 + round(hi_s * 1e9))
+    np.testing.assert_array_equal(log.imu.time_ns, imu.time_ns[keep])
+    assert len(log.imu) == 1000
+    fix_t = fix.time_ns
+    np.testing.assert_array_equal(
+        log.fix.time_ns, fix_t[(fix_t >= t0 + round(lo_s * 1e9)) & (fix_t < t0 + round(hi_s * 1e9))])
+    both = read_flight_log(good_file, start_ns=int(imu.time_ns[1500]), window_s=(lo_s, None))
+    assert both.imu.time_ns[0] == imu.time_ns[1500]
+    with pytest.raises(IngestError, match="IMU sample in the time window"):
+        read_flight_log(good_file, window_s=(lo_s, lo_s + 1e-9))
+
+
 def test_topic_names_and_mounting_from_config(tmp_path: Path, log_parts) -> None:
     """Custom topics and a non-permutation mounting (sensor yawed 30 deg, then FLU)."""
     imu, fix, vel = log_parts
