@@ -167,9 +167,10 @@ def process_one(mcap_path: str, config_dict: dict[str, Any], out_root: str,
         run_dir = Path(out_root) / name
         if not force and already_done(run_dir, config, sha):
             done = parquet_tables.read_table(run_dir / "summary.parquet").iloc[0]
-            kept = {k: (None if pd.isna(done.get(k)) else done.get(k))
-                    for k in ("n_legs", "dv_after_mps", "dp_after_m", *_HEADLINE_COLUMNS)
-                    if k in done}
+            kept: dict[str, Any] = {
+                k: (None if pd.isna(done.get(k)) else done.get(k))
+                for k in ("n_legs", "dv_after_mps", "dp_after_m", *_HEADLINE_COLUMNS)
+                if k in done}
             if kept.get("n_legs") is not None:
                 kept["n_legs"] = int(kept["n_legs"])
             return FlightOutcome(shown, sha, "skipped", time.perf_counter() - t0, None,
@@ -224,8 +225,8 @@ def _read_manifest(out_root: Path) -> dict[str, FlightOutcome]:
     names = [f.name for f in fields(FlightOutcome)]
     rows = {}
     for rec in df.to_dict("records"):
-        kw = {k: (None if pd.isna(rec.get(k)) else rec.get(k)) if k in rec else None
-              for k in names}
+        kw: dict[str, Any] = {k: (None if pd.isna(rec.get(k)) else rec.get(k))
+                              if k in rec else None for k in names}
         if kw["n_legs"] is not None:
             kw["n_legs"] = int(kw["n_legs"])
         rows[str(kw["file"])] = FlightOutcome(**kw)
@@ -331,10 +332,10 @@ def _run_locked(paths: list[str], config: PipelineConfig, root: Path, *, workers
             raise BatchError(f"cannot reach the Dask scheduler {scheduler} within "
                              f"{scheduler_timeout_s:g} s ({type(exc).__name__})") from None
         with client:
-            futures = [client.submit(process_one, p, cfg, str(root), force, names[p],
-                                     pure=False) for p in paths]
-            for fut in dask_completed(futures):
-                record(fut.result())
+            dask_futures = [client.submit(process_one, p, cfg, str(root), force, names[p],
+                                          pure=False) for p in paths]
+            for dask_fut in dask_completed(dask_futures):
+                record(dask_fut.result())
     elif workers <= 1:
         for p in paths:
             record(process_one(p, cfg, str(root), force, names[p]))

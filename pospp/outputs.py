@@ -9,15 +9,23 @@ made only here (design.md: units at the edges).
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
+from numpy.typing import ArrayLike
 
 from pospp.units import DEG_PER_H_RADPS, NS_PER_S, UG_MPS2, time_ns_from_t_s
 
+if TYPE_CHECKING:
+    from pospp.io.errors import IngestIssue
+    from pospp.io.mcap_reader import FlightLog
+    from pospp.nav.events import SensorPoses
+    from pospp.nav.filter import BiasHistory, NavSolution
+    from pospp.nav.filter_input import GnssRejection
 
-def trajectory_table(solutions: Mapping[str, Any], epoch_ns: int) -> pd.DataFrame:
+
+def trajectory_table(solutions: Mapping[str, NavSolution], epoch_ns: int) -> pd.DataFrame:
     """trajectory.parquet: one block of rows per solution ("forward", "smoothed", ...).
 
     Each solution is a :class:`pospp.nav.filter.NavSolution` (NED, rad, SI).
@@ -51,7 +59,7 @@ def trajectory_table(solutions: Mapping[str, Any], epoch_ns: int) -> pd.DataFram
     return pd.concat(blocks, ignore_index=True)
 
 
-def bias_table(histories: Mapping[str, Any], epoch_ns: int, *, rate_hz: float = 1.0
+def bias_table(histories: Mapping[str, BiasHistory | None], epoch_ns: int, *, rate_hz: float = 1.0
                ) -> pd.DataFrame:
     """biases.parquet: algorithm A's estimated sensor errors over time, one block per solution.
 
@@ -87,7 +95,7 @@ def bias_table(histories: Mapping[str, Any], epoch_ns: int, *, rate_hz: float = 
     return pd.concat(blocks, ignore_index=True)
 
 
-def events_table(poses: Any, events_ns: Any, solution: str) -> pd.DataFrame:
+def events_table(poses: SensorPoses, events_ns: ArrayLike, solution: str) -> pd.DataFrame:
     """events.parquet: the sensor's pose at every trigger event.
 
     ``poses`` is a :class:`pospp.nav.events.SensorPoses` at the stamps ``events_ns``.
@@ -114,7 +122,7 @@ def events_table(poses: Any, events_ns: Any, solution: str) -> pd.DataFrame:
     return pd.DataFrame(cols)
 
 
-def issue_message(issue: Any) -> dict[str, Any]:
+def issue_message(issue: IngestIssue) -> dict[str, Any]:
     """One :class:`pospp.io.errors.IngestIssue` -> a messages row."""
     return {
         "severity": issue.severity,
@@ -128,7 +136,8 @@ def issue_message(issue: Any) -> dict[str, Any]:
     }
 
 
-def rejection_messages(rejections: Iterable[Any], *, limit: int = 200) -> list[dict[str, Any]]:
+def rejection_messages(rejections: Iterable[GnssRejection], *, limit: int = 200
+                       ) -> list[dict[str, Any]]:
     """GNSS measurements algorithm A did not use -> messages rows (at most ``limit``, then one
     row counting the rest, so a flight with a bad receiver does not flood the table)."""
     rows = []
@@ -168,7 +177,7 @@ def messages_table(messages: list[dict[str, Any]]) -> pd.DataFrame:
     return df
 
 
-def log_summary(log: Any) -> dict[str, Any]:
+def log_summary(log: FlightLog) -> dict[str, Any]:
     """Summary columns describing the input."""
     t = log.imu.time_ns
     dt = np.diff(t)
@@ -213,7 +222,7 @@ def not_observable(parameter: str, sigma: float, unit: str) -> str:
     return f"sigma {sigma:.4g} {unit_txt} > {bound:g} {unit_txt}: {why}"
 
 
-def velocity_gap_rms_mps(dv_n_mps: Iterable[Any]) -> float:
+def velocity_gap_rms_mps(dv_n_mps: Iterable[ArrayLike]) -> float:
     """RMS of B minus A horizontal velocity over every sample after each leg's start [m/s].
 
     ``dv_n_mps``: per leg, an (M, >=2) array of [dv_N, dv_E, ...]; row 0 (the leg start, zero

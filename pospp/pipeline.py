@@ -512,7 +512,7 @@ def imu_increments(log: mcap_reader.FlightLog) -> ImuIncrements:
 
 
 def calibrate(imu: ImuIncrements, nav: nav_filter.FilterResult,
-              config: PipelineConfig) -> CalibrationRun:
+              config: PipelineConfig) -> tuple[CalibrationRun, ReferenceSolution]:
     """Legs, B replays, pairs, least squares and B re-run (pospp.calib.stage)."""
     which = config.replay.reference if nav.smoothed is not None else "forward"
     reference = ReferenceSolution(*nav_filter.reference_solution(nav, which=which))
@@ -635,8 +635,10 @@ def diagnose(calib_run: CalibrationRun, imu: ImuIncrements, reference: Reference
             noise="gyro_rw", gyro_arw_radpsqrts=arw_radpsqrts, null_dv=null_dv,
             alpha=config.pairs.diagnose_alpha, signatures=signatures)
 
-    d, at = run(sigs), {}
+    d = run(sigs)
+    at: dict[str, np.ndarray] = {}
     for _ in range(REFINE_ITERATIONS if sigs else 0):
+        assert sigs is not None  # the loop runs only with signatures
         # A is not linear in a GNSS-side effect: secants through the current estimates
         refined, at = refine_signatures(log, nav, calib_run, config, sigs, first_estimates(d), at,
                                         navigate=a_as_configured)

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -24,6 +24,10 @@ from pospp.qc import checks as qc
 from pospp.qc import time_offset
 from pospp.qc.checks import Check
 from pospp.units import t_s_from_time_ns
+
+if TYPE_CHECKING:
+    from pospp.io.mcap_reader import FlightLog
+    from pospp.nav.filter import FilterResult, LeverArmEstimate, NavSolution
 
 
 @dataclass(frozen=True)
@@ -92,7 +96,7 @@ def _static_mask(t: NDArray, w: NDArray, f: NDArray, vel_t: NDArray, vel: NDArra
     return mask
 
 
-def _down_rate(t: NDArray, w: NDArray, sol: Any) -> NDArray:
+def _down_rate(t: NDArray, w: NDArray, sol: NavSolution) -> NDArray:
     """Rotation rate of the body w.r.t. NED about the down axis at the IMU epochs [rad/s].
 
     w_d = (C_nb w_ib_b)_D + Omega sin L (the Earth rate's down component removed; the
@@ -106,8 +110,9 @@ def _down_rate(t: NDArray, w: NDArray, sol: Any) -> NDArray:
     return np.einsum("ij,ij->i", row, w) + earth.EARTH_RATE_RADPS * np.sin(lat)
 
 
-def quality_checks(log: Any, nav: Any, calib_run: Any, config: Any, *, c_bs: Any,
-                   lever_estimate: Any = None) -> QualityReport:
+def quality_checks(log: FlightLog, nav: FilterResult, calib_run: Any, config: Any, *,
+                   c_bs: NDArray, lever_estimate: LeverArmEstimate | None = None
+                   ) -> QualityReport:
     """Run every check on a run's results.
 
     Parameters

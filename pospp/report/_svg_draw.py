@@ -9,9 +9,16 @@ from __future__ import annotations
 import html
 import math
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
+
+if TYPE_CHECKING:
+    from pospp.report.svg import Axes
+
+Mapper = Callable[[ArrayLike], np.ndarray]
+"""Data -> pixel map of one axis (:func:`_mappers`)."""
 
 DPI = 80.0
 """Pixels per inch of the drawing (the PNG figures were saved at 80 dpi)."""
@@ -143,18 +150,18 @@ def _marker(kind: str, x: float, y: float, ms_pt: float, fill: str) -> str:
 
 def _mappers(box: tuple[float, float, float, float],
              lims: tuple[tuple[float, float], tuple[float, float]], log: bool
-             ) -> tuple[Callable[[Any], Any], Callable[[Any], Any]]:
+             ) -> tuple[Mapper, Mapper]:
     """Data -> pixel maps of one axes (module docstring of pospp.report.svg): x linear; y
     linear or log10, non-positive values NaN on a log axis; y grows upwards."""
     x0, y0, w, h = box
     (xlo, xhi), (ylo, yhi) = lims
     tlo, thi = (math.log10(ylo), math.log10(yhi)) if log else (ylo, yhi)
 
-    def fx(v: Any) -> Any:
+    def fx(v: ArrayLike) -> np.ndarray:
         return x0 + (np.asarray(v, dtype=float) - xlo) / (xhi - xlo) * w
 
-    def fy(v: Any) -> Any:
-        v = np.asarray(v, dtype=float)
+    def fy(v_in: ArrayLike) -> np.ndarray:
+        v = np.asarray(v_in, dtype=float)
         if log:
             with np.errstate(divide="ignore", invalid="ignore"):
                 v = np.where(v > 0, np.log10(np.where(v > 0, v, 1.0)), np.nan)
@@ -163,7 +170,7 @@ def _mappers(box: tuple[float, float, float, float],
     return fx, fy
 
 
-def _ticks(ax: Any, box: tuple[float, float, float, float],
+def _ticks(ax: Axes, box: tuple[float, float, float, float],
            lims: tuple[tuple[float, float], tuple[float, float]]) -> dict[str, Any]:
     """Major x and y ticks with their labels, and the log axis's minor ticks."""
     _, _, w, h = box
@@ -217,7 +224,7 @@ def _frame_and_ticks(box: tuple[float, float, float, float], px: Any, py: Any,
     return out
 
 
-def _labels(ax: Any, box: tuple[float, float, float, float], t: dict[str, Any], px: Any,
+def _labels(ax: Axes, box: tuple[float, float, float, float], t: dict[str, Any], px: Any,
             py: Any) -> list[str]:
     """Tick labels, axis labels and the title."""
     x0, y0, w, h = box
@@ -251,7 +258,7 @@ def _labels(ax: Any, box: tuple[float, float, float, float], t: dict[str, Any], 
     return out
 
 
-def _annotations(ax: Any, fx: Any, fy: Any) -> list[str]:
+def _annotations(ax: Axes, fx: Mapper, fy: Mapper) -> list[str]:
     out = []
     for an in ax._annotations:
         px, py = float(fx(an["xy"][0])), float(fy(an["xy"][1]))
@@ -265,7 +272,7 @@ def _annotations(ax: Any, fx: Any, fy: Any) -> list[str]:
     return out
 
 
-def draw_axes(ax: Any, box: tuple[float, float, float, float],
+def draw_axes(ax: Axes, box: tuple[float, float, float, float],
               lims: tuple[tuple[float, float], tuple[float, float]], clip_id: str) -> str:
     """SVG elements of one :class:`pospp.report.svg.Axes` in its pixel ``box`` (x0, y0,
     width, height) with data limits ``lims`` ((xlo, xhi), (ylo, yhi)); ``clip_id`` names its
@@ -310,7 +317,7 @@ def _log_ticks(lo: float, hi: float) -> tuple[np.ndarray, list[str], np.ndarray]
     return cand, [f"{v:g}" for v in cand], minor
 
 
-def _draw_artist(a: dict[str, Any], fx: Any, fy: Any, x0: float, w: float, log: bool
+def _draw_artist(a: dict[str, Any], fx: Mapper, fy: Mapper, x0: float, w: float, log: bool
                  ) -> list[str]:
     k = a["kind"]
     out: list[str] = []
@@ -331,8 +338,8 @@ def _draw_artist(a: dict[str, Any], fx: Any, fy: Any, x0: float, w: float, log: 
         ok = np.isfinite(px) & np.isfinite(p1) & np.isfinite(p2)
         if ok.any():
             px, p1, p2 = px[ok], p1[ok], p2[ok]
-            up, lo = _decimate(px, p2), _decimate(px, p1)[::-1]
-            pts = _points(np.r_[px[up], px[lo]], np.r_[p2[up], p1[lo]])
+            i_up, i_down = _decimate(px, p2), _decimate(px, p1)[::-1]
+            pts = _points(np.r_[px[i_up], px[i_down]], np.r_[p2[i_up], p1[i_down]])
             out.append(f'<polygon points="{pts}" {_paint(a["color"], "fill")} stroke="none"/>')
     elif k == "hline":
         v = float(fy(a["y"]))
@@ -363,26 +370,28 @@ def _draw_artist(a: dict[str, Any], fx: Any, fy: Any, x0: float, w: float, log: 
         col = a["color"][0]
         cap = a["capsize"] * _PX_PER_PT
         for xv, yv, ev in zip(a["x"], a["y"], a["e"], strict=True):
-            px = float(fx(xv))
+            xe = float(fx(xv))
             lo, hi, mid = float(fy(yv - ev)), float(fy(yv + ev)), float(fy(yv))
             if np.isfinite(lo) and np.isfinite(hi):
-                out.append(f'<line x1="{_f(px)}" y1="{_f(lo)}" x2="{_f(px)}" y2="{_f(hi)}" '
+                out.append(f'<line x1="{_f(xe)}" y1="{_f(lo)}" x2="{_f(xe)}" y2="{_f(hi)}" '
                            f'stroke="{col}" stroke-width="{1.5 * _PX_PER_PT:.2f}"/>')
                 if cap:
                     for yy in (lo, hi):
-                        out.append(f'<line x1="{_f(px - cap)}" y1="{_f(yy)}" '
-                                   f'x2="{_f(px + cap)}" y2="{_f(yy)}" stroke="{col}" '
+                        out.append(f'<line x1="{_f(xe - cap)}" y1="{_f(yy)}" '
+                                   f'x2="{_f(xe + cap)}" y2="{_f(yy)}" stroke="{col}" '
                                    f'stroke-width="{1.5 * _PX_PER_PT:.2f}"/>')
             if np.isfinite(mid):
-                out.append(_marker(a["marker"], px, mid, a["ms"], col))
+                out.append(_marker(a["marker"], xe, mid, a["ms"], col))
     return out
 
 
-def _draw_legend(ax: Any, box: tuple[float, float, float, float], fx: Any, fy: Any) -> str:
+def _draw_legend(ax: Axes, box: tuple[float, float, float, float], fx: Mapper,
+                 fy: Mapper) -> str:
     items = [a for a in ax._artists if a.get("label") and not str(a["label"]).startswith("_")]
     if not items:
         return ""
     leg = ax._legend
+    assert leg is not None  # draw_axes draws a legend only when one was asked for
     pt = leg["pt"]
     fs = pt * _PX_PER_PT
     ncol = max(1, min(leg["ncol"], len(items)))
@@ -413,12 +422,13 @@ def _draw_legend(ax: Any, box: tuple[float, float, float, float], fx: Any, fy: A
                 pts.append((np.interp(u, k, fx(a["x"])), np.interp(u, k, fy(a["y"]))))
         px = np.concatenate([p[0] for p in pts]) if pts else np.array([])
         py = np.concatenate([p[1] for p in pts]) if pts else np.array([])
-        best = None
+        best: tuple[int, float, float] | None = None
         for name in corners:  # matplotlib's order of preference
             cx, cy = corners[name]
             n = int(np.sum((px >= cx) & (px <= cx + bw) & (py >= cy) & (py <= cy + bh)))
             if best is None or n < best[0]:
                 best = (n, cx, cy)
+        assert best is not None  # corners is never empty
         _, lx, ly = best
     out = [f'<g><rect x="{_f(lx)}" y="{_f(ly)}" width="{_f(bw)}" height="{_f(bh)}" '
            'fill="#ffffff" fill-opacity="0.8" stroke="#cccccc" rx="3"/>']

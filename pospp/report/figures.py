@@ -70,7 +70,8 @@ def leg_colors(n: int) -> list[tuple[float, float, float, float]]:
     """``n`` colours for legs (RGBA in [0, 1]): tab10's ten, then tab20's lighter ten, then
     tab20b and tab20c (40 distinct before any repeats; every leg is also labelled with its
     number)."""
-    base = [tuple(int(h[i:i + 2], 16) / 255.0 for i in (1, 3, 5)) for h in _LEG_PALETTE]
+    base = [(int(h[1:3], 16) / 255.0, int(h[3:5], 16) / 255.0, int(h[5:7], 16) / 255.0)
+            for h in _LEG_PALETTE]
     return [(*base[i % len(base)], 1.0) for i in range(n)]
 
 

@@ -52,7 +52,7 @@ def pm_text(value: float, sigma: float, unit: str = "") -> str:
     return f"{v} +- {s}{u}" if s else f"{v}{u}"
 
 
-def utc_text(time_ns: object, *, date: bool = True) -> str:
+def utc_text(time_ns: float | np.integer | np.floating | None, *, date: bool = True) -> str:
     """int64 UTC ns -> "2024-06-01 00:05:38.01 UTC" ("" when null)."""
     if time_ns is None or pd.isna(time_ns):
         return ""
@@ -131,7 +131,7 @@ class Headline:
         v = np.abs([e.value for e in self.per_leg])
         s = np.array([e.sigma for e in self.per_leg])
         unit = unit_text(self.per_leg[0].unit)
-        legs = sorted({_PER_LEG.search(e.name).group()[4:] for e in self.per_leg})
+        legs = sorted({e.name[e.name.rindex("_leg") + 4:] for e in self.per_leg})
         return (f"{len(self.per_leg)} per-leg misalignments ({len(legs)} legs): |value| <= "
                 f"{v.max():.2g} {unit}, sigma {s.min():.2g}-{s.max():.2g} {unit}")
 

@@ -18,8 +18,10 @@ PACKAGE = Path(__file__).resolve().parents[2] / "pospp"
 LAYERS: tuple[frozenset[str], ...] = (
     # the data contract and the small facts
     frozenset({"pospp", "types", "units", "earth", "rotation"}),
-    # files <-> contract; the navigation core; stage results -> table columns
-    frozenset({"io", "nav", "outputs"}),
+    # files <-> contract; the navigation core
+    frozenset({"io", "nav"}),
+    # stage results -> table columns (names the result types of io and nav)
+    frozenset({"outputs"}),
     # the stages' numeric layer over nav
     frozenset({"sim", "calib", "qc", "evaluate"}),
     frozenset({"diagnose", "simcompare", "report"}),
