@@ -212,10 +212,6 @@ class _Progress:
         return {"wall_time_s": now - self._t0,
                 **{f"stage_{name}_s": times[name] for name in STAGES if name in times}}
 
-    @property
-    def elapsed_s(self) -> float:
-        return time.perf_counter() - self._t0
-
 
 def run(
     mcap_path: str | Path,

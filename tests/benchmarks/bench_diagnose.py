@@ -5,7 +5,7 @@ Prints a markdown table; the numbers recorded in docs/benchmarks.md ("Diagnose")
 docs/diagnose.md come from this script.
 
 Each scenario hides one effect (or none, or one outside the library) in the IMU increments of
-a synthetic survey flight (:mod:`pospp.diagnose.synthetic`, 50 Hz, 4 legs) on top of a
+a synthetic survey flight (``tests/unit/_synthetic.py``, 50 Hz, 4 legs) on top of a
 body-frame horizontal gyro bias of [0.02, -0.015] deg/h; A is the truth with white velocity
 noise of 3 mm/s. Columns: what the workflow named, its estimate and the truth (display unit),
 the RMS gap and the leave-one-leg-out (held-out) gap before and after, and the CPU time of
@@ -15,15 +15,21 @@ the RMS gap and the leave-one-leg-out (held-out) gap before and after, and the C
 from __future__ import annotations
 
 import resource
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
-from pospp import earth
-from pospp.calib.replay import ImuIncrements
-from pospp.diagnose import effects as fx
-from pospp.diagnose.synthetic import noisy_replays, survey_flight
-from pospp.diagnose.workflow import diagnose
+ROOT = Path(__file__).resolve().parents[2]
+sys.path[:0] = [str(ROOT), str(ROOT / "tests" / "unit")]  # this tree's pospp, the test flights
+
+from _synthetic import noisy_replays, survey_flight  # noqa: E402
+
+from pospp import earth  # noqa: E402
+from pospp.calib.replay import ImuIncrements  # noqa: E402
+from pospp.diagnose import effects as fx  # noqa: E402
+from pospp.diagnose.workflow import diagnose  # noqa: E402
 
 SIGMA = 0.003
 BIAS = np.array([0.02, -0.015, 0.0]) * fx.DEG_PER_H

@@ -1,17 +1,17 @@
 """Located `unexplained` and the practical significance of each row (issue 12, items 4-5).
 
 Closed forms for the horizon worth; a gap of known place and shape hidden in B minus A of
-pospp's synthetic survey flight (:mod:`pospp.diagnose.synthetic`) for the location.
+pospp's synthetic survey flight (``tests/unit/_synthetic.py``) for the location.
 """
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from _synthetic import noisy_replays, survey_flight
 
 from pospp.calib.replay import ImuIncrements
 from pospp.diagnose.locate import horizon_worth, locate_gap
-from pospp.diagnose.synthetic import noisy_replays, survey_flight
 from pospp.diagnose.tables import DIAGNOSIS_COLUMNS, candidate_columns, diagnosis_columns
 from pospp.diagnose.workflow import diagnose
 

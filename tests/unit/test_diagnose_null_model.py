@@ -19,12 +19,12 @@ import dataclasses
 
 import numpy as np
 import pytest
+from _synthetic import survey_flight
 from scipy import stats
 
 from pospp.calib.replay import replay_leg
 from pospp.calib.solve import NoiseModel
 from pospp.diagnose import null_model
-from pospp.diagnose.synthetic import survey_flight
 from pospp.diagnose.workflow import diagnose
 
 

@@ -1,6 +1,6 @@
 """The model-discrepancy workflow on simulated flights with one hidden effect.
 
-Truth: :func:`pospp.diagnose.synthetic.survey_flight` (the strapdown solution of exact
+Truth: ``tests/unit/_synthetic.survey_flight`` (the strapdown solution of exact
 increments). Each hidden effect is injected into the IMU increments by its physical definition
 (independently of the library's signatures), on top of a body-frame horizontal gyro bias that
 the base model does estimate; A is the truth plus white velocity noise (``SIGMA``). The
@@ -13,11 +13,11 @@ from __future__ import annotations
 import numpy as np
 import pyarrow as pa
 import pytest
+from _synthetic import noisy_replays, survey_flight
 
 from pospp import earth
 from pospp.calib.replay import ImuIncrements
 from pospp.diagnose import effects as fx
-from pospp.diagnose.synthetic import noisy_replays, survey_flight
 from pospp.diagnose.workflow import (
     DIAGNOSIS_COLUMNS,
     candidate_columns,

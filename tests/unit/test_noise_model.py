@@ -16,6 +16,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from _synthetic import survey_flight
 from scipy import linalg
 
 from pospp.calib.replay import replay_leg
@@ -25,7 +26,6 @@ from pospp.calib.solve import (
     gyro_noise_covariance,
     reference_error_covariance,
 )
-from pospp.diagnose.synthetic import survey_flight
 from pospp.diagnose.workflow import diagnose
 
 G_MPS2 = 9.80

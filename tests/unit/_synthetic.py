@@ -1,7 +1,8 @@
 """Synthetic survey flights whose truth is the one strapdown kernel's own solution.
 
-Frames and units: body FRD (b), navigation NED (n), SI (rad, m, s). For tests and demos of the
-model-discrepancy workflow, until the mission simulator (:mod:`pospp.sim`) is wired in.
+Frames and units: body FRD (b), navigation NED (n), SI (rad, m, s). Test scaffolding for the
+model-discrepancy workflow's tests and benchmarks (moved out of the package, issue 17 item 6;
+the mission simulator :mod:`pospp.sim` is the package's own flight generator).
 
 Method: a nominal level flight (speed profile, heading profile with constant-rate turns, and an
 optional small heading / pitch wander) is turned into error-free IMU increments with the
