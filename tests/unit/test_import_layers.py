@@ -9,11 +9,13 @@ nothing below io imports io). Packages in the same layer do not import each othe
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
 
 PACKAGE = Path(__file__).resolve().parents[2] / "pospp"
+ARCHITECTURE_DOC = PACKAGE.parent / "docs" / "architecture.md"
 
 LAYERS: tuple[frozenset[str], ...] = (
     # the data contract and the small facts
@@ -87,3 +89,14 @@ def test_imports_run_downward(path: Path) -> None:
             bad.append(f"line {line}: {module} (layer {_layer_of(top)}; {own} is layer "
                        f"{own_layer})")
     assert not bad, f"{path.relative_to(PACKAGE)} imports upward or sideways: {bad}"
+
+
+def test_architecture_doc_lists_the_layers() -> None:
+    """docs/architecture.md's layer table is ``LAYERS``, in order (the doc describes the house
+    the test enforces)."""
+    rows = re.findall(r"^\| (\d+) \| ([^|]+) \|", ARCHITECTURE_DOC.read_text(), re.MULTILINE)
+    doc = [frozenset(re.findall(r"`(\w+)`", names)) for _, names in rows]
+    assert [int(n) for n, _ in rows] == list(range(len(rows)))
+    assert doc == list(LAYERS), (
+        f"docs/architecture.md layers {[sorted(d) for d in doc]} != LAYERS "
+        f"{[sorted(x) for x in LAYERS]}")
