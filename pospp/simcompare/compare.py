@@ -137,6 +137,47 @@ def _wls(h: NDArray, g: NDArray, w: NDArray):
     return u, cov, float(u @ a @ u)
 
 
+def _refine(effect: SimEffect, names: list[str], cols: list[int], h: NDArray, g: NDArray,
+            w: NDArray, fit, base: FlightStats, simulate: SimulateFn, imu: ImuErrorModel,
+            gnss: GnssModel, ctx: EffectContext):
+    """Fit u on the simulated statistic itself, not on its slope at zero: Broyden's secant
+    method. With S(u) the simulated fit statistics of the model with u added and S(0) the
+    base's, solve S(u) - S(0) = g (weighted least squares) by simulating at the current
+    u_k, updating the slope along the last step (H += (dS - H du) du^T / du^T du) and
+    stepping u_{k+1} = u_k + WLS(H, g - (S(u_k) - S(0))), for ``effect.refine`` iterations
+    at most (stops when the step is below a tenth of its sigma). Returns the iterate with
+    the least weighted residual, with the covariance (H^T W H)^-1 of the local slope there
+    and the chi-square of u against zero (u^T H^T W H u)."""
+    p = len(effect.params)
+    s0 = np.array([base.stats[s].value for s in names])
+    u_prev, s_prev = np.zeros(len(cols)), s0
+    u_k, cov_k, _ = fit
+    best = None
+    for _ in range(effect.refine):
+        full = np.zeros(p)
+        full[cols] = u_k
+        sim = simulate(*effect.apply(imu, gnss, full, ctx))
+        s_k = np.array([sim.stats[s].value if s in sim.stats else np.nan for s in names])
+        if not np.all(np.isfinite(s_k)):
+            break
+        du, ds = u_k - u_prev, s_k - s_prev
+        if du @ du > 0:
+            h = h + np.outer(ds - h @ du, du) / (du @ du)
+        r = g - (s_k - s0)
+        a = h.T @ (h * w[:, None])
+        if not np.all(np.isfinite(a)) or np.linalg.matrix_rank(a) < h.shape[1]:
+            break
+        cov_k = np.linalg.inv(a)
+        res = float(np.sum(w * r * r))
+        if best is None or res < best[0]:
+            best = (res, u_k.copy(), cov_k, float(u_k @ a @ u_k))
+        step = cov_k @ (h.T @ (w * r))
+        if np.all(np.abs(step) < 0.1 * np.sqrt(np.diag(cov_k))):
+            break
+        u_prev, s_prev, u_k = u_k, s_k, u_k + step
+    return fit if best is None else best[1:]
+
+
 def _fit(effect: SimEffect, gap: dict[str, Gap], base: FlightStats, simulate: SimulateFn,
          imu: ImuErrorModel, gnss: GnssModel, ctx: EffectContext):
     """Weighted least squares of the effect's parameters on its fit statistics' gaps:
@@ -173,6 +214,8 @@ def _fit(effect: SimEffect, gap: dict[str, Gap], base: FlightStats, simulate: Si
         sim = simulate(*effect.apply(imu, gnss, u, ctx))
         h[:, k] = [(sim.stats[s].value - base.stats[s].value) / effect.trial[j] for s in names]
     fit = _wls(h, g, w)
+    if fit is not None and effect.refine:
+        fit = _refine(effect, names, cols, h, g, w, fit, base, simulate, imu, gnss, ctx)
     if fit is None or cov0 is None:
         return fit
     uc, covc, chi = fit

@@ -54,6 +54,8 @@ SF_TRIAL = 5e-3
 of a scale-factor error (a third of a 1 % gyro z error on a track of circles, a seventh of a
 2 % accelerometer x error on a car track), so their slope is measured, for the scale factors
 that A's estimates show (``SimEffect.screen``)."""
+SF_REFINE = 4
+"""Secant iterations of the scale-factor fit on the simulated statistics."""
 COLOURED_GNSS_TAU_S = 60.0
 """Correlation time of the coloured GNSS position error the library adds [s]."""
 
@@ -107,6 +109,10 @@ class SimEffect:
     variance: bool
     apply: Apply
     screen: bool = False
+    refine: int = 0
+    """Secant iterations on the simulated statistic after the trial-slope fit (0: none):
+    for effects that A's statistics follow non-linearly (scale factors, whose estimates in A
+    saturate: :func:`pospp.simcompare.compare._refine`)."""
 
     def size(self, u: NDArray, cov: NDArray) -> tuple[NDArray, NDArray]:
         """Reported size and 1-sigma [unit] of the fitted u (SI) and its covariance."""
@@ -201,7 +207,7 @@ LIBRARY: tuple[SimEffect, ...] = (
               (*(f"a_gyro_sf_{a}" for a in _XYZ), *(f"a_accel_sf_{a}" for a in _XYZ)),
               (*(f"a_gyro_sf_{a}" for a in _XYZ), *(f"a_accel_sf_{a}" for a in _XYZ),
                "gnss_vel_nis", "gnss_vel_norm_n", "gnss_vel_norm_e", *_LEGS),
-              (SF_TRIAL,) * 6, False, _scale, screen=True),
+              (SF_TRIAL,) * 6, False, _scale, screen=True, refine=SF_REFINE),
     SimEffect("mounting_misalignment", tuple(f"rho_{a}" for a in _XYZ), "arcsec", ARCSEC_RAD,
               ("att_offset_roll", "att_offset_pitch", "att_offset_yaw"),
               ("att_offset_roll", "att_offset_pitch", "att_offset_yaw", *_LEGS), None, False,
