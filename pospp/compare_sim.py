@@ -92,7 +92,8 @@ def flight_template(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     dt_ns = int(round(float(np.median(np.diff(log.imu.time_ns)))))
     t_fix = (log.fix.time_ns - epoch) * 1e-9
     gnss_dt = float(np.median(np.diff(t_fix))) if t_fix.size > 1 else 1.0
-    mission0 = float(sol.t_s[0])
+    t_s, lat, lon, hgt = _with_static_start(log, nav, t_imu, t_fix, sol)
+    mission0 = float(t_s[0])
     outages = tuple((float(a - mission0 + 1e-6), float(b - mission0 - 1e-6))
                     for a, b in _gaps(t_fix, 2.5))
     pos_h, pos_v = _median_sigmas(log.fix.pos_cov_ned_m2)
@@ -110,8 +111,29 @@ def flight_template(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     if vehicle is None:
         hspan = float(np.ptp(sol.height_m))
         vehicle = "aircraft" if hspan > 30.0 else "car"
-    return FlightTemplate(sol.t_s, sol.lat_rad, sol.lon_rad, sol.height_m, epoch, dt_ns,
-                          _gaps(t_imu, 1.5), gnss, len(log.vel) > 0, vehicle)
+    return FlightTemplate(t_s, lat, lon, hgt, epoch, dt_ns, _gaps(t_imu, 1.5), gnss,
+                          len(log.vel) > 0, vehicle)
+
+
+def _with_static_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
+                       t_imu: np.ndarray, t_fix: np.ndarray, sol: nav_filter.NavSolution):
+    """A's smoothed trajectory (t [s], lat, lon [rad], height [m]), with the log's initial
+    static period prepended (at the median of its fixes, 2 Hz) when A found one and started
+    after it (motion alignment), so that the simulated flight has the same static start
+    (``imu_avar_gyro_static``)."""
+    t, lat, lon, hgt = sol.t_s, sol.lat_rad, sol.lon_rad, sol.height_m
+    end = nav.alignment.static_end_s
+    if end is None or not end < t[0] - 1.0:
+        return t, lat, lon, hgt
+    m = (t_fix >= t_imu[0]) & (t_fix <= end)
+    if not m.any():
+        return t, lat, lon, hgt
+    ts = np.arange(float(t_imu[0]) + 1e-3, end, 0.5)
+    fix = log.fix
+    pre = [np.full(ts.size, float(np.median(x[m])))
+           for x in (fix.lat_rad, fix.lon_rad, fix.height_m)]
+    return (np.concatenate([ts, t]), *(np.concatenate([p, x])
+                                      for p, x in zip(pre, (lat, lon, hgt), strict=True)))
 
 
 def _residual_rms(log: mcap_reader.FlightLog, sol: nav_filter.NavSolution, epoch_ns: int

@@ -188,7 +188,8 @@ def _fit(effect: SimEffect, gap: dict[str, Gap], base: FlightStats, simulate: Si
     ``MIN_COMPONENT_Z`` sigma from zero and a trial simulation for those only (the others
     keep the identity fit's sigma and a value of 0).
     """
-    names = [s for s in effect.fit_stats if s in gap]
+    names = [s for s in effect.fit_first if s in gap] or [s for s in effect.fit_stats
+                                                          if s in gap]
     if not names:
         return None
     p = len(effect.params)

@@ -54,6 +54,9 @@ SF_TRIAL = 5e-3
 of a scale-factor error (a third of a 1 % gyro z error on a track of circles, a seventh of a
 2 % accelerometer x error on a car track), so their slope is measured, for the scale factors
 that A's estimates show (``SimEffect.screen``)."""
+BI_TRIAL_DPH = 50.0
+"""Trial Gauss-Markov sigma of ``bias_instability`` [deg/h]: large enough that its change of
+the static Allan variance stands above the run-to-run change of the static stretch."""
 SF_REFINE = 4
 """Secant iterations of the scale-factor fit on the simulated statistics."""
 COLOURED_GNSS_TAU_S = 60.0
@@ -109,6 +112,10 @@ class SimEffect:
     variance: bool
     apply: Apply
     screen: bool = False
+    fit_first: tuple[str, ...] = ()
+    """Fit statistics that, when the flight has them, are used alone (the others are weaker
+    readings of the same parameter: e.g. the static gyro Allan variance for
+    ``bias_instability``, which is linear in the added variance)."""
     refine: int = 0
     """Secant iterations on the simulated statistic after the trial-slope fit (0: none):
     for effects that A's statistics follow non-linearly (scale factors, whose estimates in A
@@ -217,10 +224,12 @@ LIBRARY: tuple[SimEffect, ...] = (
                *(f"gnss_pos_lb_{a}" for a in "ned"), "gnss_pos_lowband"), (0.04,), True,
               _coloured),
     SimEffect("bias_instability", ("gyro_gm_var",), "deg/h", DEG_PER_H_RADPS,
-              ("a_gyro_bias_wander", "imu_avar_gyro_10s", *_LEGS),
-              ("a_gyro_bias_wander", "imu_avar_gyro_10s", *(f"a_gyro_trend_{a}" for a in _XYZ),
-               *_LEGS),
-              ((5.0 * DEG_PER_H_RADPS) ** 2,), True, _instability),
+              ("imu_avar_gyro_static", "a_gyro_bias_wander", "imu_avar_gyro_10s", *_LEGS),
+              ("imu_avar_gyro_static", "a_gyro_bias_wander", "imu_avar_gyro_10s",
+               *(f"a_gyro_trend_{a}" for a in _XYZ), "gnss_vel_nis", *_norm("vel"),
+               "att_offset_roll", "att_offset_pitch", "att_offset_yaw", *_LEGS),
+              ((BI_TRIAL_DPH * DEG_PER_H_RADPS) ** 2,), True, _instability,
+              fit_first=("imu_avar_gyro_static",)),
     SimEffect("accel_bias_change", tuple(f"ramp_{a}" for a in _XYZ), "ug/h", UG_MPS2 / 3600.0,
               tuple(f"a_accel_trend_{a}" for a in _XYZ),
               (*(f"a_accel_trend_{a}" for a in _XYZ), "a_accel_bias_wander", *_LEGS),
