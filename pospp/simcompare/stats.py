@@ -59,15 +59,15 @@ Statistics (name: series, unit)
     clusters gives (y_j+1 - y_j)^2 / 2 (mean over the axes); batch means of these (4 blocks
     at 10 s). White noise of variance s^2 per sample gives s^2 dt / tau.
 ``imu_avar_gyro_static``
-    Allan variance of the gyros at ``STATIC_AVAR_TAU_S`` on the static parts only (A's
-    smoothed speed below ``STATIC_SPEED_MPS`` and steady, or A's initial static period), where the trajectory adds nothing
-    and a bias drift shows alone: white noise N^2 / tau, a Gauss-Markov drift of sigma s and
-    correlation time T >> tau about (2 s^2 / T) tau / 3 (its random-walk part). The static
-    parts: A's initial static period (the alignment's, also before A's span when A aligned
-    in motion after it) and A's smoothed solution below the speed. Products as
-    ``imu_avar_*``; sigma = std(products) / sqrt(n) x sqrt(1.5) (neighbouring products of
-    white noise share a cluster: correlation 1/4), n - 1 dof; only when the flight has at
-    least ``STATIC_MIN_PRODUCTS`` products (a static start of about a minute).
+    Allan variance of the gyros at ``STATIC_AVAR_TAU_S`` on the static parts only, where the
+    trajectory adds nothing and a bias drift shows alone: white noise N^2 / tau, a
+    Gauss-Markov drift of sigma s and correlation time T >> tau about (2 s^2 / T) tau / 3
+    (its random-walk part). The static parts: A's initial static period (the alignment's,
+    also before A's span when A aligned in motion after it; its last
+    ``STATIC_END_MARGIN_S`` left out) and A's smoothed solution below ``STATIC_SPEED_MPS``.
+    Products as ``imu_avar_*``; sigma = std(products) / sqrt(n) x sqrt(1.5) (neighbouring
+    products of white noise share a cluster: correlation 1/4), n - 1 dof; only when the
+    flight has at least ``STATIC_MIN_PRODUCTS`` products (a static start of about a minute).
 ``imu_band_accel_lo`` / ``_hi``, ``imu_band_gyro_lo`` / ``_hi``
     Spectrum of the high-passed IMU (as ``imu_hf_*``): per block, the Welch power of the
     mean over axes integrated over [1 Hz, f_s / 4) and [f_s / 4, f_s / 2] [m^2/s^4,

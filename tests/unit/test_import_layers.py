@@ -21,7 +21,7 @@ LAYERS: tuple[frozenset[str], ...] = (
     # files <-> contract; the navigation core; stage results -> table columns
     frozenset({"io", "nav", "outputs"}),
     # the stages' numeric layer over nav
-    frozenset({"sim", "calib", "qc", "evaluate"}),
+    frozenset({"sim", "calib", "qc", "evaluate", "effects_catalog"}),
     frozenset({"diagnose", "simcompare", "report"}),
     frozenset({"config"}),
     frozenset({"pipeline", "convert"}),
