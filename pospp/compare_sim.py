@@ -24,6 +24,7 @@ from pospp.sim.api import simulate_along
 from pospp.sim.gnss import GnssModel
 from pospp.sim.sensors import ImuErrorModel, imu_grade
 from pospp.simcompare.compare import Comparison, compare_flights
+from pospp.simcompare.effects import LIBRARY, SimEffect
 from pospp.simcompare.stats import FlightStats, Stat, flight_stats, leg_stats
 from pospp.simcompare.tables import comparison_columns, model_toml
 
@@ -267,8 +268,10 @@ def base_imu_model(config: PipelineConfig) -> ImuErrorModel:
 def compare_log(log: mcap_reader.FlightLog, config: PipelineConfig, *,
                 nav: nav_filter.FilterResult | None = None, vehicle: str | None = None,
                 imu: ImuErrorModel | None = None, gnss: GnssModel | None = None,
-                max_steps: int = 4) -> tuple[Comparison, FlightTemplate]:
-    """The whole comparison for one log (numeric; no files)."""
+                max_steps: int = 4, library: tuple[SimEffect, ...] = LIBRARY
+                ) -> tuple[Comparison, FlightTemplate]:
+    """The whole comparison for one log (numeric; no files); ``library``: the effects
+    (default :data:`pospp.simcompare.effects.LIBRARY`)."""
     if nav is None:
         nav = pipeline.navigate(log, config)
     tpl = flight_template(log, nav, config, vehicle=vehicle)
@@ -276,11 +279,11 @@ def compare_log(log: mcap_reader.FlightLog, config: PipelineConfig, *,
     imu = base_imu_model(config) if imu is None else imu
     gnss = tpl.gnss if gnss is None else gnss
     return compare_flights(measured, simulate_stats(tpl, config), imu, gnss,
-                           max_steps=max_steps), tpl
+                           max_steps=max_steps, library=library), tpl
 
 
 def compare_sim_run(run_dir: str | Path, *, out: str | Path | None = None,
-                    max_steps: int = 4) -> Comparison:
+                    max_steps: int = 4, library: tuple[SimEffect, ...] = LIBRARY) -> Comparison:
     """``pospp compare-sim RUN_DIR``: write sim_comparison.parquet and sim_model.toml.
 
     ``out`` is the model file (default RUN_DIR/sim_model.toml). The report is re-rendered.
@@ -288,7 +291,7 @@ def compare_sim_run(run_dir: str | Path, *, out: str | Path | None = None,
     run, meta, path, config = pipeline.reopen_run(run_dir)
     log = pipeline.ingest(path, config)
     try:
-        comp, tpl = compare_log(log, config, max_steps=max_steps)
+        comp, tpl = compare_log(log, config, max_steps=max_steps, library=library)
     except ValueError as exc:  # e.g. a flight too short or too slow to simulate along
         raise ValueError(f"{run}: cannot compare {path.name} with its simulation: {exc}") from exc
     out_meta = {k: meta[k] for k in ("input_file", "input_sha256", "config")}

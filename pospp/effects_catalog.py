@@ -99,8 +99,10 @@ CATALOG: tuple[CatalogEffect, ...] = (
     CatalogEffect("mounting_misalignment", "IMU case rotated in the body (FRD rotation vector)",
                   tuple(f"rho_{a}" for a in _XYZ), "arcsec", ARCSEC_RAD, 3600.0 * ARCSEC_RAD),
     CatalogEffect("coloured_gnss",
-                  "Gauss-Markov GNSS position error (horizontal sigma; vertical 1.5 x)",
-                  ("pos_gm_sigma_h",), "m", 1.0, 0.5),
+                  "Gauss-Markov GNSS position and velocity errors (horizontal sigmas, vertical "
+                  "1.5 x; one correlation time)",
+                  ("pos_gm_sigma_h", "gm_tau", "vel_gm_sigma_h"), "m | s | m_per_s",
+                  (1.0, 1.0, 1.0), 0.5),
     CatalogEffect("bias_instability", "gyro Gauss-Markov drift (random drift), sigma",
                   ("gyro_gm_sigma",), "deg_per_h", DEG_PER_H_RADPS, 10.0 * DEG_PER_H_RADPS),
     CatalogEffect("accel_bias_ramp", "accelerometer bias changing in-run, linearly (ramp)",

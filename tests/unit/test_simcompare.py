@@ -161,6 +161,15 @@ def test_coloured_gnss_error_statistics():
                            start_time_ns=0, seed=5)
     assert np.array_equal(f0.lat_rad, f0b.lat_rad)
     assert "pos_gm_sigma_m" not in g0.as_dict() and "pos_gm_sigma_m" in g1.as_dict()
+    # the velocity's own Gauss-Markov error (a filtered receiver): same closed forms
+    g2 = replace(g0, vel_noise_mps=(0.001, 0.001), vel_gm_sigma_mps=(0.2, 0.3),
+                 vel_gm_tau_s=10.0)
+    f2, v2 = simulate_gnss(Still(), 1999.0, g2, start_time_ns=0, seed=5)
+    assert np.array_equal(f2.lat_rad, f0.lat_rad)  # drawn after the position's
+    ve = v2.v_n_mps[:, 1]
+    assert np.std(ve) == pytest.approx(0.2, rel=0.25)
+    assert np.corrcoef(ve[1:], ve[:-1])[0, 1] == pytest.approx(np.exp(-0.1), abs=0.03)
+    assert "vel_gm_sigma_mps" in g2.as_dict() and "vel_gm_sigma_mps" not in g1.as_dict()
 
 
 def test_ljung_box_null_distribution_and_closed_form():
