@@ -6,13 +6,15 @@ of freedom, normal for A's own sigmas) with a Holm-Bonferroni correction over al
 at family-wise level ``alpha`` (default 0.01). The most significant gap (largest |g| /
 sigma_g) is the target. Every library effect that moves the target and is not yet in the
 model is fitted by weighted least squares on its linear statistics (slopes: identity or a
-trial simulation, :mod:`pospp.simcompare.effects`); an effect is admissible when its fitted
-u differs from zero (chi-square test, level ``alpha`` / number of candidates). Each
-admissible effect is added with its fitted size and the flight re-simulated; the one with the
-least sum of z^2 after (plus 2 per parameter, as AIC) over the statistics that some candidate
-of the step moves is kept, and the gaps after are recorded. A multi-parameter effect adds
-only its components at least ``MIN_COMPONENT_Z`` sigma from zero (the others are reported as
-0 with their sigma). A target that no
+trial simulation, :mod:`pospp.simcompare.effects`; then secant iterations on the simulated
+statistics for effects with ``refine``, or a grid over a parameter for effects with
+``grid``); a candidate whose trial flight A cannot process is dropped. An effect is
+admissible when its fitted u differs from zero (chi-square test, level ``alpha`` / number
+of candidates). Each admissible effect is added with its fitted size and the flight
+re-simulated; the one with the least sum of z^2 after (plus 2 per parameter, as AIC) over
+the statistics that some candidate of the step moves is kept, and the gaps after are
+recorded. A multi-parameter effect adds only its components at least ``MIN_COMPONENT_Z``
+sigma from zero (the others are reported as 0 with their sigma). A target that no
 admissible effect explains, or whose gap the added effect does not shrink, is
 ``unexplained`` and left out of later targets (a step of its own, which does not count
 against ``max_steps``). The loop stops when no target is left or ``max_steps`` effects have

@@ -31,8 +31,10 @@ Effects (stable identifiers; the model change u; the reported size)
 ``scale_factor``           gyro and accelerometer scale-factor errors, FRD; ppm
 ``mounting_misalignment``  IMU case rotated by rho (FRD) in the body: both misalignment
                            matrices get M = -[rho x] (v_s = (I - [rho x]) v_b); arcsec
-``coloured_gnss``          Gauss-Markov GNSS position error (horizontal sigma, vertical 1.5 x,
-                           tau 60 s); m
+``coloured_gnss``          Gauss-Markov GNSS position and velocity errors (horizontal sigmas,
+                           vertical 1.5 x) with one correlation time; m | s | m/s. The
+                           library fits the position sigma at 60 s only;
+                           :func:`coloured_tau_library` fits all three (the time on a grid)
 ``bias_instability``       gyro Gauss-Markov (random drift) variance added at the model's
                            correlation time; sigma, deg/h
 ``accel_bias_ramp``        accelerometer bias ramp (ImuErrorModel.accel_bias_drift_ugph);
