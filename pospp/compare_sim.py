@@ -24,6 +24,7 @@ from pospp.sim.api import simulate_along
 from pospp.sim.gnss import GnssModel
 from pospp.sim.sensors import ImuErrorModel, imu_grade
 from pospp.simcompare.compare import Comparison, compare_flights
+from pospp.simcompare.effects import LIBRARY, SimEffect
 from pospp.simcompare.stats import FlightStats, Stat, flight_stats, leg_stats
 from pospp.simcompare.tables import comparison_columns, model_toml
 
@@ -92,7 +93,8 @@ def flight_template(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     dt_ns = int(round(float(np.median(np.diff(log.imu.time_ns)))))
     t_fix = (log.fix.time_ns - epoch) * 1e-9
     gnss_dt = float(np.median(np.diff(t_fix))) if t_fix.size > 1 else 1.0
-    mission0 = float(sol.t_s[0])
+    t_s, lat, lon, hgt = _with_static_start(log, nav, t_imu, t_fix, sol)
+    mission0 = float(t_s[0])
     outages = tuple((float(a - mission0 + 1e-6), float(b - mission0 - 1e-6))
                     for a, b in _gaps(t_fix, 2.5))
     pos_h, pos_v = _median_sigmas(log.fix.pos_cov_ned_m2)
@@ -110,8 +112,29 @@ def flight_template(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     if vehicle is None:
         hspan = float(np.ptp(sol.height_m))
         vehicle = "aircraft" if hspan > 30.0 else "car"
-    return FlightTemplate(sol.t_s, sol.lat_rad, sol.lon_rad, sol.height_m, epoch, dt_ns,
-                          _gaps(t_imu, 1.5), gnss, len(log.vel) > 0, vehicle)
+    return FlightTemplate(t_s, lat, lon, hgt, epoch, dt_ns, _gaps(t_imu, 1.5), gnss,
+                          len(log.vel) > 0, vehicle)
+
+
+def _with_static_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
+                       t_imu: np.ndarray, t_fix: np.ndarray, sol: nav_filter.NavSolution):
+    """A's smoothed trajectory (t [s], lat, lon [rad], height [m]), with the log's initial
+    static period prepended (at the median of its fixes, 2 Hz) when A found one and started
+    after it (motion alignment), so that the simulated flight has the same static start
+    (``imu_avar_gyro_static``)."""
+    t, lat, lon, hgt = sol.t_s, sol.lat_rad, sol.lon_rad, sol.height_m
+    end = nav.alignment.static_end_s
+    if end is None or not end < t[0] - 1.0:
+        return t, lat, lon, hgt
+    m = (t_fix >= t_imu[0]) & (t_fix <= end)
+    if not m.any():
+        return t, lat, lon, hgt
+    ts = np.arange(float(t_imu[0]) + 1e-3, end, 0.5)
+    fix = log.fix
+    pre = [np.full(ts.size, float(np.median(x[m])))
+           for x in (fix.lat_rad, fix.lon_rad, fix.height_m)]
+    return (np.concatenate([ts, t]), *(np.concatenate([p, x])
+                                      for p, x in zip(pre, (lat, lon, hgt), strict=True)))
 
 
 def _residual_rms(log: mcap_reader.FlightLog, sol: nav_filter.NavSolution, epoch_ns: int
@@ -245,8 +268,10 @@ def base_imu_model(config: PipelineConfig) -> ImuErrorModel:
 def compare_log(log: mcap_reader.FlightLog, config: PipelineConfig, *,
                 nav: nav_filter.FilterResult | None = None, vehicle: str | None = None,
                 imu: ImuErrorModel | None = None, gnss: GnssModel | None = None,
-                max_steps: int = 4) -> tuple[Comparison, FlightTemplate]:
-    """The whole comparison for one log (numeric; no files)."""
+                max_steps: int = 4, library: tuple[SimEffect, ...] = LIBRARY
+                ) -> tuple[Comparison, FlightTemplate]:
+    """The whole comparison for one log (numeric; no files); ``library``: the effects
+    (default :data:`pospp.simcompare.effects.LIBRARY`)."""
     if nav is None:
         nav = pipeline.navigate(log, config)
     tpl = flight_template(log, nav, config, vehicle=vehicle)
@@ -254,11 +279,11 @@ def compare_log(log: mcap_reader.FlightLog, config: PipelineConfig, *,
     imu = base_imu_model(config) if imu is None else imu
     gnss = tpl.gnss if gnss is None else gnss
     return compare_flights(measured, simulate_stats(tpl, config), imu, gnss,
-                           max_steps=max_steps), tpl
+                           max_steps=max_steps, library=library), tpl
 
 
 def compare_sim_run(run_dir: str | Path, *, out: str | Path | None = None,
-                    max_steps: int = 4) -> Comparison:
+                    max_steps: int = 4, library: tuple[SimEffect, ...] = LIBRARY) -> Comparison:
     """``pospp compare-sim RUN_DIR``: write sim_comparison.parquet and sim_model.toml.
 
     ``out`` is the model file (default RUN_DIR/sim_model.toml). The report is re-rendered.
@@ -266,7 +291,7 @@ def compare_sim_run(run_dir: str | Path, *, out: str | Path | None = None,
     run, meta, path, config = pipeline.reopen_run(run_dir)
     log = pipeline.ingest(path, config)
     try:
-        comp, tpl = compare_log(log, config, max_steps=max_steps)
+        comp, tpl = compare_log(log, config, max_steps=max_steps, library=library)
     except ValueError as exc:  # e.g. a flight too short or too slow to simulate along
         raise ValueError(f"{run}: cannot compare {path.name} with its simulation: {exc}") from exc
     out_meta = {k: meta[k] for k in ("input_file", "input_sha256", "config")}

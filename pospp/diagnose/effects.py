@@ -81,10 +81,11 @@ from numpy.typing import NDArray
 from pospp import earth, rotation
 from pospp.calib.replay import ImuIncrements, LegReplay, ReferenceSolution, replay_leg
 from pospp.calib.solve import leg_sensitivities
+from pospp.effects_catalog import catalog_entry
 from pospp.nav.error_model import BG, DR, DV, PHI
-from pospp.units import ARCSEC_RAD, UG_MPS2
-from pospp.units import DEG_PER_H_RADPS as DEG_PER_H
-from pospp.units import G0_MPS2 as GRAVITY_MPS2
+from pospp.units import ARCSEC_RAD, UG_MPS2  # noqa: F401  (display units, used as fx.*)
+from pospp.units import DEG_PER_H_RADPS as DEG_PER_H  # noqa: F401
+from pospp.units import G0_MPS2 as GRAVITY_MPS2  # noqa: F401
 
 ACCEL_SETTLING_S = 1200.0
 """Default time constant of the accelerometer-bias warm-up of ``accel_bias_change`` [s]."""
@@ -123,25 +124,19 @@ class Effect:
     needs_imu: bool = False
 
 
+def _catalogued(effect_id: str, needs_imu: bool = False) -> Effect:
+    """The library entry with the name, parameters, unit, SI conversion and plausible size of
+    the catalogue both workflows share (:mod:`pospp.effects_catalog`)."""
+    c = catalog_entry(effect_id)
+    return Effect(c.name, c.description, c.parameters, c.unit, c.si_per_unit, c.plausible_si,
+                  needs_imu)
+
+
 LIBRARY: tuple[Effect, ...] = (
-    Effect("body_fixed_gyro_bias", "horizontal gyro bias fixed in the body frame (vs nav frame)",
-           ("gyro_bias_x", "gyro_bias_y"), "deg_per_h", DEG_PER_H, 0.05 * DEG_PER_H),
-    Effect("vertical_gyro_drift", "vertical (body z) gyro drift",
-           ("gyro_bias_z",), "deg_per_h", DEG_PER_H, 0.5 * DEG_PER_H),
-    Effect("accel_bias_change", "horizontal accelerometer bias settling in-run (warm-up)",
-           ("accel_bias_change_x", "accel_bias_change_y"), "ug", UG_MPS2, 100.0 * UG_MPS2),
-    Effect("gyro_scale_factor", "gyro scale-factor error", ("gyro_sf_x", "gyro_sf_y", "gyro_sf_z"),
-           "ppm", 1e-6, 1000e-6, needs_imu=True),
-    Effect("time_offset", "IMU-GNSS (IMU minus reference) time offset", ("time_offset",), "ms",
-           1e-3, 20e-3, needs_imu=True),
-    Effect("lever_arm", "GNSS antenna lever-arm error of A (computed minus true)",
-           ("lever_arm_x", "lever_arm_y", "lever_arm_z"), "m", 1.0, 0.5),
-    Effect("earth_rate_coupling", "Earth-rate (Foucault) coupling dropped by the closed form",
-           ("earth_rate_fraction",), "fraction", 1.0, 1.0),
-    Effect("gravity_disturbance", "gravity disturbance (deflection of the vertical) gradient",
-           ("gravity_gradient_nn", "gravity_gradient_ne", "gravity_gradient_ee"),
-           "arcsec_per_km", GRAVITY_MPS2 * ARCSEC_RAD / 1000.0,
-           1.0 * GRAVITY_MPS2 * ARCSEC_RAD / 1000.0),
+    _catalogued("body_fixed_gyro_bias"), _catalogued("vertical_gyro_drift"),
+    _catalogued("accel_bias_change"), _catalogued("gyro_scale_factor", needs_imu=True),
+    _catalogued("time_offset", needs_imu=True), _catalogued("lever_arm"),
+    _catalogued("earth_rate_coupling"), _catalogued("gravity_disturbance"),
 )
 """The candidate effects, in the order they are tested."""
 

@@ -22,8 +22,10 @@ Coloured position error (optional, off by default): a first-order Gauss-Markov e
 axis, stationary, horizontal / vertical sigma ``pos_gm_sigma_m`` and correlation time
 ``pos_gm_tau_s``, stepped at the epochs: e_k+1 = a e_k + sigma sqrt(1 - a^2) w_k,
 a = exp(-dt_k / tau). It is added to the white noise; the reported covariance is unchanged
-(a receiver does not report its multipath). Drawn after the white noise from the same stream,
-and only when a sigma is non-zero, so models without it give the same bits as before.
+(a receiver does not report its multipath). The velocity may have one too
+(``vel_gm_sigma_mps``, ``vel_gm_tau_s``), drawn after the position's. Drawn after the white
+noise from the same stream, and only when a sigma is non-zero, so models without it give the
+same bits as before.
 """
 
 from __future__ import annotations
@@ -62,6 +64,9 @@ class GnssModel:
     pos_gm_sigma_m : (horizontal, vertical) sigma of the coloured position error [m]
     pos_gm_tau_s : float
         Its correlation time [s] (module docstring).
+    vel_gm_sigma_mps : (horizontal, vertical) sigma of the coloured velocity error [m/s]
+    vel_gm_tau_s : float
+        Its correlation time [s] (a filtered receiver's velocity is correlated too).
     reported_pos_sigma_m, reported_vel_sigma_mps : (horizontal, vertical), optional
         The sigmas the receiver reports in the covariances, when they differ from the noise
         (default: the noise sigmas; real receivers often report nominal values).
@@ -77,12 +82,14 @@ class GnssModel:
     pos_gm_tau_s: float = 60.0
     reported_pos_sigma_m: tuple[float, float] | None = None
     reported_vel_sigma_mps: tuple[float, float] | None = None
+    vel_gm_sigma_mps: tuple[float, float] = (0.0, 0.0)
+    vel_gm_tau_s: float = 60.0
 
     def __post_init__(self) -> None:
         if not self.rate_hz > 0:
             raise ValueError(f"rate_hz must be > 0, got {self.rate_hz!r}")
         for name, n in (("pos_noise_m", 2), ("vel_noise_mps", 2), ("lever_arm_b_m", 3),
-                        ("pos_gm_sigma_m", 2)):
+                        ("pos_gm_sigma_m", 2), ("vel_gm_sigma_mps", 2)):
             v = tuple(float(x) for x in getattr(self, name))
             if len(v) != n or not np.isfinite(v).all():
                 raise ValueError(f"{name}: expected {n} finite numbers, got {v!r}")
@@ -103,9 +110,10 @@ class GnssModel:
                 if len(v) != 2 or not (np.isfinite(v).all() and min(v) >= 0):
                     raise ValueError(f"{name}: expected 2 finite numbers >= 0, got {v!r}")
                 object.__setattr__(self, name, v)
-        if not float(self.pos_gm_tau_s) > 0:
-            raise ValueError(f"pos_gm_tau_s must be > 0, got {self.pos_gm_tau_s!r}")
-        object.__setattr__(self, "pos_gm_tau_s", float(self.pos_gm_tau_s))
+        for name in ("pos_gm_tau_s", "vel_gm_tau_s"):
+            if not float(getattr(self, name)) > 0:
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
+            object.__setattr__(self, name, float(getattr(self, name)))
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> GnssModel:
@@ -118,6 +126,9 @@ class GnssModel:
         if not any(self.pos_gm_sigma_m):
             d.pop("pos_gm_sigma_m")
             d.pop("pos_gm_tau_s")
+        if not any(self.vel_gm_sigma_mps):
+            d.pop("vel_gm_sigma_mps")
+            d.pop("vel_gm_tau_s")
         for k in ("reported_pos_sigma_m", "reported_vel_sigma_mps"):
             if d[k] is None:
                 d.pop(k)
@@ -204,6 +215,8 @@ def simulate_gnss(
     e_v = rng.standard_normal((n, 3)) * sv
     if any(model.pos_gm_sigma_m):
         e_p += _gauss_markov_epochs(rng, t_true, model.pos_gm_sigma_m, model.pos_gm_tau_s)
+    if any(model.vel_gm_sigma_mps):
+        e_v += _gauss_markov_epochs(rng, t_true, model.vel_gm_sigma_mps, model.vel_gm_tau_s)
     r_m, r_n = earth.principal_radii_m(lat)
     lat = lat + e_p[:, 0] / (r_m + h)
     lon = lon + e_p[:, 1] / ((r_n + h) * np.cos(lat))

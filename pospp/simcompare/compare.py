@@ -6,13 +6,15 @@ of freedom, normal for A's own sigmas) with a Holm-Bonferroni correction over al
 at family-wise level ``alpha`` (default 0.01). The most significant gap (largest |g| /
 sigma_g) is the target. Every library effect that moves the target and is not yet in the
 model is fitted by weighted least squares on its linear statistics (slopes: identity or a
-trial simulation, :mod:`pospp.simcompare.effects`); an effect is admissible when its fitted
-u differs from zero (chi-square test, level ``alpha`` / number of candidates). Each
-admissible effect is added with its fitted size and the flight re-simulated; the one with the
-least sum of z^2 after (plus 2 per parameter, as AIC) over the statistics that some candidate
-of the step moves is kept, and the gaps after are recorded. A multi-parameter effect adds
-only its components at least ``MIN_COMPONENT_Z`` sigma from zero (the others are reported as
-0 with their sigma). A target that no
+trial simulation, :mod:`pospp.simcompare.effects`; then secant iterations on the simulated
+statistics for effects with ``refine``, or a grid over a parameter for effects with
+``grid``); a candidate whose trial flight A cannot process is dropped. An effect is
+admissible when its fitted u differs from zero (chi-square test, level ``alpha`` / number
+of candidates). Each admissible effect is added with its fitted size and the flight
+re-simulated; the one with the least sum of z^2 after (plus 2 per parameter, as AIC) over
+the statistics that some candidate of the step moves is kept, and the gaps after are
+recorded. A multi-parameter effect adds only its components at least ``MIN_COMPONENT_Z``
+sigma from zero (the others are reported as 0 with their sigma). A target that no
 admissible effect explains, or whose gap the added effect does not shrink, is
 ``unexplained`` and left out of later targets (a step of its own, which does not count
 against ``max_steps``). The loop stops when no target is left or ``max_steps`` effects have
@@ -137,17 +139,119 @@ def _wls(h: NDArray, g: NDArray, w: NDArray):
     return u, cov, float(u @ a @ u)
 
 
+def _refine(effect: SimEffect, names: list[str], cols: list[int], h: NDArray, g: NDArray,
+            w: NDArray, fit, base: FlightStats, simulate: SimulateFn, imu: ImuErrorModel,
+            gnss: GnssModel, ctx: EffectContext):
+    """Fit u on the simulated statistic itself, not on its slope at zero: Broyden's secant
+    method. With S(u) the simulated fit statistics of the model with u added and S(0) the
+    base's, solve S(u) - S(0) = g (weighted least squares) by simulating at the current
+    u_k, updating the slope along the last step (H += (dS - H du) du^T / du^T du) and
+    stepping u_{k+1} = u_k + WLS(H, g - (S(u_k) - S(0))), for ``effect.refine`` iterations
+    at most (stops when the step is below a tenth of its sigma). Returns the iterate with
+    the least weighted residual, with the covariance (H^T W H)^-1 of the local slope there
+    and the chi-square of u against zero (u^T H^T W H u)."""
+    p = len(effect.params)
+    s0 = np.array([base.stats[s].value for s in names])
+    u_prev, s_prev = np.zeros(len(cols)), s0
+    u_k, cov_k, _ = fit
+    best = None
+    for _ in range(effect.refine):
+        full = np.zeros(p)
+        full[cols] = u_k
+        sim = simulate(*effect.apply(imu, gnss, full, ctx))
+        s_k = np.array([sim.stats[s].value if s in sim.stats else np.nan for s in names])
+        if not np.all(np.isfinite(s_k)):
+            break
+        du, ds = u_k - u_prev, s_k - s_prev
+        if du @ du > 0:
+            h = h + np.outer(ds - h @ du, du) / (du @ du)
+        r = g - (s_k - s0)
+        a = h.T @ (h * w[:, None])
+        if not np.all(np.isfinite(a)) or np.linalg.matrix_rank(a) < h.shape[1]:
+            break
+        cov_k = np.linalg.inv(a)
+        res = float(np.sum(w * r * r))
+        if best is None or res < best[0]:
+            best = (res, u_k.copy(), cov_k, float(u_k @ a @ u_k))
+        step = cov_k @ (h.T @ (w * r))
+        if np.all(np.abs(step) < 0.1 * np.sqrt(np.diag(cov_k))):
+            break
+        u_prev, s_prev, u_k = u_k, s_k, u_k + step
+    return fit if best is None else best[1:]
+
+
+def _grid_fit(effect: SimEffect, names: list[str], g: NDArray, w: NDArray, base: FlightStats,
+              simulate: SimulateFn, imu: ImuErrorModel, gnss: GnssModel, ctx: EffectContext):
+    """Fit of an effect with a parameter the statistics are far from linear in (``grid``:
+    its index and trial values, SI): at each value, the other parameters' slopes by one trial
+    simulation each (with the grid parameter at that value) and their weighted least squares,
+    re-simulated; the value whose re-simulation leaves the least weighted residual
+    sum(w r^2) of the fit statistics is kept. Its sigma: the
+    Delta chi^2 = 1 half-width of the parabola through the residuals at the best value and
+    its two neighbours (NaN at the grid's ends)."""
+    p = len(effect.params)
+    jg, values = effect.grid
+    free = [j for j in range(p) if j != jg and j not in effect.fixed]
+    fits = []
+    for v in values:
+        try:
+            fits.append(_grid_point(effect, v, names, g, w, base, simulate, imu, gnss, ctx))
+        except ValueError:  # a trial flight A cannot process: this value is out
+            fits.append(None)
+    ok = [i for i, f in enumerate(fits) if f is not None]
+    if not ok:
+        return None
+    i = min(ok, key=lambda i: fits[i][0])
+    uf, covf, chi = fits[i][1]
+    u = np.zeros(p)
+    u[free], u[jg] = uf, values[i]
+    cov = np.zeros((p, p))
+    cov[np.ix_(free, free)] = covf
+    cov[jg, jg] = np.nan
+    if 0 < i < len(values) - 1 and fits[i - 1] is not None and fits[i + 1] is not None:
+        c = np.polyfit(values[i - 1:i + 2], [fits[k][0] for k in (i - 1, i, i + 1)], 2)[0]
+        cov[jg, jg] = 1.0 / c if c > 0 else np.nan  # res = c (v - v0)^2 + ...: Delta 1
+    return u, cov, chi
+
+
+def _grid_point(effect: SimEffect, v: float, names: list[str], g: NDArray, w: NDArray,
+                base: FlightStats, simulate: SimulateFn, imu: ImuErrorModel, gnss: GnssModel,
+                ctx: EffectContext):
+    """One value of :func:`_grid_fit`: (re-simulated weighted residual, WLS fit) or None."""
+    p = len(effect.params)
+    jg = effect.grid[0]
+    free = [j for j in range(p) if j != jg and j not in effect.fixed]
+    h = np.zeros((len(names), len(free)))
+    for k, j in enumerate(free):
+        u = np.zeros(p)
+        u[jg], u[j] = v, effect.trial[j]
+        sim = simulate(*effect.apply(imu, gnss, u, ctx))
+        h[:, k] = [(sim.stats[s].value - base.stats[s].value) / effect.trial[j] for s in names]
+    fit = _wls(h, g, w)
+    if fit is None:
+        return None
+    u = np.zeros(p)
+    u[free], u[jg] = fit[0], v
+    sim = simulate(*effect.apply(imu, gnss, u, ctx))  # the fit, re-simulated
+    r = g - np.array([sim.stats[s].value - base.stats[s].value if s in sim.stats
+                      else np.nan for s in names])
+    res = float(np.sum(w * r * r))
+    return (res if np.isfinite(res) else np.inf), fit
+
+
 def _fit(effect: SimEffect, gap: dict[str, Gap], base: FlightStats, simulate: SimulateFn,
          imu: ImuErrorModel, gnss: GnssModel, ctx: EffectContext):
     """Weighted least squares of the effect's parameters on its fit statistics' gaps:
     (u, cov, chi-square of u against zero), or None when they do not determine u.
 
-    Slopes: the identity (``trial`` None), one trial simulation per parameter, or, for an
+    Slopes: the identity (``trial`` None), one trial simulation per parameter (per grid
+    value of an effect with a ``grid``: :func:`_grid_fit`), or, for an
     effect with ``screen``, the identity to choose the parameters at least
     ``MIN_COMPONENT_Z`` sigma from zero and a trial simulation for those only (the others
     keep the identity fit's sigma and a value of 0).
     """
-    names = [s for s in effect.fit_stats if s in gap]
+    names = [s for s in effect.fit_first if s in gap] or [s for s in effect.fit_stats
+                                                          if s in gap]
     if not names:
         return None
     p = len(effect.params)
@@ -166,6 +270,8 @@ def _fit(effect: SimEffect, gap: dict[str, Gap], base: FlightStats, simulate: Si
         cols = [j for j in range(p) if abs(u0[j]) >= MIN_COMPONENT_Z * np.sqrt(cov0[j, j])]
         if not cols:
             return None
+    if effect.grid is not None:
+        return _grid_fit(effect, names, g, w, base, simulate, imu, gnss, ctx)
     h = np.zeros((len(names), len(cols)))
     for k, j in enumerate(cols):
         u = np.zeros(p)
@@ -173,6 +279,8 @@ def _fit(effect: SimEffect, gap: dict[str, Gap], base: FlightStats, simulate: Si
         sim = simulate(*effect.apply(imu, gnss, u, ctx))
         h[:, k] = [(sim.stats[s].value - base.stats[s].value) / effect.trial[j] for s in names]
     fit = _wls(h, g, w)
+    if fit is not None and effect.refine:
+        fit = _refine(effect, names, cols, h, g, w, fit, base, simulate, imu, gnss, ctx)
     if fit is None or cov0 is None:
         return fit
     uc, covc, chi = fit
@@ -217,16 +325,25 @@ def compare_flights(measured: FlightStats, simulate: SimulateFn, imu: ImuErrorMo
         # add noise to the score)
         moved = {st for e in cands for st in e.explains}
         for e in cands:
-            fit = _fit(e, cur, sim, simulate, imu, gnss, ctx)
+            try:
+                fit = _fit(e, cur, sim, simulate, imu, gnss, ctx)
+            except ValueError:  # a trial flight A cannot process (e.g. cannot align)
+                continue
             if fit is None:
                 continue
             u, cov, chi_u = fit
             if sps.chi2.sf(chi_u, len(u)) > alpha / max(len(cands), 1):
                 continue
             if len(u) > 1:  # components within MIN_COMPONENT_Z sigma of zero are not added
-                u = np.where(np.abs(u) >= MIN_COMPONENT_Z * np.sqrt(np.diag(cov)), u, 0.0)
+                keep = np.abs(u) >= MIN_COMPONENT_Z * np.sqrt(np.diag(cov))
+                if e.grid is not None:  # a grid parameter (a correlation time) is a choice
+                    keep[e.grid[0]] = True
+                u = np.where(keep, u, 0.0)
             imu2, gnss2 = e.apply(imu, gnss, u, ctx)
-            sim2 = simulate(imu2, gnss2)
+            try:
+                sim2 = simulate(imu2, gnss2)
+            except ValueError:
+                continue
             after = gaps(measured, sim2, alpha=alpha)
             score = (sum(g.z ** 2 for n, g in after.items() if n in moved)
                      + 2.0 * np.count_nonzero(u))

@@ -16,20 +16,29 @@ Variance-type effects (vibration, coloured GNSS error, bias instability) add a v
 the model's: the model's RMS becomes sqrt(rms_0^2 + u); their size is reported as
 sign(u) sqrt(|u|).
 
-Effects (stable identifiers; parameters; unit of the reported size)
+Names, parameter names, units and sign conventions are the shared catalogue's
+(:mod:`pospp.effects_catalog`), the same as the leg-based diagnosis uses.
+
+Effects (stable identifiers; the model change u; the reported size)
 -------------------------------------------------------------------
-``vibration``              accel and gyro sinusoidal vibration variance; m/s^2 and deg/s RMS
-``time_offset``            GNSS stamp minus true time (GnssModel.time_offset_s); ms. A's
-                           lever-arm estimate absorbs it along the track (tau v), so the
-                           lever-arm statistics are part of its signature
-``lever_arm``              IMU-to-antenna lever arm change, body FRD; m
+``vibration``              accel and gyro sinusoidal vibration variance; RMS, m/s^2 and deg/s
+``time_offset``            u = GNSS stamp minus true time (GnssModel.time_offset_s); reported
+                           as the catalogue's IMU minus GNSS time, -u, ms. A's lever-arm
+                           estimate absorbs it along the track (tau v), so the lever-arm
+                           statistics are part of its signature
+``lever_arm``              u = true minus configured IMU-to-antenna lever arm, body FRD;
+                           reported as configured minus true, -u, m
 ``scale_factor``           gyro and accelerometer scale-factor errors, FRD; ppm
 ``mounting_misalignment``  IMU case rotated by rho (FRD) in the body: both misalignment
                            matrices get M = -[rho x] (v_s = (I - [rho x]) v_b); arcsec
-``coloured_gnss``          Gauss-Markov GNSS position error (horizontal sigma, vertical 1.5 x,
-                           tau 60 s); m
-``bias_instability``       gyro Gauss-Markov (random drift) variance added; deg/h
-``accel_bias_change``      accelerometer bias ramp (ImuErrorModel.accel_bias_drift_ugph); ug/h
+``coloured_gnss``          Gauss-Markov GNSS position and velocity errors (horizontal sigmas,
+                           vertical 1.5 x) with one correlation time; m | s | m/s. The
+                           library fits the position sigma at 60 s only;
+                           :func:`coloured_tau_library` fits all three (the time on a grid)
+``bias_instability``       gyro Gauss-Markov (random drift) variance added at the model's
+                           correlation time; sigma, deg/h
+``accel_bias_ramp``        accelerometer bias ramp (ImuErrorModel.accel_bias_drift_ugph);
+                           ug/h (the diagnosis's ``accel_bias_change`` is a settling step)
 """
 
 from __future__ import annotations
@@ -40,22 +49,34 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from pospp.effects_catalog import catalog_entry
 from pospp.sim.gnss import GnssModel
 from pospp.sim.sensors import ImuErrorModel
 from pospp.units import ARCSEC_RAD, DEG_PER_H_RADPS, UG_MPS2
 
-__all__ = ["SimEffect", "LIBRARY", "EffectContext", "library_by_name"]
+__all__ = ["SimEffect", "LIBRARY", "EffectContext", "coloured_tau_library", "library_by_name"]
 
 ACCEL_RAMP_TRIAL_MPS3 = 1e-4
-"""Trial ramp of ``accel_bias_change`` [m/s^3] (about 37 000 ug/h): A's smoothed bias follows
+"""Trial ramp of ``accel_bias_ramp`` [m/s^3] (about 37 000 ug/h): A's smoothed bias follows
 only part of a ramp (its bias random walk lags), so the slope is measured, not the identity."""
 SF_TRIAL = 5e-3
 """Trial scale factor of ``scale_factor`` (5000 ppm). A's scale-factor states follow only part
 of a scale-factor error (a third of a 1 % gyro z error on a track of circles, a seventh of a
 2 % accelerometer x error on a car track), so their slope is measured, for the scale factors
 that A's estimates show (``SimEffect.screen``)."""
+BI_TRIAL_DPH = 50.0
+"""Trial Gauss-Markov sigma of ``bias_instability`` [deg/h]: large enough that its change of
+the static Allan variance stands above the run-to-run change of the static stretch."""
+SF_REFINE = 4
+"""Secant iterations of the scale-factor fit on the simulated statistics."""
 COLOURED_GNSS_TAU_S = 60.0
-"""Correlation time of the coloured GNSS position error the library adds [s]."""
+"""Correlation time of the coloured GNSS error the library adds, before its fit [s]."""
+MIN_COLOURED_TAU_S = 1.0
+"""Shortest correlation time of the coloured GNSS error [s]."""
+TAU_GRID_S = (10.0, 30.0, 60.0, 120.0, 300.0)
+"""A grid for :func:`coloured_tau_library` [s]. None below 10 s: at 1 Hz a shorter one is
+nearly white noise, which the library must not explain (with 3 s in the grid the outsider,
+white velocity noise, was named a 3 s coloured velocity error)."""
 
 
 @dataclass(frozen=True)
@@ -88,8 +109,8 @@ class SimEffect:
         Every statistic the effect moves (a gap there makes it a candidate).
     trial : tuple of float or None
         Trial sizes (SI) per parameter for the slope; None: the slope is the identity.
-    variance : bool
-        u is an added variance (size reported as a signed RMS).
+    variance : bool or tuple of bool
+        u is an added variance (size reported as a signed RMS); per parameter when a tuple.
     apply : callable(imu, gnss, u, context) -> (imu, gnss)
     screen : bool
         The fit statistics are A's own estimates of the parameters, but A follows only part
@@ -104,20 +125,42 @@ class SimEffect:
     fit_stats: tuple[str, ...]
     explains: tuple[str, ...]
     trial: tuple[float, ...] | None
-    variance: bool
+    variance: bool | tuple[bool, ...]
     apply: Apply
     screen: bool = False
+    fit_first: tuple[str, ...] = ()
+    """Fit statistics that, when the flight has them, are used alone (the others are weaker
+    readings of the same parameter: e.g. the static gyro Allan variance for
+    ``bias_instability``, which is linear in the added variance)."""
+    refine: int = 0
+    """Secant iterations on the simulated statistic after the trial-slope fit (0: none):
+    for effects that A's statistics follow non-linearly (scale factors, whose estimates in A
+    saturate: :func:`pospp.simcompare.compare._refine`)."""
+    sign: float = 1.0
+    """Reported size = sign x u / si_per_unit: -1 where the catalogue's sign convention is
+    the opposite of the simulation model's parameter (time offset, lever arm)."""
+    grid: tuple[int, tuple[float, ...]] | None = None
+    """A parameter the statistics are far from linear in, and its trial values (SI): the fit
+    takes the best of them (:func:`pospp.simcompare.compare._grid_fit`)."""
+    fixed: tuple[int, ...] = ()
+    """Parameters a grid fit leaves at 0 (reported 0 with sigma 0)."""
+    offset: tuple[float, ...] | None = None
+    """Added to the reported size per parameter [unit]: for a parameter that is a change
+    from a fixed start (the coloured GNSS error's correlation time: 60 s + u)."""
 
     def size(self, u: NDArray, cov: NDArray) -> tuple[NDArray, NDArray]:
         """Reported size and 1-sigma [unit] of the fitted u (SI) and its covariance."""
+        u = np.asarray(u, dtype=float)
         s = np.sqrt(np.clip(np.diag(cov), 0.0, None))
         k = np.asarray(self.si_per_unit, dtype=float)
-        if self.variance:
-            r = np.sign(u) * np.sqrt(np.abs(u))
-            # delta method, sigma of sqrt(u) = sigma_u / (2 sqrt(u)); at u ~ 0 use sqrt(sigma_u)
-            sr = np.where(np.abs(u) > s, s / (2.0 * np.maximum(np.abs(r), 1e-300)), np.sqrt(s))
-            return r / k, sr / k
-        return u / k, s / k
+        var = np.broadcast_to(np.asarray(self.variance, dtype=bool), u.shape)
+        r = np.sign(u) * np.sqrt(np.abs(u))
+        # delta method, sigma of sqrt(u) = sigma_u / (2 sqrt(u)); at u ~ 0 use sqrt(sigma_u)
+        sr = np.where(np.abs(u) > s, s / (2.0 * np.maximum(np.abs(r), 1e-300)), np.sqrt(s))
+        size = self.sign * np.where(var, r, u) / k
+        if self.offset is not None:
+            size = size + np.asarray(self.offset, dtype=float)
+        return size, np.where(var, sr, s) / k
 
 
 def _vibration(imu: ImuErrorModel, gnss: GnssModel, u: NDArray, ctx: EffectContext):
@@ -157,8 +200,14 @@ def _mounting(imu, gnss, u, ctx):
 
 
 def _coloured(imu, gnss, u, ctx):
+    """u = [added horizontal variance (m^2), correlation time minus COLOURED_GNSS_TAU_S (s)]
+    of the position error, and [added horizontal variance (m^2/s^2)] of the velocity error
+    at the same correlation time."""
     h = float(np.sqrt(max(gnss.pos_gm_sigma_m[0] ** 2 + float(u[0]), 0.0)))
-    return imu, replace(gnss, pos_gm_sigma_m=(h, 1.5 * h), pos_gm_tau_s=COLOURED_GNSS_TAU_S)
+    hv = float(np.sqrt(max(gnss.vel_gm_sigma_mps[0] ** 2 + float(u[2]), 0.0)))
+    tau = max(COLOURED_GNSS_TAU_S + float(u[1]), MIN_COLOURED_TAU_S)
+    return imu, replace(gnss, pos_gm_sigma_m=(h, 1.5 * h), pos_gm_tau_s=tau,
+                        vel_gm_sigma_mps=(hv, 1.5 * hv), vel_gm_tau_s=tau)
 
 
 def _instability(imu, gnss, u, ctx):
@@ -180,47 +229,71 @@ _IMU_SPECTRUM = tuple(f"imu_band_{s}_{b}" for s in ("accel", "gyro") for b in ("
 def _norm(kind: str) -> tuple[str, ...]:
     return tuple(f"gnss_{kind}_norm_{a}" for a in "ned")
 
+def _effect(name: str, fit_stats: tuple[str, ...], explains: tuple[str, ...],
+            trial: tuple[float, ...] | None, variance: bool, apply: Apply, **kw) -> SimEffect:
+    """A library effect whose name, parameters, unit and SI conversion are the shared
+    catalogue's (:mod:`pospp.effects_catalog`)."""
+    c = catalog_entry(name)
+    return SimEffect(c.name, c.parameters, c.unit, c.si_per_unit, fit_stats, explains, trial,
+                     variance, apply, **kw)
+
+
 LIBRARY: tuple[SimEffect, ...] = (
-    SimEffect("vibration", ("accel_var", "gyro_var"), "m/s2 | deg/s", (1.0, np.radians(1.0)),
-              ("imu_hf_accel_var", "imu_hf_gyro_var", *_IMU_SPECTRUM),
-              ("imu_hf_accel_var", "imu_hf_gyro_var", *_IMU_SPECTRUM, "imu_avar_accel_1s",
-               "imu_avar_gyro_1s"),
-              (0.25, np.radians(0.5) ** 2), True, _vibration),
-    SimEffect("time_offset", ("tau",), "ms", 1e-3,
-              ("gnss_vel_dot_accel", "a_lever_x", "a_lever_y", "att_offset_pitch"),
-              ("gnss_vel_dot_accel", "a_lever_x", "a_lever_y", "att_offset_pitch",
-               "gnss_vel_nis", "gnss_pos_nis", "gnss_vel_norm_n", "gnss_vel_norm_e",
-               "gnss_vel_lb_n", "gnss_vel_lb_e", "gnss_vel_lowband", *_LEGS), (0.05,), False,
-              _time_offset),
-    SimEffect("lever_arm", tuple(f"lever_{a}" for a in _XYZ), "m", 1.0,
-              tuple(f"a_lever_{a}" for a in _XYZ),
-              (*(f"a_lever_{a}" for a in _XYZ), "gnss_pos_nis", "gnss_vel_nis",
-               *_norm("pos"), *_norm("vel"), *_LEGS), None, False, _lever),
-    SimEffect("scale_factor", (*(f"gyro_sf_{a}" for a in _XYZ),
-                               *(f"accel_sf_{a}" for a in _XYZ)), "ppm", 1e-6,
-              (*(f"a_gyro_sf_{a}" for a in _XYZ), *(f"a_accel_sf_{a}" for a in _XYZ)),
-              (*(f"a_gyro_sf_{a}" for a in _XYZ), *(f"a_accel_sf_{a}" for a in _XYZ),
-               "gnss_vel_nis", "gnss_vel_norm_n", "gnss_vel_norm_e", *_LEGS),
-              (SF_TRIAL,) * 6, False, _scale, screen=True),
-    SimEffect("mounting_misalignment", tuple(f"rho_{a}" for a in _XYZ), "arcsec", ARCSEC_RAD,
-              ("att_offset_roll", "att_offset_pitch", "att_offset_yaw"),
-              ("att_offset_roll", "att_offset_pitch", "att_offset_yaw", *_LEGS), None, False,
-              _mounting),
-    SimEffect("coloured_gnss", ("pos_gm_var_h",), "m", 1.0, ("gnss_pos_lag1", "gnss_pos_nis"),
-              ("gnss_pos_lag1", "gnss_pos_nis", *_norm("pos"),
-               *(f"gnss_pos_lb_{a}" for a in "ned"), "gnss_pos_lowband"), (0.04,), True,
-              _coloured),
-    SimEffect("bias_instability", ("gyro_gm_var",), "deg/h", DEG_PER_H_RADPS,
-              ("a_gyro_bias_wander", "imu_avar_gyro_10s", *_LEGS),
-              ("a_gyro_bias_wander", "imu_avar_gyro_10s", *(f"a_gyro_trend_{a}" for a in _XYZ),
-               *_LEGS),
-              ((5.0 * DEG_PER_H_RADPS) ** 2,), True, _instability),
-    SimEffect("accel_bias_change", tuple(f"ramp_{a}" for a in _XYZ), "ug/h", UG_MPS2 / 3600.0,
-              tuple(f"a_accel_trend_{a}" for a in _XYZ),
-              (*(f"a_accel_trend_{a}" for a in _XYZ), "a_accel_bias_wander", *_LEGS),
-              (ACCEL_RAMP_TRIAL_MPS3,) * 3, False, _accel_change),
+    _effect("vibration", ("imu_hf_accel_var", "imu_hf_gyro_var", *_IMU_SPECTRUM),
+            ("imu_hf_accel_var", "imu_hf_gyro_var", *_IMU_SPECTRUM, "imu_avar_accel_1s",
+             "imu_avar_gyro_1s"),
+            (0.25, np.radians(0.5) ** 2), True, _vibration),
+    # u = GNSS stamp minus true time; the catalogue's time_offset is IMU minus GNSS: -u
+    _effect("time_offset", ("gnss_vel_dot_accel", "a_lever_x", "a_lever_y", "att_offset_pitch"),
+            ("gnss_vel_dot_accel", "a_lever_x", "a_lever_y", "att_offset_pitch",
+             "gnss_vel_nis", "gnss_pos_nis", "gnss_vel_norm_n", "gnss_vel_norm_e",
+             "gnss_vel_lb_n", "gnss_vel_lb_e", "gnss_vel_lowband", *_LEGS), (0.05,), False,
+            _time_offset, sign=-1.0),
+    # u = true minus configured lever arm; the catalogue's lever_arm is configured minus true
+    _effect("lever_arm", tuple(f"a_lever_{a}" for a in _XYZ),
+            (*(f"a_lever_{a}" for a in _XYZ), "gnss_pos_nis", "gnss_vel_nis",
+             *_norm("pos"), *_norm("vel"), *_LEGS), None, False, _lever, sign=-1.0),
+    _effect("scale_factor",
+            (*(f"a_gyro_sf_{a}" for a in _XYZ), *(f"a_accel_sf_{a}" for a in _XYZ)),
+            (*(f"a_gyro_sf_{a}" for a in _XYZ), *(f"a_accel_sf_{a}" for a in _XYZ),
+             "gnss_vel_nis", "gnss_vel_norm_n", "gnss_vel_norm_e", *_LEGS),
+            (SF_TRIAL,) * 6, False, _scale, screen=True, refine=SF_REFINE),
+    _effect("mounting_misalignment", ("att_offset_roll", "att_offset_pitch", "att_offset_yaw"),
+            ("att_offset_roll", "att_offset_pitch", "att_offset_yaw", *_LEGS), None, False,
+            _mounting),
+    # the position error at 60 s (the velocity's and the time fixed; coloured_tau_library
+    # fits all three)
+    _effect("coloured_gnss", ("gnss_pos_lag1", "gnss_pos_nis"),
+            ("gnss_pos_lag1", "gnss_pos_nis", *_norm("pos"),
+             *(f"gnss_pos_lb_{a}" for a in "ned"), "gnss_pos_lowband"),
+            (0.04, 0.0, 0.0025), (True, False, True), _coloured,
+            grid=(1, (0.0,)), fixed=(2,), offset=(0.0, COLOURED_GNSS_TAU_S, 0.0)),
+    _effect("bias_instability", ("imu_avar_gyro_static", "a_gyro_bias_wander",
+                                 "imu_avar_gyro_10s", *_LEGS),
+            ("imu_avar_gyro_static", "a_gyro_bias_wander", "imu_avar_gyro_10s",
+             *(f"a_gyro_trend_{a}" for a in _XYZ), "gnss_vel_nis", *_norm("vel"),
+             "att_offset_roll", "att_offset_pitch", "att_offset_yaw", *_LEGS),
+            ((BI_TRIAL_DPH * DEG_PER_H_RADPS) ** 2,), True, _instability,
+            fit_first=("imu_avar_gyro_static",)),
+    _effect("accel_bias_ramp", tuple(f"a_accel_trend_{a}" for a in _XYZ),
+            (*(f"a_accel_trend_{a}" for a in _XYZ), "a_accel_bias_wander", *_LEGS),
+            (ACCEL_RAMP_TRIAL_MPS3,) * 3, False, _accel_change),
 )
 """The library, in a fixed order."""
+
+
+def coloured_tau_library(taus_s: tuple[float, ...] = TAU_GRID_S) -> tuple[SimEffect, ...]:
+    """The library with the coloured GNSS error's correlation time chosen from ``taus_s``
+    [s] and its velocity error fitted too, on the position and velocity innovations'
+    whiteness and NIS (the statistics are far from linear in tau: at each value the two
+    variances are fitted and re-simulated, and the best is kept). Not the default: on the
+    hidden-error flight (0.3 m at 60 s) it chose 30 s and 0.19 m (docs/compare_sim.md)."""
+    grid = (1, tuple(float(t) - COLOURED_GNSS_TAU_S for t in taus_s))
+    fit = ("gnss_pos_lag1", "gnss_pos_nis", "gnss_vel_lag1", "gnss_vel_nis")
+    vel = ("gnss_vel_lag1", "gnss_vel_nis", *_norm("vel"),
+           *(f"gnss_vel_lb_{a}" for a in "ned"), "gnss_vel_lowband")
+    return tuple(replace(e, grid=grid, fixed=(), fit_stats=fit, explains=(*e.explains, *vel))
+                 if e.name == "coloured_gnss" else e for e in LIBRARY)
 
 
 def library_by_name() -> dict[str, SimEffect]:

@@ -58,6 +58,16 @@ Statistics (name: series, unit)
     the samples are averaged in consecutive clusters of tau, and each pair of neighbouring
     clusters gives (y_j+1 - y_j)^2 / 2 (mean over the axes); batch means of these (4 blocks
     at 10 s). White noise of variance s^2 per sample gives s^2 dt / tau.
+``imu_avar_gyro_static``
+    Allan variance of the gyros at ``STATIC_AVAR_TAU_S`` on the static parts only, where the
+    trajectory adds nothing and a bias drift shows alone: white noise N^2 / tau, a
+    Gauss-Markov drift of sigma s and correlation time T >> tau about (2 s^2 / T) tau / 3
+    (its random-walk part). The static parts: A's initial static period (the alignment's,
+    also before A's span when A aligned in motion after it; its last
+    ``STATIC_END_MARGIN_S`` left out) and A's smoothed solution below ``STATIC_SPEED_MPS``.
+    Products as ``imu_avar_*``; sigma = std(products) / sqrt(n) x sqrt(1.5) (neighbouring
+    products of white noise share a cluster: correlation 1/4), n - 1 dof; only when the
+    flight has at least ``STATIC_MIN_PRODUCTS`` products (a static start of about a minute).
 ``imu_band_accel_lo`` / ``_hi``, ``imu_band_gyro_lo`` / ``_hi``
     Spectrum of the high-passed IMU (as ``imu_hf_*``): per block, the Welch power of the
     mean over axes integrated over [1 Hz, f_s / 4) and [f_s / 4, f_s / 2] [m^2/s^4,
@@ -105,6 +115,14 @@ the steady parts of the flight where the IMU's Allan variance is taken."""
 STEADY_RATE_RADPS = np.radians(3.0)
 AVAR_TAUS_S = (1.0, 10.0)
 """Cluster times of the Allan-variance statistics [s]."""
+STATIC_SPEED_MPS = 0.1
+"""A's smoothed speed below this (and steady): static (as the alignment's static test)."""
+STATIC_AVAR_TAU_S = 10.0
+"""Cluster time of ``imu_avar_gyro_static`` [s]."""
+STATIC_END_MARGIN_S = 20.0
+"""The last seconds of A's initial static period are left out (the start of the motion)."""
+STATIC_MIN_PRODUCTS = 5
+"""``imu_avar_gyro_static`` needs at least this many Allan products (60 s static at 10 s)."""
 
 STAT_UNITS = {
     "gnss_pos_nis": "-", "gnss_vel_nis": "-", "gnss_pos_lag1": "-", "gnss_vel_lag1": "-",
@@ -120,6 +138,7 @@ STAT_UNITS = {
     "gnss_pos_lowband": "-", "gnss_vel_lowband": "-",
     "imu_avar_gyro_1s": "rad2/s2", "imu_avar_gyro_10s": "rad2/s2",
     "imu_avar_accel_1s": "m2/s4", "imu_avar_accel_10s": "m2/s4",
+    "imu_avar_gyro_static": "rad2/s2",
     "imu_band_accel_lo": "m2/s4", "imu_band_accel_hi": "m2/s4",
     "imu_band_gyro_lo": "rad2/s2", "imu_band_gyro_hi": "rad2/s2",
     **{f"a_gyro_trend_{a}": "rad/s2" for a in "xyz"},
@@ -352,7 +371,8 @@ def flight_stats(imu_time_s: NDArray, w_ib_b_radps: NDArray, f_ib_b_mps2: NDArra
     t0, t1 = float(sol.t_s[0]), float(sol.t_s[-1])
     out: dict[str, Stat] = {}
     out.update(_innovation_stats(nav, sol, t0, t1, n_blocks, gnss_sigma))
-    imu, peak = _imu_stats(imu_time_s, w_ib_b_radps, f_ib_b_mps2, sol, t0, t1, n_blocks)
+    imu, peak = _imu_stats(imu_time_s, w_ib_b_radps, f_ib_b_mps2, sol, t0, t1, n_blocks,
+                           nav.alignment.static_end_s)
     out.update(imu)
     out.update(_attitude_stats(sol, t0, t1, vehicle, min_speed_mps))
     out.update(_bias_stats(bias))
@@ -396,8 +416,8 @@ def _innovation_stats(nav: FilterResult, sol: NavSolution, t0: float, t1: float,
 
 
 def _imu_stats(imu_time_s: NDArray, w_ib_b_radps: NDArray, f_ib_b_mps2: NDArray,
-               sol: NavSolution, t0: float, t1: float, n_blocks: int
-               ) -> tuple[dict[str, Stat], float]:
+               sol: NavSolution, t0: float, t1: float, n_blocks: int,
+               static_end_s: float | None = None) -> tuple[dict[str, Stat], float]:
     """The IMU's high-frequency content, band powers and Allan variance on steady parts, and
     the dominant vibration frequency [Hz]."""
     out: dict[str, Stat] = {}
@@ -416,6 +436,14 @@ def _imu_stats(imu_time_s: NDArray, w_ib_b_radps: NDArray, f_ib_b_mps2: NDArray,
             ta, da = allan_products(imu_time_s, x, steady, tau)
             out[f"imu_avar_{name}_{tau:.0f}s"] = _batch(
                 ta, da, t0, t1, n_blocks if tau < 5.0 else N_BLOCKS_SLOW)
+    speed = np.linalg.norm(sol.v_n_mps, axis=1)
+    still = steady & (np.interp(imu_time_s, sol.t_s, speed) < STATIC_SPEED_MPS)
+    if static_end_s is not None:  # A's initial static period (also before A's span)
+        still |= imu_time_s < static_end_s - STATIC_END_MARGIN_S
+    _, ds = allan_products(imu_time_s, w_ib_b_radps, still, STATIC_AVAR_TAU_S)
+    if ds.size >= STATIC_MIN_PRODUCTS:
+        out["imu_avar_gyro_static"] = Stat(float(ds.mean()), float(
+            np.std(ds, ddof=1) / np.sqrt(ds.size) * np.sqrt(1.5)), float(ds.size - 1))
     peak = dominant_frequency_hz(f_ib_b_mps2, dt)
     return out, peak
 

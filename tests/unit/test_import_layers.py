@@ -25,7 +25,7 @@ LAYERS: tuple[frozenset[str], ...] = (
     # stage results -> table columns (names the result types of io and nav)
     frozenset({"outputs"}),
     # the stages' numeric layer over nav
-    frozenset({"sim", "calib", "qc", "evaluate"}),
+    frozenset({"sim", "calib", "qc", "evaluate", "effects_catalog"}),
     frozenset({"diagnose", "simcompare", "report"}),
     frozenset({"config"}),
     frozenset({"pipeline", "convert"}),

@@ -1,0 +1,120 @@
+"""The one catalogue of effect names shared by both discrepancy workflows (issue 14).
+
+The leg-based diagnosis (:mod:`pospp.diagnose.effects`: signatures on B minus A) and the
+measured-versus-simulated comparison (:mod:`pospp.simcompare.effects`: changes of the
+simulation model) describe an effect in different ways, but each takes the effect's name,
+parameter names, display unit, SI conversion, sign convention and plausible size from here,
+so that a name means one effect with one unit and one sign in diagnosis.parquet,
+sim_comparison.parquet and the report.
+
+Units: SI inside; ``unit`` is the display unit as the tables spell it (``deg_per_h``,
+``ug_per_h``; the report prints ``_per_`` as ``/``); the SI value of a display value x is
+``x * si_per_unit`` (one number, or one per parameter). Frames: body FRD (``_x/_y/_z``),
+NED (``_n/_e``).
+
+Sign conventions (the same in both workflows)
+---------------------------------------------
+``time_offset``  the IMU's time tag minus the GNSS (reference) time of the same instant:
+                 positive when the GNSS records are stamped early against the IMU, negative
+                 when they are stamped late.
+``lever_arm``    the configured (computed) IMU-to-antenna lever arm minus the true one.
+Scale factors    measured = (1 + s) true.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from pospp.units import ARCSEC_RAD, DEG_PER_H_RADPS, G0_MPS2, UG_MPS2
+
+__all__ = ["CatalogEffect", "CATALOG", "catalog_entry"]
+
+_XYZ = ("x", "y", "z")
+
+
+@dataclass(frozen=True)
+class CatalogEffect:
+    """One named effect: what the name means in every table.
+
+    Attributes
+    ----------
+    name : str
+        Stable identifier (the ``effect`` column of diagnosis.parquet and
+        sim_comparison.parquet).
+    description : str
+        Physical name, with its sign convention.
+    parameters : tuple of str
+        Parameter names (frame in the suffix).
+    unit : str
+        Display unit (table spelling); ``" | "`` between the units of parameters that differ.
+    si_per_unit : float or tuple of float
+        SI value of one display unit (one per parameter when they differ).
+    plausible_si : float
+        A large but plausible size for a navigation- or survey-grade POS (SI of the first
+        parameter's unit).
+    """
+
+    name: str
+    description: str
+    parameters: tuple[str, ...]
+    unit: str
+    si_per_unit: float | tuple[float, ...]
+    plausible_si: float
+
+
+CATALOG: tuple[CatalogEffect, ...] = (
+    # both workflows
+    CatalogEffect("time_offset", "IMU-GNSS time offset (IMU time tag minus GNSS time)",
+                  ("time_offset",), "ms", 1e-3, 20e-3),
+    CatalogEffect("lever_arm", "GNSS antenna lever-arm error (configured minus true)",
+                  tuple(f"lever_arm_{a}" for a in _XYZ), "m", 1.0, 0.5),
+    # the leg-based diagnosis
+    CatalogEffect("body_fixed_gyro_bias",
+                  "horizontal gyro bias fixed in the body frame (vs nav frame)",
+                  ("gyro_bias_x", "gyro_bias_y"), "deg_per_h", DEG_PER_H_RADPS,
+                  0.05 * DEG_PER_H_RADPS),
+    CatalogEffect("vertical_gyro_drift", "vertical (body z) gyro drift", ("gyro_bias_z",),
+                  "deg_per_h", DEG_PER_H_RADPS, 0.5 * DEG_PER_H_RADPS),
+    CatalogEffect("accel_bias_change",
+                  "horizontal accelerometer bias settling in-run (warm-up step)",
+                  ("accel_bias_change_x", "accel_bias_change_y"), "ug", UG_MPS2,
+                  100.0 * UG_MPS2),
+    CatalogEffect("gyro_scale_factor", "gyro scale-factor error",
+                  tuple(f"gyro_sf_{a}" for a in _XYZ), "ppm", 1e-6, 1000e-6),
+    CatalogEffect("earth_rate_coupling",
+                  "Earth-rate (Foucault) coupling dropped by the closed form",
+                  ("earth_rate_fraction",), "fraction", 1.0, 1.0),
+    CatalogEffect("gravity_disturbance",
+                  "gravity disturbance (deflection of the vertical) gradient",
+                  ("gravity_gradient_nn", "gravity_gradient_ne", "gravity_gradient_ee"),
+                  "arcsec_per_km", G0_MPS2 * ARCSEC_RAD / 1000.0,
+                  1.0 * G0_MPS2 * ARCSEC_RAD / 1000.0),
+    # the measured-versus-simulated comparison
+    CatalogEffect("vibration", "IMU vibration (sinusoidal), RMS per axis",
+                  ("accel_vibration_rms", "gyro_vibration_rms"), "m_per_s2 | deg_per_s",
+                  (1.0, DEG_PER_H_RADPS * 3600.0), 1.0),
+    CatalogEffect("scale_factor", "gyro and accelerometer scale-factor errors",
+                  (*(f"gyro_sf_{a}" for a in _XYZ), *(f"accel_sf_{a}" for a in _XYZ)), "ppm",
+                  1e-6, 1000e-6),
+    CatalogEffect("mounting_misalignment", "IMU case rotated in the body (FRD rotation vector)",
+                  tuple(f"rho_{a}" for a in _XYZ), "arcsec", ARCSEC_RAD, 3600.0 * ARCSEC_RAD),
+    CatalogEffect("coloured_gnss",
+                  "Gauss-Markov GNSS position and velocity errors (horizontal sigmas, vertical "
+                  "1.5 x; one correlation time)",
+                  ("pos_gm_sigma_h", "gm_tau", "vel_gm_sigma_h"), "m | s | m_per_s",
+                  (1.0, 1.0, 1.0), 0.5),
+    CatalogEffect("bias_instability", "gyro Gauss-Markov drift (random drift), sigma",
+                  ("gyro_gm_sigma",), "deg_per_h", DEG_PER_H_RADPS, 10.0 * DEG_PER_H_RADPS),
+    CatalogEffect("accel_bias_ramp", "accelerometer bias changing in-run, linearly (ramp)",
+                  tuple(f"accel_ramp_{a}" for a in _XYZ), "ug_per_h", UG_MPS2 / 3600.0,
+                  1000.0 * UG_MPS2 / 3600.0),
+)
+"""Every effect name of both libraries, once."""
+
+
+def catalog_entry(name: str) -> CatalogEffect:
+    """The catalogue entry of a name (ValueError naming the known ones otherwise)."""
+    for e in CATALOG:
+        if e.name == name:
+            return e
+    raise ValueError(f"effect: expected one of {tuple(e.name for e in CATALOG)}, got {name!r}")
