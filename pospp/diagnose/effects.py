@@ -128,6 +128,8 @@ def _catalogued(effect_id: str, needs_imu: bool = False) -> Effect:
     """The library entry with the name, parameters, unit, SI conversion and plausible size of
     the catalogue both workflows share (:mod:`pospp.effects_catalog`)."""
     c = catalog_entry(effect_id)
+    if isinstance(c.si_per_unit, tuple):
+        raise ValueError(f"{effect_id}: a diagnosis effect has one display unit")
     return Effect(c.name, c.description, c.parameters, c.unit, c.si_per_unit, c.plausible_si,
                   needs_imu)
 
