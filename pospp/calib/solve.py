@@ -540,16 +540,35 @@ def _blocks_reml_nll(params: NDArray, mats: list[tuple], hs: list[NDArray],
     logdet = 0.0
     hw_all, zw_all = [], []
     for m, h, z in zip(mats, hs, zs, strict=True):
-        c = sum(p * mk for p, mk in zip(params, m, strict=True))
-        try:
-            ll = np.linalg.cholesky(c)
-        except np.linalg.LinAlgError:
+        w = _chol_whiten(sum(p * mk for p, mk in zip(params, m, strict=True)), h, z)
+        if w is None:
             return 1e30
-        logdet += 2.0 * float(np.sum(np.log(np.diag(ll))))
-        hw_all.append(_tri_solve(ll, h))
-        zw_all.append(_tri_solve(ll, z))
+        hw_all.append(w[0])
+        zw_all.append(w[1])
+        logdet += w[2]
     hw, zw = np.vstack(hw_all), np.concatenate(zw_all)
     return _reml_whitened(hw, zw, logdet)
+
+
+def _chol_whiten(c: NDArray, h: NDArray, z: NDArray) -> tuple[NDArray, NDArray, float] | None:
+    """(L^-1 H, L^-1 z, log det C) with C = L L^T (Cholesky); None when C is not positive
+    definite."""
+    try:
+        ll = np.linalg.cholesky(c)
+    except np.linalg.LinAlgError:
+        return None
+    return _tri_solve(ll, h), _tri_solve(ll, z), 2.0 * float(np.sum(np.log(np.diag(ll))))
+
+
+def _grid_argmin(obj, bounds: list[tuple[float, float]], n: int) -> tuple[NDArray, NDArray]:
+    """The best point of an n-per-axis grid over ``bounds`` (the start of the REML searches).
+
+    Returns (best point, the grid's axes).
+    """
+    axes = [np.linspace(lo, hi, n) for lo, hi in bounds]
+    grid = np.stack([g.ravel() for g in np.meshgrid(*axes, indexing="ij")], axis=1)
+    vals = [obj(th) for th in grid]
+    return grid[int(np.argmin(vals))], axes
 
 
 def _reml_whitened(hw: NDArray, zw: NDArray, logdet: float) -> float:
@@ -558,10 +577,7 @@ def _reml_whitened(hw: NDArray, zw: NDArray, logdet: float) -> float:
     ``0.5 (log det C + log det H^T C^-1 H + r^T C^-1 r)`` (constants dropped), with the
     information's determinant from the column-scaled SVD (rank-deficient directions dropped).
     """
-    norms = np.linalg.norm(hw, axis=0)
-    norms[norms == 0] = 1.0
-    u, sv, _ = np.linalg.svd(hw / norms, full_matrices=False)
-    keep = sv > sv[0] * 1e-10
+    norms, u, sv, _, keep = _scaled_svd(hw)
     proj = u[:, keep].T @ zw
     rss = float(zw @ zw - proj @ proj)
     info = 2.0 * float(np.sum(np.log(sv[keep])) + np.sum(np.log(norms)))
@@ -642,10 +658,7 @@ def fit_noise_model(
         def nll(theta: NDArray) -> float:
             return _blocks_reml_nll(unpack(theta), mats, hs, zs)
 
-        axes = [np.linspace(a_, b_, 3) for a_, b_ in zip(lo, hi, strict=True)]
-        grid = np.stack([g.ravel() for g in np.meshgrid(*axes, indexing="ij")], axis=1)
-        vals = [nll(th) for th in grid]
-        th0 = grid[int(np.argmin(vals))]
+        th0, _ = _grid_argmin(nll, list(zip(lo, hi, strict=True)), 3)
         # Powell (bounded, derivative-free), then Nelder-Mead from its end: the likelihood is
         # flat along components that the data cannot see, and one search alone stalls there
         opt = optimize.minimize(nll, th0, method="Powell", bounds=list(zip(lo, hi, strict=True)),
@@ -685,12 +698,19 @@ def _lag1(series: list[NDArray]) -> float:
     return num / den if den > 0 else 0.0
 
 
-def _solve_scaled(hw: NDArray, zw: NDArray) -> tuple[NDArray, NDArray, bool]:
-    """Least squares of a whitened system with column scaling; (x, (H^T H)^-1, deficient)."""
+def _scaled_svd(hw: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
+    """Column norms of a whitened design and the SVD of it scaled to unit columns:
+    (norms, U, s, V^T, kept), singular values below 1e-10 of the largest not kept (the
+    one rank rule of the GLS and of REML's information determinant)."""
     norms = np.linalg.norm(hw, axis=0)
     norms[norms == 0] = 1.0
     u, sv, vt = np.linalg.svd(hw / norms, full_matrices=False)
-    keep = sv > sv[0] * 1e-10
+    return norms, u, sv, vt, sv > sv[0] * 1e-10
+
+
+def _solve_scaled(hw: NDArray, zw: NDArray) -> tuple[NDArray, NDArray, bool]:
+    """Least squares of a whitened system with column scaling; (x, (H^T H)^-1, deficient)."""
+    norms, u, sv, vt, keep = _scaled_svd(hw)
     xs = vt[keep].T @ ((u[:, keep].T @ zw) / sv[keep])
     cov_s = (vt[keep].T / sv[keep] ** 2) @ vt[keep]
     return xs / norms, cov_s / np.outer(norms, norms), bool(not keep.all())
@@ -845,13 +865,8 @@ def _full_reml_nll(theta: NDArray, parts: tuple, fixed: tuple[float | None, floa
     ones of (q, s2).
     """
     hs, zs, k, gm = parts
-    c = _full_cov(theta, k, gm, fixed)
-    try:
-        ll = np.linalg.cholesky(c)
-    except np.linalg.LinAlgError:
-        return 1e30
-    logdet = 2.0 * float(np.sum(np.log(np.diag(ll))))
-    return _reml_whitened(_tri_solve(ll, hs), _tri_solve(ll, zs), logdet)
+    w = _chol_whiten(_full_cov(theta, k, gm, fixed), hs, zs)
+    return 1e30 if w is None else _reml_whitened(*w)
 
 
 def _full_params(theta: NDArray, fixed: tuple[float | None, float | None]
@@ -1014,10 +1029,7 @@ def calibrate(
             bounds = [(np.log(1e-6), np.log(1e4))]
             q_fixed = float(gyro_arw_radpsqrts) ** 2
         # coarse grid (the likelihood is flat in q where a is large), then Nelder-Mead
-        axes = [np.linspace(lo, hi, 11) for lo, hi in bounds]
-        grid = np.stack([g.ravel() for g in np.meshgrid(*axes, indexing="ij")], axis=1)
-        nll = [_reml_nll(th, blocks, q_fixed) for th in grid]
-        theta0 = grid[int(np.argmin(nll))]
+        theta0, _ = _grid_argmin(lambda th: _reml_nll(th, blocks, q_fixed), bounds, 11)
         opt = optimize.minimize(_reml_nll, theta0, args=(blocks, q_fixed), method="Nelder-Mead",
                                 options={"xatol": 1e-3, "fatol": 1e-4, "maxiter": 400})
         th = np.clip(opt.x, [b[0] for b in bounds], [b[1] for b in bounds])
@@ -1128,10 +1140,7 @@ def _fit_variances(parts: tuple, fixed: tuple[float | None, float | None], penal
         v = _full_reml_nll(th, parts, fixed)
         return v if penalty is None else v + penalty(th)
 
-    axes = [np.linspace(lo, hi, 9 if len(bounds) == 1 else 6) for lo, hi in bounds]
-    grid = np.stack([g.ravel() for g in np.meshgrid(*axes, indexing="ij")], axis=1)
-    vals = [obj(th) for th in grid]
-    best = grid[int(np.argmin(vals))]
+    best, axes = _grid_argmin(obj, bounds, 9 if len(bounds) == 1 else 6)
     if len(bounds) == 1:  # only A's scale: bounded Brent around the best grid point
         step = axes[0][1] - axes[0][0]
         opt = optimize.minimize_scalar(

@@ -195,7 +195,8 @@ TABLES: dict[str, list[Column]] = {
                     "('body' or 'paper')")),
         _opt(Column("gyro_drift_sigma_dph", _F, "deg/h", "Gauss-Markov gyro drift of the "
                     "calibration's noise model (the null realisations inject it when its "
-                    "source is 'flight'): steady-state sigma per body axis (0: no drift model)", "b (FRD)")),
+                    "source is 'flight'): steady-state sigma per body axis (0: no drift model)",
+                    "b (FRD)")),
         _opt(Column("gyro_drift_tau_s", _F, "s", "its correlation time (inf: no drift model)")),
         _opt(Column("gyro_drift_source", _S, "", "where the drift comes from: 'flight' (sigma "
                     "and tau by REML on this flight's legs, the [imu] grade's a weak prior), "
