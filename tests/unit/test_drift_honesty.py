@@ -96,3 +96,27 @@ def drift_flight_z(seed: int, tau_s: float, sigma_dph: float, *, n_null: int = 6
             "drift_sigma_dph": getattr(run, "drift_sigma_radps", np.nan) / DEG_PER_H_RADPS,
             "drift_tau_s": getattr(run, "drift_tau_s", np.nan),
             "drift_source": getattr(run, "drift_source", "configured")}
+
+
+CASES = ((0.1, 100.0), (1.5, 3600.0))
+"""(sigma deg/h, tau s) of the simulated drift: a fast drift a fifth of the grade's level and a
+slow one three times it (the grade configured: 0.5 deg/h, 300 s)."""
+SEEDS = (0, 1, 2)
+
+
+def _case(args: tuple[float, float, int]) -> dict:
+    sigma_dph, tau_s, seed = args
+    return drift_flight_z(seed, tau_s, sigma_dph)
+
+
+@pytest.mark.slow
+def test_calibration_sigmas_follow_the_flights_drift():
+    # measured (these draws; the before is the grade's drift injected, main at 5c67831):
+    # see the assertions' comments; two worker processes share the six flights
+    jobs = [(s, t, seed) for s, t in CASES for seed in SEEDS]
+    with ProcessPoolExecutor(max_workers=2, mp_context=mp.get_context("fork")) as pool:
+        rows = list(pool.map(_case, jobs))
+    z = np.array([r["z"] for r in rows])
+    print(z, [(r["drift_sigma_dph"], r["drift_tau_s"]) for r in rows])
+    assert 0.7 <= float(np.sqrt(np.mean(z**2))) <= 1.5, z
+    assert np.mean(np.abs(z) < 3.0) >= 0.95, z
