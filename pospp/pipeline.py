@@ -560,8 +560,9 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     Each: the log with IMU noise (white: ``[pairs] null_imu_noise`` "measured", the
     density read from the samples, or "grade", the configured ARW / VRW; plus the
     Gauss-Markov gyro drift the calibration estimated from this flight,
-    ``calib_run.drift_sigma_radps`` / ``drift_tau_s`` when its ``drift_source`` is "flight",
-    else the configured ``[imu] gyro_gm_sigma_dph`` / ``gyro_gm_tau_s``; and the configured
+    ``calib_run.drift_sigma_radps`` / ``drift_tau_s`` when its ``drift_source`` is "flight"
+    (or "grade": the grade's kept because the flight does not reject it), else the
+    configured ``[imu] gyro_gm_sigma_dph`` / ``gyro_gm_tau_s``; and the configured
     accelerometer bias drift ``accel_gm_sigma_ug`` / ``accel_gm_tau_s``) and GNSS noise
     at the level of the flight's GNSS minus A (:func:`null_model.gnss_noise_from_residuals`),
     added to the base from A's alignment point on; A re-run exactly as configured, B replayed
@@ -575,7 +576,7 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     # the drift the flight shows (its level and tau by REML, the grade a weak prior: issue 16
     # item 3), so the calibration's and the diagnosis's sigmas follow the flight
     gm_tau, gm_sigma = si.gyro_gm_tau_s, si.gyro_gm_sigma_radps
-    if calib_run.drift_source == "flight":
+    if calib_run.drift_source in ("flight", "grade"):
         gm_tau, gm_sigma = calib_run.drift_tau_s, calib_run.drift_sigma_radps
     if config.pairs.null_imu_noise == "grade":
         arw, vrw = si.gyro_arw_radpsqrts, si.accel_vrw_mpspsqrts

@@ -68,6 +68,9 @@ NOISE_MODELS = ("gyro_rw", "white")
 GM_PRIOR_LOG_SD = float(np.log(10.0))
 """1-sigma of the grade's weak log-normal prior on the drift's sigma and tau (one decade)."""
 GM_TAUS_S = tuple(float(v) for v in np.geomspace(60.0, 86400.0, 15))
+GM_REJECT_DNLL = 0.5 * 5.991
+"""The flight's drift replaces the grade's only when the grade's (sigma, tau) is rejected by a
+likelihood-ratio test at 5 % (chi-square, 2 degrees of freedom: 2 dnll > 5.991)."""
 """Candidate drift correlation times of the profile REML [s] (60 s to 1 day, ratio 1.68)."""
 
 
@@ -78,8 +81,11 @@ class DriftPrior:
     The drift's level and correlation time are estimated from the flight (REML across the legs
     of the joint fit), penalised by ``0.5 ((ln sigma - ln sigma_g) / log_sd)^2 +
     0.5 ((ln tau - ln tau_g) / log_sd)^2`` (a log-normal prior, one decade 1-sigma by
-    default): where the likelihood is flat (a drift too small or too short for the legs to
-    see) the grade decides, elsewhere the flight. tau is profiled over ``taus_s``.
+    default), tau profiled over ``taus_s``. The flight's estimate is kept only when it
+    rejects the grade's drift: when the restricted likelihood at the grade's (sigma, tau)
+    (a and q re-fitted) is within :data:`GM_REJECT_DNLL` of the estimate's, the grade's drift
+    is used (the likelihood is flat there: a drift too small, too slow or too close to the
+    ARW for the legs to see).
 
     Attributes
     ----------
@@ -151,6 +157,9 @@ class Calibration:
     gm_tau_profile : tuple of (float, float)
         (tau [s], negative restricted log-likelihood plus the grade's prior) per candidate
         correlation time when the drift was estimated with a :class:`DriftPrior` (else empty).
+    gm_source : str
+        With a :class:`DriftPrior`: "flight" (the estimate rejects the grade's drift) or
+        "grade" (it does not: the grade's sigma and tau are used); else "".
     """
 
     formulation: str
@@ -174,6 +183,7 @@ class Calibration:
     gyro_gm_tau_s: float = np.inf
     drift: DriftSmoother | None = None
     gm_tau_profile: tuple[tuple[float, float], ...] = ()
+    gm_source: str = ""
 
     def drift_b_radps(self, t_s: NDArray) -> NDArray:
         """Smoothed Gauss-Markov drift (body FRD, rad/s) at run times ``t_s``, shape (N, 3).
@@ -994,7 +1004,7 @@ def calibrate(
     cond_raw, cond_scaled = condition_numbers(h / s[:, None])
     sizes = [2 * (r.t_s.size - 1) for r in legs]
     edges = np.concatenate([[0], np.cumsum(sizes)])
-    gm_sigma, drift, tau_profile = 0.0, None, ()
+    gm_sigma, drift, tau_profile, gm_source = 0.0, None, (), ""
     if gm_prior is not None and gyro_gm_tau_s is None:
         gyro_gm_tau_s = gm_prior.tau_s
     if noise == "white":
@@ -1010,7 +1020,8 @@ def calibrate(
         white = [res_w[edges[i]:edges[i + 1]] / np.sqrt(vf) for i in range(len(legs))]
     elif gyro_gm_tau_s is not None and (gyro_gm_sigma_radps is None
                                         or gyro_gm_sigma_radps > 0):
-        x, cov, deficient, vf, arw, gm_sigma, white, drift, tau_profile = _calibrate_gm(
+        (x, cov, deficient, vf, arw, gm_sigma, white, drift, tau_profile,
+         gm_source) = _calibrate_gm(
             legs, h, z, edges, noise_step_s, bases, gm_ops, gyro_arw_radpsqrts,
             gyro_gm_sigma_radps, float(gyro_gm_tau_s), gm_bin_s, gm_prior)
     else:
@@ -1066,6 +1077,7 @@ def calibrate(
         gyro_gm_tau_s=np.inf if drift is None else drift.tau_s,
         drift=drift,
         gm_tau_profile=tau_profile,
+        gm_source=gm_source,
     )
 
 
@@ -1107,6 +1119,16 @@ def _calibrate_gm(legs, h, z, edges, noise_step_s, bases, gm_ops, arw_given, sig
         th, val = _fit_variances(parts, fixed, pen)
         profile.append((float(tau), val, th, parts))
     tau_best, _, th, parts = min(profile, key=lambda p: p[1])
+    source = ""
+    if use_prior:
+        source = "flight"
+        nll_best = _full_reml_nll(th, parts, fixed)
+        g_fixed = (q_fixed, float(prior.sigma_radps) ** 2)
+        g_parts = (hs, zs, k, _gm_covariance(ops, float(prior.tau_s)))
+        g_th, g_nll = _fit_variances(g_parts, g_fixed)
+        if g_nll - nll_best < GM_REJECT_DNLL:  # the flight does not reject the grade
+            source, tau_best, parts, fixed = "grade", float(prior.tau_s), g_parts, g_fixed
+            th = g_th
     gm = parts[3]
     a, q, s2 = _full_params(th, fixed)
     ll = np.linalg.cholesky(_full_cov(th, k, gm, fixed))
@@ -1120,7 +1142,7 @@ def _calibrate_gm(legs, h, z, edges, noise_step_s, bases, gm_ops, arw_given, sig
     drift = DriftSmoother(np.concatenate([o[1] for o in ops]), u, s2, tau_best)
     tau_profile = tuple((t, v) for t, v, _, _ in profile) if use_prior else ()
     return (x, cov, deficient, a, float(np.sqrt(q)), float(np.sqrt(s2)), white, drift,
-            tau_profile)
+            tau_profile, source)
 
 
 def _fit_variances(parts: tuple, fixed: tuple[float | None, float | None], penalty=None

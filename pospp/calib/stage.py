@@ -92,8 +92,10 @@ class CalibrationRun:
         axis, correlation time [s]); 0 and inf without the drift model. The null
         realisations inject this drift (:func:`pospp.pipeline.null_realisations`).
     drift_source : str
-        "flight" (sigma and tau by REML on this flight's joint fit, the grade a weak prior),
-        "flight_sigma" (sigma by REML, tau given), "given" (both given) or "none".
+        "flight" (sigma and tau by REML on this flight's joint fit, the grade a weak prior,
+        and the flight rejects the grade's drift), "grade" (estimated the same way, but the
+        flight does not reject the grade's, which is kept), "flight_sigma" (sigma by REML,
+        tau given), "given" (both given) or "none".
     """
 
     legs: tuple[Leg, ...]
@@ -342,12 +344,15 @@ def calibrate_flight(
                 cal_kw["gyro_arw_radpsqrts"] = first_fit.gyro_arw_radpsqrts
             if prior is not None:
                 cal_kw["gyro_gm_tau_s"] = first_fit.gyro_gm_tau_s
-                drift_source = "flight"
-                messages.append("Gauss-Markov gyro drift sigma and tau by REML on the joint "
-                                f"{policy.formulation} fit (grade {gyro_gm_prior_sigma_dph:g} "
-                                f"deg/h, {float(gyro_gm_tau_s):g} s as a weak prior): "
-                                f"{first_fit.gyro_gm_sigma_radps / DEG_PER_H_RADPS:.3f} deg/h, "
-                                f"{first_fit.gyro_gm_tau_s:.0f} s")
+                drift_source = first_fit.gm_source
+                messages.append(
+                    "Gauss-Markov gyro drift by REML on the joint "
+                    f"{policy.formulation} fit (grade {gyro_gm_prior_sigma_dph:g} deg/h, "
+                    f"{float(gyro_gm_tau_s):g} s as a weak prior): "
+                    f"{first_fit.gyro_gm_sigma_radps / DEG_PER_H_RADPS:.3f} deg/h, "
+                    f"{first_fit.gyro_gm_tau_s:.0f} s ("
+                    + ("the flight rejects the grade's drift" if drift_source == "flight"
+                       else "the flight does not reject the grade's drift: kept") + ")")
             else:
                 messages.append("Gauss-Markov gyro drift sigma by REML on the joint "
                                 f"{policy.formulation} fit: "
