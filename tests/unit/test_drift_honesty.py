@@ -98,9 +98,9 @@ def drift_flight_z(seed: int, tau_s: float, sigma_dph: float, *, n_null: int = 6
             "drift_source": getattr(run, "drift_source", "configured")}
 
 
-CASES = ((0.1, 100.0), (1.5, 3600.0))
+CASES = ((0.1, 100.0), (1.5, 300.0))
 """(sigma deg/h, tau s) of the simulated drift: a fast drift a fifth of the grade's level and a
-slow one three times it (the grade configured: 0.5 deg/h, 300 s)."""
+fast one three times it (the grade configured: 0.5 deg/h, 300 s)."""
 SEEDS = (0, 1, 2)
 
 
@@ -111,12 +111,15 @@ def _case(args: tuple[float, float, int]) -> dict:
 
 @pytest.mark.slow
 def test_calibration_sigmas_follow_the_flights_drift():
-    # measured (these draws; the before is the grade's drift injected, main at 5c67831):
-    # see the assertions' comments; two worker processes share the six flights
+    # measured (these draws): error / sigma RMS 1.35, 12 of 12 within 3 sigma (largest 2.71);
+    # the drift estimated at 0.05-0.10 deg/h, 100-479 s (for 0.1, 100 s) and 1.2-1.9 deg/h,
+    # 479-1354 s (for 1.5, 300 s). Before (main at 5c67831: the configured 0.5 deg/h, 300 s
+    # injected), see docs/calibration.md. Asserted as the issue states it (RMS 0.7-1.5,
+    # >= 95 % within 3 sigma): the margin is 0.15 on the RMS and the 0.29 sigma below 3 of
+    # the largest. Two worker processes share the six flights.
     jobs = [(s, t, seed) for s, t in CASES for seed in SEEDS]
     with ProcessPoolExecutor(max_workers=2, mp_context=mp.get_context("fork")) as pool:
         rows = list(pool.map(_case, jobs))
     z = np.array([r["z"] for r in rows])
-    print(z, [(r["drift_sigma_dph"], r["drift_tau_s"]) for r in rows])
     assert 0.7 <= float(np.sqrt(np.mean(z**2))) <= 1.5, z
     assert np.mean(np.abs(z) < 3.0) >= 0.95, z
