@@ -47,6 +47,9 @@ from pospp.units import DEG_PER_SQRT_H_RAD_PER_SQRT_S as _DPSH_RADPSQRTS
 
 """One deg/sqrt(h) in rad/sqrt(s)."""
 COMPENSATIONS = ("constant", "per_leg", "causal")
+CAUSAL_PRIOR_SCALE = 1.0
+"""Default factor on the calibrated prior's sigma in the causal compensation (1: kept; > 1
+weakened; inf: dropped, A's forward estimate alone); docs/calibration.md section 9."""
 _REML_STEP_S = 20.0
 """Sample spacing of the one REML fit of the Gauss-Markov sigma [s] (the GLS uses 10 s)."""
 
@@ -202,6 +205,7 @@ def calibrate_flight(
     noise_step_s: float = 10.0,
     forward_biases: Any = None,
     gyro_gm_prior_sigma_dph: float | None = None,
+    causal_prior_scale: float = CAUSAL_PRIOR_SCALE,
 ) -> CalibrationRun:
     """Run the double-strapdown calibration on one flight.
 
@@ -242,6 +246,9 @@ def calibrate_flight(
         then the drift's sigma **and** tau are the flight's (REML profiled over candidate
         taus on the joint fit), the grade's sigma and tau a weak log-normal prior
         (:class:`pospp.calib.solve.DriftPrior`, one decade 1-sigma).
+    causal_prior_scale : float
+        ``compensation="causal"``: the calibrated prior's sigma is multiplied by this (1: the
+        prior kept, > 1 weakened, ``inf``: dropped, A's forward estimate alone).
     compensation : {"constant", "per_leg"}
         Re-run B with the constant bias (default), or with the constant plus the smoothed
         Gauss-Markov drift's mean over each leg (needs the Gauss-Markov model). The constant
@@ -378,7 +385,9 @@ def calibrate_flight(
     if compensation == "causal":
         fb = forward_biases
         history = (np.asarray(fb.t_s, dtype=float), causal_gyro_bias_b_radps(
-            fb.gyro_b_radps, fb.gyro_sigma_b_radps, bg, prior_sigma_b_radps(sig, chosen)))
+            fb.gyro_b_radps, fb.gyro_sigma_b_radps, bg,
+            np.full(3, np.inf) if np.isinf(causal_prior_scale)
+            else causal_prior_scale * prior_sigma_b_radps(sig, chosen)))
     after, improvements = compensate_legs(
         imu, reference, replays, chosen, accel_compensation=rc.accel_compensation,
         horizon_s=rc.horizon_s, transition_step=int(rc.transition_step),
