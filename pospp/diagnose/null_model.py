@@ -35,8 +35,9 @@ squares on each (:func:`pospp.calib.stage.with_null_covariance`) for its covaria
 
 Assumed: the injected levels are the flight's (a drift the null carries and the data do not
 hold makes it conservative, one they hold and the null lacks makes it cry wolf; a drift slower
-than the flight is invisible to the estimate and absorbed by the fitted bias), and A is linear over the noise's size around the base. Checked against an oracle (the
-same flight simulated anew) and by the null Monte Carlo: docs/diagnose.md, "The null, third
+than the flight is invisible to the estimate and absorbed by the fitted bias), and A is
+linear over the noise's size around the base. Checked against an oracle (the same flight
+simulated anew) and by the null Monte Carlo: docs/diagnose.md, "The null, third
 version".
 
 No I/O. SI units.
