@@ -523,10 +523,11 @@ def calibrate(imu: ImuIncrements, nav: nav_filter.FilterResult,
         else "constant",
         forward_biases=nav.forward_biases,
         # the grade's Gauss-Markov ("random") drift enters the least squares' noise model;
-        # its level is the flight's own (REML on the joint fit), the grade only switches it on
-        # and gives its correlation time (issue 16, item 3)
+        # its level and correlation time are the flight's own (REML on the joint fit, tau
+        # profiled), the grade's a weak prior (solve.DriftPrior; issue 16, item 3)
         gyro_gm_sigma_dph=None,
         gyro_gm_tau_s=tuning.gyro_gm_tau_s if gm else None,
+        gyro_gm_prior_sigma_dph=tuning.gyro_gm_sigma_dph if gm else None,
     ), reference
 
 
@@ -536,9 +537,12 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     """B minus A's null realisations along this flight (pospp.diagnose.null_model).
 
     Each: the log with IMU noise (white: ``[pairs] null_imu_noise`` "measured", the
-    density read from the samples, or "grade", the configured ARW / VRW; plus the configured
-    Gauss-Markov gyro drift and accelerometer bias, ``[imu] gyro_gm_sigma_dph`` /
-    ``gyro_gm_tau_s`` / ``accel_gm_sigma_ug`` / ``accel_gm_tau_s``) and GNSS noise
+    density read from the samples, or "grade", the configured ARW / VRW; plus the
+    Gauss-Markov gyro drift the calibration estimated from this flight,
+    ``calib_run.drift_sigma_radps`` / ``drift_tau_s`` when its ``drift_source`` is "flight"
+    (or "grade": the grade's kept because the flight does not reject it), else the
+    configured ``[imu] gyro_gm_sigma_dph`` / ``gyro_gm_tau_s``; and the configured
+    accelerometer bias drift ``accel_gm_sigma_ug`` / ``accel_gm_tau_s``) and GNSS noise
     at the level of the flight's GNSS minus A (:func:`null_model.gnss_noise_from_residuals`),
     added to the base from A's alignment point on; A re-run exactly as configured, B replayed
     on the same legs (same start and end times), minus the base's own B minus A. The base is
@@ -548,10 +552,11 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     logs).
     """
     si = imu_tuning(config).noise()
-    # the drift as configured: the calibration's REML level of it reads low (it hits its lower
-    # bound on paper_vehicle flights with a 0.05 deg/h drift, 0.31 for 0.5 deg/h on
-    # paper_flight), and a null without the drift cries wolf (docs/diagnose.md)
+    # the drift the flight shows (its level and tau by REML, the grade a weak prior: issue 16
+    # item 3), so the calibration's and the diagnosis's sigmas follow the flight
     gm_tau, gm_sigma = si.gyro_gm_tau_s, si.gyro_gm_sigma_radps
+    if calib_run.drift_source in ("flight", "grade"):
+        gm_tau, gm_sigma = calib_run.drift_tau_s, calib_run.drift_sigma_radps
     if config.pairs.null_imu_noise == "grade":
         arw, vrw = si.gyro_arw_radpsqrts, si.accel_vrw_mpspsqrts
     else:

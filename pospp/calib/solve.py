@@ -65,6 +65,54 @@ from pospp.nav.error_model import BG, DV, PHI
 FORMULATIONS = ("paper", "body")
 TRANSITIONS = ("numerical", "closed_form")
 NOISE_MODELS = ("gyro_rw", "white")
+GM_PRIOR_LOG_SD = float(np.log(10.0))
+"""1-sigma of the grade's weak log-normal prior on the drift's sigma and tau (one decade)."""
+GM_TAUS_S = tuple(float(v) for v in np.geomspace(60.0, 86400.0, 15))
+GM_REJECT_DNLL = 0.5 * 5.991
+"""The flight's drift replaces the grade's only when the grade's (sigma, tau) is rejected by a
+likelihood-ratio test at 5 % (chi-square, 2 degrees of freedom: 2 dnll > 5.991)."""
+"""Candidate drift correlation times of the profile REML [s] (60 s to 1 day, ratio 1.68)."""
+
+
+@dataclass(frozen=True)
+class DriftPrior:
+    """The IMU grade's Gauss-Markov drift as a weak prior of the flight's own estimate.
+
+    The drift's level and correlation time are estimated from the flight (REML across the legs
+    of the joint fit), penalised by ``0.5 ((ln sigma - ln sigma_g) / log_sd)^2 +
+    0.5 ((ln tau - ln tau_g) / log_sd)^2`` (a log-normal prior, one decade 1-sigma by
+    default), tau profiled over ``taus_s``. The flight's estimate is kept only when it
+    rejects the grade's drift: when the restricted likelihood at the grade's (sigma, tau)
+    (a and q re-fitted) is within :data:`GM_REJECT_DNLL` of the estimate's, the grade's drift
+    is used (the likelihood is flat there: a drift too small, too slow or too close to the
+    ARW for the legs to see).
+
+    Attributes
+    ----------
+    sigma_radps : float
+        The grade's steady-state drift sigma [rad/s] (body, per axis).
+    tau_s : float
+        The grade's correlation time [s].
+    taus_s : tuple of float
+        Candidate correlation times [s] (the grade's is added).
+    log_sd : float
+        1-sigma of the prior on ln sigma and on ln tau.
+    """
+
+    sigma_radps: float
+    tau_s: float
+    taus_s: tuple[float, ...] = GM_TAUS_S
+    log_sd: float = GM_PRIOR_LOG_SD
+
+    def candidates_s(self) -> tuple[float, ...]:
+        """Sorted candidate taus with the grade's [s]."""
+        return tuple(sorted(set(self.taus_s) | {float(self.tau_s)}))
+
+    def penalty(self, sigma2_radps2: float, tau_s: float) -> float:
+        """Negative log prior (constants dropped) of a drift variance and correlation time."""
+        ls = 0.5 * np.log(max(sigma2_radps2, 1e-300)) - np.log(self.sigma_radps)
+        lt = np.log(tau_s) - np.log(self.tau_s)
+        return 0.5 * float(ls**2 + lt**2) / self.log_sd**2
 
 
 @dataclass(frozen=True)
@@ -106,6 +154,12 @@ class Calibration:
     drift : DriftSmoother or None
         Conditional mean of the Gauss-Markov drift given this fit's residuals (None without
         a Gauss-Markov component), see :meth:`drift_b_radps`.
+    gm_tau_profile : tuple of (float, float)
+        (tau [s], negative restricted log-likelihood plus the grade's prior) per candidate
+        correlation time when the drift was estimated with a :class:`DriftPrior` (else empty).
+    gm_source : str
+        With a :class:`DriftPrior`: "flight" (the estimate rejects the grade's drift) or
+        "grade" (it does not: the grade's sigma and tau are used); else "".
     """
 
     formulation: str
@@ -128,6 +182,8 @@ class Calibration:
     gyro_gm_sigma_radps: float = 0.0
     gyro_gm_tau_s: float = np.inf
     drift: DriftSmoother | None = None
+    gm_tau_profile: tuple[tuple[float, float], ...] = ()
+    gm_source: str = ""
 
     def drift_b_radps(self, t_s: NDArray) -> NDArray:
         """Smoothed Gauss-Markov drift (body FRD, rad/s) at run times ``t_s``, shape (N, 3).
@@ -494,16 +550,35 @@ def _blocks_reml_nll(params: NDArray, mats: list[tuple], hs: list[NDArray],
     logdet = 0.0
     hw_all, zw_all = [], []
     for m, h, z in zip(mats, hs, zs, strict=True):
-        c = sum(p * mk for p, mk in zip(params, m, strict=True))
-        try:
-            ll = np.linalg.cholesky(c)
-        except np.linalg.LinAlgError:
+        w = _chol_whiten(sum(p * mk for p, mk in zip(params, m, strict=True)), h, z)
+        if w is None:
             return 1e30
-        logdet += 2.0 * float(np.sum(np.log(np.diag(ll))))
-        hw_all.append(_tri_solve(ll, h))
-        zw_all.append(_tri_solve(ll, z))
+        hw_all.append(w[0])
+        zw_all.append(w[1])
+        logdet += w[2]
     hw, zw = np.vstack(hw_all), np.concatenate(zw_all)
     return _reml_whitened(hw, zw, logdet)
+
+
+def _chol_whiten(c: NDArray, h: NDArray, z: NDArray) -> tuple[NDArray, NDArray, float] | None:
+    """(L^-1 H, L^-1 z, log det C) with C = L L^T (Cholesky); None when C is not positive
+    definite."""
+    try:
+        ll = np.linalg.cholesky(c)
+    except np.linalg.LinAlgError:
+        return None
+    return _tri_solve(ll, h), _tri_solve(ll, z), 2.0 * float(np.sum(np.log(np.diag(ll))))
+
+
+def _grid_argmin(obj, bounds: list[tuple[float, float]], n: int) -> tuple[NDArray, NDArray]:
+    """The best point of an n-per-axis grid over ``bounds`` (the start of the REML searches).
+
+    Returns (best point, the grid's axes).
+    """
+    axes = [np.linspace(lo, hi, n) for lo, hi in bounds]
+    grid = np.stack([g.ravel() for g in np.meshgrid(*axes, indexing="ij")], axis=1)
+    vals = [obj(th) for th in grid]
+    return grid[int(np.argmin(vals))], axes
 
 
 def _reml_whitened(hw: NDArray, zw: NDArray, logdet: float) -> float:
@@ -512,10 +587,7 @@ def _reml_whitened(hw: NDArray, zw: NDArray, logdet: float) -> float:
     ``0.5 (log det C + log det H^T C^-1 H + r^T C^-1 r)`` (constants dropped), with the
     information's determinant from the column-scaled SVD (rank-deficient directions dropped).
     """
-    norms = np.linalg.norm(hw, axis=0)
-    norms[norms == 0] = 1.0
-    u, sv, _ = np.linalg.svd(hw / norms, full_matrices=False)
-    keep = sv > sv[0] * 1e-10
+    norms, u, sv, _, keep = _scaled_svd(hw)
     proj = u[:, keep].T @ zw
     rss = float(zw @ zw - proj @ proj)
     info = 2.0 * float(np.sum(np.log(sv[keep])) + np.sum(np.log(norms)))
@@ -596,10 +668,7 @@ def fit_noise_model(
         def nll(theta: NDArray) -> float:
             return _blocks_reml_nll(unpack(theta), mats, hs, zs)
 
-        axes = [np.linspace(a_, b_, 3) for a_, b_ in zip(lo, hi, strict=True)]
-        grid = np.stack([g.ravel() for g in np.meshgrid(*axes, indexing="ij")], axis=1)
-        vals = [nll(th) for th in grid]
-        th0 = grid[int(np.argmin(vals))]
+        th0, _ = _grid_argmin(nll, list(zip(lo, hi, strict=True)), 3)
         # Powell (bounded, derivative-free), then Nelder-Mead from its end: the likelihood is
         # flat along components that the data cannot see, and one search alone stalls there
         opt = optimize.minimize(nll, th0, method="Powell", bounds=list(zip(lo, hi, strict=True)),
@@ -639,12 +708,19 @@ def _lag1(series: list[NDArray]) -> float:
     return num / den if den > 0 else 0.0
 
 
-def _solve_scaled(hw: NDArray, zw: NDArray) -> tuple[NDArray, NDArray, bool]:
-    """Least squares of a whitened system with column scaling; (x, (H^T H)^-1, deficient)."""
+def _scaled_svd(hw: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
+    """Column norms of a whitened design and the SVD of it scaled to unit columns:
+    (norms, U, s, V^T, kept), singular values below 1e-10 of the largest not kept (the
+    one rank rule of the GLS and of REML's information determinant)."""
     norms = np.linalg.norm(hw, axis=0)
     norms[norms == 0] = 1.0
     u, sv, vt = np.linalg.svd(hw / norms, full_matrices=False)
-    keep = sv > sv[0] * 1e-10
+    return norms, u, sv, vt, sv > sv[0] * 1e-10
+
+
+def _solve_scaled(hw: NDArray, zw: NDArray) -> tuple[NDArray, NDArray, bool]:
+    """Least squares of a whitened system with column scaling; (x, (H^T H)^-1, deficient)."""
+    norms, u, sv, vt, keep = _scaled_svd(hw)
     xs = vt[keep].T @ ((u[:, keep].T @ zw) / sv[keep])
     cov_s = (vt[keep].T / sv[keep] ** 2) @ vt[keep]
     return xs / norms, cov_s / np.outer(norms, norms), bool(not keep.all())
@@ -799,13 +875,8 @@ def _full_reml_nll(theta: NDArray, parts: tuple, fixed: tuple[float | None, floa
     ones of (q, s2).
     """
     hs, zs, k, gm = parts
-    c = _full_cov(theta, k, gm, fixed)
-    try:
-        ll = np.linalg.cholesky(c)
-    except np.linalg.LinAlgError:
-        return 1e30
-    logdet = 2.0 * float(np.sum(np.log(np.diag(ll))))
-    return _reml_whitened(_tri_solve(ll, hs), _tri_solve(ll, zs), logdet)
+    w = _chol_whiten(_full_cov(theta, k, gm, fixed), hs, zs)
+    return 1e30 if w is None else _reml_whitened(*w)
 
 
 def _full_params(theta: NDArray, fixed: tuple[float | None, float | None]
@@ -877,6 +948,7 @@ def calibrate(
     gyro_gm_tau_s: float | None = None,
     gm_bin_s: float = 5.0,
     gm_ops: Mapping[int, tuple[NDArray, NDArray]] | None = None,
+    gm_prior: DriftPrior | None = None,
 ) -> Calibration:
     """Calibrate from the B-minus-A velocity errors of a set of legs (paper Eq. 17).
 
@@ -910,6 +982,11 @@ def calibrate(
         Width of the drift bins of :func:`gm_noise_operator` [s].
     gm_ops : Mapping of leg id to (S, tau_bin_s), optional
         Precomputed :func:`gm_noise_operator` per leg on its basis' samples.
+    gm_prior : DriftPrior, optional
+        The grade's drift as a weak prior: with the sigma estimated (None), the drift's sigma
+        and tau are both the flight's (maximum of the restricted likelihood plus the prior,
+        tau profiled over the prior's candidates; ``gyro_gm_tau_s`` defaults to the prior's
+        and is then only a candidate). Switches the Gauss-Markov model on by itself.
 
     Returns
     -------
@@ -927,7 +1004,9 @@ def calibrate(
     cond_raw, cond_scaled = condition_numbers(h / s[:, None])
     sizes = [2 * (r.t_s.size - 1) for r in legs]
     edges = np.concatenate([[0], np.cumsum(sizes)])
-    gm_sigma, drift = 0.0, None
+    gm_sigma, drift, tau_profile, gm_source = 0.0, None, (), ""
+    if gm_prior is not None and gyro_gm_tau_s is None:
+        gyro_gm_tau_s = gm_prior.tau_s
     if noise == "white":
         hw, zw = h / s[:, None], z / s
         x, cov_s, deficient = _solve_scaled(hw, zw)
@@ -941,9 +1020,10 @@ def calibrate(
         white = [res_w[edges[i]:edges[i + 1]] / np.sqrt(vf) for i in range(len(legs))]
     elif gyro_gm_tau_s is not None and (gyro_gm_sigma_radps is None
                                         or gyro_gm_sigma_radps > 0):
-        x, cov, deficient, vf, arw, gm_sigma, white, drift = _calibrate_gm(
+        (x, cov, deficient, vf, arw, gm_sigma, white, drift, tau_profile,
+         gm_source) = _calibrate_gm(
             legs, h, z, edges, noise_step_s, bases, gm_ops, gyro_arw_radpsqrts,
-            gyro_gm_sigma_radps, float(gyro_gm_tau_s), gm_bin_s)
+            gyro_gm_sigma_radps, float(gyro_gm_tau_s), gm_bin_s, gm_prior)
     else:
         blocks, rows_all = [], []
         for i, rep in enumerate(legs):
@@ -960,10 +1040,7 @@ def calibrate(
             bounds = [(np.log(1e-6), np.log(1e4))]
             q_fixed = float(gyro_arw_radpsqrts) ** 2
         # coarse grid (the likelihood is flat in q where a is large), then Nelder-Mead
-        axes = [np.linspace(lo, hi, 11) for lo, hi in bounds]
-        grid = np.stack([g.ravel() for g in np.meshgrid(*axes, indexing="ij")], axis=1)
-        nll = [_reml_nll(th, blocks, q_fixed) for th in grid]
-        theta0 = grid[int(np.argmin(nll))]
+        theta0, _ = _grid_argmin(lambda th: _reml_nll(th, blocks, q_fixed), bounds, 11)
         opt = optimize.minimize(_reml_nll, theta0, args=(blocks, q_fixed), method="Nelder-Mead",
                                 options={"xatol": 1e-3, "fatol": 1e-4, "maxiter": 400})
         th = np.clip(opt.x, [b[0] for b in bounds], [b[1] for b in bounds])
@@ -999,12 +1076,19 @@ def calibrate(
         gyro_gm_sigma_radps=gm_sigma,
         gyro_gm_tau_s=np.inf if drift is None else drift.tau_s,
         drift=drift,
+        gm_tau_profile=tau_profile,
+        gm_source=gm_source,
     )
 
 
 def _calibrate_gm(legs, h, z, edges, noise_step_s, bases, gm_ops, arw_given, sigma_given,
-                  tau_s, bin_s):
-    """GLS + REML with the Gauss-Markov drift (full covariance over all legs)."""
+                  tau_s, bin_s, prior=None):
+    """GLS + REML with the Gauss-Markov drift (full covariance over all legs).
+
+    With ``prior`` (:class:`DriftPrior`) and the sigma estimated, tau is profiled over the
+    prior's candidates and the grade's weak prior is added to the restricted likelihood
+    (maximum a posteriori); the returned profile holds (tau, penalised nll) per candidate.
+    """
     rows, sqs, kb, ops = [], [], [], []
     for i, rep in enumerate(legs):
         lid = rep.leg.leg_id
@@ -1022,32 +1106,30 @@ def _calibrate_gm(legs, h, z, edges, noise_step_s, bases, gm_ops, arw_given, sig
     sq = np.concatenate(sqs)
     hs, zs = h[r_all] / sq[:, None], z[r_all] / sq
     k = linalg.block_diag(*kb)
-    gm = _gm_covariance(ops, tau_s)
     q_fixed = None if arw_given is None else float(arw_given) ** 2
     s2_fixed = None if sigma_given is None else float(sigma_given) ** 2
     fixed = (q_fixed, s2_fixed)
-    bounds = [(np.log(1e-6), np.log(1e4))]
-    if q_fixed is None:
-        bounds.append((np.log(1e-22), np.log(1e-6)))
-    if s2_fixed is None:
-        bounds.append((np.log(1e-17), np.log(1e-8)))
-    parts = (hs, zs, k, gm)
-    # coarse grid (each evaluation is a Cholesky of the full covariance), then refine
-    axes = [np.linspace(lo, hi, 9 if len(bounds) == 1 else 6) for lo, hi in bounds]
-    grid = np.stack([g.ravel() for g in np.meshgrid(*axes, indexing="ij")], axis=1)
-    nll = [_full_reml_nll(th, parts, fixed) for th in grid]
-    best = grid[int(np.argmin(nll))]
-    if len(bounds) == 1:  # only A's scale: bounded Brent around the best grid point
-        step = axes[0][1] - axes[0][0]
-        opt = optimize.minimize_scalar(
-            lambda v: _full_reml_nll(np.array([v]), parts, fixed), method="bounded",
-            bounds=(best[0] - step, best[0] + step), options={"xatol": 1e-3})
-        th = np.clip(np.array([opt.x]), bounds[0][0], bounds[0][1])
-    else:
-        opt = optimize.minimize(_full_reml_nll, best, args=(parts, fixed),
-                                method="Nelder-Mead",
-                                options={"xatol": 1e-2, "fatol": 1e-3, "maxiter": 300})
-        th = np.clip(opt.x, [b[0] for b in bounds], [b[1] for b in bounds])
+    use_prior = prior is not None and s2_fixed is None
+    taus = prior.candidates_s() if use_prior else (float(tau_s),)
+    profile = []
+    for tau in taus:
+        parts = (hs, zs, k, _gm_covariance(ops, tau))
+        pen = ((lambda th, tau=tau: prior.penalty(_full_params(th, fixed)[2], tau))
+               if use_prior else None)
+        th, val = _fit_variances(parts, fixed, pen)
+        profile.append((float(tau), val, th, parts))
+    tau_best, _, th, parts = min(profile, key=lambda p: p[1])
+    source = ""
+    if use_prior:
+        source = "flight"
+        nll_best = _full_reml_nll(th, parts, fixed)
+        g_fixed = (q_fixed, float(prior.sigma_radps) ** 2)
+        g_parts = (hs, zs, k, _gm_covariance(ops, float(prior.tau_s)))
+        g_th, g_nll = _fit_variances(g_parts, g_fixed)
+        if g_nll - nll_best < GM_REJECT_DNLL:  # the flight does not reject the grade
+            source, tau_best, parts, fixed = "grade", float(prior.tau_s), g_parts, g_fixed
+            th = g_th
+    gm = parts[3]
     a, q, s2 = _full_params(th, fixed)
     ll = np.linalg.cholesky(_full_cov(th, k, gm, fixed))
     x, cov, deficient = _solve_scaled(_tri_solve(ll, hs), _tri_solve(ll, zs))
@@ -1057,8 +1139,41 @@ def _calibrate_gm(legs, h, z, edges, noise_step_s, bases, gm_ops, arw_given, sig
     white = np.split(wr, cuts)
     alpha = np.split(linalg.cho_solve((ll, True), r), cuts)
     u = np.vstack([(o[0].T @ al).reshape(-1, 3) for o, al in zip(ops, alpha, strict=True)])
-    drift = DriftSmoother(np.concatenate([o[1] for o in ops]), u, s2, tau_s)
-    return x, cov, deficient, a, float(np.sqrt(q)), float(np.sqrt(s2)), white, drift
+    drift = DriftSmoother(np.concatenate([o[1] for o in ops]), u, s2, tau_best)
+    tau_profile = tuple((t, v) for t, v, _, _ in profile) if use_prior else ()
+    return (x, cov, deficient, a, float(np.sqrt(q)), float(np.sqrt(s2)), white, drift,
+            tau_profile, source)
+
+
+def _fit_variances(parts: tuple, fixed: tuple[float | None, float | None], penalty=None
+                   ) -> tuple[NDArray, float]:
+    """REML (plus an optional penalty of theta) of a and the free ones of (q, s2).
+
+    A coarse grid (each evaluation is a Cholesky of the full covariance), then bounded Brent
+    (only a free) or Nelder-Mead. Returns (theta, objective at theta).
+    """
+    bounds = [(np.log(1e-6), np.log(1e4))]
+    if fixed[0] is None:
+        bounds.append((np.log(1e-22), np.log(1e-6)))
+    if fixed[1] is None:
+        bounds.append((np.log(1e-17), np.log(1e-8)))
+
+    def obj(th: NDArray) -> float:
+        v = _full_reml_nll(th, parts, fixed)
+        return v if penalty is None else v + penalty(th)
+
+    best, axes = _grid_argmin(obj, bounds, 9 if len(bounds) == 1 else 6)
+    if len(bounds) == 1:  # only A's scale: bounded Brent around the best grid point
+        step = axes[0][1] - axes[0][0]
+        opt = optimize.minimize_scalar(
+            lambda v: obj(np.array([v])), method="bounded",
+            bounds=(best[0] - step, best[0] + step), options={"xatol": 1e-3})
+        th = np.clip(np.array([opt.x]), bounds[0][0], bounds[0][1])
+    else:
+        opt = optimize.minimize(obj, best, method="Nelder-Mead",
+                                options={"xatol": 1e-2, "fatol": 1e-3, "maxiter": 300})
+        th = np.clip(opt.x, [b[0] for b in bounds], [b[1] for b in bounds])
+    return th, obj(th)
 
 
 def predict_velocity_error(rep: LegReplay, cal: Calibration, *, transition: str = "numerical"

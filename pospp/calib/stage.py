@@ -34,13 +34,25 @@ from pospp.calib.replay import (
     replay_leg,
 )
 from pospp.calib.segment import Leg, LegThresholds, find_legs
-from pospp.calib.solve import FORMULATIONS, Calibration, gm_noise_operator, noise_basis
+from pospp.calib.solve import (
+    FORMULATIONS,
+    Calibration,
+    DriftPrior,
+    gm_noise_operator,
+    noise_basis,
+)
 from pospp.nav.closed_form import PAPER_FROM_NED
 from pospp.units import ARCSEC_RAD, DEG_PER_H_RADPS
 from pospp.units import DEG_PER_SQRT_H_RAD_PER_SQRT_S as _DPSH_RADPSQRTS
 
 """One deg/sqrt(h) in rad/sqrt(s)."""
 COMPENSATIONS = ("constant", "per_leg", "causal")
+CAUSAL_PRIOR_SCALE = 3.0
+"""Default factor on the calibrated prior's sigma in the causal compensation (1: kept; > 1
+weakened; inf: dropped, A's forward estimate alone). Weakened three times: on held-out legs
+it ties with dropping the prior (within 5 %) and beats keeping it by 10-30 % at tau <= 300 s,
+while the calibration still steadies A's estimate where that is loose (docs/calibration.md
+section 9, issue 16 item 4)."""
 _REML_STEP_S = 20.0
 """Sample spacing of the one REML fit of the Gauss-Markov sigma [s] (the GLS uses 10 s)."""
 
@@ -81,6 +93,15 @@ class CalibrationRun:
     sigma_source : str
         Where the chosen calibration's covariance comes from: "least_squares" (the GLS's
         formal covariance) or "null_realisations" (:func:`with_null_covariance`).
+    drift_sigma_radps, drift_tau_s : float
+        The Gauss-Markov gyro drift of the noise model (steady-state sigma [rad/s] per body
+        axis, correlation time [s]); 0 and inf without the drift model. The null
+        realisations inject this drift (:func:`pospp.pipeline.null_realisations`).
+    drift_source : str
+        "flight" (sigma and tau by REML on this flight's joint fit, the grade a weak prior,
+        and the flight rejects the grade's drift), "grade" (estimated the same way, but the
+        flight does not reject the grade's, which is kept), "flight_sigma" (sigma by REML,
+        tau given), "given" (both given) or "none".
     """
 
     legs: tuple[Leg, ...]
@@ -97,6 +118,9 @@ class CalibrationRun:
     messages: tuple[str, ...]
     solve_kwargs: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
     sigma_source: str = "least_squares"
+    drift_sigma_radps: float = 0.0
+    drift_tau_s: float = float("inf")
+    drift_source: str = "none"
 
     @property
     def calibrated(self) -> bool:
@@ -135,6 +159,9 @@ class CalibrationRun:
             return out
         out["calibration_formulation"] = self.chosen.formulation
         out["calibration_sigma_source"] = self.sigma_source
+        out["gyro_drift_sigma_dph"] = self.drift_sigma_radps / DEG_PER_H_RADPS
+        out["gyro_drift_tau_s"] = self.drift_tau_s
+        out["gyro_drift_source"] = self.drift_source
         for i, ax in enumerate("xyz"):
             sig = float(self.gyro_bias_sigma_b_radps[i]) / DEG_PER_H_RADPS
             known = np.isfinite(sig)
@@ -180,6 +207,8 @@ def calibrate_flight(
     compensation: str = "constant",
     noise_step_s: float = 10.0,
     forward_biases: Any = None,
+    gyro_gm_prior_sigma_dph: float | None = None,
+    causal_prior_scale: float = CAUSAL_PRIOR_SCALE,
 ) -> CalibrationRun:
     """Run the double-strapdown calibration on one flight.
 
@@ -215,6 +244,14 @@ def calibrate_flight(
         the ``"gyro_rw"`` covariance, coupling the legs (:func:`pospp.calib.solve.calibrate`).
         Off when the tau is None (the previous model); the sigma is estimated by REML when
         None and the tau is given.
+    gyro_gm_prior_sigma_dph : float, optional
+        With the sigma estimated (None) and the tau given: the grade's drift sigma [deg/h];
+        then the drift's sigma **and** tau are the flight's (REML profiled over candidate
+        taus on the joint fit), the grade's sigma and tau a weak log-normal prior
+        (:class:`pospp.calib.solve.DriftPrior`, one decade 1-sigma).
+    causal_prior_scale : float
+        ``compensation="causal"``: the calibrated prior's sigma is multiplied by this (1: the
+        prior kept, > 1 weakened, ``inf``: dropped, A's forward estimate alone).
     compensation : {"constant", "per_leg"}
         Re-run B with the constant bias (default), or with the constant plus the smoothed
         Gauss-Markov drift's mean over each leg (needs the Gauss-Markov model). The constant
@@ -294,6 +331,12 @@ def calibrate_flight(
         if gm_on:
             cal_kw["gm_ops"] = {i: gm_noise_operator(r, cal_kw["bases"][i].samples)
                                 for i, r in replays.items()}
+    drift_source = "none"
+    if gm_on:
+        drift_source = "given" if cal_kw["gyro_gm_sigma_radps"] is not None else "flight_sigma"
+    prior = None
+    if gm_on and cal_kw["gyro_gm_sigma_radps"] is None and gyro_gm_prior_sigma_dph:
+        prior = DriftPrior(gyro_gm_prior_sigma_dph * DEG_PER_H_RADPS, float(gyro_gm_tau_s))
     if gm_on and cal_kw["gyro_gm_sigma_radps"] is None:
         # the drift's sigma by REML once, on the joint fit of the compensation formulation
         # over the legs of the usable pairs; the pairs and the other formulations reuse it
@@ -304,14 +347,26 @@ def calibrate_flight(
             replays, screened, policy.formulation, transition=policy.transition,
             **{**cal_kw, "bases": coarse, "noise_step_s": _REML_STEP_S,
                "gm_ops": {i: gm_noise_operator(r, coarse[i].samples)
-                          for i, r in replays.items()}})
+                          for i, r in replays.items()}, "gm_prior": prior})
         if first_fit is not None:
             cal_kw["gyro_gm_sigma_radps"] = first_fit.gyro_gm_sigma_radps
             if cal_kw["gyro_arw_radpsqrts"] is None:
                 cal_kw["gyro_arw_radpsqrts"] = first_fit.gyro_arw_radpsqrts
-            messages.append("Gauss-Markov gyro drift sigma by REML on the joint "
-                            f"{policy.formulation} fit: "
-                            f"{first_fit.gyro_gm_sigma_radps / DEG_PER_H_RADPS:.3f} deg/h")
+            if prior is not None:
+                cal_kw["gyro_gm_tau_s"] = first_fit.gyro_gm_tau_s
+                drift_source = first_fit.gm_source
+                messages.append(
+                    "Gauss-Markov gyro drift by REML on the joint "
+                    f"{policy.formulation} fit (grade {gyro_gm_prior_sigma_dph:g} deg/h, "
+                    f"{float(gyro_gm_tau_s):g} s as a weak prior): "
+                    f"{first_fit.gyro_gm_sigma_radps / DEG_PER_H_RADPS:.3f} deg/h, "
+                    f"{first_fit.gyro_gm_tau_s:.0f} s ("
+                    + ("the flight rejects the grade's drift" if drift_source == "flight"
+                       else "the flight does not reject the grade's drift: kept") + ")")
+            else:
+                messages.append("Gauss-Markov gyro drift sigma by REML on the joint "
+                                f"{policy.formulation} fit: "
+                                f"{first_fit.gyro_gm_sigma_radps / DEG_PER_H_RADPS:.3f} deg/h")
     pairs = evaluate_pairs(replays, legs, policy, formulations=forms, **cal_kw)
     if not any(p.used for p in pairs):
         why = "; ".join(f"pair {p.pair_id} (legs {p.leg_a}, {p.leg_b}): {p.reason}"
@@ -333,7 +388,9 @@ def calibrate_flight(
     if compensation == "causal":
         fb = forward_biases
         history = (np.asarray(fb.t_s, dtype=float), causal_gyro_bias_b_radps(
-            fb.gyro_b_radps, fb.gyro_sigma_b_radps, bg, prior_sigma_b_radps(sig, chosen)))
+            fb.gyro_b_radps, fb.gyro_sigma_b_radps, bg,
+            np.full(3, np.inf) if np.isinf(causal_prior_scale)
+            else causal_prior_scale * prior_sigma_b_radps(sig, chosen)))
     after, improvements = compensate_legs(
         imu, reference, replays, chosen, accel_compensation=rc.accel_compensation,
         horizon_s=rc.horizon_s, transition_step=int(rc.transition_step),
@@ -342,7 +399,10 @@ def calibrate_flight(
     mis = {i: chosen.misalignment_n_rad(i) for i in chosen.leg_ids}
     return CalibrationRun(legs, replays, pairs, joint, chosen, after, improvements, bg, sig, mis,
                           "ok", tuple(messages),
-                          solve_kwargs={**cal_kw, "transition": policy.transition})
+                          solve_kwargs={**cal_kw, "transition": policy.transition},
+                          drift_sigma_radps=float(chosen.gyro_gm_sigma_radps),
+                          drift_tau_s=float(chosen.gyro_gm_tau_s),
+                          drift_source=drift_source if gm_on else "none")
 
 
 def _gyro_bias_sigma_b_radps(chosen: Calibration, first: LegReplay) -> NDArray:

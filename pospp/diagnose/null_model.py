@@ -11,8 +11,10 @@ realisations of it made with pospp's own A (a parametric bootstrap by perturbati
    response to it is not linear (its gate and resets): the null statistics then collapse.
 2. Add to the base, from A's alignment point on (the alignment is a decision, not a
    response), white gyro and accelerometer noise at the density read from the samples
-   (:func:`imu_white_noise_from_samples`) or the grade's, the configured Gauss-Markov gyro
-   and accelerometer drift (:func:`gauss_markov_path`), and GNSS white noise at the level of
+   (:func:`imu_white_noise_from_samples`) or the grade's, the Gauss-Markov gyro drift the
+   calibration estimated on the flight (level and tau by REML, the grade a weak prior; the
+   configured one when it did not) and the configured accelerometer drift
+   (:func:`gauss_markov_path`), and GNSS white noise at the level of
    the flight's GNSS minus A (:func:`gnss_noise_from_residuals`).
 3. Run A on the perturbed log exactly as on the flight (same configuration) and replay B on the
    SAME legs (same start and end times). The realisation is the perturbed B minus A less the
@@ -31,10 +33,11 @@ uses (lack-of-fit F, each candidate's nested F) on the R realisations with the s
 predictive Student t of log F (:func:`calibrated_p_value`). The calibration re-runs its least
 squares on each (:func:`pospp.calib.stage.with_null_covariance`) for its covariance.
 
-Assumed: the injected levels are the flight's (the configured drift: a drift the data do not
-hold makes the null conservative, one they hold and the configuration lacks makes it cry
-wolf), and A is linear over the noise's size around the base. Checked against an oracle (the
-same flight simulated anew) and by the null Monte Carlo: docs/diagnose.md, "The null, third
+Assumed: the injected levels are the flight's (a drift the null carries and the data do not
+hold makes it conservative, one they hold and the null lacks makes it cry wolf; a drift slower
+than the flight is invisible to the estimate and absorbed by the fitted bias), and A is
+linear over the noise's size around the base. Checked against an oracle (the same flight
+simulated anew) and by the null Monte Carlo: docs/diagnose.md, "The null, third
 version".
 
 No I/O. SI units.

@@ -193,6 +193,16 @@ TABLES: dict[str, list[Column]] = {
                     "covariance)")),
         _opt(Column("calibration_formulation", _S, "", "formulation of the calibration applied "
                     "('body' or 'paper')")),
+        _opt(Column("gyro_drift_sigma_dph", _F, "deg/h", "Gauss-Markov gyro drift of the "
+                    "calibration's noise model (the null realisations inject it when its "
+                    "source is 'flight' or 'grade'): steady-state sigma per body axis (0: no "
+                    "drift model)", "b (FRD)")),
+        _opt(Column("gyro_drift_tau_s", _F, "s", "its correlation time (inf: no drift model)")),
+        _opt(Column("gyro_drift_source", _S, "", "where the drift comes from: 'flight' (sigma "
+                    "and tau by REML on this flight's legs, the [imu] grade's a weak prior; "
+                    "the flight rejects the grade's drift at 5 %), 'grade' (it does not: the "
+                    "grade's kept), 'flight_sigma' (sigma by REML, tau given), 'given' or "
+                    "'none'")),
         *[_opt(Column(f"gyro_bias_{ax}{kind}_dph", _F, "deg/h", f"calibrated gyro bias, body "
                       f"{ax} (FRD){' 1-sigma' if kind else ''}; NaN: not estimated", "b (FRD)"))
           for ax in "xyz" for kind in ("", "_sigma")],

@@ -74,11 +74,11 @@ def run_hashes(run_dir: Path) -> dict[str, str]:
 
 
 EXPECTED: dict[str, str] = {
-    "trajectory": "77d577507275546d", "biases": "e58443785ee33d51", "legs": "b1a3f06a074d2366",
-    "pairs": "3834678c775431a7", "calibration": "ea3118e19c1a120e",
-    "leg_errors": "33fd0c4842f86a50", "qc": "ad7307d0d5fb7054", "diagnosis": "ed2d5e16e18728ce",
-    "diagnosis_curves": "b219d94fd5ea4c06", "messages": "e27b96c54ee94797",
-    "summary": "389143dd9eb7efca",
+    "trajectory": "bd36104a84b3b48a", "biases": "e58443785ee33d51", "legs": "b1a3f06a074d2366",
+    "pairs": "3834678c775431a7", "calibration": "133a3b8443c777c4",
+    "leg_errors": "8fe8e16caf288234", "qc": "004a0e46fdcee046", "diagnosis": "ed2d5e16e18728ce",
+    "diagnosis_curves": "b219d94fd5ea4c06", "messages": "e5cf95ab388afc70",
+    "summary": "1e0b298cad3ba85c",
 }
 
 

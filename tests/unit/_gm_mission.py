@@ -176,9 +176,11 @@ def run_once(kind: str, seed: int, folder: Path, *, estimate_gm_sigma: bool = Fa
                  np.array(leg_drift), np.array(leg_const))
 
 
-MODES = ("constant", "per_leg", "oracle", "causal", "forward")
-"""Compensation modes of :func:`run_modes` (see pospp.calib.compensate); "forward" is the
-causal mode without the calibrated prior (A's forward estimate alone)."""
+MODES = ("constant", "per_leg", "oracle", "causal", "weakened", "forward")
+"""Compensation modes of :func:`run_modes` (see pospp.calib.compensate); "weakened" is the
+causal mode with the calibrated prior's sigma times :data:`WEAKENED_PRIOR_FACTOR`, "forward"
+the causal mode without the calibrated prior (A's forward estimate alone)."""
+WEAKENED_PRIOR_FACTOR = 3.0
 
 
 def run_modes(kind: str, seed: int, folder: Path, *, gm_tau_s: float | None = None,
@@ -246,6 +248,10 @@ def run_modes(kind: str, seed: int, folder: Path, *, gm_tau_s: float | None = No
             fused = causal_gyro_bias_b_radps(fwd.gyro_b_radps, fwd.gyro_sigma_b_radps, b0,
                                              prior_sigma_b_radps(s0, c))
             opts["causal"] = {"gyro_bias_history": (fwd.t_s, fused)}
+            weak = causal_gyro_bias_b_radps(
+                fwd.gyro_b_radps, fwd.gyro_sigma_b_radps, b0,
+                WEAKENED_PRIOR_FACTOR * prior_sigma_b_radps(s0, c))
+            opts["weakened"] = {"gyro_bias_history": (fwd.t_s, weak)}
             opts["forward"] = {"gyro_bias_history": (fwd.t_s, fwd.gyro_b_radps)}
         for mode, o in opts.items():
             _, imp = compensate_legs(imu, a, reps, c, **kw, **o)
