@@ -404,6 +404,7 @@ def sim_comparison_section(sc: pd.DataFrame | None) -> list[str]:
     fig.tight_layout()
     eff = sc[sc.kind == "effect"][["step", "measure", "effect", "parameter", "value", "sigma",
                                    "unit", "gap_before", "gap_after", "z_before", "z_after"]]
+    eff = eff.assign(unit=eff["unit"].map(unit_text))
     cols = ["measure", "measured", "simulated_before", "gap_before", "sigma_gap", "z_before",
             "p_before", "significant_before"]
     return ["<h2>Measured flight versus its simulation (compare-sim)</h2>",

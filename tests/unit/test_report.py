@@ -217,3 +217,18 @@ def test_sensor_errors_read_the_biases_table(no_png) -> None:
     tables = synthetic_tables()
     page = render_report({**tables, "biases": b})
     assert "is not in this run" not in page and "is not in this run" in render_report(tables)
+
+
+def test_sim_comparison_steps_print_units_as_a_reader_writes_them() -> None:
+    """compare-sim's effect rows carry table units ("deg_per_h"); the report prints "deg/h"."""
+    stat = {"kind": "statistic", "effect": "", "parameter": "", "value": np.nan,
+            "sigma": np.nan, "unit": "", "measured": 1.0, "simulated_before": 0.5,
+            "gap_before": 0.5, "gap_after": 0.0, "sigma_gap": 0.1, "z_before": 5.0,
+            "z_after": 0.0, "p_before": 1e-6, "significant_before": True}
+    rows = [dict(stat, step=0, measure="a_gyro_bias_wander"),
+            dict(stat, step=1, measure="a_gyro_bias_wander"),
+            dict(stat, kind="effect", step=1, measure="a_gyro_bias_wander",
+                 effect="bias_instability", parameter="gyro_gm_sigma", value=100.0,
+                 sigma=8.0, unit="deg_per_h")]
+    text = "".join(html.sim_comparison_section(pd.DataFrame(rows)))
+    assert "deg/h" in text and "deg_per_h" not in text
