@@ -166,7 +166,8 @@ def _prepare_batch(buf: np.ndarray, pos: np.ndarray, state: np.ndarray, log_out:
 @njit(cache=True, nogil=True)
 def _decode_fixed(buf: np.ndarray, pos: np.ndarray, state: np.ndarray, frame_len: int,
                   itemsize: int, fast: bool, f_off: np.ndarray, outs: tuple,
-                  time_out: np.ndarray, row0: int, ref: int) -> int:  # pragma: no cover
+                  time_out: np.ndarray, row0: int,
+                  ref_frame: np.ndarray) -> tuple:  # pragma: no cover - compiled
     """Decode, in one pass, the pending (``state`` 0) messages whose frame_id length is
     ``frame_len``: each field ``j`` (``f_off[j]`` bytes into the payload, ``outs[j].shape[1]``
     bytes wide, little-endian) is copied into row ``row0 + i`` of ``outs[j]`` (uint8 views of
@@ -174,10 +175,11 @@ def _decode_fixed(buf: np.ndarray, pos: np.ndarray, state: np.ndarray, frame_len
     their ``state`` becomes 3. With ``fast`` False, or a payload length other than
     ``itemsize`` (the fixed layout's), ``state`` becomes 2 instead (the generic decoder).
 
-    Returns how many decoded messages have a frame_id other than that of the message at
-    record offset ``ref``.
+    Returns (how many decoded messages have a frame_id other than ``ref_frame``, how many
+    were decoded).
     """
     n_other = 0
+    n_done = 0
     for i in range(pos.shape[0]):
         if state[i] != 0:
             continue
@@ -209,11 +211,12 @@ def _decode_fixed(buf: np.ndarray, pos: np.ndarray, state: np.ndarray, frame_len
             sec -= 2**32
         time_out[row] = sec * 1_000_000_000 + nsec
         for k in range(frame_len):
-            if buf[s + 16 + k] != buf[ref + 31 + 16 + k]:
+            if buf[s + 16 + k] != ref_frame[k]:
                 n_other += 1
                 break
         state[i] = 3
-    return n_other
+        n_done += 1
+    return n_other, n_done
 
 
 class Collector:
@@ -237,6 +240,7 @@ class Collector:
         self._hint = 0
         self._out: dict[str, np.ndarray] = {}
         self._views: tuple[np.ndarray, ...] = ()
+        self._fast: dict[int, tuple] = {}  # channel -> checked (frame_len, size, offsets, frame)
 
     def reserve(self, n: int) -> None:
         """Expect ``n`` more messages (a channel's Statistics count): one allocation."""
@@ -313,12 +317,17 @@ class Collector:
         if _prepare_batch(buf, pos, state, out["log_time_ns"], row0) >= 0:
             raise IndexError("a Message record too short for its log time ends the chunk")
         starts = pos + 31
+        known = self._fast.get(channel_id)
+        if known is not None:  # the layout of this channel's last batch, checked then
+            if self._decode_known(buf, starts, pos, state, row0, *known) == n and _LITTLE_ENDIAN:
+                self.count += n
+                return
         pending = np.flatnonzero(state == 0)
         while pending.size:
             self._decode_pass(channel_id, buf, pos, starts, state, int(pending[0]), row0)
             pending = np.flatnonzero(state == 0)
         if not _LITTLE_ENDIAN:  # the fast path copied little-endian bytes
-            done = row0 + np.flatnonzero(state == 1)
+            done = row0 + np.flatnonzero((state == 1) | (state == 3))
             for name in self.spec.wanted:
                 out[name][done] = out[name][done].byteswap()
         for i in np.flatnonzero(state == 2):
@@ -350,20 +359,34 @@ class Collector:
                 hit = same[plen == dt.itemsize]
                 j = int(hit[0]) if hit.size else -1
         fast = j >= 0 and self._layout_ok(channel_id, buf, starts, j, dt)
-        off = np.array([dt.fields[f][1] for f in self.spec.wanted] if fast
-                       else [0] * len(self.spec.wanted), np.int64)
-        n_other = _decode_fixed(buf, pos, state, fl, dt.itemsize if fast else 0, fast, off,
-                                self._views, self._out["time_ns"], row0,
-                                int(pos[j]) if fast else 0)
-        if not fast:
+        if not fast:  # the generic decoder for all pending messages of this frame_id length
+            _decode_fixed(buf, pos, state, fl, 0, False, np.zeros(len(self.spec.wanted),
+                          np.int64), self._views, self._out["time_ns"], row0,
+                          np.zeros(0, np.uint8))
             return
+        off = np.array([dt.fields[f][1] for f in self.spec.wanted], np.int64)
+        known = (fl, dt.itemsize, off, buf[int(starts[j]) + 16 : int(starts[j]) + 16 + fl].copy())
+        self._fast[channel_id] = known
+        self._decode_known(buf, starts, pos, state, row0, *known)
+
+    def _decode_known(self, buf: np.ndarray, starts: np.ndarray, pos: np.ndarray,
+                      state: np.ndarray, row0: int, fl: int, itemsize: int, off: np.ndarray,
+                      ref_frame: np.ndarray) -> int:
+        """:func:`_decode_fixed` with a checked layout; frame_ids noted. Returns the number
+        of messages decoded."""
+        n_other, n_done = _decode_fixed(buf, pos, state, fl, itemsize, True, off, self._views,
+                                        self._out["time_ns"], row0, ref_frame)
+        if n_done == len(pos) and not n_other:
+            self._note_frame(ref_frame, 0, fl)
+            return n_done
         mine = np.flatnonzero(state == 3)
         state[mine] = 1
         if n_other:  # several frame_ids: each noted, in sorted order
             for row in np.unique(_gather(buf, starts[mine], 16, fl), axis=0):
                 self._note_frame(row, 0, fl)
-        else:
-            self._note_frame(buf, int(starts[j]) + 16, fl)
+        elif n_done:
+            self._note_frame(ref_frame, 0, fl)
+        return n_done
 
     def _note_frame(self, buf: np.ndarray, start: int, length: int) -> None:
         fid = buf[start : start + length].tobytes().rstrip(b"\x00").decode("utf-8", "replace")

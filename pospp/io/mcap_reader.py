@@ -122,9 +122,9 @@ class FlightLog:
 
 
 def _window(a: dict[str, np.ndarray], start_ns: int | None, end_ns: int | None) -> dict:
-    """Keep samples with ``start_ns <= time_ns < end_ns``; add ``index`` (file order)."""
-    a = dict(a)
-    a["index"] = np.arange(len(a["time_ns"]))
+    """Keep samples with ``start_ns <= time_ns < end_ns``; add ``index`` (file order: None
+    while it is the identity, so that a whole log needs no index array)."""
+    a = {**a, "index": None}
     keep = np.ones(len(a["time_ns"]), bool)
     if start_ns is not None:
         keep &= a["time_ns"] >= start_ns
@@ -132,7 +132,20 @@ def _window(a: dict[str, np.ndarray], start_ns: int | None, end_ns: int | None) 
         keep &= a["time_ns"] < end_ns
     if keep.all():
         return a
-    return {k: v[keep] for k, v in a.items()}
+    return _subset(a, keep)
+
+
+def _subset(a: dict, keep: np.ndarray) -> dict:
+    """The samples where ``keep`` (bool) holds, ``index`` kept pointing at file order."""
+    idx = a["index"]
+    out = {k: v[keep] for k, v in a.items() if k != "index"}
+    out["index"] = np.flatnonzero(keep) if idx is None else idx[keep]
+    return out
+
+
+def _index(a: dict, i: int) -> int:
+    """File-order index of sample ``i`` of ``a``."""
+    return int(i) if a["index"] is None else int(a["index"][i])
 
 
 def _absolute_window(
@@ -163,13 +176,13 @@ def _check_order(a: dict, topic: str, path: str, *, drop_duplicates: bool,
     if drop_duplicates and np.any(d == 0):
         dup = np.flatnonzero(d == 0) + 1
         issues.append(IngestIssue(
-            "warning", path, topic, int(a["index"][dup[0]]), int(t[dup[0]]),
+            "warning", path, topic, _index(a, dup[0]), int(t[dup[0]]),
             f"{dup.size} message(s) with a duplicate header stamp dropped (kept the first of "
             "each stamp)", log_time_ns=int(a["log_time_ns"][dup[0]]),
         ))
         keep = np.ones(len(t), bool)
         keep[dup] = False
-        a = {k: v[keep] for k, v in a.items()}
+        a = _subset(a, keep)
         t = a["time_ns"]
         d = np.diff(t)
     bad = np.flatnonzero(d <= 0)
@@ -179,7 +192,7 @@ def _check_order(a: dict, topic: str, path: str, *, drop_duplicates: bool,
         raise IngestError(
             f"header stamp {what} the previous message's ({int(t[i - 1])} ns); stamps must "
             f"increase strictly ({bad.size} such message(s) in total)",
-            file=path, topic=topic, index=int(a["index"][i]), time_ns=int(t[i]),
+            file=path, topic=topic, index=_index(a, i), time_ns=int(t[i]),
             log_time_ns=int(a["log_time_ns"][i]),
         )
     return a
@@ -196,7 +209,7 @@ def _check_finite(a: dict, names: tuple[str, ...], topic: str, path: str) -> Non
         raise IngestError(
             f"non-finite value (NaN or inf) in {', '.join(fields)} = "
             f"{[a[n][i].tolist() for n in fields]} ({int(bad.sum())} bad message(s) in total)",
-            file=path, topic=topic, index=int(a["index"][i]), time_ns=int(a["time_ns"][i]),
+            file=path, topic=topic, index=_index(a, i), time_ns=int(a["time_ns"][i]),
             log_time_ns=int(a["log_time_ns"][i]),
         )
 
@@ -212,7 +225,7 @@ def _imu_timing_issues(a: dict, topic: str, path: str) -> list[IngestIssue]:
     gaps = np.flatnonzero(d > _GAP_FACTOR * nominal)
     for g in gaps[:_MAX_LISTED]:
         out.append(IngestIssue(
-            "warning", path, topic, int(a["index"][g + 1]), int(t[g + 1]),
+            "warning", path, topic, _index(a, g + 1), int(t[g + 1]),
             f"IMU gap of {d[g] * 1e-9:.6f} s ({d[g] / nominal:.1f} nominal intervals of "
             f"{nominal * 1e-6:.3f} ms) after stamp {int(t[g])} ns",
             log_time_ns=int(a["log_time_ns"][g + 1]),
@@ -239,7 +252,7 @@ def _imu_timing_issues(a: dict, topic: str, path: str) -> list[IngestIssue]:
             k = lo + int(np.argmax(np.abs(seg - med[b]) < np.abs(seg - nominal)))
             j = k + 1  # the sample that ends the first changed interval
             out.append(IngestIssue(
-                "warning", path, topic, int(a["index"][j]), int(t[j]),
+                "warning", path, topic, _index(a, j), int(t[j]),
                 f"IMU sampling interval changes to {med[b] * 1e-6:.3f} ms (nominal "
                 f"{nominal * 1e-6:.3f} ms, {1e9 / nominal:.2f} Hz)",
                 log_time_ns=int(a["log_time_ns"][j]),
@@ -294,7 +307,11 @@ def _check_rate_units_against_gnss(imu: ImuSamples, vel: GnssVelocities, topic: 
         return
     t = imu.time_ns
     dt = np.diff(t, prepend=t[0] - (t[1] - t[0])) * S_PER_NS
-    cum = np.vstack([np.zeros((1, 3)), np.cumsum(imu.w_ib_b_radps * dt[:, None], axis=0)])
+    cum = np.empty((len(t) + 1, 3))  # cum[i]: the sum of the first i rows of w dt
+    cum[0] = 0.0
+    np.multiply(imu.w_ib_b_radps, dt[:, None], out=cum[1:])
+    np.cumsum(cum[1:], axis=0, out=cum[1:])
+    del dt
     tv = vel.time_ns
     speed = np.hypot(vel.v_n_mps[:, 0], vel.v_n_mps[:, 1])
     course = np.arctan2(vel.v_n_mps[:, 1], vel.v_n_mps[:, 0])
@@ -333,10 +350,11 @@ def _assemble_imu(a: dict, col: Collector, c_bs: np.ndarray, check_units: bool,
     if len(col.frame_ids) > 1:
         issues.append(IngestIssue("warning", path, topic, None, None,
                                   f"several IMU frame_ids: {col.frame_ids}"))
+    w, f = a["angular_velocity"], a["linear_acceleration"]  # the reader's own arrays
     return ImuSamples(
         time_ns=a["time_ns"],
-        w_ib_b_radps=apply_rotation(c_bs, a["angular_velocity"]),
-        f_ib_b_mps2=apply_rotation(c_bs, a["linear_acceleration"]),
+        w_ib_b_radps=apply_rotation(c_bs, w, out=w),  # in place: no second copy of the log
+        f_ib_b_mps2=apply_rotation(c_bs, f, out=f),
         frame_id=col.frame_ids[0] if col.frame_ids else "",
     )
 
@@ -347,11 +365,11 @@ def _assemble_fix(a: dict, col: Collector, issues: list[IngestIssue]) -> GnssFix
     if nofix.any():
         i = int(np.argmax(nofix))
         issues.append(IngestIssue(
-            "warning", path, topic, int(a["index"][i]), int(a["time_ns"][i]),
+            "warning", path, topic, _index(a, i), int(a["time_ns"][i]),
             f"{int(nofix.sum())} fix(es) with status NO_FIX dropped",
             log_time_ns=int(a["log_time_ns"][i]),
         ))
-        a = {k: v[~nofix] for k, v in a.items()}
+        a = _subset(a, ~nofix)
     if len(a["time_ns"]) == 0:
         raise IngestError("no usable GNSS fixes (in the time window)", file=path, topic=topic)
     a = _check_order(a, topic, path, drop_duplicates=True, issues=issues)
@@ -362,13 +380,13 @@ def _assemble_fix(a: dict, col: Collector, issues: list[IngestIssue]) -> GnssFix
         raise IngestError(
             f"latitude/longitude out of range: {a['latitude'][i]}, {a['longitude'][i]} "
             "(expected degrees, |lat| <= 90, |lon| <= 180)", file=path, topic=topic,
-            index=int(a["index"][i]), time_ns=int(a["time_ns"][i]),
+            index=_index(a, i), time_ns=int(a["time_ns"][i]),
         )
     unknown = a["position_covariance_type"] == 0
     if unknown.any():
         i = int(np.argmax(unknown))
         issues.append(IngestIssue(
-            "warning", path, topic, int(a["index"][i]), int(a["time_ns"][i]),
+            "warning", path, topic, _index(a, i), int(a["time_ns"][i]),
             f"{int(unknown.sum())} fix(es) with position_covariance_type UNKNOWN",
         ))
     cov_enu = a["position_covariance"].reshape(-1, 3, 3)
