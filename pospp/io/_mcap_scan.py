@@ -449,6 +449,40 @@ _READ_PIECE = 1 << 20  # bytes read at a time when a byte range is only checksum
 
 
 @njit(cache=True, nogil=True)
+def _walk_pass(buf: np.ndarray, msg_pos: np.ndarray, msg_ch: np.ndarray, meta_pos: np.ndarray,
+               fill: bool) -> tuple:  # pragma: no cover - compiled
+    """One walk of :func:`_walk_records`: counts only, or (``fill``) offsets written too."""
+    n = buf.shape[0]
+    n_msg = 0
+    n_meta = 0
+    pos = 0
+    while pos < n:
+        if pos + 9 > n:
+            return n_msg, n_meta, pos, 1
+        ln = np.uint64(0)
+        for k in range(8):
+            ln |= np.uint64(buf[pos + 1 + k]) << np.uint64(8 * k)
+        if ln > np.uint64(n - pos - 9):
+            return n_msg, n_meta, pos, 1
+        op = buf[pos]
+        if op == 0x05:
+            if pos + 11 > n:
+                return n_msg, n_meta, pos, 1
+            if fill:
+                msg_pos[n_msg] = pos
+                msg_ch[n_msg] = np.int64(buf[pos + 9]) | (np.int64(buf[pos + 10]) << 8)
+            n_msg += 1
+        elif op == 0x03 or op == 0x04:
+            if fill:
+                meta_pos[n_meta] = pos
+            n_meta += 1
+        elif op == 0:
+            return n_msg, n_meta, pos, 2
+        pos += 9 + np.int64(ln)
+    return n_msg, n_meta, pos, 0
+
+
+@njit(cache=True, nogil=True)
 def _walk_records(buf: np.ndarray) -> tuple:  # pragma: no cover - compiled
     """Frame the records of ``buf`` (uint8): ``opcode u8, length u64, body`` each.
 
@@ -456,37 +490,16 @@ def _walk_records(buf: np.ndarray) -> tuple:  # pragma: no cover - compiled
     their offsets, offset reached, status): status 0 when the walk ended exactly at the end,
     1 when a record overruns the buffer (or a Message is too short for its channel id) at
     the offset reached, 2 at a record with the reserved opcode 0 (zeros: a bomb's output
-    or a hole are not walked).
+    or a hole are not walked). Two passes: the first counts, so that the offset arrays are
+    allocated to size (not one slot per 9 bytes of the chunk).
     """
-    n = buf.shape[0]
-    msg_pos = np.empty(n // 9 + 1, np.int64)  # every record is at least 9 bytes
-    msg_ch = np.empty(n // 9 + 1, np.int64)
-    meta_pos = np.empty(n // 9 + 1, np.int64)
-    n_msg = 0
-    n_meta = 0
-    pos = 0
-    while pos < n:
-        if pos + 9 > n:
-            return n_msg, msg_pos, msg_ch, n_meta, meta_pos, pos, 1
-        ln = np.uint64(0)
-        for k in range(8):
-            ln |= np.uint64(buf[pos + 1 + k]) << np.uint64(8 * k)
-        if ln > np.uint64(n - pos - 9):
-            return n_msg, msg_pos, msg_ch, n_meta, meta_pos, pos, 1
-        op = buf[pos]
-        if op == 0x05:
-            if pos + 11 > n:
-                return n_msg, msg_pos, msg_ch, n_meta, meta_pos, pos, 1
-            msg_pos[n_msg] = pos
-            msg_ch[n_msg] = np.int64(buf[pos + 9]) | (np.int64(buf[pos + 10]) << 8)
-            n_msg += 1
-        elif op == 0x03 or op == 0x04:
-            meta_pos[n_meta] = pos
-            n_meta += 1
-        elif op == 0:
-            return n_msg, msg_pos, msg_ch, n_meta, meta_pos, pos, 2
-        pos += 9 + np.int64(ln)
-    return n_msg, msg_pos, msg_ch, n_meta, meta_pos, pos, 0
+    none = np.empty(0, np.int64)
+    n_msg, n_meta, _, _ = _walk_pass(buf, none, none, none, False)
+    msg_pos = np.empty(n_msg, np.int64)
+    msg_ch = np.empty(n_msg, np.int64)
+    meta_pos = np.empty(n_meta, np.int64)
+    n_msg, n_meta, pos, status = _walk_pass(buf, msg_pos, msg_ch, meta_pos, True)
+    return n_msg, msg_pos, msg_ch, n_meta, meta_pos, pos, status
 
 
 class _Truncated(Exception):
@@ -500,7 +513,7 @@ class _RawChunk:
     uncompressed_size: int
     crc: int
     compression: str
-    data: bytes
+    data: bytes | memoryview
     truncated: bool
 
 
@@ -525,7 +538,7 @@ def _parse_chunk(body: bytes, truncated: bool) -> _RawChunk:
     (dlen,) = struct.unpack_from("<Q", body, p) if len(body) >= p + 8 else (None,)
     if dlen is None:
         raise _Truncated("chunk header cut off")
-    data = body[p + 8 : p + 8 + dlen]
+    data = memoryview(body)[p + 8 : p + 8 + dlen]  # not a copy of the compressed records
     return _RawChunk(start, end, usize, crc, comp, data, truncated or len(data) < dlen)
 
 
@@ -576,7 +589,7 @@ def _count_hints(f: Any, size: int) -> dict[int, int]:
         f.seek(len(_MAGIC))
 
 
-def _lz4_bounded(data: bytes, limit: int) -> bytes | bytearray:
+def _lz4_bounded(data: bytes | memoryview, limit: int) -> bytes | bytearray:
     """Decompress an lz4 frame, producing at most ``limit + 1`` bytes (one more than allowed,
     so that the caller sees an overrun); the readable part of a cut-off frame is returned."""
     import lz4.frame
@@ -591,7 +604,8 @@ def _lz4_bounded(data: bytes, limit: int) -> bytes | bytearray:
     return out
 
 
-def _decompress(chunk: _RawChunk, max_bytes: int = MAX_CHUNK_BYTES) -> bytes | bytearray:
+def _decompress(chunk: _RawChunk,
+                max_bytes: int = MAX_CHUNK_BYTES) -> bytes | bytearray | memoryview:
     """Chunk records; for a truncated chunk, as many bytes as can be decompressed.
 
     Memory is bounded: a header claiming more than ``max_bytes`` is rejected before anything
@@ -720,7 +734,7 @@ class Scan:
             col.reserve(self._hints.get(rec.id, 0))
         self.route[rec.id] = col
 
-    def _meta(self, op: int, body: bytes) -> None:
+    def _meta(self, op: int, body: bytes | memoryview) -> None:
         stream = ReadDataStream(BytesIO(body))
         try:
             rec = Schema.read(stream) if op == _OP_SCHEMA else Channel.read(stream)
@@ -733,7 +747,7 @@ class Scan:
         else:
             self._channel(rec)
 
-    def _records(self, buf: bytes | bytearray, *, partial: bool = False) -> int:
+    def _records(self, buf: bytes | bytearray | memoryview, *, partial: bool = False) -> int:
         """Walk the records of a decompressed chunk (or a block of loose messages).
 
         The framing is one compiled pass (:func:`_walk_records`); Schema and Channel records

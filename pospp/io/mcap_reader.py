@@ -220,8 +220,8 @@ def _imu_timing_issues(a: dict, topic: str, path: str) -> list[IngestIssue]:
     out: list[IngestIssue] = []
     if len(t) < 3:
         return out
+    nominal = float(np.median(np.diff(t), overwrite_input=True))  # one (N,) temporary at a time
     d = np.diff(t)
-    nominal = float(np.median(d))
     gaps = np.flatnonzero(d > _GAP_FACTOR * nominal)
     for g in gaps[:_MAX_LISTED]:
         out.append(IngestIssue(
@@ -263,9 +263,7 @@ def _imu_timing_issues(a: dict, topic: str, path: str) -> list[IngestIssue]:
 def _check_imu_units(w: np.ndarray, f: np.ndarray, topic: str, path: str) -> None:
     """Reject specific force in g, and rates that look like deg/s."""
     with np.errstate(over="ignore"):  # finite but absurd values: inf, rejected below
-        fmag = np.linalg.norm(f, axis=1)
-        wmag = np.linalg.norm(w, axis=1)
-    fmed = float(np.median(fmag))
+        fmed = float(np.median(_row_norms(f)))
     if 0.5 < fmed < 1.5:
         raise IngestError(
             f"median |linear_acceleration| = {fmed:.4f}: looks like g, not m/s^2 "
@@ -277,6 +275,8 @@ def _check_imu_units(w: np.ndarray, f: np.ndarray, topic: str, path: str) -> Non
             "m/s^2 (specific force of a vehicle near the Earth's surface)",
             file=path, topic=topic,
         )
+    with np.errstate(over="ignore"):
+        wmag = _row_norms(w)
     wmed, wmax = float(np.median(wmag)), float(wmag.max())
     if wmed > 1.0 or wmax > 40.0:
         i = int(np.argmax(wmag))
@@ -285,6 +285,42 @@ def _check_imu_units(w: np.ndarray, f: np.ndarray, topic: str, path: str) -> Non
             "deg/s, not rad/s (expected median < 1 rad/s and max < 40 rad/s)",
             file=path, topic=topic, index=i,
         )
+
+
+_BLOCK_ROWS = 65536  # rows of the IMU log handled at a time by the checks' temporaries
+
+
+def _row_norms(v: np.ndarray) -> np.ndarray:
+    """``np.linalg.norm(v, axis=1)`` (same sums, same bits), its temporaries a block long."""
+    out = np.empty(len(v))
+    for b in range(0, len(v), _BLOCK_ROWS):
+        blk = v[b : b + _BLOCK_ROWS]
+        np.sqrt(np.add.reduce(blk * blk, axis=1), out=out[b : b + _BLOCK_ROWS])
+    return out
+
+
+def _rotation_sums(w: np.ndarray, t_ns: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """``S[j] = sum_{i < j} w_i dt_i`` [rad] (rows of (N, 3) ``w`` [rad/s]) at the indices
+    ``at`` (0..N), ``dt_i = t_i - t_{i-1}`` [s] (``dt_0 = t_1 - t_0``).
+
+    The running sum is the sequential ``np.cumsum`` order, carried block to block, so the
+    values are those of one cumulative sum over the whole log without its (N, 3) array.
+    """
+    out = np.zeros((len(at), 3))
+    carry = np.zeros(3)
+    n = len(t_ns)
+    for b in range(0, n, _BLOCK_ROWS):
+        e = min(b + _BLOCK_ROWS, n)
+        prev = t_ns[b - 1] if b else t_ns[0] - (t_ns[1] - t_ns[0])
+        dt = np.diff(t_ns[b:e], prepend=prev) * S_PER_NS
+        blk = np.empty((e - b + 1, 3))
+        blk[0] = carry
+        np.multiply(w[b:e], dt[:, None], out=blk[1:])
+        np.cumsum(blk, axis=0, out=blk)  # blk[r] = S[b + r]
+        sel = (at > b) & (at <= e)
+        out[sel] = blk[at[sel] - b]
+        carry = blk[-1].copy()
+    return out
 
 
 _TURN_RATE_MIN_RADPS = np.deg2rad(1.0)  # GNSS intervals turning faster than this are compared
@@ -306,12 +342,6 @@ def _check_rate_units_against_gnss(imu: ImuSamples, vel: GnssVelocities, topic: 
     if len(vel) < _MIN_TURN_INTERVALS + 1 or len(imu) < 3:
         return
     t = imu.time_ns
-    dt = np.diff(t, prepend=t[0] - (t[1] - t[0])) * S_PER_NS
-    cum = np.empty((len(t) + 1, 3))  # cum[i]: the sum of the first i rows of w dt
-    cum[0] = 0.0
-    np.multiply(imu.w_ib_b_radps, dt[:, None], out=cum[1:])
-    np.cumsum(cum[1:], axis=0, out=cum[1:])
-    del dt
     tv = vel.time_ns
     speed = np.hypot(vel.v_n_mps[:, 0], vel.v_n_mps[:, 1])
     course = np.arctan2(vel.v_n_mps[:, 1], vel.v_n_mps[:, 0])
@@ -325,7 +355,8 @@ def _check_rate_units_against_gnss(imu: ImuSamples, vel: GnssVelocities, topic: 
         return
     ia = np.searchsorted(t, tv[k], side="right")
     ib = np.searchsorted(t, tv[k + 1], side="right")
-    angle = np.linalg.norm(cum[ib] - cum[ia], axis=1)
+    cum = _rotation_sums(imu.w_ib_b_radps, t, np.concatenate([ia, ib]))
+    angle = np.linalg.norm(cum[len(k) :] - cum[: len(k)], axis=1)
     ratio = float(np.median(angle / np.abs(dpsi[k])))
     if ratio > 10.0:
         j = int(k[np.argmax(angle / np.abs(dpsi[k]))])
@@ -486,6 +517,7 @@ def _assemble_all(
                         cols[fix_topic], issues)
     vel = _assemble_vel(_window(cols[vel_topic].arrays(), start_ns, end_ns),
                         cols[vel_topic], issues)
+    del imu_raw  # the raw log time stamps go now, before the rate check's temporaries
     if check_units and len(vel):
         _check_rate_units_against_gnss(imu, vel, imu_topic, cols[imu_topic].path)
     events_ns = _assemble_events(_window(cols[events_topic].arrays(), start_ns, end_ns),
