@@ -765,8 +765,10 @@ class Scan:
         msg_pos, msg_ch = msg_pos[:n_msg], msg_ch[:n_msg]
         if n_msg == 0:
             return pos
-        chans, first = np.unique(msg_ch, return_index=True)
-        for ch in chans[np.argsort(first)].tolist():
+        chans = np.flatnonzero(np.bincount(msg_ch))  # channel ids are u16
+        if len(chans) > 1:  # in order of first appearance
+            chans = chans[np.argsort([int(np.argmax(msg_ch == c)) for c in chans])]
+        for ch in chans.tolist():
             if ch not in self.route:
                 raise ValueError(f"message on channel {ch} before its Channel record")
             p = msg_pos if len(chans) == 1 else msg_pos[msg_ch == ch]
