@@ -1,6 +1,6 @@
 """Single-pass MCAP scanning and batched CDR decoding for :mod:`pospp.io.mcap_reader`.
 
-Private module: the record framing, chunk decompression and numpy decoding behind
+Private module: the record framing, chunk decompression and compiled (numba) decoding behind
 ``read_flight_log``. Why pospp frames records itself rather than iterating with
 ``mcap.reader.make_reader(...).iter_messages()`` is measured in docs/formats.md ("Why a
 hand-written framing"): the library builds one Python ``Message`` object per record, which costs

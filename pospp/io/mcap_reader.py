@@ -22,13 +22,17 @@ The file is read in ONE sequential pass by :mod:`pospp.io._mcap_scan` (no summar
 needed, so a truncated file yields everything before the break, including the readable part of a
 cut-off zstd/lz4 chunk). Records are framed there (index records skipped unparsed; Schema and
 Channel records parsed by ``mcap.records``); docs/formats.md gives the measured reason for not
-using ``mcap.reader.make_reader(...).iter_messages()``. Each chunk is decompressed and its
-records are walked with ``struct``; the payloads of the wanted topics are gathered with numpy
-and decoded through one structured dtype per (frame_id length) layout
-(``pospp.io.ros_messages.cdr_dtype``), for all messages of the chunk at once. The first message
-of every (channel, layout) is also decoded by ``mcap_ros2``'s generic decoder and the two must
-agree bit for bit, else that layout falls back to the generic decoder; messages that are not
-little-endian plain CDR always go through it.
+using ``mcap.reader.make_reader(...).iter_messages()``. Each chunk is decompressed, its records
+are framed by one compiled pass, and the messages of each wanted channel are decoded by one
+compiled pass per chunk (``_decode_fixed``: the fixed little-endian CDR layout of
+``pospp.io.ros_messages.cdr_dtype`` for the message's frame_id length) straight into arrays
+allocated once from the summary's Statistics message counts (read first from the end of the
+file; without them the arrays grow by doubling). The first message of every (channel, layout)
+is also decoded by ``mcap_ros2``'s generic decoder and the two must agree bit for bit, else
+that layout falls back to the generic decoder; messages that are not little-endian plain CDR
+always go through it. The IMU vectors are rotated to the body frame in place, and the checks
+keep their (N, 3) temporaries a block long, so that the peak is close to the decoded arrays
+plus one chunk (docs/benchmarks.md, "The reader, third round").
 
 Checks
 ------
@@ -52,6 +56,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pospp.io._blockwise import rotation_sums, row_norms
 from pospp.io._mcap_scan import (
     EVENT_SPEC,
     FIX_SPEC,
@@ -268,7 +273,7 @@ def _imu_timing_issues(a: dict, topic: str, path: str) -> list[IngestIssue]:
 def _check_imu_units(w: np.ndarray, f: np.ndarray, topic: str, path: str) -> None:
     """Reject specific force in g, and rates that look like deg/s."""
     with np.errstate(over="ignore"):  # finite but absurd values: inf, rejected below
-        fmed = float(np.median(_row_norms(f), overwrite_input=True))
+        fmed = float(np.median(row_norms(f), overwrite_input=True))
     if 0.5 < fmed < 1.5:
         raise IngestError(
             f"median |linear_acceleration| = {fmed:.4f}: looks like g, not m/s^2 "
@@ -281,7 +286,7 @@ def _check_imu_units(w: np.ndarray, f: np.ndarray, topic: str, path: str) -> Non
             file=path, topic=topic,
         )
     with np.errstate(over="ignore"):
-        wmag = _row_norms(w)
+        wmag = row_norms(w)
     i = int(np.argmax(wmag))
     wmax = float(wmag[i])
     wmed = float(np.median(wmag, overwrite_input=True))
@@ -291,47 +296,6 @@ def _check_imu_units(w: np.ndarray, f: np.ndarray, topic: str, path: str) -> Non
             "deg/s, not rad/s (expected median < 1 rad/s and max < 40 rad/s)",
             file=path, topic=topic, index=i,
         )
-
-
-_BLOCK_ROWS = 65536  # rows of the IMU log handled at a time by the checks' temporaries
-
-
-def _row_norms(v: np.ndarray) -> np.ndarray:
-    """``np.linalg.norm(v, axis=1)`` for (N, 3) ``v`` (same sums, same bits), its
-    temporaries a block long."""
-    out = np.empty(len(v))
-    for b in range(0, len(v), _BLOCK_ROWS):
-        blk = v[b : b + _BLOCK_ROWS]
-        o = out[b : b + _BLOCK_ROWS]
-        np.multiply(blk[:, 0], blk[:, 0], out=o)  # ((x^2 + y^2) + z^2): add.reduce's order
-        o += blk[:, 1] * blk[:, 1]
-        o += blk[:, 2] * blk[:, 2]
-        np.sqrt(o, out=o)
-    return out
-
-
-def _rotation_sums(w: np.ndarray, t_ns: np.ndarray, at: np.ndarray) -> np.ndarray:
-    """``S[j] = sum_{i < j} w_i dt_i`` [rad] (rows of (N, 3) ``w`` [rad/s]) at the indices
-    ``at`` (0..N), ``dt_i = t_i - t_{i-1}`` [s] (``dt_0 = t_1 - t_0``).
-
-    The running sum is the sequential ``np.cumsum`` order, carried block to block, so the
-    values are those of one cumulative sum over the whole log without its (N, 3) array.
-    """
-    out = np.zeros((len(at), 3))
-    carry = np.zeros(3)
-    n = len(t_ns)
-    for b in range(0, n, _BLOCK_ROWS):
-        e = min(b + _BLOCK_ROWS, n)
-        prev = t_ns[b - 1] if b else t_ns[0] - (t_ns[1] - t_ns[0])
-        dt = np.diff(t_ns[b:e], prepend=prev) * S_PER_NS
-        blk = np.empty((e - b + 1, 3))
-        blk[0] = carry
-        np.multiply(w[b:e], dt[:, None], out=blk[1:])
-        np.cumsum(blk, axis=0, out=blk)  # blk[r] = S[b + r]
-        sel = (at > b) & (at <= e)
-        out[sel] = blk[at[sel] - b]
-        carry = blk[-1].copy()
-    return out
 
 
 _TURN_RATE_MIN_RADPS = np.deg2rad(1.0)  # GNSS intervals turning faster than this are compared
@@ -366,7 +330,7 @@ def _check_rate_units_against_gnss(imu: ImuSamples, vel: GnssVelocities, topic: 
         return
     ia = np.searchsorted(t, tv[k], side="right")
     ib = np.searchsorted(t, tv[k + 1], side="right")
-    cum = _rotation_sums(imu.w_ib_b_radps, t, np.concatenate([ia, ib]))
+    cum = rotation_sums(imu.w_ib_b_radps, t, np.concatenate([ia, ib]))
     angle = np.linalg.norm(cum[len(k) :] - cum[: len(k)], axis=1)
     ratio = float(np.median(angle / np.abs(dpsi[k])))
     if ratio > 10.0:

@@ -17,7 +17,8 @@ from mcap_ros2.writer import Writer as Ros2Writer
 from test_mcap_reader import make_log, write_with_library
 
 from pospp.io import ros_messages as rm
-from pospp.io.mcap_reader import _rotation_sums, _row_norms, read_flight_log
+from pospp.io._blockwise import rotation_sums, row_norms
+from pospp.io.mcap_reader import read_flight_log
 from pospp.types import FLU_TO_FRD
 
 
@@ -98,8 +99,8 @@ def test_block_wise_check_helpers_match_numpy_bit_for_bit() -> None:
     n = 150_001  # more than two blocks of 65536 rows
     w = rng.normal(0.0, 0.3, (n, 3))
     t = 10**18 + np.cumsum(rng.integers(4_000_000, 6_000_000, n))
-    np.testing.assert_array_equal(_row_norms(w), np.linalg.norm(w, axis=1))
+    np.testing.assert_array_equal(row_norms(w), np.linalg.norm(w, axis=1))
     dt = np.diff(t, prepend=t[0] - (t[1] - t[0])) * 1e-9
     cum = np.vstack([np.zeros((1, 3)), np.cumsum(w * dt[:, None], axis=0)])
     at = np.r_[0, 1, 65535, 65536, 65537, 131072, n, rng.integers(0, n + 1, 100)]
-    np.testing.assert_array_equal(_rotation_sums(w, t, at), cum[at])
+    np.testing.assert_array_equal(rotation_sums(w, t, at), cum[at])
