@@ -169,7 +169,13 @@ def apply_rotation(c_ab: np.ndarray, v_b: np.ndarray, out: np.ndarray | None = N
         cols = np.argmax(nz, axis=1)
         signs = c[np.arange(3), cols]
         if np.array_equal(cols, np.arange(3)):  # diagonal (FLU->FRD): signs only
-            return np.multiply(v, signs, out=out)
+            if out is None:
+                return v * signs
+            if out is not v_b:
+                out[...] = v
+            for k in np.flatnonzero(signs < 0):  # in place (a ufunc would copy an input
+                np.negative(out[..., k], out=out[..., k])  # that shares out's memory)
+            return out
         return np.multiply(v[..., cols], signs, out=out)
     if out is None:
         return v @ c.T

@@ -251,11 +251,12 @@ def _imu_timing_issues(a: dict, topic: str, path: str) -> list[IngestIssue]:
         edges.pop()
     if len(edges) >= 2:
         full = min(len(d) // block, len(edges))  # whole blocks: one median call for all
-        med = np.median(d[: full * block].reshape(full, block), axis=1)
-        if len(edges) > full:
-            med = np.append(med, np.median(d[edges[-1] :]))
+        last = np.median(d[edges[-1] :]) if len(edges) > full else None
+        med = np.median(d[: full * block].reshape(full, block), axis=1, overwrite_input=True)
+        med = med if last is None else np.append(med, last)
         off = np.abs(med - nominal) > 0.02 * nominal
         starts = np.flatnonzero(off & ~np.r_[False, off[:-1]])
+        d = np.diff(t) if starts.size else d  # the blocks were reordered by their medians
         for b in starts[:_MAX_LISTED]:
             lo = edges[max(b - 1, 0)]
             seg = d[lo : edges[b] + block]
