@@ -129,15 +129,13 @@ class FlightLog:
 def _window(a: dict[str, np.ndarray], start_ns: int | None, end_ns: int | None) -> dict:
     """Keep samples with ``start_ns <= time_ns < end_ns``; add ``index`` (file order: None
     while it is the identity, so that a whole log needs no index array)."""
-    a = {**a, "index": None}
+    out: dict[str, np.ndarray | None] = {**a, "index": None}
     keep = np.ones(len(a["time_ns"]), bool)
     if start_ns is not None:
         keep &= a["time_ns"] >= start_ns
     if end_ns is not None:
         keep &= a["time_ns"] < end_ns
-    if keep.all():
-        return a
-    return _subset(a, keep)
+    return out if keep.all() else _subset(out, keep)
 
 
 def _subset(a: dict, keep: np.ndarray) -> dict:
