@@ -154,20 +154,33 @@ def empty_velocities() -> GnssVelocities:
     )
 
 
-def apply_rotation(c_ab: np.ndarray, v_b: np.ndarray) -> np.ndarray:
+def apply_rotation(c_ab: np.ndarray, v_b: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """``v_a = C_ab @ v_b`` for rows of ``v_b`` (N, 3).
 
     A signed permutation (entries in {-1, 0, 1}, e.g. FLU->FRD, ENU->NED) is applied by
     indexing and sign flips, so it is exact and invertible bit for bit (no ``0 * x`` sums that
-    turn -0.0 into +0.0); any other DCM by matrix product.
+    turn -0.0 into +0.0); any other DCM by matrix product. ``out`` (float, the shape of
+    ``v_b``; may be ``v_b`` itself) receives the result instead of a new array.
     """
     c = np.asarray(c_ab, dtype=float)
     v = np.asarray(v_b, dtype=float)
     nz = c != 0.0
     if np.all(np.isin(c, (-1.0, 0.0, 1.0))) and np.all(nz.sum(axis=1) == 1):
         cols = np.argmax(nz, axis=1)
-        return v[..., cols] * c[np.arange(3), cols]
-    return v @ c.T
+        signs = c[np.arange(3), cols]
+        if np.array_equal(cols, np.arange(3)):  # diagonal (FLU->FRD): signs only
+            if out is None:
+                return v * signs
+            if out is not v_b:
+                out[...] = v
+            for k in np.flatnonzero(signs < 0):  # in place (a ufunc would copy an input
+                np.negative(out[..., k], out=out[..., k])  # that shares out's memory)
+            return out
+        return np.multiply(v[..., cols], signs, out=out)
+    if out is None:
+        return v @ c.T
+    out[...] = v @ c.T
+    return out
 
 
 def rotate_covariance(c_ab: np.ndarray, p_b: np.ndarray) -> np.ndarray:

@@ -1,6 +1,6 @@
 """Single-pass MCAP scanning and batched CDR decoding for :mod:`pospp.io.mcap_reader`.
 
-Private module: the record framing, chunk decompression and numpy decoding behind
+Private module: the record framing, chunk decompression and compiled (numba) decoding behind
 ``read_flight_log``. Why pospp frames records itself rather than iterating with
 ``mcap.reader.make_reader(...).iter_messages()`` is measured in docs/formats.md ("Why a
 hand-written framing"): the library builds one Python ``Message`` object per record, which costs
@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import functools
 import struct
+import sys
 import zlib
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -35,7 +36,7 @@ from numba import njit
 from pospp.io import ros_messages as rm
 from pospp.io.errors import IngestError, IngestIssue
 
-_GATHER_BATCH = 16384  # messages gathered at a time (bounds the index array to ~100 MB)
+_LITTLE_ENDIAN = sys.byteorder == "little"
 
 # --------------------------------------------------------------------------- topic specs
 
@@ -130,20 +131,142 @@ def _field_values(buf: np.ndarray, starts: np.ndarray, dt: np.ndarray, name: str
     return vals.astype(base.newbyteorder("="), copy=False)
 
 
+_MIN_CAPACITY = 4096  # rows allocated at least when a collector grows without a hint
+
+
+@njit(cache=True, nogil=True)
+def _prepare_batch(buf: np.ndarray, pos: np.ndarray, state: np.ndarray, log_out: np.ndarray,
+                   row0: int) -> int:  # pragma: no cover - compiled
+    """Log times of the Message records at ``pos`` into ``log_out[row0:]``; ``state`` 2 (the
+    generic decoder) for payloads shorter than a CDR header or not little-endian plain CDR
+    (encapsulation bytes 0x00 0x01), 0 (not decoded yet) for the others.
+
+    The records were framed by :func:`_walk_records`, so each lies wholly inside ``buf``
+    when it is long enough for its log time; returns the index of the first that is not
+    (its log time would overrun ``buf``), else -1.
+    """
+    for i in range(pos.shape[0]):
+        p = pos[i]
+        if p + 23 > buf.shape[0]:
+            return i
+        t = np.int64(0)
+        ln = np.int64(0)
+        for k in range(8):
+            t |= np.int64(buf[p + 15 + k]) << np.int64(8 * k)
+            ln |= np.int64(buf[p + 1 + k]) << np.int64(8 * k)
+        log_out[row0 + i] = t
+        s = p + 31  # opcode 1 + length 8 + channel 2 + sequence 4 + 2 x time 8
+        if ln - 22 < 16 or buf[s] != 0 or buf[s + 1] != 1:
+            state[i] = 2
+        else:
+            state[i] = 0
+    return -1
+
+
+@njit(cache=True, nogil=True)
+def _decode_fixed(buf: np.ndarray, pos: np.ndarray, state: np.ndarray, frame_len: int,
+                  itemsize: int, fast: bool, f_off: np.ndarray, outs: tuple,
+                  time_out: np.ndarray, row0: int,
+                  ref_frame: np.ndarray) -> tuple:  # pragma: no cover - compiled
+    """Decode, in one pass, the pending (``state`` 0) messages whose frame_id length is
+    ``frame_len``: each field ``j`` (``f_off[j]`` bytes into the payload, ``outs[j].shape[1]``
+    bytes wide, little-endian) is copied into row ``row0 + i`` of ``outs[j]`` (uint8 views of
+    the output arrays) and the header stamp ``sec * 1e9 + nanosec`` [ns] into ``time_out``;
+    their ``state`` becomes 3. With ``fast`` False, or a payload length other than
+    ``itemsize`` (the fixed layout's), ``state`` becomes 2 instead (the generic decoder).
+
+    Returns (how many decoded messages have a frame_id other than ``ref_frame``, how many
+    were decoded).
+    """
+    n_other = 0
+    n_done = 0
+    for i in range(pos.shape[0]):
+        if state[i] != 0:
+            continue
+        p = pos[i]
+        s = p + 31
+        fl = np.int64(0)
+        ln = np.int64(0)
+        for k in range(4):
+            fl |= np.int64(buf[s + 12 + k]) << np.int64(8 * k)
+        if fl != frame_len:
+            continue
+        for k in range(8):
+            ln |= np.int64(buf[p + 1 + k]) << np.int64(8 * k)
+        if not fast or ln - 22 != itemsize:
+            state[i] = 2
+            continue
+        row = row0 + i
+        for j in range(len(outs)):
+            o = outs[j]
+            src = s + f_off[j]
+            for k in range(o.shape[1]):
+                o[row, k] = buf[src + k]
+        sec = np.int64(0)
+        nsec = np.int64(0)
+        for k in range(4):
+            sec |= np.int64(buf[s + 4 + k]) << np.int64(8 * k)
+            nsec |= np.int64(buf[s + 8 + k]) << np.int64(8 * k)
+        if sec >= 2**31:  # int32 seconds
+            sec -= 2**32
+        time_out[row] = sec * 1_000_000_000 + nsec
+        for k in range(frame_len):
+            if buf[s + 16 + k] != ref_frame[k]:
+                n_other += 1
+                break
+        state[i] = 3
+        n_done += 1
+    return n_other, n_done
+
+
 class Collector:
-    """Accumulates the decoded messages of one topic, block by block."""
+    """Accumulates the decoded messages of one topic into arrays grown as needed.
+
+    The arrays are allocated once for the message count of the summary's Statistics record
+    when it is known (:meth:`reserve`), else grown by doubling; rows are written in place by
+    the compiled :func:`_decode_fixed`, so no per-batch blocks are kept and concatenated.
+    """
 
     def __init__(self, topic: str, spec: Spec, path: str) -> None:
         self.topic = topic
         self.spec = spec
         self.path = path
-        self.blocks: list[dict[str, np.ndarray]] = []
         self.count = 0
         self.frame_ids: list[str] = []
         self.channels: dict[int, Schema | None] = {}
         self._decoders: dict[int, Callable[[bytes], Any]] = {}
         self._verified: dict[tuple[int, int], bool] = {}  # (channel, frame_len) -> fast ok
         self.slow_messages = 0
+        self._hint = 0
+        self._out: dict[str, np.ndarray] = {}
+        self._views: tuple[np.ndarray, ...] = ()
+        self._fast: dict[int, tuple] = {}  # channel -> checked (frame_len, size, offsets, frame)
+
+    def reserve(self, n: int) -> None:
+        """Expect ``n`` more messages (a channel's Statistics count): one allocation."""
+        self._hint += max(int(n), 0)
+
+    def _empty(self, n: int) -> dict[str, np.ndarray]:
+        probe = _cdr_dtype(self.spec.layout, 1)
+        res = {"time_ns": np.empty(n, np.int64), "log_time_ns": np.empty(n, np.int64)}
+        for name in self.spec.wanted:
+            ftype = probe.fields[name][0]
+            base = ftype.base if ftype.subdtype else ftype
+            res[name] = np.empty((n, *ftype.shape), base.newbyteorder("="))
+        return res
+
+    def _ensure(self, n: int) -> None:
+        """Room for ``n`` more rows (kept rows copied when the arrays must grow)."""
+        cap = len(self._out["time_ns"]) if self._out else 0
+        if self.count + n <= cap:
+            return
+        new_cap = max(self.count + n, 2 * cap, _MIN_CAPACITY, self._hint if not cap else 0)
+        new = self._empty(new_cap)
+        for k, a in self._out.items():
+            new[k][: self.count] = a[: self.count]
+        self._out = new
+        self._views = tuple(new[name].reshape(new_cap, -1).view(np.uint8)
+                            for name in self.spec.wanted)
 
     # -- generic path
     def _decoder(self, channel_id: int) -> Callable[[bytes], Any]:
@@ -180,59 +303,95 @@ class Collector:
 
     # -- one batch of messages of one channel
     def add(self, channel_id: int, buf: np.ndarray, pos: np.ndarray) -> None:
-        """Decode the Message records starting at ``pos`` (record offsets) in ``buf``."""
+        """Decode the Message records starting at ``pos`` (record offsets) in ``buf``.
+
+        Little-endian plain CDR messages go through :func:`_decode_fixed`, one pass per
+        frame_id length (one in the usual case), once their layout has been checked against
+        the generic decoder (:meth:`_layout_ok`); the others through the generic decoder.
+        """
         n = len(pos)
-        first_index = self.count
-        head = _gather(buf, pos, 0, 23)  # opcode, length, channel, sequence, log time
-        rec_len = head[:, 1:9].copy().view("<u8")[:, 0].astype(np.int64)
-        log_time = head[:, 15:23].copy().view("<u8")[:, 0].astype(np.int64)
-        starts = pos + 31  # opcode 1 + length 8 + channel 2 + sequence 4 + 2 x time 8
-        plen = rec_len - 22
-        out: dict[str, np.ndarray] = {"time_ns": np.zeros(n, np.int64), "log_time_ns": log_time}
-        probe = _cdr_dtype(self.spec.layout, 1)
-        for name in self.spec.wanted:
-            ftype = probe.fields[name][0]
-            base = ftype.base if ftype.subdtype else ftype
-            out[name] = np.zeros((n, *ftype.shape), base.newbyteorder("="))
-        slow = np.ones(n, bool)
-        ok_hdr = plen >= 16
-        if ok_hdr.any():
-            hdr = np.zeros((n, 16), np.uint8)
-            hdr[ok_hdr] = _gather(buf, starts[ok_hdr], 0, 16)
-            le = ok_hdr & (hdr[:, 0] == 0) & (hdr[:, 1] == 1)
-            flen = hdr[:, 12:16].copy().view("<u4")[:, 0].astype(np.int64)
-            fls = flen[le]
-            one = len(fls) > 0 and bool((fls == fls[0]).all())  # the usual case: one length
-            for fl in (fls[:1] if one else np.unique(fls)):
-                dt = _cdr_dtype(self.spec.layout, int(fl))
-                grp = np.flatnonzero(le & (flen == fl) & (plen == dt.itemsize))
-                if grp.size == 0 or not self._layout_ok(channel_id, buf, starts, grp[0], dt):
-                    continue
-                # the whole payloads of the group at once, then each field from them
-                rec = _gather(buf, starts[grp], 0, dt.itemsize).view(dt)[:, 0]
-                for name in self.spec.wanted:
-                    out[name][grp] = rec[name]
-                out["time_ns"][grp] = rm.stamp_ns(rec["sec"], rec["nanosec"])
-                self._note_frames(rec["frame_id"])
-                slow[grp] = False
-        for i in np.flatnonzero(slow):
-            s, ln = int(starts[i]), int(plen[i])
-            vals = self._decode_slow(channel_id, buf[s : s + ln].tobytes(), first_index + i)
+        self._ensure(n)
+        row0 = self.count
+        out = self._out
+        state = np.empty(n, np.int8)
+        if _prepare_batch(buf, pos, state, out["log_time_ns"], row0) >= 0:
+            raise IndexError("a Message record too short for its log time ends the chunk")
+        starts = pos + 31
+        known = self._fast.get(channel_id)
+        if known is not None:  # the layout of this channel's last batch, checked then
+            if self._decode_known(buf, starts, pos, state, row0, *known) == n and _LITTLE_ENDIAN:
+                self.count += n
+                return
+        pending = np.flatnonzero(state == 0)
+        while pending.size:
+            self._decode_pass(channel_id, buf, pos, starts, state, int(pending[0]), row0)
+            pending = np.flatnonzero(state == 0)
+        if not _LITTLE_ENDIAN:  # the fast path copied little-endian bytes
+            done = row0 + np.flatnonzero((state == 1) | (state == 3))
             for name in self.spec.wanted:
-                out[name][i] = vals[name]
-            out["time_ns"][i] = vals["time_ns"]
+                out[name][done] = out[name][done].byteswap()
+        for i in np.flatnonzero(state == 2):
+            s, ln = int(starts[i]), int(_REC(buf, int(pos[i]))[1]) - 22
+            vals = self._decode_slow(channel_id, buf[s : s + ln].tobytes(), row0 + i)
+            for name in self.spec.wanted:
+                out[name][row0 + i] = vals[name]
+            out["time_ns"][row0 + i] = vals["time_ns"]
             if vals["frame_id"] not in self.frame_ids:
                 self.frame_ids.append(vals["frame_id"])
             self.slow_messages += 1
-        self.blocks.append(out)
         self.count += n
 
-    def _note_frames(self, chars: np.ndarray) -> None:
-        rows = chars if np.all(chars == chars[0]) else np.unique(chars, axis=0)
-        for row in rows[:1] if rows is chars else rows:
-            fid = row.tobytes().rstrip(b"\x00").decode("utf-8", "replace")
-            if fid not in self.frame_ids:
-                self.frame_ids.append(fid)
+    def _decode_pass(self, channel_id: int, buf: np.ndarray, pos: np.ndarray,
+                     starts: np.ndarray, state: np.ndarray, i: int, row0: int) -> None:
+        """Decode the pending messages with the frame_id length of message ``i`` (state 1),
+        or hand them to the generic decoder (state 2) when that layout fails its check."""
+        s = int(starts[i])
+        fl = int.from_bytes(buf[s + 12 : s + 16].tobytes(), "little")
+        dt = _cdr_dtype(self.spec.layout, fl) if fl >= 1 else None
+        j = -1  # a message of this frame_id length and the layout's payload length
+        if dt is not None:
+            if _REC(buf, int(pos[i]))[1] - 22 == dt.itemsize:
+                j = i
+            else:
+                same = np.flatnonzero(state == 0)
+                same = same[_gather(buf, starts[same], 12, 4).view("<u4")[:, 0] == fl]
+                plen = _gather(buf, pos[same], 1, 8).view("<u8")[:, 0].astype(np.int64) - 22
+                hit = same[plen == dt.itemsize]
+                j = int(hit[0]) if hit.size else -1
+        fast = j >= 0 and self._layout_ok(channel_id, buf, starts, j, dt)
+        if not fast:  # the generic decoder for all pending messages of this frame_id length
+            _decode_fixed(buf, pos, state, fl, 0, False, np.zeros(len(self.spec.wanted),
+                          np.int64), self._views, self._out["time_ns"], row0,
+                          np.zeros(0, np.uint8))
+            return
+        off = np.array([dt.fields[f][1] for f in self.spec.wanted], np.int64)
+        known = (fl, dt.itemsize, off, buf[int(starts[j]) + 16 : int(starts[j]) + 16 + fl].copy())
+        self._fast[channel_id] = known
+        self._decode_known(buf, starts, pos, state, row0, *known)
+
+    def _decode_known(self, buf: np.ndarray, starts: np.ndarray, pos: np.ndarray,
+                      state: np.ndarray, row0: int, fl: int, itemsize: int, off: np.ndarray,
+                      ref_frame: np.ndarray) -> int:
+        """:func:`_decode_fixed` with a checked layout; frame_ids noted. Returns the number
+        of messages decoded."""
+        n_other, n_done = _decode_fixed(buf, pos, state, fl, itemsize, True, off, self._views,
+                                        self._out["time_ns"], row0, ref_frame)
+        if n_done == len(pos) and not n_other:
+            self._note_frame(ref_frame, 0, fl)
+            return n_done
+        mine = np.flatnonzero(state == 3)
+        state[mine] = 1
+        if n_other:  # several frame_ids: each noted, in sorted order
+            for row in np.unique(_gather(buf, starts[mine], 16, fl), axis=0):
+                self._note_frame(row, 0, fl)
+        elif n_done:
+            self._note_frame(ref_frame, 0, fl)
+        return n_done
+
+    def _note_frame(self, buf: np.ndarray, start: int, length: int) -> None:
+        fid = buf[start : start + length].tobytes().rstrip(b"\x00").decode("utf-8", "replace")
+        if fid not in self.frame_ids:
+            self.frame_ids.append(fid)
 
     def _layout_ok(
         self, channel_id: int, buf: np.ndarray, starts: np.ndarray, i: int, dt: np.dtype
@@ -254,23 +413,15 @@ class Collector:
         return self._verified[key]
 
     def arrays(self) -> dict[str, np.ndarray]:
-        """All blocks concatenated (one concatenate per field, not per block).
+        """The decoded fields, ``count`` rows each; the collector lets go of them.
 
-        Consumes the blocks: each field's blocks are released as soon as that field is
-        concatenated, so the peak is the data plus one field, not twice the data.
+        Rows past ``count`` (a Statistics count above what was read, or growth) were never
+        written, so their pages are not resident; the arrays returned are views of the first
+        ``count`` rows, not copies.
         """
-        if not self.blocks:
-            probe = rm.cdr_dtype(self.spec.layout, 1)
-            res = {"time_ns": np.zeros(0, np.int64), "log_time_ns": np.zeros(0, np.int64)}
-            for name in self.spec.wanted:
-                ftype = probe.fields[name][0]
-                base = ftype.base if ftype.subdtype else ftype
-                res[name] = np.zeros((0, *ftype.shape), base.newbyteorder("="))
-            return res
-        keys = list(self.blocks[0])
-        out = {k: np.concatenate([b.pop(k) for b in self.blocks]) for k in keys}
-        self.blocks = []
-        return out
+        out = self._out or self._empty(0)
+        self._out, self._views = {}, ()
+        return {k: v[: self.count] for k, v in out.items()}
 
 
 # --------------------------------------------------------------------------- streaming pass
@@ -286,6 +437,8 @@ _MAGIC = b"\x89MCAP0\r\n"
 _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK, _OP_FOOTER = 0x03, 0x04, 0x05, 0x06, 0x02
 _OP_STATISTICS, _OP_DATA_END = 0x0B, 0x0F
 _FOOTER_LEN = 20  # summary_start u64, summary_offset_start u64, summary_crc u32
+_MAX_SUMMARY_BYTES = 64 * 1024 * 1024  # a larger summary section is not read for hints
+_MAX_RATIO = 64  # no hint above 64 x (file bytes / 31-byte minimal Message record) messages
 
 MAX_CHUNK_BYTES = 256 * 1024 * 1024
 """Default cap on one chunk's decompressed size [bytes] (``max_chunk_bytes``): a chunk whose
@@ -296,6 +449,40 @@ _READ_PIECE = 1 << 20  # bytes read at a time when a byte range is only checksum
 
 
 @njit(cache=True, nogil=True)
+def _walk_pass(buf: np.ndarray, msg_pos: np.ndarray, msg_ch: np.ndarray, meta_pos: np.ndarray,
+               fill: bool) -> tuple:  # pragma: no cover - compiled
+    """One walk of :func:`_walk_records`: counts only, or (``fill``) offsets written too."""
+    n = buf.shape[0]
+    n_msg = 0
+    n_meta = 0
+    pos = 0
+    while pos < n:
+        if pos + 9 > n:
+            return n_msg, n_meta, pos, 1
+        ln = np.uint64(0)
+        for k in range(8):
+            ln |= np.uint64(buf[pos + 1 + k]) << np.uint64(8 * k)
+        if ln > np.uint64(n - pos - 9):
+            return n_msg, n_meta, pos, 1
+        op = buf[pos]
+        if op == 0x05:
+            if pos + 11 > n:
+                return n_msg, n_meta, pos, 1
+            if fill:
+                msg_pos[n_msg] = pos
+                msg_ch[n_msg] = np.int64(buf[pos + 9]) | (np.int64(buf[pos + 10]) << 8)
+            n_msg += 1
+        elif op == 0x03 or op == 0x04:
+            if fill:
+                meta_pos[n_meta] = pos
+            n_meta += 1
+        elif op == 0:
+            return n_msg, n_meta, pos, 2
+        pos += 9 + np.int64(ln)
+    return n_msg, n_meta, pos, 0
+
+
+@njit(cache=True, nogil=True)
 def _walk_records(buf: np.ndarray) -> tuple:  # pragma: no cover - compiled
     """Frame the records of ``buf`` (uint8): ``opcode u8, length u64, body`` each.
 
@@ -303,37 +490,16 @@ def _walk_records(buf: np.ndarray) -> tuple:  # pragma: no cover - compiled
     their offsets, offset reached, status): status 0 when the walk ended exactly at the end,
     1 when a record overruns the buffer (or a Message is too short for its channel id) at
     the offset reached, 2 at a record with the reserved opcode 0 (zeros: a bomb's output
-    or a hole are not walked).
+    or a hole are not walked). Two passes: the first counts, so that the offset arrays are
+    allocated to size (not one slot per 9 bytes of the chunk).
     """
-    n = buf.shape[0]
-    msg_pos = np.empty(n // 9 + 1, np.int64)  # every record is at least 9 bytes
-    msg_ch = np.empty(n // 9 + 1, np.int64)
-    meta_pos = np.empty(n // 9 + 1, np.int64)
-    n_msg = 0
-    n_meta = 0
-    pos = 0
-    while pos < n:
-        if pos + 9 > n:
-            return n_msg, msg_pos, msg_ch, n_meta, meta_pos, pos, 1
-        ln = np.uint64(0)
-        for k in range(8):
-            ln |= np.uint64(buf[pos + 1 + k]) << np.uint64(8 * k)
-        if ln > np.uint64(n - pos - 9):
-            return n_msg, msg_pos, msg_ch, n_meta, meta_pos, pos, 1
-        op = buf[pos]
-        if op == 0x05:
-            if pos + 11 > n:
-                return n_msg, msg_pos, msg_ch, n_meta, meta_pos, pos, 1
-            msg_pos[n_msg] = pos
-            msg_ch[n_msg] = np.int64(buf[pos + 9]) | (np.int64(buf[pos + 10]) << 8)
-            n_msg += 1
-        elif op == 0x03 or op == 0x04:
-            meta_pos[n_meta] = pos
-            n_meta += 1
-        elif op == 0:
-            return n_msg, msg_pos, msg_ch, n_meta, meta_pos, pos, 2
-        pos += 9 + np.int64(ln)
-    return n_msg, msg_pos, msg_ch, n_meta, meta_pos, pos, 0
+    none = np.empty(0, np.int64)
+    n_msg, n_meta, _, _ = _walk_pass(buf, none, none, none, False)
+    msg_pos = np.empty(n_msg, np.int64)
+    msg_ch = np.empty(n_msg, np.int64)
+    meta_pos = np.empty(n_meta, np.int64)
+    n_msg, n_meta, pos, status = _walk_pass(buf, msg_pos, msg_ch, meta_pos, True)
+    return n_msg, msg_pos, msg_ch, n_meta, meta_pos, pos, status
 
 
 class _Truncated(Exception):
@@ -347,7 +513,7 @@ class _RawChunk:
     uncompressed_size: int
     crc: int
     compression: str
-    data: bytes
+    data: bytes | memoryview
     truncated: bool
 
 
@@ -372,7 +538,7 @@ def _parse_chunk(body: bytes, truncated: bool) -> _RawChunk:
     (dlen,) = struct.unpack_from("<Q", body, p) if len(body) >= p + 8 else (None,)
     if dlen is None:
         raise _Truncated("chunk header cut off")
-    data = body[p + 8 : p + 8 + dlen]
+    data = memoryview(body)[p + 8 : p + 8 + dlen]  # not a copy of the compressed records
     return _RawChunk(start, end, usize, crc, comp, data, truncated or len(data) < dlen)
 
 
@@ -387,7 +553,43 @@ def _parse_stats(body: bytes, offset: int) -> _Stats:
     return _Stats(count, start, end, per_channel, offset)
 
 
-def _lz4_bounded(data: bytes, limit: int) -> bytes | bytearray:
+def _count_hints(f: Any, size: int) -> dict[int, int]:
+    """Per-channel message counts of the summary's Statistics record, as allocation hints.
+
+    Read before the data (Footer at the end -> summary section -> Statistics); any doubt
+    (no Footer, no Statistics, unreadable records) gives no hints, and the collectors then
+    grow their arrays as they go. Only sizes depend on these numbers, never what is read;
+    the counts are checked against the data at the end (:meth:`Scan._check_statistics`).
+    """
+    tail_len = 9 + _FOOTER_LEN + len(_MAGIC)
+    if size < len(_MAGIC) + tail_len:
+        return {}
+    try:
+        f.seek(size - tail_len)
+        tail = f.read(tail_len)
+        if tail[-len(_MAGIC):] != _MAGIC or _REC(tail, 0) != (_OP_FOOTER, _FOOTER_LEN):
+            return {}
+        start, footer_at = struct.unpack_from("<Q", tail, 9)[0], size - tail_len
+        if not len(_MAGIC) <= start < footer_at or footer_at - start > _MAX_SUMMARY_BYTES:
+            return {}
+        f.seek(start)
+        data = f.read(footer_at - start)
+        pos = 0
+        while pos + 9 <= len(data):
+            op, ln = _REC(data, pos)
+            if op == _OP_STATISTICS:
+                cap = _MAX_RATIO * size // 31
+                counts = _parse_stats(data[pos + 9 : pos + 9 + ln], start + pos).per_channel
+                return {ch: min(n, cap) for ch, n in counts.items()}
+            pos += 9 + ln
+        return {}
+    except (ValueError, struct.error):
+        return {}
+    finally:
+        f.seek(len(_MAGIC))
+
+
+def _lz4_bounded(data: bytes | memoryview, limit: int) -> bytes | bytearray:
     """Decompress an lz4 frame, producing at most ``limit + 1`` bytes (one more than allowed,
     so that the caller sees an overrun); the readable part of a cut-off frame is returned."""
     import lz4.frame
@@ -402,7 +604,8 @@ def _lz4_bounded(data: bytes, limit: int) -> bytes | bytearray:
     return out
 
 
-def _decompress(chunk: _RawChunk, max_bytes: int = MAX_CHUNK_BYTES) -> bytes | bytearray:
+def _decompress(chunk: _RawChunk,
+                max_bytes: int = MAX_CHUNK_BYTES) -> bytes | bytearray | memoryview:
     """Chunk records; for a truncated chunk, as many bytes as can be decompressed.
 
     Memory is bounded: a header claiming more than ``max_bytes`` is rejected before anything
@@ -483,6 +686,7 @@ class Scan:
         self.stats: _Stats | None = None
         self._loose: list[bytes] = []
         self._after_data_end_noted = False
+        self._hints: dict[int, int] = {}  # channel id -> Statistics message count
 
     # -- issues
     def _when(self) -> str:
@@ -527,9 +731,10 @@ class Scan:
                     file=self.path, topic=rec.topic,
                 )
             col.channels[rec.id] = schema
+            col.reserve(self._hints.get(rec.id, 0))
         self.route[rec.id] = col
 
-    def _meta(self, op: int, body: bytes) -> None:
+    def _meta(self, op: int, body: bytes | memoryview) -> None:
         stream = ReadDataStream(BytesIO(body))
         try:
             rec = Schema.read(stream) if op == _OP_SCHEMA else Channel.read(stream)
@@ -542,7 +747,7 @@ class Scan:
         else:
             self._channel(rec)
 
-    def _records(self, buf: bytes | bytearray, *, partial: bool = False) -> int:
+    def _records(self, buf: bytes | bytearray | memoryview, *, partial: bool = False) -> int:
         """Walk the records of a decompressed chunk (or a block of loose messages).
 
         The framing is one compiled pass (:func:`_walk_records`); Schema and Channel records
@@ -560,8 +765,10 @@ class Scan:
         msg_pos, msg_ch = msg_pos[:n_msg], msg_ch[:n_msg]
         if n_msg == 0:
             return pos
-        chans, first = np.unique(msg_ch, return_index=True)
-        for ch in chans[np.argsort(first)].tolist():
+        chans = np.flatnonzero(np.bincount(msg_ch))  # channel ids are u16
+        if len(chans) > 1:  # in order of first appearance
+            chans = chans[np.argsort([int(np.argmax(msg_ch == c)) for c in chans])]
+        for ch in chans.tolist():
             if ch not in self.route:
                 raise ValueError(f"message on channel {ch} before its Channel record")
             p = msg_pos if len(chans) == 1 else msg_pos[msg_ch == ch]
@@ -569,8 +776,7 @@ class Scan:
             col = self.route[ch]
             if col is None:
                 continue
-            for k in range(0, len(p), _GATHER_BATCH):
-                col.add(ch, arr, p[k : k + _GATHER_BATCH])
+            col.add(ch, arr, p)
             first_t = struct.unpack_from("<Q", buf, int(p[0]) + 15)[0]
             last_t = struct.unpack_from("<Q", buf, int(p[-1]) + 15)[0]
             self.first_log_time_ns = min(self.first_log_time_ns or first_t, first_t)
@@ -602,6 +808,7 @@ class Scan:
         with open(self.path, "rb") as f:
             if f.read(8) != _MAGIC:
                 raise IngestError("not an MCAP file (bad magic bytes)", file=self.path)
+            self._hints = _count_hints(f, size)
             good = 8
             try:
                 while True:

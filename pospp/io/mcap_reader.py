@@ -22,13 +22,17 @@ The file is read in ONE sequential pass by :mod:`pospp.io._mcap_scan` (no summar
 needed, so a truncated file yields everything before the break, including the readable part of a
 cut-off zstd/lz4 chunk). Records are framed there (index records skipped unparsed; Schema and
 Channel records parsed by ``mcap.records``); docs/formats.md gives the measured reason for not
-using ``mcap.reader.make_reader(...).iter_messages()``. Each chunk is decompressed and its
-records are walked with ``struct``; the payloads of the wanted topics are gathered with numpy
-and decoded through one structured dtype per (frame_id length) layout
-(``pospp.io.ros_messages.cdr_dtype``), for all messages of the chunk at once. The first message
-of every (channel, layout) is also decoded by ``mcap_ros2``'s generic decoder and the two must
-agree bit for bit, else that layout falls back to the generic decoder; messages that are not
-little-endian plain CDR always go through it.
+using ``mcap.reader.make_reader(...).iter_messages()``. Each chunk is decompressed, its records
+are framed by one compiled pass, and the messages of each wanted channel are decoded by one
+compiled pass per chunk (``_decode_fixed``: the fixed little-endian CDR layout of
+``pospp.io.ros_messages.cdr_dtype`` for the message's frame_id length) straight into arrays
+allocated once from the summary's Statistics message counts (read first from the end of the
+file; without them the arrays grow by doubling). The first message of every (channel, layout)
+is also decoded by ``mcap_ros2``'s generic decoder and the two must agree bit for bit, else
+that layout falls back to the generic decoder; messages that are not little-endian plain CDR
+always go through it. The IMU vectors are rotated to the body frame in place, and the checks
+keep their (N, 3) temporaries a block long, so that the peak is close to the decoded arrays
+plus one chunk (docs/benchmarks.md, "The reader, third round").
 
 Checks
 ------
@@ -52,6 +56,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pospp.io._blockwise import rotation_sums, row_norms
 from pospp.io._mcap_scan import (
     EVENT_SPEC,
     FIX_SPEC,
@@ -122,17 +127,28 @@ class FlightLog:
 
 
 def _window(a: dict[str, np.ndarray], start_ns: int | None, end_ns: int | None) -> dict:
-    """Keep samples with ``start_ns <= time_ns < end_ns``; add ``index`` (file order)."""
-    a = dict(a)
-    a["index"] = np.arange(len(a["time_ns"]))
+    """Keep samples with ``start_ns <= time_ns < end_ns``; add ``index`` (file order: None
+    while it is the identity, so that a whole log needs no index array)."""
+    out: dict[str, np.ndarray | None] = {**a, "index": None}
     keep = np.ones(len(a["time_ns"]), bool)
     if start_ns is not None:
         keep &= a["time_ns"] >= start_ns
     if end_ns is not None:
         keep &= a["time_ns"] < end_ns
-    if keep.all():
-        return a
-    return {k: v[keep] for k, v in a.items()}
+    return out if keep.all() else _subset(out, keep)
+
+
+def _subset(a: dict, keep: np.ndarray) -> dict:
+    """The samples where ``keep`` (bool) holds, ``index`` kept pointing at file order."""
+    idx = a["index"]
+    out = {k: v[keep] for k, v in a.items() if k != "index"}
+    out["index"] = np.flatnonzero(keep) if idx is None else idx[keep]
+    return out
+
+
+def _index(a: dict, i: int) -> int:
+    """File-order index of sample ``i`` of ``a``."""
+    return int(i) if a["index"] is None else int(a["index"][i])
 
 
 def _absolute_window(
@@ -163,13 +179,13 @@ def _check_order(a: dict, topic: str, path: str, *, drop_duplicates: bool,
     if drop_duplicates and np.any(d == 0):
         dup = np.flatnonzero(d == 0) + 1
         issues.append(IngestIssue(
-            "warning", path, topic, int(a["index"][dup[0]]), int(t[dup[0]]),
+            "warning", path, topic, _index(a, dup[0]), int(t[dup[0]]),
             f"{dup.size} message(s) with a duplicate header stamp dropped (kept the first of "
             "each stamp)", log_time_ns=int(a["log_time_ns"][dup[0]]),
         ))
         keep = np.ones(len(t), bool)
         keep[dup] = False
-        a = {k: v[keep] for k, v in a.items()}
+        a = _subset(a, keep)
         t = a["time_ns"]
         d = np.diff(t)
     bad = np.flatnonzero(d <= 0)
@@ -179,13 +195,15 @@ def _check_order(a: dict, topic: str, path: str, *, drop_duplicates: bool,
         raise IngestError(
             f"header stamp {what} the previous message's ({int(t[i - 1])} ns); stamps must "
             f"increase strictly ({bad.size} such message(s) in total)",
-            file=path, topic=topic, index=int(a["index"][i]), time_ns=int(t[i]),
+            file=path, topic=topic, index=_index(a, i), time_ns=int(t[i]),
             log_time_ns=int(a["log_time_ns"][i]),
         )
     return a
 
 
 def _check_finite(a: dict, names: tuple[str, ...], topic: str, path: str) -> None:
+    if all(np.isfinite(a[name]).all() for name in names):  # the usual case, one pass each
+        return
     bad = np.zeros(len(a["time_ns"]), bool)
     for name in names:
         v = a[name]
@@ -196,7 +214,7 @@ def _check_finite(a: dict, names: tuple[str, ...], topic: str, path: str) -> Non
         raise IngestError(
             f"non-finite value (NaN or inf) in {', '.join(fields)} = "
             f"{[a[n][i].tolist() for n in fields]} ({int(bad.sum())} bad message(s) in total)",
-            file=path, topic=topic, index=int(a["index"][i]), time_ns=int(a["time_ns"][i]),
+            file=path, topic=topic, index=_index(a, i), time_ns=int(a["time_ns"][i]),
             log_time_ns=int(a["log_time_ns"][i]),
         )
 
@@ -207,12 +225,12 @@ def _imu_timing_issues(a: dict, topic: str, path: str) -> list[IngestIssue]:
     out: list[IngestIssue] = []
     if len(t) < 3:
         return out
+    nominal = float(np.median(np.diff(t), overwrite_input=True))  # one (N,) temporary at a time
     d = np.diff(t)
-    nominal = float(np.median(d))
     gaps = np.flatnonzero(d > _GAP_FACTOR * nominal)
     for g in gaps[:_MAX_LISTED]:
         out.append(IngestIssue(
-            "warning", path, topic, int(a["index"][g + 1]), int(t[g + 1]),
+            "warning", path, topic, _index(a, g + 1), int(t[g + 1]),
             f"IMU gap of {d[g] * 1e-9:.6f} s ({d[g] / nominal:.1f} nominal intervals of "
             f"{nominal * 1e-6:.3f} ms) after stamp {int(t[g])} ns",
             log_time_ns=int(a["log_time_ns"][g + 1]),
@@ -230,16 +248,20 @@ def _imu_timing_issues(a: dict, topic: str, path: str) -> list[IngestIssue]:
     if len(edges) > 1 and len(d) - edges[-1] < block // 4:
         edges.pop()
     if len(edges) >= 2:
-        med = np.array([np.median(d[e : e + block]) for e in edges])
+        full = min(len(d) // block, len(edges))  # whole blocks: one median call for all
+        last = np.median(d[edges[-1] :]) if len(edges) > full else None
+        med = np.median(d[: full * block].reshape(full, block), axis=1, overwrite_input=True)
+        med = med if last is None else np.append(med, last)
         off = np.abs(med - nominal) > 0.02 * nominal
         starts = np.flatnonzero(off & ~np.r_[False, off[:-1]])
+        d = np.diff(t) if starts.size else d  # the blocks were reordered by their medians
         for b in starts[:_MAX_LISTED]:
             lo = edges[max(b - 1, 0)]
             seg = d[lo : edges[b] + block]
             k = lo + int(np.argmax(np.abs(seg - med[b]) < np.abs(seg - nominal)))
             j = k + 1  # the sample that ends the first changed interval
             out.append(IngestIssue(
-                "warning", path, topic, int(a["index"][j]), int(t[j]),
+                "warning", path, topic, _index(a, j), int(t[j]),
                 f"IMU sampling interval changes to {med[b] * 1e-6:.3f} ms (nominal "
                 f"{nominal * 1e-6:.3f} ms, {1e9 / nominal:.2f} Hz)",
                 log_time_ns=int(a["log_time_ns"][j]),
@@ -250,9 +272,7 @@ def _imu_timing_issues(a: dict, topic: str, path: str) -> list[IngestIssue]:
 def _check_imu_units(w: np.ndarray, f: np.ndarray, topic: str, path: str) -> None:
     """Reject specific force in g, and rates that look like deg/s."""
     with np.errstate(over="ignore"):  # finite but absurd values: inf, rejected below
-        fmag = np.linalg.norm(f, axis=1)
-        wmag = np.linalg.norm(w, axis=1)
-    fmed = float(np.median(fmag))
+        fmed = float(np.median(row_norms(f), overwrite_input=True))
     if 0.5 < fmed < 1.5:
         raise IngestError(
             f"median |linear_acceleration| = {fmed:.4f}: looks like g, not m/s^2 "
@@ -264,9 +284,12 @@ def _check_imu_units(w: np.ndarray, f: np.ndarray, topic: str, path: str) -> Non
             "m/s^2 (specific force of a vehicle near the Earth's surface)",
             file=path, topic=topic,
         )
-    wmed, wmax = float(np.median(wmag)), float(wmag.max())
+    with np.errstate(over="ignore"):
+        wmag = row_norms(w)
+    i = int(np.argmax(wmag))
+    wmax = float(wmag[i])
+    wmed = float(np.median(wmag, overwrite_input=True))
     if wmed > 1.0 or wmax > 40.0:
-        i = int(np.argmax(wmag))
         raise IngestError(
             f"|angular_velocity| median {wmed:.4g}, max {wmax:.4g} (sample {i}): looks like "
             "deg/s, not rad/s (expected median < 1 rad/s and max < 40 rad/s)",
@@ -293,8 +316,6 @@ def _check_rate_units_against_gnss(imu: ImuSamples, vel: GnssVelocities, topic: 
     if len(vel) < _MIN_TURN_INTERVALS + 1 or len(imu) < 3:
         return
     t = imu.time_ns
-    dt = np.diff(t, prepend=t[0] - (t[1] - t[0])) * S_PER_NS
-    cum = np.vstack([np.zeros((1, 3)), np.cumsum(imu.w_ib_b_radps * dt[:, None], axis=0)])
     tv = vel.time_ns
     speed = np.hypot(vel.v_n_mps[:, 0], vel.v_n_mps[:, 1])
     course = np.arctan2(vel.v_n_mps[:, 1], vel.v_n_mps[:, 0])
@@ -308,7 +329,8 @@ def _check_rate_units_against_gnss(imu: ImuSamples, vel: GnssVelocities, topic: 
         return
     ia = np.searchsorted(t, tv[k], side="right")
     ib = np.searchsorted(t, tv[k + 1], side="right")
-    angle = np.linalg.norm(cum[ib] - cum[ia], axis=1)
+    cum = rotation_sums(imu.w_ib_b_radps, t, np.concatenate([ia, ib]))
+    angle = np.linalg.norm(cum[len(k) :] - cum[: len(k)], axis=1)
     ratio = float(np.median(angle / np.abs(dpsi[k])))
     if ratio > 10.0:
         j = int(k[np.argmax(angle / np.abs(dpsi[k]))])
@@ -333,10 +355,11 @@ def _assemble_imu(a: dict, col: Collector, c_bs: np.ndarray, check_units: bool,
     if len(col.frame_ids) > 1:
         issues.append(IngestIssue("warning", path, topic, None, None,
                                   f"several IMU frame_ids: {col.frame_ids}"))
+    w, f = a["angular_velocity"], a["linear_acceleration"]  # the reader's own arrays
     return ImuSamples(
         time_ns=a["time_ns"],
-        w_ib_b_radps=apply_rotation(c_bs, a["angular_velocity"]),
-        f_ib_b_mps2=apply_rotation(c_bs, a["linear_acceleration"]),
+        w_ib_b_radps=apply_rotation(c_bs, w, out=w),  # in place: no second copy of the log
+        f_ib_b_mps2=apply_rotation(c_bs, f, out=f),
         frame_id=col.frame_ids[0] if col.frame_ids else "",
     )
 
@@ -347,11 +370,11 @@ def _assemble_fix(a: dict, col: Collector, issues: list[IngestIssue]) -> GnssFix
     if nofix.any():
         i = int(np.argmax(nofix))
         issues.append(IngestIssue(
-            "warning", path, topic, int(a["index"][i]), int(a["time_ns"][i]),
+            "warning", path, topic, _index(a, i), int(a["time_ns"][i]),
             f"{int(nofix.sum())} fix(es) with status NO_FIX dropped",
             log_time_ns=int(a["log_time_ns"][i]),
         ))
-        a = {k: v[~nofix] for k, v in a.items()}
+        a = _subset(a, ~nofix)
     if len(a["time_ns"]) == 0:
         raise IngestError("no usable GNSS fixes (in the time window)", file=path, topic=topic)
     a = _check_order(a, topic, path, drop_duplicates=True, issues=issues)
@@ -362,13 +385,13 @@ def _assemble_fix(a: dict, col: Collector, issues: list[IngestIssue]) -> GnssFix
         raise IngestError(
             f"latitude/longitude out of range: {a['latitude'][i]}, {a['longitude'][i]} "
             "(expected degrees, |lat| <= 90, |lon| <= 180)", file=path, topic=topic,
-            index=int(a["index"][i]), time_ns=int(a["time_ns"][i]),
+            index=_index(a, i), time_ns=int(a["time_ns"][i]),
         )
     unknown = a["position_covariance_type"] == 0
     if unknown.any():
         i = int(np.argmax(unknown))
         issues.append(IngestIssue(
-            "warning", path, topic, int(a["index"][i]), int(a["time_ns"][i]),
+            "warning", path, topic, _index(a, i), int(a["time_ns"][i]),
             f"{int(unknown.sum())} fix(es) with position_covariance_type UNKNOWN",
         ))
     cov_enu = a["position_covariance"].reshape(-1, 3, 3)
@@ -468,6 +491,7 @@ def _assemble_all(
                         cols[fix_topic], issues)
     vel = _assemble_vel(_window(cols[vel_topic].arrays(), start_ns, end_ns),
                         cols[vel_topic], issues)
+    del imu_raw  # the raw log time stamps go now, before the rate check's temporaries
     if check_units and len(vel):
         _check_rate_units_against_gnss(imu, vel, imu_topic, cols[imu_topic].path)
     events_ns = _assemble_events(_window(cols[events_topic].arrays(), start_ns, end_ns),

@@ -10,6 +10,17 @@ Run on demand (not collected by pytest)::
 zstd or lz4, whole or cut, its header claiming 200 MiB or 2 GiB) and prints the peak resident
 set above the baseline of each read (per tree, with a 120 s limit per file).
 
+``--memory FILE`` prints, for each tree, the peak resident set of reading FILE (default: the
+reference case ``flight_null_200hz.mcap``) above the set just before the read, next to the
+decoded arrays' size and the largest chunk (compressed + decompressed). A small log is read
+first in the same process, so that the one-time costs (numba's LLVM initialisation and
+loading the cached kernels, the generic decoder's schema parsing) are outside the peak; they
+are printed apart.
+
+``--warm`` measures in ONE process per tree, after a first read (the pipeline's situation:
+numba initialised, kernels loaded): the floor, ``read_flight_log``, and ``read_flight_log``
+with the chunk CRC check switched off, interleaved ``--repeat`` times; best CPU and wall.
+
 ``--trees`` runs each method with the ``pospp`` of each given source tree, interleaved run by
 run (so that a change of machine load hits both alike), to compare two versions of the reader.
 
@@ -139,6 +150,77 @@ def read_bomb(path: Path) -> str:
         verdict = "IngestError"
     grown = _status_mib("VmHWM") - base
     return f"| {path.name} ({path.stat().st_size / 1e3:.0f} kB) | {grown:.0f} | {verdict} |"
+
+
+def _largest_chunk_bytes(path: Path) -> int:
+    """Compressed + decompressed size of the file's largest chunk [bytes]."""
+    import struct
+
+    data, pos, best = path.read_bytes(), 8, 0
+    while pos < len(data) - 8:
+        op, ln = struct.unpack_from("<BQ", data, pos)
+        if op == 0x02:
+            break
+        if op == 0x06:
+            best = max(best, ln + struct.unpack_from("<Q", data, pos + 25)[0])
+        pos += 9 + ln
+    return best
+
+
+def read_memory(path: Path) -> str:
+    """One table row: the read's peak above the set before it, with the one-time costs apart."""
+    import numpy as np
+
+    from pospp.io.mcap_reader import read_flight_log
+
+    small = Path("/tmp/pospp_bench_bombs/src.mcap")
+    if not small.exists():
+        bomb_files(small.parent)
+    after_imports = _status_mib("VmRSS")
+    read_flight_log(small, check_units=False)  # numba init, kernels loaded, decoders built
+    before = _status_mib("VmRSS")
+    Path("/proc/self/clear_refs").write_text("5")  # VmHWM := VmRSS
+    log = read_flight_log(path)
+    peak = _status_mib("VmHWM") - before
+    decoded = sum(v.nbytes for part in (log.imu, log.fix, log.vel)
+                  for v in vars(part).values() if isinstance(v, np.ndarray)) / 2**20
+    chunk = _largest_chunk_bytes(path) / 2**20
+    return (f"| {path.name} | {before - after_imports:.0f} | {peak:.0f} | {decoded:.1f} | "
+            f"{chunk:.1f} | {peak - decoded - chunk:+.1f} |")
+
+
+def warm_rows(path: Path, repeat: int) -> list[str]:
+    """``--warm``: floor / reader / reader without chunk CRCs, interleaved in this process."""
+    import pospp.io._mcap_scan as scan
+    from pospp.io.mcap_reader import read_flight_log
+
+    parse = scan._parse_chunk
+
+    def no_crc(body: bytes, truncated: bool):  # the stored CRC set to 0: not checked
+        chunk = parse(body, truncated)
+        return scan._RawChunk(chunk.start_ns, chunk.end_ns, chunk.uncompressed_size, 0,
+                              chunk.compression, chunk.data, chunk.truncated)
+
+    def reader_no_crc() -> None:
+        scan._parse_chunk = no_crc
+        try:
+            read_flight_log(path)
+        finally:
+            scan._parse_chunk = parse
+
+    methods = {"floor": lambda: _floor(path), "read_flight_log": lambda: read_flight_log(path),
+               "read_flight_log, chunk CRCs not checked": reader_no_crc}
+    read_flight_log(path)
+    best = {k: (9e9, 9e9) for k in methods}
+    for _ in range(repeat):
+        for name, fn in methods.items():
+            t, c = time.perf_counter(), time.process_time()
+            fn()
+            c, t = time.process_time() - c, time.perf_counter() - t
+            best[name] = (min(best[name][0], c), min(best[name][1], t))
+    floor_cpu, floor_wall = best["floor"]
+    return [f"| {k} | {c:.3f} | {c / floor_cpu:.1f} | {w:.3f} | {w / floor_wall:.1f} |"
+            for k, (c, w) in best.items()]
 
 
 def _library_decode(path: Path, *, seeking: bool) -> int:
@@ -273,7 +355,40 @@ def main() -> None:
     ap.add_argument("--tree", help=argparse.SUPPRESS)
     ap.add_argument("--bombs", action="store_true", help="peak memory on decompression bombs")
     ap.add_argument("--bomb", help=argparse.SUPPRESS)
+    ap.add_argument("--memory", nargs="?", type=Path, help="peak memory of one read",
+                    const=Path("../shared/reference_cases/flight_null_200hz.mcap"))
+    ap.add_argument("--memory-one", type=Path, help=argparse.SUPPRESS)
+    ap.add_argument("--warm", action="store_true", help="floor and reader in one warm process")
+    ap.add_argument("--warm-one", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.warm_one:
+        print("\n".join(warm_rows(args.path, args.repeat)))
+        return
+    if args.warm:
+        if not args.path.exists():
+            build(args.path)
+        print(f"file: {args.path}, best of {args.repeat}, one process per tree after a first "
+              "read\n\n| method | CPU [s] | CPU x floor | wall [s] | wall x floor |\n"
+              "|---|---:|---:|---:|---:|")
+        for tree in [str(Path(t).resolve()) for t in args.trees.split(",")]:
+            out = subprocess.run([sys.executable, __file__, "--warm-one", "--path",
+                                  str(args.path), "--repeat", str(args.repeat), "--tree", tree],
+                                 capture_output=True, text=True, timeout=600)
+            print(f"| {tree} | | | | |\n" + (out.stdout.strip() or out.stderr[-400:]))
+        return
+    if args.memory_one:
+        print(read_memory(args.memory_one))
+        return
+    if args.memory:
+        print("| file | one-time init [MiB] | read peak above the set before it [MiB] | "
+              "decoded arrays [MiB] | largest chunk [MiB] | peak - arrays - chunk [MiB] |\n"
+              "|---|---:|---:|---:|---:|---:|")
+        for tree in [str(Path(t).resolve()) for t in args.trees.split(",")]:
+            out = subprocess.run([sys.executable, __file__, "--memory-one",
+                                  str(args.memory.resolve()), "--tree", tree],
+                                 capture_output=True, text=True, timeout=300)
+            print(out.stdout.strip() or out.stderr[-400:], f"({tree})")
+        return
     if args.bomb:
         print(read_bomb(Path(args.bomb)))
         return
