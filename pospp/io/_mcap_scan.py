@@ -121,8 +121,9 @@ def _cdr_dtype(layout: tuple[tuple[str, str, int], ...], frame_id_len: int) -> n
     return rm.cdr_dtype(layout, frame_id_len)
 
 
-def _field_values(buf: np.ndarray, starts: np.ndarray, dt: np.ndarray, name: str) -> np.ndarray:
+def _field_values(buf: np.ndarray, starts: np.ndarray, dt: np.dtype, name: str) -> np.ndarray:
     """Field ``name`` of layout ``dt`` for messages starting at ``starts``: (n,) or (n, k)."""
+    assert dt.fields is not None  # a structured dtype (_cdr_dtype)
     ftype, offset = dt.fields[name][:2]
     base = ftype.base if ftype.subdtype else ftype
     raw = np.ascontiguousarray(_gather(buf, starts, offset, ftype.itemsize))
@@ -248,6 +249,7 @@ class Collector:
 
     def _empty(self, n: int) -> dict[str, np.ndarray]:
         probe = _cdr_dtype(self.spec.layout, 1)
+        assert probe.fields is not None  # a structured dtype
         res = {"time_ns": np.empty(n, np.int64), "log_time_ns": np.empty(n, np.int64)}
         for name in self.spec.wanted:
             ftype = probe.fields[name][0]
@@ -332,7 +334,7 @@ class Collector:
                 out[name][done] = out[name][done].byteswap()
         for i in np.flatnonzero(state == 2):
             s, ln = int(starts[i]), int(_REC(buf, int(pos[i]))[1]) - 22
-            vals = self._decode_slow(channel_id, buf[s : s + ln].tobytes(), row0 + i)
+            vals = self._decode_slow(channel_id, buf[s : s + ln].tobytes(), row0 + int(i))
             for name in self.spec.wanted:
                 out[name][row0 + i] = vals[name]
             out["time_ns"][row0 + i] = vals["time_ns"]
@@ -358,12 +360,13 @@ class Collector:
                 plen = _gather(buf, pos[same], 1, 8).view("<u8")[:, 0].astype(np.int64) - 22
                 hit = same[plen == dt.itemsize]
                 j = int(hit[0]) if hit.size else -1
-        fast = j >= 0 and self._layout_ok(channel_id, buf, starts, j, dt)
-        if not fast:  # the generic decoder for all pending messages of this frame_id length
+        if dt is None or j < 0 or not self._layout_ok(channel_id, buf, starts, j, dt):
+            # the generic decoder for all pending messages of this frame_id length
             _decode_fixed(buf, pos, state, fl, 0, False, np.zeros(len(self.spec.wanted),
                           np.int64), self._views, self._out["time_ns"], row0,
                           np.zeros(0, np.uint8))
             return
+        assert dt.fields is not None  # a structured dtype
         off = np.array([dt.fields[f][1] for f in self.spec.wanted], np.int64)
         known = (fl, dt.itemsize, off, buf[int(starts[j]) + 16 : int(starts[j]) + 16 + fl].copy())
         self._fast[channel_id] = known
@@ -426,7 +429,8 @@ class Collector:
 
 # --------------------------------------------------------------------------- streaming pass
 
-_REC = struct.Struct("<BQ").unpack_from
+# typed for any buffer: numpy's stubs give ndarray no ``__buffer__`` before Python 3.12
+_REC: Callable[[Any, int], tuple[Any, ...]] = struct.Struct("<BQ").unpack_from
 _U16 = struct.Struct("<H").unpack_from
 _CHUNK_HEAD = struct.Struct("<QQQII")  # start, end, uncompressed size, crc, compression len
 # Statistics: message_count u64, schema_count u16, channel_count u32, attachment_count u32,
@@ -455,7 +459,7 @@ def _walk_pass(buf: np.ndarray, msg_pos: np.ndarray, msg_ch: np.ndarray, meta_po
     n = buf.shape[0]
     n_msg = 0
     n_meta = 0
-    pos = 0
+    pos: int | np.int64 = 0  # int64 once a record length is added
     while pos < n:
         if pos + 9 > n:
             return n_msg, n_meta, pos, 1
@@ -617,6 +621,7 @@ def _decompress(chunk: _RawChunk,
     if usize > max_bytes:
         raise ValueError(f"chunk claims {usize} uncompressed bytes, over the cap of {max_bytes} "
                          "(max_chunk_bytes; a corrupt header, or raise the cap)")
+    data: bytes | bytearray | memoryview
     if chunk.compression == "zstd":
         import zstandard
 
@@ -724,6 +729,7 @@ class Scan:
                     f"topic {rec.topic!r} has schema {got!r}, expected {col.spec.type_name!r}",
                     file=self.path, topic=rec.topic,
                 )
+            assert schema is not None  # "<no schema>" raised above
             if rec.message_encoding != "cdr" or schema.encoding != "ros2msg":
                 raise IngestError(
                     f"topic {rec.topic!r} is {rec.message_encoding!r} / {schema.encoding!r}, "
@@ -734,7 +740,7 @@ class Scan:
             col.reserve(self._hints.get(rec.id, 0))
         self.route[rec.id] = col
 
-    def _meta(self, op: int, body: bytes | memoryview) -> None:
+    def _meta(self, op: int, body: bytes | bytearray | memoryview) -> None:
         stream = ReadDataStream(BytesIO(body))
         try:
             rec = Schema.read(stream) if op == _OP_SCHEMA else Channel.read(stream)
