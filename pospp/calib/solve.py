@@ -54,6 +54,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -570,7 +571,9 @@ def _chol_whiten(c: NDArray, h: NDArray, z: NDArray) -> tuple[NDArray, NDArray, 
     return _tri_solve(ll, h), _tri_solve(ll, z), 2.0 * float(np.sum(np.log(np.diag(ll))))
 
 
-def _grid_argmin(obj, bounds: list[tuple[float, float]], n: int) -> tuple[NDArray, NDArray]:
+def _grid_argmin(
+    obj, bounds: list[tuple[float, float]], n: int
+) -> tuple[NDArray, list[NDArray]]:
     """The best point of an n-per-axis grid over ``bounds`` (the start of the REML searches).
 
     Returns (best point, the grid's axes).
@@ -634,7 +637,7 @@ def fit_noise_model(
         base.append((np.eye(sq.size), gyro_noise_covariance(rep, smp) / np.outer(sq, sq),
                      accel_noise_covariance(rep, smp) / np.outer(sq, sq), sq))
     q_fixed = None if gyro_arw_radpsqrts is None else float(gyro_arw_radpsqrts) ** 2
-    ops = [None] * len(legs)
+    ops: list[tuple[NDArray, NDArray] | None] = [None] * len(legs)
     if gyro_gm_taus_s:
         ops = []
         for rep, smp, (_, _, _, sq) in zip(legs, rows, base, strict=True):
@@ -647,6 +650,7 @@ def fit_noise_model(
             g = reference_error_covariance(rep, length, smp, kind) / np.outer(sq, sq)
             m = [eye, k, ka, g]
             if tau is not None:
+                assert op is not None  # a tau only when gyro_gm_taus_s built the operators
                 m.append(_gm_covariance([op], tau))
             mats.append(tuple(m))
         free_q = q_fixed is None
@@ -842,7 +846,8 @@ def gm_noise_operator(rep: LegReplay, rows: NDArray | None = None, *, bin_s: flo
     b = np.floor(tau_k / bin_s).astype(int)
     nb = int(b[-1]) + 1
     sb = np.zeros((idx.size, 2, nb, 3))
-    np.add.at(sb, (slice(None), slice(None), b), s)
+    # cast: numpy's stubs take no slices in ufunc.at's index
+    np.add.at(sb, cast(Any, (slice(None), slice(None), b)), s)
     # bin centre: the mean sample time of the bin (weights dt)
     centre = np.bincount(b, weights=(tau_k + 0.5 * dt) * dt, minlength=nb) / np.maximum(
         np.bincount(b, weights=dt, minlength=nb), 1e-12)
