@@ -294,6 +294,7 @@ def calibrate_flight(
                               "gyro_arw_radpsqrts": None if gyro_arw_dpsh is None
                               else gyro_arw_dpsh * _DPSH_RADPSQRTS}
     if gm_on:
+        assert gyro_gm_tau_s is not None  # gm_on needs it
         cal_kw["gyro_gm_tau_s"] = float(gyro_gm_tau_s)
         cal_kw["gyro_gm_sigma_radps"] = (None if gyro_gm_sigma_dph is None
                                          else gyro_gm_sigma_dph * DEG_PER_H_RADPS)
@@ -336,8 +337,10 @@ def calibrate_flight(
         drift_source = "given" if cal_kw["gyro_gm_sigma_radps"] is not None else "flight_sigma"
     prior = None
     if gm_on and cal_kw["gyro_gm_sigma_radps"] is None and gyro_gm_prior_sigma_dph:
+        assert gyro_gm_tau_s is not None  # gm_on needs it
         prior = DriftPrior(gyro_gm_prior_sigma_dph * DEG_PER_H_RADPS, float(gyro_gm_tau_s))
     if gm_on and cal_kw["gyro_gm_sigma_radps"] is None:
+        assert gyro_gm_tau_s is not None  # gm_on needs it
         # the drift's sigma by REML once, on the joint fit of the compensation formulation
         # over the legs of the usable pairs; the pairs and the other formulations reuse it
         # (a pair alone has too few legs to estimate it, and it saves most of the cost)
