@@ -13,6 +13,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -183,8 +184,9 @@ def simulate_log(tpl: FlightTemplate, imu: ImuErrorModel, gnss: GnssModel, *,
     for a, b in tpl.imu_gaps_s:
         keep &= ~((ts > a) & (ts < b))
     if not keep.all():
-        ims = replace(ims, **{k: v[keep] for k, v in vars(ims).items()
-                              if isinstance(v, np.ndarray) and v.shape[:1] == keep.shape})
+        cut: dict[str, Any] = {k: v[keep] for k, v in vars(ims).items()
+                               if isinstance(v, np.ndarray) and v.shape[:1] == keep.shape}
+        ims = replace(ims, **cut)
     vel = sim.vel if tpl.has_velocity else replace(
         sim.vel, **{k: v[:0] for k, v in vars(sim.vel).items() if isinstance(v, np.ndarray)})
     return mcap_reader.FlightLog(ims, sim.fix, vel, "simulation")
