@@ -86,7 +86,7 @@ def gaps(measured: FlightStats, simulated: FlightStats, *, alpha: float = ALPHA
         z = g / sig
         raw[name] = _pvalue(m, s, z)
         out[name] = Gap(name, m.value, s.value, g, sig, z, np.nan, False)
-    order = sorted(raw, key=raw.get)
+    order = sorted(raw, key=raw.__getitem__)
     n = len(order)
     running = 0.0
     stop = False
@@ -94,8 +94,9 @@ def gaps(measured: FlightStats, simulated: FlightStats, *, alpha: float = ALPHA
         running = max(running, min(1.0, (n - i) * raw[name]))
         sig = (not stop) and running <= alpha
         stop = stop or not sig
-        g = out[name]
-        out[name] = Gap(name, g.measured, g.simulated, g.gap, g.sigma, g.z, running, sig)
+        old = out[name]
+        out[name] = Gap(name, old.measured, old.simulated, old.gap, old.sigma, old.z, running,
+                        sig)
     return out
 
 
@@ -190,6 +191,7 @@ def _grid_fit(effect: SimEffect, names: list[str], g: NDArray, w: NDArray, base:
     Delta chi^2 = 1 half-width of the parabola through the residuals at the best value and
     its two neighbours (NaN at the grid's ends)."""
     p = len(effect.params)
+    assert effect.grid is not None  # called for effects with a grid only
     jg, values = effect.grid
     free = [j for j in range(p) if j != jg and j not in effect.fixed]
     fits = []
@@ -219,6 +221,7 @@ def _grid_point(effect: SimEffect, v: float, names: list[str], g: NDArray, w: ND
                 ctx: EffectContext):
     """One value of :func:`_grid_fit`: (re-simulated weighted residual, WLS fit) or None."""
     p = len(effect.params)
+    assert effect.grid is not None and effect.trial is not None  # _fit checked both
     jg = effect.grid[0]
     free = [j for j in range(p) if j != jg and j not in effect.fixed]
     h = np.zeros((len(names), len(free)))

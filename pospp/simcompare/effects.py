@@ -45,6 +45,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -166,7 +167,7 @@ class SimEffect:
 def _vibration(imu: ImuErrorModel, gnss: GnssModel, u: NDArray, ctx: EffectContext):
     acc = np.sqrt(np.clip(np.square(imu.accel_vibration_rms_mps2) + u[0], 0.0, None))
     gyr = np.sqrt(np.clip(np.square(np.radians(imu.gyro_vibration_rms_dps)) + u[1], 0.0, None))
-    kw = {}
+    kw: dict[str, Any] = {}
     if not imu.has_vibration():
         f = ctx.hf_peak_hz if np.isfinite(ctx.hf_peak_hz) else 50.0
         kw = {"vibration_freq_hz": float(f), "vibration_bandwidth_hz": 0.0}
@@ -230,7 +231,8 @@ def _norm(kind: str) -> tuple[str, ...]:
     return tuple(f"gnss_{kind}_norm_{a}" for a in "ned")
 
 def _effect(name: str, fit_stats: tuple[str, ...], explains: tuple[str, ...],
-            trial: tuple[float, ...] | None, variance: bool, apply: Apply, **kw) -> SimEffect:
+            trial: tuple[float, ...] | None, variance: bool | tuple[bool, ...], apply: Apply,
+            **kw) -> SimEffect:
     """A library effect whose name, parameters, unit and SI conversion are the shared
     catalogue's (:mod:`pospp.effects_catalog`)."""
     c = catalog_entry(name)

@@ -87,6 +87,7 @@ Statistics (name: series, unit)
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -194,7 +195,7 @@ def dominant_frequency_hz(x: NDArray, dt_s: float) -> float:
     return float(f[m][np.argmax(p[m])]) if m.any() else np.nan
 
 
-def _from_blocks(values: list[float]) -> Stat:
+def _from_blocks(values: Sequence[float | np.floating]) -> Stat:
     """Batch means of per-block values: mean, std / sqrt(k), k - 1 dof."""
     v = np.asarray(values, dtype=float)
     v = v[np.isfinite(v)]
@@ -329,6 +330,7 @@ def _nearest(ts: NDArray, t: NDArray) -> NDArray:
 
 def _innov(nav: FilterResult, kind: int) -> tuple[NDArray, NDArray, NDArray]:
     inn = nav.innovations
+    assert inn is not None  # the filter's result of a run with GNSS updates
     m = (inn.kind == kind) & ((inn.status == 0) | (inn.status == 2)) & np.isfinite(inn.nis)
     return inn.t_s[m], inn.nis[m], inn.dz_ned[m]
 
@@ -394,8 +396,8 @@ def _innovation_stats(nav: FilterResult, sol: NavSolution, t0: float, t1: float,
         tl, pl = _lag1(t, dz)
         out[f"gnss_{name}_lag1"] = _batch(tl, pl, t0, t1, n_blocks)
         if name == "vel":
-            a = np.stack([np.interp(t, sol.t_s, acc[:, i]) for i in range(2)], axis=1)
-            out["gnss_vel_dot_accel"] = _batch(t, np.sum(dz[:, :2] * a, axis=1), t0, t1,
+            acc_ne = np.stack([np.interp(t, sol.t_s, acc[:, i]) for i in range(2)], axis=1)
+            out["gnss_vel_dot_accel"] = _batch(t, np.sum(dz[:, :2] * acc_ne, axis=1), t0, t1,
                                                n_blocks)
         if gnss_sigma is not None and kind in gnss_sigma and t.size:
             ts, sg = gnss_sigma[kind]
