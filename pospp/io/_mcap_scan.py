@@ -32,6 +32,7 @@ from mcap.exceptions import McapError
 from mcap.records import Channel, Schema
 from mcap_ros2.decoder import DecoderFactory
 from numba import njit
+from numba.core.errors import NumbaError
 
 from pospp.io import ros_messages as rm
 from pospp.io.errors import IngestError, IngestIssue
@@ -267,8 +268,10 @@ class Collector:
         for k, a in self._out.items():
             new[k][: self.count] = a[: self.count]
         self._out = new
+        # one zero-width view when only the stamp is wanted (trigger events): the compiled
+        # pass cannot type an empty tuple
         self._views = tuple(new[name].reshape(new_cap, -1).view(np.uint8)
-                            for name in self.spec.wanted)
+                            for name in self.spec.wanted) or (np.zeros((new_cap, 0), np.uint8),)
 
     # -- generic path
     def _decoder(self, channel_id: int) -> Callable[[bytes], Any]:
@@ -362,12 +365,12 @@ class Collector:
                 j = int(hit[0]) if hit.size else -1
         if dt is None or j < 0 or not self._layout_ok(channel_id, buf, starts, j, dt):
             # the generic decoder for all pending messages of this frame_id length
-            _decode_fixed(buf, pos, state, fl, 0, False, np.zeros(len(self.spec.wanted),
+            _decode_fixed(buf, pos, state, fl, 0, False, np.zeros(len(self._views),
                           np.int64), self._views, self._out["time_ns"], row0,
                           np.zeros(0, np.uint8))
             return
         assert dt.fields is not None  # a structured dtype
-        off = np.array([dt.fields[f][1] for f in self.spec.wanted], np.int64)
+        off = np.array([dt.fields[f][1] for f in self.spec.wanted] or [0], np.int64)
         known = (fl, dt.itemsize, off, buf[int(starts[j]) + 16 : int(starts[j]) + 16 + fl].copy())
         self._fast[channel_id] = known
         self._decode_known(buf, starts, pos, state, row0, *known)
@@ -984,8 +987,8 @@ class Scan:
         try:
             data = _decompress(chunk, self.max_chunk_bytes)
             self._records(data, partial=chunk.truncated)
-        except IngestError:
-            raise
+        except (IngestError, NumbaError):
+            raise  # a compiled pass that fails is pospp's error, not a corrupt chunk
         except Exception as exc:  # noqa: BLE001 - zstd/lz4 errors have their own classes
             if chunk.truncated:
                 raise _Truncated(f"chunk cut off and undecodable: {exc}") from exc
