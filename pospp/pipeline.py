@@ -708,16 +708,22 @@ def diagnose(calib_run: CalibrationRun, imu: ImuIncrements, reference: Reference
 
 def _named_removed(replays: list, d: Diagnosis, sigs: dict[str, list[np.ndarray]]
                    ) -> list | None:
-    """The replays minus the named re-run effects' fitted response (``S p``, SI), for the
-    whitening's estimate; None when none of them was named."""
-    named = [e for e in d.named if e in sigs]
-    if not named:
-        return None
+    """The replays minus the fitted response (``S p``, SI) of the re-run effects named, or,
+    when none was, of the first step's significant re-run candidate with the largest F: the
+    replays to estimate the whitening on (the noise estimated under the model tested). None
+    when no re-run effect was named or significant."""
+    fits = {e: d.step_of(e).values for e in d.named if e in sigs}
+    if not fits:
+        first = [c for c in d.candidates if c.step == 1 and c.significant and c.effect in sigs]
+        if not first:
+            return None
+        best = max(first, key=lambda c: c.statistic)
+        fits = {best.effect: best.values}
     out = []
     for k, r in enumerate(replays):
         dv = r.dv_n_mps.copy()
-        for e in named:
-            p_si = np.asarray(d.step_of(e).values, dtype=float) * effect_by_id(e).si_per_unit
+        for e, values in fits.items():
+            p_si = np.asarray(values, dtype=float) * effect_by_id(e).si_per_unit
             dv[:, 0:2] -= sigs[e][k] @ p_si
         out.append(replace(r, dv_n_mps=dv))
     return out
