@@ -697,7 +697,8 @@ def diagnose(calib_run: CalibrationRun, imu: ImuIncrements, reference: Reference
     d = run(sigs)
     for _ in range(REFINE_ITERATIONS if sigs else 0):
         # A is not linear in a GNSS-side effect: secants through the current estimates
-        refined, at = refine_signatures(log, nav, calib_run, config, sigs, first_estimates(d), at,
+        refined, at = refine_signatures(log, nav, calib_run, config, sigs,
+                                        first_estimates(d, config.pairs.diagnose_alpha), at,
                                         navigate=a_as_configured)
         if all(refined[k] is sigs[k] for k in sigs):
             break

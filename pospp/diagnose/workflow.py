@@ -555,7 +555,10 @@ def diagnose(
         eff = best["eff"]
         confounded = []
         for tr in trials:
-            if tr is best or not tr["sig"]:
+            # other significant candidates, and those that explain the gap as well at the
+            # uncorrected level (a GNSS time offset against the lever arm it aliases into)
+            if tr is best or not (tr["sig"] or (tr["p"] < alpha
+                                                and tr["frac"] >= min_explained_fraction)):
                 continue
             both = prob.fit(terms + [tr["term"], best["term"]])
             dof = n - both.rank
