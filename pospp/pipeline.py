@@ -37,12 +37,15 @@ from pospp.calib.replay import ImuIncrements, ReferenceSolution, replay_leg
 from pospp.calib.stage import CalibrationRun, calibrate_flight, with_null_covariance
 from pospp.config import PipelineConfig, config_from_dict
 from pospp.diagnose import null_model
+from pospp.diagnose.effects import effect_by_id
 from pospp.diagnose.rerun import (
     PIPELINE_RERUN,
+    REFINE_FRACTION,
     REFINE_ITERATIONS,
     first_estimates,
     refine_signatures,
     rerun_signatures,
+    signature_at,
 )
 from pospp.diagnose.workflow import Diagnosis, diagnosis_columns, residual_curve_columns
 from pospp.diagnose.workflow import diagnose as run_diagnosis
@@ -446,32 +449,40 @@ QC_LEVER_ARM_SIGMA_M = 2.0
 """Prior sigma of the lever-arm states in the QC stage's re-estimation [m]."""
 
 
+def lever_arm_estimate(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
+                       config: PipelineConfig) -> nav_filter.LeverArmEstimate:
+    """The antenna lever arm (body FRD, m) estimated by one forward pass of A with lever-arm
+    states (no smoother) and a :data:`QC_LEVER_ARM_SIGMA_M` prior sigma (the QC stage's, and
+    the diagnosis's starting point for ``lever_arm``). The axes A's attitude history reveals
+    (:func:`pospp.qc.checks.lever_arm_observable`) start from zero, so that the configured
+    value does not pull them; the others start from the configured value, where they stay
+    instead of floating and leaking into the revealed ones (all from zero, a 1.5 m down lever
+    that one banked turn cannot reveal bent the forward estimate by 0.3 m at 14 sigma: 2 false
+    alarms in 100 clean flights, docs/qc.md). Raises ValueError when A fails."""
+    from pospp.qc.checks import lever_arm_observable
+
+    rerun = replace(config, gnss=replace(config.gnss, estimate_lever_arm=True))
+    opts = replace(config.filter_options(), smoother=False,
+                   lever_arm_sigma_m=QC_LEVER_ARM_SIGMA_M)
+    sol = nav.smoothed if nav.smoothed is not None else nav.forward
+    start = np.where(lever_arm_observable(sol.rpy_rad), 0.0,
+                     np.asarray(config.gnss.lever_arm_m, dtype=float))
+    return navigate(log, rerun, lever_arm_b_m=start, options=opts).lever_arm
+
+
 def quality_control(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                     calib_run: CalibrationRun | None, config: PipelineConfig,
                     book: _Progress | None = None) -> QualityReport:
     """The QC stage (pospp.qc): every check, with the lever arm re-estimated by A.
 
     Unless A already estimated it, the lever arm is estimated by one more forward pass of A
-    with lever-arm states (no smoother; about a third of A's time) and a 2 m sigma. The axes
-    A's attitude history reveals (:func:`pospp.qc.checks.lever_arm_observable`) start from
-    zero, so that the configured value does not pull them; the others start from the
-    configured value, where they stay instead of floating and leaking into the revealed ones
-    (all from zero, a 1.5 m down lever that one banked turn cannot reveal bent the forward
-    estimate by 0.3 m at 14 sigma: 2 false alarms in 100 clean flights, docs/qc.md). Failed
+    with lever-arm states (:func:`lever_arm_estimate`; about a third of A's time). Failed
     checks are noted in ``book`` (stage "qc").
     """
     lever = None
     if not config.gnss.estimate_lever_arm:
         try:
-            rerun = replace(config, gnss=replace(config.gnss, estimate_lever_arm=True))
-            opts = replace(config.filter_options(), smoother=False,
-                           lever_arm_sigma_m=QC_LEVER_ARM_SIGMA_M)
-            from pospp.qc.checks import lever_arm_observable
-
-            sol = nav.smoothed if nav.smoothed is not None else nav.forward
-            start = np.where(lever_arm_observable(sol.rpy_rad), 0.0,
-                             np.asarray(config.gnss.lever_arm_m, dtype=float))
-            lever = navigate(log, rerun, lever_arm_b_m=start, options=opts).lever_arm
+            lever = lever_arm_estimate(log, nav, config)
         except ValueError as exc:
             if book is not None:
                 book.note("warning", "qc", f"lever arm not re-estimated: {exc}")
@@ -602,6 +613,19 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     return out
 
 
+def _lever_arm_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
+                     config: PipelineConfig) -> np.ndarray | None:
+    """Configured minus A's estimate of the lever arm (the diagnosis's ``dl``, FRD, m), or
+    None when A estimates the lever arm itself or the extra pass fails."""
+    if config.gnss.estimate_lever_arm:
+        return None
+    try:
+        est = lever_arm_estimate(log, nav, config)
+    except ValueError:
+        return None
+    return np.asarray(config.gnss.lever_arm_m, dtype=float) - est.lever_b_m
+
+
 def diagnose(calib_run: CalibrationRun, imu: ImuIncrements, reference: ReferenceSolution,
              config: PipelineConfig, *, log: mcap_reader.FlightLog | None = None,
              nav: nav_filter.FilterResult | None = None,
@@ -622,31 +646,79 @@ def diagnose(calib_run: CalibrationRun, imu: ImuIncrements, reference: Reference
                         ) -> nav_filter.FilterResult:
         return navigate(log_p, config, lever_arm_b_m=lever_arm_b_m)
 
-    sigs = rerun_signatures(log, nav, calib_run, config, PIPELINE_RERUN,
-                            navigate=a_as_configured) \
-        if log is not None and nav is not None else None
+    sigs: dict[str, list[np.ndarray]] | None = None
+    at: dict[str, np.ndarray] = {}
+    if log is not None and nav is not None:
+        # the lever arm: Gauss-Newton from A's own estimate of it (lever-arm states): the
+        # signature made there (secant along it, axis derivatives at the estimate; 1 + 4 A
+        # runs) instead of at the configured value, where A's gate and attitude Jacobian are
+        # those of the wrong lever arm (docs/diagnose.md, "Power")
+        p_lever = _lever_arm_start(log, nav, config)
+        gn = p_lever is not None and bool(
+            np.linalg.norm(p_lever) > REFINE_FRACTION * effect_by_id("lever_arm").plausible_si)
+        sigs = rerun_signatures(log, nav, calib_run, config,
+                                [e for e in PIPELINE_RERUN if not (gn and e == "lever_arm")],
+                                navigate=a_as_configured)
+        if gn and p_lever is not None:
+            try:
+                sigs["lever_arm"] = signature_at(log, nav, calib_run, config, "lever_arm",
+                                                 p_lever, navigate=a_as_configured)
+                at["lever_arm"] = p_lever
+            except (ValueError, np.linalg.LinAlgError):  # A failed at the estimate
+                sigs.update(rerun_signatures(log, nav, calib_run, config, ("lever_arm",),
+                                             navigate=a_as_configured))
     # B's residuals carry the gyro angle random walk, correlated along each leg: weighting them
     # as white noise would make every F-test too liberal
     arw_radpsqrts = imu_tuning(config).noise().gyro_arw_radpsqrts
-    def run(signatures):
+    def run(signatures, whitening_replays=None):
         return run_diagnosis(
             replays, imu=imu, reference=reference,
             replay_kwargs={"accel_compensation": config.replay.accel_compensation},
             base_formulation=config.pairs.formulation, base_transition=config.pairs.transition,
             noise="gyro_rw", gyro_arw_radpsqrts=arw_radpsqrts, null_dv=null_dv,
-            alpha=config.pairs.diagnose_alpha, signatures=signatures)
+            alpha=config.pairs.diagnose_alpha, signatures=signatures,
+            whitening_replays=whitening_replays)
 
     d = run(sigs)
-    at: dict[str, np.ndarray] = {}
     for _ in range(REFINE_ITERATIONS if sigs else 0):
         assert sigs is not None  # the loop runs only with signatures
         # A is not linear in a GNSS-side effect: secants through the current estimates
-        refined, at = refine_signatures(log, nav, calib_run, config, sigs, first_estimates(d), at,
+        refined, at = refine_signatures(log, nav, calib_run, config, sigs,
+                                        first_estimates(d, config.pairs.diagnose_alpha), at,
                                         navigate=a_as_configured)
         if all(refined[k] is sigs[k] for k in sigs):
             break
         d, sigs = run(refined), refined
-    return d
+    removed = _named_removed(replays, d, sigs) if sigs else None
+    if removed is None:
+        return d
+    # the whitening under the model named: a pass whose whitening drops an effect it was
+    # estimated under is not self-consistent, and the first stands (measured: a 3 m lever arm)
+    d2 = run(sigs, removed)
+    return d2 if set(d.named) <= set(d2.named) else d
+
+
+def _named_removed(replays: list, d: Diagnosis, sigs: dict[str, list[np.ndarray]]
+                   ) -> list | None:
+    """The replays minus the fitted response (``S p``, SI) of the re-run effects named, or,
+    when none was, of the first step's significant re-run candidate with the largest F: the
+    replays to estimate the whitening on (the noise estimated under the model tested). None
+    when no re-run effect was named or significant."""
+    fits = {e: d.step_of(e).values for e in d.named if e in sigs}
+    if not fits:
+        first = [c for c in d.candidates if c.step == 1 and c.significant and c.effect in sigs]
+        if not first:
+            return None
+        best = max(first, key=lambda c: c.statistic)
+        fits = {best.effect: best.values}
+    out = []
+    for k, r in enumerate(replays):
+        dv = r.dv_n_mps.copy()
+        for e, values in fits.items():
+            p_si = np.asarray(values, dtype=float) * effect_by_id(e).si_per_unit
+            dv[:, 0:2] -= sigs[e][k] @ p_si
+        out.append(replace(r, dv_n_mps=dv))
+    return out
 
 
 def evaluate_run(run_dir: str | Path, truth_file: str | Path, *, skip_s: float = 0.0

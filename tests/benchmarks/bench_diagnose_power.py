@@ -128,7 +128,8 @@ def power(seeds: int, sizes) -> None:
         named = sum(r.named for r in runs)
         ok = sum(r.within_20pct for r in runs)
         est = ", ".join(f"{r.estimate:.3g}" for r in runs)
-        concl = ", ".join(sorted({r.diagnosis.conclusion for r in runs}))
+        concl = ", ".join(f"{c} {sum(r.diagnosis.conclusion == c for r in runs)}"
+                          for c in sorted({r.diagnosis.conclusion for r in runs}))
         unit = tp.EFFECT_UNITS.get(eff, "")
         print(f"| {eff} | {size:g} {unit} | {named} | {ok} | {est} | {concl} |", flush=True)
 
