@@ -158,8 +158,10 @@ def _effect_term(prob: Problem, terms: list[Term], eff: fx.Effect, sigs: list[ND
     if not all(np.all(np.isfinite(r)) for r in raw):
         return None
     probe = Term(eff.effect_id, raw)
-    g = c = e = 0.0
-    for i in range(len(prob.reps)):
+    h = prob.leg_matrix(terms, 0)
+    ew = prob.wblocks(probe)[0]
+    g, c, e = h.T @ h, h.T @ ew, ew.T @ ew
+    for i in range(1, len(prob.reps)):
         h = prob.leg_matrix(terms, i)
         ew = prob.wblocks(probe)[i]
         g, c, e = g + h.T @ h, c + h.T @ ew, e + ew.T @ ew
@@ -185,6 +187,7 @@ def _effect_estimate(term: Term, fit: Fit, terms: list[Term], s2: float
     w = term.blocks[0].shape[1]
     c = fit.x[k:k + w]
     cc = fit.cov_unscaled[k:k + w, k:k + w] * s2
+    assert term.effect is not None and term.basis is not None  # an effect's term
     unit = term.effect.si_per_unit
     p = term.basis @ c / unit
     cp = term.basis @ cc @ term.basis.T / unit**2
