@@ -26,7 +26,7 @@ import pandas as pd  # noqa: E402
 
 from pospp import pipeline  # noqa: E402
 from pospp.calib import stage as calib_stage  # noqa: E402
-from pospp.calib.replay import ImuIncrements, ReferenceSolution  # noqa: E402
+from pospp.calib.replay import ImuIncrements, SolutionA  # noqa: E402
 from pospp.calib.solve import noise_basis  # noqa: E402
 from pospp.calib.stage import calibrate_flight  # noqa: E402
 from pospp.config import config_from_dict, load_config  # noqa: E402
@@ -99,7 +99,7 @@ def leg_study(out: Path, stem: str, pipe: str, grade: str,
     log = pipeline.ingest(out / f"{stem}.mcap", cfg)
     nav = pipeline.navigate(log, cfg)
     imu = pipeline.imu_increments(log)
-    ref = ReferenceSolution(*nav_filter.reference_solution(nav, which="smoothed"))
+    ref = SolutionA(*nav_filter.solution_a_fields(nav, which="smoothed"))
     truth = mean_bias_dph(out, stem)
     rows = []
     for d in durations_s:
@@ -170,7 +170,7 @@ def leg_length_study(grade: str, leg_s: tuple[float, ...] = (10.0, 15.0, 20.0, 3
             output_rate_hz=10.0)
         imu = ImuIncrements(*increments_from_rates(
             sim.imu.time_ns, sim.imu.w_ib_b_radps, sim.imu.f_ib_b_mps2, epoch_ns=epoch))
-        ref = ReferenceSolution(*nav_filter.reference_solution(nav, which="smoothed"))
+        ref = SolutionA(*nav_filter.solution_a_fields(nav, which="smoothed"))
         truth = sim.imu_errors.gyro_bias_radps.mean(axis=0) / DPH
         for label, noise, step in (("pipeline (gyro_rw, 10 s)", "gyro_rw", 10.0),
                                    ("gyro_rw, 2 s step", "gyro_rw", 2.0),
@@ -218,7 +218,7 @@ def quad_what_if(out: Path) -> pd.DataFrame:
     log = pipeline.ingest(out / "quad.mcap", cfg)
     nav = pipeline.navigate(log, cfg)
     imu = pipeline.imu_increments(log)
-    ref = ReferenceSolution(*nav_filter.reference_solution(nav, which="smoothed"))
+    ref = SolutionA(*nav_filter.solution_a_fields(nav, which="smoothed"))
     rows = []
     for label, noise, step in (("gyro_rw, 2 s step", "gyro_rw", 2.0),
                                ("white", "white", 10.0)):

@@ -33,7 +33,7 @@ import pandas as pd
 
 from pospp import outputs, rotation
 from pospp.calib.observability import observability_table
-from pospp.calib.replay import ImuIncrements, ReferenceSolution, replay_leg
+from pospp.calib.replay import ImuIncrements, SolutionA, replay_leg
 from pospp.calib.stage import CalibrationRun, calibrate_flight, with_null_covariance
 from pospp.config import PipelineConfig, config_from_dict
 from pospp.diagnose import null_model
@@ -361,7 +361,7 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
     # --- calibration: legs, B, pairs, least squares -------------------------------------------
     book.stage("calibrate")
     imu = imu_increments(log)
-    calib_run, reference = calibrate(imu, nav, config)
+    calib_run, solution_a = calibrate(imu, nav, config)
     for text in calib_run.messages:
         book.note("warning", "calibrate", text)
     if not calib_run.calibrated:
@@ -388,7 +388,7 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
     diagnosis = None
     if config.outputs.diagnose and calib_run.calibrated:
         try:
-            diagnosis = diagnose(calib_run, imu, reference, config, log=log, nav=nav,
+            diagnosis = diagnose(calib_run, imu, solution_a, config, log=log, nav=nav,
                                  null_dv=null_dv)
             if diagnosis.location is not None:  # "unexplained": where the gap sits (issue 12)
                 book.note("warning", "diagnose", diagnosis.location.text)
@@ -519,14 +519,14 @@ def imu_increments(log: mcap_reader.FlightLog) -> ImuIncrements:
 
 
 def calibrate(imu: ImuIncrements, nav: nav_filter.FilterResult,
-              config: PipelineConfig) -> tuple[CalibrationRun, ReferenceSolution]:
+              config: PipelineConfig) -> tuple[CalibrationRun, SolutionA]:
     """Legs, B replays, pairs, least squares and B re-run (pospp.calib.stage)."""
     which = config.replay.reference if nav.smoothed is not None else "forward"
-    reference = ReferenceSolution(*nav_filter.reference_solution(nav, which=which))
+    solution_a = SolutionA(*nav_filter.solution_a_fields(nav, which=which))
     tuning = imu_tuning(config)
     gm = bool(np.isfinite(tuning.gyro_gm_tau_s) and tuning.gyro_gm_sigma_dph > 0)
     return calibrate_flight(
-        imu, reference, legs_cfg=config.legs.thresholds(), replay_cfg=config.replay.options(),
+        imu, solution_a, legs_cfg=config.legs.thresholds(), replay_cfg=config.replay.options(),
         pairs_cfg=config.pairs.policy(), gyro_arw_dpsh=tuning.gyro_arw_dpsh,
         noise=config.pairs.noise, noise_step_s=config.pairs.noise_step_s,
         estimate_gyro_z=config.pairs.estimate_gyro_z,
@@ -539,7 +539,7 @@ def calibrate(imu: ImuIncrements, nav: nav_filter.FilterResult,
         gyro_gm_sigma_dph=None,
         gyro_gm_tau_s=tuning.gyro_gm_tau_s if gm else None,
         gyro_gm_prior_sigma_dph=tuning.gyro_gm_sigma_dph if gm else None,
-    ), reference
+    ), solution_a
 
 
 def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
@@ -580,7 +580,7 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
 
     def b_minus_a(log_r: mcap_reader.FlightLog) -> list[np.ndarray]:
         nav_r = navigate(log_r, config)
-        ref_r = ReferenceSolution(*nav_filter.reference_solution(nav_r, which=which))
+        ref_r = SolutionA(*nav_filter.solution_a_fields(nav_r, which=which))
         imu_r = imu_increments(log_r)
         return [replay_leg(imu_r, ref_r, legs[i],
                            accel_compensation=rc.accel_compensation,
@@ -626,7 +626,7 @@ def _lever_arm_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     return np.asarray(config.gnss.lever_arm_m, dtype=float) - est.lever_b_m
 
 
-def diagnose(calib_run: CalibrationRun, imu: ImuIncrements, reference: ReferenceSolution,
+def diagnose(calib_run: CalibrationRun, imu: ImuIncrements, solution_a: SolutionA,
              config: PipelineConfig, *, log: mcap_reader.FlightLog | None = None,
              nav: nav_filter.FilterResult | None = None,
              null_dv: list[list[np.ndarray]] | None = None) -> Diagnosis:
@@ -672,7 +672,7 @@ def diagnose(calib_run: CalibrationRun, imu: ImuIncrements, reference: Reference
     arw_radpsqrts = imu_tuning(config).noise().gyro_arw_radpsqrts
     def run(signatures, whitening_replays=None):
         return run_diagnosis(
-            replays, imu=imu, reference=reference,
+            replays, imu=imu, solution_a=solution_a,
             replay_kwargs={"accel_compensation": config.replay.accel_compensation},
             base_formulation=config.pairs.formulation, base_transition=config.pairs.transition,
             noise="gyro_rw", gyro_arw_radpsqrts=arw_radpsqrts, null_dv=null_dv,
@@ -803,14 +803,14 @@ def diagnose_run(run_dir: str | Path, *, progress: ProgressFn | None = None) -> 
     nav = navigate(log, config)
     book.stage("calibrate")
     imu = imu_increments(log)
-    calib_run, reference = calibrate(imu, nav, config)
+    calib_run, solution_a = calibrate(imu, nav, config)
     if not calib_run.calibrated:
         raise ValueError(f"{run}: no calibration to diagnose: {calib_run.reason}")
     book.stage("null_realisations")
     null_dv = (null_realisations(log, nav, calib_run, config, config.pairs.null_realisations)
                if config.pairs.null_realisations > 0 else None)
     book.stage("diagnose")
-    diagnosis = diagnose(calib_run, imu, reference, config, log=log, nav=nav, null_dv=null_dv)
+    diagnosis = diagnose(calib_run, imu, solution_a, config, log=log, nav=nav, null_dv=null_dv)
     book.stage("write")
     out_meta = {k: meta[k] for k in ("input_file", "input_sha256", "config")}
     parquet_tables.write_table(run / "diagnosis.parquet", diagnosis_columns(diagnosis),

@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pospp.calib.pairs import Pair
-from pospp.calib.replay import ImuIncrements, LegReplay, ReferenceSolution, replay_leg
+from pospp.calib.replay import ImuIncrements, LegReplay, SolutionA, replay_leg
 from pospp.calib.solve import Calibration, calibrate
 
 
@@ -148,7 +148,7 @@ def _drift_removed(imu: ImuIncrements, rep: LegReplay, cal: Calibration) -> ImuI
 
 def compensate_legs(
     imu: ImuIncrements,
-    reference: ReferenceSolution,
+    solution_a: SolutionA,
     before: dict[int, LegReplay],
     cal: Calibration,
     *,
@@ -203,7 +203,7 @@ def compensate_legs(
             leg_imu = _bias_removed(imu, rep, hist_t, hist_b, hold=True)
             bg = np.zeros(3)
         new = replay_leg(
-            leg_imu, reference, rep.leg, gyro_bias_b_radps=bg, attitude_correction_n_rad=phi,
+            leg_imu, solution_a, rep.leg, gyro_bias_b_radps=bg, attitude_correction_n_rad=phi,
             accel_compensation=accel_compensation, transition_step=transition_step,
             sample_rate_hz=sample_rate_hz, sigma_floor_mps=sigma_floor_mps,
         )

@@ -50,7 +50,7 @@ class ImuIncrements:
 
 
 @dataclass(frozen=True)
-class ReferenceSolution:
+class SolutionA:
     """Algorithm A's solution as B needs it (any epoch grid covering the legs).
 
     Attributes
@@ -110,12 +110,12 @@ class LegReplay:
     v_n0_mps: NDArray
 
 
-def reference_from_trajectory(
+def solution_a_from_trajectory(
     trajectory: strapdown.Trajectory,
     *,
     v_sigma_n_mps: ArrayLike,
     accel_bias_b_mps2: ArrayLike | None = None,
-) -> ReferenceSolution:
+) -> SolutionA:
     """Wrap any trajectory (a smoothed solution, a reference system, simulation truth) as A.
 
     Parameters
@@ -140,12 +140,12 @@ def reference_from_trajectory(
     sig = per_epoch(v_sigma_n_mps, "v_sigma_n_mps")
     if not np.all(sig > 0):
         raise ValueError("v_sigma_n_mps: expected positive standard deviations")
-    return ReferenceSolution(trajectory, sig, per_epoch(accel_bias_b_mps2, "accel_bias_b_mps2"))
+    return SolutionA(trajectory, sig, per_epoch(accel_bias_b_mps2, "accel_bias_b_mps2"))
 
 
 def replay_leg(
     imu: ImuIncrements,
-    reference: ReferenceSolution,
+    solution_a: SolutionA,
     leg: Leg,
     *,
     gyro_bias_b_radps: NDArray | None = None,
@@ -161,7 +161,7 @@ def replay_leg(
     ----------
     imu : ImuIncrements
         The whole flight's raw increments.
-    reference : ReferenceSolution
+    solution_a : SolutionA
         Algorithm A (smoothed by default, see the pipeline config).
     leg : Leg
         The leg to replay.
@@ -186,7 +186,7 @@ def replay_leg(
     k0 = max(k0, 1)
     if k1 - k0 < 10:
         raise ValueError(f"leg {leg.leg_id}: fewer than 10 IMU epochs between its start and end")
-    ref_traj = reference.trajectory
+    ref_traj = solution_a.trajectory
     a0 = strapdown.interpolate_trajectory(ref_traj, np.array([t_imu[k0]]))
     c_nb0 = rotation.dcm_from_quat(a0.q_nb[0])
     if attitude_correction_n_rad is not None:
@@ -197,7 +197,7 @@ def replay_leg(
     )
     if accel_compensation == "filter":
         j = min(int(np.searchsorted(ref_traj.t_s, t_imu[k0])), len(ref_traj) - 1)
-        ba = reference.accel_bias_b_mps2[j]
+        ba = solution_a.accel_bias_b_mps2[j]
     elif accel_compensation == "none":
         ba = np.zeros(3)
     else:
@@ -225,7 +225,7 @@ def replay_leg(
     )
     sig = np.empty((ts.size, 3))
     for c in range(3):
-        sig[:, c] = np.interp(t0 + ts, ref_traj.t_s, reference.v_sigma_n_mps[:, c])
+        sig[:, c] = np.interp(t0 + ts, ref_traj.t_s, solution_a.v_sigma_n_mps[:, c])
     sig = np.maximum(sig, sigma_floor_mps)
     # numerical transition matrices along B's actual trajectory
     dt = np.diff(b.t_s)

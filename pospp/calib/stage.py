@@ -29,8 +29,8 @@ from pospp.calib.pairs import Pair, PairPolicy, evaluate_pairs
 from pospp.calib.replay import (
     ImuIncrements,
     LegReplay,
-    ReferenceSolution,
     ReplayOptions,
+    SolutionA,
     replay_leg,
 )
 from pospp.calib.segment import Leg, LegThresholds, find_legs
@@ -191,7 +191,7 @@ class CalibrationRun:
 
 def calibrate_flight(
     imu: ImuIncrements,
-    reference: ReferenceSolution,
+    solution_a: SolutionA,
     *,
     legs_cfg: LegThresholds | None = None,
     replay_cfg: ReplayOptions | None = None,
@@ -216,7 +216,7 @@ def calibrate_flight(
     ----------
     imu : ImuIncrements
         Raw IMU increments of the whole flight (body FRD, rad and m/s).
-    reference : ReferenceSolution
+    solution_a : SolutionA
         Algorithm A (the smoothed solution by default: its errors at each leg start and along
         the leg are the smallest, and B minus A must be B's error).
     legs_cfg : LegThresholds, optional
@@ -298,7 +298,7 @@ def calibrate_flight(
         cal_kw["gyro_gm_tau_s"] = float(gyro_gm_tau_s)
         cal_kw["gyro_gm_sigma_radps"] = (None if gyro_gm_sigma_dph is None
                                          else gyro_gm_sigma_dph * DEG_PER_H_RADPS)
-    traj = reference.trajectory
+    traj = solution_a.trajectory
     messages: list[str] = []
     if legs is None:
         legs = find_legs(traj.t_s, traj.v_n_mps, traj.height_m, thresholds=th)
@@ -306,7 +306,7 @@ def calibrate_flight(
     for leg in legs:
         try:
             replays[leg.leg_id] = replay_leg(
-                imu, reference, leg, accel_compensation=rc.accel_compensation,
+                imu, solution_a, leg, accel_compensation=rc.accel_compensation,
                 sample_rate_hz=rc.sample_rate_hz, sigma_floor_mps=rc.sigma_floor_mps,
                 transition_step=int(rc.transition_step))
         except ValueError as exc:
@@ -395,7 +395,7 @@ def calibrate_flight(
             np.full(3, np.inf) if np.isinf(causal_prior_scale)
             else causal_prior_scale * prior_sigma_b_radps(sig, chosen)))
     after, improvements = compensate_legs(
-        imu, reference, replays, chosen, accel_compensation=rc.accel_compensation,
+        imu, solution_a, replays, chosen, accel_compensation=rc.accel_compensation,
         horizon_s=rc.horizon_s, transition_step=int(rc.transition_step),
         sample_rate_hz=rc.sample_rate_hz, sigma_floor_mps=rc.sigma_floor_mps,
         per_leg_drift=compensation == "per_leg", gyro_bias_history=history)

@@ -79,7 +79,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pospp import earth, rotation
-from pospp.calib.replay import ImuIncrements, LegReplay, ReferenceSolution, replay_leg
+from pospp.calib.replay import ImuIncrements, LegReplay, SolutionA, replay_leg
 from pospp.calib.solve import leg_sensitivities
 from pospp.effects_catalog import catalog_entry
 from pospp.nav.error_model import BG, DR, DV, PHI
@@ -161,7 +161,7 @@ class ReplayContext:
     ----------
     imu : ImuIncrements
         The flight's raw increments.
-    reference : ReferenceSolution
+    solution_a : SolutionA
         Algorithm A.
     replay_kwargs : dict
         Keyword arguments the replays were made with (``accel_compensation``,
@@ -170,7 +170,7 @@ class ReplayContext:
     """
 
     imu: ImuIncrements
-    reference: ReferenceSolution
+    solution_a: SolutionA
     replay_kwargs: dict = dataclasses.field(default_factory=dict)
 
 
@@ -281,7 +281,7 @@ def _rerun_dv(rep: LegReplay, ctx: ReplayContext, imu: ImuIncrements) -> NDArray
     kw = dict(ctx.replay_kwargs)
     kw["sample_rate_hz"] = 1.0 / float(rep.t_s[1] - rep.t_s[0])
     kw["transition_step"] = 10**9
-    r = replay_leg(imu, ctx.reference, rep.leg, **kw)
+    r = replay_leg(imu, ctx.solution_a, rep.leg, **kw)
     m = min(r.t_s.size, rep.t_s.size)
     out = np.zeros((rep.t_s.size, 2))
     out[:m] = r.dv_n_mps[:m, 0:2]

@@ -36,7 +36,7 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import NDArray
 
-from pospp.calib.replay import ImuIncrements, ReferenceSolution, replay_leg
+from pospp.calib.replay import ImuIncrements, SolutionA, replay_leg
 from pospp.diagnose.effects import ACCEL_SETTLING_S, effect_by_id
 from pospp.nav import filter as nav_filter
 from pospp.nav.filter import FilterResult
@@ -80,7 +80,7 @@ def _response(log_p, nav, calib_run, config, navigate: Navigate, lever_b_m=None
     which = rc.reference if nav.smoothed is not None else "forward"
     legs = {leg.leg_id: leg for leg in calib_run.legs}
     nav_p = navigate(log_p, lever_arm_b_m=lever_b_m)
-    ref_p = ReferenceSolution(*nav_filter.reference_solution(nav_p, which=which))
+    ref_p = SolutionA(*nav_filter.solution_a_fields(nav_p, which=which))
     t0 = int(log_p.imu.time_ns[0])
     imu = ImuIncrements(*increments_from_rates(log_p.imu.time_ns, log_p.imu.w_ib_b_radps,
                                                log_p.imu.f_ib_b_mps2, epoch_ns=t0))

@@ -60,7 +60,7 @@ from functools import partial
 import numpy as np
 from numpy.typing import NDArray
 
-from pospp.calib.replay import ImuIncrements, LegReplay, ReferenceSolution
+from pospp.calib.replay import ImuIncrements, LegReplay, SolutionA
 from pospp.calib.solve import NoiseModel, calibrate, fit_noise_model, leg_sensitivities
 from pospp.diagnose import effects as fx
 from pospp.diagnose._linear import Fit, Problem, Term, bic, f_test, rms
@@ -319,7 +319,7 @@ def diagnose(
     replays: Sequence[LegReplay],
     *,
     imu: ImuIncrements | None = None,
-    reference: ReferenceSolution | None = None,
+    solution_a: SolutionA | None = None,
     replay_kwargs: dict | None = None,
     base_formulation: str = "body",
     base_transition: str = "numerical",
@@ -344,7 +344,7 @@ def diagnose(
     ----------
     replays : sequence of LegReplay
         B minus A over each leg (at least 3 legs for held-out prediction to mean much).
-    imu, reference : ImuIncrements, ReferenceSolution, optional
+    imu, solution_a : ImuIncrements, SolutionA, optional
         The flight's increments and A, for effects whose signature re-runs B (``time_offset``;
         ``gyro_scale_factor`` is then exact, otherwise linearised). Without them
         ``time_offset`` is not evaluated.
@@ -436,8 +436,8 @@ def diagnose(
     if base_transition == "numerical":
         in_base.append("earth_rate_coupling")
     ctx = None
-    if imu is not None and reference is not None:
-        ctx = fx.ReplayContext(imu, reference, dict(replay_kwargs or {}))
+    if imu is not None and solution_a is not None:
+        ctx = fx.ReplayContext(imu, solution_a, dict(replay_kwargs or {}))
     given = dict(signatures or {})
     for e, sg in given.items():
         fx.effect_by_id(e)

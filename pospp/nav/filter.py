@@ -504,11 +504,11 @@ def _bias_history(t_s: NDArray, sens: NDArray, bias_var: NDArray, diag: NDArray,
     )
 
 
-def reference_solution(
+def solution_a_fields(
     result: FilterResult, *, which: str = "smoothed"
 ) -> tuple[Trajectory, NDArray, NDArray]:
     """What algorithm B needs from A, in the field order of ``pospp.calib.replay.
-    ReferenceSolution``: ``ReferenceSolution(*reference_solution(result))``.
+    SolutionA``: ``SolutionA(*solution_a_fields(result))``.
 
     Parameters
     ----------
@@ -537,6 +537,6 @@ def reference_solution(
 __all__ = [
     "BiasHistory", "FilterOptions", "FilterResult", "GnssRejection", "InnovationRecord",
     "LeverArmEstimate",
-    "NavSolution", "reference_solution",
+    "NavSolution", "solution_a_fields",
     "run_integrated_navigation",
 ]

@@ -19,7 +19,7 @@ import numpy as np
 
 from pospp import rotation, units
 from pospp.calib.compensate import compensate_legs
-from pospp.calib.replay import ImuIncrements, reference_from_trajectory, replay_leg
+from pospp.calib.replay import ImuIncrements, replay_leg, solution_a_from_trajectory
 from pospp.calib.solve import calibrate
 from pospp.calib.stage import calibrate_flight, calibration_rows
 from pospp.io.mcap_reader import read_flight_log
@@ -41,7 +41,7 @@ def main() -> None:
     ref = read_reference_trajectory(REF / f"{NAME}.truth.parquet")
     traj = Trajectory((ref.time_ns - epoch) * 1e-9, ref.lat_rad, ref.lon_rad, ref.height_m,
                       ref.v_n_mps, rotation.quat_from_euler(ref.rpy_rad))
-    a = reference_from_trajectory(traj, v_sigma_n_mps=[0.02, 0.02, 0.03])
+    a = solution_a_from_trajectory(traj, v_sigma_n_mps=[0.02, 0.02, 0.03])
     calibrate_flight(imu, a)  # warm-up (numba caches)
     walls, cpus = [], []
     for _ in range(3):
@@ -79,7 +79,7 @@ def main() -> None:
           f"({s['dv_before_mps'] / s['dv_after_mps']:.0f}x); {s['dp_before_m']:.1f} -> "
           f"{s['dp_after_m']:.2f} m ({s['dp_before_m'] / s['dp_after_m']:.0f}x)")
     ba = np.array(params["imu_errors"]["accel_bias_ug"]) * 9.80665e-6
-    for label, aa in (("A = truth", a), ("A = truth + accel bias known", reference_from_trajectory(
+    for label, aa in (("A = truth", a), ("A = truth + accel bias known", solution_a_from_trajectory(
             traj, v_sigma_n_mps=[0.02, 0.02, 0.03], accel_bias_b_mps2=ba))):
         reps = {g.leg_id: replay_leg(imu, aa, g) for g in run.legs}
         for form in ("body", "paper"):

@@ -20,7 +20,7 @@ import pandas as pd
 
 from pospp import pipeline
 from pospp.calib.compensate import compensate_legs
-from pospp.calib.replay import ReferenceSolution
+from pospp.calib.replay import SolutionA
 from pospp.calib.stage import calibrate_flight
 from pospp.config import load_config
 from pospp.nav import filter as nav_filter
@@ -38,7 +38,7 @@ def main() -> None:
     log = pipeline.ingest(ROOT / "sample_data" / "sample_flight.mcap", cfg)
     imu = pipeline.imu_increments(log)
     nav = pipeline.navigate(log, cfg)
-    ref = ReferenceSolution(*nav_filter.reference_solution(nav, which="smoothed"))
+    ref = SolutionA(*nav_filter.solution_a_fields(nav, which="smoothed"))
     tun = pipeline.imu_tuning(cfg)
     epoch_ns = int(log.imu.time_ns[0])
     bias = pd.read_parquet(ROOT / "sample_data" / "sample_flight.bias.parquet")

@@ -113,12 +113,12 @@ def main() -> None:
     print("|---|---|---|---:|---|---|---|---:|---:|")
     for name, f, dth, dv, kw, truth in _scenarios(fl):
         imu = ImuIncrements(f.imu.t_s, dth, dv)
-        ref = f.reference(SIGMA)
+        ref = f.solution_a(SIGMA)
         c0 = time.process_time()
         reps = noisy_replays(f, imu, sigma_mps=SIGMA, rng=np.random.default_rng(7),
-                             reference=ref)
+                             solution_a=ref)
         c1 = time.process_time()
-        d = diagnose(reps, imu=imu, reference=ref, **kw)
+        d = diagnose(reps, imu=imu, solution_a=ref, **kw)
         c2 = time.process_time()
         first, last = d.steps[0], d.steps[-1]
         named = ", ".join(d.named) + ("; " if d.named else "") + d.conclusion

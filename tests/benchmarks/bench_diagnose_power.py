@@ -66,7 +66,7 @@ def _diagnose(run, ref, imu, cfg, null, sigs, replays=None):
     from pospp.diagnose.workflow import diagnose
 
     reps = replays if replays is not None else [run.replays[i] for i in sorted(run.replays)]
-    return diagnose(reps, imu=imu, reference=ref,
+    return diagnose(reps, imu=imu, solution_a=ref,
                     replay_kwargs={"accel_compensation": cfg.replay.accel_compensation},
                     base_formulation=cfg.pairs.formulation,
                     base_transition=cfg.pairs.transition, noise="gyro_rw",

@@ -16,7 +16,7 @@ import pytest
 from pospp import rotation, units
 from pospp.calib.compensate import compensate_legs
 from pospp.calib.pairs import PairPolicy
-from pospp.calib.replay import ImuIncrements, reference_from_trajectory, replay_leg
+from pospp.calib.replay import ImuIncrements, replay_leg, solution_a_from_trajectory
 from pospp.calib.solve import calibrate
 from pospp.calib.stage import calibrate_flight
 from pospp.io.mcap_reader import read_flight_log
@@ -40,7 +40,7 @@ def case(reference_cases):
     traj = Trajectory((ref.time_ns - epoch) * 1e-9, ref.lat_rad, ref.lon_rad, ref.height_m,
                       ref.v_n_mps, rotation.quat_from_euler(ref.rpy_rad))
     vel_noise = params["gnss"]["vel_noise_mps"]
-    a = reference_from_trajectory(traj, v_sigma_n_mps=[vel_noise[0], vel_noise[0],
+    a = solution_a_from_trajectory(traj, v_sigma_n_mps=[vel_noise[0], vel_noise[0],
                                                        vel_noise[1]])
     imu = ImuIncrements(t, dth, dv)
     run = calibrate_flight(imu, a)
@@ -122,7 +122,7 @@ def test_held_out_leg_predicted_by_one_pair(case):
     """
     params, _, imu, a, run = case
     ba = np.array(params["imu_errors"]["accel_bias_ug"]) * 9.80665e-6
-    a = reference_from_trajectory(a.trajectory, v_sigma_n_mps=a.v_sigma_n_mps,
+    a = solution_a_from_trajectory(a.trajectory, v_sigma_n_mps=a.v_sigma_n_mps,
                                   accel_bias_b_mps2=ba)
     reps = {leg.leg_id: replay_leg(imu, a, leg) for leg in run.legs}
     ratios, after = {}, {}

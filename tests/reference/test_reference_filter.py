@@ -22,7 +22,7 @@ from scipy.stats import chi2
 
 from pospp.evaluate import solution_errors
 from pospp.io.mcap_reader import read_flight_log
-from pospp.nav.filter import reference_solution, run_integrated_navigation
+from pospp.nav.filter import run_integrated_navigation, solution_a_fields
 from pospp.nav.tuning import tuning_preset
 
 pytestmark = pytest.mark.reference
@@ -244,14 +244,14 @@ def test_lever_arm_and_scale_factor_states(case):
 
 
 def test_reference_solution_for_replay(result):
-    traj, v_sigma, accel_bias = reference_solution(result, which="smoothed")
+    traj, v_sigma, accel_bias = solution_a_fields(result, which="smoothed")
     n = len(result.smoothed)
     assert len(traj) == n and v_sigma.shape == (n, 3) and accel_bias.shape == (n, 3)
     np.testing.assert_array_equal(traj.q_nb, result.smoothed.q_nb)
-    traj_f, _, acc_f = reference_solution(result, which="forward")
+    traj_f, _, acc_f = solution_a_fields(result, which="forward")
     np.testing.assert_array_equal(acc_f, result.forward_biases.accel_b_mps2)
     with pytest.raises(ValueError, match="which"):
-        reference_solution(result, which="best")
+        solution_a_fields(result, which="best")
 
 
 def test_in_motion_alignment_when_the_record_starts_in_flight(case, reference_cases):

@@ -23,7 +23,7 @@ from pospp.calib.compensate import (
     compensate_legs,
     prior_sigma_b_radps,
 )
-from pospp.calib.replay import ImuIncrements, reference_from_trajectory
+from pospp.calib.replay import ImuIncrements, solution_a_from_trajectory
 from pospp.calib.solve import calibrate
 from pospp.calib.stage import calibrate_flight
 from pospp.nav.filter import run_integrated_navigation
@@ -119,7 +119,7 @@ def run_once(kind: str, seed: int, folder: Path, *, estimate_gm_sigma: bool = Fa
     imu = ImuIncrements(t, dth, dv)
     model = ImuErrorModel.from_dict(sim.params["config"]["imu_errors"])
     ba = np.array(model.accel_bias_ug) * UG_MPS2
-    a = reference_from_trajectory(sim.truth, v_sigma_n_mps=[0.02, 0.02, 0.03],
+    a = solution_a_from_trajectory(sim.truth, v_sigma_n_mps=[0.02, 0.02, 0.03],
                                   accel_bias_b_mps2=ba)
     tun = tuning_preset(TUNING[kind])
     run = calibrate_flight(
@@ -212,7 +212,7 @@ def run_modes(kind: str, seed: int, folder: Path, *, gm_tau_s: float | None = No
                                        sim.imu.f_ib_b_mps2, epoch_ns=sim.start_time_ns)
     imu = ImuIncrements(t, dth, dv)
     ba = np.array(model.accel_bias_ug) * UG_MPS2
-    a = reference_from_trajectory(sim.truth, v_sigma_n_mps=[0.02, 0.02, 0.03],
+    a = solution_a_from_trajectory(sim.truth, v_sigma_n_mps=[0.02, 0.02, 0.03],
                                   accel_bias_b_mps2=ba)
     gm_kw = {"gyro_arw_dpsh": tun.gyro_arw_dpsh, "gyro_gm_sigma_dph": tun.gyro_gm_sigma_dph,
              "gyro_gm_tau_s": tun.gyro_gm_tau_s}

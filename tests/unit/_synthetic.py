@@ -30,9 +30,9 @@ from pospp import earth, rotation
 from pospp.calib.replay import (
     ImuIncrements,
     LegReplay,
-    ReferenceSolution,
-    reference_from_trajectory,
+    SolutionA,
     replay_leg,
+    solution_a_from_trajectory,
 )
 from pospp.calib.segment import Leg
 from pospp.nav import strapdown
@@ -56,9 +56,9 @@ class SyntheticFlight:
     truth: strapdown.Trajectory
     legs: tuple[Leg, ...]
 
-    def reference(self, v_sigma_mps: float = 0.01) -> ReferenceSolution:
+    def solution_a(self, v_sigma_mps: float = 0.01) -> SolutionA:
         """The truth as algorithm A (no accelerometer-bias estimate)."""
-        return reference_from_trajectory(self.truth, v_sigma_n_mps=np.full(3, v_sigma_mps))
+        return solution_a_from_trajectory(self.truth, v_sigma_n_mps=np.full(3, v_sigma_mps))
 
 
 def _smooth_turn(t: NDArray, t0: float, duration: float, angle: float) -> NDArray:
@@ -186,14 +186,14 @@ def noisy_replays(
     *,
     sigma_mps: float,
     rng: np.random.Generator,
-    reference: ReferenceSolution | None = None,
+    solution_a: SolutionA | None = None,
 ) -> list[LegReplay]:
     """Replay B on (possibly perturbed) increments over every leg, with white noise on B - A.
 
     The noise stands for A's velocity error (standard deviation ``sigma_mps`` per axis, also
     the replays' ``sigma_v_n_mps``); the first sample stays zero (B starts on A).
     """
-    ref = flight.reference(sigma_mps) if reference is None else reference
+    ref = flight.solution_a(sigma_mps) if solution_a is None else solution_a
     out = []
     for leg in flight.legs:
         r = replay_leg(imu, ref, leg, sigma_floor_mps=min(0.005, sigma_mps))

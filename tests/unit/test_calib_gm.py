@@ -16,7 +16,7 @@ from _gm_mission import run_once
 from _truth_imu import rhumb_line
 
 from pospp import rotation, units
-from pospp.calib.replay import ImuIncrements, reference_from_trajectory, replay_leg
+from pospp.calib.replay import ImuIncrements, replay_leg, solution_a_from_trajectory
 from pospp.calib.segment import Leg
 from pospp.calib.solve import _gm_covariance, calibrate, gm_noise_operator, noise_basis
 from pospp.calib.stage import calibrate_flight
@@ -49,7 +49,7 @@ def _leg(leg_id, heading_deg, bias_fn=None, duration_s=301.0):
     if bias_fn is not None:
         dth += bias_fn(0.5 * (tr.t_s[1:] + tr.t_s[:-1])) * dt
     imu = ImuIncrements(tr.t_s, dth, tr.dv_b_mps)
-    ref = reference_from_trajectory(traj, v_sigma_n_mps=[0.02, 0.02, 0.05])
+    ref = solution_a_from_trajectory(traj, v_sigma_n_mps=[0.02, 0.02, 0.05])
     leg = Leg(leg_id, 1.0, duration_s, hd % (2 * np.pi), V_MPS, H_M, 0.0, 0.0, 0.0, 0.0)
     return replay_leg(imu, ref, leg)
 

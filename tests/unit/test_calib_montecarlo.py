@@ -18,7 +18,7 @@ import pytest
 
 from pospp import units
 from pospp.calib.compensate import compensate_legs
-from pospp.calib.replay import ImuIncrements, reference_from_trajectory, replay_leg
+from pospp.calib.replay import ImuIncrements, replay_leg, solution_a_from_trajectory
 from pospp.calib.segment import find_legs
 from pospp.calib.solve import calibrate
 from pospp.calib.stage import calibrate_flight
@@ -42,7 +42,7 @@ def _simulate(preset: str, seed: int, duration_s: float):
                    duration_s=duration_s)
     t, dth, dv = increments_from_rates(sim.imu.time_ns, sim.imu.w_ib_b_radps,
                                        sim.imu.f_ib_b_mps2, epoch_ns=sim.start_time_ns)
-    a = reference_from_trajectory(sim.truth, v_sigma_n_mps=[0.02, 0.02, 0.03])
+    a = solution_a_from_trajectory(sim.truth, v_sigma_n_mps=[0.02, 0.02, 0.03])
     return ImuIncrements(t, dth, dv), a, bias * DPH, model
 
 
@@ -81,7 +81,7 @@ def test_grid_flight_prediction_on_legs_not_used():
     # A that knows the accelerometer bias (a converged filter's tilt and bias states do):
     # held-out legs get no attitude correction
     ba = np.array(model.accel_bias_ug) * 9.80665e-6
-    a = reference_from_trajectory(a.trajectory, v_sigma_n_mps=a.v_sigma_n_mps,
+    a = solution_a_from_trajectory(a.trajectory, v_sigma_n_mps=a.v_sigma_n_mps,
                                   accel_bias_b_mps2=ba)
     reps = {g.leg_id: replay_leg(imu, a, g) for g in (*block1[-2:], *block2)}
     pair = (reps[block1[-2].leg_id], reps[block1[-1].leg_id])

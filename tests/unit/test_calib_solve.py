@@ -15,7 +15,7 @@ import pytest
 from _truth_imu import rhumb_line, weaving_flight, weaving_truth_state
 
 from pospp import rotation, units
-from pospp.calib.replay import ImuIncrements, reference_from_trajectory, replay_leg
+from pospp.calib.replay import ImuIncrements, replay_leg, solution_a_from_trajectory
 from pospp.calib.segment import Leg
 from pospp.calib.solve import calibrate, leg_sensitivities
 from pospp.nav.strapdown import Trajectory
@@ -52,7 +52,7 @@ def _leg(leg_id, heading_deg, *, phi_n_rad, rng=None, weave_amp_deg=0.0, accel=T
         dth = dth + ARW * np.sqrt(dt) * rng.standard_normal(dth.shape)
     dv = tr.dv_b_mps + (ACCEL_B * dt if accel else 0.0)
     imu = ImuIncrements(tr.t_s, dth, dv)
-    ref = reference_from_trajectory(traj, v_sigma_n_mps=[0.02, 0.03, 0.05])
+    ref = solution_a_from_trajectory(traj, v_sigma_n_mps=[0.02, 0.03, 0.05])
     leg = Leg(leg_id, 1.0, duration_s, hd % (2 * np.pi), V_MPS, H_M, 0.0, 0.0, 0.0, 0.0)
     # C_nb_hat = (I - [phi x]) C_nb: B starts from exp(-[phi x]) C_nb_A
     rep = replay_leg(imu, ref, leg, attitude_correction_n_rad=-np.asarray(phi_n_rad))

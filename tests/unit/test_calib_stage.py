@@ -13,7 +13,7 @@ from _truth_imu import rhumb_line, stationary
 from pospp import rotation, units
 from pospp.calib.observability import condition_grid, observability_table
 from pospp.calib.pairs import PairPolicy
-from pospp.calib.replay import ImuIncrements, reference_from_trajectory
+from pospp.calib.replay import ImuIncrements, solution_a_from_trajectory
 from pospp.calib.segment import Leg
 from pospp.calib.stage import calibrate_flight
 from pospp.io.parquet_tables import write_table
@@ -27,7 +27,7 @@ def _flight(tr, n):
     q = np.tile(rotation.quat_from_dcm(tr.c_nb), (n, 1))
     traj = Trajectory(tr.t_s, tr.lat_rad, tr.lon_rad, np.full(n, tr.height_m), v, q)
     return (ImuIncrements(tr.t_s, tr.dtheta_b_rad, tr.dv_b_mps),
-            reference_from_trajectory(traj, v_sigma_n_mps=[0.02, 0.02, 0.05]))
+            solution_a_from_trajectory(traj, v_sigma_n_mps=[0.02, 0.02, 0.05]))
 
 
 def _check_tables(run, tmp_path):

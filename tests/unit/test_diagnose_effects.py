@@ -19,7 +19,7 @@ import pytest
 from _truth_imu import weaving_flight, weaving_truth_state
 
 from pospp import earth, rotation
-from pospp.calib.replay import ImuIncrements, reference_from_trajectory, replay_leg
+from pospp.calib.replay import ImuIncrements, replay_leg, solution_a_from_trajectory
 from pospp.calib.segment import Leg
 from pospp.diagnose import effects as fx
 from pospp.nav import strapdown
@@ -40,8 +40,8 @@ class _Flight:
     truth: strapdown.Trajectory
     legs: tuple[Leg, ...]
 
-    def reference(self, v_sigma_mps: float):
-        return reference_from_trajectory(self.truth, v_sigma_n_mps=np.full(3, v_sigma_mps))
+    def solution_a(self, v_sigma_mps: float):
+        return solution_a_from_trajectory(self.truth, v_sigma_n_mps=np.full(3, v_sigma_mps))
 
 
 def _two_legs() -> _Flight:
@@ -73,7 +73,7 @@ def _two_legs() -> _Flight:
 @pytest.fixture(scope="module")
 def flight():
     fl = _two_legs()
-    ref = fl.reference(0.01)
+    ref = fl.solution_a(0.01)
     reps = [replay_leg(fl.imu, ref, leg) for leg in fl.legs]
     return fl, ref, reps
 
@@ -134,7 +134,7 @@ def test_accel_bias_settling(flight):
     # A absorbs the bias at each leg start: give A (the reference) that bias as its estimate
     ba = np.zeros((t.size, 3))
     ba[:, 0:2] = np.outer(np.exp(-t / settle), db)
-    ref_b = reference_from_trajectory(fl.truth, v_sigma_n_mps=np.full(3, 0.01),
+    ref_b = solution_a_from_trajectory(fl.truth, v_sigma_n_mps=np.full(3, 0.01),
                                       accel_bias_b_mps2=ba)
     imu = ImuIncrements(t, fl.imu.dtheta_b_rad, dv)
     meas = [replay_leg(imu, ref_b, leg).dv_n_mps[:, 0:2] for leg in fl.legs]
@@ -206,7 +206,7 @@ def test_lever_arm_error_of_a(flight):
         tr.t_s, tr.lat_rad + dr_a[:, 0] / (r_m + tr.height_m),
         tr.lon_rad + dr_a[:, 1] / ((r_n + tr.height_m) * np.cos(tr.lat_rad)),
         tr.height_m - dr_a[:, 2], tr.v_n_mps + dv_a, tr.q_nb)
-    ref_a = reference_from_trajectory(traj_a, v_sigma_n_mps=np.full(3, 0.01))
+    ref_a = solution_a_from_trajectory(traj_a, v_sigma_n_mps=np.full(3, 0.01))
     meas = [replay_leg(imu, ref_a, leg).dv_n_mps[:, 0:2] for leg in fl.legs]
     # measured 4.2e-3: B's body rate from its 1 Hz attitude samples
     _check(meas, reps, lambda r: fx.signature("lever_arm", r), dl, 2e-2)

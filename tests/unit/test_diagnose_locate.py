@@ -58,9 +58,9 @@ def reversal():
 
 def _replays(fl, seed):
     imu = ImuIncrements(fl.imu.t_s, fl.imu.dtheta_b_rad.copy(), fl.imu.dv_b_mps.copy())
-    ref = fl.reference(SIGMA)
+    ref = fl.solution_a(SIGMA)
     reps = noisy_replays(fl, imu, sigma_mps=SIGMA, rng=np.random.default_rng(seed),
-                         reference=ref)
+                         solution_a=ref)
     return imu, ref, reps
 
 
@@ -86,7 +86,7 @@ def test_out_of_library_gap_is_located(reversal, seed):
     add = np.zeros((t.size, 2))
     add[:, 1] = 0.02 * np.clip(3.0 * (u - 2.0 / 3.0), 0.0, None) ** 2
     reps = [(_with(r, add) if i == k else r) for i, r in enumerate(reps)]
-    d = diagnose(reps, imu=imu, reference=ref)
+    d = diagnose(reps, imu=imu, solution_a=ref)
     assert d.conclusion == "unexplained", d.steps[-1]
     loc = d.location
     assert loc is not None
@@ -116,8 +116,8 @@ def test_named_effect_is_worth_its_signature_at_the_horizon(reversal):
     db = np.array([300.0, -200.0, 0.0]) * 9.80665e-6
     dv = imu0.dv_b_mps + np.outer(np.exp(-t_mid / 1200.0), db) * np.diff(fl.imu.t_s)[:, None]
     imu = ImuIncrements(fl.imu.t_s, imu0.dtheta_b_rad, dv)
-    reps = noisy_replays(fl, imu, sigma_mps=SIGMA, rng=np.random.default_rng(41), reference=ref)
-    d = diagnose(reps, imu=imu, reference=ref)
+    reps = noisy_replays(fl, imu, sigma_mps=SIGMA, rng=np.random.default_rng(41), solution_a=ref)
+    d = diagnose(reps, imu=imu, solution_a=ref)
     if "accel_bias_change" not in d.named:
         pytest.skip(f"warm-up not named here: {d.named}")
     s = d.step_of("accel_bias_change")

@@ -160,7 +160,7 @@ def test_gauss_markov_path_variance_and_correlation():
 @pytest.fixture(scope="module")
 def replays():
     fl = survey_flight(headings_deg=(0.0, 180.0, 90.0), leg_duration_s=200.0, rate_hz=50.0)
-    ref = fl.reference(0.002)
+    ref = fl.solution_a(0.002)
     return [replay_leg(fl.imu, ref, leg, sigma_floor_mps=0.002) for leg in fl.legs]
 
 

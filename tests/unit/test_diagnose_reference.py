@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from pospp import rotation
-from pospp.calib.replay import ImuIncrements, reference_from_trajectory, replay_leg
+from pospp.calib.replay import ImuIncrements, replay_leg, solution_a_from_trajectory
 from pospp.calib.segment import Leg
 from pospp.diagnose.workflow import diagnose
 from pospp.io.mcap_reader import read_flight_log
@@ -36,7 +36,7 @@ def test_paper_base_names_body_fixed_gyro_bias(reference_cases):
         log.imu.time_ns, log.imu.w_ib_b_radps, log.imu.f_ib_b_mps2, epoch_ns=epoch)
     traj = strapdown.Trajectory((tr.time_ns - epoch) * 1e-9, tr.lat_rad, tr.lon_rad,
                                 tr.height_m, tr.v_n_mps, rotation.quat_from_euler(tr.rpy_rad))
-    a = reference_from_trajectory(traj, v_sigma_n_mps=np.full(3, 0.001))
+    a = solution_a_from_trajectory(traj, v_sigma_n_mps=np.full(3, 0.001))
     imu = ImuIncrements(t_s, dth, dv)
     legs = [Leg(p["leg_id"], (p["start_ns"] - epoch) * 1e-9 + 3.0,
                 (p["end_ns"] - epoch) * 1e-9 - 3.0, np.radians(p["heading_deg"]),
@@ -45,7 +45,7 @@ def test_paper_base_names_body_fixed_gyro_bias(reference_cases):
     assert len(legs) == 4  # transit at 90 deg and three survey lines at 20 / 200 deg
     reps = [replay_leg(imu, a, leg, sigma_floor_mps=0.001) for leg in legs]
     arw = np.radians(params["imu_errors"]["gyro_arw_dpsh"][0]) / 60.0
-    d = diagnose(reps, imu=imu, reference=a, base_formulation="paper", noise="gyro_rw",
+    d = diagnose(reps, imu=imu, solution_a=a, base_formulation="paper", noise="gyro_rw",
                  gyro_arw_radpsqrts=arw, effects=("body_fixed_gyro_bias", "vertical_gyro_drift",
                                                   "accel_bias_change", "gravity_disturbance"))
     assert d.named[:1] == ("body_fixed_gyro_bias",)

@@ -13,7 +13,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from pospp.calib.replay import ImuIncrements, reference_from_trajectory, replay_leg
+from pospp.calib.replay import ImuIncrements, replay_leg, solution_a_from_trajectory
 from pospp.calib.segment import Leg
 from pospp.diagnose.workflow import diagnose
 from pospp.nav import strapdown
@@ -47,7 +47,7 @@ def _diagnose(errors: ImuErrorModel, seed: int, **kw):
     t_s, dth, dv = strapdown.increments_from_rates(
         sim.imu.time_ns, sim.imu.w_ib_b_radps, sim.imu.f_ib_b_mps2, epoch_ns=sim.start_time_ns)
     imu = ImuIncrements(t_s, dth, dv)
-    a = reference_from_trajectory(sim.truth, v_sigma_n_mps=np.full(3, SIGMA))
+    a = solution_a_from_trajectory(sim.truth, v_sigma_n_mps=np.full(3, SIGMA))
     rng = np.random.default_rng(seed)
     reps = []
     for tl in sim.legs:
@@ -58,7 +58,7 @@ def _diagnose(errors: ImuErrorModel, seed: int, **kw):
         noisy[0] = 0.0
         reps.append(dataclasses.replace(r, dv_n_mps=noisy))
     assert len(reps) == 4
-    return diagnose(reps, imu=imu, reference=a, **kw)
+    return diagnose(reps, imu=imu, solution_a=a, **kw)
 
 
 def test_body_fixed_gyro_bias_against_paper_base():

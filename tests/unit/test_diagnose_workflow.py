@@ -58,10 +58,10 @@ def _increments(fl, bias_b=BIAS_B):
 
 def _run(fl, dth, dv, seed, **kw):
     imu = ImuIncrements(fl.imu.t_s, dth, dv)
-    ref = fl.reference(SIGMA)
+    ref = fl.solution_a(SIGMA)
     reps = noisy_replays(fl, imu, sigma_mps=SIGMA, rng=np.random.default_rng(seed),
-                         reference=ref)
-    return diagnose(reps, imu=imu, reference=ref, **kw)
+                         solution_a=ref)
+    return diagnose(reps, imu=imu, solution_a=ref, **kw)
 
 
 def _excess(gap):

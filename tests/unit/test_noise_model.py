@@ -38,7 +38,7 @@ def flight():
 
 @pytest.fixture(scope="module")
 def replays(flight):
-    ref = flight.reference(0.002)
+    ref = flight.solution_a(0.002)
     return [replay_leg(flight.imu, ref, leg, sigma_floor_mps=0.002) for leg in flight.legs]
 
 

@@ -22,7 +22,7 @@ from _truth_imu import rhumb_line
 from scipy.linalg import expm
 
 from pospp import earth, rotation, units
-from pospp.calib.replay import ImuIncrements, reference_from_trajectory, replay_leg
+from pospp.calib.replay import ImuIncrements, replay_leg, solution_a_from_trajectory
 from pospp.calib.segment import Leg
 from pospp.calib.solve import calibrate
 from pospp.nav import closed_form as cf
@@ -52,7 +52,7 @@ def _paper_leg(leg_id: int, heading_deg: float, duration_s: float = 301.0):
     bias_b = tr.c_nb.T @ EPS_NED  # the navigation-frame drift in this leg's body axes
     dth = tr.dtheta_b_rad + bias_b * np.diff(tr.t_s)[:, None]
     imu = ImuIncrements(tr.t_s, dth, tr.dv_b_mps)
-    ref = reference_from_trajectory(traj, v_sigma_n_mps=[0.02, 0.02, 0.03])
+    ref = solution_a_from_trajectory(traj, v_sigma_n_mps=[0.02, 0.02, 0.03])
     leg = Leg(leg_id, 1.0, duration_s, hd % (2 * np.pi), V_MPS, H_M, 0.0, 0.0, 0.0, 0.0)
     # C_nb_hat = (I - [phi x]) C_nb: B starts from exp(-[phi x]) C_nb_A
     return replay_leg(imu, ref, leg, attitude_correction_n_rad=-PHI_NED)
