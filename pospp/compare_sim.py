@@ -203,7 +203,7 @@ def bma_leg_stats(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
 
     imu = pipeline.imu_increments(log)
     try:
-        calib_run, _ = pipeline.calibrate(imu, nav, config)
+        calib_run, _ = pipeline.calibrate_from_a(imu, nav, config)
     except ValueError:
         return {}
     if not calib_run.calibrated or len(calib_run.replays) < MIN_LEGS:

@@ -361,7 +361,7 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
     # --- calibration: legs, B, pairs, least squares -------------------------------------------
     book.stage("calibrate")
     imu = imu_increments(log)
-    calib_run, solution_a = calibrate(imu, nav, config)
+    calib_run, solution_a = calibrate_from_a(imu, nav, config)
     for text in calib_run.messages:
         book.note("warning", "calibrate", text)
     if not calib_run.calibrated:
@@ -518,7 +518,7 @@ def imu_increments(log: mcap_reader.FlightLog) -> ImuIncrements:
     return ImuIncrements(t_s, dth, dv)
 
 
-def calibrate(imu: ImuIncrements, nav: nav_filter.FilterResult,
+def calibrate_from_a(imu: ImuIncrements, nav: nav_filter.FilterResult,
               config: PipelineConfig) -> tuple[CalibrationRun, SolutionA]:
     """Legs, B replays, pairs, least squares and B re-run (pospp.calib.stage)."""
     which = config.replay.reference if nav.smoothed is not None else "forward"
@@ -803,7 +803,7 @@ def diagnose_run(run_dir: str | Path, *, progress: ProgressFn | None = None) -> 
     nav = navigate(log, config)
     book.stage("calibrate")
     imu = imu_increments(log)
-    calib_run, solution_a = calibrate(imu, nav, config)
+    calib_run, solution_a = calibrate_from_a(imu, nav, config)
     if not calib_run.calibrated:
         raise ValueError(f"{run}: no calibration to diagnose: {calib_run.reason}")
     book.stage("null_realisations")

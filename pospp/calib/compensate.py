@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 
 from pospp.calib.pairs import Pair
 from pospp.calib.replay import ImuIncrements, LegReplay, SolutionA, replay_leg
-from pospp.calib.solve import Calibration, calibrate
+from pospp.calib.solve import Calibration, fit_calibration
 
 
 @dataclass(frozen=True)
@@ -54,7 +54,7 @@ def joint_calibration(
     ids = sorted({i for p in pairs if p.used for i in (p.leg_a, p.leg_b)})
     if len(ids) < 2:
         return None
-    return calibrate(tuple(replays[i] for i in ids), formulation, transition=transition,
+    return fit_calibration(tuple(replays[i] for i in ids), formulation, transition=transition,
                      **calibrate_kwargs)
 
 

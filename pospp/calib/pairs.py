@@ -21,7 +21,7 @@ import numpy as np
 
 from pospp.calib.replay import LegReplay
 from pospp.calib.segment import Leg
-from pospp.calib.solve import Calibration, calibrate, condition_numbers, design_matrix
+from pospp.calib.solve import Calibration, condition_numbers, design_matrix, fit_calibration
 
 MODES = ("adjacent", "all")
 
@@ -125,7 +125,7 @@ def evaluate_pairs(
     formulations : tuple of str
         Formulations to calibrate each used pair with.
     **calibrate_kwargs
-        Passed to :func:`pospp.calib.solve.calibrate` (noise model, ARW, ...).
+        Passed to :func:`pospp.calib.solve.fit_calibration` (noise model, ARW, ...).
 
     Returns
     -------
@@ -155,7 +155,7 @@ def evaluate_pairs(
         cals: tuple[Calibration, ...] = ()
         if not reason:
             try:
-                cals = tuple(calibrate(reps, f, transition=policy.transition,
+                cals = tuple(fit_calibration(reps, f, transition=policy.transition,
                                        **calibrate_kwargs) for f in formulations)
             except (ValueError, np.linalg.LinAlgError) as exc:
                 reason = f"least squares failed: {exc}"

@@ -939,7 +939,7 @@ def _reml_nll(theta: NDArray, blocks: list[_LegNoise], q_fixed: float | None) ->
     return _reml_whitened(hw, zw, logdet)
 
 
-def calibrate(
+def fit_calibration(
     legs: tuple[LegReplay, ...],
     formulation: str,
     *,

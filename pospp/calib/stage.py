@@ -241,7 +241,7 @@ def calibrate_flight(
     gyro_gm_sigma_dph, gyro_gm_tau_s : float, optional
         First-order Gauss-Markov ("random") gyro drift of the IMU grade (steady-state sigma
         [deg/h], correlation time [s]; ``pospp.nav.tuning.tuning_preset(grade)``): added to
-        the ``"gyro_rw"`` covariance, coupling the legs (:func:`pospp.calib.solve.calibrate`).
+        the ``"gyro_rw"`` covariance, coupling the legs (:func:`pospp.calib.solve.fit_calibration`).
         Off when the tau is None (the previous model); the sigma is estimated by REML when
         None and the tau is given.
     gyro_gm_prior_sigma_dph : float, optional

@@ -61,7 +61,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pospp.calib.replay import ImuIncrements, LegReplay, SolutionA
-from pospp.calib.solve import NoiseModel, calibrate, fit_noise_model, leg_sensitivities
+from pospp.calib.solve import NoiseModel, fit_calibration, fit_noise_model, leg_sensitivities
 from pospp.diagnose import effects as fx
 from pospp.diagnose._linear import Fit, Problem, Term, bic, f_test, rms
 from pospp.diagnose.locate import horizon_worth, locate_gap, lof_basis
@@ -361,7 +361,7 @@ def diagnose(
     noise : {"white", "gyro_rw", "full"}
         Residual covariance: A's sigmas only (``"white"``), or A's sigmas times a plus the
         gyro angle random walk's correlated covariance q K (``"gyro_rw"``, as
-        :func:`pospp.calib.solve.calibrate`, which estimates a and q by REML on the base
+        :func:`pospp.calib.solve.fit_calibration`, which estimates a and q by REML on the base
         model). Only the shape matters to the F-tests (the scale is estimated), but a wrong
         shape (correlated residuals weighted as white) makes every test too liberal.
         ``"full"``: :class:`pospp.calib.solve.NoiseModel` fitted by REML on the base model
@@ -451,7 +451,7 @@ def diagnose(
     if noise == "white":
         white_scale, arw = 1.0, 0.0
     elif noise == "gyro_rw":
-        cal = calibrate(tuple(replays if whitening_replays is None else whitening_replays),
+        cal = fit_calibration(tuple(replays if whitening_replays is None else whitening_replays),
                         "body", noise="gyro_rw", gyro_arw_radpsqrts=gyro_arw_radpsqrts)
         white_scale, arw = cal.variance_factor, cal.gyro_arw_radpsqrts
     elif noise == "full":
@@ -471,7 +471,7 @@ def diagnose(
         whitening = None
         if noise == "gyro_rw" and rewhiten_null:
             def whitening(reps: tuple[LegReplay, ...]) -> tuple[float, float]:
-                c = calibrate(reps, "body", noise="gyro_rw",
+                c = fit_calibration(reps, "body", noise="gyro_rw",
                               gyro_arw_radpsqrts=gyro_arw_radpsqrts)
                 return c.variance_factor, c.gyro_arw_radpsqrts
         null = _NullCalibration(prob, null_dv, whitening)

@@ -20,7 +20,7 @@ import numpy as np
 from pospp import rotation, units
 from pospp.calib.compensate import compensate_legs
 from pospp.calib.replay import ImuIncrements, replay_leg, solution_a_from_trajectory
-from pospp.calib.solve import calibrate
+from pospp.calib.solve import fit_calibration
 from pospp.calib.stage import calibrate_flight, calibration_rows
 from pospp.io.mcap_reader import read_flight_log
 from pospp.io.parquet_tables import read_reference_trajectory
@@ -83,7 +83,7 @@ def main() -> None:
             traj, v_sigma_n_mps=[0.02, 0.02, 0.03], accel_bias_b_mps2=ba))):
         reps = {g.leg_id: replay_leg(imu, aa, g) for g in run.legs}
         for form in ("body", "paper"):
-            cal = calibrate((reps[0], reps[1]), form)
+            cal = fit_calibration((reps[0], reps[1]), form)
             _, imp = compensate_legs(imu, aa, {2: reps[2]}, cal)
             i = imp[0]
             print(f"held-out leg 2, {label}, {form} from pair (0,1): |dv| "

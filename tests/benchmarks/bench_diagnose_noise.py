@@ -42,7 +42,7 @@ def run_case(name: str) -> None:
     log = pipeline.ingest(CASES / f"{name}.mcap", cfg)
     nav = pipeline.navigate(log, cfg)
     imu = pipeline.imu_increments(log)
-    run, ref = pipeline.calibrate(imu, nav, cfg)
+    run, ref = pipeline.calibrate_from_a(imu, nav, cfg)
     truth_b = np.array(params["imu_errors"]["gyro_bias_dph"][:2])
     err = run.gyro_bias_b_radps[:2] / DPH - truth_b
     sig = run.gyro_bias_sigma_b_radps[:2] / DPH
@@ -98,7 +98,7 @@ def run_null(name: str, n_null: int) -> None:
     nav = pipeline.navigate(log, cfg)
     t_a = time.perf_counter() - t0
     imu = pipeline.imu_increments(log)
-    run, ref = pipeline.calibrate(imu, nav, cfg)
+    run, ref = pipeline.calibrate_from_a(imu, nav, cfg)
     t0 = time.perf_counter()
     null = pipeline.null_realisations(log, nav, run, cfg, n_null, seed=1)
     t_null = time.perf_counter() - t0

@@ -54,7 +54,7 @@ def null_case(seed: int, gnss_pos_m: float, leg_s: float):
     log, cfg = tp.simulate_flight(None, 0.0, seed, gnss_pos_m=gnss_pos_m, leg_s=leg_s)
     nav = pipeline.navigate(log, cfg)
     imu = pipeline.imu_increments(log)
-    run, ref = pipeline.calibrate(imu, nav, cfg)
+    run, ref = pipeline.calibrate_from_a(imu, nav, cfg)
     null = pipeline.null_realisations(log, nav, run, cfg, tp.N_NULL, seed=seed)
     sigs = rerun_signatures(log, nav, run, cfg,
                             navigate=lambda lg, lever_arm_b_m=None: pipeline.navigate(

@@ -17,7 +17,7 @@ from pospp import rotation, units
 from pospp.calib.compensate import compensate_legs
 from pospp.calib.pairs import PairPolicy
 from pospp.calib.replay import ImuIncrements, replay_leg, solution_a_from_trajectory
-from pospp.calib.solve import calibrate
+from pospp.calib.solve import fit_calibration
 from pospp.calib.stage import calibrate_flight
 from pospp.io.mcap_reader import read_flight_log
 from pospp.io.parquet_tables import read_reference_trajectory, write_table
@@ -127,7 +127,7 @@ def test_held_out_leg_predicted_by_one_pair(case):
     reps = {leg.leg_id: replay_leg(imu, a, leg) for leg in run.legs}
     ratios, after = {}, {}
     for form in ("body", "paper"):
-        cal = calibrate((reps[0], reps[1]), form)
+        cal = fit_calibration((reps[0], reps[1]), form)
         _, imp = compensate_legs(imu, a, {2: reps[2]}, cal)
         after[form] = imp[0]
         ratios[form] = (imp[0].vel_before_mps / imp[0].vel_after_mps,

@@ -24,7 +24,7 @@ from pospp.calib.compensate import (
     prior_sigma_b_radps,
 )
 from pospp.calib.replay import ImuIncrements, solution_a_from_trajectory
-from pospp.calib.solve import calibrate
+from pospp.calib.solve import fit_calibration
 from pospp.calib.stage import calibrate_flight
 from pospp.nav.filter import run_integrated_navigation
 from pospp.nav.strapdown import increments_from_rates
@@ -146,7 +146,7 @@ def run_once(kind: str, seed: int, folder: Path, *, estimate_gm_sigma: bool = Fa
     _, smooth = compensate_legs(imu, a, run.replays, cal, smoothed_drift=True, **kw)
     # prediction: calibrate on the first two legs only, compensate the last (not in the fit)
     ids = sorted(run.replays)
-    pair = calibrate((run.replays[ids[0]], run.replays[ids[1]]), "body",
+    pair = fit_calibration((run.replays[ids[0]], run.replays[ids[1]]), "body",
                      gyro_arw_radpsqrts=tun.gyro_arw_dpsh * np.pi / 180.0 / 60.0,
                      gyro_gm_sigma_radps=cal.gyro_gm_sigma_radps,
                      gyro_gm_tau_s=tun.gyro_gm_tau_s)
@@ -226,7 +226,7 @@ def run_modes(kind: str, seed: int, folder: Path, *, gm_tau_s: float | None = No
         k1 = int(np.searchsorted(t, rep.t0_s + rep.t_s[-1]))
         true_mean[lid] = bias[k0:k1].mean(axis=0)
     ids = sorted(run.replays)
-    pair = calibrate((run.replays[ids[0]], run.replays[ids[1]]), "body",
+    pair = fit_calibration((run.replays[ids[0]], run.replays[ids[1]]), "body",
                      gyro_arw_radpsqrts=tun.gyro_arw_dpsh * np.pi / 180.0 / 60.0,
                      gyro_gm_sigma_radps=cal.gyro_gm_sigma_radps,
                      gyro_gm_tau_s=tun.gyro_gm_tau_s)

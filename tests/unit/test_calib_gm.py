@@ -18,7 +18,7 @@ from _truth_imu import rhumb_line
 from pospp import rotation, units
 from pospp.calib.replay import ImuIncrements, replay_leg, solution_a_from_trajectory
 from pospp.calib.segment import Leg
-from pospp.calib.solve import _gm_covariance, calibrate, gm_noise_operator, noise_basis
+from pospp.calib.solve import _gm_covariance, fit_calibration, gm_noise_operator, noise_basis
 from pospp.calib.stage import calibrate_flight
 from pospp.nav.error_model import BG
 from pospp.nav.strapdown import Trajectory
@@ -94,7 +94,7 @@ def test_drift_covariance_with_infinite_tau_is_a_random_constant():
 def test_validation_messages():
     reps = (_leg(0, 20.0, _bias), _leg(1, 200.0, _bias))
     with pytest.raises(ValueError, match="gyro_gm_tau_s: expected > 0 s"):
-        calibrate(reps, "body", gyro_gm_tau_s=0.0)
+        fit_calibration(reps, "body", gyro_gm_tau_s=0.0)
     with pytest.raises(ValueError, match="compensation"):
         calibrate_flight(ImuIncrements(np.zeros(2), np.zeros((1, 3)), np.zeros((1, 3))),
                          None, compensation="per_leg")

@@ -20,7 +20,7 @@ from pospp import units
 from pospp.calib.compensate import compensate_legs
 from pospp.calib.replay import ImuIncrements, replay_leg, solution_a_from_trajectory
 from pospp.calib.segment import find_legs
-from pospp.calib.solve import calibrate
+from pospp.calib.solve import fit_calibration
 from pospp.calib.stage import calibrate_flight
 from pospp.nav.strapdown import increments_from_rates
 from pospp.sim.api import ImuErrorModel, simulate
@@ -87,7 +87,7 @@ def test_grid_flight_prediction_on_legs_not_used():
     pair = (reps[block1[-2].leg_id], reps[block1[-1].leg_id])
     after = {}
     for form in ("body", "paper"):
-        cal = calibrate(pair, form)
+        cal = fit_calibration(pair, form)
         _, imp = compensate_legs(imu, a, {g.leg_id: reps[g.leg_id] for g in block2}, cal)
         after[form] = imp
         for i in imp:

@@ -17,7 +17,7 @@ from _truth_imu import rhumb_line, weaving_flight, weaving_truth_state
 from pospp import rotation, units
 from pospp.calib.replay import ImuIncrements, replay_leg, solution_a_from_trajectory
 from pospp.calib.segment import Leg
-from pospp.calib.solve import calibrate, leg_sensitivities
+from pospp.calib.solve import fit_calibration, leg_sensitivities
 from pospp.nav.strapdown import Trajectory
 
 DPH = units.DEG_PER_H_RADPS
@@ -74,7 +74,7 @@ def reversal_pair():
 
 def test_body_formulation_recovers_injected_bias_and_tilts(reversal_pair):
     (ra, ca), (rb, cb) = reversal_pair
-    cal = calibrate((ra, rb), "body")
+    cal = fit_calibration((ra, rb), "body")
     for i, ax in enumerate("xy"):
         est, sig = cal.value(f"gyro_bias_{ax}"), cal.sigma_of(f"gyro_bias_{ax}")
         assert np.sign(est) == np.sign(BIAS_B[i])
@@ -95,8 +95,8 @@ def test_body_formulation_recovers_injected_bias_and_tilts(reversal_pair):
 
 def test_paper_formulation_cannot_follow_a_body_fixed_drift_on_a_reversal(reversal_pair):
     (ra, ca), (rb, cb) = reversal_pair
-    body = calibrate((ra, rb), "body")
-    paper = calibrate((ra, rb), "paper")
+    body = fit_calibration((ra, rb), "body")
+    paper = fit_calibration((ra, rb), "paper")
     eps_a = (ca @ BIAS_B)[0:2]  # nav-frame drift on leg a; leg b sees about -eps_a
     eps_p = np.array([paper.value("eps_n"), paper.value("eps_e")])
     assert np.linalg.norm(eps_p - eps_a) > 0.5 * np.linalg.norm(eps_a)
@@ -115,8 +115,8 @@ def test_closed_form_and_numerical_transitions_agree_on_an_ideal_leg(reversal_pa
             scale = np.abs(a).max(axis=(0, 2), keepdims=True)  # per velocity component
             # the closed forms drop terms worth a few per cent over 300 s (closed_form docs)
             assert np.max(np.abs(a - b) / scale) < 0.05
-    c_num = calibrate((ra, rb), "body", transition="numerical")
-    c_cf = calibrate((ra, rb), "body", transition="closed_form")
+    c_num = fit_calibration((ra, rb), "body", transition="numerical")
+    c_cf = fit_calibration((ra, rb), "body", transition="closed_form")
     for ax in "xy":
         assert abs(c_num.value(f"gyro_bias_{ax}") - c_cf.value(f"gyro_bias_{ax}")) < 0.05 * DPH
 
@@ -126,7 +126,7 @@ def test_numerical_transition_beats_closed_form_on_a_weaving_leg():
     b = _leg(1, 200.0, phi_n_rad=PHI1, weave_amp_deg=8.0, accel=False)
     err = {}
     for tr in ("numerical", "closed_form"):
-        cal = calibrate((a[0], b[0]), "body", transition=tr, noise="white")
+        cal = fit_calibration((a[0], b[0]), "body", transition=tr, noise="white")
         err[tr] = np.hypot(*(cal.gyro_bias_b_radps()[0:2] - BIAS_B[0:2])) / DPH
     assert err["numerical"] < 0.01  # deg/h, of a 0.64 deg/h bias
     assert err["numerical"] < 0.2 * err["closed_form"], err

@@ -32,7 +32,7 @@ FUNCTION_EXCEPTIONS = {
     "nav/error_model.py:fill_f_matrix": "the 15x15 F written element by element, one "
                                         "equation of docs/filter.md per line",
     "calib/solve.py:fit_noise_model": "lead's noise-model work (issue 12)",
-    "calib/solve.py:calibrate": "lead's noise-model work (issue 12)",
+    "calib/solve.py:fit_calibration": "lead's noise-model work (issue 12)",
     "calib/stage.py:calibrate_flight": "lead's (issue 17 item 3 names it; issue 12 changes it)",
     "diagnose/workflow.py:diagnose": "issue 12 items 3-5 (power)",
     "pipeline.py:_run_stages": "the lead's stage runner",

@@ -84,7 +84,7 @@ def null_flight_diagnosis(seed: int, n_null: int = N_NULL):
     log = _Log(sim.imu, sim.fix, sim.vel)
     nav = pipeline.navigate(log, cfg)
     imu = pipeline.imu_increments(log)
-    run, ref = pipeline.calibrate(imu, nav, cfg)
+    run, ref = pipeline.calibrate_from_a(imu, nav, cfg)
     assert run.calibrated and len(run.replays) >= 2, run.reason
     null = pipeline.null_realisations(log, nav, run, cfg, n_null, seed=seed)
     honest = with_null_covariance(run, null)

@@ -39,7 +39,7 @@ def _run(cases: Path, name: str, extra: str = ""):
     log = pipeline.ingest(cases / f"{name}.mcap", cfg)
     nav = pipeline.navigate(log, cfg)
     imu = pipeline.imu_increments(log)
-    run, ref = pipeline.calibrate(imu, nav, cfg)
+    run, ref = pipeline.calibrate_from_a(imu, nav, cfg)
     assert run.calibrated, run.reason
     null = pipeline.null_realisations(log, nav, run, cfg, 8, seed=2)
     honest = with_null_covariance(run, null)

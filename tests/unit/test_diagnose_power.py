@@ -125,7 +125,7 @@ def power_run(effect: str | None, size: float, seed: int, *, n_null: int = N_NUL
     log, cfg = simulate_flight(effect, size, seed, **kwargs)
     nav = pipeline.navigate(log, cfg)
     imu = pipeline.imu_increments(log)
-    run, ref = pipeline.calibrate(imu, nav, cfg)
+    run, ref = pipeline.calibrate_from_a(imu, nav, cfg)
     assert run.calibrated and len(run.replays) >= 2, run.reason
     null = pipeline.null_realisations(log, nav, run, cfg, n_null, seed=seed)
     d = pipeline.diagnose(run, imu, ref, cfg, log=log, nav=nav, null_dv=null)

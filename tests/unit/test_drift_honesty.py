@@ -72,7 +72,7 @@ def drift_flight_z(seed: int, tau_s: float, sigma_dph: float, *, n_null: int = 6
     log = _Log(sim.imu, sim.fix, sim.vel)
     nav = pipeline.navigate(log, cfg)
     imu = pipeline.imu_increments(log)
-    run, _ = pipeline.calibrate(imu, nav, cfg)
+    run, _ = pipeline.calibrate_from_a(imu, nav, cfg)
     assert run.calibrated and len(run.replays) >= 2, run.reason
     null = pipeline.null_realisations(log, nav, run, cfg, n_null, seed=seed)
     honest = with_null_covariance(run, null)
