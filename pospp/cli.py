@@ -404,7 +404,7 @@ def diagnose(run_dir: str) -> None:
 
     Predicts B's error on every leg with the calibrated model, measures the gap, tests the
     library of candidate effects, adds the one the data supports and repeats
-    (pospp.diagnose.workflow.diagnose).
+    (pospp.diagnose.workflow.diagnose_replays).
     """
     from pospp.pipeline import diagnose_run
 

@@ -195,11 +195,11 @@ def simulate_log(tpl: FlightTemplate, imu: ImuErrorModel, gnss: GnssModel, *,
 def bma_leg_stats(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                   config: PipelineConfig) -> dict[str, Stat]:
     """B minus A on the flight's legs, as the leg-based workflow sees them: the calibration
-    stage as configured, then :func:`pospp.diagnose.workflow.diagnose` with its base model
+    stage as configured, then :func:`pospp.diagnose.workflow.diagnose_replays` with its base model
     only (the pipeline's formulation, transition and gyro-random-walk weighting; no
     candidates), whose per-leg gaps give :func:`pospp.simcompare.stats.leg_stats`. Empty
     when the flight has fewer than 3 legs or no calibration."""
-    from pospp.diagnose.workflow import diagnose
+    from pospp.diagnose.workflow import diagnose_replays
 
     imu = pipeline.imu_increments(log)
     try:
@@ -209,7 +209,7 @@ def bma_leg_stats(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     if not calib_run.calibrated or len(calib_run.replays) < MIN_LEGS:
         return {}
     replays = [calib_run.replays[i] for i in sorted(calib_run.replays)]
-    d = diagnose(replays, base_formulation=config.pairs.formulation,
+    d = diagnose_replays(replays, base_formulation=config.pairs.formulation,
                  base_transition=config.pairs.transition, noise="gyro_rw",
                  gyro_arw_radpsqrts=pipeline.imu_tuning(config).noise().gyro_arw_radpsqrts,
                  effects=(), max_steps=0)

@@ -47,8 +47,12 @@ from pospp.diagnose.rerun import (
     rerun_signatures,
     signature_at,
 )
-from pospp.diagnose.workflow import Diagnosis, diagnosis_columns, residual_curve_columns
-from pospp.diagnose.workflow import diagnose as run_diagnosis
+from pospp.diagnose.workflow import (
+    Diagnosis,
+    diagnose_replays,
+    diagnosis_columns,
+    residual_curve_columns,
+)
 from pospp.evaluate import evaluation_rows, solution_errors
 from pospp.io import mcap_reader, parquet_tables, report_files, run_folder, trajectory_mcap
 from pospp.io.errors import IngestError
@@ -388,7 +392,7 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
     diagnosis = None
     if config.outputs.diagnose and calib_run.calibrated:
         try:
-            diagnosis = diagnose(calib_run, imu, solution_a, config, log=log, nav=nav,
+            diagnosis = diagnose_calibration(calib_run, imu, solution_a, config, log=log, nav=nav,
                                  null_dv=null_dv)
             if diagnosis.location is not None:  # "unexplained": where the gap sits (issue 12)
                 book.note("warning", "diagnose", diagnosis.location.text)
@@ -626,7 +630,7 @@ def _lever_arm_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     return np.asarray(config.gnss.lever_arm_m, dtype=float) - est.lever_b_m
 
 
-def diagnose(calib_run: CalibrationRun, imu: ImuIncrements, solution_a: SolutionA,
+def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution_a: SolutionA,
              config: PipelineConfig, *, log: mcap_reader.FlightLog | None = None,
              nav: nav_filter.FilterResult | None = None,
              null_dv: list[list[np.ndarray]] | None = None) -> Diagnosis:
@@ -671,7 +675,7 @@ def diagnose(calib_run: CalibrationRun, imu: ImuIncrements, solution_a: Solution
     # as white noise would make every F-test too liberal
     arw_radpsqrts = imu_tuning(config).noise().gyro_arw_radpsqrts
     def run(signatures, whitening_replays=None):
-        return run_diagnosis(
+        return diagnose_replays(
             replays, imu=imu, solution_a=solution_a,
             replay_kwargs={"accel_compensation": config.replay.accel_compensation},
             base_formulation=config.pairs.formulation, base_transition=config.pairs.transition,
@@ -810,7 +814,8 @@ def diagnose_run(run_dir: str | Path, *, progress: ProgressFn | None = None) -> 
     null_dv = (null_realisations(log, nav, calib_run, config, config.pairs.null_realisations)
                if config.pairs.null_realisations > 0 else None)
     book.stage("diagnose")
-    diagnosis = diagnose(calib_run, imu, solution_a, config, log=log, nav=nav, null_dv=null_dv)
+    diagnosis = diagnose_calibration(calib_run, imu, solution_a, config, log=log, nav=nav,
+                                     null_dv=null_dv)
     book.stage("write")
     out_meta = {k: meta[k] for k in ("input_file", "input_sha256", "config")}
     parquet_tables.write_table(run / "diagnosis.parquet", diagnosis_columns(diagnosis),

@@ -27,11 +27,11 @@ realisations of it made with pospp's own A (a parametric bootstrap by perturbati
    flight's own trajectory, GNSS rate, stamps and gaps, A's own gains and the legs' coupling
    through A.
 
-The workflow (:func:`pospp.diagnose.workflow.diagnose`, ``null_dv``) computes each statistic it
-uses (lack-of-fit F, each candidate's nested F) on the R realisations with the same design
-(the whitening re-estimated on each), and turns the flight's statistic into a p-value by the
-predictive Student t of log F (:func:`calibrated_p_value`). The calibration re-runs its least
-squares on each (:func:`pospp.calib.stage.with_null_covariance`) for its covariance.
+The workflow (:func:`pospp.diagnose.workflow.diagnose_replays`, ``null_dv``) computes each
+statistic it uses (lack-of-fit F, each candidate's nested F) on the R realisations with the same
+design (the whitening re-estimated on each), and turns the flight's statistic into a p-value by
+the predictive Student t of log F (:func:`calibrated_p_value`). The calibration re-runs its
+least squares on each (:func:`pospp.calib.stage.with_null_covariance`) for its covariance.
 
 Assumed: the injected levels are the flight's (a drift the null carries and the data do not
 hold makes it conservative, one they hold and the null lacks makes it cry wolf; a drift slower

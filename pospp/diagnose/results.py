@@ -1,4 +1,4 @@
-"""Results of the model-discrepancy workflow (:func:`pospp.diagnose.workflow.diagnose`).
+"""Results of the model-discrepancy workflow (:func:`pospp.diagnose.workflow.diagnose_replays`).
 
 Frozen dataclasses; display units only in the rows' ``unit``, SI elsewhere (m/s, m, s).
 """

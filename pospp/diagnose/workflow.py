@@ -315,7 +315,7 @@ class _NullCalibration:
 # the workflow
 
 
-def diagnose(
+def diagnose_replays(
     replays: Sequence[LegReplay],
     *,
     imu: ImuIncrements | None = None,
@@ -374,11 +374,11 @@ def diagnose(
     whitening_replays : sequence of LegReplay, optional
         ``"gyro_rw"``: estimate the whitening (REML variance factor of the white part, the
         random walk fixed or estimated) on these instead of ``replays``: the replays with the
-        effects already named removed (``pipeline.diagnose``). A large effect left in the base
-        model's residual (a 1 m lever arm: 50 mm/s) is read as white noise, which flattens the
-        whitening's shape; the closing lack-of-fit test then finds the random walk left after
-        the effect is named structured (measured: F 390 against a null of about 30, where the
-        same flight with the lever arm configured right closes at F 34).
+        effects already named removed (``pipeline.diagnose_calibration``). A large effect left
+        in the base model's residual (a 1 m lever arm: 50 mm/s) is read as white noise, which
+        flattens the whitening's shape; the closing lack-of-fit test then finds the random walk
+        left after the effect is named structured (measured: F 390 against a null of about 30,
+        where the same flight with the lever arm configured right closes at F 34).
     gyro_gm_taus_s : sequence of float
         ``"full"``: correlation times of a Gauss-Markov gyro drift for REML to choose from
         (none: no drift in the model).

@@ -25,7 +25,7 @@ import numpy as np
 
 from pospp import pipeline, rotation
 from pospp.config import load_config
-from pospp.diagnose.workflow import diagnose
+from pospp.diagnose.workflow import diagnose_replays
 from pospp.io.parquet_tables import read_reference_trajectory
 from pospp.nav import strapdown
 from pospp.nav.strapdown import interpolate_trajectory
@@ -71,7 +71,7 @@ def run_case(name: str) -> None:
     for label, rr in variants:
         for noise in ("gyro_rw", "full"):
             t0 = time.perf_counter()
-            d = diagnose(rr, imu=imu, solution_a=ref, base_formulation="body", noise=noise,
+            d = diagnose_replays(rr, imu=imu, solution_a=ref, base_formulation="body", noise=noise,
                          replay_kwargs={"accel_compensation": cfg.replay.accel_compensation},
                          effects=EFFECTS)
             rows = [(s.effect, f"{s.value:.4g} {s.unit}".strip(), f"F={s.statistic:.2f}",
@@ -110,8 +110,9 @@ def run_null(name: str, n_null: int) -> None:
     for effects in (None, EFFECTS):
         for nd in (None, null):
             t0 = time.perf_counter()
-            d = pipeline.diagnose(run, imu, ref, cfg, null_dv=nd) if effects is None else \
-                diagnose([run.replays[i] for i in sorted(run.replays)], imu=imu, solution_a=ref,
+            d = pipeline.diagnose_calibration(run, imu, ref, cfg, null_dv=nd) \
+                if effects is None else diagnose_replays(
+                    [run.replays[i] for i in sorted(run.replays)], imu=imu, solution_a=ref,
                          replay_kwargs={"accel_compensation": cfg.replay.accel_compensation},
                          noise="gyro_rw", null_dv=nd, effects=effects,
                          gyro_arw_radpsqrts=np.radians(pipeline.imu_tuning(cfg).gyro_arw_dpsh)

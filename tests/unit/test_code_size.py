@@ -34,7 +34,7 @@ FUNCTION_EXCEPTIONS = {
     "calib/solve.py:fit_noise_model": "lead's noise-model work (issue 12)",
     "calib/solve.py:fit_calibration": "lead's noise-model work (issue 12)",
     "calib/stage.py:calibrate_flight": "lead's (issue 17 item 3 names it; issue 12 changes it)",
-    "diagnose/workflow.py:diagnose": "issue 12 items 3-5 (power)",
+    "diagnose/workflow.py:diagnose_replays": "issue 12 items 3-5 (power)",
     "pipeline.py:_run_stages": "the lead's stage runner",
 }
 

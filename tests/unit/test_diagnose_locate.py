@@ -13,7 +13,7 @@ from _synthetic import noisy_replays, survey_flight
 from pospp.calib.replay import ImuIncrements
 from pospp.diagnose.locate import horizon_worth, locate_gap
 from pospp.diagnose.tables import DIAGNOSIS_COLUMNS, candidate_columns, diagnosis_columns
-from pospp.diagnose.workflow import diagnose
+from pospp.diagnose.workflow import diagnose_replays
 
 SIGMA = 0.003  # A's velocity noise [m/s]
 
@@ -86,7 +86,7 @@ def test_out_of_library_gap_is_located(reversal, seed):
     add = np.zeros((t.size, 2))
     add[:, 1] = 0.02 * np.clip(3.0 * (u - 2.0 / 3.0), 0.0, None) ** 2
     reps = [(_with(r, add) if i == k else r) for i, r in enumerate(reps)]
-    d = diagnose(reps, imu=imu, solution_a=ref)
+    d = diagnose_replays(reps, imu=imu, solution_a=ref)
     assert d.conclusion == "unexplained", d.steps[-1]
     loc = d.location
     assert loc is not None
@@ -117,7 +117,7 @@ def test_named_effect_is_worth_its_signature_at_the_horizon(reversal):
     dv = imu0.dv_b_mps + np.outer(np.exp(-t_mid / 1200.0), db) * np.diff(fl.imu.t_s)[:, None]
     imu = ImuIncrements(fl.imu.t_s, imu0.dtheta_b_rad, dv)
     reps = noisy_replays(fl, imu, sigma_mps=SIGMA, rng=np.random.default_rng(41), solution_a=ref)
-    d = diagnose(reps, imu=imu, solution_a=ref)
+    d = diagnose_replays(reps, imu=imu, solution_a=ref)
     if "accel_bias_change" not in d.named:
         pytest.skip(f"warm-up not named here: {d.named}")
     s = d.step_of("accel_bias_change")

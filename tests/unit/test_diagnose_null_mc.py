@@ -91,8 +91,8 @@ def null_flight_diagnosis(seed: int, n_null: int = N_NULL):
     assert honest.sigma_source == "null_realisations"
     true_b = np.radians(np.asarray(sim.params["imu_errors"]["gyro_bias_dph"], float)) / 3600.0
     z = ((honest.gyro_bias_b_radps - true_b) / honest.gyro_bias_sigma_b_radps)[:2]
-    return (pipeline.diagnose(run, imu, ref, cfg, null_dv=null),
-            pipeline.diagnose(run, imu, ref, cfg),
+    return (pipeline.diagnose_calibration(run, imu, ref, cfg, null_dv=null),
+            pipeline.diagnose_calibration(run, imu, ref, cfg),
             z)
 
 

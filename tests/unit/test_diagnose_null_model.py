@@ -25,7 +25,7 @@ from scipy import stats
 from pospp.calib.replay import replay_leg
 from pospp.calib.solve import NoiseModel
 from pospp.diagnose import null_model
-from pospp.diagnose.workflow import diagnose
+from pospp.diagnose.workflow import diagnose_replays
 
 
 def test_calibrated_p_value_is_exact_for_a_normal_log_statistic():
@@ -194,8 +194,8 @@ def test_workflow_calibrated_on_null_realisations_holds_alpha(replays):
         reps = [dataclasses.replace(r, dv_n_mps=r.dv_n_mps + d)
                 for r, d in zip(replays, data, strict=True)]
         kw = dict(noise="gyro_rw", gyro_arw_radpsqrts=2e-6, effects=effects, alpha=0.05)
-        nominal.append(diagnose(reps, **kw).conclusion)
-        d = diagnose(reps, null_dv=null, **kw)
+        nominal.append(diagnose_replays(reps, **kw).conclusion)
+        d = diagnose_replays(reps, null_dv=null, **kw)
         calibrated.append(d.conclusion)
         assert d.steps[-1].criterion == "lack_of_fit_F_null_calibrated"
         # a structured gap outside the library: a 20 mm/s sine over leg 2's north channel
@@ -204,7 +204,7 @@ def test_workflow_calibrated_on_null_realisations_holds_alpha(replays):
         dv = r.dv_n_mps.copy()
         dv[:, 0] += 0.02 * np.sin(3 * np.pi * r.t_s / r.t_s[-1])
         bumped[1] = dataclasses.replace(r, dv_n_mps=dv)
-        powered.append(diagnose(bumped, null_dv=null, **kw).conclusion)
+        powered.append(diagnose_replays(bumped, null_dv=null, **kw).conclusion)
     # at alpha = 0.05 over 12 draws, 3 or more false alarms has probability 2 %
     assert nominal.count("unexplained") >= 6
     assert calibrated.count("unexplained") <= 2

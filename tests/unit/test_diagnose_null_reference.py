@@ -45,8 +45,8 @@ def _run(cases: Path, name: str, extra: str = ""):
     honest = with_null_covariance(run, null)
     true_b = np.radians(np.asarray(params["imu_errors"]["gyro_bias_dph"], float)) / 3600.0
     z = ((honest.gyro_bias_b_radps - true_b) / honest.gyro_bias_sigma_b_radps)[:2]
-    return (pipeline.diagnose(run, imu, ref, cfg, null_dv=null),
-            pipeline.diagnose(run, imu, ref, cfg), z)
+    return (pipeline.diagnose_calibration(run, imu, ref, cfg, null_dv=null),
+            pipeline.diagnose_calibration(run, imu, ref, cfg), z)
 
 
 @pytest.mark.slow

@@ -128,7 +128,7 @@ def power_run(effect: str | None, size: float, seed: int, *, n_null: int = N_NUL
     run, ref = pipeline.calibrate_from_a(imu, nav, cfg)
     assert run.calibrated and len(run.replays) >= 2, run.reason
     null = pipeline.null_realisations(log, nav, run, cfg, n_null, seed=seed)
-    d = pipeline.diagnose(run, imu, ref, cfg, log=log, nav=nav, null_dv=null)
+    d = pipeline.diagnose_calibration(run, imu, ref, cfg, log=log, nav=nav, null_dv=null)
     if effect is None or effect not in d.named:
         return PowerRun(str(effect), size, d, False, float("nan"), False)
     est = abs(float(d.step_of(effect).value))

@@ -21,7 +21,7 @@ from pospp.diagnose import effects as fx
 from pospp.diagnose.workflow import (
     DIAGNOSIS_COLUMNS,
     candidate_columns,
-    diagnose,
+    diagnose_replays,
     diagnosis_columns,
     leg_gap_columns,
     residual_curve_columns,
@@ -61,7 +61,7 @@ def _run(fl, dth, dv, seed, **kw):
     ref = fl.solution_a(SIGMA)
     reps = noisy_replays(fl, imu, sigma_mps=SIGMA, rng=np.random.default_rng(seed),
                          solution_a=ref)
-    return diagnose(reps, imu=imu, solution_a=ref, **kw)
+    return diagnose_replays(reps, imu=imu, solution_a=ref, **kw)
 
 
 def _excess(gap):
@@ -209,12 +209,12 @@ def test_input_contract(reversal):
     imu = ImuIncrements(reversal.imu.t_s, dth, dv)
     reps = noisy_replays(reversal, imu, sigma_mps=SIGMA, rng=np.random.default_rng(1))
     with pytest.raises(ValueError, match="base_formulation"):
-        diagnose(reps, base_formulation="nav")
+        diagnose_replays(reps, base_formulation="nav")
     with pytest.raises(ValueError, match="at least 2 legs"):
-        diagnose(reps[:1])
+        diagnose_replays(reps[:1])
     with pytest.raises(ValueError, match="expected one of"):
-        diagnose(reps, effects=("wind",))
-    d = diagnose(reps, effects=("time_offset",))  # no IMU given: cannot re-run B
+        diagnose_replays(reps, effects=("wind",))
+    d = diagnose_replays(reps, effects=("time_offset",))  # no IMU given: cannot re-run B
     assert d.not_evaluated == ("time_offset",)
 
 
