@@ -289,7 +289,7 @@ def main(out: Path) -> None:
             convert(DATA / src, out / f"{stem}.mcap", **opts)
         cfg = load_config(ROOT / "pipelines" / "realdata" / f"{name}.toml")
         run_dir = out / f"run_{stem}"
-        outcome = pipeline.run(out / f"{stem}.mcap", cfg, run_dir, force=True)
+        outcome = pipeline.process_flight(out / f"{stem}.mcap", cfg, run_dir, force=True)
         tables = {k: pd.read_parquet(run_dir / f"{k}.parquet") for k in
                   ("legs", "pairs", "calibration", "leg_errors", "diagnosis", "messages")
                   if (run_dir / f"{k}.parquet").is_file()}

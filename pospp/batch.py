@@ -177,7 +177,7 @@ def process_one(mcap_path: str, config_dict: dict[str, Any], out_root: str,
                                  run_dir=name, **kept)
         # the batch owns its root: an earlier run of this flight is replaced (never a folder
         # holding files pospp did not write)
-        outcome = pipeline.run(path, config, run_dir, force=True)
+        outcome = pipeline.process_flight(path, config, run_dir, force=True)
         s = outcome.summary
         return FlightOutcome(
             shown, sha, "done" if outcome.status == "ok" else outcome.status,

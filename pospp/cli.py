@@ -147,7 +147,8 @@ def run(mcap_file: str, pipeline_file: str | None, out_dir: str, force: bool,
         verbose: bool) -> None:
     """Process one flight log: A, legs, B, pairs, calibration, compensation, report.
 
-    Calls pospp.pipeline.run. The run is written beside OUT and swapped in whole when done.
+    Calls pospp.pipeline.process_flight. The run is written beside OUT and swapped in whole
+    when done.
     """
     from pospp import pipeline
     from pospp.io.report_files import read_run_tables
@@ -156,7 +157,7 @@ def run(mcap_file: str, pipeline_file: str | None, out_dir: str, force: bool,
     config = _config(pipeline_file)
     bar = _StageBar()
     try:
-        outcome = pipeline.run(mcap_file, config, out_dir, progress=bar, force=force)
+        outcome = pipeline.process_flight(mcap_file, config, out_dir, progress=bar, force=force)
     finally:
         bar.close()
     click.echo(summary_text(read_run_tables(outcome.out_dir), verbose=verbose))

@@ -220,7 +220,7 @@ class _Progress:
                 **{f"stage_{name}_s": times[name] for name in STAGES if name in times}}
 
 
-def run(
+def process_flight(
     mcap_path: str | Path,
     config: PipelineConfig,
     out_dir: str | Path,
@@ -258,7 +258,8 @@ def run(
     pospp.io.errors.IngestError, ValueError, ...
         Only after the failed run (messages and summary recording the failure) is swapped in.
     """
-    book = _Progress(progress)  # the run's clock starts here: wall_time_s is all of run()
+    # the run's clock starts here: wall_time_s is all of process_flight()
+    book = _Progress(progress)
     target = run_folder.check_target(out_dir, input_file=mcap_path, force=force)
     sha = sha256_file(mcap_path) if Path(mcap_path).is_file() else ""
     stage = run_folder.new_staging(target)
@@ -305,7 +306,7 @@ def _write_failed(mcap_path: str | Path, sha: str, config: PipelineConfig, out: 
 
 def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
                 book: _Progress) -> RunOutcome:
-    """Every stage of :func:`run`, writing into the (staging) folder ``out``."""
+    """Every stage of :func:`process_flight`, writing into the (staging) folder ``out``."""
     meta = {
         "input_file": run_folder.display_path(mcap_path),
         "input_sha256": sha,
@@ -674,7 +675,7 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
     # B's residuals carry the gyro angle random walk, correlated along each leg: weighting them
     # as white noise would make every F-test too liberal
     arw_radpsqrts = imu_tuning(config).noise().gyro_arw_radpsqrts
-    def run(signatures, whitening_replays=None):
+    def diagnose_with(signatures, whitening_replays=None):
         return diagnose_replays(
             replays, imu=imu, solution_a=solution_a,
             replay_kwargs={"accel_compensation": config.replay.accel_compensation},
@@ -683,7 +684,7 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
             alpha=config.pairs.diagnose_alpha, signatures=signatures,
             whitening_replays=whitening_replays)
 
-    d = run(sigs)
+    d = diagnose_with(sigs)
     for _ in range(REFINE_ITERATIONS if sigs else 0):
         assert sigs is not None  # the loop runs only with signatures
         # A is not linear in a GNSS-side effect: secants through the current estimates
@@ -692,13 +693,13 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
                                         navigate=a_as_configured)
         if all(refined[k] is sigs[k] for k in sigs):
             break
-        d, sigs = run(refined), refined
+        d, sigs = diagnose_with(refined), refined
     removed = _named_removed(replays, d, sigs) if sigs else None
     if removed is None:
         return d
     # the whitening under the model named: a pass whose whitening drops an effect it was
     # estimated under is not self-consistent, and the first stands (measured: a 3 m lever arm)
-    d2 = run(sigs, removed)
+    d2 = diagnose_with(sigs, removed)
     return d2 if set(d.named) <= set(d2.named) else d
 
 

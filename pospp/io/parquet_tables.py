@@ -169,7 +169,8 @@ TABLES: dict[str, list[Column]] = {
                     "end before compensation (RMS over legs)")),
         _opt(Column("dp_after_m", _F, "m", "same, after compensation")),
         _opt(Column("calibration_reason", _S, "", "'ok', or why no calibration was produced")),
-        _opt(Column("wall_time_s", _F, "s", "processing wall time of the run (pospp.pipeline.run "
+        _opt(Column("wall_time_s", _F, "s", "processing wall time of the run "
+                    "(pospp.pipeline.process_flight "
                     "from its call to the summary's last write, report included; not the "
                     "interpreter's start-up and imports)")),
         *[_opt(Column(f"stage_{name}_s", _F, "s", f"wall time of the {name} stage{extra}"))

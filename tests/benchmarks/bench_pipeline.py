@@ -48,7 +48,7 @@ def progress(stage, frac):
         stages_cpu[last[1]] = stages_cpu.get(last[1], 0.0) + cpu - last[2]
         stages_hwm[last[1]] = hwm_mib()  # peak so far, read when the stage ends
     last[0], last[1], last[2] = now, stage, cpu
-out = pipeline.run(sys.argv[1], load_config(sys.argv[2]), sys.argv[3], progress=progress,
+out = pipeline.process_flight(sys.argv[1], load_config(sys.argv[2]), sys.argv[3], progress=progress,
                    force=True)
 progress(None, 1.0)
 print(json.dumps({"wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0,
@@ -113,7 +113,7 @@ def main() -> None:
               f"{r['peak_rss_mib']:.0f} | {stages} |")
     print()
     print("Per stage: wall / CPU [s], peak RSS of the process at the stage's end [MiB] "
-          "(imports: before pipeline.run)")
+          "(imports: before pipeline.process_flight)")
     names = list(dict.fromkeys(k for r in rows for k in r["stages_s"]))
     print("| duration | imports | " + " | ".join(names) + " |")
     print("|---|---|" + "---|" * len(names))

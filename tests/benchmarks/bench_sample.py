@@ -9,9 +9,9 @@ fresh process each time (numba's cache warm: one untimed run first), with ``[pai
 null_realisations`` set to each ``--null`` value (a copy of the pipeline file), so
 that the null realisations' share of the diagnose stage shows. Per run: the command's wall
 time from outside, its CPU time (user + system of the child, from ``wait4``), the summary's
-``wall_time_s`` (``pipeline.run`` only: start-up and imports are the difference) and every
-``stage_<name>_s`` column. Best run (by CPU) per setting; the load average beside it. Prints
-markdown for docs/benchmarks.md.
+``wall_time_s`` (``pipeline.process_flight`` only: start-up and imports are the difference) and
+every ``stage_<name>_s`` column. Best run (by CPU) per setting; the load average beside it.
+Prints markdown for docs/benchmarks.md.
 """
 
 from __future__ import annotations

@@ -129,7 +129,7 @@ def test_folder_with_the_users_files_is_refused_even_with_force(flight, tmp_path
 def test_run_folder_with_a_foreign_file_is_refused_even_with_force(flight, quick_config,
                                                                    tmp_path):
     out = tmp_path / "run"
-    pipeline.run(flight, quick_config, out)
+    pipeline.process_flight(flight, quick_config, out)
     (out / "my_notes.txt").write_text("kept")
     before = _hashes(tmp_path)
     code, _, err = _cli("run", str(flight), "-p", str(PIPELINE), "-o", str(out), "--force")
@@ -198,7 +198,7 @@ def _killed_run(flight: Path, config, out: Path, kill_at: int, *, exchange: bool
                 run_folder._exchange = hook(run_folder._exchange)
             else:  # the portable swap: two renames and a recovery step
                 run_folder._exchange = lambda a, b: False
-            pipeline.run(flight, config, out, force=True)
+            pipeline.process_flight(flight, config, out, force=True)
         finally:
             os._exit(0)
     os.close(w)
@@ -217,7 +217,7 @@ def test_kill_9_at_seeded_moments_leaves_one_complete_run(flight, quick_config, 
     when the swap was done; the next run cleans the leftovers and does the right thing."""
     out = tmp_path / "run"
     old_cfg = replace(quick_config, name="previous")
-    pipeline.run(flight, old_cfg, out)
+    pipeline.process_flight(flight, old_cfg, out)
     old = _assert_one_complete_run(out)
     n = _killed_run(flight, quick_config, out, 10**6, exchange=exchange)  # not killed: count
     assert n >= 6  # tables, summary, marker (+ the swap's renames)
@@ -225,7 +225,7 @@ def test_kill_9_at_seeded_moments_leaves_one_complete_run(flight, quick_config, 
     moments = sorted({1, n, *rng.choice(np.arange(2, n), 2, replace=False).tolist()})
     new_cfg_hash = run_folder.config_sha256(quick_config.to_json())
     for k in moments:
-        pipeline.run(flight, old_cfg, out, force=True)  # the previous run, again
+        pipeline.process_flight(flight, old_cfg, out, force=True)  # the previous run, again
         assert _killed_run(flight, quick_config, out, k, exchange=exchange) == k
         run_folder.recover(out)  # what the next run does first
         marker = _assert_one_complete_run(out)
@@ -233,7 +233,7 @@ def test_kill_9_at_seeded_moments_leaves_one_complete_run(flight, quick_config, 
         # only the swap's last rename makes the new run visible
         assert (marker["config_sha256"] == new_cfg_hash) == (k == n), k
         # the next run does the right thing: replaces it whole, no leftover beside it
-        pipeline.run(flight, quick_config, out, force=True)
+        pipeline.process_flight(flight, quick_config, out, force=True)
         assert _assert_one_complete_run(out)["config_sha256"] == new_cfg_hash
         assert sorted(p.name for p in tmp_path.iterdir()) == ["run"], k
 

@@ -4,9 +4,9 @@ non-ok with the failing QC check named (and what the data suggest, where it can 
 Each case cuts the first 720 s of the bundled sample flight (240 s static, take-off, climb,
 survey line 1, a 180 deg turn at 4 deg/s and the start of line 2; the simulator's truth:
 lever arm [0.3, 0.1, -1.5] m FRD, no GNSS time offset), damages it in one way, writes it as
-MCAP and runs ``pospp.pipeline.run`` on it. The window has one leg and so no calibration: the
-clean window is "partial" with ``calibration`` as its only failed check, which is what the
-faults are compared against. The clean full sample staying "ok" is asserted by
+MCAP and runs ``pospp.pipeline.process_flight`` on it. The window has one leg and so no
+calibration: the clean window is "partial" with ``calibration`` as its only failed check,
+which is what the faults are compared against. The clean full sample staying "ok" is asserted by
 tests/e2e/test_pipeline.py (slow) and the reference cases below.
 """
 
@@ -56,7 +56,7 @@ def window():
 def _run(tmp_path: Path, imu, fix, vel, config=None, name="case"):
     path = tmp_path / f"{name}.mcap"
     write_flight_log(path, imu, fix, vel)
-    out = pipeline.run(path, config or _config(), tmp_path / f"run_{name}")
+    out = pipeline.process_flight(path, config or _config(), tmp_path / f"run_{name}")
     qc = parquet_tables.read_table(out.out_dir / "qc.parquet")
     return out, qc
 
@@ -134,7 +134,7 @@ def test_truncated_log_is_not_ok(window, tmp_path):
     cut = tmp_path / "cut.mcap"
     data = path.read_bytes()
     cut.write_bytes(data[: int(len(data) * 0.8)])
-    out = pipeline.run(cut, _config(), tmp_path / "run_cut")
+    out = pipeline.process_flight(cut, _config(), tmp_path / "run_cut")
     qc = parquet_tables.read_table(out.out_dir / "qc.parquet")
     assert out.status != "ok"
     assert "data_complete" in _failed(qc)

@@ -85,11 +85,11 @@ EXPECTED: dict[str, str] = {
 @pytest.mark.slow
 def test_sample_run_tables_are_unchanged_and_timed(tmp_path):
     from pospp.config import load_config
-    from pospp.pipeline import STAGES, run
+    from pospp.pipeline import STAGES, process_flight
 
     seen: list[tuple[str, float]] = []
     out = tmp_path / "sample"
-    outcome = run(SAMPLE, load_config(SAMPLE_PIPELINE), out,
+    outcome = process_flight(SAMPLE, load_config(SAMPLE_PIPELINE), out,
                   progress=lambda stage, fraction: seen.append((stage, fraction)))
     assert outcome.status == "ok"
     got = run_hashes(out)

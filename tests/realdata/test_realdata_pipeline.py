@@ -109,7 +109,7 @@ def out_dir(tmp_path_factory):
 def _run(out_dir: Path, stem: str, pipe: str) -> tuple[pipeline.RunOutcome, Path]:
     cfg = load_config(PIPELINES / f"{pipe}.toml")
     run_dir = out_dir / f"run_{stem}"
-    return pipeline.run(out_dir / f"{stem}.mcap", cfg, run_dir), run_dir
+    return pipeline.process_flight(out_dir / f"{stem}.mcap", cfg, run_dir), run_dir
 
 
 @pytest.mark.realdata

@@ -190,7 +190,7 @@ def test_run_writes_events_and_biases_and_exports_them(sim_run, tmp_path):
                             "sensor": {"lever_arm_m": LEVER_B_M.tolist(),
                                        "boresight_rpy_deg": list(BORESIGHT_RPY_DEG)},
                             "outputs": {"report": False, "diagnose": False}})
-    run = pipeline.run(paths["mcap"], cfg, tmp_path / "run").out_dir
+    run = pipeline.process_flight(paths["mcap"], cfg, tmp_path / "run").out_dir
     ev = parquet_tables.read_table(run / "events.parquet")
     assert len(ev) == 1400 and ev.inside.all()
     (lat, lon, h), _ = _truth_sensor(sim, ev.time_ns.to_numpy())
