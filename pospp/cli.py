@@ -12,7 +12,7 @@ from __future__ import annotations
 import os
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 # One BLAS thread, set before numpy loads OpenBLAS: the calibration's many small dense solves
 # run 5-60x slower when OpenBLAS threads compete with numba for 2 cores (docs/benchmarks.md).
@@ -23,6 +23,9 @@ import click  # noqa: E402
 
 from pospp import __version__  # noqa: E402
 from pospp.config import ConfigError, PipelineConfig, load_config  # noqa: E402
+
+if TYPE_CHECKING:
+    from pospp.batch import FlightOutcome
 
 EXIT_CODES = {"ok": 0, "failed": 1, "usage": 2, "degraded": 3}
 """Exit status of every command: 0 ok (a run that completed, "ok" or "partial"), 1 failed
@@ -63,7 +66,8 @@ def _exit_code_for(exc: BaseException) -> int:
 class _Cli(click.Group):
     """The command group: turns any error of a command into one line and an exit status."""
 
-    def main(self, args=None, prog_name=None, complete_var=None,  # type: ignore[override]
+    def main(self, args: list[str] | None = None,  # type: ignore[override]
+             prog_name: str | None = None, complete_var: str | None = None,
              standalone_mode: bool = True, **extra: object) -> object:
         if not standalone_mode:
             return super().main(args, prog_name, complete_var, False, **extra)
@@ -190,7 +194,7 @@ def batch(inputs: tuple[str, ...], pipeline_file: str | None, out_root: str, wor
         raise click.UsageError(f"no .mcap files found in {', '.join(inputs)}")
     config = _config(pipeline_file)
 
-    def show(o) -> None:
+    def show(o: FlightOutcome) -> None:
         from pospp.report.summary import pm_text
 
         tail = f": {o.error}" if o.error else ""

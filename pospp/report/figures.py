@@ -60,7 +60,8 @@ def _thin(df: pd.DataFrame, max_points: int = 4000) -> pd.DataFrame:
     return df.iloc[::step]
 
 
-def _local_en_m(lat_deg: np.ndarray, lon_deg: np.ndarray, lat0: float, lon0: float):
+def _local_en_m(lat_deg: np.ndarray, lon_deg: np.ndarray, lat0: float, lon0: float
+                ) -> tuple[np.ndarray, np.ndarray]:
     e = np.radians(lon_deg - lon0) * _R_M * np.cos(np.radians(lat0))
     n = np.radians(lat_deg - lat0) * _R_M
     return e, n
@@ -75,7 +76,7 @@ def leg_colors(n: int) -> list[tuple[float, float, float, float]]:
     return [(*base[i % len(base)], 1.0) for i in range(n)]
 
 
-def _label_ends(ax, curves: list[tuple[np.ndarray, np.ndarray, str, tuple]]) -> None:
+def _label_ends(ax: Any, curves: list[tuple[np.ndarray, np.ndarray, str, tuple]]) -> None:
     """Write each curve's label at its last point, in its colour (readable past ten legs)."""
     for x, y, text, color in curves:
         if len(x):

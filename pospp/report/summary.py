@@ -31,7 +31,8 @@ def unit_text(unit: str) -> str:
     return UNIT_TEXT.get(unit, unit.replace("_per_", "/"))
 
 
-def round_to_sigma(value: float, sigma: float, *, digits: int = 2) -> tuple[str, str]:
+def round_to_sigma(value: float | None, sigma: float | None, *, digits: int = 2
+                   ) -> tuple[str, str]:
     """``value`` and ``sigma`` as text, both rounded to the sigma's ``digits`` significant
     digits (0.93686, 0.29270 -> "0.94", "0.29"; 313.0, 1915.4 -> "300", "1900")."""
     if value is None or not np.isfinite(value):
@@ -45,7 +46,7 @@ def round_to_sigma(value: float, sigma: float, *, digits: int = 2) -> tuple[str,
     return f"{v:+.{dec}f}", f"{s:.{dec}f}"
 
 
-def pm_text(value: float, sigma: float, unit: str = "") -> str:
+def pm_text(value: float | None, sigma: float | None, unit: str = "") -> str:
     """"+0.94 +- 0.29 deg/h" (rounded to the sigma)."""
     v, s = round_to_sigma(value, sigma)
     u = f" {unit_text(unit)}" if unit else ""
