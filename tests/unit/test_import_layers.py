@@ -28,6 +28,7 @@ LAYERS: tuple[frozenset[str], ...] = (
     frozenset({"sim", "calib", "qc", "evaluate", "effects_catalog"}),
     frozenset({"diagnose", "simcompare", "report"}),
     frozenset({"config"}),
+    frozenset({"flight_stages"}),
     frozenset({"pipeline", "convert"}),
     frozenset({"batch", "compare_sim"}),
     frozenset({"cli"}),
