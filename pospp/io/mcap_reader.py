@@ -18,7 +18,8 @@ Frames and units
 
 Speed
 -----
-The file is read in ONE sequential pass by :mod:`pospp.io._mcap_scan` (no summary section
+The file is read in ONE sequential pass by :mod:`pospp.io._mcap_scan` (the compiled chunk framing
+and decoding in :mod:`pospp.io._mcap_decode`; no summary section
 needed, so a truncated file yields everything before the break, including the readable part of a
 cut-off zstd/lz4 chunk). Records are framed there (index records skipped unparsed; Schema and
 Channel records parsed by ``mcap.records``); docs/formats.md gives the measured reason for not
@@ -57,15 +58,8 @@ from pathlib import Path
 import numpy as np
 
 from pospp.io._blockwise import rotation_sums, row_norms
-from pospp.io._mcap_scan import (
-    EVENT_SPEC,
-    FIX_SPEC,
-    IMU_SPEC,
-    MAX_CHUNK_BYTES,
-    VEL_SPEC,
-    Collector,
-    Scan,
-)
+from pospp.io._mcap_decode import EVENT_SPEC, FIX_SPEC, IMU_SPEC, VEL_SPEC, Collector
+from pospp.io._mcap_scan import MAX_CHUNK_BYTES, Scan
 from pospp.io.errors import IngestError, IngestIssue
 from pospp.types import (
     ENU_TO_NED,
