@@ -26,8 +26,8 @@ import pandas as pd  # noqa: E402
 
 from pospp import pipeline  # noqa: E402
 from pospp.calib import stage as calib_stage  # noqa: E402
+from pospp.calib.noise_model import noise_basis  # noqa: E402
 from pospp.calib.replay import ImuIncrements, SolutionA  # noqa: E402
-from pospp.calib.solve import noise_basis  # noqa: E402
 from pospp.calib.stage import calibrate_flight  # noqa: E402
 from pospp.config import config_from_dict, load_config  # noqa: E402
 from pospp.convert import convert  # noqa: E402

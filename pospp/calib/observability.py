@@ -14,9 +14,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pospp import earth, rotation
+from pospp.calib.design import condition_numbers, design_matrix
 from pospp.calib.replay import LegReplay
 from pospp.calib.segment import Leg
-from pospp.calib.solve import condition_numbers, design_matrix
 from pospp.nav.error_model import transition_matrices
 from pospp.nav.strapdown import Trajectory
 

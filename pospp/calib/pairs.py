@@ -19,9 +19,10 @@ from typing import Any
 
 import numpy as np
 
+from pospp.calib.design import condition_numbers, design_matrix
 from pospp.calib.replay import LegReplay
 from pospp.calib.segment import Leg
-from pospp.calib.solve import Calibration, condition_numbers, design_matrix, fit_calibration
+from pospp.calib.solve import Calibration, fit_calibration
 
 MODES = ("adjacent", "all")
 

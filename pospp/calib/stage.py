@@ -25,6 +25,8 @@ from pospp.calib.compensate import (
     joint_calibration,
     prior_sigma_b_radps,
 )
+from pospp.calib.design import FORMULATIONS
+from pospp.calib.noise_model import gm_noise_operator, noise_basis
 from pospp.calib.pairs import Pair, PairPolicy, evaluate_pairs
 from pospp.calib.replay import (
     ImuIncrements,
@@ -34,13 +36,7 @@ from pospp.calib.replay import (
     replay_leg,
 )
 from pospp.calib.segment import Leg, LegThresholds, find_legs
-from pospp.calib.solve import (
-    FORMULATIONS,
-    Calibration,
-    DriftPrior,
-    gm_noise_operator,
-    noise_basis,
-)
+from pospp.calib.solve import Calibration, DriftPrior
 from pospp.nav.closed_form import PAPER_FROM_NED
 from pospp.units import ARCSEC_RAD, DEG_PER_H_RADPS
 from pospp.units import DEG_PER_SQRT_H_RAD_PER_SQRT_S as _DPSH_RADPSQRTS

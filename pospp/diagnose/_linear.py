@@ -2,9 +2,9 @@
 
 Rows are B's horizontal velocity errors [dv_N, dv_E] at the samples t > 0 of each leg
 (sample-major), whitened per leg by A's sigmas or by the Cholesky factor of
-``a diag(sigma^2) + q K`` (K: :func:`pospp.calib.solve.gyro_noise_covariance`). Columns come in
-named blocks (:class:`Term`); fits solve the column-scaled normal equations (minimum norm on
-rank deficiency). SI units.
+``a diag(sigma^2) + q K`` (K: :func:`pospp.calib.noise_model.gyro_noise_covariance`).
+Columns come in named blocks (:class:`Term`); fits solve the column-scaled normal equations
+(minimum norm on rank deficiency). SI units.
 """
 
 from __future__ import annotations
@@ -17,8 +17,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg, stats
 
+from pospp.calib.noise_model import NoiseModel, gyro_noise_covariance
 from pospp.calib.replay import LegReplay
-from pospp.calib.solve import NoiseModel, gyro_noise_covariance
 from pospp.diagnose.effects import Effect
 
 

@@ -19,8 +19,8 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
+from pospp.calib.design import leg_sensitivities
 from pospp.calib.replay import LegReplay
-from pospp.calib.solve import leg_sensitivities
 from pospp.diagnose import effects as fx
 from pospp.diagnose._linear import Fit, Problem, Term
 from pospp.diagnose.locate import lof_basis

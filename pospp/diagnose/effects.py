@@ -79,8 +79,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pospp import earth, rotation
+from pospp.calib.design import leg_sensitivities
 from pospp.calib.replay import ImuIncrements, LegReplay, SolutionA, replay_leg
-from pospp.calib.solve import leg_sensitivities
 from pospp.effects_catalog import catalog_entry
 from pospp.nav.error_model import BG, DR, DV, PHI
 from pospp.units import ARCSEC_RAD, UG_MPS2  # noqa: F401  (display units, used as fx.*)

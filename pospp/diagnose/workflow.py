@@ -5,7 +5,7 @@ Errors are computed minus true (B minus A).
 
 Measurements: B's horizontal velocity error [dv_N, dv_E] at the samples t > 0 of every leg
 (:class:`pospp.calib.replay.LegReplay`), weighted by A's sigmas (and, when the gyro angle
-random walk is given, by the correlated covariance of :func:`pospp.calib.solve.
+random walk is given, by the correlated covariance of :func:`pospp.calib.noise_model.
 gyro_noise_covariance`, ``noise="gyro_rw"``), i.e. whitened by the Cholesky factor of each
 leg's covariance.
 
@@ -60,8 +60,9 @@ from functools import partial
 import numpy as np
 from numpy.typing import NDArray
 
+from pospp.calib.noise_model import NoiseModel
 from pospp.calib.replay import ImuIncrements, LegReplay, SolutionA
-from pospp.calib.solve import NoiseModel, fit_calibration, fit_noise_model
+from pospp.calib.solve import fit_calibration, fit_noise_model
 from pospp.diagnose import effects as fx
 from pospp.diagnose._linear import Fit, Problem, Term, bic, f_test, rms
 from pospp.diagnose._terms import (
@@ -258,7 +259,7 @@ def diagnose_replays(
         :func:`pospp.calib.solve.fit_calibration`, which estimates a and q by REML on the base
         model). Only the shape matters to the F-tests (the scale is estimated), but a wrong
         shape (correlated residuals weighted as white) makes every test too liberal.
-        ``"full"``: :class:`pospp.calib.solve.NoiseModel` fitted by REML on the base model
+        ``"full"``: :class:`pospp.calib.noise_model.NoiseModel` fitted by REML on the base model
         (A's sigmas times a, the gyro ARW, an accelerometer white noise, A's own coloured
         velocity error entering at the leg start and at t, and optionally the within-leg
         part of a Gauss-Markov gyro drift).

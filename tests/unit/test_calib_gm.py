@@ -16,9 +16,10 @@ from _gm_mission import run_once
 from _truth_imu import rhumb_line
 
 from pospp import rotation, units
+from pospp.calib.noise_model import _gm_covariance, gm_noise_operator, noise_basis
 from pospp.calib.replay import ImuIncrements, replay_leg, solution_a_from_trajectory
 from pospp.calib.segment import Leg
-from pospp.calib.solve import _gm_covariance, fit_calibration, gm_noise_operator, noise_basis
+from pospp.calib.solve import fit_calibration
 from pospp.calib.stage import calibrate_flight
 from pospp.nav.error_model import BG
 from pospp.nav.strapdown import Trajectory

@@ -15,9 +15,10 @@ import pytest
 from _truth_imu import rhumb_line, weaving_flight, weaving_truth_state
 
 from pospp import rotation, units
+from pospp.calib.design import leg_sensitivities
 from pospp.calib.replay import ImuIncrements, replay_leg, solution_a_from_trajectory
 from pospp.calib.segment import Leg
-from pospp.calib.solve import fit_calibration, leg_sensitivities
+from pospp.calib.solve import fit_calibration
 from pospp.nav.strapdown import Trajectory
 
 DPH = units.DEG_PER_H_RADPS

@@ -22,8 +22,8 @@ import pytest
 from _synthetic import survey_flight
 from scipy import stats
 
+from pospp.calib.noise_model import NoiseModel
 from pospp.calib.replay import replay_leg
-from pospp.calib.solve import NoiseModel
 from pospp.diagnose import null_model
 from pospp.diagnose.workflow import diagnose_replays
 

@@ -1,4 +1,4 @@
-"""The noise model of B minus A (pospp.calib.solve.NoiseModel) against closed forms.
+"""The noise model of B minus A (pospp.calib.noise_model.NoiseModel) against closed forms.
 
 - B's velocity error driven by white gyro noise on a short level leg is an integrated
   Brownian motion: Var dv(t) = g^2 q t^3 / 3, Cov(dv(s), dv(t)) = g^2 q (s^2 t / 2 - s^3 / 6)
@@ -19,13 +19,9 @@ import pytest
 from _synthetic import survey_flight
 from scipy import linalg
 
+from pospp.calib.noise_model import NoiseModel, gyro_noise_covariance, reference_error_covariance
 from pospp.calib.replay import replay_leg
-from pospp.calib.solve import (
-    NoiseModel,
-    fit_noise_model,
-    gyro_noise_covariance,
-    reference_error_covariance,
-)
+from pospp.calib.solve import fit_noise_model
 from pospp.diagnose.workflow import diagnose_replays
 
 G_MPS2 = 9.80
