@@ -17,13 +17,7 @@ PACKAGE = Path(__file__).resolve().parents[2] / "pospp"
 MAX_MODULE_LINES = 600
 MAX_FUNCTION_LINES = 80
 
-MODULE_EXCEPTIONS = {
-    "calib/solve.py": "calibration least squares; its REML/GLS pieces are issue 17 item 5's "
-                      "'calib/solve.py repeats' (the lead's noise-model work, issue 12)",
-    "diagnose/workflow.py": "the diagnosis workflow (issue 12 items 3-5, under rework)",
-    "io/_mcap_scan.py": "the one-pass MCAP scanner (issue 18 speed work)",
-    "pipeline.py": "the stage runner (the lead's; issue 12 noise model)",
-}
+MODULE_EXCEPTIONS: dict[str, str] = {}
 FUNCTION_EXCEPTIONS = {
     "nav/_kernels.py:strapdown_step": "the one compiled mechanization step (coning, sculling, "
                                       "velocity, position, attitude in one numba loop body "
@@ -31,11 +25,17 @@ FUNCTION_EXCEPTIONS = {
                                       "loop, and the steps share their mid-interval terms)",
     "nav/error_model.py:fill_f_matrix": "the 15x15 F written element by element, one "
                                         "equation of docs/filter.md per line",
-    "calib/solve.py:fit_noise_model": "lead's noise-model work (issue 12)",
-    "calib/solve.py:fit_calibration": "lead's noise-model work (issue 12)",
-    "calib/stage.py:calibrate_flight": "lead's (issue 17 item 3 names it; issue 12 changes it)",
-    "diagnose/workflow.py:diagnose_replays": "issue 12 items 3-5 (power)",
-    "pipeline.py:_run_stages": "the lead's stage runner",
+    "calib/solve.py:fit_noise_model": "one REML fit over the noise models and the drift's tau "
+                                      "profile: its steps share the whitened design and the "
+                                      "candidate loop (to split next, issue 12's noise work)",
+    "calib/solve.py:fit_calibration": "the joint least squares with its covariance branches "
+                                      "(per-leg bases, full Gauss-Markov, null realisations)",
+    "calib/stage.py:calibrate_flight": "the calibration stage's sequence (legs, B, pairs, "
+                                       "fits, compensation, drift source) in one readable list",
+    "diagnose/workflow.py:diagnose_replays": "the diagnosis's step loop (screen, candidates, "
+                                             "nested tests, closing lack of fit) in one place",
+    "pipeline.py:_run_stages": "the stage runner: each stage's call, its clock and its "
+                               "failure record, in the order a run takes",
 }
 
 
