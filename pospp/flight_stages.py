@@ -235,22 +235,26 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
 
 
 def _lever_arm_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
-                     config: PipelineConfig) -> np.ndarray | None:
+                     config: PipelineConfig,
+                     est: nav_filter.LeverArmEstimate | None = None) -> np.ndarray | None:
     """Configured minus A's estimate of the lever arm (the diagnosis's ``dl``, FRD, m), or
-    None when A estimates the lever arm itself or the extra pass fails."""
+    None when A estimates the lever arm itself or the extra pass fails. ``est``: the
+    estimate already made (:func:`lever_arm_estimate`); None: made here."""
     if config.gnss.estimate_lever_arm:
         return None
-    try:
-        est = lever_arm_estimate(log, nav, config)
-    except ValueError:
-        return None
+    if est is None:
+        try:
+            est = lever_arm_estimate(log, nav, config)
+        except ValueError:
+            return None
     return np.asarray(config.gnss.lever_arm_m, dtype=float) - est.lever_b_m
 
 
 def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution_a: SolutionA,
              config: PipelineConfig, *, log: mcap_reader.FlightLog | None = None,
              nav: nav_filter.FilterResult | None = None,
-             null_dv: list[list[np.ndarray]] | None = None) -> Diagnosis:
+             null_dv: list[list[np.ndarray]] | None = None,
+             lever_estimate: nav_filter.LeverArmEstimate | None = None) -> Diagnosis:
     """Model-discrepancy workflow on the calibrated run's B-minus-A curves (pospp.diagnose).
 
     Every test's null distribution is calibrated on ``null_dv`` (:func:`null_realisations`)
@@ -274,7 +278,7 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
         # signature made there (secant along it, axis derivatives at the estimate; 1 + 4 A
         # runs) instead of at the configured value, where A's gate and attitude Jacobian are
         # those of the wrong lever arm (docs/diagnose.md, "Power")
-        p_lever = _lever_arm_start(log, nav, config)
+        p_lever = _lever_arm_start(log, nav, config, lever_estimate)
         gn = p_lever is not None and bool(
             np.linalg.norm(p_lever) > REFINE_FRACTION * effect_by_id("lever_arm").plausible_si)
         sigs = rerun_signatures(log, nav, calib_run, config,

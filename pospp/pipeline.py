@@ -313,11 +313,13 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
 
     # --- diagnosis -----------------------------------------------------------------------------
     book.stage("diagnose")
+    # A's lever-arm estimate, made once: the diagnosis starts from it and QC checks it
+    lever = _lever_re_estimate(log, nav, config)
     diagnosis = None
     if config.outputs.diagnose and calib_run.calibrated:
         try:
             diagnosis = diagnose_calibration(calib_run, imu, solution_a, config, log=log, nav=nav,
-                                 null_dv=null_dv)
+                                             null_dv=null_dv, lever_estimate=lever[0])
             if diagnosis.location is not None:  # "unexplained": where the gap sits (issue 12)
                 book.note("warning", "diagnose", diagnosis.location.text)
         except ValueError as exc:
@@ -326,7 +328,7 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
 
     # --- quality checks: the run is ok only when every check passes (docs/qc.md) -------------
     book.stage("qc")
-    report = quality_control(log, nav, calib_run, config, book)
+    report = quality_control(log, nav, calib_run, config, book, lever=lever)
     status = worst_status(status, report.status)
 
     # --- outputs -------------------------------------------------------------------------------
@@ -373,24 +375,36 @@ def _event_poses(log: mcap_reader.FlightLog, solution: nav_filter.NavSolution, n
     return outputs.events_table(poses, log.events_ns, name)
 
 
+def _lever_re_estimate(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
+                       config: PipelineConfig
+                       ) -> tuple[nav_filter.LeverArmEstimate | None, str | None]:
+    """(A's lever-arm estimate, None) by :func:`lever_arm_estimate`, or (None, why it failed);
+    (None, None) when A estimates the lever arm itself."""
+    if config.gnss.estimate_lever_arm:
+        return None, None
+    try:
+        return lever_arm_estimate(log, nav, config), None
+    except ValueError as exc:
+        return None, str(exc)
+
+
 def quality_control(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                     calib_run: CalibrationRun | None, config: PipelineConfig,
-                    book: _Progress | None = None) -> QualityReport:
+                    book: _Progress | None = None, *,
+                    lever: tuple[nav_filter.LeverArmEstimate | None, str | None] | None = None
+                    ) -> QualityReport:
     """The QC stage (pospp.qc): every check, with the lever arm re-estimated by A.
 
     Unless A already estimated it, the lever arm is estimated by one more forward pass of A
     with lever-arm states (:func:`lever_arm_estimate`; about a third of A's time). Failed
-    checks are noted in ``book`` (stage "qc").
+    checks are noted in ``book`` (stage "qc"). ``lever``: that estimate and why it failed, when
+    already made (:func:`_lever_re_estimate`); None: made here.
     """
-    lever = None
-    if not config.gnss.estimate_lever_arm:
-        try:
-            lever = lever_arm_estimate(log, nav, config)
-        except ValueError as exc:
-            if book is not None:
-                book.note("warning", "qc", f"lever arm not re-estimated: {exc}")
+    estimate, failure = _lever_re_estimate(log, nav, config) if lever is None else lever
+    if failure is not None and book is not None:
+        book.note("warning", "qc", f"lever arm not re-estimated: {failure}")
     cin = config.input
-    report = quality_checks(log, nav, calib_run, config, lever_estimate=lever,
+    report = quality_checks(log, nav, calib_run, config, lever_estimate=estimate,
                             c_bs=sensor_to_body_dcm(cin.sensor_frame, cin.mounting_rpy_deg))
     if book is not None:
         for c in report.failed:
