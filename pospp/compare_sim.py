@@ -10,7 +10,6 @@ simulation the same way, and hand both to the step-wise comparison of
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -24,7 +23,7 @@ from pospp.nav import filter as nav_filter
 from pospp.sim.api import simulate_along
 from pospp.sim.gnss import GnssModel
 from pospp.sim.sensors import ImuErrorModel, imu_grade
-from pospp.simcompare.compare import Comparison, compare_flights
+from pospp.simcompare.compare import Comparison, SimulateFn, compare_flights
 from pospp.simcompare.effects import LIBRARY, SimEffect
 from pospp.simcompare.stats import FlightStats, Stat, flight_stats, leg_stats
 from pospp.simcompare.tables import comparison_columns, model_toml
@@ -252,12 +251,13 @@ def reported_sigmas(log: mcap_reader.FlightLog, epoch_ns: int
     return out
 
 
-def simulate_stats(tpl: FlightTemplate, config: PipelineConfig
-                   ) -> Callable[[ImuErrorModel, GnssModel], FlightStats]:
-    """simulate(imu, gnss) -> statistics of A on the simulated flight (for compare_flights)."""
+def simulate_stats(tpl: FlightTemplate, config: PipelineConfig) -> SimulateFn:
+    """simulate(imu, gnss, draw=0) -> statistics of A on the simulated flight (for
+    compare_flights): draw 0 with ``SIM_SEED``, draw k with ``SIM_SEED + k``."""
 
-    def run(imu: ImuErrorModel, gnss: GnssModel) -> FlightStats:
-        return log_stats(simulate_log(tpl, imu, gnss), config, vehicle=tpl.vehicle)[0]
+    def run(imu: ImuErrorModel, gnss: GnssModel, draw: int = 0) -> FlightStats:
+        return log_stats(simulate_log(tpl, imu, gnss, seed=SIM_SEED + draw), config,
+                         vehicle=tpl.vehicle)[0]
 
     return run
 

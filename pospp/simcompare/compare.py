@@ -19,12 +19,21 @@ admissible effect explains, or whose gap the added effect does not shrink, is
 ``unexplained`` and left out of later targets (a step of its own, which does not count
 against ``max_steps``). The loop stops when no target is left or ``max_steps`` effects have
 been added.
+
+A random effect whose realization over one flight is one draw of a slow process (``ensemble``:
+the gyro random drift, which over a few minutes is a random constant bias that A leaves in its
+attitude, lever arm and innovations) makes the slow statistics one draw too, and their
+batch-means sigmas do not see the spread between draws. A model with such an effect is
+therefore also simulated with ``ENSEMBLE_DRAWS`` other seeds (:func:`ensemble_spread`), and
+every statistic's sigma, measured and simulated (under the model the measured flight is one
+more draw), is at least its spread over the draws, with their degrees of freedom
+(:func:`with_spread`). The spread is carried to the later steps.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -35,7 +44,8 @@ from pospp.sim.sensors import ImuErrorModel
 from pospp.simcompare.effects import LIBRARY, EffectContext, SimEffect
 from pospp.simcompare.stats import STAT_UNITS, FlightStats, Stat
 
-__all__ = ["ALPHA", "Comparison", "Gap", "compare_flights", "gaps"]
+__all__ = ["ALPHA", "ENSEMBLE_DRAWS", "Comparison", "Gap", "SimulateFn", "compare_flights",
+           "ensemble_spread", "gaps", "with_spread"]
 
 ALPHA = 0.01
 """Family-wise significance level of the gap tests (Holm-Bonferroni)."""
@@ -44,7 +54,16 @@ MIN_COMPONENT_Z = 2.0
 from zero (the others stay 0: e.g. the horizontal accelerometer ramps, which A's bias
 estimate hardly sees)."""
 
-SimulateFn = Callable[[ImuErrorModel, GnssModel], FlightStats]
+ENSEMBLE_DRAWS = 4
+"""Other seeds a model with an ``ensemble`` effect is simulated with; with the comparison's own
+simulation, ``ENSEMBLE_DRAWS`` degrees of freedom of each statistic's spread."""
+
+
+class SimulateFn(Protocol):
+    """simulate(imu, gnss, draw) -> the simulated flight's statistics: draw 0 with the
+    comparison's own seed (common random numbers across its steps), draw k > 0 another seed."""
+
+    def __call__(self, imu: ImuErrorModel, gnss: GnssModel, draw: int = 0) -> FlightStats: ...
 
 
 @dataclass(frozen=True)
@@ -70,9 +89,46 @@ def _pvalue(m: Stat, s: Stat, z: float) -> float:
     return float(2.0 * sps.t.sf(abs(z), dof))
 
 
-def gaps(measured: FlightStats, simulated: FlightStats, *, alpha: float = ALPHA
-         ) -> dict[str, Gap]:
-    """Every statistic's gap with its Holm-Bonferroni test at family-wise level ``alpha``."""
+def ensemble_spread(simulate: SimulateFn, imu: ImuErrorModel, gnss: GnssModel,
+                    sim0: FlightStats, draws: int = ENSEMBLE_DRAWS) -> dict[str, Stat]:
+    """Spread of every statistic between draws of the model (SI, as the statistic): the
+    model simulated with ``draws`` other seeds (a draw A cannot process is left out), and per
+    statistic the sample standard deviation of its values over those and ``sim0`` (the
+    comparison's own draw), as Stat(0, std, n - 1); only statistics with at least 3 values."""
+    runs = [sim0]
+    for k in range(1, draws + 1):
+        try:
+            runs.append(simulate(imu, gnss, k))
+        except ValueError:  # a draw A cannot process (e.g. cannot align)
+            continue
+    out: dict[str, Stat] = {}
+    for name in sim0.stats:
+        v = np.array([r.stats[name].value for r in runs if name in r.stats])
+        v = v[np.isfinite(v)]
+        if v.size >= 3:
+            out[name] = Stat(0.0, float(np.std(v, ddof=1)), float(v.size - 1))
+    return out
+
+
+def with_spread(fs: FlightStats, spread: dict[str, Stat] | None) -> FlightStats:
+    """The statistics with each sigma at least its spread between draws (then with the
+    spread's degrees of freedom): sigma = max(sigma, spread)."""
+    if not spread:
+        return fs
+    out = dict(fs.stats)
+    for name, e in spread.items():
+        st = out.get(name)
+        if st is not None and e.sigma > st.sigma:
+            out[name] = Stat(st.value, e.sigma, e.dof)
+    return FlightStats(out, fs.hf_peak_hz)
+
+
+def gaps(measured: FlightStats, simulated: FlightStats, *, alpha: float = ALPHA,
+         spread: dict[str, Stat] | None = None) -> dict[str, Gap]:
+    """Every statistic's gap with its Holm-Bonferroni test at family-wise level ``alpha``;
+    ``spread``: the model's spread between draws (:func:`ensemble_spread`), a floor of both
+    sides' sigmas (:func:`with_spread`)."""
+    measured, simulated = with_spread(measured, spread), with_spread(simulated, spread)
     out: dict[str, Gap] = {}
     raw: dict[str, float] = {}
     for name in STAT_UNITS:
@@ -294,6 +350,38 @@ def _fit(effect: SimEffect, gap: dict[str, Gap], base: FlightStats, simulate: Si
     return u, cov, chi
 
 
+def _candidate(e: SimEffect, measured: FlightStats, cur: dict[str, Gap], sim: FlightStats,
+               simulate: SimulateFn, imu: ImuErrorModel, gnss: GnssModel, ctx: EffectContext,
+               spread: dict[str, Stat] | None, moved: set[str], n_cands: int, alpha: float):
+    """One candidate of a step: fitted, tested, added and re-simulated (module docstring).
+    Returns (score, effect, u, cov, imu, gnss, sim, gaps after, spread after) or None (not
+    admissible, or a flight A cannot process)."""
+    try:
+        fit = _fit(e, cur, sim, simulate, imu, gnss, ctx)
+    except ValueError:  # a trial flight A cannot process (e.g. cannot align)
+        return None
+    if fit is None:
+        return None
+    u, cov, chi_u = fit
+    if sps.chi2.sf(chi_u, len(u)) > alpha / max(n_cands, 1):
+        return None
+    if len(u) > 1:  # components within MIN_COMPONENT_Z sigma of zero are not added
+        keep = np.abs(u) >= MIN_COMPONENT_Z * np.sqrt(np.diag(cov))
+        if e.grid is not None:  # a grid parameter (a correlation time) is a choice
+            keep[e.grid[0]] = True
+        u = np.where(keep, u, 0.0)
+    imu2, gnss2 = e.apply(imu, gnss, u, ctx)
+    try:
+        sim2 = simulate(imu2, gnss2)
+    except ValueError:
+        return None
+    if e.ensemble:  # the model's own spread between draws (module docstring)
+        spread = ensemble_spread(simulate, imu2, gnss2, sim2)
+    after = gaps(measured, sim2, alpha=alpha, spread=spread)
+    score = sum(g.z ** 2 for n, g in after.items() if n in moved) + 2.0 * np.count_nonzero(u)
+    return score, e, u, cov, imu2, gnss2, sim2, after, spread
+
+
 def compare_flights(measured: FlightStats, simulate: SimulateFn, imu: ImuErrorModel,
                     gnss: GnssModel, *, library: tuple[SimEffect, ...] = LIBRARY,
                     alpha: float = ALPHA, max_steps: int = 4) -> Comparison:
@@ -302,15 +390,16 @@ def compare_flights(measured: FlightStats, simulate: SimulateFn, imu: ImuErrorMo
     Parameters
     ----------
     measured : FlightStats
-    simulate : callable(imu_model, gnss_model) -> FlightStats
-        Simulates the flight with the given models (always the same seed) and returns its
-        statistics.
+    simulate : callable(imu_model, gnss_model, draw=0) -> FlightStats
+        Simulates the flight with the given models (draw 0: always the same seed; draw k:
+        another seed, for :func:`ensemble_spread`) and returns its statistics.
     imu, gnss : the configured (base) simulation models.
     """
     ctx = EffectContext(hf_peak_hz=measured.hf_peak_hz)
     sim = simulate(imu, gnss)
     cur = gaps(measured, sim, alpha=alpha)
     base = cur
+    spread: dict[str, Stat] | None = None  # the configured model: batch means and A's sigmas
     steps: list[Step] = []
     added: list[str] = []
     dropped: set[str] = set()
@@ -323,39 +412,17 @@ def compare_flights(measured: FlightStats, simulate: SimulateFn, imu: ImuErrorMo
         k += 1
         target = targets[0].statistic
         cands = [e for e in library if target in e.explains and e.name not in added]
-        tried = []
         # the statistics the choice is about: those some candidate moves (the others only
         # add noise to the score)
         moved = {st for e in cands for st in e.explains}
-        for e in cands:
-            try:
-                fit = _fit(e, cur, sim, simulate, imu, gnss, ctx)
-            except ValueError:  # a trial flight A cannot process (e.g. cannot align)
-                continue
-            if fit is None:
-                continue
-            u, cov, chi_u = fit
-            if sps.chi2.sf(chi_u, len(u)) > alpha / max(len(cands), 1):
-                continue
-            if len(u) > 1:  # components within MIN_COMPONENT_Z sigma of zero are not added
-                keep = np.abs(u) >= MIN_COMPONENT_Z * np.sqrt(np.diag(cov))
-                if e.grid is not None:  # a grid parameter (a correlation time) is a choice
-                    keep[e.grid[0]] = True
-                u = np.where(keep, u, 0.0)
-            imu2, gnss2 = e.apply(imu, gnss, u, ctx)
-            try:
-                sim2 = simulate(imu2, gnss2)
-            except ValueError:
-                continue
-            after = gaps(measured, sim2, alpha=alpha)
-            score = (sum(g.z ** 2 for n, g in after.items() if n in moved)
-                     + 2.0 * np.count_nonzero(u))
-            tried.append((score, e, u, cov, imu2, gnss2, sim2, after))
+        tried = [c for c in (_candidate(e, measured, cur, sim, simulate, imu, gnss, ctx, spread,
+                                        moved, len(cands), alpha) for e in cands)
+                 if c is not None]
         if not tried:
             steps.append(Step(k, target, "unexplained", (), (), (), "", cur, cur))
             dropped.add(target)
             continue
-        _, e, u, cov, imu2, gnss2, sim2, after = min(tried, key=lambda x: x[0])
+        _, e, u, cov, imu2, gnss2, sim2, after, spread2 = min(tried, key=lambda x: x[0])
         size, sig = e.size(u, cov)
         if target in after and abs(after[target].z) >= abs(cur[target].z):
             # the best effect did not shrink its target: not kept
@@ -367,5 +434,5 @@ def compare_flights(measured: FlightStats, simulate: SimulateFn, imu: ImuErrorMo
         steps.append(Step(k, target, e.name, e.params, tuple(size), tuple(sig), e.unit, cur,
                           after))
         added.append(e.name)
-        imu, gnss, sim, cur = imu2, gnss2, sim2, after
+        imu, gnss, sim, cur, spread = imu2, gnss2, sim2, after, spread2
     return Comparison(base, tuple(steps), imu, gnss, cur, tuple(added))

@@ -148,6 +148,12 @@ class SimEffect:
     offset: tuple[float, ...] | None = None
     """Added to the reported size per parameter [unit]: for a parameter that is a change
     from a fixed start (the coloured GNSS error's correlation time: 60 s + u)."""
+    ensemble: bool = False
+    """A random effect whose realization over one flight is one draw of a slow process (the
+    gyro random drift: over a few minutes a random constant bias, which A leaves in its
+    attitude, lever arm and innovations): a model with it is simulated with other seeds too,
+    and every statistic's sigma is at least its spread between the draws
+    (:func:`pospp.simcompare.compare.ensemble_spread`)."""
 
     def size(self, u: NDArray, cov: NDArray) -> tuple[NDArray, NDArray]:
         """Reported size and 1-sigma [unit] of the fitted u (SI) and its covariance."""
@@ -274,9 +280,10 @@ LIBRARY: tuple[SimEffect, ...] = (
                                  "imu_avar_gyro_10s", *_LEGS),
             ("imu_avar_gyro_static", "a_gyro_bias_wander", "imu_avar_gyro_10s",
              *(f"a_gyro_trend_{a}" for a in _XYZ), "gnss_vel_nis", *_norm("vel"),
+             "gnss_pos_nis", *_norm("pos"), *(f"a_lever_{a}" for a in _XYZ),
              "att_offset_roll", "att_offset_pitch", "att_offset_yaw", *_LEGS),
             ((BI_TRIAL_DPH * DEG_PER_H_RADPS) ** 2,), True, _instability,
-            fit_first=("imu_avar_gyro_static",)),
+            fit_first=("imu_avar_gyro_static",), ensemble=True),
     _effect("accel_bias_ramp", tuple(f"a_accel_trend_{a}" for a in _XYZ),
             (*(f"a_accel_trend_{a}" for a in _XYZ), "a_accel_bias_wander", *_LEGS),
             (ACCEL_RAMP_TRIAL_MPS3,) * 3, False, _accel_change),
