@@ -20,13 +20,14 @@ admissible effect explains, or whose gap the added effect does not shrink, is
 against ``max_steps``). The loop stops when no target is left or ``max_steps`` effects have
 been added.
 
-A random effect whose realization over one flight is one draw of a slow process (``ensemble``:
-the gyro random drift, which over a few minutes is a random constant bias that A leaves in its
-attitude, lever arm and innovations) makes the slow statistics one draw too, and their
-batch-means sigmas do not see the spread between draws. A model with such an effect is
-therefore also simulated with ``ENSEMBLE_DRAWS`` other seeds (:func:`ensemble_spread`), and
-every statistic's sigma, measured and simulated (under the model the measured flight is one
-more draw), is at least its spread over the draws, with their degrees of freedom
+A random effect whose realization over one flight is one draw of a slow process (the gyro
+random drift, which over a few minutes is a random constant bias that A leaves in its
+attitude, lever arm and bias trend) makes the statistics that are a signed mean of it one draw
+too (``SimEffect.ensemble``): their expectation does not move, their batch-means sigmas (blocks
+of one flight) do not see the spread between draws. A model with such an effect is therefore
+also simulated with ``ENSEMBLE_DRAWS`` other seeds (:func:`ensemble_spread`), and those
+statistics' sigmas, measured and simulated (under the model the measured flight is one more
+draw), are at least their spread over the draws, with its degrees of freedom
 (:func:`with_spread`). The spread is carried to the later steps.
 """
 
@@ -90,10 +91,11 @@ def _pvalue(m: Stat, s: Stat, z: float) -> float:
 
 
 def ensemble_spread(simulate: SimulateFn, imu: ImuErrorModel, gnss: GnssModel,
-                    sim0: FlightStats, draws: int = ENSEMBLE_DRAWS) -> dict[str, Stat]:
-    """Spread of every statistic between draws of the model (SI, as the statistic): the
-    model simulated with ``draws`` other seeds (a draw A cannot process is left out), and per
-    statistic the sample standard deviation of its values over those and ``sim0`` (the
+                    sim0: FlightStats, names: tuple[str, ...],
+                    draws: int = ENSEMBLE_DRAWS) -> dict[str, Stat]:
+    """Spread of the statistics ``names`` between draws of the model (SI, as the statistic):
+    the model simulated with ``draws`` other seeds (a draw A cannot process is left out), and
+    per statistic the sample standard deviation of its values over those and ``sim0`` (the
     comparison's own draw), as Stat(0, std, n - 1); only statistics with at least 3 values."""
     runs = [sim0]
     for k in range(1, draws + 1):
@@ -102,7 +104,7 @@ def ensemble_spread(simulate: SimulateFn, imu: ImuErrorModel, gnss: GnssModel,
         except ValueError:  # a draw A cannot process (e.g. cannot align)
             continue
     out: dict[str, Stat] = {}
-    for name in sim0.stats:
+    for name in (n for n in names if n in sim0.stats):
         v = np.array([r.stats[name].value for r in runs if name in r.stats])
         v = v[np.isfinite(v)]
         if v.size >= 3:
@@ -376,7 +378,7 @@ def _candidate(e: SimEffect, measured: FlightStats, cur: dict[str, Gap], sim: Fl
     except ValueError:
         return None
     if e.ensemble:  # the model's own spread between draws (module docstring)
-        spread = ensemble_spread(simulate, imu2, gnss2, sim2)
+        spread = ensemble_spread(simulate, imu2, gnss2, sim2, e.ensemble)
     after = gaps(measured, sim2, alpha=alpha, spread=spread)
     score = sum(g.z ** 2 for n, g in after.items() if n in moved) + 2.0 * np.count_nonzero(u)
     return score, e, u, cov, imu2, gnss2, sim2, after, spread

@@ -36,7 +36,10 @@ Effects (stable identifiers; the model change u; the reported size)
                            library fits the position sigma at 60 s only;
                            :func:`coloured_tau_library` fits all three (the time on a grid)
 ``bias_instability``       gyro Gauss-Markov (random drift) variance added at the model's
-                           correlation time; sigma, deg/h
+                           correlation time; sigma, deg/h. Over a flight of minutes its
+                           realization is one random bias, which A leaves in its attitude,
+                           lever arm and bias trends: those statistics are one draw of it
+                           (``SimEffect.ensemble``), compared with their spread between seeds
 ``accel_bias_ramp``        accelerometer bias ramp (ImuErrorModel.accel_bias_drift_ugph);
                            ug/h (the diagnosis's ``accel_bias_change`` is a settling step)
 """
@@ -148,12 +151,16 @@ class SimEffect:
     offset: tuple[float, ...] | None = None
     """Added to the reported size per parameter [unit]: for a parameter that is a change
     from a fixed start (the coloured GNSS error's correlation time: 60 s + u)."""
-    ensemble: bool = False
-    """A random effect whose realization over one flight is one draw of a slow process (the
-    gyro random drift: over a few minutes a random constant bias, which A leaves in its
-    attitude, lever arm and innovations): a model with it is simulated with other seeds too,
-    and every statistic's sigma is at least its spread between the draws
-    (:func:`pospp.simcompare.compare.ensemble_spread`)."""
+    ensemble: tuple[str, ...] = ()
+    """For a random effect whose realization over one flight is one draw of a slow process
+    (the gyro random drift: over a few minutes a random constant bias, which A leaves in its
+    attitude, lever arm and bias trend): the statistics that are a signed mean of that draw.
+    Their expectation stays where it was, their spread between draws grows, and their
+    batch-means sigmas (blocks of one flight) do not see it. A model with the effect is
+    simulated with other seeds too, and these statistics' sigmas are at least their spread
+    between the draws (:func:`pospp.simcompare.compare.ensemble_spread`). Mean-square
+    statistics (NIS, Allan variance, bias wander), whose expectation the effect moves, are
+    not among them."""
 
     def size(self, u: NDArray, cov: NDArray) -> tuple[NDArray, NDArray]:
         """Reported size and 1-sigma [unit] of the fitted u (SI) and its covariance."""
@@ -230,6 +237,12 @@ def _accel_change(imu, gnss, u, ctx):
 
 _XYZ = ("x", "y", "z")
 _LEGS = ("legs_bma_ms", "legs_bma_heldout_ms")
+_BI_DRAW = ("att_offset_roll", "att_offset_pitch", "att_offset_yaw",
+            *(f"a_lever_{a}" for a in _XYZ), *(f"a_{k}_trend_{a}" for k in ("gyro", "accel")
+                                              for a in _XYZ))
+"""The statistics that are a signed mean of one draw of the gyro random drift
+(``SimEffect.ensemble``): A's attitude offsets, lever-arm estimate, and gyro and
+accelerometer bias trends (the drift's tilt error leaks into A's accelerometer bias)."""
 _IMU_SPECTRUM = tuple(f"imu_band_{s}_{b}" for s in ("accel", "gyro") for b in ("lo", "hi"))
 
 
@@ -279,11 +292,9 @@ LIBRARY: tuple[SimEffect, ...] = (
     _effect("bias_instability", ("imu_avar_gyro_static", "a_gyro_bias_wander",
                                  "imu_avar_gyro_10s", *_LEGS),
             ("imu_avar_gyro_static", "a_gyro_bias_wander", "imu_avar_gyro_10s",
-             *(f"a_gyro_trend_{a}" for a in _XYZ), "gnss_vel_nis", *_norm("vel"),
-             "gnss_pos_nis", *_norm("pos"), *(f"a_lever_{a}" for a in _XYZ),
-             "att_offset_roll", "att_offset_pitch", "att_offset_yaw", *_LEGS),
+             "gnss_vel_nis", *_norm("vel"), *_BI_DRAW, *_LEGS),
             ((BI_TRIAL_DPH * DEG_PER_H_RADPS) ** 2,), True, _instability,
-            fit_first=("imu_avar_gyro_static",), ensemble=True),
+            fit_first=("imu_avar_gyro_static",), ensemble=_BI_DRAW),
     _effect("accel_bias_ramp", tuple(f"a_accel_trend_{a}" for a in _XYZ),
             (*(f"a_accel_trend_{a}" for a in _XYZ), "a_accel_bias_wander", *_LEGS),
             (ACCEL_RAMP_TRIAL_MPS3,) * 3, False, _accel_change),

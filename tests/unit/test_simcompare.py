@@ -378,7 +378,8 @@ def test_hidden_bias_instability_named_and_sized(static_s):
 def test_ensemble_spread_floors_the_sigmas():
     """The spread between draws is the sample standard deviation of a statistic over the
     comparison's own draw and the other seeds (n - 1 dof; a draw A cannot process is left
-    out, a statistic with fewer than 3 values gets none); it floors both sides' sigmas, so a
+    out, a statistic with fewer than 3 values or not simulated gets none); it floors both
+    sides' sigmas, so a
     gap of 0.5 with batch sigmas 0.1 (z 3.5) becomes z 0.5 / (sqrt(2) x 0.5) = 0.71."""
     from pospp.simcompare.compare import ensemble_spread, with_spread
 
@@ -395,11 +396,12 @@ def test_ensemble_spread_floors_the_sigmas():
 
     sim0 = FlightStats({"att_offset_yaw": Stat(0.0, 0.1, 3.0),
                         "a_lever_x": Stat(0.0, 0.05, inf)}, np.nan)
-    e = ensemble_spread(simulate, imu_grade("tactical"), GnssModel(), sim0, draws=4)
+    e = ensemble_spread(simulate, imu_grade("tactical"), GnssModel(), sim0,
+                        ("att_offset_yaw", "a_lever_x", "gnss_vel_nis"), draws=4)
     v = [0.0, 0.5, -0.5, 1.0]
     assert e["att_offset_yaw"].sigma == pytest.approx(np.std(v, ddof=1), rel=1e-12)
     assert e["att_offset_yaw"].dof == 3.0
-    assert "a_lever_x" not in e  # 2 values only
+    assert "a_lever_x" not in e and "gnss_vel_nis" not in e  # 2 values only; not simulated
     m = FlightStats({"att_offset_yaw": Stat(0.5, 0.1, 3.0), "a_lever_x": Stat(0.3, 0.05, inf)},
                     np.nan)
     assert with_spread(m, e).stats["a_lever_x"] == m.stats["a_lever_x"]
