@@ -74,7 +74,7 @@ from pospp.diagnose._terms import (
     _lof_term,
 )
 from pospp.diagnose.locate import horizon_worth, locate_gap
-from pospp.diagnose.null_model import calibrated_p_value
+from pospp.diagnose.null_model import calibrated_p_value, few_parameter_p_value
 from pospp.diagnose.results import CandidateTest, Diagnosis, DiagnosisStep, LegGap
 from pospp.diagnose.tables import (  # noqa: F401  (the tables' home before issue 17)
     DIAGNOSIS_COLUMNS,
@@ -87,6 +87,9 @@ from pospp.diagnose.tables import (  # noqa: F401  (the tables' home before issu
 BASE_FORMULATIONS = ("body", "paper")
 BASE_TRANSITIONS = ("numerical", "closed_form")
 CRITERION = "F_test_bonferroni_and_heldout"
+FEW_PARAMETERS = 3
+"""Nested tests of up to this many parameters (the library's candidates) get the predictive
+F(1, R) of :func:`pospp.diagnose.null_model.few_parameter_p_value`."""
 LOF_CRITERION = "lack_of_fit_F"
 
 
@@ -202,7 +205,12 @@ class _NullCalibration:
 
     def p_value(self, f: float, p_nominal: float, terms0: Sequence[Term],
                 terms1: Sequence[Term]) -> float:
-        p = calibrated_p_value(f, self.statistics(terms0, terms1))
+        """The flight's p-value against the null statistics: the predictive F(1, R) of a
+        test of at most :data:`FEW_PARAMETERS` parameters (the candidates), the predictive
+        log-normal of the many-parameter ones (the lack of fit); nominal when uncalibrated."""
+        r = self._fits(terms1)[0][1] - self._fits(terms0)[0][1] if self.probs else 0
+        rule = few_parameter_p_value if 0 < r <= FEW_PARAMETERS else calibrated_p_value
+        p = rule(f, self.statistics(terms0, terms1))
         return p_nominal if not np.isfinite(p) else p
 
 

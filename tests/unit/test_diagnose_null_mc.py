@@ -7,7 +7,9 @@ one 90 deg off, 50 Hz IMU) with one of the grades' errors (constant bias, Gauss-
 ARW: pospp/presets/imu.toml), GNSS at 1-10 Hz with horizontal noise log-uniform in 0.02-1 m
 (vertical twice, velocity half that in m/s); A and the calibration as the pipeline runs them
 (the grade's drift configured under [imu]); the pipeline's ``diagnose`` calibrated on 6 null
-realisations (pospp.diagnose.null_model), which also give the calibration its covariance
+realisations (pospp.diagnose.null_model), with the log and A's result as ``pospp run`` gives
+them (so the A re-run candidates, lever arm and GNSS time offset, are tested too), which also
+give the calibration its covariance
 (pospp.calib.stage.with_null_covariance). Nothing outside the base model is present, so the
 closing row should be ``none`` at alpha = 0.05 (body bias, vertical drift and Earth-rate
 coupling may be named), and the calibrated body gyro bias should sit within its sigma of the
@@ -91,7 +93,10 @@ def null_flight_diagnosis(seed: int, n_null: int = N_NULL):
     assert honest.sigma_source == "null_realisations"
     true_b = np.radians(np.asarray(sim.params["imu_errors"]["gyro_bias_dph"], float)) / 3600.0
     z = ((honest.gyro_bias_b_radps - true_b) / honest.gyro_bias_sigma_b_radps)[:2]
-    return (pipeline.diagnose_calibration(run, imu, ref, cfg, null_dv=null),
+    # the pipeline's whole path: with the log and A's result, the lever arm and the GNSS time
+    # offset are candidates with their A re-run signatures (Gauss-Newton from A's own lever-arm
+    # estimate) and the null's drift may be re-estimated under the alternative
+    return (pipeline.diagnose_calibration(run, imu, ref, cfg, null_dv=null, log=log, nav=nav),
             pipeline.diagnose_calibration(run, imu, ref, cfg),
             z)
 

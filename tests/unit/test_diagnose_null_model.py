@@ -47,6 +47,36 @@ def test_calibrated_p_value_is_exact_for_a_normal_log_statistic():
     assert np.isnan(null_model.calibrated_p_value(1.0, np.array([1.0, np.nan])))
 
 
+def test_few_parameter_p_value_is_exact_for_one_parameter_and_conservative_for_three():
+    # one parameter: the F statistic is c chi2_1 (the square of the noise's Gaussian
+    # projection on the candidate); over many (R null draws, one new draw) of it,
+    # P(p < alpha) = alpha for every R: the statistic over the mean of R draws is F(1, R)
+    rng = np.random.default_rng(5)
+    n = 20000
+    for r in (4, 6, 10):
+        f = 37.0 * rng.standard_normal((n, r + 1)) ** 2
+        p = np.array([null_model.few_parameter_p_value(float(row[0]), row[1:]) for row in f])
+        for alpha in (0.05, 0.01):
+            assert np.mean(p < alpha) == pytest.approx(alpha, abs=4 * np.sqrt(alpha / n))
+    # three parameters of unequal noise (lambda 1, 0.3, 0.05, sum of lambda_j chi2_1 / 3):
+    # at most the stated level (the one-parameter tail is the heaviest for a given mean)
+    lam = np.array([1.0, 0.3, 0.05])
+    for r in (4, 6, 10):
+        f = (rng.standard_normal((n, r + 1, 3)) ** 2 @ lam) / 3.0
+        p = np.array([null_model.few_parameter_p_value(float(row[0]), row[1:]) for row in f])
+        for alpha in (0.05, 0.01):
+            assert np.mean(p < alpha) <= alpha + 4 * np.sqrt(alpha / n)
+    # against scipy written out, and the edge cases
+    null = np.array([0.1, 1.1, 1.4, 12.4, 21.5, 140.4])
+    assert null_model.few_parameter_p_value(17798.0, null) == pytest.approx(
+        stats.f.sf(17798.0 / null.mean(), 1, 6))
+    # the log-normal predictive reads the same draws far too heavy-tailed (docs/diagnose.md)
+    assert null_model.calibrated_p_value(17798.0, null) > 100 * \
+        null_model.few_parameter_p_value(17798.0, null)
+    assert null_model.few_parameter_p_value(float("nan"), null) == 1.0
+    assert np.isnan(null_model.few_parameter_p_value(1.0, np.array([1.0, np.nan])))
+
+
 def test_imu_white_noise_density_from_second_differences():
     rng = np.random.default_rng(4)
     dt = 0.005
