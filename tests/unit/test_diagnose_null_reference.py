@@ -45,7 +45,8 @@ def _run(cases: Path, name: str, extra: str = ""):
     honest = with_null_covariance(run, null)
     true_b = np.radians(np.asarray(params["imu_errors"]["gyro_bias_dph"], float)) / 3600.0
     z = ((honest.gyro_bias_b_radps - true_b) / honest.gyro_bias_sigma_b_radps)[:2]
-    return (pipeline.diagnose_calibration(run, imu, ref, cfg, null_dv=null),
+    # the pipeline's whole path (log and A's result: the A re-run candidates are tested too)
+    return (pipeline.diagnose_calibration(run, imu, ref, cfg, null_dv=null, log=log, nav=nav),
             pipeline.diagnose_calibration(run, imu, ref, cfg), z)
 
 
