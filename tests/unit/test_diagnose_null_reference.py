@@ -26,9 +26,11 @@ from pospp.config import load_config
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def _run(cases: Path, name: str, extra: str = ""):
+def _run(cases: Path, name: str, extra: str = "", lever_arm_m: list[float] | None = None):
+    """(calibrated diagnosis, nominal diagnosis, body bias error / sigma) of a case, with its
+    lever arm configured from its params.json (or ``lever_arm_m``)."""
     params = json.loads((cases / f"{name}.params.json").read_text())
-    lever = params["gnss"]["lever_arm_m"]
+    lever = params["gnss"]["lever_arm_m"] if lever_arm_m is None else lever_arm_m
     toml = (ROOT / "pipelines" / "flight.toml").read_text().replace(
         "lever_arm_m = [0.0, 0.0, 0.0]", f"lever_arm_m = [{lever[0]}, {lever[1]}, {lever[2]}]")
     toml = toml.replace('[imu]\ngrade = "flight"\n', '[imu]\ngrade = "flight"\n' + extra)
@@ -81,4 +83,21 @@ def test_time_offset_is_named_with_its_size(reference_cases):
     assert step.value < 0
     true_ms = 1e3 * abs(float(params["gnss"]["time_offset_s"]))
     assert abs(step.value) == pytest.approx(true_ms, rel=0.2)
+    assert calibrated.conclusion == "none", calibrated.steps[-1]
+
+
+@pytest.mark.slow
+def test_unknown_lever_arm_is_named_with_its_size(reference_cases):
+    # flight_null_200hz with its antenna lever arm (0.3, -0.2, -0.9) m FRD left at 0 in the
+    # configuration: named `lever_arm` with its size (the norm of configured minus true)
+    # within 20 % and each axis within 0.2 m. Measured: 0.843 m for 0.970 m, axes (-0.30,
+    # 0.18, 0.77) against (-0.3, 0.2, 0.9); closing row none (p 0.84). Before the A re-run
+    # signatures (issue 12 item 3) this ended `unexplained`.
+    params = json.loads((reference_cases / "flight_null_200hz.params.json").read_text())
+    true = np.asarray(params["gnss"]["lever_arm_m"], dtype=float)
+    calibrated, _, _ = _run(reference_cases, "flight_null_200hz", lever_arm_m=[0.0, 0.0, 0.0])
+    assert "lever_arm" in calibrated.named, calibrated.steps
+    step = calibrated.step_of("lever_arm")
+    assert step.value == pytest.approx(float(np.linalg.norm(true)), rel=0.2)
+    np.testing.assert_allclose(step.values, -true, atol=0.2)
     assert calibrated.conclusion == "none", calibrated.steps[-1]
