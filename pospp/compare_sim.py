@@ -155,9 +155,10 @@ def _rest_end_s(log: mcap_reader.FlightLog, end_s: float, limit_s: float,
     m = (tv > end_s) & (tv <= limit_s)
     if not m.any():
         return end_s
-    tv = tv[m]
-    moving = gnss_moving_windows(tv, tv, tv, log.vel.v_n_mps[m],
-                                 log.vel.vel_cov_ned_m2ps2[m], options)
+    order = np.argsort(tv[m], kind="stable")
+    tv = tv[m][order]
+    moving = gnss_moving_windows(tv, tv, tv, log.vel.v_n_mps[m][order],
+                                 log.vel.vel_cov_ned_m2ps2[m][order], options)
     n_rest = int(np.argmax(moving)) if moving.any() else tv.size
     return float(tv[n_rest - 1]) if n_rest > 0 else end_s
 

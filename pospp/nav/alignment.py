@@ -47,8 +47,10 @@ For equal sigmas s per axis |v| / s follows the chi distribution with 3 dof, and
 at most 0.5 m/s. The same test is applied to each window's mean velocity (covariance
 sum C_i / n^2), which sees a slow creep that single records at a higher rate do not. With the
 simulator's receiver (0.02, 0.02, 0.03 m/s; 0.041 m/s RMS in 3-D) one record passed 0.1 m/s
-within ten minutes on most seeds; at alpha = 1e-6 per record (and per window mean) a 20-minute
-static log of 1200 (1 Hz) to 12000 (10 Hz) records is cut falsely with probability 0.2-2.4 %.
+within ten minutes on most seeds; at alpha = 1e-6 per record and per window mean a 20-minute
+static log is cut falsely with probability at most 1200 x 1e-6 = 0.12 % at 1 Hz (the mean of
+a window of one record is that record) and (12000 + 1200) x 1e-6 = 1.3 % at 10 Hz (less with
+the 0.1 m/s condition).
 Without covariances the test is |v| > ``max_static_speed_mps`` alone.
 """
 
