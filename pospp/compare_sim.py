@@ -20,6 +20,7 @@ from pospp import pipeline
 from pospp.config import PipelineConfig
 from pospp.io import mcap_reader, parquet_tables, report_files
 from pospp.nav import filter as nav_filter
+from pospp.nav.alignment import AlignmentOptions, gnss_moving_windows
 from pospp.sim.api import simulate_along
 from pospp.sim.gnss import GnssModel
 from pospp.sim.sensors import ImuErrorModel, imu_grade
@@ -93,7 +94,8 @@ def flight_template(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     dt_ns = int(round(float(np.median(np.diff(log.imu.time_ns)))))
     t_fix = (log.fix.time_ns - epoch) * 1e-9
     gnss_dt = float(np.median(np.diff(t_fix))) if t_fix.size > 1 else 1.0
-    t_s, lat, lon, hgt = _with_static_start(log, nav, t_imu, t_fix, sol)
+    t_s, lat, lon, hgt = _with_static_start(log, nav, t_imu, t_fix, sol,
+                                            config.filter_options().alignment)
     mission0 = float(t_s[0])
     outages = tuple((float(a - mission0 + 1e-6), float(b - mission0 - 1e-6))
                     for a, b in _gaps(t_fix, 2.5))
@@ -117,11 +119,16 @@ def flight_template(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
 
 
 def _with_static_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
-                       t_imu: np.ndarray, t_fix: np.ndarray, sol: nav_filter.NavSolution):
+                       t_imu: np.ndarray, t_fix: np.ndarray, sol: nav_filter.NavSolution,
+                       options: AlignmentOptions):
     """A's smoothed trajectory (t [s], lat, lon [rad], height [m]), with the log's initial
     static period prepended (at the median of its fixes, 2 Hz) when A found one and started
     after it (motion alignment), so that the simulated flight has the same static start
-    (``imu_avar_gyro_static``)."""
+    (``imu_avar_gyro_static``). The position is held to the last GNSS velocity before A's
+    start that is at rest by the alignment's test (:func:`pospp.nav.alignment.
+    gnss_moving_windows`, each record alone), not only to the end of A's static period, so
+    that the spline of the simulator joins the held position to A's first epoch over the
+    start of motion only (not over minutes of rest after an IMU window that moved)."""
     t, lat, lon, hgt = sol.t_s, sol.lat_rad, sol.lon_rad, sol.height_m
     end = nav.alignment.static_end_s
     if end is None or not end < t[0] - 1.0:
@@ -129,12 +136,31 @@ def _with_static_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     m = (t_fix >= t_imu[0]) & (t_fix <= end)
     if not m.any():
         return t, lat, lon, hgt
+    end = max(end, _rest_end_s(log, end, float(t[0]) - 1.0, options))
     ts = np.arange(float(t_imu[0]) + 1e-3, end, 0.5)
     fix = log.fix
     pre = [np.full(ts.size, float(np.median(x[m])))
            for x in (fix.lat_rad, fix.lon_rad, fix.height_m)]
     return (np.concatenate([ts, t]), *(np.concatenate([p, x])
                                       for p, x in zip(pre, (lat, lon, hgt), strict=True)))
+
+
+def _rest_end_s(log: mcap_reader.FlightLog, end_s: float, limit_s: float,
+                options: AlignmentOptions) -> float:
+    """The last GNSS velocity time [s from the first IMU stamp] in (end_s, limit_s] before
+    the first record that moves (``end_s`` when the first one moves or there are none)."""
+    if not len(log.vel):
+        return end_s
+    tv = (log.vel.time_ns - int(log.imu.time_ns[0])) * 1e-9
+    m = (tv > end_s) & (tv <= limit_s)
+    if not m.any():
+        return end_s
+    order = np.argsort(tv[m], kind="stable")
+    tv = tv[m][order]
+    moving = gnss_moving_windows(tv, tv, tv, log.vel.v_n_mps[m][order],
+                                 log.vel.vel_cov_ned_m2ps2[m][order], options)
+    n_rest = int(np.argmax(moving)) if moving.any() else tv.size
+    return float(tv[n_rest - 1]) if n_rest > 0 else end_s
 
 
 def _residual_rms(log: mcap_reader.FlightLog, sol: nav_filter.NavSolution, epoch_ns: int

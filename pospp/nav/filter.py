@@ -417,7 +417,8 @@ def _align_and_measurements(
     """Screen the GNSS records, align, and list the measurements (ZUPTs over a static start)."""
     gnss = filter_input.screened_gnss(fixes, vels, t, epoch_ns, options, rejections)
     al = align(t, w, f, gnss.fix_t_s, gnss.fix_llh, gnss.fix_cov, gnss.vel_t_s, gnss.vel_n,
-               noise, lever_arm_b_m=lever0, options=options.alignment)
+               noise, lever_arm_b_m=lever0, options=options.alignment,
+               vel_cov_ned_m2ps2=gnss.vel_cov)
     zupt_t_s = None
     if options.zupt and al.method == "static" and al.static_end_s is not None:
         zupt_t_s = np.arange(t[0], al.static_end_s - options.alignment.window_s,

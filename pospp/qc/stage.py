@@ -84,9 +84,12 @@ def config_problems(config: Any) -> list[str]:
     return out
 
 
-def _static_mask(t: NDArray, w: NDArray, f: NDArray, vel_t: NDArray, vel: NDArray) -> NDArray:
-    ends, is_static = static_windows(t, w, f, gnss_vel_t_s=vel_t if len(vel_t) else None,
-                                     gnss_v_n_mps=vel if len(vel_t) else None)
+def _static_mask(t: NDArray, w: NDArray, f: NDArray, vel_t: NDArray, vel: NDArray,
+                 vel_cov: NDArray) -> NDArray:
+    has = len(vel_t) > 0
+    ends, is_static = static_windows(t, w, f, gnss_vel_t_s=vel_t if has else None,
+                                     gnss_v_n_mps=vel if has else None,
+                                     gnss_vel_cov_ned_m2ps2=vel_cov if has else None)
     # windows are consecutive runs of samples, window j ending at ends[j]; samples after the
     # last whole window belong to none
     j = np.searchsorted(ends, t, side="left")
@@ -146,7 +149,7 @@ def quality_checks(log: FlightLog, nav: FilterResult, calib_run: Any, config: An
                                 float(t[-1] - t[0]) if t.shape[0] else 0.0, window))
 
     # --- IMU against gravity and the Earth rate ----------------------------------------------
-    static = _static_mask(t, w, f, vel_t, log.vel.v_n_mps)
+    static = _static_mask(t, w, f, vel_t, log.vel.v_n_mps, log.vel.vel_cov_ned_m2ps2)
     out.append(qc.gravity_direction(f, static, c_bs, cin.sensor_frame))
     lat0 = float(log.fix.lat_rad[0]) if len(log.fix.time_ns) else nav.alignment.lat_rad
     h0 = float(log.fix.height_m[0]) if len(log.fix.time_ns) else nav.alignment.height_m

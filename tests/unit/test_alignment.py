@@ -126,3 +126,86 @@ def test_static_position_resists_an_outlier_fix():
     al = align(t, w, f, fix_t, llh, cov, np.zeros(0), np.zeros((0, 3)),
                tuning_preset("flight").noise())
     assert al.lat_rad == pytest.approx(lat, abs=1e-9)
+
+
+def _gnss_vel(static_s, total_s, rate_hz, seed, v_after=lambda dt: np.zeros((dt.size, 3))):
+    """GNSS velocities with the simulator's receiver noise (GnssModel defaults), reported
+    sigmas in the covariances; after ``static_s`` the true velocity is ``v_after(t - static)``."""
+    from pospp.sim.gnss import GnssModel
+
+    h, v = GnssModel().vel_noise_mps
+    sig = np.array([h, h, v])
+    rng = np.random.default_rng(1000 + seed)
+    t = np.arange(1.0 / rate_hz, total_s, 1.0 / rate_hz)
+    vel = rng.standard_normal((t.size, 3)) * sig
+    after = t > static_s
+    vel[after] += v_after(t[after] - static_s)
+    cov = np.tile(np.diag(sig**2), (t.size, 1, 1))
+    return t, vel, cov
+
+
+@pytest.mark.parametrize("rate_hz", [1.0, 10.0])
+def test_twenty_static_minutes_stay_static_under_gnss_velocity_noise(rate_hz):
+    """20 minutes at rest, the simulator's receiver (pospp.sim.gnss defaults: velocity noise
+    0.02, 0.02, 0.03 m/s, 0.041 m/s RMS in 3-D, reported as such): static to the end on 6
+    seeds with the chi^2(3) test (alpha 1e-6 per record), while the speed threshold alone
+    (no covariances) cuts it on most of them."""
+    from pospp.sim.gnss import GnssModel, simulate_gnss
+    from pospp.sim.trajectory import MotionSample
+
+    class Still:  # the receiver at rest: its velocities are its noise
+        def evaluate(self, ts):
+            n = np.asarray(ts).size
+            z3 = np.zeros((n, 3))
+            return MotionSample(np.asarray(ts), np.full(n, 0.8), np.full(n, 0.1),
+                                np.full(n, 100.0), z3, z3, z3, z3)
+
+    t, w, f = _record(1200.0, 0.0, rate=50.0)
+    cut_by_speed_alone = 0
+    for seed in range(1, 7):
+        _, v = simulate_gnss(Still(), 1200.0, GnssModel(rate_hz=rate_hz), start_time_ns=0,
+                             seed=seed)
+        tv, vel, cov = v.time_ns * 1e-9, v.v_n_mps, v.vel_cov_ned_m2ps2
+        _, ok = static_windows(t, w, f, gnss_vel_t_s=tv, gnss_v_n_mps=vel,
+                               gnss_vel_cov_ned_m2ps2=cov)
+        assert ok.all(), (seed, np.flatnonzero(~ok))
+        _, ok0 = static_windows(t, w, f, gnss_vel_t_s=tv, gnss_v_n_mps=vel)
+        cut_by_speed_alone += int(not ok0.all())
+    assert cut_by_speed_alone >= 4
+
+
+@pytest.mark.parametrize("rate_hz", [1.0, 10.0])
+@pytest.mark.parametrize("motion", ["creep 0.3 m/s", "accelerate 0.5 m/s^2"])
+def test_a_start_of_motion_ends_the_static_period_within_two_windows(rate_hz, motion):
+    """A creep at 0.3 m/s or an acceleration of 0.5 m/s^2 (north) from 300 s, which the IMU
+    windows do not see (no vibration; 0.5 m/s^2 changes |f| by 0.013 m/s^2 < 0.1), ends the
+    static period by the GNSS velocity within two 1 s windows, on 6 seeds."""
+    def creep(dt):
+        return np.tile([0.3, 0.0, 0.0], (dt.size, 1))
+
+    def accelerate(dt):
+        return np.column_stack([0.5 * dt, np.zeros(dt.size), np.zeros(dt.size)])
+
+    v_after = creep if motion.startswith("creep") else accelerate
+    t, w, f = _record(330.0, 0.0, rate=50.0)
+    for seed in range(1, 7):
+        tv, vel, cov = _gnss_vel(300.0, 330.0, rate_hz, seed, v_after)
+        end, ok = static_windows(t, w, f, gnss_vel_t_s=tv, gnss_v_n_mps=vel,
+                                 gnss_vel_cov_ned_m2ps2=cov)
+        first_moving = float(end[np.argmin(ok)])
+        assert ok[end <= 300.0].all() and 300.0 < first_moving <= 302.0, (seed, first_moving)
+
+
+def test_a_large_reported_sigma_does_not_hide_half_a_metre_per_second():
+    """A receiver reporting 1 m/s: a record at 0.6 m/s moves (``max_noisy_static_speed_mps``),
+    one at 0.4 m/s does not; without covariances 0.12 m/s moves, 0.08 m/s does not
+    (``max_static_speed_mps``)."""
+    t, w, f = _record(10.0, 0.0, rate=50.0)
+    tv = np.array([2.5, 5.5])
+    vel = np.array([[0.4, 0.0, 0.0], [0.6, 0.0, 0.0]])
+    cov = np.tile(np.eye(3), (2, 1, 1))
+    end, ok = static_windows(t, w, f, gnss_vel_t_s=tv, gnss_v_n_mps=vel,
+                             gnss_vel_cov_ned_m2ps2=cov)
+    assert ok[2] and not ok[5] and ok[[0, 1, 3, 4, 6, 7, 8]].all()
+    _, ok0 = static_windows(t, w, f, gnss_vel_t_s=tv, gnss_v_n_mps=vel * 0.2)
+    assert ok0[2] and not ok0[5]
