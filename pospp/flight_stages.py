@@ -112,27 +112,47 @@ def navigate(
 
 QC_LEVER_ARM_SIGMA_M = 2.0
 """Prior sigma of the lever-arm states in the QC stage's re-estimation [m]."""
+LEVER_ARM_PASSES = 3
+"""At most this many forward passes of :func:`lever_arm_estimate`, each from the last one's
+estimate."""
+LEVER_ARM_PASS_STEP_M = 0.1
+"""Another pass when the estimate moved more than this from where its pass started [m]."""
 
 
 def lever_arm_estimate(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                        config: PipelineConfig) -> nav_filter.LeverArmEstimate:
-    """The antenna lever arm (body FRD, m) estimated by one forward pass of A with lever-arm
-    states (no smoother) and a :data:`QC_LEVER_ARM_SIGMA_M` prior sigma (the QC stage's, and
-    the diagnosis's starting point for ``lever_arm``). The axes A's attitude history reveals
-    (:func:`pospp.qc.checks.lever_arm_observable`) start from zero, so that the configured
-    value does not pull them; the others start from the configured value, where they stay
-    instead of floating and leaking into the revealed ones (all from zero, a 1.5 m down lever
-    that one banked turn cannot reveal bent the forward estimate by 0.3 m at 14 sigma: 2 false
-    alarms in 100 clean flights, docs/qc.md). Raises ValueError when A fails."""
+    """The antenna lever arm (body FRD, m) estimated by forward passes of A with lever-arm
+    states (no smoother; a second and third pass from the previous estimate while it moves
+    by more than :data:`LEVER_ARM_PASS_STEP_M`) and a :data:`QC_LEVER_ARM_SIGMA_M` prior
+    sigma (the QC stage's, and the diagnosis's starting point for ``lever_arm``). The axes
+    A's attitude history reveals (:func:`pospp.qc.checks.lever_arm_observable`) start from
+    zero, so that the configured value does not pull them; the others start from the
+    configured value, where they stay instead of floating and leaking into the revealed ones
+    (all from zero, a 1.5 m down lever that one banked turn cannot reveal bent the forward
+    estimate by 0.3 m at 14 sigma: 2 false alarms in 100 clean flights, docs/qc.md). Raises
+    ValueError when A fails."""
     from pospp.qc.checks import lever_arm_observable
 
     rerun = replace(config, gnss=replace(config.gnss, estimate_lever_arm=True))
     opts = replace(config.filter_options(), smoother=False,
                    lever_arm_sigma_m=QC_LEVER_ARM_SIGMA_M)
     sol = nav.smoothed if nav.smoothed is not None else nav.forward
-    start = np.where(lever_arm_observable(sol.rpy_rad), 0.0,
-                     np.asarray(config.gnss.lever_arm_m, dtype=float))
-    return navigate(log, rerun, lever_arm_b_m=start, options=opts).lever_arm
+    seen = lever_arm_observable(sol.rpy_rad)
+    configured = np.asarray(config.gnss.lever_arm_m, dtype=float)
+    start = np.where(seen, 0.0, configured)
+    est = navigate(log, rerun, lever_arm_b_m=start, options=opts).lever_arm
+    # A is not linear in a large lever-arm error (its gate rejects the shifted fixes, its
+    # attitude Jacobian is made at the wrong lever arm): a 3 m offset read 1.78 m at 5 cm
+    # sigma after one pass; restarted from that estimate it read 2.93 m, then 2.98 m
+    # (docs/diagnose.md, "Power"). Passes restart from the revealed axes' estimate until
+    # it moves by less than LEVER_ARM_PASS_STEP_M.
+    for _ in range(LEVER_ARM_PASSES - 1):
+        nxt = np.where(seen, est.lever_b_m, configured)
+        if not np.max(np.abs(nxt - start)) > LEVER_ARM_PASS_STEP_M:
+            break
+        start = nxt
+        est = navigate(log, rerun, lever_arm_b_m=start, options=opts).lever_arm
+    return est
 
 
 def imu_increments(log: mcap_reader.FlightLog) -> ImuIncrements:
