@@ -143,7 +143,7 @@ def lever_arm_estimate(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     est = navigate(log, rerun, lever_arm_b_m=start, options=opts).lever_arm
     # A is not linear in a large lever-arm error (its gate rejects the shifted fixes, its
     # attitude Jacobian is made at the wrong lever arm): a 3 m offset read 1.78 m at 5 cm
-    # sigma after one pass; restarted from that estimate it read 2.93 m, then 2.98 m
+    # sigma after one pass; restarted from that estimate it read 2.95 m, then 2.99 m
     # (docs/diagnose.md, "Power"). Passes restart from the revealed axes' estimate until
     # it moves by less than LEVER_ARM_PASS_STEP_M.
     for _ in range(LEVER_ARM_PASSES - 1):
