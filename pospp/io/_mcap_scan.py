@@ -159,6 +159,20 @@ def _lz4_bounded(data: bytes | memoryview, limit: int) -> bytes | bytearray:
     return out
 
 
+_CORRUPT_DATA_ERRORS = (ValueError, struct.error, IndexError, KeyError, EOFError,
+                        OverflowError, RuntimeError, zlib.error, McapError, MemoryError)
+"""What corrupt chunk bytes raise: the record walk's bounds and struct errors, lz4's
+RuntimeError, zlib, the mcap library's errors, a declared size that cannot be allocated
+(UnicodeDecodeError is a ValueError); zstandard's ZstdError is matched by name (imported
+lazily)."""
+
+
+def _is_corrupt_data_error(exc: BaseException) -> bool:
+    """True when ``exc`` is what corrupt chunk bytes raise (:data:`_CORRUPT_DATA_ERRORS`, or
+    zstandard's ``ZstdError``), False for anything else (a bug in pospp, which propagates)."""
+    return isinstance(exc, _CORRUPT_DATA_ERRORS) or type(exc).__name__ == "ZstdError"
+
+
 def _decompress(chunk: _RawChunk,
                 max_bytes: int = MAX_CHUNK_BYTES) -> bytes | bytearray | memoryview:
     """Chunk records; for a truncated chunk, as many bytes as can be decompressed.
@@ -538,6 +552,8 @@ class Scan:
         except (IngestError, NumbaError):
             raise  # a compiled pass that fails is pospp's error, not a corrupt chunk
         except Exception as exc:  # noqa: BLE001 - zstd/lz4 errors have their own classes
+            if not _is_corrupt_data_error(exc):
+                raise  # a TypeError or AttributeError is pospp's bug, not the file's
             if chunk.truncated:
                 raise _Truncated(f"chunk cut off and undecodable: {exc}") from exc
             cause = str(exc) if isinstance(exc, ValueError | struct.error | IndexError) else (

@@ -659,3 +659,27 @@ def test_random_damage_never_escapes_as_another_exception(tmp_path: Path, log_pa
             assert any(i.severity == "error" and i.byte_offset is not None for i in log.issues)
         assert np.all(np.isin(log.imu.time_ns, imu.time_ns))
     assert {"error", "partial"} <= outcomes
+
+
+def test_corrupt_chunk_is_reported_but_a_reader_bug_propagates(
+        good_file: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """What corrupt bytes raise (here a ValueError from decompression) is a skipped chunk, an
+    error issue naming the byte offset, and ``complete`` False; anything else (a TypeError: a
+    bug in pospp) propagates instead of being reported as the file's fault."""
+    from pospp.io import _mcap_scan
+
+    def corrupt(*_args, **_kwargs):
+        raise ValueError("bad zstd frame")
+
+    monkeypatch.setattr(_mcap_scan, "_decompress", corrupt)
+    with pytest.raises(IngestError) as err:  # every chunk skipped: no IMU left
+        read_flight_log(good_file)
+    assert "corrupt chunk at byte 34 skipped" in str(err.value)
+    assert "bad zstd frame" in str(err.value)
+
+    def bug(*_args, **_kwargs):
+        raise TypeError("unsupported operand")
+
+    monkeypatch.setattr(_mcap_scan, "_decompress", bug)
+    with pytest.raises(TypeError, match="unsupported operand"):
+        read_flight_log(good_file)
