@@ -18,12 +18,12 @@ simulated constant bias as often as a normal error would.
 
 from __future__ import annotations
 
-import dataclasses
 import multiprocessing as mp
 from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 import pytest
+from _missions import SimLog, three_leg_survey
 
 from pospp import pipeline
 from pospp.calib.stage import with_null_covariance
@@ -42,28 +42,8 @@ ACCEL_DRIFT = {"paper_flight": (0.0, 600.0), "paper_vehicle": (0.0, 600.0),
 N_NULL = 6
 MAY_BE_NAMED = {"body_fixed_gyro_bias", "vertical_gyro_drift", "earth_rate_coupling"}
 
-PROFILE = {
-    "name": "null_mc", "imu_rate_hz": 50,
-    "start": {"lat_deg": 40.0, "lon_deg": 116.0, "height_m": 1000.0, "heading_deg": 30.0},
-    "options": {"turn_bank": "coordinated", "blend_s": 5.0},
-    "segment": [
-        {"type": "static", "duration_s": 60.0},
-        {"type": "accelerate", "to_speed_mps": 60.0, "duration_s": 20.0},
-        {"type": "straight", "duration_s": 60.0},
-        {"type": "straight", "duration_s": 180.0, "kind": "survey"},
-        {"type": "turn", "angle_deg": 180.0, "rate_dps": 3.0},
-        {"type": "straight", "duration_s": 180.0, "kind": "survey"},
-        {"type": "turn", "angle_deg": 90.0, "rate_dps": 3.0},
-        {"type": "straight", "duration_s": 180.0, "kind": "survey"},
-    ],
-}
-
-
-@dataclasses.dataclass(frozen=True)
-class _Log:
-    imu: object
-    fix: object
-    vel: object
+PROFILE = three_leg_survey("null_mc", 180.0, lat_deg=40.0, lon_deg=116.0, height_m=1000.0,
+                           heading_deg=30.0)
 
 
 def null_flight_diagnosis(seed: int, n_null: int = N_NULL):
@@ -83,7 +63,7 @@ def null_flight_diagnosis(seed: int, n_null: int = N_NULL):
         "legs": {"min_duration_s": 120.0, "min_speed_mps": 20.0},
         "replay": {"reference": "smoothed", "horizon_s": 180.0},
         "pairs": {"diagnose_alpha": 0.05}})
-    log = _Log(sim.imu, sim.fix, sim.vel)
+    log = SimLog(sim.imu, sim.fix, sim.vel)
     nav = pipeline.navigate(log, cfg)
     imu = pipeline.imu_increments(log)
     run, ref = pipeline.calibrate_from_a(imu, nav, cfg)

@@ -18,6 +18,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from _missions import SimLog
 
 from pospp import pipeline
 from pospp.config import config_from_dict
@@ -59,13 +60,6 @@ def profile(leg_s: float = 180.0, n_legs: int = 3, wander: bool = True) -> dict:
     return {"name": "power", "imu_rate_hz": 50,
             "start": {"lat_deg": 40.0, "lon_deg": 116.0, "height_m": 1000.0, "heading_deg": 30.0},
             "options": {"turn_bank": "coordinated", "blend_s": 5.0}, "segment": seg}
-
-
-@dataclasses.dataclass(frozen=True)
-class _Log:
-    imu: object
-    fix: object
-    vel: object
 
 
 @dataclasses.dataclass(frozen=True)
@@ -116,7 +110,7 @@ def simulate_flight(effect: str | None, size: float, seed: int, *, gnss_pos_m: f
         f = imu.f_ib_b_mps2.copy()
         f[:, 0] += size * 9.80665e-6 * np.exp(-t / ACCEL_SETTLING_S)
         imu = dataclasses.replace(imu, f_ib_b_mps2=f)
-    return _Log(imu, sim.fix, sim.vel), _config(leg_s)
+    return SimLog(imu, sim.fix, sim.vel), _config(leg_s)
 
 
 def power_run(effect: str | None, size: float, seed: int, *, n_null: int = N_NULL,

@@ -20,6 +20,7 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 import pytest
+from _missions import SimLog, three_leg_survey
 
 from pospp import pipeline
 from pospp.calib.stage import with_null_covariance
@@ -30,28 +31,8 @@ from pospp.sim.profile import parse_profile
 from pospp.sim.sensors import imu_grade
 from pospp.units import DEG_PER_H_RADPS
 
-PROFILE = {
-    "name": "drift_honesty", "imu_rate_hz": 50,
-    "start": {"lat_deg": 34.25, "lon_deg": 108.95, "height_m": 2600.0, "heading_deg": 0.0},
-    "options": {"turn_bank": "coordinated", "blend_s": 5.0},
-    "segment": [
-        {"type": "static", "duration_s": 60.0},
-        {"type": "accelerate", "to_speed_mps": 60.0, "duration_s": 20.0},
-        {"type": "straight", "duration_s": 60.0},
-        {"type": "straight", "duration_s": 300.0, "kind": "survey"},
-        {"type": "turn", "angle_deg": 180.0, "rate_dps": 3.0},
-        {"type": "straight", "duration_s": 300.0, "kind": "survey"},
-        {"type": "turn", "angle_deg": 90.0, "rate_dps": 3.0},
-        {"type": "straight", "duration_s": 300.0, "kind": "survey"},
-    ],
-}
-
-
-@dataclasses.dataclass(frozen=True)
-class _Log:
-    imu: object
-    fix: object
-    vel: object
+PROFILE = three_leg_survey("drift_honesty", 300.0, lat_deg=34.25, lon_deg=108.95, height_m=2600.0,
+                           heading_deg=0.0)
 
 
 def drift_flight_z(seed: int, tau_s: float, sigma_dph: float, *, n_null: int = 6) -> dict:
@@ -69,7 +50,7 @@ def drift_flight_z(seed: int, tau_s: float, sigma_dph: float, *, n_null: int = 6
         "filter": {"output_rate_hz": 10.0, "smoother": True},
         "legs": {"min_duration_s": 240.0, "min_speed_mps": 20.0},
         "replay": {"reference": "smoothed", "horizon_s": 300.0}})
-    log = _Log(sim.imu, sim.fix, sim.vel)
+    log = SimLog(sim.imu, sim.fix, sim.vel)
     nav = pipeline.navigate(log, cfg)
     imu = pipeline.imu_increments(log)
     run, _ = pipeline.calibrate_from_a(imu, nav, cfg)
