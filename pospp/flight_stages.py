@@ -123,7 +123,8 @@ def lever_arm_estimate(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                        config: PipelineConfig) -> nav_filter.LeverArmEstimate:
     """The antenna lever arm (body FRD, m) estimated by forward passes of A with lever-arm
     states (no smoother; a second and third pass from the previous estimate while it moves
-    by more than :data:`LEVER_ARM_PASS_STEP_M`) and a :data:`QC_LEVER_ARM_SIGMA_M` prior
+    by more than :data:`LEVER_ARM_PASS_STEP_M` and differs from the configured value by as
+    much) and a :data:`QC_LEVER_ARM_SIGMA_M` prior
     sigma (the QC stage's, and the diagnosis's starting point for ``lever_arm``). The axes
     A's attitude history reveals (:func:`pospp.qc.checks.lever_arm_observable`) start from
     zero, so that the configured value does not pull them; the others start from the
@@ -145,10 +146,12 @@ def lever_arm_estimate(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     # attitude Jacobian is made at the wrong lever arm): a 3 m offset read 1.78 m at 5 cm
     # sigma after one pass; restarted from that estimate it read 2.95 m, then 2.99 m
     # (docs/diagnose.md, "Power"). Passes restart from the revealed axes' estimate until
-    # it moves by less than LEVER_ARM_PASS_STEP_M.
+    # it moves by less than LEVER_ARM_PASS_STEP_M; none when the first pass agrees with the
+    # configured lever arm (A then ran near the right one: the usual flight pays one pass).
     for _ in range(LEVER_ARM_PASSES - 1):
         nxt = np.where(seen, est.lever_b_m, configured)
-        if not np.max(np.abs(nxt - start)) > LEVER_ARM_PASS_STEP_M:
+        if (not np.max(np.abs(nxt - start)) > LEVER_ARM_PASS_STEP_M
+                or not np.max(np.abs(nxt - configured)) > LEVER_ARM_PASS_STEP_M):
             break
         start = nxt
         est = navigate(log, rerun, lever_arm_b_m=start, options=opts).lever_arm
@@ -274,8 +277,7 @@ def drift_under_alternative(calib_run: CalibrationRun, replays_minus_effect: lis
     ``LegReplay`` in leg-id order). Returns (sigma [rad/s], tau [s]) only when the flight
     rejected the grade's drift under the base model (``drift_source`` "flight") as too small
     (the flight's sigma above the grade's) and no longer does with the effect removed: the
-    excess drift was the effect. None otherwise
-    (then the null stays the base model's).
+    excess drift was the effect. None otherwise (the null stays the base model's).
     """
     tuning = imu_tuning(config)
     grade_radps = tuning.gyro_gm_sigma_dph * DEG_PER_H_RADPS

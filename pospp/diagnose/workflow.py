@@ -61,7 +61,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pospp.calib.noise_model import NoiseModel
+from pospp.calib.pairs import PairPolicy, heading_difference_rad
 from pospp.calib.replay import ImuIncrements, LegReplay, SolutionA
+from pospp.calib.segment import Leg
 from pospp.calib.solve import fit_calibration, fit_noise_model
 from pospp.diagnose import effects as fx
 from pospp.diagnose._linear import Fit, Problem, Term, bic, f_test, rms
@@ -157,25 +159,25 @@ def _pair_explaining(prob: Problem, terms: list[Term], fit0: Fit, trials: list[d
     return best_pair
 
 
-def informative_heldout_legs(heading_rad: Sequence[float], min_dheading_deg: float = 30.0
-                             ) -> list[int]:
-    """The legs whose leave-one-leg-out prediction tests a candidate: those whose other legs
-    hold two headings at least ``min_dheading_deg`` apart (the calibration's pairing rule,
-    ``calib.pairs.PairPolicy``). From legs of one heading the base model's common parameters
-    (heading error, horizontal bias) are not separable, so a prediction from them is an
-    extrapolation that any added parameter can make worse: on flight_time_offset_200hz (legs
-    at 20, 200, 20 deg) the 15 ms offset cut the held-out gap of legs 0 and 2 from 0.143 and
-    0.125 to 0.006-0.056 m/s, but leg 1, predicted from the two 20 deg legs, went from 0.31 to
-    0.60 m/s, and the offset (p = 2e-13) was not named (docs/diagnose.md). All legs when none
-    qualifies."""
-    h = np.asarray(heading_rad, dtype=float)
+def informative_heldout_legs(legs: Sequence[Leg],
+                             min_dheading_deg: float = PairPolicy.min_dheading_deg) -> list[int]:
+    """The legs (indices into ``legs``) whose leave-one-leg-out prediction tests a candidate:
+    those whose other legs hold two headings at least ``min_dheading_deg`` apart (the
+    calibration's pairing rule, :class:`pospp.calib.pairs.PairPolicy`, with its
+    :func:`~pospp.calib.pairs.heading_difference_rad`). From legs of one heading the base
+    model's common parameters (heading error, horizontal bias) are not separable, so a
+    prediction from them is an extrapolation that any added parameter can make worse: on
+    flight_time_offset_200hz (legs at 20, 200, 20 deg) the 15 ms offset cut the held-out gap
+    of legs 0 and 2 from 0.143 and 0.125 to 0.006-0.056 m/s, but leg 1, predicted from the
+    two 20 deg legs, went from 0.31 to 0.60 m/s, and the offset (p = 2e-13) was not named
+    (docs/diagnose.md). All legs when none qualifies."""
     out = []
-    for i in range(h.size):
-        o = np.delete(h, i)
-        d = np.abs((o[:, None] - o[None, :] + np.pi) % (2 * np.pi) - np.pi)
-        if d.size and np.degrees(d.max()) >= min_dheading_deg:
+    for i in range(len(legs)):
+        others = [leg for j, leg in enumerate(legs) if j != i]
+        if any(np.degrees(heading_difference_rad(a, b)) >= min_dheading_deg
+               for k, a in enumerate(others) for b in others[k + 1:]):
             out.append(i)
-    return out or list(range(h.size))
+    return out or list(range(len(legs)))
 
 
 class _NullCalibration:
@@ -416,7 +418,7 @@ def diagnose_replays(
         return horizon_worth(t_legs, [np.reshape(c, (-1, 2)) for c in curves], ids)
 
     calib_worth = worth(base_fit.res_raw)
-    ho_legs = informative_heldout_legs([r.leg.heading_rad for r in replays])
+    ho_legs = informative_heldout_legs([r.leg for r in replays])
     fit0, ho0 = base_fit, base_ho
     steps: list[DiagnosisStep] = []
     tests: list[CandidateTest] = []
