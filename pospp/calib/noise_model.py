@@ -57,20 +57,28 @@ def accel_noise_covariance(rep: LegReplay, rows: NDArray | None = None) -> NDArr
 
 
 def _white_forcing_covariance(rep: LegReplay, cols: slice, rows: NDArray | None) -> NDArray:
+    # dv(t_i) = g_i int_0^t_i w(tau) dn(tau) with g_i = Phi_v(t_i, t0) (2 x 15) and
+    # w(tau) = Phi(tau, t0)^-1 G(tau) (15 x 3), so that
+    # Cov(dv_i, dv_j) = g_i S(min(t_i, t_j)) g_j^T with S(t) = int_0^t w w^T dtau (15 x 15):
+    # one cumulative 15 x 15 sum and one (2R x 15) (15 x 2R) product, where the integrand
+    # written out per row and interval cost R M products (issue 18).
+    # w is taken linear inside each interval of the grid (exact for the last interval before
+    # t_i, where Phi_v,phi(t_i, tau) falls to 0: a left Riemann sum would triple the variance
+    # of each sample's newest increment, the part that whitening weighs):
+    # int w w^T = dt (u u^T + v v^T), u = (w_k + w_k+1) / 2, v = (w_k+1 - w_k) / (2 sqrt 3).
     idx = np.arange(1, rep.t_s.size) if rows is None else np.asarray(rows)
     g = rep.phi[idx, 3:5, :]  # (R, 2, 15)
     w = np.linalg.inv(rep.phi)[:, :, cols] @ rep.c_nb  # (M, 15, 3) at the grid points
-    f = np.einsum("iaj,kjb->iakb", g, w, optimize=True)  # integrand at tau_k
-    sdt = np.sqrt(np.diff(rep.t_s))[None, None, :, None]
-    mask = (idx[:, None] > np.arange(rep.t_s.size - 1)[None, :])[:, None, :, None]
-    # integrand linear inside each interval (exact for its last one, where it falls to 0):
-    # int f f^T = u u^T + v v^T with u = (f_k + f_k+1) / 2, v = (f_k+1 - f_k) / (2 sqrt 3)
-    u = 0.5 * (f[:, :, :-1] + f[:, :, 1:]) * sdt * mask
-    v = (f[:, :, 1:] - f[:, :, :-1]) * (sdt / (2.0 * np.sqrt(3.0))) * mask
+    u = 0.5 * (w[:-1] + w[1:])
+    v = (w[1:] - w[:-1]) / (2.0 * np.sqrt(3.0))
+    dt = np.diff(rep.t_s)[:, None, None]
+    s_k = np.zeros((rep.t_s.size, 15, 15))
+    np.cumsum(dt * (u @ u.transpose(0, 2, 1) + v @ v.transpose(0, 2, 1)), axis=0, out=s_k[1:])
     n = 2 * idx.size
-    u = u.reshape(n, -1)
-    v = v.reshape(n, -1)
-    return u @ u.T + v @ v.T
+    q = s_k[idx] @ g.transpose(0, 2, 1)  # (R, 15, 2): S(t_j) g_j^T
+    a = g.reshape(n, 15) @ q.transpose(1, 0, 2).reshape(15, n)  # g_i S(t_j) g_j^T
+    later = np.repeat(np.repeat(idx[None, :] <= idx[:, None], 2, axis=0), 2, axis=1)
+    return np.where(later, a, a.T)
 
 
 def matern32(lag_s: NDArray, length_s: float) -> NDArray:
