@@ -149,10 +149,14 @@ def already_done(run_dir: Path, config: PipelineConfig, sha256: str) -> bool:
 
 
 def process_one(mcap_path: str, config_dict: dict[str, Any], out_root: str,
-                force: bool = False, run_name: str | None = None) -> FlightOutcome:
+                force: bool = False, run_name: str | None = None,
+                flights_at_once: int | None = None) -> FlightOutcome:
     """Run the pipeline on one flight; never raises (the error goes in the outcome).
 
     Takes plain arguments so it pickles for a process pool or a Dask worker.
+    ``flights_at_once``: flights this machine runs at once; the flight makes its A re-runs on
+    its share of the cores (``pipeline.process_flight``'s ``threads``); None: one at a time
+    (a Dask worker's own threads share its cores).
     """
     from pospp import pipeline  # local: keeps worker start-up light and avoids a cycle
 
@@ -177,7 +181,9 @@ def process_one(mcap_path: str, config_dict: dict[str, Any], out_root: str,
                                  run_dir=name, **kept)
         # the batch owns its root: an earlier run of this flight is replaced (never a folder
         # holding files pospp did not write)
-        outcome = pipeline.process_flight(path, config, run_dir, force=True)
+        threads = (1 if flights_at_once is None
+                   else max(1, pipeline.available_cores() // flights_at_once))
+        outcome = pipeline.process_flight(path, config, run_dir, force=True, threads=threads)
         s = outcome.summary
         return FlightOutcome(
             shown, sha, "done" if outcome.status == "ok" else outcome.status,
@@ -338,11 +344,11 @@ def _run_locked(paths: list[str], config: PipelineConfig, root: Path, *, workers
                 record(dask_fut.result())
     elif workers <= 1:
         for p in paths:
-            record(process_one(p, cfg, str(root), force, names[p]))
+            record(process_one(p, cfg, str(root), force, names[p], flights_at_once=1))
     else:
         with ProcessPoolExecutor(max_workers=workers, initializer=_die_with_parent,
                                  initargs=(os.getpid(),)) as pool:
-            futures = [pool.submit(process_one, p, cfg, str(root), force, names[p])
+            futures = [pool.submit(process_one, p, cfg, str(root), force, names[p], workers)
                        for p in paths]
             for fut in as_completed(futures):
                 record(fut.result())

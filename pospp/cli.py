@@ -147,8 +147,11 @@ def main(debug: bool) -> None:
 @click.option("-v", "--verbose", is_flag=True,
               help="Print every calibrated parameter (per-leg misalignments, every "
                    "formulation), not only the headline.")
+@click.option("--threads", default=None, type=click.IntRange(min=1),
+              help="A re-runs (null realisations, diagnosis) made at once; the outputs do "
+                   "not depend on it.  [default: the cores this process may use]")
 def run(mcap_file: str, pipeline_file: str | None, out_dir: str, force: bool,
-        verbose: bool) -> None:
+        verbose: bool, threads: int | None) -> None:
     """Process one flight log: A, legs, B, pairs, calibration, compensation, report.
 
     Calls pospp.pipeline.process_flight. The run is written beside OUT and swapped in whole
@@ -161,7 +164,8 @@ def run(mcap_file: str, pipeline_file: str | None, out_dir: str, force: bool,
     config = _config(pipeline_file)
     bar = _StageBar()
     try:
-        outcome = pipeline.process_flight(mcap_file, config, out_dir, progress=bar, force=force)
+        outcome = pipeline.process_flight(mcap_file, config, out_dir, progress=bar, force=force,
+                                           threads=threads)
     finally:
         bar.close()
     click.echo(summary_text(read_run_tables(outcome.out_dir), verbose=verbose))

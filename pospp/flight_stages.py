@@ -9,6 +9,9 @@ Nothing here touches files but through :mod:`pospp.io`'s reader.
 
 from __future__ import annotations
 
+import itertools
+from collections.abc import Callable, Iterable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -65,6 +68,19 @@ def ingest(path: str | Path, config: PipelineConfig) -> mcap_reader.FlightLog:
         events_topic=cfg.events_topic,
         window_s=(cfg.start_s, cfg.end_s),
     )
+
+
+def map_in_threads(fn: Callable[[Any], Any], items: Iterable[Any], threads: int) -> list[Any]:
+    """``[fn(x) for x in items]`` on up to ``threads`` threads, results in the items' order.
+
+    A's and B's compiled kernels release the GIL (``nogil``), so independent A re-runs
+    (null realisations, signature columns) overlap on a machine's cores (issue 18).
+    """
+    items = list(items)
+    if threads <= 1 or len(items) <= 1:
+        return [fn(x) for x in items]
+    with ThreadPoolExecutor(max_workers=min(threads, len(items))) as pool:
+        return list(pool.map(fn, items))
 
 
 def imu_tuning(config: PipelineConfig) -> nav_tuning.ImuTuning:
@@ -191,8 +207,8 @@ def calibrate_from_a(imu: ImuIncrements, nav: nav_filter.FilterResult,
 
 def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                       calib_run: CalibrationRun, config: PipelineConfig, n: int, *,
-                      seed: int = 0, drift: tuple[float, float] | None = None
-                      ) -> list[list[np.ndarray]]:
+                      seed: int = 0, drift: tuple[float, float] | None = None,
+                      threads: int = 1) -> list[list[np.ndarray]]:
     """B minus A's null realisations along this flight (pospp.diagnose.null_model).
 
     Each: the log with IMU noise (white: ``[pairs] null_imu_noise`` "measured", the
@@ -209,7 +225,9 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     (:func:`pospp.diagnose.null_model.gnss_on_solution`). Returns ``n`` lists of (M, 3)
     arrays, legs in id order (fewer when A fails on more than ``n`` of ``2 n`` perturbed
     logs). ``drift``: (sigma [rad/s], tau [s]) of the gyro drift to inject instead
-    (:func:`drift_under_alternative`).
+    (:func:`drift_under_alternative`). ``threads``: realisations made at once
+    (:func:`map_in_threads`); the perturbed logs are drawn in the same order from the same
+    generator, so the result does not depend on it.
     """
     si = imu_tuning(config).noise()
     # the drift the flight shows (its level and tau by REML, the grade a weak prior: issue 16
@@ -252,15 +270,25 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     base_dv = b_minus_a(base)
     t_align_ns = int(log.imu.time_ns[0]) + round(nav.alignment.t_s * 1e9)
     rng = np.random.default_rng(seed)
-    out: list[list[np.ndarray]] = []
-    for _ in range(2 * n):  # a realisation whose A fails (alignment) is skipped
-        if len(out) == n:
-            break
+
+    def attempt(log_r: mcap_reader.FlightLog) -> list[np.ndarray] | None:
         try:
-            dv = b_minus_a(null_model.perturb_log(base, noise, rng, from_time_ns=t_align_ns))
-        except ValueError:
-            continue
-        out.append([d - d0 for d, d0 in zip(dv, base_dv, strict=True)])
+            return b_minus_a(log_r)
+        except ValueError:  # a realisation whose A fails (alignment) is skipped
+            return None
+
+    perturbed = (null_model.perturb_log(base, noise, rng, from_time_ns=t_align_ns)
+                 for _ in range(2 * n))
+    out: list[list[np.ndarray]] = []
+    while len(out) < n:
+        # never more logs drawn than realisations still missing: the draws, and so the
+        # realisations, are those of one log at a time
+        batch = list(itertools.islice(perturbed, min(max(threads, 1), n - len(out))))
+        if not batch:
+            break
+        for dv in map_in_threads(attempt, batch, threads):
+            if dv is not None:
+                out.append([d - d0 for d, d0 in zip(dv, base_dv, strict=True)])
     return out
 
 
@@ -322,16 +350,18 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
              config: PipelineConfig, *, log: mcap_reader.FlightLog | None = None,
              nav: nav_filter.FilterResult | None = None,
              null_dv: list[list[np.ndarray]] | None = None,
-             lever_estimate: nav_filter.LeverArmEstimate | None = None) -> Diagnosis:
+             lever_estimate: nav_filter.LeverArmEstimate | None = None,
+             threads: int = 1) -> Diagnosis:
     """Model-discrepancy workflow on the calibrated run's B-minus-A curves (pospp.diagnose).
 
     Every test's null distribution is calibrated on ``null_dv`` (:func:`null_realisations`)
     when given, else on ``[pairs] null_realisations`` realisations made here when the log and
-    A's result are given (seed 0: a run is reproducible).
+    A's result are given (seed 0: a run is reproducible). ``threads``: A re-runs made at once
+    (:func:`map_in_threads`; the result does not depend on it).
     """
     n_null = config.pairs.null_realisations
     if null_dv is None and n_null > 0 and log is not None and nav is not None:
-        null_dv = null_realisations(log, nav, calib_run, config, n_null)
+        null_dv = null_realisations(log, nav, calib_run, config, n_null, threads=threads)
     replays = [calib_run.replays[i] for i in sorted(calib_run.replays)]
     # lever arm and GNSS time offset: A's own response to them, by re-running A (issue 12;
     # 3 + 1 A runs)
@@ -391,7 +421,8 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
              if null_dv and log is not None and nav is not None else None)
     if drift is not None:
         assert log is not None and nav is not None and sigs is not None and null_dv
-        null_dv = null_realisations(log, nav, calib_run, config, len(null_dv), drift=drift)
+        null_dv = null_realisations(log, nav, calib_run, config, len(null_dv), drift=drift,
+                                    threads=threads)
         d = diagnose_with(sigs)
         removed = _named_removed(replays, d, sigs)
         if removed is None:

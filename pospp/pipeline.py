@@ -23,6 +23,7 @@ each file atomically.
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -150,6 +151,7 @@ def process_flight(
     *,
     progress: ProgressFn | None = None,
     force: bool = False,
+    threads: int | None = None,
 ) -> RunOutcome:
     """Process one flight log into a run folder (the whole pipeline).
 
@@ -169,6 +171,9 @@ def process_flight(
         Called with (stage, fraction done) at each stage start.
     force : bool
         Replace an earlier pospp run in ``out_dir``.
+    threads : int, optional
+        A re-runs (null realisations, the diagnosis's) made at once; the cores this process
+        may use when None (:func:`available_cores`). The outputs do not depend on it.
 
     Returns
     -------
@@ -187,7 +192,8 @@ def process_flight(
     sha = sha256_file(mcap_path) if Path(mcap_path).is_file() else ""
     stage = run_folder.new_staging(target)
     try:
-        outcome = _run_stages(mcap_path, sha, config, stage, book)
+        outcome = _run_stages(mcap_path, sha, config, stage, book,
+                              available_cores() if threads is None else max(1, threads))
         status = outcome.status
     except Exception as exc:
         # the new run failed: its folder says so and keeps nothing of an earlier run
@@ -227,8 +233,17 @@ def _write_failed(mcap_path: str | Path, sha: str, config: PipelineConfig, out: 
     parquet_tables.write_table(out / "summary.parquet", summary, "summary", metadata=meta)
 
 
+def available_cores() -> int:
+    """The CPU cores this process may run on (its affinity mask; ``os.cpu_count`` where the
+    platform has none)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - macOS, Windows
+        return os.cpu_count() or 1
+
+
 def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
-                book: _Progress) -> RunOutcome:
+                book: _Progress, threads: int) -> RunOutcome:
     """Every stage of :func:`process_flight`, writing into the (staging) folder ``out``."""
     meta = {
         "input_file": run_folder.display_path(mcap_path),
@@ -300,7 +315,8 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
     null_dv = None
     if calib_run.calibrated and config.pairs.null_realisations > 0:
         book.stage("null_realisations")
-        null_dv = null_realisations(log, nav, calib_run, config, config.pairs.null_realisations)
+        null_dv = null_realisations(log, nav, calib_run, config, config.pairs.null_realisations,
+                                    threads=threads)
         calib_run = with_null_covariance(calib_run, null_dv)
 
     # --- compensation: A re-run with the calibrated gyro bias ---------------------------------
@@ -319,7 +335,8 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
     if config.outputs.diagnose and calib_run.calibrated:
         try:
             diagnosis = diagnose_calibration(calib_run, imu, solution_a, config, log=log, nav=nav,
-                                             null_dv=null_dv, lever_estimate=lever[0])
+                                             null_dv=null_dv, lever_estimate=lever[0],
+                                             threads=threads)
             if diagnosis.location is not None:  # "unexplained": where the gap sits (issue 12)
                 book.note("warning", "diagnose", diagnosis.location.text)
         except ValueError as exc:
@@ -514,11 +531,13 @@ def diagnose_run(run_dir: str | Path, *, progress: ProgressFn | None = None) -> 
     if not calib_run.calibrated:
         raise ValueError(f"{run}: no calibration to diagnose: {calib_run.reason}")
     book.stage("null_realisations")
-    null_dv = (null_realisations(log, nav, calib_run, config, config.pairs.null_realisations)
+    threads = available_cores()
+    null_dv = (null_realisations(log, nav, calib_run, config, config.pairs.null_realisations,
+                                 threads=threads)
                if config.pairs.null_realisations > 0 else None)
     book.stage("diagnose")
     diagnosis = diagnose_calibration(calib_run, imu, solution_a, config, log=log, nav=nav,
-                                     null_dv=null_dv)
+                                     null_dv=null_dv, threads=threads)
     book.stage("write")
     out_meta = {k: meta[k] for k in ("input_file", "input_sha256", "config")}
     parquet_tables.write_table(run / "diagnosis.parquet", diagnosis_columns(diagnosis),

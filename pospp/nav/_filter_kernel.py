@@ -12,7 +12,8 @@ The loop (:func:`forward_kernel`) calls one compiled helper per job, each tested
 numpy (tests/unit/test_filter_kernel.py):
 
 - :func:`correct_increments`, :func:`decay_gauss_markov`: the sensor-error model;
-- :func:`propagate_covariance`: Phi = I + F T + (F T)^2 / 2, P <- Phi P Phi^T + Q_d;
+- :func:`propagate_covariance` (in place: :func:`propagate_covariance_into`):
+  Phi = I + F T + (F T)^2 / 2, P <- Phi P Phi^T + Q_d;
 - :func:`measurement_model`: innovation dz (predicted minus measured) and H;
 - :func:`innovation_covariance`: S = H P H^T + R and its inverse (the one place S is made);
 - :func:`reset_block`: the covariance reset after ``gate_reset_s`` of gated records;
@@ -110,17 +111,34 @@ def propagate_covariance(p, phi_acc, x, fm, wm, t_acc, qc, i_gm, i_sf, inv_tau):
     ``Phi = I + F T + (F T)^2 / 2`` with F the 15-state ``fill_f_matrix`` extended by the
     optional columns (``phi' += -C_nb (b_g,gm + diag(w) s_g)``, ``dv' += C_nb (b_a,gm +
     diag(f) s_a)``, ``b_gm' = -b_gm / tau``); ``P <- Phi P Phi^T + (Phi Q_c Phi^T + Q_c) T / 2``
-    (symmetrised). Returns the new P and ``Phi @ phi_acc``.
+    (symmetrised). Returns the new P and ``Phi @ phi_acc`` (new arrays; the forward pass
+    uses :func:`propagate_covariance_into`).
     """
     n = p.shape[0]
+    p_new, phi_new = p.copy(), phi_acc.copy()
+    propagate_covariance_into(p_new, phi_new, x, fm, wm, t_acc, qc, i_gm, i_sf, inv_tau,
+                              np.empty((5, n, n)))
+    return p_new, phi_new
+
+
+@njit(cache=True)
+def propagate_covariance_into(p, phi_acc, x, fm, wm, t_acc, qc, i_gm, i_sf, inv_tau, work):
+    """:func:`propagate_covariance` in place: ``p`` and ``phi_acc`` are overwritten.
+
+    ``work``: float64[5, n, n] scratch, reused across steps (the step allocates nothing n x n:
+    issue 18, where the allocations and the separate ``Phi Q_c Phi^T`` product were half of
+    the step's time). ``Phi P Phi^T + (Phi Q_c Phi^T + Q_c) T / 2`` is computed as the one
+    product ``Phi (P + Q_c T / 2) Phi^T + Q_c T / 2``.
+    """
+    n = p.shape[0]
+    ff, ff2, phi, m, m2 = work[0], work[1], work[2], work[3], work[4]
     c_nb = np.empty((3, 3))
     _kernels.dcm_from_quat_into(x[X_QUAT:X_QUAT + 4], c_nb)
-    f15 = np.zeros((N_STATES, N_STATES))
+    f15 = m[:N_STATES, :N_STATES]  # m is free until the product below
     fill_f_matrix(x[X_POS], x[X_POS + 2], x[X_VEL:X_VEL + 3], c_nb, fm, 0.0, 0.0, f15)
-    ff = np.zeros((n, n))
-    for a in range(N_STATES):
-        for b in range(N_STATES):
-            ff[a, b] = f15[a, b] * t_acc
+    for a in range(n):
+        for b in range(n):
+            ff[a, b] = f15[a, b] * t_acc if a < N_STATES and b < N_STATES else 0.0
     if i_gm >= 0:
         for a in range(3):
             for b in range(3):
@@ -133,10 +151,23 @@ def propagate_covariance(p, phi_acc, x, fm, wm, t_acc, qc, i_gm, i_sf, inv_tau):
             for b in range(3):
                 ff[I_PHI + a, i_sf + b] = -c_nb[a, b] * wm[b] * t_acc
                 ff[I_DV + a, i_sf + 3 + b] = c_nb[a, b] * fm[b] * t_acc
-    phi = np.eye(n) + ff + 0.5 * np.dot(ff, ff)
-    pq = np.dot(np.dot(phi, qc), phi.T)
-    p_new = np.dot(np.dot(phi, p), phi.T) + (0.5 * t_acc) * (pq + qc)
-    return 0.5 * (p_new + p_new.T), np.dot(phi, phi_acc)
+    np.dot(ff, ff, ff2)
+    for a in range(n):
+        for b in range(n):
+            phi[a, b] = ff[a, b] + 0.5 * ff2[a, b] + (1.0 if a == b else 0.0)
+    half_t = 0.5 * t_acc
+    for a in range(n):
+        for b in range(n):
+            m2[a, b] = p[a, b] + half_t * qc[a, b]
+    np.dot(phi, m2, m)
+    np.dot(m, phi.T, m2)
+    for a in range(n):
+        for b in range(a, n):
+            v = 0.5 * (m2[a, b] + m2[b, a]) + half_t * qc[a, b]
+            p[a, b] = v
+            p[b, a] = v
+    np.dot(phi, phi_acc, m)
+    phi_acc[:, :] = m
 
 
 @njit(cache=True)
@@ -318,6 +349,8 @@ def _update_epoch(k, im, t, x, xp, p, sens, lever, w_b, meas, meas_out, gate, re
     """All measurement records of epoch ``k`` from index ``im``: model, gate (or reset),
     update, feedback. Returns the new P and the index after the epoch's records."""
     m_k, m_type, m_z, m_r, m_dt = meas
+    if not (im < m_k.shape[0] and m_k[im] == k):  # most epochs: nothing to allocate
+        return p, im
     m_status, m_nis, m_dz = meas_out
     n = p.shape[0]
     h_mat = np.zeros((3, n))
@@ -357,7 +390,7 @@ def _update_epoch(k, im, t, x, xp, p, sens, lever, w_b, meas, meas_out, gate, re
     return p, im
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def forward_kernel(t, w_imu, f_imu, k0, x0, p0, lever0, layout, inv_tau, flags, meas,
                    meas_out, prop_steps, q_diag, gate, reset_after_s, outs, nodes):
     """Closed-loop forward pass over IMU epochs ``k0 .. N-1`` (module docstring).
@@ -380,6 +413,7 @@ def forward_kernel(t, w_imu, f_imu, k0, x0, p0, lever0, layout, inv_tau, flags, 
     p = p0.copy()
     phi_acc = np.eye(n)
     qc = np.diag(q_diag)
+    work = np.empty((5, n, n))
     fsum, wsum = np.zeros(3), np.zeros(3)
     dth_p, dv_p, dth_c, dv_c, w_b = (np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3),
                                      np.zeros(3))
@@ -410,8 +444,8 @@ def forward_kernel(t, w_imu, f_imu, k0, x0, p0, lever0, layout, inv_tau, flags, 
         is_node = (flags[k] & FLAG_NODE) != 0 or has_meas or k == k0
         is_out = (flags[k] & FLAG_OUTPUT) != 0
         if steps > 0 and (steps >= prop_steps or has_meas or is_node or is_out):
-            p, phi_acc = propagate_covariance(p, phi_acc, x, fsum / t_acc, wsum / t_acc, t_acc,
-                                              qc, i_gm, i_sf, inv_tau)
+            propagate_covariance_into(p, phi_acc, x, fsum / t_acc, wsum / t_acc, t_acc, qc,
+                                      i_gm, i_sf, inv_tau, work)
             fsum[:] = 0.0
             wsum[:] = 0.0
             t_acc, steps = 0.0, 0

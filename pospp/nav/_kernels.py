@@ -229,7 +229,7 @@ def strapdown_step(x, x_prev, dth, dvel, dth_prev, dv_prev, dt, extrap, x_out):
     x_out[9] = q2[3] / nrm
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def integrate_kernel(x0, dt_s, dtheta, dvel, gyro_bias, accel_bias, dth_prev0, dv_prev0, out):
     """Run :func:`strapdown_step` over all intervals.
 

@@ -189,7 +189,7 @@ def f_matrix(
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _transition_kernel(t_s, lat, h, v_n, q_nb, f_b, step, inv_tau_g, inv_tau_a, out):
     """Fill ``out`` (M, 15, 15) with Phi(t_j, t_0) at the nodes t_j = t_s[j * step].
 

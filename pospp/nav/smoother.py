@@ -42,7 +42,7 @@ from pospp.nav._kernels import X_POS, X_QUAT, X_VEL, _radii, quat_from_rotvec, q
 from pospp.nav.error_model import I_DR, I_DV, I_PHI
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def rts_backward(p_pred, p_upd, phi, dx, e_plus, e_minus, p_smooth):
     """Backward RTS pass over ``K`` nodes (see the module docstring).
 
@@ -126,7 +126,7 @@ def interpolate_covariance_blocks(
     return diag, out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def apply_correction(x, dx):
     """Remove an estimated error ``dx`` (computed minus true) from a kernel state ``x`` in place.
 
@@ -150,7 +150,7 @@ def apply_correction(x, dx):
         x[X_QUAT + i] = q[i] / nrm
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def correct_states(states, errors):
     """Apply :func:`apply_correction` row by row to (N, 10) states with (N, n) errors."""
     out = states.copy()

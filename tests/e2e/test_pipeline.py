@@ -42,7 +42,8 @@ def _cli(*args: str) -> tuple[int, str]:
 @pytest.fixture(scope="module")
 def sample_run(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("run") / "sample"
-    code, text = _cli("run", str(SAMPLE), "-p", str(SAMPLE_PIPELINE), "-o", str(out))
+    code, text = _cli("run", str(SAMPLE), "-p", str(SAMPLE_PIPELINE), "-o", str(out),
+                      "--threads", "2")
     assert code == 0, text
     assert "status: ok" in text and "legs: 4" in text
     return out
@@ -112,8 +113,10 @@ def test_trajectory_mcap_reads_back(sample_run):
 
 @pytest.mark.slow
 def test_outputs_are_deterministic(sample_run, tmp_path):
+    # and independent of the threads making the A re-runs (sample_run made them on 2)
     again = tmp_path / "again"
-    code, text = _cli("run", str(SAMPLE), "-p", str(SAMPLE_PIPELINE), "-o", str(again))
+    code, text = _cli("run", str(SAMPLE), "-p", str(SAMPLE_PIPELINE), "-o", str(again),
+                      "--threads", "1")
     assert code == 0, text
     for name in TABLES:
         a = parquet_tables.read_table(sample_run / f"{name}.parquet")
