@@ -13,6 +13,7 @@ import itertools
 from collections.abc import Callable, Iterable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -205,6 +206,21 @@ def calibrate_from_a(imu: ImuIncrements, nav: nav_filter.FilterResult,
     ), solution_a
 
 
+def null_drift(calib_run: CalibrationRun, config: PipelineConfig) -> tuple[float, float, str]:
+    """The gyro drift the null realisations inject: (sigma [rad/s], tau [s], source).
+
+    The drift the flight shows (its level and tau by REML, the grade a weak prior: issue 16
+    item 3; source "flight", or "grade" when the flight does not reject the grade's), so the
+    calibration's and the diagnosis's sigmas follow the flight; the configured ``[imu]
+    gyro_gm_sigma_dph`` / ``gyro_gm_tau_s`` (source "configured") when the calibration did not
+    estimate it.
+    """
+    if calib_run.drift_source in ("flight", "grade"):
+        return calib_run.drift_sigma_radps, calib_run.drift_tau_s, calib_run.drift_source
+    si = imu_tuning(config).noise()
+    return si.gyro_gm_sigma_radps, si.gyro_gm_tau_s, "configured"
+
+
 def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                       calib_run: CalibrationRun, config: PipelineConfig, n: int, *,
                       seed: int = 0, drift: tuple[float, float] | None = None,
@@ -213,10 +229,7 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
 
     Each: the log with IMU noise (white: ``[pairs] null_imu_noise`` "measured", the
     density read from the samples, or "grade", the configured ARW / VRW; plus the
-    Gauss-Markov gyro drift the calibration estimated from this flight,
-    ``calib_run.drift_sigma_radps`` / ``drift_tau_s`` when its ``drift_source`` is "flight"
-    (or "grade": the grade's kept because the flight does not reject it), else the
-    configured ``[imu] gyro_gm_sigma_dph`` / ``gyro_gm_tau_s``; and the configured
+    Gauss-Markov gyro drift of :func:`null_drift`; and the configured
     accelerometer bias drift ``accel_gm_sigma_ug`` / ``accel_gm_tau_s``) and GNSS noise
     at the level of the flight's GNSS minus A (:func:`null_model.gnss_noise_from_residuals`),
     added to the base from A's alignment point on; A re-run exactly as configured, B replayed
@@ -230,13 +243,7 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     generator, so the result does not depend on it.
     """
     si = imu_tuning(config).noise()
-    # the drift the flight shows (its level and tau by REML, the grade a weak prior: issue 16
-    # item 3), so the calibration's and the diagnosis's sigmas follow the flight
-    gm_tau, gm_sigma = si.gyro_gm_tau_s, si.gyro_gm_sigma_radps
-    if calib_run.drift_source in ("flight", "grade"):
-        gm_tau, gm_sigma = calib_run.drift_tau_s, calib_run.drift_sigma_radps
-    if drift is not None:
-        gm_sigma, gm_tau = drift
+    gm_sigma, gm_tau, _ = null_drift(calib_run, config) if drift is None else (*drift, "")
     if config.pairs.null_imu_noise == "grade":
         arw, vrw = si.gyro_arw_radpsqrts, si.accel_vrw_mpspsqrts
     else:
@@ -365,9 +372,7 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
     replays = [calib_run.replays[i] for i in sorted(calib_run.replays)]
     # lever arm and GNSS time offset: A's own response to them, by re-running A (issue 12;
     # 3 + 1 A runs)
-    def a_as_configured(log_p: mcap_reader.FlightLog, lever_arm_b_m: Any = None
-                        ) -> nav_filter.FilterResult:
-        return navigate(log_p, config, lever_arm_b_m=lever_arm_b_m)
+    a_as_configured = partial(navigate, config=config)
 
     sigs: dict[str, list[np.ndarray]] | None = None
     at: dict[str, np.ndarray] = {}
@@ -402,6 +407,8 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
             alpha=config.pairs.diagnose_alpha, signatures=signatures,
             whitening_replays=whitening_replays)
 
+    note = _null_note(null_dv, *null_drift(calib_run, config))
+
     d = diagnose_with(sigs)
     for _ in range(REFINE_ITERATIONS if sigs else 0):
         assert sigs is not None  # the loop runs only with signatures
@@ -414,31 +421,51 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
         d, sigs = diagnose_with(refined), refined
     removed = _named_removed(replays, d, sigs) if sigs else None
     if removed is None:
-        return d
+        return replace(d, null_model=note)
     # the drift under the alternative: when the effect explains the excess drift the flight
     # showed, the null realisations inject the drift the flight shows with it removed
-    drift = (drift_under_alternative(calib_run, removed, config)
+    drift = (drift_under_alternative(calib_run, removed[0], config)
              if null_dv and log is not None and nav is not None else None)
     if drift is not None:
         assert log is not None and nav is not None and sigs is not None and null_dv
         null_dv = null_realisations(log, nav, calib_run, config, len(null_dv), drift=drift,
                                     threads=threads)
+        note = _null_note(null_dv, *drift, "", removed[1], null_drift(calib_run, config))
         d = diagnose_with(sigs)
         removed = _named_removed(replays, d, sigs)
         if removed is None:
-            return d
+            return replace(d, null_model=note)
     # the whitening under the model named: a pass whose whitening drops an effect it was
     # estimated under is not self-consistent, and the first stands (measured: a 3 m lever arm)
-    d2 = diagnose_with(sigs, removed)
-    return d2 if set(d.named) <= set(d2.named) else d
+    d2 = diagnose_with(sigs, removed[0])
+    return replace(d2 if set(d.named) <= set(d2.named) else d, null_model=note)
+
+
+def _null_note(null_dv: list | None, sigma_radps: float, tau_s: float, source: str,
+               removed: list[str] | None = None,
+               base: tuple[float, float, str] | None = None) -> str:
+    """One sentence: the null the diagnosis's p-values are calibrated on (``removed``,
+    ``base``: re-made with the drift re-estimated with those effects removed, and the drift
+    of the base model's null)."""
+    if not null_dv:
+        return "no null realisations: nominal F distributions"
+    if removed:
+        source = f"re-estimated with {' + '.join(removed)} removed"
+    text = (f"{len(null_dv)} null realisations, gyro drift {sigma_radps / DEG_PER_H_RADPS:.3g} "
+            f"deg/h, tau {tau_s:.0f} s ({source})")
+    if base is not None:
+        text += (f"; re-made: under the base model the flight's drift read "
+                 f"{base[0] / DEG_PER_H_RADPS:.3g} deg/h, tau {base[1]:.0f} s, which the "
+                 "effect explains")
+    return text
 
 
 def _named_removed(replays: list, d: Diagnosis, sigs: dict[str, list[np.ndarray]]
-                   ) -> list | None:
+                   ) -> tuple[list, list[str]] | None:
     """The replays minus the fitted response (``S p``, SI) of the re-run effects named, or,
     when none was, of the first step's significant re-run candidate with the largest F: the
-    replays to estimate the whitening on (the noise estimated under the model tested). None
-    when no re-run effect was named or significant."""
+    replays to estimate the whitening on (the noise estimated under the model tested), and
+    those effects. None when no re-run effect was named or significant."""
     fits = {e: d.step_of(e).values for e in d.named if e in sigs}
     if not fits:
         first = [c for c in d.candidates if c.step == 1 and c.significant and c.effect in sigs]
@@ -453,4 +480,4 @@ def _named_removed(replays: list, d: Diagnosis, sigs: dict[str, list[np.ndarray]
             p_si = np.asarray(values, dtype=float) * effect_by_id(e).si_per_unit
             dv[:, 0:2] -= sigs[e][k] @ p_si
         out.append(replace(r, dv_n_mps=dv))
-    return out
+    return out, list(fits)

@@ -337,6 +337,7 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
             diagnosis = diagnose_calibration(calib_run, imu, solution_a, config, log=log, nav=nav,
                                              null_dv=null_dv, lever_estimate=lever[0],
                                              threads=threads)
+            book.note("info", "diagnose", f"p-values calibrated on {diagnosis.null_model}")
             if diagnosis.location is not None:  # "unexplained": where the gap sits (issue 12)
                 book.note("warning", "diagnose", diagnosis.location.text)
         except ValueError as exc:

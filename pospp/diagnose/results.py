@@ -155,6 +155,11 @@ class Diagnosis:
         Where the structured gap of the final model sits (legs, channel, part of the leg,
         basis function) and its size at the horizon; None unless the closing row is
         "unexplained" (:func:`pospp.diagnose.locate.locate_gap`).
+    null_model : str
+        What the p-values are calibrated on, one sentence (the null realisations and the gyro
+        drift they inject; whether they were re-made with the drift re-estimated with a
+        named effect removed); empty when the caller did not say
+        (:func:`pospp.flight_stages.diagnose_calibration` does).
     """
 
     base_formulation: str
@@ -172,6 +177,7 @@ class Diagnosis:
     heldout_before_n_mps: tuple[NDArray, ...] = field(repr=False)
     heldout_after_n_mps: tuple[NDArray, ...] = field(repr=False)
     location: GapLocation | None = None
+    null_model: str = ""
 
     @property
     def named(self) -> tuple[str, ...]:

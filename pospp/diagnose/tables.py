@@ -34,7 +34,7 @@ def diagnosis_columns(diagnosis: Diagnosis) -> dict[str, NDArray]:
     ``gap_horizon_*`` / ``residual_horizon_*``: what the row is worth at the horizon against
     the calibration's own residual (:mod:`pospp.diagnose.locate`). ``gap_legs`` ...
     ``gap_location``: where the structured gap sits, on an "unexplained" closing row only
-    (empty strings elsewhere).
+    (empty strings elsewhere). ``null_model``: what the p-values are calibrated on (every row).
     """
     s = diagnosis.steps
     loc = diagnosis.location
@@ -76,6 +76,7 @@ def diagnosis_columns(diagnosis: Diagnosis) -> dict[str, NDArray]:
         "gap_part": np.array([where(x, loc and loc.part) for x in s], dtype=object),
         "gap_basis": np.array([where(x, loc and loc.basis) for x in s], dtype=object),
         "gap_location": np.array([where(x, loc and loc.text) for x in s], dtype=object),
+        "null_model": np.array([diagnosis.null_model for _ in s], dtype=object),
     }
 
 

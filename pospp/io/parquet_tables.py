@@ -269,6 +269,9 @@ TABLES: dict[str, list[Column]] = {
                     "function carrying most of the gap ('legendre_k', 'cos_k')")),
         _opt(Column("gap_location", _S, "", "closing row 'unexplained': where the gap sits "
                     "and its size at the horizon, one sentence")),
+        _opt(Column("null_model", _S, "", "what the p-values are calibrated on: the null "
+                    "realisations and the gyro drift they inject, and whether they were re-made "
+                    "with the drift re-estimated with a named effect removed")),
     ],
     "observability": [
         Column("formulation", _S, "", "'paper' or 'body'"),

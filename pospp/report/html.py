@@ -294,7 +294,10 @@ def _diagnosis_worth_text(d: pd.DataFrame) -> str:
             f"gap left): {'; '.join(rows)}, against the calibration's own residual of "
             f"{1e3 * last.residual_horizon_mps:.3g} mm/s, {last.residual_horizon_m:.3g} m.")
     where = last.get("gap_location", "") if last.effect == "unexplained" else ""
-    return text + (f" {where}" if isinstance(where, str) and where else "")
+    null = last.get("null_model", "")
+    return (text + (f" {where}" if isinstance(where, str) and where else "")
+            + (f" The p-values are calibrated on {null}." if isinstance(null, str) and null
+               else ""))
 
 
 def _messages_section(msgs: pd.DataFrame, t0_ns: int | None) -> list[str]:
