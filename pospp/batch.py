@@ -38,6 +38,7 @@ import pandas as pd
 from pospp.config import PipelineConfig, config_from_dict
 from pospp.io import parquet_tables, run_folder
 from pospp.io.files import sha256_file
+from pospp.threads import available_cores
 
 MAX_RUN_NAME_LEN = 160
 """Longest run-folder name (longer ones keep their start and end in a path hash)."""
@@ -182,7 +183,7 @@ def process_one(mcap_path: str, config_dict: dict[str, Any], out_root: str,
         # the batch owns its root: an earlier run of this flight is replaced (never a folder
         # holding files pospp did not write)
         threads = (1 if flights_at_once is None
-                   else max(1, pipeline.available_cores() // flights_at_once))
+                   else max(1, available_cores() // flights_at_once))
         outcome = pipeline.process_flight(path, config, run_dir, force=True, threads=threads)
         s = outcome.summary
         return FlightOutcome(

@@ -10,8 +10,6 @@ Nothing here touches files but through :mod:`pospp.io`'s reader.
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable, Iterable
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 from functools import partial
 from pathlib import Path
@@ -41,6 +39,7 @@ from pospp.io import mcap_reader
 from pospp.nav import filter as nav_filter
 from pospp.nav import tuning as nav_tuning
 from pospp.nav.strapdown import increments_from_rates
+from pospp.threads import map_in_threads
 from pospp.types import FLU_TO_FRD
 from pospp.units import DEG_PER_H_RADPS
 
@@ -69,19 +68,6 @@ def ingest(path: str | Path, config: PipelineConfig) -> mcap_reader.FlightLog:
         events_topic=cfg.events_topic,
         window_s=(cfg.start_s, cfg.end_s),
     )
-
-
-def map_in_threads(fn: Callable[[Any], Any], items: Iterable[Any], threads: int) -> list[Any]:
-    """``[fn(x) for x in items]`` on up to ``threads`` threads, results in the items' order.
-
-    A's and B's compiled kernels release the GIL (``nogil``), so independent A re-runs
-    (null realisations, signature columns) overlap on a machine's cores (issue 18).
-    """
-    items = list(items)
-    if threads <= 1 or len(items) <= 1:
-        return [fn(x) for x in items]
-    with ThreadPoolExecutor(max_workers=min(threads, len(items))) as pool:
-        return list(pool.map(fn, items))
 
 
 def imu_tuning(config: PipelineConfig) -> nav_tuning.ImuTuning:
@@ -239,8 +225,8 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     arrays, legs in id order (fewer when A fails on more than ``n`` of ``2 n`` perturbed
     logs). ``drift``: (sigma [rad/s], tau [s]) of the gyro drift to inject instead
     (:func:`drift_under_alternative`). ``threads``: realisations made at once
-    (:func:`map_in_threads`); the perturbed logs are drawn in the same order from the same
-    generator, so the result does not depend on it.
+    (:func:`pospp.threads.map_in_threads`); the perturbed logs are drawn in the same order
+    from the same generator, so the result does not depend on it.
     """
     si = imu_tuning(config).noise()
     gm_sigma, gm_tau, _ = null_drift(calib_run, config) if drift is None else (*drift, "")
@@ -364,7 +350,7 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
     Every test's null distribution is calibrated on ``null_dv`` (:func:`null_realisations`)
     when given, else on ``[pairs] null_realisations`` realisations made here when the log and
     A's result are given (seed 0: a run is reproducible). ``threads``: A re-runs made at once
-    (:func:`map_in_threads`; the result does not depend on it).
+    (:func:`pospp.threads.map_in_threads`; the result does not depend on it).
     """
     n_null = config.pairs.null_realisations
     if null_dv is None and n_null > 0 and log is not None and nav is not None:
@@ -386,15 +372,15 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
             np.linalg.norm(p_lever) > REFINE_FRACTION * effect_by_id("lever_arm").plausible_si)
         sigs = rerun_signatures(log, nav, calib_run, config,
                                 [e for e in PIPELINE_RERUN if not (gn and e == "lever_arm")],
-                                navigate=a_as_configured)
+                                navigate=a_as_configured, threads=threads)
         if gn and p_lever is not None:
             try:
                 sigs["lever_arm"] = signature_at(log, nav, calib_run, config, "lever_arm",
-                                                 p_lever, navigate=a_as_configured)
+                                                 p_lever, navigate=a_as_configured, threads=threads)
                 at["lever_arm"] = p_lever
             except (ValueError, np.linalg.LinAlgError):  # A failed at the estimate
                 sigs.update(rerun_signatures(log, nav, calib_run, config, ("lever_arm",),
-                                             navigate=a_as_configured))
+                                             navigate=a_as_configured, threads=threads))
     # B's residuals carry the gyro angle random walk, correlated along each leg: weighting them
     # as white noise would make every F-test too liberal
     arw_radpsqrts = imu_tuning(config).noise().gyro_arw_radpsqrts
@@ -415,7 +401,7 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
         # A is not linear in a GNSS-side effect: secants through the current estimates
         refined, at = refine_signatures(log, nav, calib_run, config, sigs,
                                         first_estimates(d, config.pairs.diagnose_alpha), at,
-                                        navigate=a_as_configured)
+                                        navigate=a_as_configured, threads=threads)
         if all(refined[k] is sigs[k] for k in sigs):
             break
         d, sigs = diagnose_with(refined), refined

@@ -23,7 +23,6 @@ each file atomically.
 
 from __future__ import annotations
 
-import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -59,6 +58,7 @@ from pospp.qc.checks import comparison_text
 from pospp.qc.stage import QualityReport, qc_columns, quality_checks, worst_status
 from pospp.report import figures
 from pospp.report.html import render_report
+from pospp.threads import available_cores
 from pospp.units import t_s_from_time_ns
 
 ProgressFn = Callable[[str, float], None]
@@ -173,7 +173,7 @@ def process_flight(
         Replace an earlier pospp run in ``out_dir``.
     threads : int, optional
         A re-runs (null realisations, the diagnosis's) made at once; the cores this process
-        may use when None (:func:`available_cores`). The outputs do not depend on it.
+        may use when None (:func:`pospp.threads.available_cores`). The outputs do not depend on it.
 
     Returns
     -------
@@ -231,15 +231,6 @@ def _write_failed(mcap_path: str | Path, sha: str, config: PipelineConfig, out: 
     parquet_tables.write_table(out / "messages.parquet", outputs.messages_table(book.rows()),
                                "messages", metadata=meta)
     parquet_tables.write_table(out / "summary.parquet", summary, "summary", metadata=meta)
-
-
-def available_cores() -> int:
-    """The CPU cores this process may run on (its affinity mask; ``os.cpu_count`` where the
-    platform has none)."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # pragma: no cover - macOS, Windows
-        return os.cpu_count() or 1
 
 
 def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,

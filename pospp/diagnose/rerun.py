@@ -32,6 +32,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -41,6 +42,7 @@ from pospp.diagnose.effects import ACCEL_SETTLING_S, effect_by_id
 from pospp.nav import filter as nav_filter
 from pospp.nav.filter import FilterResult
 from pospp.nav.strapdown import increments_from_rates
+from pospp.threads import map_in_threads
 
 STEP_FRACTION = 1.0
 """Finite-difference step as a fraction of ``Effect.plausible_si`` (20 ms, 0.5 m, 1000 ppm,
@@ -98,8 +100,8 @@ def _gnss_earlier(log, dt_s: float):
 
 
 def rerun_signatures(log, nav, calib_run, config, effect_ids=RERUN_EFFECTS, *,
-                     navigate: Navigate,
-                     accel_settling_s: float = ACCEL_SETTLING_S) -> dict[str, list[NDArray]]:
+                     navigate: Navigate, accel_settling_s: float = ACCEL_SETTLING_S,
+                     threads: int = 1) -> dict[str, list[NDArray]]:
     """Per effect, per leg (legs in id order) the signature (M, 2, P), SI parameters.
 
     Parameters
@@ -116,6 +118,9 @@ def rerun_signatures(log, nav, calib_run, config, effect_ids=RERUN_EFFECTS, *,
         A as configured (:data:`Navigate`).
     accel_settling_s : float
         Warm-up time constant of ``accel_bias_change`` [s] (the workflow's).
+    threads : int
+        An effect's A re-runs made at once (:func:`pospp.threads.map_in_threads`; the
+        result does not depend on it).
 
     Returns
     -------
@@ -134,25 +139,27 @@ def rerun_signatures(log, nav, calib_run, config, effect_ids=RERUN_EFFECTS, *,
                         **({} if forces is None else {"f_ib_b_mps2": forces}))
         return replace(log, imu=imu_p)
 
-    def response(log_p, lever_b_m=None) -> list[NDArray]:
-        return _response(log_p, nav, calib_run, config, navigate, lever_b_m)
+    def response(run: tuple) -> list[NDArray]:  # run: (perturbed log, lever arm or None)
+        return _response(run[0], nav, calib_run, config, navigate, run[1])
 
     out: dict[str, list[NDArray]] = {}
     for eid in effect_ids:
         h = STEP_FRACTION * effect_by_id(eid).plausible_si
+        runs: list[tuple[Any, NDArray | None]]
+        if eid == "lever_arm":
+            lever0 = np.asarray(config.gnss.lever_arm_m, dtype=float)
+            runs = [(log, lever0 + h * e) for e in np.eye(3)]
+        elif eid == "time_offset":
+            runs = [(_gnss_earlier(log, h), None)]
+        elif eid == "gyro_scale_factor":
+            w = log.imu.w_ib_b_radps
+            runs = [(imu_log(rates=w * (1.0 + h * e)), None) for e in np.eye(3)]
+        else:  # accel_bias_change
+            f = log.imu.f_ib_b_mps2
+            warm = np.exp(-t_run_s / accel_settling_s)[:, None]
+            runs = [(imu_log(forces=f + h * warm * e), None) for e in np.eye(3)[:2]]
         try:
-            if eid == "lever_arm":
-                lever0 = np.asarray(config.gnss.lever_arm_m, dtype=float)
-                cols = [response(log, lever0 + h * e) for e in np.eye(3)]
-            elif eid == "time_offset":
-                cols = [response(_gnss_earlier(log, h))]
-            elif eid == "gyro_scale_factor":
-                w = log.imu.w_ib_b_radps
-                cols = [response(imu_log(rates=w * (1.0 + h * e))) for e in np.eye(3)]
-            else:  # accel_bias_change
-                f = log.imu.f_ib_b_mps2
-                warm = np.exp(-t_run_s / accel_settling_s)[:, None]
-                cols = [response(imu_log(forces=f + h * warm * e)) for e in np.eye(3)[:2]]
+            cols = map_in_threads(response, runs, threads)
         except (ValueError, np.linalg.LinAlgError):
             continue
         out[eid] = [np.stack([c[k] for c in cols], axis=-1) / h
@@ -160,8 +167,8 @@ def rerun_signatures(log, nav, calib_run, config, effect_ids=RERUN_EFFECTS, *,
     return out
 
 
-def signature_at(log, nav, calib_run, config, effect_id: str, p, *, navigate: Navigate
-                 ) -> list[NDArray]:
+def signature_at(log, nav, calib_run, config, effect_id: str, p, *, navigate: Navigate,
+                 threads: int = 1) -> list[NDArray]:
     """Gauss-Newton signature of a GNSS-side effect at the estimate ``p`` (SI, (P,)).
 
     A is re-run with the estimate removed (configured lever arm minus p; GNSS stamps moved
@@ -176,8 +183,9 @@ def signature_at(log, nav, calib_run, config, effect_id: str, p, *, navigate: Na
 
         S(p) = J(configured - p) (I - u u^T) + s_u u^T
 
-    One A run (``time_offset``, one parameter: the secant alone) or four (``lever_arm``).
-    Returns ``[S_leg (M, 2, P)]``, legs in id order. Raises ValueError when A fails.
+    One A run (``time_offset``, one parameter: the secant alone) or four (``lever_arm``, made
+    on up to ``threads`` threads). Returns ``[S_leg (M, 2, P)]``, legs in id order. Raises
+    ValueError when A fails.
     """
     p = np.asarray(p, dtype=float)
     size = float(np.linalg.norm(p))
@@ -186,10 +194,10 @@ def signature_at(log, nav, calib_run, config, effect_id: str, p, *, navigate: Na
     u = p / size
     if effect_id == "lever_arm":
         lever = np.asarray(config.gnss.lever_arm_m, dtype=float) - p
-        removed = _response(log, nav, calib_run, config, navigate, lever)
         h = LOCAL_STEP_FRACTION * effect_by_id(effect_id).plausible_si
-        cols = [_response(log, nav, calib_run, config, navigate, lever + h * e)
-                for e in np.eye(3)]
+        removed, *cols = map_in_threads(
+            lambda dl: _response(log, nav, calib_run, config, navigate, lever + dl),
+            [np.zeros(3), *(h * np.eye(3))], threads)
         local = [np.stack([(c[k] - removed[k]) / h for c in cols], axis=-1)
                  for k in range(len(removed))]
     elif effect_id == "time_offset":
@@ -203,7 +211,7 @@ def signature_at(log, nav, calib_run, config, effect_id: str, p, *, navigate: Na
 
 def refine_signatures(log, nav, calib_run, config, signatures: dict[str, list[NDArray]],
                       estimates: dict[str, NDArray], at: dict[str, NDArray] | None = None,
-                      *, navigate: Navigate
+                      *, navigate: Navigate, threads: int = 1
                       ) -> tuple[dict[str, list[NDArray]], dict[str, NDArray]]:
     """Gauss-Newton step: the signatures re-made at the current estimates (A is not linear).
 
@@ -229,7 +237,8 @@ def refine_signatures(log, nav, calib_run, config, signatures: dict[str, list[ND
         if prev is not None and np.linalg.norm(p - prev) <= REFINE_TOLERANCE * size:
             continue
         try:
-            out[eid] = signature_at(log, nav, calib_run, config, eid, p, navigate=navigate)
+            out[eid] = signature_at(log, nav, calib_run, config, eid, p, navigate=navigate,
+                                    threads=threads)
         except (ValueError, np.linalg.LinAlgError):
             continue
         at[eid] = p

@@ -21,9 +21,10 @@ DIAGNOSIS_COLUMNS = (
     "heldout_gap_before_mps", "heldout_gap_after_mps", "confounded_with", "parameters",
     "parameter_values", "parameter_sigmas", "horizon_s", "gap_horizon_mps", "gap_horizon_m",
     "residual_horizon_mps", "residual_horizon_m", "gap_legs", "gap_channel", "gap_part",
-    "gap_basis", "gap_location",
+    "gap_basis", "gap_location", "null_model",
 )
-"""Columns of diagnosis.parquet, in order (the last ten: issue 12, items 4-5)."""
+"""Columns of diagnosis.parquet, in order (the last eleven: issue 12, items 4-5 and the null
+the p-values are calibrated on)."""
 
 
 def diagnosis_columns(diagnosis: Diagnosis) -> dict[str, NDArray]:

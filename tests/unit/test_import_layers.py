@@ -19,7 +19,7 @@ ARCHITECTURE_DOC = PACKAGE.parent / "docs" / "architecture.md"
 
 LAYERS: tuple[frozenset[str], ...] = (
     # the data contract and the small facts
-    frozenset({"pospp", "types", "units", "earth", "rotation"}),
+    frozenset({"pospp", "types", "units", "earth", "rotation", "threads"}),
     # files <-> contract; the navigation core
     frozenset({"io", "nav"}),
     # stage results -> table columns (names the result types of io and nav)
