@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from isal.isal_zlib import crc32  # zlib's CRC-32, 10x faster (issue 18; README)
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.records import Channel, Schema
@@ -211,7 +212,7 @@ def _decompress(chunk: _RawChunk,
         return data
     if len(data) != usize:
         raise ValueError(f"chunk decompressed to {len(data)} bytes, header says {usize}")
-    if chunk.crc != 0 and zlib.crc32(data) != chunk.crc:
+    if chunk.crc != 0 and crc32(data) != chunk.crc:
         raise ValueError("chunk CRC mismatch")
     return data
 
@@ -370,7 +371,7 @@ class Scan:
             b = f.read(min(n, _READ_PIECE))
             if not b:
                 break
-            crc, n = zlib.crc32(b, crc), n - len(b)
+            crc, n = crc32(b, crc), n - len(b)
         f.seek(here)
         return crc
 

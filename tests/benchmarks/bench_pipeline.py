@@ -2,7 +2,7 @@
 
 Run on demand (not collected by pytest)::
 
-    python tests/benchmarks/bench_pipeline.py [--minutes 15 45 90] [--rate-hz 200]
+    python tests/benchmarks/bench_pipeline.py [--minutes 15 45 90] [--rate-hz 200] [--threads N]
 
 For each duration, the ``flight`` preset (paper_flight IMU, 1 Hz GNSS 0.05/0.1 m,
 0.02/0.03 m/s) is simulated once into /tmp/pospp_bench (cached), then the pipeline runs in a
@@ -49,7 +49,7 @@ def progress(stage, frac):
         stages_hwm[last[1]] = hwm_mib()  # peak so far, read when the stage ends
     last[0], last[1], last[2] = now, stage, cpu
 out = pipeline.process_flight(sys.argv[1], load_config(sys.argv[2]), sys.argv[3], progress=progress,
-                   force=True)
+                   force=True, threads=int(sys.argv[4]) if sys.argv[4] != "auto" else None)
 progress(None, 1.0)
 print(json.dumps({"wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0,
                   "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
@@ -82,6 +82,8 @@ def main() -> None:
     ap.add_argument("--minutes", type=float, nargs="+", default=[15.0, 45.0, 90.0])
     ap.add_argument("--rate-hz", type=float, default=200.0)
     ap.add_argument("--pipeline", default=str(REPO / "pipelines" / "flight.toml"))
+    ap.add_argument("--threads", default="auto",
+                    help="pospp run --threads (A re-runs at once); auto: the process's cores")
     args = ap.parse_args()
     CACHE.mkdir(parents=True, exist_ok=True)
     # as the CLI does (pospp/cli.py): one OpenBLAS thread
@@ -92,10 +94,11 @@ def main() -> None:
         out = CACHE / f"run_{mcap.stem}"
         # warm numba's on-disk cache once (not timed)
         if not rows:
-            subprocess.run([sys.executable, "-c", _CHILD, str(mcap), args.pipeline, str(out)],
-                           check=True, capture_output=True, env=env)
+            subprocess.run([sys.executable, "-c", _CHILD, str(mcap), args.pipeline, str(out),
+                            args.threads], check=True, capture_output=True, env=env)
         res = subprocess.run([sys.executable, "-c", _CHILD, str(mcap), args.pipeline,
-                              str(out)], check=True, capture_output=True, text=True, env=env)
+                              str(out), args.threads], check=True, capture_output=True,
+                             text=True, env=env)
         r = json.loads(res.stdout.strip().splitlines()[-1])
         r["minutes"] = minutes
         rows.append(r)

@@ -2,7 +2,7 @@
 
 Run on demand (not collected by pytest)::
 
-    python tests/benchmarks/bench_sample.py [--repeat 3] [--null 10 0]
+    python tests/benchmarks/bench_sample.py [--repeat 3] [--null 10 0] [--threads 1 2]
 
 ``pospp run sample_data/sample_flight.mcap -p pipelines/sample.toml -o /tmp/... --force`` in a
 fresh process each time (numba's cache warm: one untimed run first), with ``[pairs]
@@ -41,10 +41,10 @@ def _pipeline(n_null: int, folder: Path) -> Path:
     return out
 
 
-def _one(pipeline: Path, out: Path) -> dict:
+def _one(pipeline: Path, out: Path, threads: str = "auto") -> dict:
     env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
     cmd = [sys.executable, "-m", "pospp.cli", "run", str(SAMPLE), "-p", str(pipeline), "-o",
-           str(out), "--force"]
+           str(out), "--force", *(() if threads == "auto" else ("--threads", threads))]
     t0 = time.perf_counter()
     proc = subprocess.Popen(cmd, cwd=REPO, env=env, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)
@@ -63,20 +63,24 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--null", type=int, nargs="+", default=[10, 0])
+    ap.add_argument("--threads", nargs="+", default=["auto"],
+                    help="pospp run --threads values (auto: the process's cores)")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         _one(PIPELINE, folder / "warm")  # numba's cache, page cache
         rows = []
         for n_null in args.null:
-            pipe = _pipeline(n_null, folder)
-            runs = [_one(pipe, folder / f"run_{n_null}") for _ in range(args.repeat)]
-            best = min(runs, key=lambda r: r["cpu_s"])
-            best["null"] = n_null
-            best["walls"] = " / ".join(f"{r['wall_s']:.1f}" for r in runs)
-            rows.append(best)
+            for threads in args.threads:
+                pipe = _pipeline(n_null, folder)
+                runs = [_one(pipe, folder / f"run_{n_null}", threads)
+                        for _ in range(args.repeat)]
+                best = min(runs, key=lambda r: r["cpu_s"])
+                best["null"] = f"{n_null}, threads {threads}"
+                best["walls"] = " / ".join(f"{r['wall_s']:.1f}" for r in runs)
+                rows.append(best)
     stages = list(dict.fromkeys(k for r in rows for k in r["stages"]))
-    print("| null realisations | command wall [s] (runs) | CPU [s] | run() [s] | start-up "
+    print("| null realisations, threads | command wall [s] (runs) | CPU [s] | run() [s] | start-up "
           "[s] | " + " | ".join(stages) + " | peak RSS [MiB] | load |")
     print("|---:|---|---:|---:|---:|" + "---:|" * len(stages) + "---:|---:|")
     for r in rows:
