@@ -466,7 +466,8 @@ def _smoothed(t: NDArray, fw: ForwardArrays, lay: StateLayout, out_tns: NDArray
     """RTS smoother over the nodes: the smoothed solution, biases and (when estimated) lever
     arm with its sigma."""
     out_t = t[fw.out_k]
-    e_plus, e_minus, p_s = smoother.rts_smooth(fw.node_pp, fw.node_pu, fw.node_phi, fw.node_dx)
+    e_plus, e_minus, p_s = smoother.rts_smooth(fw.node_pp, fw.node_pu, fw.node_phi, fw.node_dx,
+                                               overwrite_p_upd=True)
     node_t = t[fw.node_k]
     err = smoother.interpolate_errors(node_t, e_plus, e_minus, out_t)
     diag_s, blocks_s = smoother.interpolate_covariance_blocks(node_t, p_s, out_t, (PHI, DV, DR))

@@ -74,20 +74,28 @@ def rts_backward(p_pred, p_upd, phi, dx, e_plus, e_minus, p_smooth):
 
 
 def rts_smooth(
-    p_pred: NDArray, p_upd: NDArray, phi: NDArray, dx: NDArray
+    p_pred: NDArray, p_upd: NDArray, phi: NDArray, dx: NDArray, *,
+    overwrite_p_upd: bool = False,
 ) -> tuple[NDArray, NDArray, NDArray]:
     """Run the backward pass; returns (e_plus, e_minus, p_smooth), shapes (K, n), (K, n),
-    (K, n, n)."""
+    (K, n, n).
+
+    ``overwrite_p_upd``: the smoothed covariances are written over ``p_upd`` (C-contiguous
+    float64) and it is returned as p_smooth: node k's updated covariance is last read by step
+    k, which then writes node k's smoothed one (the same values, one (K, n, n) array fewer:
+    36 MiB on a 1.5 h flight; issue 18).
+    """
     k, n = dx.shape
     for name, arr in (("p_pred", p_pred), ("p_upd", p_upd), ("phi", phi)):
         if arr.shape != (k, n, n):
             raise ValueError(f"{name}: expected shape ({k}, {n}, {n}), got {arr.shape}")
     e_plus = np.zeros((k, n))
     e_minus = np.zeros((k, n))
-    p_smooth = np.empty((k, n, n))
+    p_upd = np.ascontiguousarray(p_upd, dtype=float)
+    p_smooth = p_upd if overwrite_p_upd else np.empty((k, n, n))
     if k:
         rts_backward(
-            np.ascontiguousarray(p_pred), np.ascontiguousarray(p_upd), np.ascontiguousarray(phi),
+            np.ascontiguousarray(p_pred), p_upd, np.ascontiguousarray(phi),
             np.ascontiguousarray(dx), e_plus, e_minus, p_smooth,
         )
     return e_plus, e_minus, p_smooth

@@ -103,6 +103,12 @@ def test_closed_loop_rts_equals_batch_map(seed):
                                    atol=1e-9, rtol=1e-7)
     # the last node is the filtered one
     np.testing.assert_array_equal(e_plus[-1], 0.0)
+    # written over the updated covariances (as A does): the same numbers, bit for bit
+    p_upd_copy = np.array(p_upd, dtype=float)
+    e2, _, p_s2 = smoother.rts_smooth(p_pred, p_upd_copy, phis, dx, overwrite_p_upd=True)
+    assert p_s2 is p_upd_copy
+    np.testing.assert_array_equal(p_s2, p_s)
+    np.testing.assert_array_equal(e2, e_plus)
 
 
 @settings(max_examples=25, deadline=None)
