@@ -1,0 +1,59 @@
+"""pospp.threads: results in the items' order, errors raised, the kernels run concurrently."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+
+from pospp.threads import available_cores, map_in_threads
+
+
+def test_results_in_the_items_order_whatever_finishes_first():
+    def slow_first(x: int) -> int:
+        time.sleep(0.05 if x == 0 else 0.0)
+        return x * x
+
+    assert map_in_threads(slow_first, range(5), 3) == [0, 1, 4, 9, 16]
+    assert map_in_threads(slow_first, range(5), 1) == [0, 1, 4, 9, 16]
+    assert map_in_threads(slow_first, [], 2) == []
+
+
+def test_an_error_in_one_item_is_raised():
+    def fail_on_two(x: int) -> int:
+        if x == 2:
+            raise ValueError("item 2")
+        return x
+
+    with pytest.raises(ValueError, match="item 2"):
+        map_in_threads(fail_on_two, range(4), 2)
+
+
+def test_runs_on_several_threads_when_asked():
+    seen: set[int] = set()
+    barrier = threading.Barrier(2, timeout=10)
+
+    def meet(_: int) -> None:
+        seen.add(threading.get_ident())
+        barrier.wait()  # returns only when two calls run at once
+
+    map_in_threads(meet, range(2), 2)
+    assert len(seen) == 2
+
+
+def test_the_re_run_kernels_release_the_gil():
+    """The kernels an A re-run and a B replay spend their time in are compiled nogil, so
+    that threads overlap them (a kernel without it would serialise the threads silently)."""
+    from pospp.nav import _filter_kernel, _kernels, error_model, smoother
+
+    for kernel in (_filter_kernel.forward_kernel, smoother.rts_backward,
+                   smoother.correct_states, _kernels.integrate_kernel,
+                   error_model._transition_kernel):
+        assert kernel.targetoptions.get("nogil") is True, kernel
+
+
+def test_available_cores_is_the_affinity_mask():
+    import os
+
+    assert available_cores() == len(os.sched_getaffinity(0))
