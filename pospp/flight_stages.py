@@ -177,12 +177,12 @@ def scale_factor_estimate(log: mcap_reader.FlightLog, config: PipelineConfig,
     """The gyro scale factors (body FRD, measured = (1 + s) true, dimensionless) and their
     sigmas from one forward pass of A with scale-factor states (prior
     :data:`GYRO_SF_PRIOR_PPM`, no smoother), the antenna at ``lever_b_m`` (A's own lever-arm
-    estimate: measured on the power flights, a 1 m lever arm the configuration does not know
-    reads 400-700 ppm of scale factor on x and y at 20-40 ppm sigma with the configured 0,
-    10-20 ppm with A's estimate; a 24 ms GNSS offset -250 ppm on y and z, and under 20 ppm
-    with the estimate, which reads the offset as 1.4 m along x). A 600 ppm z scale factor
-    read 574-605 ppm at 24 ppm sigma (docs/diagnose.md "Power"). Raises ValueError when A
-    fails."""
+    estimate: measured on the power flights, seeds 1-2, a 1 m lever arm the configuration
+    does not know reads 360-670 ppm of scale factor on x and y at 17-39 ppm sigma with the
+    configured 0, at most 21 ppm with A's estimate; a 24 ms GNSS offset -160 to -250 ppm on
+    y and z, and at most 15 ppm with the estimate, which reads the offset as 1.4 m along x).
+    A 600 ppm z scale factor read 574 and 605 ppm at 24 ppm sigma (docs/diagnose.md
+    "Power"). Raises ValueError when A fails."""
     tuning = replace(imu_tuning(config), gyro_sf_sigma_ppm=GYRO_SF_PRIOR_PPM)
     opts = replace(config.filter_options(), smoother=False)
     nav = navigate(log, config, lever_arm_b_m=lever_b_m, options=opts, tuning=tuning,
@@ -382,8 +382,9 @@ def _rerun_signatures_at_start(log: mcap_reader.FlightLog, nav: nav_filter.Filte
     the configured value, where A's gate and attitude Jacobian are those of the wrong lever
     arm. The time offset: at the configuration (1 A run). The gyro scale factor: Gauss-Newton
     from A's own estimate (scale-factor states, one forward pass with the antenna at A's
-    lever-arm estimate) only when that is significant (4 A runs); else the library's signature
-    stands and the usual flight pays the one pass (docs/diagnose.md, "Power")."""
+    lever-arm estimate) only when that is significant (the secant along it: 1 A run); else
+    the library's signature stands and the usual flight pays the one forward pass (docs/
+    diagnose.md, "Power")."""
     lever_b_m, p_lever = _lever_arm_and_start(log, nav, config, lever_estimate)
     gn = p_lever is not None and bool(
         np.linalg.norm(p_lever) > REFINE_FRACTION * effect_by_id("lever_arm").plausible_si)

@@ -63,11 +63,11 @@ RERUN_EFFECTS = ("lever_arm", "time_offset", "gyro_scale_factor", "accel_bias_ch
 """Effects whose signature :func:`rerun_signatures` makes by re-running A."""
 PIPELINE_RERUN = ("lever_arm", "time_offset", "gyro_scale_factor")
 """The ones the pipeline's diagnosis re-runs. The lever arm and the time offset always (4 A
-runs, or 1 + 4 at A's lever-arm estimate); the gyro scale factor only by Gauss-Newton at A's
-own scale-factor estimate, when that is significant (4 A runs; otherwise the library's
-signature stands): its re-run at the configuration (3 A runs) read a 600 ppm z scale factor
-on the y axis (docs/diagnose.md, "Power"). The warm-up's is absorbed by A's
-accelerometer-bias estimate: it is left to the caller."""
+runs, or 1 + 4 at A's lever-arm estimate); the gyro scale factor only by Gauss-Newton from A's
+own scale-factor estimate, when that is significant (1 A run; otherwise the library's
+signature stands and the flight pays A's 0.2 s forward pass): its re-run at the configuration
+(3 A runs) read a 600 ppm z scale factor on the y axis (docs/diagnose.md, "Power"). The
+warm-up's is absorbed by A's accelerometer-bias estimate: it is left to the caller."""
 GAUSS_NEWTON_EFFECTS = ("lever_arm", "time_offset", "gyro_scale_factor")
 """Effects :func:`signature_at` and :func:`refine_signatures` make a signature at an estimate
 for."""
@@ -186,15 +186,22 @@ def signature_at(log, nav, calib_run, config, effect_id: str, p, *, navigate: Na
         S(p) = J(configured - p) (I - u u^T) + s_u u^T
 
     ``gyro_scale_factor`` (s, FRD, measured = (1 + s) true): the rates divided by (1 + p)
-    removes it, the local derivatives are those of ``(1 + h e_j) w / (1 + p)``, h = 200 ppm.
-    At the flight's own state (600 ppm on z still in the rates) the z derivative read leg 0's
-    response at twice its size and the fit put a 600 ppm z scale factor on y; at the removed
-    state the three local derivatives fit the true response to 0.15 mm/s of its 56 mm/s RMS,
-    reading 605 ppm on z (measured, docs/diagnose.md "Power").
+    remove it; p is A's own estimate (``flight_stages.scale_factor_estimate``, 15-28 ppm
+    sigma per axis on the power flights), and the signature is the secant along it alone
+    (one parameter, the size along A's direction; the directions orthogonal to u get zero
+    columns, which the workflow's observability screen drops). Why not at the configuration:
+    with 600 ppm on z in the flight, the re-run's 1000 ppm step put A at 1600 ppm, where its
+    chi-square gate rejected 279 of 911 fixes and 116 velocities with 12 covariance resets
+    (4 fixes at 600 ppm, 1 velocity at 0 and 200 ppm): the z column read leg 0's response at
+    twice its size and the fit put the scale factor on y. At the removed state the three
+    local derivatives fit the true response to 0.15 mm/s of its 56 mm/s RMS (605 ppm on z),
+    but in the diagnosis their x and y columns took the grade's 0.1 deg/h z gyro bias (not in
+    the base model) as 85 ppm on y and failed the held-out test more often than the secant
+    alone (measured, docs/diagnose.md "Power").
 
-    One A run (``time_offset``, one parameter: the secant alone) or four (``lever_arm``,
-    ``gyro_scale_factor``). Returns ``[S_leg (M, 2, P)]``, legs in id order. Raises ValueError
-    when A fails.
+    One A run (``time_offset``, ``gyro_scale_factor``: the secant alone) or four
+    (``lever_arm``). Returns ``[S_leg (M, 2, P)]``, legs in id order. Raises ValueError when
+    A fails.
     """
     p = np.asarray(p, dtype=float)
     size = float(np.linalg.norm(p))
@@ -211,14 +218,13 @@ def signature_at(log, nav, calib_run, config, effect_id: str, p, *, navigate: Na
         removed = _response(_gnss_earlier(log, -float(p[0])), nav, calib_run, config, navigate)
         cols = []
     elif effect_id == "gyro_scale_factor":
-        w0 = log.imu.w_ib_b_radps / (1.0 + p)
-        removed = _response(_with_rates(log, w0), nav, calib_run, config, navigate)
-        cols = [_response(_with_rates(log, w0 * (1.0 + h * e)), nav, calib_run, config,
-                          navigate) for e in np.eye(3)]
+        removed = _response(_with_rates(log, log.imu.w_ib_b_radps / (1.0 + p)), nav,
+                            calib_run, config, navigate)
+        cols = []  # the secant alone, along A's own estimate (see the docstring)
     else:
         raise ValueError(f"{effect_id}: no Gauss-Newton signature ({GAUSS_NEWTON_EFFECTS})")
     local = [np.stack([(c[k] - removed[k]) / h for c in cols], axis=-1) if cols
-             else np.zeros(removed[k].shape + (1,)) for k in range(len(removed))]
+             else np.zeros(removed[k].shape + p.shape) for k in range(len(removed))]
     return [s - np.einsum("mcp,p,q->mcq", s, u, u) + (-r / size)[:, :, None] * u
             for s, r in zip(local, removed, strict=True)]
 
