@@ -2,6 +2,7 @@
 
     PYTHONPATH=. python tests/benchmarks/bench_diagnose_power.py limits [--seeds 5]
     PYTHONPATH=. python tests/benchmarks/bench_diagnose_power.py power [--seeds 6]
+    PYTHONPATH=. python tests/benchmarks/bench_diagnose_power.py trigger [--seeds 10]
 
 Flights: tests/unit/test_diagnose_power.py (pospp's simulator, paper_vehicle grade, three
 wandering legs at 60 m/s, 1 Hz GNSS, pospp's own A, 6 null realisations, the pipeline's
@@ -17,6 +18,12 @@ signature is right). The detection limit is the smallest grid size named with it
 ``power``: each effect hidden by the simulator itself (GNSS lever arm and time offset, gyro
 scale factor) or in the IMU samples (accelerometer warm-up) at two sizes, seeds 1..N: how often
 it is named, and with its size within 20 %.
+
+``trigger``: on flights with another effect hidden (lever arm, GNSS time offset) or none, A's
+own gyro scale-factor estimate (``flight_stages.scale_factor_estimate`` at A's lever-arm
+estimate) and whether the pipeline would make the scale factor's Gauss-Newton signature
+(``flight_stages._scale_factor_start``): how often the scale factor's extra A run is paid
+where no scale factor is hidden.
 """
 
 from __future__ import annotations
@@ -34,7 +41,7 @@ sys.path[:0] = [str(ROOT), str(ROOT / "tests" / "unit")]
 
 import test_diagnose_power as tp  # noqa: E402
 
-from pospp import pipeline  # noqa: E402
+from pospp import flight_stages, pipeline  # noqa: E402
 from pospp.diagnose import effects as fx  # noqa: E402
 from pospp.diagnose.rerun import rerun_signatures  # noqa: E402
 
@@ -134,9 +141,30 @@ def power(seeds: int, sizes) -> None:
         print(f"| {eff} | {size:g} {unit} | {named} | {ok} | {est} | {concl} |", flush=True)
 
 
+TRIGGER_CASES = (("lever_arm", 0.5), ("lever_arm", 1.0), ("lever_arm", 1.5), ("lever_arm", 3.0),
+                 ("time_offset", 4.0), ("time_offset", 8.0), ("time_offset", 12.0),
+                 ("time_offset", 24.0), ("none", 0.0))
+
+
+def trigger(seeds: int) -> None:
+    print(f"| hidden | size | triggered (of {seeds}) | largest axis / sigma |")
+    print("|---|---|---|---|")
+    for eff, size in TRIGGER_CASES:
+        n, worst = 0, 0.0
+        for s in range(1, seeds + 1):
+            log, cfg = tp.simulate_flight(None if eff == "none" else eff, size, s)
+            nav = pipeline.navigate(log, cfg)
+            lever = pipeline.lever_arm_estimate(log, nav, cfg).lever_b_m
+            sf, sigma = flight_stages.scale_factor_estimate(log, cfg, lever)
+            worst = max(worst, float(np.max(np.abs(sf) / sigma)))
+            n += flight_stages._scale_factor_start(log, cfg, lever) is not None
+        print(f"| {eff} | {size:g} {tp.EFFECT_UNITS.get(eff, '')} | {n} | {worst:.1f} |",
+              flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("what", choices=("limits", "power"))
+    ap.add_argument("what", choices=("limits", "power", "trigger"))
     ap.add_argument("--seeds", type=int, default=5)
     ap.add_argument("--cells", default="0.05:180,0.5:180,0.05:360",
                     help="GNSS pos sigma [m]:leg length [s], comma-separated")
@@ -148,6 +176,8 @@ def main() -> None:
     if a.what == "limits":
         cells = [(float(c.split(":")[0]), float(c.split(":")[1])) for c in a.cells.split(",")]
         limits(a.seeds, cells)
+    elif a.what == "trigger":
+        trigger(a.seeds)
     else:
         sizes = [(s.split(":")[0], float(s.split(":")[1])) for s in a.sizes.split(",")]
         power(a.seeds, sizes)
