@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 from _missions import SimLog
 
-from pospp import pipeline
+from pospp import flight_stages, pipeline
 from pospp.config import config_from_dict
 from pospp.sim.api import simulate
 from pospp.sim.gnss import GnssModel
@@ -187,3 +187,22 @@ def test_gyro_scale_factor_is_named_with_its_size(size_ppm, seed):
     assert values[2] > 0.8 * size_ppm, values
     assert np.max(np.abs(values[:2])) < 0.2 * size_ppm, values
     assert set(d.named) <= {"gyro_scale_factor", "vertical_gyro_drift"}, d.named
+
+
+@pytest.mark.parametrize(("effect", "size_ppm"), [("gyro_scale_factor", 600.0), (None, 0.0)])
+def test_scale_factor_pass_starts_the_gauss_newton_only_where_one_is_hidden(effect, size_ppm):
+    """A's forward pass with scale-factor states (flight_stages.scale_factor_estimate, the
+    2000 ppm prior) reads a 600 ppm z scale factor within 3 sigma on every axis (measured
+    591 +- 24 ppm on z, seed 1), and the pipeline then makes its Gauss-Newton signature from
+    it; on the same flight without one nothing is started (its axes read within 1 sigma: the
+    usual flight pays the one forward pass)."""
+    log, cfg = simulate_flight(effect, size_ppm, 1)
+    sf, sigma = flight_stages.scale_factor_estimate(log, cfg)
+    truth = np.array([0.0, 0.0, size_ppm * 1e-6])
+    assert np.all(np.abs(sf - truth) < 3.0 * sigma), (sf, sigma)
+    start = flight_stages._scale_factor_start(log, cfg, None)
+    if effect is None:
+        assert start is None, start
+    else:
+        assert start is not None
+        np.testing.assert_allclose(start, sf)
