@@ -23,7 +23,8 @@ it is named, and with its size within 20 %.
 own gyro scale-factor estimate (``flight_stages.scale_factor_estimate`` at A's lever-arm
 estimate) and whether the pipeline would make the scale factor's Gauss-Newton signature
 (``flight_stages._scale_factor_start``): how often the scale factor's extra A run is paid
-where no scale factor is hidden.
+where no scale factor is hidden; with ``--mc``, on the 40 flights of the null Monte Carlo
+(tests/unit/test_diagnose_null_mc.py) instead.
 """
 
 from __future__ import annotations
@@ -146,20 +147,30 @@ TRIGGER_CASES = (("lever_arm", 0.5), ("lever_arm", 1.0), ("lever_arm", 1.5), ("l
                  ("time_offset", 24.0), ("none", 0.0))
 
 
-def trigger(seeds: int) -> None:
-    print(f"| hidden | size | triggered (of {seeds}) | largest axis / sigma |")
+def _triggered(log, cfg) -> tuple[bool, float]:
+    """(the scale factor's Gauss-Newton started, A's largest axis / sigma) on one flight."""
+    nav = pipeline.navigate(log, cfg)
+    lever = pipeline.lever_arm_estimate(log, nav, cfg).lever_b_m
+    sf, sigma = flight_stages.scale_factor_estimate(log, cfg, lever)
+    start = flight_stages._scale_factor_start(log, cfg, lever)
+    return start is not None, float(np.max(np.abs(sf) / sigma))
+
+
+def trigger(seeds: int, mc: bool) -> None:
+    print(f"| hidden | size | triggered (of {40 if mc else seeds}) | largest axis / sigma |")
     print("|---|---|---|---|")
+    if mc:
+        import test_diagnose_null_mc as tm
+
+        res = [_triggered(*tm.null_flight(s)[1:]) for s in range(40)]
+        print(f"| none (null Monte Carlo) | - | {sum(r[0] for r in res)} | "
+              f"{max(r[1] for r in res):.1f} |")
+        return
     for eff, size in TRIGGER_CASES:
-        n, worst = 0, 0.0
-        for s in range(1, seeds + 1):
-            log, cfg = tp.simulate_flight(None if eff == "none" else eff, size, s)
-            nav = pipeline.navigate(log, cfg)
-            lever = pipeline.lever_arm_estimate(log, nav, cfg).lever_b_m
-            sf, sigma = flight_stages.scale_factor_estimate(log, cfg, lever)
-            worst = max(worst, float(np.max(np.abs(sf) / sigma)))
-            n += flight_stages._scale_factor_start(log, cfg, lever) is not None
-        print(f"| {eff} | {size:g} {tp.EFFECT_UNITS.get(eff, '')} | {n} | {worst:.1f} |",
-              flush=True)
+        res = [_triggered(*tp.simulate_flight(None if eff == "none" else eff, size, s))
+               for s in range(1, seeds + 1)]
+        print(f"| {eff} | {size:g} {tp.EFFECT_UNITS.get(eff, '')} | {sum(r[0] for r in res)} "
+              f"| {max(r[1] for r in res):.1f} |", flush=True)
 
 
 def main() -> None:
@@ -172,12 +183,14 @@ def main() -> None:
                     "lever_arm:1.2,gyro_scale_factor:200,gyro_scale_factor:600,"
                     "accel_bias_change:200,accel_bias_change:600",
                     help="effect:size (display unit), comma-separated")
+    ap.add_argument("--mc", action="store_true",
+                    help="trigger: the null Monte Carlo's 40 flights")
     a = ap.parse_args()
     if a.what == "limits":
         cells = [(float(c.split(":")[0]), float(c.split(":")[1])) for c in a.cells.split(",")]
         limits(a.seeds, cells)
     elif a.what == "trigger":
-        trigger(a.seeds)
+        trigger(a.seeds, a.mc)
     else:
         sizes = [(s.split(":")[0], float(s.split(":")[1])) for s in a.sizes.split(",")]
         power(a.seeds, sizes)
