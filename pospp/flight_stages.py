@@ -82,13 +82,17 @@ def navigate(
     gyro_bias_correction_b_radps: Any = None,
     lever_arm_b_m: Any = None,
     options: nav_filter.FilterOptions | None = None,
+    tuning: nav_tuning.ImuTuning | None = None,
+    estimate_scale_factors: bool | None = None,
 ) -> nav_filter.FilterResult:
     """Algorithm A over the whole log; optionally with a calibrated gyro bias removed first.
 
     The correction is applied to the IMU samples (measured = true + bias, so the corrected rate
     is w - b_g), which is exactly what compensating the sensor means; the filter then runs
     unchanged. ``lever_arm_b_m`` and ``options`` replace the configured lever arm and the
-    filter options (the QC stage's lever-arm re-estimation).
+    filter options (the QC stage's lever-arm re-estimation); ``tuning`` and
+    ``estimate_scale_factors`` the configured IMU tuning and ``[filter]
+    estimate_scale_factors`` (the diagnosis's scale-factor estimate).
     """
     imu = log.imu
     if gyro_bias_correction_b_radps is not None:
@@ -103,11 +107,12 @@ def navigate(
         imu,
         log.fix,
         log.vel,
-        imu_tuning(config),
+        imu_tuning(config) if tuning is None else tuning,
         epoch_ns=int(log.imu.time_ns[0]),
         lever_arm_b_m=np.asarray(lever_arm_b_m, dtype=float),
         estimate_lever_arm=g.estimate_lever_arm,
-        estimate_scale_factors=f.estimate_scale_factors,
+        estimate_scale_factors=f.estimate_scale_factors if estimate_scale_factors is None
+        else estimate_scale_factors,
         output_rate_hz=f.output_rate_hz,
         options=options,
     )
@@ -159,6 +164,34 @@ def lever_arm_estimate(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
         start = nxt
         est = navigate(log, rerun, lever_arm_b_m=start, options=opts).lever_arm
     return est
+
+
+GYRO_SF_PRIOR_PPM = 2000.0
+"""Prior sigma of the gyro scale-factor states in the diagnosis's scale-factor pass [ppm]
+(twice the effect's plausible size; the grades' presets, 10 ppm for "vehicle", would hold a
+600 ppm scale factor at zero)."""
+GYRO_SF_SIGNIFICANCE = 3.0
+"""The scale-factor pass's estimate starts a Gauss-Newton signature when an axis reads more
+than this many of its sigmas."""
+
+
+def scale_factor_estimate(log: mcap_reader.FlightLog, config: PipelineConfig,
+                          lever_b_m: Any = None) -> tuple[np.ndarray, np.ndarray]:
+    """The gyro scale factors (body FRD, measured = (1 + s) true, dimensionless) and their
+    sigmas from one forward pass of A with scale-factor states (prior
+    :data:`GYRO_SF_PRIOR_PPM`, no smoother), the antenna at ``lever_b_m`` (A's own lever-arm
+    estimate: measured on the power flights, seeds 1-2, a 1 m lever arm the configuration
+    does not know reads 360-670 ppm of scale factor on x and y at 17-39 ppm sigma with the
+    configured 0, at most 21 ppm with A's estimate; a 24 ms GNSS offset -160 to -250 ppm on
+    y and z, and at most 15 ppm with the estimate, which reads the offset as 1.4 m along x).
+    A 600 ppm z scale factor read 574 and 605 ppm at 24 ppm sigma (docs/diagnose.md
+    "Power"). Raises ValueError when A fails."""
+    tuning = replace(imu_tuning(config), gyro_sf_sigma_ppm=GYRO_SF_PRIOR_PPM)
+    opts = replace(config.filter_options(), smoother=False)
+    nav = navigate(log, config, lever_arm_b_m=lever_b_m, options=opts, tuning=tuning,
+                   estimate_scale_factors=True)
+    b = nav.forward_biases
+    return np.asarray(b.gyro_sf[-1], dtype=float), np.asarray(b.gyro_sf_sigma[-1], dtype=float)
 
 
 def imu_increments(log: mcap_reader.FlightLog) -> ImuIncrements:
@@ -323,20 +356,78 @@ def drift_under_alternative(calib_run: CalibrationRun, replays_minus_effect: lis
     return float(cal.gyro_gm_sigma_radps), float(cal.gyro_gm_tau_s)
 
 
-def _lever_arm_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
-                     config: PipelineConfig,
-                     est: nav_filter.LeverArmEstimate | None = None) -> np.ndarray | None:
-    """Configured minus A's estimate of the lever arm (the diagnosis's ``dl``, FRD, m), or
-    None when A estimates the lever arm itself or the extra pass fails. ``est``: the
-    estimate already made (:func:`lever_arm_estimate`); None: made here."""
+def _lever_arm_and_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
+                         config: PipelineConfig,
+                         est: nav_filter.LeverArmEstimate | None = None
+                         ) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """(A's lever-arm estimate, body FRD m, configured minus it: the diagnosis's ``dl``), each
+    None when A estimates the lever arm itself or the extra pass fails. ``est``: the estimate
+    already made (:func:`lever_arm_estimate`); None: made here."""
     if config.gnss.estimate_lever_arm:
-        return None
+        return None, None
     if est is None:
         try:
             est = lever_arm_estimate(log, nav, config)
         except ValueError:
-            return None
-    return np.asarray(config.gnss.lever_arm_m, dtype=float) - est.lever_b_m
+            return None, None
+    return est.lever_b_m, np.asarray(config.gnss.lever_arm_m, dtype=float) - est.lever_b_m
+
+
+def _scale_factor_start(log: mcap_reader.FlightLog, config: PipelineConfig,
+                        lever_b_m: np.ndarray | None) -> np.ndarray | None:
+    """A's gyro scale-factor estimate (:func:`scale_factor_estimate`) when an axis of it is
+    significant (:data:`GYRO_SF_SIGNIFICANCE`) and its norm above the refinement's bar, else
+    None (also when A estimates scale factors itself, or the pass fails)."""
+    if config.filter.estimate_scale_factors:
+        return None
+    try:
+        sf, sigma = scale_factor_estimate(log, config, lever_b_m)
+    except ValueError:
+        return None
+    if (not np.any(np.abs(sf) > GYRO_SF_SIGNIFICANCE * sigma)
+            or not np.linalg.norm(sf) > REFINE_FRACTION
+            * effect_by_id("gyro_scale_factor").plausible_si):
+        return None
+    return sf
+
+
+def _rerun_signatures_at_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
+                               calib_run: CalibrationRun, config: PipelineConfig,
+                               lever_estimate: nav_filter.LeverArmEstimate | None,
+                               navigate_a: Any, threads: int = 1
+                               ) -> tuple[dict[str, list[np.ndarray]], dict[str, np.ndarray]]:
+    """The diagnosis's first A re-run signatures and the estimates they were made at.
+
+    The lever arm: Gauss-Newton from A's own estimate of it (lever-arm states): the signature
+    made there (secant along it, axis derivatives at the estimate; 1 + 4 A runs) instead of at
+    the configured value, where A's gate and attitude Jacobian are those of the wrong lever
+    arm. The time offset: at the configuration (1 A run). The gyro scale factor: Gauss-Newton
+    from A's own estimate (scale-factor states, one forward pass with the antenna at A's
+    lever-arm estimate) only when that is significant (the secant along it: 1 A run); else
+    the library's signature stands and the usual flight pays the one forward pass (docs/
+    diagnose.md, "Power")."""
+    lever_b_m, p_lever = _lever_arm_and_start(log, nav, config, lever_estimate)
+    gn = p_lever is not None and bool(
+        np.linalg.norm(p_lever) > REFINE_FRACTION * effect_by_id("lever_arm").plausible_si)
+    sigs = rerun_signatures(log, nav, calib_run, config,
+                            [e for e in PIPELINE_RERUN if e != "gyro_scale_factor"
+                             and not (gn and e == "lever_arm")], navigate=navigate_a,
+                            threads=threads)
+    at: dict[str, np.ndarray] = {}
+    starts = {"lever_arm": p_lever if gn else None,
+              "gyro_scale_factor": _scale_factor_start(log, config, lever_b_m)}
+    for eid, p in starts.items():
+        if p is None:
+            continue
+        try:
+            sigs[eid] = signature_at(log, nav, calib_run, config, eid, p, navigate=navigate_a,
+                                     threads=threads)
+            at[eid] = p
+        except (ValueError, np.linalg.LinAlgError):  # A failed at the estimate
+            if eid == "lever_arm":
+                sigs.update(rerun_signatures(log, nav, calib_run, config, (eid,),
+                                             navigate=navigate_a, threads=threads))
+    return sigs, at
 
 
 def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution_a: SolutionA,
@@ -356,31 +447,16 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
     if null_dv is None and n_null > 0 and log is not None and nav is not None:
         null_dv = null_realisations(log, nav, calib_run, config, n_null, threads=threads)
     replays = [calib_run.replays[i] for i in sorted(calib_run.replays)]
-    # lever arm and GNSS time offset: A's own response to them, by re-running A (issue 12;
-    # 3 + 1 A runs)
+    # lever arm, GNSS time offset, gyro scale factor: A's own response to them, by re-running
+    # A (issue 12)
     a_as_configured = partial(navigate, config=config)
 
     sigs: dict[str, list[np.ndarray]] | None = None
     at: dict[str, np.ndarray] = {}
     if log is not None and nav is not None:
-        # the lever arm: Gauss-Newton from A's own estimate of it (lever-arm states): the
-        # signature made there (secant along it, axis derivatives at the estimate; 1 + 4 A
-        # runs) instead of at the configured value, where A's gate and attitude Jacobian are
-        # those of the wrong lever arm (docs/diagnose.md, "Power")
-        p_lever = _lever_arm_start(log, nav, config, lever_estimate)
-        gn = p_lever is not None and bool(
-            np.linalg.norm(p_lever) > REFINE_FRACTION * effect_by_id("lever_arm").plausible_si)
-        sigs = rerun_signatures(log, nav, calib_run, config,
-                                [e for e in PIPELINE_RERUN if not (gn and e == "lever_arm")],
-                                navigate=a_as_configured, threads=threads)
-        if gn and p_lever is not None:
-            try:
-                sigs["lever_arm"] = signature_at(log, nav, calib_run, config, "lever_arm",
-                                                 p_lever, navigate=a_as_configured, threads=threads)
-                at["lever_arm"] = p_lever
-            except (ValueError, np.linalg.LinAlgError):  # A failed at the estimate
-                sigs.update(rerun_signatures(log, nav, calib_run, config, ("lever_arm",),
-                                             navigate=a_as_configured, threads=threads))
+        # lever arm and gyro scale factor by Gauss-Newton from A's own estimates
+        sigs, at = _rerun_signatures_at_start(log, nav, calib_run, config, lever_estimate,
+                                              a_as_configured, threads)
     # B's residuals carry the gyro angle random walk, correlated along each leg: weighting them
     # as white noise would make every F-test too liberal
     arw_radpsqrts = imu_tuning(config).noise().gyro_arw_radpsqrts

@@ -63,10 +63,16 @@ stops earlier when no estimate moves by more than :data:`REFINE_TOLERANCE` of it
 REFINE_TOLERANCE = 0.05
 RERUN_EFFECTS = ("lever_arm", "time_offset", "gyro_scale_factor", "accel_bias_change")
 """Effects whose signature :func:`rerun_signatures` makes by re-running A."""
-PIPELINE_RERUN = ("lever_arm", "time_offset")
-"""The ones the pipeline's diagnosis re-runs (4 A runs). The scale factor's re-run (3 A runs)
-raised its F but named it in none of the flights measured, and the warm-up's is absorbed by
-A's accelerometer-bias estimate (docs/diagnose.md, "Power"): both are left to the caller."""
+PIPELINE_RERUN = ("lever_arm", "time_offset", "gyro_scale_factor")
+"""The ones the pipeline's diagnosis re-runs. The lever arm and the time offset always (4 A
+runs, or 1 + 4 at A's lever-arm estimate); the gyro scale factor only by Gauss-Newton from A's
+own scale-factor estimate, when that is significant (1 A run; otherwise the library's
+signature stands and the flight pays A's 0.2 s forward pass): its re-run at the configuration
+(3 A runs) read a 600 ppm z scale factor on the y axis (docs/diagnose.md, "Power"). The
+warm-up's is absorbed by A's accelerometer-bias estimate: it is left to the caller."""
+GAUSS_NEWTON_EFFECTS = ("lever_arm", "time_offset", "gyro_scale_factor")
+"""Effects :func:`signature_at` and :func:`refine_signatures` make a signature at an estimate
+for."""
 
 
 Navigate = Callable[..., FilterResult]
@@ -90,6 +96,11 @@ def _response(log_p, nav, calib_run, config, navigate: Navigate, lever_b_m=None
                        sample_rate_hz=rc.sample_rate_hz, sigma_floor_mps=rc.sigma_floor_mps,
                        transition_step=int(rc.transition_step)).dv_n_mps[:, 0:2]
             - calib_run.replays[i].dv_n_mps[:, 0:2] for i in sorted(calib_run.replays)]
+
+
+def _with_rates(log, rates):
+    """The log with its IMU rates replaced (body FRD, rad/s)."""
+    return replace(log, imu=replace(log.imu, w_ib_b_radps=rates))
 
 
 def _gnss_earlier(log, dt_s: float):
@@ -134,10 +145,8 @@ def rerun_signatures(log, nav, calib_run, config, effect_ids=RERUN_EFFECTS, *,
                          f"{RERUN_EFFECTS}")
     t_run_s = (log.imu.time_ns - log.imu.time_ns[0]) * 1e-9
 
-    def imu_log(rates=None, forces=None):
-        imu_p = replace(log.imu, **({} if rates is None else {"w_ib_b_radps": rates}),
-                        **({} if forces is None else {"f_ib_b_mps2": forces}))
-        return replace(log, imu=imu_p)
+    def imu_log(forces):
+        return replace(log, imu=replace(log.imu, f_ib_b_mps2=forces))
 
     def response(run: tuple) -> list[NDArray]:  # run: (perturbed log, lever arm or None)
         return _response(run[0], nav, calib_run, config, navigate, run[1])
@@ -153,11 +162,11 @@ def rerun_signatures(log, nav, calib_run, config, effect_ids=RERUN_EFFECTS, *,
             runs = [(_gnss_earlier(log, h), None)]
         elif eid == "gyro_scale_factor":
             w = log.imu.w_ib_b_radps
-            runs = [(imu_log(rates=w * (1.0 + h * e)), None) for e in np.eye(3)]
+            runs = [(_with_rates(log, w * (1.0 + h * e)), None) for e in np.eye(3)]
         else:  # accel_bias_change
             f = log.imu.f_ib_b_mps2
             warm = np.exp(-t_run_s / accel_settling_s)[:, None]
-            runs = [(imu_log(forces=f + h * warm * e), None) for e in np.eye(3)[:2]]
+            runs = [(imu_log(f + h * warm * e), None) for e in np.eye(3)[:2]]
         try:
             cols = map_in_threads(response, runs, threads)
         except (ValueError, np.linalg.LinAlgError):
@@ -183,28 +192,46 @@ def signature_at(log, nav, calib_run, config, effect_id: str, p, *, navigate: Na
 
         S(p) = J(configured - p) (I - u u^T) + s_u u^T
 
-    One A run (``time_offset``, one parameter: the secant alone) or four (``lever_arm``, made
-    on up to ``threads`` threads). Returns ``[S_leg (M, 2, P)]``, legs in id order. Raises
-    ValueError when A fails.
+    ``gyro_scale_factor`` (s, FRD, measured = (1 + s) true): the rates divided by (1 + p)
+    remove it; p is A's own estimate (``flight_stages.scale_factor_estimate``, 15-28 ppm
+    sigma per axis on the power flights), and the signature is the secant along it alone
+    (one parameter, the size along A's direction; the directions orthogonal to u get zero
+    columns, which the workflow's observability screen drops). Why not at the configuration:
+    with 600 ppm on z in the flight, the re-run's 1000 ppm step put A at 1600 ppm, where its
+    chi-square gate rejected 279 of 911 fixes and 116 velocities with 12 covariance resets
+    (4 fixes at 600 ppm, 1 velocity at 0 and 200 ppm): the z column read leg 0's response at
+    twice its size and the fit put the scale factor on y. At the removed state the three
+    local derivatives fit the true response to 0.15 mm/s of its 56 mm/s RMS (605 ppm on z),
+    but in the diagnosis their x and y columns took the grade's 0.1 deg/h z gyro bias (not in
+    the base model) as 85 ppm on y and failed the held-out test more often than the secant
+    alone (measured, docs/diagnose.md "Power").
+
+    One A run (``time_offset``, ``gyro_scale_factor``: the secant alone) or four
+    (``lever_arm``, made on up to ``threads`` threads). Returns ``[S_leg (M, 2, P)]``, legs in
+    id order. Raises ValueError when A fails.
     """
     p = np.asarray(p, dtype=float)
     size = float(np.linalg.norm(p))
     if not size > 0:
         raise ValueError(f"{effect_id}: the estimate is zero; use rerun_signatures")
     u = p / size
+    h = LOCAL_STEP_FRACTION * effect_by_id(effect_id).plausible_si
     if effect_id == "lever_arm":
         lever = np.asarray(config.gnss.lever_arm_m, dtype=float) - p
-        h = LOCAL_STEP_FRACTION * effect_by_id(effect_id).plausible_si
         removed, *cols = map_in_threads(
             lambda dl: _response(log, nav, calib_run, config, navigate, lever + dl),
             [np.zeros(3), *(h * np.eye(3))], threads)
-        local = [np.stack([(c[k] - removed[k]) / h for c in cols], axis=-1)
-                 for k in range(len(removed))]
     elif effect_id == "time_offset":
         removed = _response(_gnss_earlier(log, -float(p[0])), nav, calib_run, config, navigate)
-        local = [np.zeros(r.shape + (1,)) for r in removed]
+        cols = []
+    elif effect_id == "gyro_scale_factor":
+        removed = _response(_with_rates(log, log.imu.w_ib_b_radps / (1.0 + p)), nav,
+                            calib_run, config, navigate)
+        cols = []  # the secant alone, along A's own estimate (see the docstring)
     else:
-        raise ValueError(f"{effect_id}: no Gauss-Newton signature (lever_arm, time_offset)")
+        raise ValueError(f"{effect_id}: no Gauss-Newton signature ({GAUSS_NEWTON_EFFECTS})")
+    local = [np.stack([(c[k] - removed[k]) / h for c in cols], axis=-1) if cols
+             else np.zeros(removed[k].shape + p.shape) for k in range(len(removed))]
     return [s - np.einsum("mcp,p,q->mcq", s, u, u) + (-r / size)[:, :, None] * u
             for s, r in zip(local, removed, strict=True)]
 
@@ -230,7 +257,7 @@ def refine_signatures(log, nav, calib_run, config, signatures: dict[str, list[ND
     for eid, p in estimates.items():
         p = np.asarray(p, dtype=float)
         size = float(np.linalg.norm(p))
-        if eid not in signatures or eid not in ("lever_arm", "time_offset") or \
+        if eid not in signatures or eid not in GAUSS_NEWTON_EFFECTS or \
                 not size > REFINE_FRACTION * effect_by_id(eid).plausible_si:
             continue
         prev = at.get(eid)

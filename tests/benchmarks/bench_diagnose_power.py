@@ -2,6 +2,7 @@
 
     PYTHONPATH=. python tests/benchmarks/bench_diagnose_power.py limits [--seeds 5]
     PYTHONPATH=. python tests/benchmarks/bench_diagnose_power.py power [--seeds 6]
+    PYTHONPATH=. python tests/benchmarks/bench_diagnose_power.py trigger [--seeds 10]
 
 Flights: tests/unit/test_diagnose_power.py (pospp's simulator, paper_vehicle grade, three
 wandering legs at 60 m/s, 1 Hz GNSS, pospp's own A, 6 null realisations, the pipeline's
@@ -17,6 +18,13 @@ signature is right). The detection limit is the smallest grid size named with it
 ``power``: each effect hidden by the simulator itself (GNSS lever arm and time offset, gyro
 scale factor) or in the IMU samples (accelerometer warm-up) at two sizes, seeds 1..N: how often
 it is named, and with its size within 20 %.
+
+``trigger``: on flights with another effect hidden (lever arm, GNSS time offset) or none, A's
+own gyro scale-factor estimate (``flight_stages.scale_factor_estimate`` at A's lever-arm
+estimate) and whether the pipeline would make the scale factor's Gauss-Newton signature
+(``flight_stages._scale_factor_start``): how often the scale factor's extra A run is paid
+where no scale factor is hidden; with ``--mc``, on the 40 flights of the null Monte Carlo
+(tests/unit/test_diagnose_null_mc.py) instead.
 """
 
 from __future__ import annotations
@@ -34,7 +42,7 @@ sys.path[:0] = [str(ROOT), str(ROOT / "tests" / "unit")]
 
 import test_diagnose_power as tp  # noqa: E402
 
-from pospp import pipeline  # noqa: E402
+from pospp import flight_stages, pipeline  # noqa: E402
 from pospp.diagnose import effects as fx  # noqa: E402
 from pospp.diagnose.rerun import rerun_signatures  # noqa: E402
 
@@ -134,9 +142,40 @@ def power(seeds: int, sizes) -> None:
         print(f"| {eff} | {size:g} {unit} | {named} | {ok} | {est} | {concl} |", flush=True)
 
 
+TRIGGER_CASES = (("lever_arm", 0.5), ("lever_arm", 1.0), ("lever_arm", 1.5), ("lever_arm", 3.0),
+                 ("time_offset", 4.0), ("time_offset", 8.0), ("time_offset", 12.0),
+                 ("time_offset", 24.0), ("none", 0.0))
+
+
+def _triggered(log, cfg) -> tuple[bool, float]:
+    """(the scale factor's Gauss-Newton started, A's largest axis / sigma) on one flight."""
+    nav = pipeline.navigate(log, cfg)
+    lever = pipeline.lever_arm_estimate(log, nav, cfg).lever_b_m
+    sf, sigma = flight_stages.scale_factor_estimate(log, cfg, lever)
+    start = flight_stages._scale_factor_start(log, cfg, lever)
+    return start is not None, float(np.max(np.abs(sf) / sigma))
+
+
+def trigger(seeds: int, mc: bool) -> None:
+    print(f"| hidden | size | triggered (of {40 if mc else seeds}) | largest axis / sigma |")
+    print("|---|---|---|---|")
+    if mc:
+        import test_diagnose_null_mc as tm
+
+        res = [_triggered(*tm.null_flight(s)[1:]) for s in range(40)]
+        print(f"| none (null Monte Carlo) | - | {sum(r[0] for r in res)} | "
+              f"{max(r[1] for r in res):.1f} |")
+        return
+    for eff, size in TRIGGER_CASES:
+        res = [_triggered(*tp.simulate_flight(None if eff == "none" else eff, size, s))
+               for s in range(1, seeds + 1)]
+        print(f"| {eff} | {size:g} {tp.EFFECT_UNITS.get(eff, '')} | {sum(r[0] for r in res)} "
+              f"| {max(r[1] for r in res):.1f} |", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("what", choices=("limits", "power"))
+    ap.add_argument("what", choices=("limits", "power", "trigger"))
     ap.add_argument("--seeds", type=int, default=5)
     ap.add_argument("--cells", default="0.05:180,0.5:180,0.05:360",
                     help="GNSS pos sigma [m]:leg length [s], comma-separated")
@@ -144,10 +183,14 @@ def main() -> None:
                     "lever_arm:1.2,gyro_scale_factor:200,gyro_scale_factor:600,"
                     "accel_bias_change:200,accel_bias_change:600",
                     help="effect:size (display unit), comma-separated")
+    ap.add_argument("--mc", action="store_true",
+                    help="trigger: the null Monte Carlo's 40 flights")
     a = ap.parse_args()
     if a.what == "limits":
         cells = [(float(c.split(":")[0]), float(c.split(":")[1])) for c in a.cells.split(",")]
         limits(a.seeds, cells)
+    elif a.what == "trigger":
+        trigger(a.seeds, a.mc)
     else:
         sizes = [(s.split(":")[0], float(s.split(":")[1])) for s in a.sizes.split(",")]
         power(a.seeds, sizes)

@@ -46,9 +46,8 @@ PROFILE = three_leg_survey("null_mc", 180.0, lat_deg=40.0, lon_deg=116.0, height
                            heading_deg=30.0)
 
 
-def null_flight_diagnosis(seed: int, n_null: int = N_NULL):
-    """(calibrated Diagnosis, nominal Diagnosis, bias error / sigma (x, y)) of one seeded null
-    flight."""
+def null_flight(seed: int):
+    """(simulation, log, config) of one seeded null flight."""
     grade = GRADES[seed % len(GRADES)]
     rng = np.random.default_rng(1000 + seed)
     lvl = float(np.exp(rng.uniform(np.log(0.02), np.log(1.0))))
@@ -63,7 +62,13 @@ def null_flight_diagnosis(seed: int, n_null: int = N_NULL):
         "legs": {"min_duration_s": 120.0, "min_speed_mps": 20.0},
         "replay": {"reference": "smoothed", "horizon_s": 180.0},
         "pairs": {"diagnose_alpha": 0.05}})
-    log = SimLog(sim.imu, sim.fix, sim.vel)
+    return sim, SimLog(sim.imu, sim.fix, sim.vel), cfg
+
+
+def null_flight_diagnosis(seed: int, n_null: int = N_NULL):
+    """(calibrated Diagnosis, nominal Diagnosis, bias error / sigma (x, y)) of one seeded null
+    flight."""
+    sim, log, cfg = null_flight(seed)
     nav = pipeline.navigate(log, cfg)
     imu = pipeline.imu_increments(log)
     run, ref = pipeline.calibrate_from_a(imu, nav, cfg)
