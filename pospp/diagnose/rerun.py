@@ -55,9 +55,12 @@ plausible size (0.1 m for the lever arm): near the effect-free state A's gate is
 response to the lever arm linear (5e-5 m/s, measured)."""
 REFINE_FRACTION = 0.05
 """An estimate above this fraction of the plausible size gets a secant signature."""
-REFINE_ITERATIONS = 3
-"""Secant refinements the pipeline makes (each: one A run per effect and one diagnosis); it
-stops earlier when no estimate moves by more than :data:`REFINE_TOLERANCE` of itself."""
+REFINE_ITERATIONS = 8
+"""Secant refinements the pipeline makes at most (each: one to four A runs per effect and one
+diagnosis); it stops earlier when no estimate moves by more than :data:`REFINE_TOLERANCE` of
+itself (the lever arm and the time offset within 3). The warm-up's creeps: A's response to
+it is super-linear, and from the derivative at 0 a 600 ug warm-up read 148, 237, 343, 433,
+488, 513, 523, 525 ug (x; seed 5 of the warm-up mission, docs/diagnose.md "Power")."""
 REFINE_TOLERANCE = 0.05
 RERUN_EFFECTS = ("lever_arm", "time_offset", "gyro_scale_factor", "accel_bias_change")
 """Effects whose signature :func:`rerun_signatures` makes by re-running A."""
