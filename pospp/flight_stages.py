@@ -40,7 +40,6 @@ from pospp.nav.strapdown import increments_from_rates
 from pospp.types import FLU_TO_FRD
 from pospp.units import DEG_PER_H_RADPS
 
-
 VERTICAL_ALT_EXPLAINED = 0.9
 """Share of the structured gap a first-step vertical-drift candidate must explain for the
 null's drift to be re-estimated with it removed (:func:`drift_under_alternative`; the
@@ -399,12 +398,10 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
             break
         d, sigs = diagnose_with(refined), refined
     removed = _named_removed(replays, d, sigs) if sigs else None
-    # the drift under the alternative: when the effect explains the excess drift the flight
-    # showed, the null realisations inject the drift the flight shows with it removed (the
-    # re-run effects named, and a vertical drift that explains the gap: a z bias beyond the
-    # grade is read as drift by the base model's REML, 0.21 deg/h for 0.4 on 180 s legs)
-    alt = (_vertical_removed(removed if removed is not None else replays, d, candidate=True)
-           if sigs else None) or removed
+    # the drift under the alternative: when the effect (re-run effects named; a vertical
+    # drift, _with_vertical) explains the excess drift the flight showed, the null
+    # realisations inject the drift the flight shows with it removed
+    alt = _with_vertical(replays, removed, d, candidate=True) if sigs else None
     if alt is None:
         return d
     drift = (drift_under_alternative(calib_run, alt, config)
@@ -414,9 +411,7 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
         null_dv = null_realisations(log, nav, calib_run, config, len(null_dv), drift=drift)
         d = diagnose_with(sigs)
         removed = _named_removed(replays, d, sigs)
-    # a named vertical drift is part of the model the whitening is estimated under too
-    removed = _vertical_removed(removed if removed is not None else replays, d,
-                                candidate=False) or removed
+    removed = _with_vertical(replays, removed, d, candidate=False)  # whitened under it too
     if removed is None:
         return d
     # the whitening under the model named: a pass whose whitening drops an effect it was
@@ -425,24 +420,26 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
     return d2 if set(d.named) <= set(d2.named) else d
 
 
-def _vertical_removed(replays: list, d: Diagnosis, *, candidate: bool) -> list | None:
-    """The replays minus the vertical drift's fitted response (library signature, the Phi BG
-    z column along B) when it was named or, with ``candidate``, its first-step candidate
-    explains at least :data:`VERTICAL_ALT_EXPLAINED` of the structured gap; else None."""
+def _with_vertical(replays: list, removed: list | None, d: Diagnosis, *, candidate: bool
+                   ) -> list | None:
+    """``removed`` (the replays minus the named re-run effects' response, or None) minus the
+    vertical drift's fitted response (library signature, the Phi BG z column along B) when it
+    was named or, with ``candidate``, its first-step candidate explains at least
+    :data:`VERTICAL_ALT_EXPLAINED` of the structured gap; else ``removed`` unchanged. The base
+    model's REML reads a z bias beyond the grade's as gyro drift (0.21 deg/h for 0.4 deg/h on
+    180 s legs, against 0.05 configured), and the null realisations then hide it."""
     eid = "vertical_gyro_drift"
+    first = [c for c in d.candidates if c.step == 1 and c.effect == eid
+             and c.explained_fraction >= VERTICAL_ALT_EXPLAINED]
     if eid in d.named:
         values = d.step_of(eid).values
-    elif not candidate:
-        return None
-    else:
-        first = [c for c in d.candidates if c.step == 1 and c.effect == eid
-                 and c.explained_fraction >= VERTICAL_ALT_EXPLAINED]
-        if not first:
-            return None
+    elif candidate and first:
         values = first[0].values
+    else:
+        return removed
     b_z = float(np.asarray(values, dtype=float)[0]) * effect_by_id(eid).si_per_unit
     out = []
-    for r in replays:
+    for r in (removed if removed is not None else replays):
         dv = r.dv_n_mps.copy()
         dv[:, 0:2] -= signature(eid, r)[:, :, 0] * b_z
         out.append(replace(r, dv_n_mps=dv))

@@ -176,14 +176,14 @@ def signature_at(log, nav, calib_run, config, effect_id: str, p, *, navigate: Na
     """Gauss-Newton signature of a re-run effect at the estimate ``p`` (SI, (P,)).
 
     A is re-run with the estimate removed (configured lever arm minus p; GNSS stamps moved
-    back by p; the warm-up ``p exp(-t / T)`` taken off the specific force): B minus A there, ``r``, is the flight's effect-free curve if p is right. The
-    direction u = p / |p| gets the secant ``s_u = -r / |p|`` (the response from zero to p, so
-    that a fit reading 1 along it reads |p|), and the directions orthogonal to u get the local
-    derivatives re-run *at* the removed state (``lever_arm``: configured - p + h e_j,
-    h = :data:`LOCAL_STEP_FRACTION` of the plausible size), where A's gate and its attitude
-    Jacobian ``[C_nb l x]`` are those of the effect-free flight, not of the wrong configuration
-    (measured: at the configuration 1 m off, the three axis responses read a 1 m offset's z
-    part at 0.2 of its size)::
+    back by p; the warm-up ``p exp(-t / T)`` taken off the specific force): B minus A there,
+    ``r``, is the flight's effect-free curve if p is right. The direction u = p / |p| gets
+    the secant ``s_u = -r / |p|`` (the response from zero to p, so that a fit reading 1 along
+    it reads |p|), and the directions orthogonal to u get the local derivatives re-run *at*
+    the removed state (``lever_arm``: configured - p + h e_j, h = :data:`LOCAL_STEP_FRACTION`
+    of the plausible size), where A's gate and its attitude Jacobian ``[C_nb l x]`` are those
+    of the effect-free flight, not of the wrong configuration (measured: at the configuration
+    1 m off, the three axis responses read a 1 m offset's z part at 0.2 of its size)::
 
         S(p) = J(configured - p) (I - u u^T) + s_u u^T
 
@@ -191,7 +191,8 @@ def signature_at(log, nav, calib_run, config, effect_id: str, p, *, navigate: Na
     (``accel_bias_change``: local steps h = :data:`LOCAL_STEP_FRACTION` of the plausible
     size on x and y at the removed state; A is not linear in a warm-up early in the flight:
     measured, a 600 ug warm-up moves B minus A on a leg 170 s after power-up by 61 mm/s RMS
-    where the derivative at 0 predicts 38) or four (``lever_arm``). Returns ``[S_leg (M, 2, P)]``, legs in id order. Raises ValueError when A fails.
+    where the derivative at 0 predicts 38) or four (``lever_arm``). Returns
+    ``[S_leg (M, 2, P)]``, legs in id order. Raises ValueError when A fails.
     """
     p = np.asarray(p, dtype=float)
     size = float(np.linalg.norm(p))

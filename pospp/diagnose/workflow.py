@@ -35,8 +35,8 @@ Steps
 
    at level alpha / (number of candidates tested) (Bonferroni), together with the
    leave-one-leg-out prediction error, which must decrease (in m/s; for the vertical drift,
-   which every IMU carries, in noise units: :data:`HELDOUT_WHITENED`). A lack-of-fit basis (per leg and
-   channel, Legendre polynomials up to degree 4 and cosines cos(pi k t / T), 0 < k <
+   which every IMU carries, in noise units: :data:`HELDOUT_WHITENED`). A lack-of-fit basis
+   (per leg and channel, Legendre polynomials up to degree 4 and cosines cos(pi k t / T), 0 < k <
    ``lof_terms``) measures the whole structured gap (the polynomials keep smooth gaps in the
    span even when a correlated-noise whitening amplifies the cosines' truncation error); a
    candidate is named only when its RSS reduction beyond noise is at least
