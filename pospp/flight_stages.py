@@ -348,8 +348,7 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
     if null_dv is None and n_null > 0 and log is not None and nav is not None:
         null_dv = null_realisations(log, nav, calib_run, config, n_null)
     replays = [calib_run.replays[i] for i in sorted(calib_run.replays)]
-    # lever arm and GNSS time offset: A's own response to them, by re-running A (issue 12;
-    # 3 + 1 A runs)
+    # PIPELINE_RERUN: A's own response to them, by re-running A (issue 12; 3 + 1 + 2 A runs)
     def a_as_configured(log_p: mcap_reader.FlightLog, lever_arm_b_m: Any = None
                         ) -> nav_filter.FilterResult:
         return navigate(log_p, config, lever_arm_b_m=lever_arm_b_m)
@@ -357,10 +356,9 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
     sigs: dict[str, list[np.ndarray]] | None = None
     at: dict[str, np.ndarray] = {}
     if log is not None and nav is not None:
-        # the lever arm: Gauss-Newton from A's own estimate of it (lever-arm states): the
-        # signature made there (secant along it, axis derivatives at the estimate; 1 + 4 A
-        # runs) instead of at the configured value, where A's gate and attitude Jacobian are
-        # those of the wrong lever arm (docs/diagnose.md, "Power")
+        # the lever arm: Gauss-Newton from A's own estimate of it (lever-arm states; 1 + 4 A
+        # runs), not at the configured value, where A's gate and attitude Jacobian are those
+        # of the wrong lever arm (docs/diagnose.md, "Power")
         p_lever = _lever_arm_start(log, nav, config, lever_estimate)
         gn = p_lever is not None and bool(
             np.linalg.norm(p_lever) > REFINE_FRACTION * effect_by_id("lever_arm").plausible_si)
@@ -409,7 +407,9 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
     if drift is not None:
         assert log is not None and nav is not None and sigs is not None and null_dv
         null_dv = null_realisations(log, nav, calib_run, config, len(null_dv), drift=drift)
-        d = diagnose_with(sigs)
+        d, d_base = diagnose_with(sigs), d
+        if removed is None and "vertical_gyro_drift" not in d.named:
+            return d_base  # the vertical drift it was re-estimated for is not borne out
         removed = _named_removed(replays, d, sigs)
     removed = _with_vertical(replays, removed, d, candidate=False)  # whitened under it too
     if removed is None:
