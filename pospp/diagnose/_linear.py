@@ -91,6 +91,11 @@ class Problem:
             return a / (self.sig[i] if a.ndim == 1 else self.sig[i][:, None])
         return linalg.solve_triangular(c, a, lower=True, check_finite=False)
 
+    def whitened_rms(self, res: Sequence[NDArray], legs: Sequence[int]) -> float:
+        """RMS of the legs' raw residuals ``res[i]`` (flattened (2 (M - 1),)) whitened by
+        their leg's noise model, over ``legs`` (dimensionless: noise sigmas)."""
+        return rms([self.whiten(i, np.ravel(res[i])) for i in legs])
+
     def wblocks(self, term: Term) -> list[NDArray]:
         """Whitened blocks of a term (cached on the term, or on a re-whitened problem)."""
         if self.wcache is not None:

@@ -36,24 +36,40 @@ ACCEL_SETTLING_S = 1200.0
 LEVER_DIRECTION = np.array([0.3, 0.2, -1.0]) / np.linalg.norm([0.3, 0.2, -1.0])
 """Direction (FRD) of the hidden antenna offset: mostly above the IMU, a little fore and right."""
 
+WARMUP_LOITER_LOOPS = 2
+"""Racetrack loops (each 2 x (180 deg turn + 60 s straight)) before the warm-up mission's
+later legs."""
+
 EFFECT_UNITS = {"lever_arm": "m", "time_offset": "ms", "gyro_scale_factor": "ppm",
-                "accel_bias_change": "ug"}
+                "accel_bias_change": "ug", "vertical_gyro_drift": "deg/h"}
 
 
-def profile(leg_s: float = 180.0, n_legs: int = 3, wander: bool = True) -> dict:
-    """Survey flight: legs of ``leg_s`` at 60 m/s, alternately 180 and 90 deg apart."""
+def profile(leg_s: float = 180.0, n_legs: int = 3, wander: bool = True, *,
+            warmup: bool = False) -> dict:
+    """Survey flight: legs of ``leg_s`` at 60 m/s, alternately 180 and 90 deg apart.
+
+    ``warmup``: the accelerometer warm-up's mission (T = 1200 s): a shorter S-turn (the first
+    leg starts 180 s after power-up instead of 260 s) and, before leg ``n_legs // 2``, a
+    racetrack loiter (180 deg turns, 60 s straights: no leg) of :data:`WARMUP_LOITER_LOOPS`
+    loops, so that the later legs start after about T (4 legs of 180 s: at 180, 420, 1110
+    and 1350 s; exp(-t0 / T) = 0.86, 0.70, 0.40, 0.32)."""
     w = ({"heading_wander_deg": 2.0, "heading_wander_period_s": 40.0,
           "speed_wander_mps": 2.0, "speed_wander_period_s": 60.0} if wander else {})
+    straights = (10.0, 10.0, 20.0) if warmup else (30.0, 30.0, 60.0)
     seg = [{"type": "static", "duration_s": 60.0},
            {"type": "accelerate", "to_speed_mps": 60.0, "duration_s": 20.0},
            # an S-turn first: A's heading converges before the first leg (a leg right after
            # take-off makes A's response to the null noise non-linear: 0.1-0.3 m/s on that leg)
-           {"type": "straight", "duration_s": 30.0},
+           {"type": "straight", "duration_s": straights[0]},
            {"type": "turn", "angle_deg": 90.0, "rate_dps": 3.0},
-           {"type": "straight", "duration_s": 30.0},
+           {"type": "straight", "duration_s": straights[1]},
            {"type": "turn", "angle_deg": -90.0, "rate_dps": 3.0},
-           {"type": "straight", "duration_s": 60.0}]
+           {"type": "straight", "duration_s": straights[2]}]
+    loop = [{"type": "turn", "angle_deg": 180.0, "rate_dps": 3.0},
+            {"type": "straight", "duration_s": 60.0}]
     for k in range(n_legs):
+        if warmup and k == n_legs // 2:
+            seg += loop * (2 * WARMUP_LOITER_LOOPS)
         if k:
             seg.append({"type": "turn", "angle_deg": 180.0 if k % 2 else 90.0, "rate_dps": 3.0})
         seg.append({"type": "straight", "duration_s": leg_s, "kind": "survey", **w})
@@ -86,8 +102,9 @@ def _config(leg_s: float):
 
 
 def simulate_flight(effect: str | None, size: float, seed: int, *, gnss_pos_m: float = 0.05,
-                    leg_s: float = 180.0, n_legs: int = 3):
-    """(log, config) of a flight with ``effect`` hidden at ``size`` (display unit)."""
+                    leg_s: float = 180.0, n_legs: int = 3, warmup: bool = False):
+    """(log, config) of a flight with ``effect`` hidden at ``size`` (display unit);
+    ``warmup``: the warm-up mission (:func:`profile`)."""
     model = imu_grade(GRADE)
     lever = (0.0, 0.0, 0.0)
     offset_s = 0.0
@@ -97,12 +114,17 @@ def simulate_flight(effect: str | None, size: float, seed: int, *, gnss_pos_m: f
         offset_s = size * 1e-3
     elif effect == "gyro_scale_factor":
         model = dataclasses.replace(model, gyro_sf_ppm=(0.0, 0.0, size))
+    elif effect == "vertical_gyro_drift":
+        # a z gyro bias beyond the grade's: B (raw gyro) carries the sum (true_size)
+        bz = model.gyro_bias_dph
+        model = dataclasses.replace(model, gyro_bias_dph=(bz[0], bz[1], bz[2] + size))
     elif effect not in (None, "accel_bias_change"):
         raise ValueError(effect)
     gnss = GnssModel(rate_hz=1.0, pos_noise_m=(gnss_pos_m, 2 * gnss_pos_m),
                      vel_noise_mps=(gnss_pos_m / 2, gnss_pos_m), lever_arm_b_m=lever,
                      time_offset_s=offset_s)
-    sim = simulate(parse_profile(profile(leg_s, n_legs)), imu_grade=model, gnss=gnss, seed=seed)
+    sim = simulate(parse_profile(profile(leg_s, n_legs, warmup=warmup)), imu_grade=model,
+                   gnss=gnss, seed=seed)
     imu = sim.imu
     if effect == "accel_bias_change":
         # warm-up b(t) = db exp(-t / T) on x, from the first IMU stamp (the run's epoch)
@@ -111,6 +133,15 @@ def simulate_flight(effect: str | None, size: float, seed: int, *, gnss_pos_m: f
         f[:, 0] += size * 9.80665e-6 * np.exp(-t / ACCEL_SETTLING_S)
         imu = dataclasses.replace(imu, f_ib_b_mps2=f)
     return SimLog(imu, sim.fix, sim.vel), _config(leg_s)
+
+
+def true_size(effect: str | None, size: float) -> float:
+    """What the diagnosis should read for ``effect`` hidden at ``size`` (display unit): the
+    size itself, but for ``vertical_gyro_drift`` the whole constant z bias B carries (the
+    grade's own, 0.1 deg/h for paper_vehicle, plus the hidden one; B runs on the raw gyro)."""
+    if effect == "vertical_gyro_drift":
+        return size + float(imu_grade(GRADE).gyro_bias_dph[2])
+    return size
 
 
 def power_run(effect: str | None, size: float, seed: int, *, n_null: int = N_NULL,
@@ -126,7 +157,8 @@ def power_run(effect: str | None, size: float, seed: int, *, n_null: int = N_NUL
     if effect is None or effect not in d.named:
         return PowerRun(str(effect), size, d, False, float("nan"), False)
     est = abs(float(d.step_of(effect).value))
-    return PowerRun(effect, size, d, True, est, bool(abs(est - size) <= 0.2 * size))
+    truth = true_size(effect, size)
+    return PowerRun(effect, size, d, True, est, bool(abs(est - truth) <= 0.2 * truth))
 
 
 @pytest.mark.slow
@@ -210,3 +242,52 @@ def test_scale_factor_pass_starts_the_gauss_newton_only_where_one_is_hidden(effe
     else:
         assert start is not None
         np.testing.assert_allclose(start, sf)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("size_ug", "seed"), [(600.0, 1), (600.0, 5)])
+def test_accelerometer_warmup_is_named_with_its_size(size_ug, seed):
+    """An x accelerometer warm-up ``db exp(-t / 1200 s)`` of 600 ug on the warm-up mission
+    (four 180 s legs starting 170, 430, 1150 and 1400 s after power-up): named
+    `accel_bias_change` with its size within 20 %, read on x. Its signature is A's own
+    response (A re-run on the samples with the warm-up added, Gauss-Newton at the estimate:
+    rerun.signature_at): A's accelerometer-bias estimate lags the warm-up and its attitude
+    takes up the rest, which B carries from each leg start (61 mm/s RMS on the first leg,
+    where the library's in-leg forcing gives 25 mm/s and the screen dropped it). Seed 5 needs
+    the Gauss-Newton's 8 iterations (148, 237, ... 525 ug: A's gate rejects fixes early in the
+    flight, its response is super-linear). Measured over seeds 1-10 (bench_diagnose_power.py
+    power --warmup --n-legs 4): named 7 of 10, 6 within 20 % (docs/diagnose.md, "Power")."""
+    r = power_run("accel_bias_change", size_ug, seed, n_legs=4, warmup=True)
+    d = r.diagnosis
+    assert r.named, (d.named, d.steps[-1])
+    assert r.within_20pct, (r.estimate, size_ug)
+    vals = d.step_of("accel_bias_change").values
+    assert vals[0] > 0 and abs(vals[1]) < 0.5 * vals[0], vals
+    assert set(d.named) <= {"accel_bias_change", "vertical_gyro_drift"}, d.named
+
+
+@pytest.mark.slow
+def test_warmup_is_unobservable_on_late_legs():
+    """The same 600 ug warm-up on the usual flight (legs 260-900 s after power-up): what is
+    left of it inside the legs is a ramp that the base model's horizontal gyro bias fits, and
+    the observability screen reports it `unobservable` (the limit the docs state: the first
+    leg within about T of power-up and a later one after T)."""
+    d = power_run("accel_bias_change", 600.0, 1).diagnosis
+    assert "accel_bias_change" in d.unobservable
+    assert "accel_bias_change" not in d.named
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("size_dph", "seed", "leg_s"), [(0.3, 1, 180.0), (1.0, 1, 600.0)])
+def test_vertical_drift_is_named_with_its_size(size_dph, seed, leg_s):
+    """A z gyro bias beyond the grade's (0.1 deg/h plus ``size_dph``) on three legs of
+    ``leg_s``: named `vertical_gyro_drift` with the whole z bias B carries within 20 %. It
+    needs the null's drift re-estimated with the vertical drift removed (the base model's REML
+    reads 0.4 deg/h of z bias as 0.21 deg/h of drift, and its null then hides it) and the
+    held-out prediction compared in noise units (workflow.HELDOUT_WHITENED)."""
+    r = power_run("vertical_gyro_drift", size_dph, seed, leg_s=leg_s)
+    d = r.diagnosis
+    assert r.named, (d.named, d.steps[-1])
+    assert r.within_20pct, (r.estimate, true_size("vertical_gyro_drift", size_dph))
+    assert d.step_of("vertical_gyro_drift").value > 0
+    assert set(d.named) <= {"vertical_gyro_drift"}, d.named

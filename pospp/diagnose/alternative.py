@@ -1,0 +1,86 @@
+"""B minus A with named effects' fitted responses removed: the data under the alternative.
+
+The pipeline's diagnosis (:func:`pospp.flight_stages.diagnose_calibration`) re-estimates the
+null's gyro drift and the whitening on the replays with the effects it named (or its leading
+significant candidate) removed, so that an effect the base model leaves out is not read as
+noise (docs/diagnose.md, "Power"). Replays are :class:`pospp.calib.replay.LegReplay` in leg-id
+order; signatures SI, per leg (M, 2, P); diagnosis values in display units. No I/O.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from pospp.diagnose.effects import effect_by_id, signature
+from pospp.diagnose.results import Diagnosis
+
+VERTICAL_ALT_EXPLAINED = 0.9
+"""Share of the structured gap a first-step vertical-drift candidate must explain for the
+null's drift to be re-estimated with it removed
+(:func:`pospp.flight_stages.drift_under_alternative`; the workflow's
+``min_explained_fraction``)."""
+
+
+def with_vertical(replays: list, removed: list | None, d: Diagnosis, *, candidate: bool
+                  ) -> list | None:
+    """``removed`` (the replays minus the named re-run effects' response, or None) minus the
+    vertical drift's fitted response (library signature, the Phi BG z column along B) when it
+    was named or, with ``candidate``, its first-step candidate explains at least
+    :data:`VERTICAL_ALT_EXPLAINED` of the structured gap; else ``removed`` unchanged. The base
+    model's REML reads a z bias beyond the grade's as gyro drift (0.21 deg/h for 0.4 deg/h on
+    180 s legs, against 0.05 configured), and the null realisations then hide it."""
+    eid = "vertical_gyro_drift"
+    first = [c for c in d.candidates if c.step == 1 and c.effect == eid
+             and c.explained_fraction >= VERTICAL_ALT_EXPLAINED]
+    if eid in d.named:
+        values = d.step_of(eid).values
+    elif candidate and first:
+        values = first[0].values
+    else:
+        return removed
+    b_z = float(np.asarray(values, dtype=float)[0]) * effect_by_id(eid).si_per_unit
+    out = []
+    for r in (removed if removed is not None else replays):
+        dv = r.dv_n_mps.copy()
+        dv[:, 0:2] -= signature(eid, r)[:, :, 0] * b_z
+        out.append(replace(r, dv_n_mps=dv))
+    return out
+
+
+def removed_fits(d: Diagnosis, sigs: dict[str, list[np.ndarray]]) -> dict[str, Any]:
+    """The re-run effects named (effect -> values, display units), or, when none was, the
+    first step's significant re-run candidate with the largest F; empty when neither."""
+    fits = {e: d.step_of(e).values for e in d.named if e in sigs}
+    if not fits:
+        first = [c for c in d.candidates if c.step == 1 and c.significant and c.effect in sigs]
+        if first:
+            best = max(first, key=lambda c: c.statistic)
+            fits = {best.effect: best.values}
+    return fits
+
+
+def removed_names(d: Diagnosis, sigs: dict[str, list[np.ndarray]], vertical: bool
+                   ) -> list[str]:
+    """The effects whose response was removed for the drift under the alternative."""
+    return [*removed_fits(d, sigs), *(["vertical_gyro_drift"] if vertical else [])]
+
+
+def named_removed(replays: list, d: Diagnosis, sigs: dict[str, list[np.ndarray]]
+                   ) -> list | None:
+    """The replays minus the fitted response (``S p``, SI) of :func:`removed_fits`: the
+    replays to estimate the whitening on (the noise estimated under the model tested). None
+    when no re-run effect was named or significant."""
+    fits = removed_fits(d, sigs)
+    if not fits:
+        return None
+    out = []
+    for k, r in enumerate(replays):
+        dv = r.dv_n_mps.copy()
+        for e, values in fits.items():
+            p_si = np.asarray(values, dtype=float) * effect_by_id(e).si_per_unit
+            dv[:, 0:2] -= sigs[e][k] @ p_si
+        out.append(replace(r, dv_n_mps=dv))
+    return out
