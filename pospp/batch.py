@@ -151,13 +151,14 @@ def already_done(run_dir: Path, config: PipelineConfig, sha256: str) -> bool:
 
 def process_one(mcap_path: str, config_dict: dict[str, Any], out_root: str,
                 force: bool = False, run_name: str | None = None,
-                flights_at_once: int | None = None) -> FlightOutcome:
+                flights_at_once: int | None = None, threads: int | None = None
+                ) -> FlightOutcome:
     """Run the pipeline on one flight; never raises (the error goes in the outcome).
 
     Takes plain arguments so it pickles for a process pool or a Dask worker.
     ``flights_at_once``: flights this machine runs at once; the flight makes its A re-runs on
     its share of the cores (``pipeline.process_flight``'s ``threads``); None: one at a time
-    (a Dask worker's own threads share its cores).
+    (a Dask worker's own threads share its cores). ``threads``: that number instead.
     """
     from pospp import pipeline  # local: keeps worker start-up light and avoids a cycle
 
@@ -182,8 +183,9 @@ def process_one(mcap_path: str, config_dict: dict[str, Any], out_root: str,
                                  run_dir=name, **kept)
         # the batch owns its root: an earlier run of this flight is replaced (never a folder
         # holding files pospp did not write)
-        threads = (1 if flights_at_once is None
-                   else max(1, available_cores() // flights_at_once))
+        if threads is None:
+            threads = (1 if flights_at_once is None
+                       else max(1, available_cores() // flights_at_once))
         outcome = pipeline.process_flight(path, config, run_dir, force=True, threads=threads)
         s = outcome.summary
         return FlightOutcome(
@@ -258,6 +260,7 @@ def run_batch(
     scheduler_timeout_s: float = SCHEDULER_TIMEOUT_S,
     force: bool = False,
     on_result: Callable[[FlightOutcome], None] | None = None,
+    threads: int | None = None,
 ) -> list[FlightOutcome]:
     """Process many flight logs, one run folder each; returns this batch's manifest rows.
 
@@ -280,6 +283,10 @@ def run_batch(
         Re-run flights that are already done.
     on_result : callable, optional
         Called with each outcome as it arrives (progress display).
+    threads : int, optional
+        A re-runs each flight makes at once (``pipeline.process_flight``); default: the
+        machine's cores shared out among the ``workers`` (a Dask worker's flight: 1). The
+        outputs do not depend on it.
 
     Raises
     ------
@@ -295,12 +302,13 @@ def run_batch(
     with run_folder.BatchLock(root):
         return _run_locked(paths, config, root, workers=workers, scheduler=scheduler,
                            scheduler_timeout_s=scheduler_timeout_s, force=force,
-                           on_result=on_result)
+                           on_result=on_result, threads=threads)
 
 
 def _run_locked(paths: list[str], config: PipelineConfig, root: Path, *, workers: int,
                 scheduler: str | None, scheduler_timeout_s: float, force: bool,
-                on_result: Callable[[FlightOutcome], None] | None) -> list[FlightOutcome]:
+                on_result: Callable[[FlightOutcome], None] | None,
+                threads: int | None = None) -> list[FlightOutcome]:
     cfg = config.to_dict()
     known = _read_manifest(root)
     names = run_folder_names(paths)
@@ -340,16 +348,17 @@ def _run_locked(paths: list[str], config: PipelineConfig, root: Path, *, workers
                              f"{scheduler_timeout_s:g} s ({type(exc).__name__})") from None
         with client:
             dask_futures = [client.submit(process_one, p, cfg, str(root), force, names[p],
-                                          pure=False) for p in paths]
+                                          None, threads, pure=False) for p in paths]
             for dask_fut in dask_completed(dask_futures):
                 record(dask_fut.result())
     elif workers <= 1:
         for p in paths:
-            record(process_one(p, cfg, str(root), force, names[p], flights_at_once=1))
+            record(process_one(p, cfg, str(root), force, names[p], 1, threads))
     else:
         with ProcessPoolExecutor(max_workers=workers, initializer=_die_with_parent,
                                  initargs=(os.getpid(),)) as pool:
-            futures = [pool.submit(process_one, p, cfg, str(root), force, names[p], workers)
+            futures = [pool.submit(process_one, p, cfg, str(root), force, names[p], workers,
+                                   threads)
                        for p in paths]
             for fut in as_completed(futures):
                 record(fut.result())

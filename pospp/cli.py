@@ -183,8 +183,12 @@ def run(mcap_file: str, pipeline_file: str | None, out_dir: str, force: bool,
 @click.option("--scheduler-timeout-s", default=10.0, show_default=True,
               help="How long to wait for the scheduler [s].")
 @click.option("--force", is_flag=True, help="Re-run flights that are already done.")
+@click.option("--threads", default=None, type=click.IntRange(min=1),
+              help="A re-runs each flight makes at once; the outputs do not depend on it.  "
+                   "[default: the cores shared out among the workers]")
 def batch(inputs: tuple[str, ...], pipeline_file: str | None, out_root: str, workers: int,
-          scheduler: str | None, scheduler_timeout_s: float, force: bool) -> None:
+          scheduler: str | None, scheduler_timeout_s: float, force: bool,
+          threads: int | None) -> None:
     """Process an archive: MCAP files and/or folders of them (pospp.batch.run_batch)."""
     from pospp.batch import run_batch
 
@@ -210,7 +214,8 @@ def batch(inputs: tuple[str, ...], pipeline_file: str | None, out_root: str, wor
         click.echo(_printable(f"{o.status:8s} {o.duration_s:7.1f} s  {o.file}{tail}"))
 
     rows = run_batch(files, config, out_root, workers=workers, scheduler=scheduler,
-                     scheduler_timeout_s=scheduler_timeout_s, force=force, on_result=show)
+                     scheduler_timeout_s=scheduler_timeout_s, force=force, on_result=show,
+                     threads=threads)
     n_failed = sum(r.status == "failed" for r in rows)
     click.echo(f"{len(rows)} flights: {len(rows) - n_failed} processed or skipped, "
                f"{n_failed} failed; manifest: {Path(out_root) / 'manifest.parquet'}")

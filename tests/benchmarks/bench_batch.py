@@ -2,7 +2,7 @@
 
 Run on demand (not collected by pytest)::
 
-    python tests/benchmarks/bench_batch.py [--flights 20] [--workers 1 2]
+    python tests/benchmarks/bench_batch.py [--flights 20] [--workers 1 2] [--threads N]
 
 The archive is ``--flights`` copies (symbolic links, each its own run folder) of the bundled
 sample flight (27 min at 100 Hz, 4 legs) in /tmp/pospp_bench_batch. Each ``pospp batch`` runs
@@ -83,11 +83,12 @@ def single_run() -> tuple[float, float]:
     return wall, inner
 
 
-def batch(archive: Path, workers: int) -> tuple[float, pd.DataFrame]:
+def batch(archive: Path, workers: int, threads: str = "auto") -> tuple[float, pd.DataFrame]:
     out = WORK / f"out_j{workers}"
     shutil.rmtree(out, ignore_errors=True)
     wall = _timed([sys.executable, "-m", "pospp.cli", "batch", str(archive), "-p",
-                   str(PIPELINE), "-o", str(out), "-j", str(workers)])
+                   str(PIPELINE), "-o", str(out), "-j", str(workers),
+                   *(() if threads == "auto" else ("--threads", threads))])
     return wall, pd.read_parquet(out / "manifest.parquet")
 
 
@@ -95,6 +96,8 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--flights", type=int, default=20)
     ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--threads", default="auto",
+                    help="pospp batch --threads (auto: the cores shared out among the workers)")
     args = ap.parse_args()
     subprocess.run([sys.executable, "-c", "import pospp.pipeline"], cwd=REPO, env=_env(),
                    check=True)
@@ -111,7 +114,7 @@ def main() -> None:
     print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
     base = None
     for j in args.workers:
-        wall, manifest = batch(archive, j)
+        wall, manifest = batch(archive, j, args.threads)
         n_ok = int((manifest.status != "failed").sum())
         rate = 60.0 * n_ok / wall
         base = base or rate
