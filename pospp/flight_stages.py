@@ -493,8 +493,8 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
         d, sigs = diagnose_with(refined), refined
     removed = named_removed(replays, d, sigs) if sigs else None
     # the drift under the alternative: when the effect (re-run effects named; a vertical
-    # drift, _with_vertical) explains the excess drift the flight showed, the null
-    # realisations inject the drift the flight shows with it removed
+    # drift, diagnose.alternative.with_vertical) explains the excess drift the flight
+    # showed, the null realisations inject the drift the flight shows with it removed
     alt = with_vertical(replays, removed, d, candidate=True) if sigs else None
     if alt is None:
         return replace(d, null_model=note)
@@ -507,8 +507,9 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
         d, d_base = diagnose_with(sigs), d
         if removed is None and "vertical_gyro_drift" not in d.named:
             return replace(d_base, null_model=note)  # the vertical drift is not borne out
-        note = _null_note(null_dv, *drift, "", removed_names(d_base, sigs, alt is not removed),
-                          null_drift(calib_run, config))
+        gone = " + ".join(removed_names(d_base, sigs, alt is not removed))
+        note = _null_note(null_dv, *drift, f"re-estimated with {gone} removed",
+                          base=null_drift(calib_run, config))
         removed = named_removed(replays, d, sigs)
     removed = with_vertical(replays, removed, d, candidate=False)  # whitened under it too
     if removed is None:
@@ -519,16 +520,13 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
     return replace(d2 if set(d.named) <= set(d2.named) else d, null_model=note)
 
 
-def _null_note(null_dv: list | None, sigma_radps: float, tau_s: float, source: str,
-               removed: list[str] | None = None,
+def _null_note(null_dv: list | None, sigma_radps: float, tau_s: float, source: str, *,
                base: tuple[float, float, str] | None = None) -> str:
-    """One sentence: the null the diagnosis's p-values are calibrated on (``removed``,
-    ``base``: re-made with the drift re-estimated with those effects removed, and the drift
-    of the base model's null)."""
+    """One sentence: the null the diagnosis's p-values are calibrated on; ``base``: the
+    drift (sigma [rad/s], tau [s], source) of the base model's null when this one was re-made
+    under the alternative."""
     if not null_dv:
         return "no null realisations: nominal F distributions"
-    if removed:
-        source = f"re-estimated with {' + '.join(removed)} removed"
     text = (f"{len(null_dv)} null realisations, gyro drift {sigma_radps / DEG_PER_H_RADPS:.3g} "
             f"deg/h, tau {tau_s:.0f} s ({source})")
     if base is not None:

@@ -78,7 +78,8 @@ def _white_forcing_covariance(rep: LegReplay, cols: slice, rows: NDArray | None)
     q = s_k[idx] @ g.transpose(0, 2, 1)  # (R, 15, 2): S(t_j) g_j^T
     a = g.reshape(n, 15) @ q.transpose(1, 0, 2).reshape(15, n)  # g_i S(t_j) g_j^T
     later = np.repeat(np.repeat(idx[None, :] <= idx[:, None], 2, axis=0), 2, axis=1)
-    return np.where(later, a, a.T)
+    cov = np.where(later, a, a.T)
+    return 0.5 * (cov + cov.T)  # the (i, i) blocks are symmetric only to rounding
 
 
 def matern32(lag_s: NDArray, length_s: float) -> NDArray:

@@ -42,12 +42,8 @@ def with_vertical(replays: list, removed: list | None, d: Diagnosis, *, candidat
     else:
         return removed
     b_z = float(np.asarray(values, dtype=float)[0]) * effect_by_id(eid).si_per_unit
-    out = []
-    for r in (removed if removed is not None else replays):
-        dv = r.dv_n_mps.copy()
-        dv[:, 0:2] -= signature(eid, r)[:, :, 0] * b_z
-        out.append(replace(r, dv_n_mps=dv))
-    return out
+    reps = removed if removed is not None else replays
+    return _minus(reps, [signature(eid, r)[:, :, 0] * b_z for r in reps])
 
 
 def removed_fits(d: Diagnosis, sigs: dict[str, list[np.ndarray]]) -> dict[str, Any]:
@@ -63,24 +59,29 @@ def removed_fits(d: Diagnosis, sigs: dict[str, list[np.ndarray]]) -> dict[str, A
 
 
 def removed_names(d: Diagnosis, sigs: dict[str, list[np.ndarray]], vertical: bool
-                   ) -> list[str]:
+                  ) -> list[str]:
     """The effects whose response was removed for the drift under the alternative."""
     return [*removed_fits(d, sigs), *(["vertical_gyro_drift"] if vertical else [])]
 
 
 def named_removed(replays: list, d: Diagnosis, sigs: dict[str, list[np.ndarray]]
-                   ) -> list | None:
+                  ) -> list | None:
     """The replays minus the fitted response (``S p``, SI) of :func:`removed_fits`: the
     replays to estimate the whitening on (the noise estimated under the model tested). None
     when no re-run effect was named or significant."""
     fits = removed_fits(d, sigs)
     if not fits:
         return None
+    p_si = {e: np.asarray(v, dtype=float) * effect_by_id(e).si_per_unit for e, v in fits.items()}
+    return _minus(replays, [sum(sigs[e][k] @ p for e, p in p_si.items())
+                            for k in range(len(replays))])
+
+
+def _minus(replays: list, responses: list) -> list:
+    """Each replay with ``response`` ((M, 2) [m/s], N and E) taken off its B minus A."""
     out = []
-    for k, r in enumerate(replays):
+    for r, resp in zip(replays, responses, strict=True):
         dv = r.dv_n_mps.copy()
-        for e, values in fits.items():
-            p_si = np.asarray(values, dtype=float) * effect_by_id(e).si_per_unit
-            dv[:, 0:2] -= sigs[e][k] @ p_si
+        dv[:, 0:2] -= resp
         out.append(replace(r, dv_n_mps=dv))
     return out

@@ -3,6 +3,8 @@
 - B's velocity error driven by white gyro noise on a short level leg is an integrated
   Brownian motion: Var dv(t) = g^2 q t^3 / 3, Cov(dv(s), dv(t)) = g^2 q (s^2 t / 2 - s^3 / 6)
   for s <= t (Schuler terms below 0.5 % over 60 s).
+- B's velocity error driven by white accelerometer noise is a Brownian motion:
+  Cov(dv(s), dv(t)) = q min(s, t) per channel (Schuler terms below 0.5 % over 60 s).
 - A's own coloured error enters B minus A as Phi_v,v(t) e(t0) - e(t): checked against a Monte
   Carlo of a Matern-3/2 process simulated through its state-space form (exact discretisation
   by the matrix exponential, scipy), not through pospp's correlation function.
@@ -19,7 +21,12 @@ import pytest
 from _synthetic import survey_flight
 from scipy import linalg
 
-from pospp.calib.noise_model import NoiseModel, gyro_noise_covariance, reference_error_covariance
+from pospp.calib.noise_model import (
+    NoiseModel,
+    accel_noise_covariance,
+    gyro_noise_covariance,
+    reference_error_covariance,
+)
 from pospp.calib.replay import replay_leg
 from pospp.calib.solve import fit_noise_model
 from pospp.diagnose.workflow import diagnose_replays
@@ -50,6 +57,23 @@ def test_gyro_noise_covariance_is_integrated_brownian_motion(replays):
         # misses by 200 % at t = 1 s and by 5 % at 30 s
         np.testing.assert_allclose(k[:, ch, :, ch], want, rtol=0.01)
     assert np.abs(k[:, 0, :, 1]).max() < 1e-3 * want.max()
+
+
+def test_accel_noise_covariance_is_brownian_motion(replays):
+    """The same quadrature with the accelerometer's forcing C_nb w_a (issue 18 rewrote it as
+    g_i S(min(t_i, t_j)) g_j^T): unit white noise gives Cov(dv_i, dv_j) = min(t_i, t_j)."""
+    rep = replays[2]  # heading east
+    rows = np.array([1, 2, 5, 10, 30, 60])
+    k = accel_noise_covariance(rep, rows).reshape(rows.size, 2, rows.size, 2)
+    want = np.minimum.outer(rep.t_s[rows], rep.t_s[rows])
+    for ch in range(2):
+        np.testing.assert_allclose(k[:, ch, :, ch], want, rtol=0.01)
+    assert np.abs(k[:, 0, :, 1]).max() < 1e-2 * want.max()
+    # symmetric, and the rows' order does not matter
+    np.testing.assert_array_equal(k, k.transpose(2, 3, 0, 1))
+    perm = np.array([3, 0, 5, 1, 4, 2])
+    kp = accel_noise_covariance(rep, rows[perm]).reshape(rows.size, 2, rows.size, 2)
+    np.testing.assert_allclose(kp, k[perm][:, :, perm], rtol=1e-12, atol=1e-15)
 
 
 def _matern32_paths(t_s: np.ndarray, length_s: float, n: int, rng) -> np.ndarray:
