@@ -52,6 +52,7 @@ from pospp.flight_stages import (  # the stage functions, importable from here a
 from pospp.io import mcap_reader, parquet_tables, report_files, run_folder, trajectory_mcap
 from pospp.io.errors import IngestError
 from pospp.io.files import sha256_file
+from pospp.memory import release_free_heap
 from pospp.nav import events as sensor_events
 from pospp.nav import filter as nav_filter
 from pospp.qc.checks import comparison_text
@@ -111,6 +112,7 @@ class _Progress:
         self._stage_s: dict[str, float] = {}
 
     def stage(self, name: str) -> None:
+        release_free_heap()  # what the last stage freed (pospp.memory)
         now = time.perf_counter()
         if self._current is not None:
             self._stage_s[self._current] = (self._stage_s.get(self._current, 0.0)
