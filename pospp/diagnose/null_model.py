@@ -49,6 +49,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 from scipy import stats
 
@@ -232,25 +233,24 @@ def gauss_markov_path(dt_s: NDArray, sigma: float, tau_s: float, rng: np.random.
     """Three independent first-order Gauss-Markov paths, stationary start, shape (N, 3).
 
     Exact discretisation: ``x_k = e^(-dt_k / tau) x_k-1 + sigma sqrt(1 - e^(-2 dt_k / tau)) n_k``
-    (varying steps: the recursion by cumulative products of the decay, in blocks of 20
-    correlation times to stay within floating range).
+    with ``x_0 = sigma n_0`` (varying steps: the decay and the increment's sigma per step).
     """
     dt = np.asarray(dt_s, dtype=float)
     a = np.exp(-dt / tau_s)
     q = sigma * np.sqrt(1.0 - a**2)
     e = rng.standard_normal((dt.size, 3)) * q[:, None]
     e[0] = rng.standard_normal(3) * sigma
+    return _first_order_recursion(a, e)
+
+
+@njit(cache=True, nogil=True)
+def _first_order_recursion(a: NDArray, e: NDArray) -> NDArray:
+    """``x_0 = e_0``, ``x_k = a_k x_k-1 + e_k`` per column."""
     x = np.empty_like(e)
-    prev = np.zeros(3)
-    block = max(1, int(20.0 * tau_s / max(float(np.median(dt)), 1e-12)))
-    for s0 in range(0, dt.size, block):
-        sl = slice(s0, min(s0 + block, dt.size))
-        la = np.log(a[sl])
-        if s0 == 0:
-            la[0] = 0.0  # x_0 = e_0 (stationary start)
-        c = np.exp(np.cumsum(la))  # x_j = c_j (prev + sum_i<=j e_i / c_i)
-        x[sl] = c[:, None] * (prev + np.cumsum(e[sl] / c[:, None], axis=0))
-        prev = x[sl][-1]
+    x[0] = e[0]
+    for k in range(1, e.shape[0]):
+        for j in range(e.shape[1]):
+            x[k, j] = a[k] * x[k - 1, j] + e[k, j]
     return x
 
 

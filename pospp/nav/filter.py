@@ -275,19 +275,28 @@ class FilterResult:
 
 
 def rpy_covariance(q_nb: NDArray, att_cov: NDArray) -> NDArray:
-    """Covariance of [roll, pitch, yaw] errors from the phi covariance (d rpy = -E^-1 phi)."""
+    """Covariance of [roll, pitch, yaw] errors from the phi covariance (d rpy = -E^-1 phi).
+
+    E's columns are the roll, pitch and yaw axes in NED (``Rz Ry e_x``, ``Rz e_y``, ``e_z``),
+    so ``phi = E d rpy`` up to sign and, with det E = cos(pitch), in closed form::
+
+        E^-1 = [[ cz / cy,      sz / cy,      0],
+                [-sz,           cz,           0],
+                [ sy cz / cy,   sy sz / cy,   1]]
+
+    (c, s of yaw z and pitch y; singular at pitch +-90 deg, where roll and yaw merge).
+    """
     rpy = rotation.euler_from_quat(q_nb)
     cz, sz = np.cos(rpy[:, 2]), np.sin(rpy[:, 2])
     cy, sy = np.cos(rpy[:, 1]), np.sin(rpy[:, 1])
-    e = np.zeros((q_nb.shape[0], 3, 3))
-    # columns: Rz Ry e_x (roll axis), Rz e_y (pitch axis), e_z (yaw axis), all in NED
-    e[:, 0, 0] = cz * cy
-    e[:, 1, 0] = sz * cy
-    e[:, 2, 0] = -sy
-    e[:, 0, 1] = -sz
-    e[:, 1, 1] = cz
-    e[:, 2, 2] = 1.0
-    e_inv = np.linalg.inv(e)
+    e_inv = np.zeros((q_nb.shape[0], 3, 3))
+    e_inv[:, 0, 0] = cz / cy
+    e_inv[:, 0, 1] = sz / cy
+    e_inv[:, 1, 0] = -sz
+    e_inv[:, 1, 1] = cz
+    e_inv[:, 2, 0] = sy * e_inv[:, 0, 0]
+    e_inv[:, 2, 1] = sy * e_inv[:, 0, 1]
+    e_inv[:, 2, 2] = 1.0
     return e_inv @ att_cov @ np.swapaxes(e_inv, 1, 2)
 
 

@@ -102,6 +102,27 @@ def test_static_windows_find_the_initial_static_period():
     assert not ok[end > 41.0].any()
 
 
+@pytest.mark.parametrize("static_s", [3.0, 40.0, 300.0, 400.0])
+def test_leading_static_windows_are_a_prefix_of_all(static_s):
+    # leading_only reads windows in growing chunks (64, 128, ...) and stops at the first
+    # that is not static: the same classification as the whole list's first windows
+    t, w, f = _record(static_s, 100.0)
+    tv = np.arange(0.0, t[-1], 1.0)
+    vel = np.where((tv > static_s)[:, None], [5.0, 0.0, 0.0], 0.0)
+    end, ok = static_windows(t, w, f, gnss_vel_t_s=tv, gnss_v_n_mps=vel)
+    end1, ok1 = static_windows(t, w, f, gnss_vel_t_s=tv, gnss_v_n_mps=vel, leading_only=True)
+    n = int(np.argmin(ok)) + 1
+    assert not ok[n - 1] and ok[:n - 1].all() and n == ok1.size
+    np.testing.assert_array_equal(end1, end[:n])
+    np.testing.assert_array_equal(ok1, ok[:n])
+    t, w, f = _record(200.0, 0.0)  # static throughout: every window
+    end, ok = static_windows(t, w, f)
+    end1, ok1 = static_windows(t, w, f, leading_only=True)
+    assert ok.all()
+    np.testing.assert_array_equal(end1, end)
+    np.testing.assert_array_equal(ok1, ok)
+
+
 def test_mems_at_rest_without_motion_data_is_a_clear_error():
     t, w, f = _record(60.0, 0.0)
     lat = math.radians(45.0)

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from pospp import earth, rotation
-from pospp.nav.filter import FilterOptions, run_integrated_navigation
+from pospp.nav.filter import FilterOptions, rpy_covariance, run_integrated_navigation
 from pospp.nav.tuning import tuning_preset
 from pospp.types import GnssFixes, GnssVelocities, ImuSamples
 
@@ -282,3 +282,28 @@ def test_options_from_pipeline_config():
 def test_options_are_validated(name, value, match):
     with pytest.raises(ValueError, match=f"FilterOptions.{name}: {match}"):
         FilterOptions(**{name: value})
+
+
+def test_rpy_covariance_by_finite_differences_of_the_euler_angles():
+    # independent of E's closed form: perturb the attitude by small phi (C_nb' = (I - [phi x])
+    # C_nb, phi in NED), read the Euler angles back and fit d rpy = J phi numerically
+    rng = np.random.default_rng(4)
+    rpy = np.column_stack([rng.uniform(-0.5, 0.5, 20), rng.uniform(-1.2, 1.2, 20),
+                           rng.uniform(-3.0, 3.0, 20)])
+    q = rotation.quat_from_euler(rpy)
+    c = rng.normal(size=(20, 3, 3))
+    att_cov = c @ np.swapaxes(c, 1, 2)
+    got = rpy_covariance(q, att_cov)
+    h = 1e-7
+    for k in range(20):
+        c_nb = rotation.dcm_from_quat(q[k])
+        jac = np.empty((3, 3))
+        for j in range(3):
+            phi = np.zeros(3)
+            phi[j] = h
+            skew = rotation.skew(phi)
+            d = rotation.euler_from_dcm((np.eye(3) - skew) @ c_nb) - rpy[k]
+            jac[:, j] = (d + np.pi) % (2 * np.pi) - np.pi
+        jac /= h
+        np.testing.assert_allclose(got[k], jac @ att_cov[k] @ jac.T, rtol=1e-5,
+                                   atol=1e-6 * np.abs(att_cov[k]).max())
