@@ -19,7 +19,7 @@ import numpy as np
 
 from pospp import rotation
 from pospp.calib.compensate import joint_calibration
-from pospp.calib.replay import ImuIncrements, SolutionA, replay_leg
+from pospp.calib.replay import ImuIncrements, SolutionA, replay_velocity_error
 from pospp.calib.solve import DriftPrior
 from pospp.calib.stage import CalibrationRun, calibrate_flight
 from pospp.config import PipelineConfig
@@ -278,10 +278,9 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
         nav_r = navigate(log_r, config)
         ref_r = SolutionA(*nav_filter.solution_a_fields(nav_r, which=which))
         imu_r = imu_increments(log_r)
-        return [replay_leg(imu_r, ref_r, legs[i],
-                           accel_compensation=rc.accel_compensation,
-                           sample_rate_hz=rc.sample_rate_hz, sigma_floor_mps=rc.sigma_floor_mps,
-                           transition_step=int(rc.transition_step)).dv_n_mps for i in ids]
+        return [replay_velocity_error(imu_r, ref_r, legs[i],
+                                      accel_compensation=rc.accel_compensation,
+                                      sample_rate_hz=rc.sample_rate_hz) for i in ids]
 
     # the base: the flight with its GNSS replaced by A's solution at the antenna
     # (null_model.gnss_on_solution: noise on top of the flight's own GNSS noise is not linear)

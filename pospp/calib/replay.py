@@ -180,6 +180,65 @@ def replay_leg(
     transition_step : int
         IMU intervals per F evaluation for the numerical transition matrices.
     """
+    b, x0, c_nb0, ba, (k0, k1) = _b_over_leg(imu, solution_a, leg, gyro_bias_b_radps,
+                                             attitude_correction_n_rad, accel_compensation)
+    t_imu, ref_traj = imu.t_s, solution_a.trajectory
+    t0, ts, b_s, a_s = _samples(b, ref_traj, t_imu[k0], t_imu[k1], sample_rate_hz)
+    dv = b_s.v_n_mps - a_s.v_n_mps
+    dr = earth.llh_difference_ned_m(
+        b_s.lat_rad, b_s.lon_rad, b_s.height_m, a_s.lat_rad, a_s.lon_rad, a_s.height_m
+    )
+    sig = np.empty((ts.size, 3))
+    for c in range(3):
+        sig[:, c] = np.interp(t0 + ts, ref_traj.t_s, solution_a.v_sigma_n_mps[:, c])
+    sig = np.maximum(sig, sigma_floor_mps)
+    # numerical transition matrices along B's actual trajectory
+    dt = np.diff(b.t_s)
+    f_b = (imu.dv_b_mps[k0:k1] - ba * dt[:, None]) / dt[:, None]
+    phi_all = transition_matrices(b, f_b, step=transition_step)
+    t_phi = b.t_s[:: transition_step][: phi_all.shape[0]] - t0
+    idx = np.clip(np.searchsorted(t_phi, ts - 1e-9), 0, phi_all.shape[0] - 1)
+    return LegReplay(
+        leg=leg,
+        t0_s=t0,
+        t_s=ts,
+        dv_n_mps=dv,
+        dr_n_m=dr,
+        sigma_v_n_mps=sig,
+        phi=phi_all[idx],
+        c_nb0=c_nb0,
+        c_nb=rotation.dcm_from_quat(b_s.q_nb),
+        lat_rad=float(x0.lat_rad),
+        height_m=float(x0.height_m),
+        v_n0_mps=x0.v_n_mps.copy(),
+    )
+
+
+def replay_velocity_error(
+    imu: ImuIncrements,
+    solution_a: SolutionA,
+    leg: Leg,
+    *,
+    gyro_bias_b_radps: NDArray | None = None,
+    attitude_correction_n_rad: NDArray | None = None,
+    accel_compensation: str = "filter",
+    sample_rate_hz: float = 1.0,
+) -> NDArray:
+    """B minus A in velocity over one leg, NED [m/s], shape (M, 3): ``replay_leg(...).dv_n_mps``
+    (same arguments, samples and values) without the transition matrices, which cost most of
+    a replay and which the null realisations and the re-run signatures do not use."""
+    b, _, _, _, (k0, k1) = _b_over_leg(imu, solution_a, leg, gyro_bias_b_radps,
+                                       attitude_correction_n_rad, accel_compensation)
+    _, _, b_s, a_s = _samples(b, solution_a.trajectory, imu.t_s[k0], imu.t_s[k1],
+                              sample_rate_hz)
+    return b_s.v_n_mps - a_s.v_n_mps
+
+
+def _b_over_leg(imu: ImuIncrements, solution_a: SolutionA, leg: Leg,
+                gyro_bias_b_radps: NDArray | None, attitude_correction_n_rad: NDArray | None,
+                accel_compensation: str) -> tuple:
+    """B integrated over the leg from A's state at its first IMU epoch (``replay_leg``):
+    (trajectory, initial NavState, initial C_nb, accelerometer bias removed, (k0, k1))."""
     t_imu = imu.t_s
     k0 = int(np.searchsorted(t_imu, leg.start_s))
     k1 = int(np.searchsorted(t_imu, leg.end_s, side="right")) - 1
@@ -214,36 +273,13 @@ def replay_leg(
         accel_bias_b_mps2=ba,
         previous_increments=(imu.dtheta_b_rad[k0 - 1], imu.dv_b_mps[k0 - 1]),
     )
-    # sample times: every 1/sample_rate from B's start, within the leg
-    t0 = float(t_imu[k0])
-    ts = np.arange(0.0, t_imu[k1] - t0 + 1e-9, 1.0 / sample_rate_hz)
-    b_s = strapdown.interpolate_trajectory(b, t0 + ts)
-    a_s = strapdown.interpolate_trajectory(ref_traj, t0 + ts)
-    dv = b_s.v_n_mps - a_s.v_n_mps
-    dr = earth.llh_difference_ned_m(
-        b_s.lat_rad, b_s.lon_rad, b_s.height_m, a_s.lat_rad, a_s.lon_rad, a_s.height_m
-    )
-    sig = np.empty((ts.size, 3))
-    for c in range(3):
-        sig[:, c] = np.interp(t0 + ts, ref_traj.t_s, solution_a.v_sigma_n_mps[:, c])
-    sig = np.maximum(sig, sigma_floor_mps)
-    # numerical transition matrices along B's actual trajectory
-    dt = np.diff(b.t_s)
-    f_b = (imu.dv_b_mps[k0:k1] - ba * dt[:, None]) / dt[:, None]
-    phi_all = transition_matrices(b, f_b, step=transition_step)
-    t_phi = b.t_s[:: transition_step][: phi_all.shape[0]] - t0
-    idx = np.clip(np.searchsorted(t_phi, ts - 1e-9), 0, phi_all.shape[0] - 1)
-    return LegReplay(
-        leg=leg,
-        t0_s=t0,
-        t_s=ts,
-        dv_n_mps=dv,
-        dr_n_m=dr,
-        sigma_v_n_mps=sig,
-        phi=phi_all[idx],
-        c_nb0=c_nb0,
-        c_nb=rotation.dcm_from_quat(b_s.q_nb),
-        lat_rad=float(x0.lat_rad),
-        height_m=float(x0.height_m),
-        v_n0_mps=x0.v_n_mps.copy(),
-    )
+    return b, x0, c_nb0, ba, (k0, k1)
+
+
+def _samples(b: strapdown.Trajectory, ref_traj: strapdown.Trajectory, t_start_s: float,
+             t_end_s: float, sample_rate_hz: float) -> tuple:
+    """B and A at every 1 / sample_rate from B's start within the leg: (t0, ts, B, A)."""
+    t0 = float(t_start_s)
+    ts = np.arange(0.0, t_end_s - t0 + 1e-9, 1.0 / sample_rate_hz)
+    return (t0, ts, strapdown.interpolate_trajectory(b, t0 + ts),
+            strapdown.interpolate_trajectory(ref_traj, t0 + ts))

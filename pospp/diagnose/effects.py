@@ -22,7 +22,7 @@ order). Three ways, picked per effect:
 * A perturbation of algorithm A (lever arm): B minus A changes by B's propagated initial error
   minus A's own error.
 * Finite differences of B re-run on perturbed IMU increments (time offset, gyro scale
-  factor): the one strapdown kernel, through :func:`pospp.calib.replay.replay_leg`.
+  factor): the one strapdown kernel, through :func:`pospp.calib.replay.replay_velocity_error`.
 
 Effects (stable identifiers)
 ----------------------------
@@ -80,7 +80,7 @@ from numpy.typing import NDArray
 
 from pospp import earth, rotation
 from pospp.calib.design import leg_sensitivities
-from pospp.calib.replay import ImuIncrements, LegReplay, SolutionA, replay_leg
+from pospp.calib.replay import ImuIncrements, LegReplay, SolutionA, replay_velocity_error
 from pospp.effects_catalog import catalog_entry
 from pospp.nav.error_model import BG, DR, DV, PHI
 from pospp.units import ARCSEC_RAD, UG_MPS2  # noqa: F401  (display units, used as fx.*)
@@ -278,13 +278,13 @@ def _sig_earth_rate(rep: LegReplay, base_x_leg: NDArray) -> NDArray:
 
 def _rerun_dv(rep: LegReplay, ctx: ReplayContext, imu: ImuIncrements) -> NDArray:
     """B's horizontal velocity at the replay's samples after re-running on ``imu``."""
-    kw = dict(ctx.replay_kwargs)
-    kw["sample_rate_hz"] = 1.0 / float(rep.t_s[1] - rep.t_s[0])
-    kw["transition_step"] = 10**9
-    r = replay_leg(imu, ctx.solution_a, rep.leg, **kw)
-    m = min(r.t_s.size, rep.t_s.size)
+    kw = {k: v for k, v in ctx.replay_kwargs.items()
+          if k in ("accel_compensation", "gyro_bias_b_radps", "attitude_correction_n_rad")}
+    dv = replay_velocity_error(imu, ctx.solution_a, rep.leg,
+                               sample_rate_hz=1.0 / float(rep.t_s[1] - rep.t_s[0]), **kw)
+    m = min(dv.shape[0], rep.t_s.size)
     out = np.zeros((rep.t_s.size, 2))
-    out[:m] = r.dv_n_mps[:m, 0:2]
+    out[:m] = dv[:m, 0:2]
     out[m:] = out[m - 1]
     return out
 

@@ -184,3 +184,20 @@ def test_causal_compensation_removes_a_known_changing_bias_and_uses_no_later_dat
     fused = causal_gyro_bias_b_radps(fwd, s_fwd, np.array([3.0, 0.0, 0.0]),
                                      np.array([1.0, np.sqrt(3.0), np.inf]))
     np.testing.assert_allclose(fused, [[2.0, 1.5, 3.0]], rtol=1e-12)
+
+
+def test_replay_velocity_error_is_replay_legs_dv():
+    """replay_velocity_error (no transition matrices) gives replay_leg's B minus A exactly,
+    with and without a gyro bias, an attitude correction and A's accelerometer bias."""
+    from pospp.calib.replay import replay_leg, replay_velocity_error
+
+    tr = rhumb_line(LAT, 1000.0, 60.0, 0.5, 10.0, 200.0)
+    imu_true, ref = _flight(tr, tr.t_s.size)
+    imu = type(imu_true)(tr.t_s, tr.dtheta_b_rad + 1e-6, tr.dv_b_mps)
+    leg = Leg(0, 5.0, 195.0, 0.5, 60.0, 1000.0, 0, 0, 0, 0)
+    for kw in ({}, {"gyro_bias_b_radps": np.array([1e-6, -2e-6, 0.0]),
+                    "attitude_correction_n_rad": np.array([1e-4, 0.0, -2e-4]),
+                    "accel_compensation": "none", "sample_rate_hz": 2.0}):
+        dv = replay_velocity_error(imu, ref, leg, **kw)
+        assert np.abs(dv).max() > 1e-3  # the injected bias shows
+        np.testing.assert_array_equal(dv, replay_leg(imu, ref, leg, **kw).dv_n_mps)
