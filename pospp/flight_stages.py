@@ -255,9 +255,12 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     added to the base from A's alignment point on; A re-run exactly as configured, B replayed
     on the same legs (same start and end times), minus the base's own B minus A. The base is
     the flight with its GNSS replaced by A's solution at the antenna
-    (:func:`pospp.diagnose.null_model.gnss_on_solution`). Returns ``n`` lists of (M, 3)
-    arrays, legs in id order (fewer when A fails on more than ``n`` of ``2 n`` perturbed
-    logs). ``drift``: (sigma [rad/s], tau [s]) of the gyro drift to inject instead
+    (:func:`pospp.diagnose.null_model.gnss_on_solution`). The noise is drawn at the flight's
+    IMU rate, and A and B run on the IMU summed down to ``[pairs] null_imu_rate_hz``
+    (:func:`null_decimation`, :func:`null_model.decimate_imu`): the same realisations as at
+    the flight's rate to about 1e-4 of their size, at a fraction of the cost. Returns ``n``
+    lists of (M, 3) arrays, legs in id order (fewer when A fails on more than ``n`` of
+    ``2 n`` perturbed logs). ``drift``: (sigma [rad/s], tau [s]) of the gyro drift to inject instead
     (:func:`drift_under_alternative`). ``threads``: realisations made at once
     (:func:`pospp.threads.map_in_threads`); the perturbed logs are drawn in the same order
     from the same generator, so the result does not depend on it.
@@ -288,12 +291,13 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     base = null_model.gnss_on_solution(log, solution, int(log.imu.time_ns[0]),
                                        nav.lever_arm.lever_b_m)
     pos_sig, vel_sig = null_model.gnss_noise_from_residuals(log, base)
+    factor = null_decimation(log, config.pairs.null_imu_rate_hz)
     noise = null_model.NullNoise(
         gyro_arw_radpsqrts=float(arw), accel_vrw_mpspsqrts=float(vrw),
         gyro_gm_sigma_radps=float(gm_sigma), gyro_gm_tau_s=float(gm_tau),
         accel_gm_sigma_mps2=float(si.accel_gm_sigma_mps2), accel_gm_tau_s=float(si.accel_gm_tau_s),
         pos_sigma_ned_m=pos_sig, vel_sigma_ned_mps=vel_sig)
-    base_dv = b_minus_a(base)
+    base_dv = b_minus_a(null_model.decimate_imu(base, factor))
     t_align_ns = int(log.imu.time_ns[0]) + round(nav.alignment.t_s * 1e9)
     rng = np.random.default_rng(seed)
 
@@ -303,8 +307,10 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
         except ValueError:  # a realisation whose A fails (alignment) is skipped
             return None
 
-    perturbed = (null_model.perturb_log(base, noise, rng, from_time_ns=t_align_ns)
-                 for _ in range(2 * n))
+    # drawn at the flight's rate (the same draws at any null_imu_rate_hz), then summed down
+    perturbed = (null_model.decimate_imu(
+        null_model.perturb_log(base, noise, rng, from_time_ns=t_align_ns), factor)
+        for _ in range(2 * n))
     out: list[list[np.ndarray]] = []
     while len(out) < n:
         # never more logs drawn than realisations still missing: the draws, and so the
@@ -316,6 +322,16 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
             if dv is not None:
                 out.append([d - d0 for d, d0 in zip(dv, base_dv, strict=True)])
     return out
+
+
+def null_decimation(log: mcap_reader.FlightLog, rate_hz: float) -> int:
+    """IMU samples summed per null-realisation sample: the largest whole factor keeping the
+    rate at or above ``rate_hz`` (``[pairs] null_imu_rate_hz``; 0: 1, the flight's rate)."""
+    t = np.asarray(log.imu.time_ns, dtype=np.int64)
+    if rate_hz <= 0.0 or t.size < 2:
+        return 1
+    flight_hz = 1e9 / float(np.median(np.diff(t)))
+    return max(1, int(flight_hz / rate_hz + 1e-6))
 
 
 def drift_under_alternative(calib_run: CalibrationRun, replays_minus_effect: list,

@@ -192,6 +192,35 @@ def perturb_log(log: Any, noise: NullNoise, rng: np.random.Generator,
                    vel=replace(vel, v_n_mps=v))
 
 
+def decimate_imu(log: Any, factor: int) -> Any:
+    """The log with its IMU samples summed in groups of ``factor`` (the null's lower rate).
+
+    Sample i of the result ends at the flight's stamp ``k_i = factor i`` and holds the mean
+    rate and specific force over (t[k_i-1], t[k_i]]: ``sum_j w_j dt_j / sum_j dt_j`` over the
+    flight's samples j in it, so the increments (``w dt``) are the flight's summed exactly,
+    gaps included. The first sample is kept as it is; samples after the last whole group are
+    dropped. ``factor`` 1: the log itself.
+    """
+    if factor <= 1:
+        return log
+    imu = log.imu
+    t = np.asarray(imu.time_ns, dtype=np.int64)
+    keep = np.arange(0, t.size, factor)
+    dt = np.diff(t).astype(float) * 1e-9
+
+    def mean_over_groups(rate: NDArray) -> NDArray:
+        inc = np.asarray(rate)[1:] * dt[:, None]  # increment of interval (t[j-1], t[j]]
+        sums = np.add.reduceat(inc[: keep[-1]], keep[:-1], axis=0)
+        out = np.empty((keep.size, 3))
+        out[0] = rate[0]
+        out[1:] = sums / ((t[keep[1:]] - t[keep[:-1]]) * 1e-9)[:, None]
+        return out
+
+    return replace(log, imu=replace(imu, time_ns=t[keep],
+                                    w_ib_b_radps=mean_over_groups(imu.w_ib_b_radps),
+                                    f_ib_b_mps2=mean_over_groups(imu.f_ib_b_mps2)))
+
+
 def gnss_on_solution(log: Any, solution: NavSolution, epoch_ns: int, lever_b_m: NDArray) -> Any:
     """The flight log with its GNSS replaced by A's solution at the antenna (the null's base).
 
