@@ -10,6 +10,7 @@ Nothing here touches files but through :mod:`pospp.io`'s reader.
 from __future__ import annotations
 
 import itertools
+from collections.abc import Sequence
 from dataclasses import replace
 from functools import partial
 from pathlib import Path
@@ -20,6 +21,7 @@ import numpy as np
 from pospp import rotation
 from pospp.calib.compensate import joint_calibration
 from pospp.calib.replay import ImuIncrements, SolutionA, replay_velocity_error
+from pospp.calib.segment import Leg
 from pospp.calib.solve import DriftPrior
 from pospp.calib.stage import CalibrationRun, calibrate_flight
 from pospp.config import PipelineConfig
@@ -42,7 +44,7 @@ from pospp.nav import tuning as nav_tuning
 from pospp.nav.strapdown import increments_from_rates
 from pospp.threads import map_in_threads
 from pospp.types import FLU_TO_FRD
-from pospp.units import DEG_PER_H_RADPS
+from pospp.units import DEG_PER_H_RADPS, t_s_from_time_ns
 
 
 def sensor_to_body_dcm(sensor_frame: str, mounting_rpy_deg: tuple[float, float, float]) -> Any:
@@ -297,7 +299,8 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
         gyro_gm_sigma_radps=float(gm_sigma), gyro_gm_tau_s=float(gm_tau),
         accel_gm_sigma_mps2=float(si.accel_gm_sigma_mps2), accel_gm_tau_s=float(si.accel_gm_tau_s),
         pos_sigma_ned_m=pos_sig, vel_sigma_ned_mps=vel_sig)
-    base_dv = b_minus_a(null_model.decimate_imu(base, factor))
+    leg_ns = leg_epochs_ns(log, calib_run.legs)
+    base_dv = b_minus_a(null_model.decimate_imu(base, factor, leg_ns))
     t_align_ns = int(log.imu.time_ns[0]) + round(nav.alignment.t_s * 1e9)
     rng = np.random.default_rng(seed)
 
@@ -309,7 +312,7 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
 
     # drawn at the flight's rate (the same draws at any null_imu_rate_hz), then summed down
     perturbed = (null_model.decimate_imu(
-        null_model.perturb_log(base, noise, rng, from_time_ns=t_align_ns), factor)
+        null_model.perturb_log(base, noise, rng, from_time_ns=t_align_ns), factor, leg_ns)
         for _ in range(2 * n))
     out: list[list[np.ndarray]] = []
     while len(out) < n:
@@ -332,6 +335,21 @@ def null_decimation(log: mcap_reader.FlightLog, rate_hz: float) -> int:
         return 1
     flight_hz = 1e9 / float(np.median(np.diff(t)))
     return max(1, int(flight_hz / rate_hz + 1e-6))
+
+
+def leg_epochs_ns(log: mcap_reader.FlightLog, legs: Sequence[Leg]) -> np.ndarray:
+    """The IMU stamps [ns] a decimated log keeps so that B runs over each leg as on the
+    flight: the epoch before B's first (its previous increments), B's first and its last
+    (:func:`pospp.calib.replay.replay_velocity_error`: the first epoch at or after the leg's
+    start, at least the second, and the last at or before its end)."""
+    t_ns = np.asarray(log.imu.time_ns, dtype=np.int64)
+    t_s = t_s_from_time_ns(t_ns, int(t_ns[0]))  # imu_increments' axis
+    out: list[int] = []
+    for leg in legs:
+        k0 = max(int(np.searchsorted(t_s, leg.start_s)), 1)
+        k1 = int(np.searchsorted(t_s, leg.end_s, side="right")) - 1
+        out += [k0 - 1, k0, max(k1, k0)]
+    return t_ns[np.clip(out, 0, t_ns.size - 1)] if out else np.zeros(0, np.int64)
 
 
 def drift_under_alternative(calib_run: CalibrationRun, replays_minus_effect: list,

@@ -192,20 +192,25 @@ def perturb_log(log: Any, noise: NullNoise, rng: np.random.Generator,
                    vel=replace(vel, v_n_mps=v))
 
 
-def decimate_imu(log: Any, factor: int) -> Any:
+def decimate_imu(log: Any, factor: int, keep_time_ns: NDArray | None = None) -> Any:
     """The log with its IMU samples summed in groups of ``factor`` (the null's lower rate).
 
-    Sample i of the result ends at the flight's stamp ``k_i = factor i`` and holds the mean
-    rate and specific force over (t[k_i-1], t[k_i]]: ``sum_j w_j dt_j / sum_j dt_j`` over the
-    flight's samples j in it, so the increments (``w dt``) are the flight's summed exactly,
-    gaps included. The first sample is kept as it is; samples after the last whole group are
-    dropped. ``factor`` 1: the log itself.
+    The samples kept end at the flight's stamps with indices ``0, factor, 2 factor, ...``
+    and at the stamps in ``keep_time_ns`` (the legs' first and last epochs: B then starts and
+    ends where the flight's B did, on the same sample grid); each holds the mean rate and
+    specific force over the interval since the previous one kept, ``sum_j w_j dt_j /
+    sum_j dt_j`` over the flight's samples j in it, so the increments (``w dt``) are the
+    flight's summed exactly, gaps included. The first sample is kept as it is; samples after
+    the last one kept are dropped. ``factor`` 1: the log itself.
     """
     if factor <= 1:
         return log
     imu = log.imu
     t = np.asarray(imu.time_ns, dtype=np.int64)
     keep = np.arange(0, t.size, factor)
+    if keep_time_ns is not None and np.size(keep_time_ns):
+        at = np.searchsorted(t, np.asarray(keep_time_ns, dtype=np.int64))
+        keep = np.union1d(keep, at[(at < t.size)])
     dt = np.diff(t).astype(float) * 1e-9
 
     def mean_over_groups(rate: NDArray) -> NDArray:
