@@ -387,13 +387,14 @@ class PairsConfig:
     null_imu_noise: NullImuNoise = NullImuNoise.MEASURED
     """White IMU noise of the null realisations: "measured" (read from the samples' second
     differences) or "grade" (the grade's ARW / VRW); the [imu] Gauss-Markov drifts in both."""
-    null_imu_rate_hz: float = _key(50.0, ge=0.0)
-    """IMU rate the null realisations run A and B at [Hz]: the flight's increments summed in
-    whole groups (a 200 Hz flight's realisations at 50 Hz cost a quarter). B minus A's response
-    to the injected noise is the noise's density through the error dynamics, neither of which
-    depends on the rate; what the summing changes (the strapdown's algorithm error) is in the
-    base and the realisation alike and cancels (docs/diagnose.md, "The null at a lower IMU
-    rate"). 0, or a rate above half the flight's: the flight's rate."""
+    rerun_imu_rate_hz: float = _key(50.0, ge=0.0)
+    """IMU rate A and B re-run at for the null realisations and the diagnosis's re-run
+    signatures [Hz]: the flight's increments summed in whole groups (a 200 Hz flight's
+    re-runs at 50 Hz cost a quarter). A re-run's B minus A response (to the null's noise, to
+    an effect's step) is carried by the error dynamics, which do not depend on the rate; what
+    the summing changes (the strapdown's algorithm error) is in the re-run and its base alike
+    and cancels (docs/diagnose.md, "The null at a lower IMU rate"). 0, or a rate above half
+    the flight's: the flight's rate."""
 
     def policy(self) -> PairPolicy:
         """The calibration stage's pairing policy (:class:`pospp.calib.pairs.PairPolicy`)."""

@@ -258,8 +258,8 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     on the same legs (same start and end times), minus the base's own B minus A. The base is
     the flight with its GNSS replaced by A's solution at the antenna
     (:func:`pospp.diagnose.null_model.gnss_on_solution`). The noise is drawn at the flight's
-    IMU rate, and A and B run on the IMU summed down to ``[pairs] null_imu_rate_hz``
-    (:func:`null_decimation`, :func:`null_model.decimate_imu`): the same realisations as at
+    IMU rate, and A and B run on the IMU summed down to ``[pairs] rerun_imu_rate_hz``
+    (:func:`rerun_decimation`, :func:`null_model.decimate_imu`): the same realisations as at
     the flight's rate to about 1e-4 of their size, at a fraction of the cost. Returns ``n``
     lists of (M, 3) arrays, legs in id order (fewer when A fails on more than ``n`` of
     ``2 n`` perturbed logs). ``drift``: (sigma [rad/s], tau [s]) of the gyro drift to inject instead
@@ -293,7 +293,7 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     base = null_model.gnss_on_solution(log, solution, int(log.imu.time_ns[0]),
                                        nav.lever_arm.lever_b_m)
     pos_sig, vel_sig = null_model.gnss_noise_from_residuals(log, base)
-    factor = null_decimation(log, config.pairs.null_imu_rate_hz)
+    factor = rerun_decimation(log, config.pairs.rerun_imu_rate_hz)
     noise = null_model.NullNoise(
         gyro_arw_radpsqrts=float(arw), accel_vrw_mpspsqrts=float(vrw),
         gyro_gm_sigma_radps=float(gm_sigma), gyro_gm_tau_s=float(gm_tau),
@@ -310,7 +310,7 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
         except ValueError:  # a realisation whose A fails (alignment) is skipped
             return None
 
-    # drawn at the flight's rate (the same draws at any null_imu_rate_hz), then summed down
+    # drawn at the flight's rate (the same draws at any rerun_imu_rate_hz), then summed down
     perturbed = (null_model.decimate_imu(
         null_model.perturb_log(base, noise, rng, from_time_ns=t_align_ns), factor, leg_ns)
         for _ in range(2 * n))
@@ -327,9 +327,9 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     return out
 
 
-def null_decimation(log: mcap_reader.FlightLog, rate_hz: float) -> int:
+def rerun_decimation(log: mcap_reader.FlightLog, rate_hz: float) -> int:
     """IMU samples summed per null-realisation sample: the largest whole factor keeping the
-    rate at or above ``rate_hz`` (``[pairs] null_imu_rate_hz``; 0: 1, the flight's rate)."""
+    rate at or above ``rate_hz`` (``[pairs] rerun_imu_rate_hz``; 0: 1, the flight's rate)."""
     t = np.asarray(log.imu.time_ns, dtype=np.int64)
     if rate_hz <= 0.0 or t.size < 2:
         return 1
@@ -350,6 +350,35 @@ def leg_epochs_ns(log: mcap_reader.FlightLog, legs: Sequence[Leg]) -> np.ndarray
         k1 = int(np.searchsorted(t_s, leg.end_s, side="right")) - 1
         out += [k0 - 1, k0, max(k1, k0)]
     return t_ns[np.clip(out, 0, t_ns.size - 1)] if out else np.zeros(0, np.int64)
+
+
+def rerun_base(log: mcap_reader.FlightLog, calib_run: CalibrationRun, config: PipelineConfig
+               ) -> tuple[mcap_reader.FlightLog, CalibrationRun]:
+    """The log and calibration run the diagnosis's A re-run signatures are made against.
+
+    The log's IMU summed down to ``[pairs] rerun_imu_rate_hz`` (:func:`rerun_decimation`,
+    keeping the legs' epochs, :func:`leg_epochs_ns`), and the run with its replays' B minus
+    A replaced by the summed-down log's own (A run on it as configured): a re-run's response
+    is then B minus A at the lower rate less B minus A at the lower rate, the strapdown's
+    rate-dependent error cancelling as in the null realisations (docs/diagnose.md, "The null
+    at a lower IMU rate"). The log and run themselves when nothing is summed or A fails on
+    the summed-down log."""
+    factor = rerun_decimation(log, config.pairs.rerun_imu_rate_hz)
+    if factor == 1:
+        return log, calib_run
+    log_r = null_model.decimate_imu(log, factor, leg_epochs_ns(log, calib_run.legs))
+    try:
+        nav_r = navigate(log_r, config)
+    except ValueError:
+        return log, calib_run
+    which = config.replay.reference if nav_r.smoothed is not None else "forward"
+    ref = SolutionA(*nav_filter.solution_a_fields(nav_r, which=which))
+    imu_r = imu_increments(log_r)
+    legs = {leg.leg_id: leg for leg in calib_run.legs}
+    replays = {i: replace(rep, dv_n_mps=replay_velocity_error(
+        imu_r, ref, legs[i], accel_compensation=config.replay.accel_compensation,
+        sample_rate_hz=config.replay.sample_rate_hz)) for i, rep in calib_run.replays.items()}
+    return log_r, replace(calib_run, replays=replays)
 
 
 def drift_under_alternative(calib_run: CalibrationRun, replays_minus_effect: list,

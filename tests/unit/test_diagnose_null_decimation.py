@@ -1,4 +1,4 @@
-"""The null realisations at a lower IMU rate (``[pairs] null_imu_rate_hz``) are the same
+"""The null realisations at a lower IMU rate (``[pairs] rerun_imu_rate_hz``) are the same
 realisations: one noise draw added to a simulated 200 Hz flight, and B minus A's response to
 it computed at 200 Hz and again with the IMU summed down to 50 Hz and 25 Hz
 (:func:`pospp.diagnose.null_model.decimate_imu`), agree to a small fraction of the response.
@@ -54,11 +54,11 @@ def _b_minus_a(log, run, cfg):
 
 def test_decimation_factor_from_the_rate(flight):
     log, _, _, _ = flight
-    assert fs.null_decimation(log, 50.0) == 4
-    assert fs.null_decimation(log, 25.0) == 8
-    assert fs.null_decimation(log, 60.0) == 3
-    assert fs.null_decimation(log, 0.0) == 1
-    assert fs.null_decimation(log, 400.0) == 1
+    assert fs.rerun_decimation(log, 50.0) == 4
+    assert fs.rerun_decimation(log, 25.0) == 8
+    assert fs.rerun_decimation(log, 60.0) == 3
+    assert fs.rerun_decimation(log, 0.0) == 1
+    assert fs.rerun_decimation(log, 400.0) == 1
 
 
 def test_summed_down_response_is_the_full_rate_response(flight):
