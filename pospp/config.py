@@ -371,30 +371,23 @@ class PairsConfig:
     """"numerical" (F(t) along B) or "closed_form" (paper Eq. 10/13 with corrected signs)."""
     noise: NoiseModel = NoiseModel.GYRO_RW
     """Residual model of the least squares: "gyro_rw" (B's error driven by the gyro random
-    walk and, when the grade has one, its Gauss-Markov drift; docs/calibration.md) or
-    "white"."""
+    walk and the grade's Gauss-Markov drift; docs/calibration.md) or "white"."""
     noise_step_s: float = _key(10.0, gt=0.0)
     """Spacing of the samples the correlated-noise least squares uses [s]."""
     estimate_gyro_z: bool = False
     """Also estimate the vertical body gyro bias (weakly observable on level legs)."""
     null_realisations: int = _key(10, ge=0, le=1000)
     """Null realisations of B minus A (docs/diagnose.md): the calibration's covariance and the
-    diagnosis's null. 0: the least squares' formal covariance and the nominal F distribution
-    (which cries wolf on flights with GNSS noise)."""
+    diagnosis's null. 0: the formal covariance and nominal F (cries wolf on GNSS noise)."""
     diagnose_alpha: float = _key(0.05, gt=0.0, lt=0.5)
     """Significance level of the diagnosis's tests (candidates Bonferroni-corrected per step;
     on null flights "none" in at least 1 - alpha of runs: docs/diagnose.md)."""
     null_imu_noise: NullImuNoise = NullImuNoise.MEASURED
-    """White IMU noise of the null realisations: "measured" (read from the samples' second
-    differences) or "grade" (the grade's ARW / VRW); the [imu] Gauss-Markov drifts in both."""
+    """Null's white IMU noise: "measured" (second differences) or "grade"; [imu] drifts both."""
     rerun_imu_rate_hz: float = _key(50.0, ge=0.0)
-    """IMU rate A and B re-run at for the null realisations and the diagnosis's re-run
-    signatures [Hz]: the flight's increments summed in whole groups (a 200 Hz flight's
-    re-runs at 50 Hz cost a quarter). A re-run's B minus A response (to the null's noise, to
-    an effect's step) is carried by the error dynamics, which do not depend on the rate; what
-    the summing changes (the strapdown's algorithm error) is in the re-run and its base alike
-    and cancels (docs/diagnose.md, "The null at a lower IMU rate"). 0, or a rate above half
-    the flight's: the flight's rate."""
+    """IMU rate [Hz] A and B re-run at for the null realisations and the diagnosis's re-run
+    signatures: the flight's increments summed (docs/diagnose.md, "The null at a lower IMU
+    rate"). 0, or above half the flight's rate: the flight's rate."""
 
     def policy(self) -> PairPolicy:
         """The calibration stage's pairing policy (:class:`pospp.calib.pairs.PairPolicy`)."""
@@ -412,11 +405,10 @@ class CompensationConfig:
     rerun_filter: bool = True
     """Re-run algorithm A with the calibrated gyro bias removed (the compensated trajectory)."""
     mode: CompensationMode = CompensationMode.CAUSAL
-    """How B is re-run: "causal" (A's forward, causal gyro-bias estimate inside each leg,
-    fused with the calibrated bias as its prior: best on legs held out of the fit,
-    docs/calibration.md section 9), "per_leg" (the constant bias plus the Gauss-Markov
-    drift's estimated mean over each leg, when the grade has a drift) or "constant" (one
-    bias for all legs)."""
+    """How B is re-run: "causal" (A's causal gyro-bias estimate inside each leg, fused with
+    the calibrated bias as its prior: best held out, docs/calibration.md section 9),
+    "per_leg" (the constant bias plus the drift's estimated mean over each leg, when the
+    grade has a drift) or "constant" (one bias for all legs)."""
 
 
 @dataclass(frozen=True)
@@ -425,7 +417,7 @@ class OutputsConfig:
 
     mcap: bool = True
     """Write the best trajectory to trajectory.mcap (ROS 2 NavSatFix, PoseStamped, /tf,
-    Odometry, a Path per leg and the run metadata; docs/formats.md)."""
+    Odometry, a Path per leg, run metadata; docs/formats.md)."""
     mcap_rate_hz: float = _key(2.0, gt=0.0, le=1000.0)
     """Rate of trajectory.mcap [Hz] (at most the [filter] output rate; the Parquet table keeps
     the full output rate)."""
