@@ -26,7 +26,13 @@ from pospp.calib.solve import DriftPrior
 from pospp.calib.stage import CalibrationRun, calibrate_flight
 from pospp.config import PipelineConfig
 from pospp.diagnose import null_model
-from pospp.diagnose.alternative import named_removed, removed_names, with_vertical
+from pospp.diagnose.alternative import (
+    LIBRARY_ALTERNATIVES,
+    library_fits,
+    named_removed,
+    removed_names,
+    with_library,
+)
 from pospp.diagnose.effects import effect_by_id
 from pospp.diagnose.rerun import (
     PIPELINE_RERUN,
@@ -555,9 +561,10 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
         d, sigs = diagnose_with(refined), refined
     removed = named_removed(replays, d, sigs) if sigs else None
     # the drift under the alternative: when the effect (re-run effects named; a vertical
-    # drift, diagnose.alternative.with_vertical) explains the excess drift the flight
-    # showed, the null realisations inject the drift the flight shows with it removed
-    alt = with_vertical(replays, removed, d, candidate=True) if sigs else None
+    # drift or a gravity gradient, diagnose.alternative.with_library) explains the excess
+    # drift the flight showed, the null realisations inject the drift the flight shows with
+    # it removed
+    alt = with_library(replays, removed, d, candidate=True) if sigs else None
     if alt is None:
         return replace(d, null_model=note)
     drift = (drift_under_alternative(calib_run, alt, config)
@@ -567,13 +574,14 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
         null_dv = null_realisations(log, nav, calib_run, config, len(null_dv), drift=drift,
                                     threads=threads)
         d, d_base = diagnose_with(sigs), d
-        if removed is None and "vertical_gyro_drift" not in d.named:
-            return replace(d_base, null_model=note)  # the vertical drift is not borne out
-        gone = " + ".join(removed_names(d_base, sigs, alt is not removed))
+        if removed is None and not set(LIBRARY_ALTERNATIVES) & set(d.named):
+            return replace(d_base, null_model=note)  # the library effect is not borne out
+        gone = " + ".join(removed_names(d_base, sigs,
+                                        list(library_fits(d_base, candidate=True))))
         note = _null_note(null_dv, *drift, f"re-estimated with {gone} removed",
                           base=null_drift(calib_run, config))
         removed = named_removed(replays, d, sigs)
-    removed = with_vertical(replays, removed, d, candidate=False)  # whitened under it too
+    removed = with_library(replays, removed, d, candidate=False)  # whitened under it too
     if removed is None:
         return replace(d, null_model=note)
     # the whitening under the model named: a pass whose whitening drops an effect it was

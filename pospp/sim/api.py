@@ -26,6 +26,7 @@ from numpy.typing import ArrayLike
 from pospp import __version__, rotation
 from pospp.nav.strapdown import Trajectory
 from pospp.sim.gnss import GnssModel, simulate_gnss
+from pospp.sim.gravity import GravityDisturbance
 from pospp.sim.imu import Motion, exact_increments, quat_nb_from_euler
 from pospp.sim.profile import MissionProfile, load_profile, plan_mission
 from pospp.sim.sensors import ImuErrorModel, RealisedImuErrors, apply_imu_errors, imu_grade
@@ -36,6 +37,7 @@ from pospp.units import DEG_PER_H_RADPS, UG_MPS2, time_ns_from_t_s
 __all__ = [
     "DEFAULT_START_TIME_NS",
     "GnssModel",
+    "GravityDisturbance",
     "ImuErrorModel",
     "Simulation",
     "TrueLeg",
@@ -246,7 +248,8 @@ def _truth(motion: Motion, t_s: np.ndarray, progress: ProgressFn | None) -> Traj
 def _params(*, grade_name: str, model: ImuErrorModel, realised: RealisedImuErrors,
             gnss: GnssModel, n_fix: int, seed: int, imu_rate_hz: float, start_time_ns: int,
             dt_ns: int, n: int, n_sub: int, n_gl: int, extra_params: dict[str, Any],
-            legs: tuple[TrueLeg, ...], timings: dict[str, float]) -> dict[str, Any]:
+            legs: tuple[TrueLeg, ...], timings: dict[str, float],
+            gravity: GravityDisturbance | None = None) -> dict[str, Any]:
     """The JSON-ready record of everything injected (layout mirrors the reference cases)."""
     g = model.as_dict()
     flu = np.array([1.0, -1.0, -1.0])
@@ -262,6 +265,12 @@ def _params(*, grade_name: str, model: ImuErrorModel, realised: RealisedImuError
         "realised_accel_bias_at_start_ug": list(realised.accel_bias_mps2[0] / UG_MPS2),
     })
     gn = gnss.as_dict()
+    conventions = CONVENTIONS if gravity is None else {**CONVENTIONS,
+                                                        "gravity": gravity.describe()}
+    grav: dict[str, Any] = {"model": "WGS-84 normal gravity, TR8350.2 Eq. 4-1 and 4-3 "
+                                     "(pospp.earth.normal_gravity_mps2)"}
+    if gravity is not None:
+        grav = {"model": gravity.describe(), "disturbance": gravity.as_dict()}
     gn.update({"lever_arm_flu_m": list(np.asarray(gnss.lever_arm_b_m) * flu),
                "n_epochs": n_fix,
                "reported_pos_sigma_m": [max(x, 1e-3) for x in gnss.pos_noise_m],
@@ -270,7 +279,8 @@ def _params(*, grade_name: str, model: ImuErrorModel, realised: RealisedImuError
         "generator": {"name": "pospp.sim", "version": __version__},
         "config": {"imu_grade": grade_name, "imu_rate_hz": imu_rate_hz, "seed": seed,
                    "imu_errors": g, "gnss": gnss.as_dict(), "start_time_ns": start_time_ns,
-                   "n_sub": n_sub, "n_gl": n_gl, **extra_params.get("config", {})},
+                   "n_sub": n_sub, "n_gl": n_gl, **extra_params.get("config", {}),
+                   **({} if gravity is None else {"gravity": gravity.as_dict()})},
         "seed": seed,
         "time": {
             "start_time_ns": start_time_ns, "imu_rate_hz": imu_rate_hz, "imu_dt_ns": dt_ns,
@@ -278,13 +288,12 @@ def _params(*, grade_name: str, model: ImuErrorModel, realised: RealisedImuError
             "end_time_ns": start_time_ns + n * dt_ns,
             "first_imu_stamp_ns": start_time_ns + dt_ns,
         },
-        "conventions": CONVENTIONS,
+        "conventions": conventions,
         **{k: v for k, v in extra_params.items() if k != "config"},
         "legs": [lg.as_dict() for lg in legs],
         "imu_errors": imu_err,
         "gnss": gn,
-        "gravity": {"model": "WGS-84 normal gravity, TR8350.2 Eq. 4-1 and 4-3 "
-                             "(pospp.earth.normal_gravity_mps2)"},
+        "gravity": grav,
         "numerics": {
             "quadrature": f"composite Gauss-Legendre, {n_sub} sub-intervals x {n_gl} nodes "
                           "per IMU interval",
@@ -309,6 +318,7 @@ def _generate(
     n_gl: int,
     extra_params: dict[str, Any],
     legs_fn: Callable[[Trajectory], tuple[TrueLeg, ...]],
+    gravity: GravityDisturbance | None = None,
 ) -> Simulation:
     timings: dict[str, float] = {}
     clock = time.perf_counter()
@@ -327,7 +337,8 @@ def _generate(
     t_s = (k * dt_ns).astype(float) * 1e-9
     ss_imu, ss_gnss = np.random.SeedSequence(seed).spawn(2)
     prog_imu = None if progress is None else (lambda f: progress("imu", f))
-    dth, dv = exact_increments(motion, t_s, n_sub=n_sub, n_gl=n_gl, progress=prog_imu)
+    dth, dv = exact_increments(motion, t_s, n_sub=n_sub, n_gl=n_gl, progress=prog_imu,
+                               gravity=gravity)
     tick("increments_s")
     dth_m, dv_m, realised = apply_imu_errors(t_s, dth, dv, model, ss_imu)
     del dth, dv
@@ -349,7 +360,7 @@ def _generate(
     params = _params(grade_name=grade_name, model=model, realised=realised, gnss=gnss,
                      n_fix=len(fix), seed=seed, imu_rate_hz=imu_rate_hz,
                      start_time_ns=start_time_ns, dt_ns=dt_ns, n=n, n_sub=n_sub, n_gl=n_gl,
-                     extra_params=extra_params, legs=legs, timings=timings)
+                     extra_params=extra_params, legs=legs, timings=timings, gravity=gravity)
     return Simulation(name, imu, fix, vel, truth, int(start_time_ns), legs, realised, params)
 
 
@@ -365,6 +376,7 @@ def simulate(
     duration_s: float | None = None,
     n_sub: int = 2,
     n_gl: int = 4,
+    gravity: GravityDisturbance | None = None,
 ) -> Simulation:
     """Simulate a mission: exact IMU increments + IMU errors, GNSS, truth and parameters.
 
@@ -387,6 +399,10 @@ def simulate(
         Truncate the mission (default: the whole plan).
     n_sub, n_gl : int
         Quadrature: sub-intervals and Gauss-Legendre nodes per IMU interval.
+    gravity : GravityDisturbance, optional
+        A gravity disturbance field (deflection, anomaly, gradient; :mod:`pospp.sim.gravity`)
+        in the true specific force; default WGS-84 normal gravity only. Recorded in
+        ``params["gravity"]`` and ``params["conventions"]["gravity"]``.
 
     Returns
     -------
@@ -444,7 +460,7 @@ def simulate(
     sim = _generate(prof.name, motion, dur, grade_name=grade_name, model=model, gnss=gnss,
                     seed=seed, imu_rate_hz=rate, start_time_ns=start_time_ns,
                     progress=progress, n_sub=n_sub, n_gl=n_gl, extra_params=extra,
-                    legs_fn=legs_fn)
+                    legs_fn=legs_fn, gravity=gravity)
     sim.params["numerics"]["timings_s"]["trajectory_s"] = t_traj
     sim.params["numerics"]["position"] = (
         "Gauss-Legendre 4 nodes per 0.02 s step, Picard on the radii, cubic Hermite between")
@@ -482,6 +498,7 @@ def simulate_along(
     n_sub: int = 2,
     n_gl: int = 4,
     name: str = "along",
+    gravity: GravityDisturbance | None = None,
 ) -> Simulation:
     """Simulate along a given trajectory (e.g. an RTK drive), exact increments included.
 
@@ -500,7 +517,7 @@ def simulate_along(
         Smoothing: RMS residual of the position / heading fits, none above 4 x this.
     heading_min_speed_mps : float
         Below this speed the heading is held (the track angle of a stopped vehicle is noise).
-    Other parameters as :func:`simulate`.
+    Other parameters (``gravity`` too) as :func:`simulate`.
     """
     t = np.asarray(time_s, dtype=float)
     grade_name, model = _resolve_grade(imu_grade)
@@ -526,7 +543,7 @@ def simulate_along(
     sim = _generate(name, motion, float(t[-1] - t[0]), grade_name=grade_name, model=model,
                     gnss=gnss, seed=seed, imu_rate_hz=imu_rate_hz,
                     start_time_ns=start_time_ns, progress=progress, n_sub=n_sub, n_gl=n_gl,
-                    extra_params=extra, legs_fn=lambda truth: ())
+                    extra_params=extra, legs_fn=lambda truth: (), gravity=gravity)
     sim.params["numerics"]["timings_s"]["trajectory_s"] = t_traj
     sim.params["numerics"]["position"] = "quintic smoothing splines of ECEF position"
     return sim

@@ -10,7 +10,9 @@ For each IMU interval (t_k, t_{k+1}] the increments are
 
 (body axes at the integrand time, no rotation or sculling compensation: what a real IMU
 outputs; the strapdown kernel applies coning and sculling). ``a_n`` is dv_n/dt, g_n the
-WGS-84 normal gravity [0, 0, gamma(lat, h)] (:mod:`pospp.earth`), w_ie and w_en the Earth and
+WGS-84 normal gravity [0, 0, gamma(lat, h)] (:mod:`pospp.earth`) or, with a
+:class:`pospp.sim.gravity.GravityDisturbance`, normal gravity plus its disturbance dg_n
+(deflection, anomaly, gradient: the true plumb line the IMU senses), w_ie and w_en the Earth and
 transport rates (Groves Eq. 2.123, 5.44), and with z-y-x Euler angles (roll phi, pitch theta,
 yaw psi)
 
@@ -32,6 +34,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pospp import earth
+from pospp.sim.gravity import GravityDisturbance
 from pospp.sim.trajectory import MotionSample
 
 __all__ = ["body_rates", "dcm_nb_from_euler", "exact_increments", "quat_nb_from_euler"]
@@ -78,8 +81,10 @@ def quat_nb_from_euler(rpy_rad: NDArray) -> NDArray:
     return q * np.where(q[..., :1] < 0.0, -1.0, 1.0)
 
 
-def body_rates(m: MotionSample) -> tuple[NDArray, NDArray]:
-    """True w_ib_b [rad/s] and f_ib_b [m/s^2] of a motion sample, each shape (M, 3)."""
+def body_rates(m: MotionSample, gravity: GravityDisturbance | None = None
+               ) -> tuple[NDArray, NDArray]:
+    """True w_ib_b [rad/s] and f_ib_b [m/s^2] of a motion sample, each shape (M, 3);
+    ``gravity``: the disturbance added to normal gravity (None: normal gravity only)."""
     c_nb = dcm_nb_from_euler(m.rpy_rad)
     roll, pitch = m.rpy_rad[:, 0], m.rpy_rad[:, 1]
     d = m.rpy_rate_radps
@@ -94,7 +99,10 @@ def body_rates(m: MotionSample) -> tuple[NDArray, NDArray]:
     )
     w_ie = earth.earth_rate_n_radps(m.lat_rad)
     w_en = earth.transport_rate_n_radps(m.lat_rad, m.height_m, m.v_n_mps)
-    g_n = earth.gravity_n_mps2(m.lat_rad, m.height_m)
+    if gravity is None:
+        g_n = earth.gravity_n_mps2(m.lat_rad, m.height_m)
+    else:
+        g_n = gravity.gravity_n_mps2(m.lat_rad, m.lon_rad, m.height_m)
     f_n = m.a_n_mps2 + np.cross(2.0 * w_ie + w_en, m.v_n_mps) - g_n
     # C_bn x = C_nb^T x
     w_ib_b = w_nb_b + np.einsum("nji,nj->ni", c_nb, w_ie + w_en)
@@ -110,6 +118,7 @@ def exact_increments(
     n_gl: int = 4,
     chunk_intervals: int = 20_000,
     progress: Callable[[float], None] | None = None,
+    gravity: GravityDisturbance | None = None,
 ) -> tuple[NDArray, NDArray]:
     """Increments over the intervals (t_s[k], t_s[k+1]] by composite Gauss-Legendre.
 
@@ -123,6 +132,8 @@ def exact_increments(
         Intervals evaluated at once (bounds memory: about 1.5 kB per node).
     progress : callable, optional
         Called with the fraction done (0..1) after each chunk.
+    gravity : GravityDisturbance, optional
+        Gravity disturbance field (default: WGS-84 normal gravity only).
 
     Returns
     -------
@@ -140,7 +151,7 @@ def exact_increments(
         b = min(n, a + chunk_intervals)
         dt = np.diff(t[a : b + 1])
         tn = (t[a:b, None] + dt[:, None] * frac[None, :]).ravel()
-        w_ib, f_b = body_rates(motion.evaluate(tn))
+        w_ib, f_b = body_rates(motion.evaluate(tn), gravity)
         k = len(frac)
         wdt = (dt[:, None] * wfrac[None, :])[..., None]
         dth[a:b] = (w_ib.reshape(b - a, k, 3) * wdt).sum(axis=1)

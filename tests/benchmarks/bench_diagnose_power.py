@@ -2,7 +2,7 @@
 
     PYTHONPATH=. python tests/benchmarks/bench_diagnose_power.py limits [--seeds 5]
     PYTHONPATH=. python tests/benchmarks/bench_diagnose_power.py power [--seeds 6]
-        [--warmup --n-legs 4] [--leg-s 600]
+        [--warmup --n-legs 4] [--leg-s 600] [--crossing --n-legs 4]
     PYTHONPATH=. python tests/benchmarks/bench_diagnose_power.py trigger [--seeds 10]
 
 Flights: tests/unit/test_diagnose_power.py (pospp's simulator, paper_vehicle grade, three
@@ -17,11 +17,13 @@ signature is right). The detection limit is the smallest grid size named with it
 20 % in at least 90 % of the seeds.
 
 ``power``: each effect hidden by the simulator itself (GNSS lever arm and time offset, gyro
-scale factor, a z gyro bias beyond the grade's) or in the IMU samples (accelerometer warm-up)
-at two sizes, seeds 1..N: how often it is named, and with its size within 20 % (the vertical
-drift's against the whole z bias B carries, the grade's 0.1 deg/h plus the hidden one).
-``--warmup`` flies the warm-up mission (first leg 170 s after power-up, a loiter, the later
-legs after T = 1200 s; test_diagnose_power.profile), ``--leg-s`` the legs' length.
+scale factor, a z gyro bias beyond the grade's, a gravity gradient: pospp.sim.gravity) or in
+the IMU samples (accelerometer warm-up) at two sizes, seeds 1..N: how often it is named, and
+with its size within 20 % (the vertical drift's against the whole z bias B carries, the
+grade's 0.1 deg/h plus the hidden one). ``--warmup`` flies the warm-up mission (first leg 170
+s after power-up, a loiter, the later legs after T = 1200 s; test_diagnose_power.profile),
+``--crossing`` the gravity gradient's (a box of crossing lines at 40 and 80 m/s),
+``--leg-s`` the legs' length.
 
 ``trigger``: on flights with another effect hidden (lever arm, GNSS time offset) or none, A's
 own gyro scale-factor estimate (``flight_stages.scale_factor_estimate`` at A's lever-arm
@@ -195,6 +197,8 @@ def main() -> None:
     ap.add_argument("--mc", action="store_true",
                     help="trigger: the null Monte Carlo's 40 flights")
     ap.add_argument("--warmup", action="store_true", help="the warm-up mission (power only)")
+    ap.add_argument("--crossing", action="store_true",
+                    help="crossing lines at 40 / 80 m/s (power only; the gravity gradient)")
     ap.add_argument("--n-legs", type=int, default=3)
     ap.add_argument("--leg-s", type=float, default=180.0)
     a = ap.parse_args()
@@ -205,7 +209,8 @@ def main() -> None:
         trigger(a.seeds, a.mc)
     else:
         sizes = [(s.split(":")[0], float(s.split(":")[1])) for s in a.sizes.split(",")]
-        power(a.seeds, sizes, warmup=a.warmup, n_legs=a.n_legs, leg_s=a.leg_s)
+        power(a.seeds, sizes, warmup=a.warmup, n_legs=a.n_legs, leg_s=a.leg_s,
+              crossing=a.crossing)
 
 
 if __name__ == "__main__":
