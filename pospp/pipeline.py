@@ -37,10 +37,10 @@ from pospp.calib.observability import observability_table
 from pospp.calib.stage import CalibrationRun, with_null_covariance
 from pospp.config import PipelineConfig, config_from_dict
 from pospp.diagnose.workflow import Diagnosis, diagnosis_columns, residual_curve_columns
+from pospp.diagnosis_stage import diagnose_calibration
 from pospp.evaluate import evaluation_rows, solution_errors
 from pospp.flight_stages import (  # the stage functions, importable from here as before
     calibrate_from_a,
-    diagnose_calibration,
     imu_increments,
     imu_tuning,  # noqa: F401  (re-exported: compare_sim and the tests call pipeline.imu_tuning)
     ingest,

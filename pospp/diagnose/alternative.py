@@ -1,6 +1,6 @@
 """B minus A with named effects' fitted responses removed: the data under the alternative.
 
-The pipeline's diagnosis (:func:`pospp.flight_stages.diagnose_calibration`) re-estimates the
+The pipeline's diagnosis (:func:`pospp.diagnosis_stage.diagnose_calibration`) re-estimates the
 null's gyro drift and the whitening on the replays with the effects it named (or its leading
 significant candidate) removed, so that an effect the base model leaves out is not read as
 noise (docs/diagnose.md, "Power"). Replays are :class:`pospp.calib.replay.LegReplay` in leg-id
@@ -32,7 +32,7 @@ deg/h, 6435 s, where with the offset alone removed it fell back to the grade's."
 LIBRARY_ALT_EXPLAINED = 0.9
 """Share of the structured gap a first-step candidate of :data:`LIBRARY_ALTERNATIVES` must
 explain for the null's drift to be re-estimated with it removed
-(:func:`pospp.flight_stages.drift_under_alternative`; the workflow's
+(:func:`pospp.diagnosis_stage.drift_under_alternative`; the workflow's
 ``min_explained_fraction``)."""
 
 

@@ -159,7 +159,7 @@ class Diagnosis:
         What the p-values are calibrated on, one sentence (the null realisations and the gyro
         drift they inject; whether they were re-made with the drift re-estimated with a
         named effect removed); empty when the caller did not say
-        (:func:`pospp.flight_stages.diagnose_calibration` does).
+        (:func:`pospp.diagnosis_stage.diagnose_calibration` does).
     """
 
     base_formulation: str

@@ -206,7 +206,7 @@ def test_gnss_time_offset_is_named_with_its_size(size_ms, seed):
     12 ms failed before the candidates' p-value became the predictive F(1, R)
     (null_model.few_parameter_p_value; the log-normal read F = 17800 against null
     statistics of at most 140 as p = 0.016) and before the null's drift was re-estimated
-    under the alternative (flight_stages.drift_under_alternative: seed 2's flight read the
+    under the alternative (diagnosis_stage.drift_under_alternative: seed 2's flight read the
     offset as 0.28 deg/h of drift, the grade's 0.05 with it removed)."""
     r = power_run("time_offset", size_ms, seed)
     d = r.diagnosis

@@ -29,6 +29,7 @@ LAYERS: tuple[frozenset[str], ...] = (
     frozenset({"diagnose", "simcompare", "report"}),
     frozenset({"config"}),
     frozenset({"flight_stages"}),
+    frozenset({"diagnosis_stage"}),
     frozenset({"pipeline", "convert"}),
     frozenset({"batch", "compare_sim"}),
     frozenset({"cli"}),

@@ -1,0 +1,271 @@
+"""The diagnosis stage of one flight: the model-discrepancy workflow over a calibrated run.
+
+:func:`diagnose_calibration` runs :func:`pospp.diagnose.workflow.diagnose_replays` on the run's
+B-minus-A replays with every test calibrated on B minus A's null realisations
+(:func:`pospp.flight_stages.null_realisations`), the A re-run signatures
+(:mod:`pospp.diagnose.rerun`) made by Gauss-Newton from A's own estimates where the pipeline has
+them, the secant refinements, and the drift under the alternative
+(:func:`drift_under_alternative`). Moved out of :mod:`pospp.flight_stages` (issue 18: that
+module had reached the house's 600 lines); :mod:`pospp.pipeline` imports it as before.
+Nothing here touches files.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from functools import partial
+from typing import Any
+
+import numpy as np
+
+from pospp.calib.compensate import joint_calibration
+from pospp.calib.replay import ImuIncrements, SolutionA, replay_velocity_error
+from pospp.calib.solve import DriftPrior
+from pospp.calib.stage import CalibrationRun
+from pospp.config import PipelineConfig
+from pospp.diagnose import null_model
+from pospp.diagnose.alternative import (
+    LIBRARY_ALTERNATIVES,
+    library_fits,
+    named_removed,
+    removed_names,
+    with_library,
+)
+from pospp.diagnose.effects import effect_by_id
+from pospp.diagnose.rerun import (
+    PIPELINE_RERUN,
+    REFINE_FRACTION,
+    REFINE_ITERATIONS,
+    first_estimates,
+    refine_signatures,
+    rerun_signatures,
+    signature_at,
+)
+from pospp.diagnose.workflow import Diagnosis, diagnose_replays
+from pospp.flight_stages import (
+    _lever_arm_and_start,
+    _scale_factor_start,
+    imu_increments,
+    imu_tuning,
+    leg_epochs_ns,
+    navigate,
+    null_drift,
+    null_realisations,
+    rerun_decimation,
+)
+from pospp.io import mcap_reader
+from pospp.nav import filter as nav_filter
+from pospp.units import DEG_PER_H_RADPS
+
+
+def rerun_base(log: mcap_reader.FlightLog, calib_run: CalibrationRun, config: PipelineConfig
+               ) -> tuple[mcap_reader.FlightLog, CalibrationRun]:
+    """The log and calibration run the diagnosis's A re-run signatures are made against.
+
+    The log's IMU summed down to ``[pairs] rerun_imu_rate_hz`` (:func:`rerun_decimation`,
+    keeping the legs' epochs, :func:`leg_epochs_ns`), and the run with its replays' B minus
+    A replaced by the summed-down log's own (A run on it as configured): a re-run's response
+    is then B minus A at the lower rate less B minus A at the lower rate, the strapdown's
+    rate-dependent error cancelling as in the null realisations (docs/diagnose.md, "The null
+    at a lower IMU rate"). The log and run themselves when nothing is summed or A fails on
+    the summed-down log."""
+    factor = rerun_decimation(log, config.pairs.rerun_imu_rate_hz)
+    if factor == 1:
+        return log, calib_run
+    log_r = null_model.decimate_imu(log, factor, leg_epochs_ns(log, calib_run.legs))
+    try:
+        nav_r = navigate(log_r, config)
+    except ValueError:
+        return log, calib_run
+    which = config.replay.reference if nav_r.smoothed is not None else "forward"
+    ref = SolutionA(*nav_filter.solution_a_fields(nav_r, which=which))
+    imu_r = imu_increments(log_r)
+    legs = {leg.leg_id: leg for leg in calib_run.legs}
+    replays = {i: replace(rep, dv_n_mps=replay_velocity_error(
+        imu_r, ref, legs[i], accel_compensation=config.replay.accel_compensation,
+        sample_rate_hz=config.replay.sample_rate_hz)) for i, rep in calib_run.replays.items()}
+    return log_r, replace(calib_run, replays=replays)
+
+
+def drift_under_alternative(calib_run: CalibrationRun, replays_minus_effect: list,
+                            config: PipelineConfig) -> tuple[float, float] | None:
+    """The flight's gyro drift re-estimated with a candidate effect in the model, or None.
+
+    The calibration reads the drift by REML on B minus A under the base model (issue 16 item
+    3); an effect the base model leaves out (a 12 ms GNSS offset: 0.28 deg/h at 100 s against
+    the grade's 0.05) is then read as drift, the null realisations inject it, and the
+    effect's test loses its power (docs/diagnose.md, "Power"). Here the same REML (the grade's
+    drift the same weak prior, the joint fit over the same pairs) runs on
+    ``replays_minus_effect`` (B minus A with the candidate's fitted response removed,
+    ``LegReplay`` in leg-id order). Returns (sigma [rad/s], tau [s]) only when the flight
+    rejected the grade's drift under the base model (``drift_source`` "flight") as too small
+    (the flight's sigma above the grade's) and with the effect removed either no longer does
+    (the grade's drift; also when the re-estimate falls below it) or reads a smaller drift
+    than before, still above the grade's (that one: three 600 s legs read 0.071 deg/h of
+    drift for the grade's 0.05 with nothing hidden, 0.44 with a 1.1 deg/h vertical drift).
+    None otherwise (the null stays the base model's).
+    """
+    tuning = imu_tuning(config)
+    grade_radps = tuning.gyro_gm_sigma_dph * DEG_PER_H_RADPS
+    # no excess drift for an effect to explain when the flight is quieter than the grade
+    # (flight_null_200hz: 0.045 deg/h for 0.5 would otherwise get the grade's larger drift)
+    if (calib_run.chosen is None or calib_run.drift_source != "flight"
+            or not np.isfinite(tuning.gyro_gm_tau_s) or not grade_radps > 0
+            or not calib_run.drift_sigma_radps > grade_radps):
+        return None
+    kw = dict(calib_run.solve_kwargs)
+    transition = kw.pop("transition", calib_run.chosen.transition)
+    kw.update(gyro_gm_sigma_radps=None, gyro_gm_tau_s=None,
+              gm_prior=DriftPrior(grade_radps, float(tuning.gyro_gm_tau_s)))
+    reps = {r.leg.leg_id: r for r in replays_minus_effect}
+    try:
+        cal = joint_calibration(reps, calib_run.pairs, calib_run.chosen.formulation,
+                                transition=transition, **kw)
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+    if cal is None:
+        return None
+    if cal.gm_source == "grade":
+        return float(cal.gyro_gm_sigma_radps), float(cal.gyro_gm_tau_s)
+    if cal.gm_source == "flight" and cal.gyro_gm_sigma_radps <= grade_radps:
+        return grade_radps, float(tuning.gyro_gm_tau_s)  # not below the grade's
+    if cal.gm_source == "flight" and cal.gyro_gm_sigma_radps < calib_run.drift_sigma_radps:
+        # less excess drift with the effect removed, still above the grade's (600 s legs)
+        return float(cal.gyro_gm_sigma_radps), float(cal.gyro_gm_tau_s)
+    return None
+
+
+def _rerun_signatures_at_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
+                               calib_run: CalibrationRun, config: PipelineConfig,
+                               lever_estimate: nav_filter.LeverArmEstimate | None,
+                               navigate_a: Any, threads: int = 1
+                               ) -> tuple[dict[str, list[np.ndarray]], dict[str, np.ndarray]]:
+    """The diagnosis's first A re-run signatures and the estimates they were made at.
+
+    The lever arm: Gauss-Newton from A's own estimate of it (lever-arm states): the signature
+    made there (secant along it, axis derivatives at the estimate; 1 + 4 A runs) instead of at
+    the configured value, where A's gate and attitude Jacobian are those of the wrong lever
+    arm. The time offset: at the configuration (1 A run). The gyro scale factor: Gauss-Newton
+    from A's own estimate (scale-factor states, one forward pass with the antenna at A's
+    lever-arm estimate) only when that is significant (the secant along it: 1 A run); else
+    the library's signature stands and the usual flight pays the one forward pass (docs/
+    diagnose.md, "Power")."""
+    lever_b_m, p_lever = _lever_arm_and_start(log, nav, config, lever_estimate)
+    gn = p_lever is not None and bool(
+        np.linalg.norm(p_lever) > REFINE_FRACTION * effect_by_id("lever_arm").plausible_si)
+    sigs = rerun_signatures(log, nav, calib_run, config,
+                            [e for e in PIPELINE_RERUN if e != "gyro_scale_factor"
+                             and not (gn and e == "lever_arm")], navigate=navigate_a,
+                            threads=threads)
+    at: dict[str, np.ndarray] = {}
+    starts = {"lever_arm": p_lever if gn else None,
+              "gyro_scale_factor": _scale_factor_start(log, config, lever_b_m)}
+    for eid, p in starts.items():
+        if p is None:
+            continue
+        try:
+            sigs[eid] = signature_at(log, nav, calib_run, config, eid, p, navigate=navigate_a,
+                                     threads=threads)
+            at[eid] = p
+        except (ValueError, np.linalg.LinAlgError):  # A failed at the estimate
+            if eid == "lever_arm":
+                sigs.update(rerun_signatures(log, nav, calib_run, config, (eid,),
+                                             navigate=navigate_a, threads=threads))
+    return sigs, at
+
+
+def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution_a: SolutionA,
+             config: PipelineConfig, *, log: mcap_reader.FlightLog | None = None,
+             nav: nav_filter.FilterResult | None = None,
+             null_dv: list[list[np.ndarray]] | None = None,
+             lever_estimate: nav_filter.LeverArmEstimate | None = None,
+             threads: int = 1) -> Diagnosis:
+    """Model-discrepancy workflow on the calibrated run's B-minus-A curves (pospp.diagnose).
+
+    Every test's null distribution is calibrated on ``null_dv`` (:func:`null_realisations`)
+    when given, else on ``[pairs] null_realisations`` realisations made here when the log and
+    A's result are given (seed 0: a run is reproducible). ``threads``: A re-runs made at once
+    (:func:`pospp.threads.map_in_threads`; the result does not depend on it).
+    """
+    n_null = config.pairs.null_realisations
+    if null_dv is None and n_null > 0 and log is not None and nav is not None:
+        null_dv = null_realisations(log, nav, calib_run, config, n_null, threads=threads)
+    replays = [calib_run.replays[i] for i in sorted(calib_run.replays)]
+    # PIPELINE_RERUN: A's own response to them, by re-running A (issue 12)
+    a_as_configured = partial(navigate, config=config)
+
+    sigs: dict[str, list[np.ndarray]] | None = None
+    at: dict[str, np.ndarray] = {}
+    if log is not None and nav is not None:
+        # lever arm and gyro scale factor by Gauss-Newton from A's own estimates
+        sigs, at = _rerun_signatures_at_start(log, nav, calib_run, config, lever_estimate,
+                                              a_as_configured, threads)
+    # B's residuals carry the gyro angle random walk, correlated along each leg: weighting them
+    # as white noise would make every F-test too liberal
+    arw_radpsqrts = imu_tuning(config).noise().gyro_arw_radpsqrts
+    def diagnose_with(signatures, whitening_replays=None):
+        return diagnose_replays(
+            replays, imu=imu, solution_a=solution_a,
+            replay_kwargs={"accel_compensation": config.replay.accel_compensation},
+            base_formulation=config.pairs.formulation, base_transition=config.pairs.transition,
+            noise="gyro_rw", gyro_arw_radpsqrts=arw_radpsqrts, null_dv=null_dv,
+            alpha=config.pairs.diagnose_alpha, signatures=signatures,
+            whitening_replays=whitening_replays)
+
+    note = _null_note(null_dv, *null_drift(calib_run, config))
+
+    d = diagnose_with(sigs)
+    for _ in range(REFINE_ITERATIONS if sigs else 0):
+        assert sigs is not None  # the loop runs only with signatures
+        # A is not linear in a GNSS-side effect: secants through the current estimates
+        refined, at = refine_signatures(log, nav, calib_run, config, sigs,
+                                        first_estimates(d, config.pairs.diagnose_alpha), at,
+                                        navigate=a_as_configured, threads=threads)
+        if all(refined[k] is sigs[k] for k in sigs):
+            break
+        d, sigs = diagnose_with(refined), refined
+    removed = named_removed(replays, d, sigs) if sigs else None
+    # the drift under the alternative: when the effect (re-run effects named; a vertical
+    # drift or a gravity gradient, diagnose.alternative.with_library) explains the excess
+    # drift the flight showed, the null realisations inject the drift the flight shows with
+    # it removed
+    alt = with_library(replays, removed, d, candidate=True) if sigs else None
+    if alt is None:
+        return replace(d, null_model=note)
+    drift = (drift_under_alternative(calib_run, alt, config)
+             if null_dv and log is not None and nav is not None else None)
+    if drift is not None:
+        assert log is not None and nav is not None and sigs is not None and null_dv
+        null_dv = null_realisations(log, nav, calib_run, config, len(null_dv), drift=drift,
+                                    threads=threads)
+        d, d_base = diagnose_with(sigs), d
+        if removed is None and not set(LIBRARY_ALTERNATIVES) & set(d.named):
+            return replace(d_base, null_model=note)  # the library effect is not borne out
+        gone = " + ".join(removed_names(d_base, sigs,
+                                        list(library_fits(d_base, candidate=True))))
+        note = _null_note(null_dv, *drift, f"re-estimated with {gone} removed",
+                          base=null_drift(calib_run, config))
+        removed = named_removed(replays, d, sigs)
+    removed = with_library(replays, removed, d, candidate=False)  # whitened under it too
+    if removed is None:
+        return replace(d, null_model=note)
+    # the whitening under the model named: a pass whose whitening drops an effect it was
+    # estimated under is not self-consistent, and the first stands (measured: a 3 m lever arm)
+    d2 = diagnose_with(sigs, removed)
+    return replace(d2 if set(d.named) <= set(d2.named) else d, null_model=note)
+
+
+def _null_note(null_dv: list | None, sigma_radps: float, tau_s: float, source: str, *,
+               base: tuple[float, float, str] | None = None) -> str:
+    """One sentence: the null the diagnosis's p-values are calibrated on; ``base``: the
+    drift (sigma [rad/s], tau [s], source) of the base model's null when this one was re-made
+    under the alternative."""
+    if not null_dv:
+        return "no null realisations: nominal F distributions"
+    text = (f"{len(null_dv)} null realisations, gyro drift {sigma_radps / DEG_PER_H_RADPS:.3g} "
+            f"deg/h, tau {tau_s:.0f} s ({source})")
+    if base is not None:
+        text += (f"; re-made: under the base model the flight's drift read "
+                 f"{base[0] / DEG_PER_H_RADPS:.3g} deg/h, tau {base[1]:.0f} s, which the "
+                 "effect explains")
+    return text
