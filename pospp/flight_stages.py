@@ -24,8 +24,13 @@ from pospp.calib.solve import DriftPrior
 from pospp.calib.stage import CalibrationRun, calibrate_flight
 from pospp.config import PipelineConfig
 from pospp.diagnose import null_model
-from pospp.diagnose.alternative import named_removed, removed_names, with_vertical
-from pospp.diagnose.effects import effect_by_id
+from pospp.diagnose.alternative import (
+    named_removed,
+    removed_names,
+    start_removed,
+    with_vertical,
+)
+from pospp.diagnose.effects import ACCEL_SETTLING_S, effect_by_id
 from pospp.diagnose.rerun import (
     PIPELINE_RERUN,
     REFINE_FRACTION,
@@ -34,15 +39,16 @@ from pospp.diagnose.rerun import (
     refine_signatures,
     rerun_signatures,
     signature_at,
+    warmup_fit,
 )
-from pospp.diagnose.workflow import Diagnosis, diagnose_replays
+from pospp.diagnose.workflow import HELDOUT_WHITENED, Diagnosis, diagnose_replays
 from pospp.io import mcap_reader
 from pospp.nav import filter as nav_filter
 from pospp.nav import tuning as nav_tuning
 from pospp.nav.strapdown import increments_from_rates
 from pospp.threads import map_in_threads
 from pospp.types import FLU_TO_FRD
-from pospp.units import DEG_PER_H_RADPS
+from pospp.units import DEG_PER_H_RADPS, UG_MPS2
 
 
 def sensor_to_body_dcm(sensor_frame: str, mounting_rpy_deg: tuple[float, float, float]) -> Any:
@@ -193,6 +199,33 @@ def scale_factor_estimate(log: mcap_reader.FlightLog, config: PipelineConfig,
                    estimate_scale_factors=True)
     b = nav.forward_biases
     return np.asarray(b.gyro_sf[-1], dtype=float), np.asarray(b.gyro_sf_sigma[-1], dtype=float)
+
+
+WARMUP_PRIOR_UG = 1000.0
+"""Sigma of the accelerometer Gauss-Markov states in the diagnosis's warm-up pass [ug] (ten
+times the effect's plausible 100 ug; the "vehicle" preset's 5 ug at 3600 s cannot follow a
+warm-up: A's smoothed bias then reads 600 ug as a constant 285 ug, docs/diagnose.md)."""
+WARMUP_START_UG = 200.0
+"""The warm-up pass's estimate starts a Gauss-Newton signature when its norm exceeds this
+[ug] (twice the plausible size; null flights of the warm-up mission read at most 110 ug)."""
+
+
+def warmup_estimate(log: mcap_reader.FlightLog, config: PipelineConfig, lever_b_m: Any = None,
+                    settling_s: float = ACCEL_SETTLING_S) -> np.ndarray:
+    """The accelerometer warm-up ``db`` (body FRD x, y, m/s^2) of ``b(t) = b_inf + db exp(-t /
+    T)``, t from the first IMU stamp, T = ``settling_s``: one pass of A (smoother on) whose
+    accelerometer Gauss-Markov states have the warm-up's own dynamics (``b' = -b / T``, sigma
+    :data:`WARMUP_PRIOR_UG`), the antenna at ``lever_b_m``, and its smoothed accelerometer
+    bias fitted (:func:`pospp.diagnose.rerun.warmup_fit`). Measured on the warm-up mission,
+    seeds 1-10 (docs/diagnose.md, "Power"): 600 ug read 483-682 ug, 1800 ug 1669-1868 ug,
+    nothing hidden -110 to 89 ug (x). Raises ValueError when A fails."""
+    tuning = replace(imu_tuning(config), accel_gm_sigma_ug=WARMUP_PRIOR_UG,
+                     accel_gm_tau_s=settling_s)
+    opts = replace(config.filter_options(), smoother=True, gauss_markov_states=True)
+    nav = navigate(log, config, lever_arm_b_m=lever_b_m, options=opts, tuning=tuning)
+    b = nav.smoothed_biases
+    assert b is not None  # the smoother ran
+    return warmup_fit(b.t_s, b.accel_b_mps2, nav.alignment.t_s, settling_s)
 
 
 def imu_increments(log: mcap_reader.FlightLog) -> ImuIncrements:
@@ -402,6 +435,17 @@ def _scale_factor_start(log: mcap_reader.FlightLog, config: PipelineConfig,
     return sf
 
 
+def _warmup_start(log: mcap_reader.FlightLog, config: PipelineConfig,
+                  lever_b_m: np.ndarray | None) -> np.ndarray | None:
+    """A's warm-up estimate (:func:`warmup_estimate`) when its norm exceeds
+    :data:`WARMUP_START_UG`, else None (also when the pass fails)."""
+    try:
+        db = warmup_estimate(log, config, lever_b_m)
+    except ValueError:
+        return None
+    return db if np.linalg.norm(db) > WARMUP_START_UG * UG_MPS2 else None
+
+
 def _rerun_signatures_at_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                                calib_run: CalibrationRun, config: PipelineConfig,
                                lever_estimate: nav_filter.LeverArmEstimate | None,
@@ -420,13 +464,14 @@ def _rerun_signatures_at_start(log: mcap_reader.FlightLog, nav: nav_filter.Filte
     lever_b_m, p_lever = _lever_arm_and_start(log, nav, config, lever_estimate)
     gn = p_lever is not None and bool(
         np.linalg.norm(p_lever) > REFINE_FRACTION * effect_by_id("lever_arm").plausible_si)
+    starts = {"lever_arm": p_lever if gn else None,
+              "gyro_scale_factor": _scale_factor_start(log, config, lever_b_m),
+              "accel_bias_change": _warmup_start(log, config, lever_b_m)}
     sigs = rerun_signatures(log, nav, calib_run, config,
                             [e for e in PIPELINE_RERUN if e != "gyro_scale_factor"
-                             and not (gn and e == "lever_arm")], navigate=navigate_a,
+                             and starts.get(e) is None], navigate=navigate_a,
                             threads=threads)
     at: dict[str, np.ndarray] = {}
-    starts = {"lever_arm": p_lever if gn else None,
-              "gyro_scale_factor": _scale_factor_start(log, config, lever_b_m)}
     for eid, p in starts.items():
         if p is None:
             continue
@@ -435,7 +480,7 @@ def _rerun_signatures_at_start(log: mcap_reader.FlightLog, nav: nav_filter.Filte
                                      threads=threads)
             at[eid] = p
         except (ValueError, np.linalg.LinAlgError):  # A failed at the estimate
-            if eid == "lever_arm":
+            if eid != "gyro_scale_factor":
                 sigs.update(rerun_signatures(log, nav, calib_run, config, (eid,),
                                              navigate=navigate_a, threads=threads))
     return sigs, at
@@ -477,11 +522,18 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
             base_formulation=config.pairs.formulation, base_transition=config.pairs.transition,
             noise="gyro_rw", gyro_arw_radpsqrts=arw_radpsqrts, null_dv=null_dv,
             alpha=config.pairs.diagnose_alpha, signatures=signatures,
-            whitening_replays=whitening_replays)
+            whitening_replays=whitening_replays, heldout_whitened=ho_white)
 
     note = _null_note(null_dv, *null_drift(calib_run, config))
 
-    d = diagnose_with(sigs)
+    # A's own warm-up pass read one and started its signature: the whitening under it, kept
+    # when the warm-up is then named (alternative.start_removed), and its held-out gap in
+    # noise units, as the vertical drift's (the pass is the evidence that it is present)
+    white = start_removed(replays, sigs, at, "accel_bias_change") if sigs else None
+    ho_white = (*HELDOUT_WHITENED, *(("accel_bias_change",) if white is not None else ()))
+    d = diagnose_with(sigs, white)
+    if white is not None and "accel_bias_change" not in d.named:
+        white, d = None, diagnose_with(sigs)
     for _ in range(REFINE_ITERATIONS if sigs else 0):
         assert sigs is not None  # the loop runs only with signatures
         # A is not linear in a GNSS-side effect: secants through the current estimates
@@ -490,7 +542,7 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
                                         navigate=a_as_configured, threads=threads)
         if all(refined[k] is sigs[k] for k in sigs):
             break
-        d, sigs = diagnose_with(refined), refined
+        d, sigs = diagnose_with(refined, white), refined
     removed = named_removed(replays, d, sigs) if sigs else None
     # the drift under the alternative: when the effect (re-run effects named; a vertical
     # drift, diagnose.alternative.with_vertical) explains the excess drift the flight
@@ -504,7 +556,7 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
         assert log is not None and nav is not None and sigs is not None and null_dv
         null_dv = null_realisations(log, nav, calib_run, config, len(null_dv), drift=drift,
                                     threads=threads)
-        d, d_base = diagnose_with(sigs), d
+        d, d_base = diagnose_with(sigs, white), d
         if removed is None and "vertical_gyro_drift" not in d.named:
             return replace(d_base, null_model=note)  # the vertical drift is not borne out
         gone = " + ".join(removed_names(d_base, sigs, alt is not removed))

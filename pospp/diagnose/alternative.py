@@ -77,6 +77,19 @@ def named_removed(replays: list, d: Diagnosis, sigs: dict[str, list[np.ndarray]]
                             for k in range(len(replays))])
 
 
+def start_removed(replays: list, sigs: dict[str, list[np.ndarray]],
+                  at: dict[str, np.ndarray], effect_id: str) -> list | None:
+    """The replays minus ``effect_id``'s response at its first estimate ``at[effect_id]``
+    (SI; the signature made there: ``S p`` is the secant's whole response), or None when it
+    has none. The whitening of the first diagnosis when A's own estimate of the warm-up
+    started its signature: a 1800 ug warm-up left in B minus A is read as white noise by the
+    REML of the whitening, and the observability screen, in those noise units, then drops
+    the warm-up (measured, docs/diagnose.md "Power")."""
+    if effect_id not in at or effect_id not in sigs:
+        return None
+    return _minus(replays, [s @ at[effect_id] for s in sigs[effect_id]])
+
+
 def _minus(replays: list, responses: list) -> list:
     """Each replay with ``response`` ((M, 2) [m/s], N and E) taken off its B minus A."""
     out = []

@@ -303,3 +303,20 @@ def first_estimates(diagnosis, alpha: float | None = None) -> dict[str, NDArray]
                 c.significant or (alpha is not None and c.p_value < alpha)):
             out[c.effect] = np.asarray(c.values, dtype=float) * effect_by_id(c.effect).si_per_unit
     return out
+
+
+def warmup_fit(t_s, accel_b_mps2, t_from_s: float, settling_s: float = ACCEL_SETTLING_S
+               ) -> NDArray:
+    """``db`` (body FRD x, y, m/s^2) of ``b(t) = b_inf + db exp(-t / T)`` fitted by least
+    squares to an accelerometer-bias history ``accel_b_mps2`` (N, 3) [m/s^2] at ``t_s`` (N,)
+    [s from the first IMU stamp], samples from ``t_from_s`` on (A's alignment point: before
+    it the horizontal bias sits in A's tilt), T = ``settling_s`` [s]. For the history of A
+    run with the warm-up's dynamics (``flight_stages.warmup_estimate``); A's own history under
+    a tight bias model lags the warm-up and reads it as a constant (600 ug: b_inf 285 ug,
+    db 77 ug; docs/diagnose.md, "Power")."""
+    t = np.asarray(t_s, dtype=float)
+    keep = t >= t_from_s
+    e = np.exp(-t[keep] / settling_s)
+    x = np.linalg.lstsq(np.column_stack([np.ones_like(e), e]),
+                        np.asarray(accel_b_mps2, dtype=float)[keep, 0:2], rcond=None)[0]
+    return np.asarray(x[1], dtype=float)
