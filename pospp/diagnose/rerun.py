@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.stats import poisson
 
 from pospp.calib.replay import ImuIncrements, SolutionA, replay_leg
 from pospp.diagnose.effects import ACCEL_SETTLING_S, effect_by_id
@@ -115,7 +116,7 @@ def _gnss_earlier(log, dt_s: float):
                    vel=replace(log.vel, time_ns=log.vel.time_ns - dt_ns))
 
 
-def _warmed(log, db_b_mps2, accel_settling_s: float):
+def warmed(log, db_b_mps2, accel_settling_s: float):
     """The log with the warm-up ``db exp(-t / T)`` added to the x and y specific force,
     ``db_b_mps2`` (2,) [m/s^2] FRD, t from the first IMU stamp [s]."""
     t_run_s = (log.imu.time_ns - log.imu.time_ns[0]) * 1e-9
@@ -173,7 +174,7 @@ def rerun_signatures(log, nav, calib_run, config, effect_ids=RERUN_EFFECTS, *,
             w = log.imu.w_ib_b_radps
             runs = [(_with_rates(log, w * (1.0 + h * e)), None) for e in np.eye(3)]
         else:  # accel_bias_change
-            runs = [(_warmed(log, h * e, accel_settling_s), None) for e in np.eye(2)]
+            runs = [(warmed(log, h * e, accel_settling_s), None) for e in np.eye(2)]
         try:
             cols = map_in_threads(response, runs, threads)
         except (ValueError, np.linalg.LinAlgError):
@@ -242,7 +243,7 @@ def signature_at(log, nav, calib_run, config, effect_id: str, p, *, navigate: Na
         cols = []  # the secant alone, along A's own estimate (see the docstring)
     elif effect_id == "accel_bias_change":
         removed, *cols = map_in_threads(
-            lambda db: _response(_warmed(log, db, accel_settling_s), nav, calib_run, config,
+            lambda db: _response(warmed(log, db, accel_settling_s), nav, calib_run, config,
                                  navigate),
             [-p, *(h * np.eye(2) - p)], threads)
     else:
@@ -320,3 +321,26 @@ def warmup_fit(t_s, accel_b_mps2, t_from_s: float, settling_s: float = ACCEL_SET
     x = np.linalg.lstsq(np.column_stack([np.ones_like(e), e]),
                         np.asarray(accel_b_mps2, dtype=float)[keep, 0:2], rcond=None)[0]
     return np.asarray(x[1], dtype=float)
+
+
+GATE_EXCESS_TAIL = 1e-3
+"""Poisson tail probability below which A's gated GNSS records are more than its model
+allows (:func:`gate_excess`)."""
+
+
+def gate_excess(nav: nav_filter.FilterResult, gate_probability: float) -> bool:
+    """Whether A gated more GNSS records (position and velocity, gated or accepted after a
+    covariance reset) than its own model allows: under the model each processed record fails
+    the chi-square gate with probability ``1 - gate_probability``, so their count is Poisson
+    with mean ``n (1 - gate_probability)``; True when the count's upper tail is below
+    :data:`GATE_EXCESS_TAIL`. Where A's IMU error model does not hold (a 600 ug accelerometer
+    warm-up against the "vehicle" preset's 30 ug: 33-39 of 3300 records gated, one reset;
+    none or up to 2 without it: docs/diagnose.md, "Power") A is not linear in the effect,
+    and its derivative at zero no place to start a Gauss-Newton."""
+    rec = nav.innovations
+    if rec is None:
+        return False
+    gnss = (rec.kind <= 1) & (rec.status >= 0) & (rec.status <= 2)
+    k = int(np.count_nonzero(gnss & (rec.status >= 1)))
+    lam = float(np.count_nonzero(gnss)) * (1.0 - gate_probability)
+    return k > 0 and float(poisson.sf(k - 1, lam)) < GATE_EXCESS_TAIL

@@ -159,26 +159,28 @@ TRIGGER_CASES = (("lever_arm", 0.5), ("lever_arm", 1.0), ("lever_arm", 1.5), ("l
 
 def _triggered(log, cfg) -> tuple[bool, float, bool, float]:
     """(the scale factor's Gauss-Newton started, A's largest axis / sigma, the warm-up's
-    started, its pass's |db| in ug) on one flight."""
+    started, its pass's |db| in ug, A's gate in excess) on one flight."""
     nav = pipeline.navigate(log, cfg)
     lever = pipeline.lever_arm_estimate(log, nav, cfg).lever_b_m
     sf, sigma = flight_stages.scale_factor_estimate(log, cfg, lever)
     start = flight_stages._scale_factor_start(log, cfg, lever)
     db = flight_stages.warmup_estimate(log, cfg, lever)
-    warm = flight_stages._warmup_start(log, cfg, lever)
+    warm = flight_stages._warmup_start(log, nav, cfg, lever)
     return (start is not None, float(np.max(np.abs(sf) / sigma)), warm is not None,
-            float(np.linalg.norm(db)) / fx.UG_MPS2)
+            float(np.linalg.norm(db)) / fx.UG_MPS2,
+            flight_stages.gate_excess(nav, cfg.filter_options().gate_probability))
 
 
 def _trigger_row(label: str, res: list) -> str:
     return (f"{label} | {sum(r[0] for r in res)} | {max(r[1] for r in res):.1f} | "
-            f"{sum(r[2] for r in res)} | {max(r[3] for r in res):.0f} |")
+            f"{sum(r[4] for r in res)} | {sum(r[2] for r in res)} | "
+            f"{max(r[3] for r in res):.0f} |")
 
 
 def trigger(seeds: int, mc: bool, warmup: bool = False) -> None:
     print(f"| hidden | size | scale factor triggered (of {40 if mc else seeds}) | largest axis "
-          "/ sigma | warm-up triggered | largest warm-up pass (ug) |")
-    print("|---|---|---|---|---|---|")
+          "/ sigma | A's gate in excess | warm-up triggered | largest warm-up pass (ug) |")
+    print("|---|---|---|---|---|---|---|")
     if mc:
         import test_diagnose_null_mc as tm
 
