@@ -26,6 +26,7 @@ from pospp.config import PipelineConfig
 from pospp.diagnose import null_model
 from pospp.diagnose.alternative import (
     named_removed,
+    null_note,
     removed_names,
     start_removed,
     with_vertical,
@@ -208,18 +209,18 @@ WARMUP_PRIOR_UG = 1000.0
 times the effect's plausible 100 ug; the "vehicle" preset's 5 ug at 3600 s cannot follow a
 warm-up: A's smoothed bias then reads 600 ug as a constant 285 ug, docs/diagnose.md)."""
 WARMUP_START_UG = 200.0
-"""The warm-up pass's estimate starts a Gauss-Newton signature when its norm exceeds this
-[ug] (twice the plausible size; null flights of the warm-up mission read at most 110 ug)
-and A as configured gated more GNSS records than its model allows (:func:`gate_excess`)."""
+"""The warm-up pass's estimate starts a Gauss-Newton signature above this norm [ug] (twice the
+plausible size; the warm-up mission's null flights read at most 110 ug): :func:`_warmup_start`."""
+
+
 def warmup_estimate(log: mcap_reader.FlightLog, config: PipelineConfig, lever_b_m: Any = None,
                     settling_s: float = ACCEL_SETTLING_S) -> np.ndarray:
-    """The accelerometer warm-up ``db`` (body FRD x, y, m/s^2) of ``b(t) = b_inf + db exp(-t /
-    T)``, t from the first IMU stamp, T = ``settling_s``: one pass of A (smoother on) whose
-    accelerometer Gauss-Markov states have the warm-up's own dynamics (``b' = -b / T``, sigma
-    :data:`WARMUP_PRIOR_UG`), the antenna at ``lever_b_m``, and its smoothed accelerometer
-    bias fitted (:func:`pospp.diagnose.rerun.warmup_fit`). Measured on the warm-up mission,
-    seeds 1-10 (docs/diagnose.md, "Power"): 600 ug read 483-682 ug, 1800 ug 1669-1868 ug,
-    nothing hidden -110 to 89 ug (x). Raises ValueError when A fails."""
+    """The accelerometer warm-up ``db`` (body FRD x, y, m/s^2) of ``b_inf + db exp(-t / T)``
+    (t from the first IMU stamp, T = ``settling_s``): one pass of A, smoother on, whose
+    accelerometer Gauss-Markov states have the warm-up's dynamics (``b' = -b / T``, sigma
+    :data:`WARMUP_PRIOR_UG`), antenna at ``lever_b_m``, its smoothed bias fitted
+    (:func:`pospp.diagnose.rerun.warmup_fit`). Warm-up mission, seeds 1-10: 600 ug read
+    483-682, 1800 ug 1669-1868, none -110 to 89 ug (x). Raises ValueError when A fails."""
     tuning = replace(imu_tuning(config), accel_gm_sigma_ug=WARMUP_PRIOR_UG,
                      accel_gm_tau_s=settling_s)
     opts = replace(config.filter_options(), smoother=True, gauss_markov_states=True)
@@ -439,12 +440,10 @@ def _scale_factor_start(log: mcap_reader.FlightLog, config: PipelineConfig,
 def _warmup_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                   config: PipelineConfig, lever_b_m: np.ndarray | None) -> np.ndarray | None:
     """A's warm-up estimate (:func:`warmup_estimate`) when it explains A's rejections: A as
-    configured gated more GNSS records than its model allows (:func:`gate_excess`; otherwise
-    no pass is run), the estimate's norm exceeds :data:`WARMUP_START_UG`, and A re-run with
-    the estimate removed from the samples gates no more than its model allows. Else None
-    (also when A fails). The pass alone is no evidence: it read 250 ug of warm-up on the
-    power flights' 900 s with nothing hidden, and a lever arm or a GNSS time offset also
-    makes A's gate reject (docs/diagnose.md, "Power")."""
+    configured gated more GNSS records than its model allows (:func:`gate_excess`; else no
+    pass), the estimate exceeds :data:`WARMUP_START_UG`, and A re-run without it gates no
+    more than its model allows; else None (also when A fails). The pass alone is no evidence
+    (250 ug on the power flights with nothing hidden; docs/diagnose.md, "Power")."""
     gate_p = config.filter_options().gate_probability
     if not gate_excess(nav, gate_p):
         return None
@@ -498,6 +497,22 @@ def _rerun_signatures_at_start(log: mcap_reader.FlightLog, nav: nav_filter.Filte
     return sigs, at
 
 
+def _null_without_warmup(log: mcap_reader.FlightLog | None, nav: nav_filter.FilterResult | None,
+                         db: np.ndarray | None, calib_run: CalibrationRun,
+                         config: PipelineConfig, null_dv: list | None, threads: int
+                         ) -> tuple[Any, Any, list | None, str]:
+    """(log, A, null realisations, note) of the diagnosis's null: when A's warm-up estimate
+    ``db`` (body x, y, m/s^2) explains A's rejections (:func:`_warmup_start`), re-made on the
+    log without it (with it, A diverged in them: 1800 ug; docs/diagnose.md "Power")."""
+    if not null_dv or log is None or db is None:
+        return log, nav, null_dv, ""
+    log_w = warmed(log, -db, ACCEL_SETTLING_S)
+    nav_w = navigate(log_w, config)
+    return (log_w, nav_w, null_realisations(log_w, nav_w, calib_run, config, len(null_dv),
+                                            threads=threads),
+            "; made on the log with A's warm-up estimate removed")
+
+
 def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution_a: SolutionA,
              config: PipelineConfig, *, log: mcap_reader.FlightLog | None = None,
              nav: nav_filter.FilterResult | None = None,
@@ -524,6 +539,8 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
         # lever arm and gyro scale factor by Gauss-Newton from A's own estimates
         sigs, at = _rerun_signatures_at_start(log, nav, calib_run, config, lever_estimate,
                                               a_as_configured, threads)
+    null_log, null_nav, null_dv, warm_note = _null_without_warmup(
+        log, nav, at.get("accel_bias_change"), calib_run, config, null_dv, threads)
     # B's residuals carry the gyro angle random walk, correlated along each leg: weighting them
     # as white noise would make every F-test too liberal
     arw_radpsqrts = imu_tuning(config).noise().gyro_arw_radpsqrts
@@ -536,11 +553,10 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
             alpha=config.pairs.diagnose_alpha, signatures=signatures,
             whitening_replays=whitening_replays, heldout_whitened=ho_white)
 
-    note = _null_note(null_dv, *null_drift(calib_run, config))
+    note = null_note(null_dv, *null_drift(calib_run, config)) + warm_note
 
-    # A's own warm-up pass read one and started its signature: the whitening under it, kept
-    # when the warm-up is then named (alternative.start_removed), and its held-out gap in
-    # noise units, as the vertical drift's (the pass is the evidence that it is present)
+    # A's warm-up pass started its signature: the whitening under it while it is named, its
+    # held-out in noise units as the vertical drift's (the pass: evidence it is present)
     white = start_removed(replays, sigs, at, "accel_bias_change") if sigs else None
     ho_white = (*HELDOUT_WHITENED, *(("accel_bias_change",) if white is not None else ()))
     d = diagnose_with(sigs, white)
@@ -565,15 +581,15 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
     drift = (drift_under_alternative(calib_run, alt, config)
              if null_dv and log is not None and nav is not None else None)
     if drift is not None:
-        assert log is not None and nav is not None and sigs is not None and null_dv
-        null_dv = null_realisations(log, nav, calib_run, config, len(null_dv), drift=drift,
-                                    threads=threads)
+        assert null_log is not None and null_nav is not None and sigs is not None and null_dv
+        null_dv = null_realisations(null_log, null_nav, calib_run, config, len(null_dv),
+                                    drift=drift, threads=threads)
         d, d_base = diagnose_with(sigs, white), d
         if removed is None and "vertical_gyro_drift" not in d.named:
             return replace(d_base, null_model=note)  # the vertical drift is not borne out
         gone = " + ".join(removed_names(d_base, sigs, alt is not removed))
-        note = _null_note(null_dv, *drift, f"re-estimated with {gone} removed",
-                          base=null_drift(calib_run, config))
+        note = null_note(null_dv, *drift, f"re-estimated with {gone} removed",
+                         base=null_drift(calib_run, config)) + warm_note
         removed = named_removed(replays, d, sigs)
     removed = with_vertical(replays, removed, d, candidate=False)  # whitened under it too
     if removed is None:
@@ -582,19 +598,3 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
     # estimated under is not self-consistent, and the first stands (measured: a 3 m lever arm)
     d2 = diagnose_with(sigs, removed)
     return replace(d2 if set(d.named) <= set(d2.named) else d, null_model=note)
-
-
-def _null_note(null_dv: list | None, sigma_radps: float, tau_s: float, source: str, *,
-               base: tuple[float, float, str] | None = None) -> str:
-    """One sentence: the null the diagnosis's p-values are calibrated on; ``base``: the
-    drift (sigma [rad/s], tau [s], source) of the base model's null when this one was re-made
-    under the alternative."""
-    if not null_dv:
-        return "no null realisations: nominal F distributions"
-    text = (f"{len(null_dv)} null realisations, gyro drift {sigma_radps / DEG_PER_H_RADPS:.3g} "
-            f"deg/h, tau {tau_s:.0f} s ({source})")
-    if base is not None:
-        text += (f"; re-made: under the base model the flight's drift read "
-                 f"{base[0] / DEG_PER_H_RADPS:.3g} deg/h, tau {base[1]:.0f} s, which the "
-                 "effect explains")
-    return text

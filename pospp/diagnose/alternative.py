@@ -16,6 +16,7 @@ import numpy as np
 
 from pospp.diagnose.effects import effect_by_id, signature
 from pospp.diagnose.results import Diagnosis
+from pospp.units import DEG_PER_H_RADPS
 
 VERTICAL_ALT_EXPLAINED = 0.9
 """Share of the structured gap a first-step vertical-drift candidate must explain for the
@@ -98,3 +99,19 @@ def _minus(replays: list, responses: list) -> list:
         dv[:, 0:2] -= resp
         out.append(replace(r, dv_n_mps=dv))
     return out
+
+
+def null_note(null_dv: list | None, sigma_radps: float, tau_s: float, source: str, *,
+               base: tuple[float, float, str] | None = None) -> str:
+    """One sentence: the null the diagnosis's p-values are calibrated on; ``base``: the
+    drift (sigma [rad/s], tau [s], source) of the base model's null when this one was re-made
+    under the alternative."""
+    if not null_dv:
+        return "no null realisations: nominal F distributions"
+    text = (f"{len(null_dv)} null realisations, gyro drift {sigma_radps / DEG_PER_H_RADPS:.3g} "
+            f"deg/h, tau {tau_s:.0f} s ({source})")
+    if base is not None:
+        text += (f"; re-made: under the base model the flight's drift read "
+                 f"{base[0] / DEG_PER_H_RADPS:.3g} deg/h, tau {base[1]:.0f} s, which the "
+                 "effect explains")
+    return text

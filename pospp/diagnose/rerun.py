@@ -36,13 +36,13 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import poisson
 
 from pospp.calib.replay import ImuIncrements, SolutionA, replay_leg
 from pospp.diagnose.effects import ACCEL_SETTLING_S, effect_by_id
 from pospp.nav import filter as nav_filter
 from pospp.nav.filter import FilterResult
 from pospp.nav.strapdown import increments_from_rates
+from pospp.qc.checks import gnss_gate
 from pospp.threads import map_in_threads
 
 STEP_FRACTION = 1.0
@@ -323,24 +323,16 @@ def warmup_fit(t_s, accel_b_mps2, t_from_s: float, settling_s: float = ACCEL_SET
     return np.asarray(x[1], dtype=float)
 
 
-GATE_EXCESS_TAIL = 1e-3
-"""Poisson tail probability below which A's gated GNSS records are more than its model
-allows (:func:`gate_excess`)."""
-
-
 def gate_excess(nav: nav_filter.FilterResult, gate_probability: float) -> bool:
     """Whether A gated more GNSS records (position and velocity, gated or accepted after a
-    covariance reset) than its own model allows: under the model each processed record fails
-    the chi-square gate with probability ``1 - gate_probability``, so their count is Poisson
-    with mean ``n (1 - gate_probability)``; True when the count's upper tail is below
-    :data:`GATE_EXCESS_TAIL`. Where A's IMU error model does not hold (a 600 ug accelerometer
-    warm-up against the "vehicle" preset's 30 ug: 33-39 of 3300 records gated, one reset;
-    none or up to 2 without it: docs/diagnose.md, "Power") A is not linear in the effect,
-    and its derivative at zero no place to start a Gauss-Newton."""
+    covariance reset) than its own model allows (the QC check
+    :func:`pospp.qc.checks.gnss_gate`: Poisson tail 1e-3). Where A's IMU error model does not
+    hold (a 600 ug accelerometer warm-up against the "vehicle" preset's 30 ug: 33-39 of 3300
+    records gated, one reset; none to 2 without it: docs/diagnose.md, "Power") A is not
+    linear in the effect, and its derivative at zero is no place to start a Gauss-Newton."""
     rec = nav.innovations
     if rec is None:
         return False
     gnss = (rec.kind <= 1) & (rec.status >= 0) & (rec.status <= 2)
-    k = int(np.count_nonzero(gnss & (rec.status >= 1)))
-    lam = float(np.count_nonzero(gnss)) * (1.0 - gate_probability)
-    return k > 0 and float(poisson.sf(k - 1, lam)) < GATE_EXCESS_TAIL
+    return not gnss_gate(int(np.count_nonzero(gnss)),
+                         int(np.count_nonzero(gnss & (rec.status >= 1))), gate_probability).passed
