@@ -464,14 +464,14 @@ def _rerun_signatures_at_start(log: mcap_reader.FlightLog, nav: nav_filter.Filte
                                ) -> tuple[dict[str, list[np.ndarray]], dict[str, np.ndarray]]:
     """The diagnosis's first A re-run signatures and the estimates they were made at.
 
-    The lever arm: Gauss-Newton from A's own estimate of it (lever-arm states): the signature
-    made there (secant along it, axis derivatives at the estimate; 1 + 4 A runs) instead of at
-    the configured value, where A's gate and attitude Jacobian are those of the wrong lever
-    arm. The time offset: at the configuration (1 A run). The gyro scale factor: Gauss-Newton
-    from A's own estimate (scale-factor states, one forward pass with the antenna at A's
-    lever-arm estimate) only when that is significant (the secant along it: 1 A run); else
-    the library's signature stands and the usual flight pays the one forward pass (docs/
-    diagnose.md, "Power")."""
+    The lever arm: Gauss-Newton from A's own estimate of it (lever-arm states; 1 + 4 A runs)
+    instead of at the configured value, where A's gate and attitude Jacobian are those of the
+    wrong lever arm. The time offset: at the configuration (1 A run). The gyro scale factor:
+    Gauss-Newton from A's own estimate (one forward pass with scale-factor states) only when
+    that is significant (the secant along it: 1 A run); else the library's signature. The
+    warm-up: Gauss-Newton from A's pass with its dynamics where it explains A's rejections
+    (:func:`_warmup_start`: 3 A runs), else at the configuration (2 A runs). The usual flight
+    pays the scale-factor pass (docs/diagnose.md, "Power")."""
     lever_b_m, p_lever = _lever_arm_and_start(log, nav, config, lever_estimate)
     gn = p_lever is not None and bool(
         np.linalg.norm(p_lever) > REFINE_FRACTION * effect_by_id("lever_arm").plausible_si)
@@ -536,7 +536,7 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
     sigs: dict[str, list[np.ndarray]] | None = None
     at: dict[str, np.ndarray] = {}
     if log is not None and nav is not None:
-        # lever arm and gyro scale factor by Gauss-Newton from A's own estimates
+        # lever arm, gyro scale factor, warm-up: Gauss-Newton from A's own estimates
         sigs, at = _rerun_signatures_at_start(log, nav, calib_run, config, lever_estimate,
                                               a_as_configured, threads)
     null_log, null_nav, null_dv, warm_note = _null_without_warmup(

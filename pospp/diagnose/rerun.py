@@ -72,11 +72,13 @@ PIPELINE_RERUN = ("lever_arm", "time_offset", "gyro_scale_factor", "accel_bias_c
 runs, or 1 + 4 at A's lever-arm estimate); the gyro scale factor only by Gauss-Newton from A's
 own scale-factor estimate, when that is significant (1 A run; otherwise the library's
 signature stands and the flight pays A's 0.2 s forward pass): its re-run at the configuration
-(3 A runs) read a 600 ppm z scale factor on the y axis. The warm-up always (2 A runs): A's
+(3 A runs) read a 600 ppm z scale factor on the y axis. The warm-up always: A's
 accelerometer-bias estimate lags the warm-up and its attitude and heading take up the rest,
 which B carries from each leg start (measured: 61 mm/s RMS on a leg 170 s after power-up
 where the in-leg forcing of :mod:`pospp.diagnose.effects` gives 25 mm/s; docs/diagnose.md
-"Power")."""
+"Power"); at the configuration (2 A runs), or by Gauss-Newton from A's own pass with the
+warm-up's dynamics where the warm-up explains A's gated GNSS records (:func:`gate_excess`;
+``flight_stages.warmup_estimate``: 3 A runs and the pass)."""
 GAUSS_NEWTON_EFFECTS = ("lever_arm", "time_offset", "gyro_scale_factor", "accel_bias_change")
 """Effects :func:`signature_at` and :func:`refine_signatures` make a signature at an estimate
 for."""
@@ -118,7 +120,8 @@ def _gnss_earlier(log, dt_s: float):
 
 def warmed(log, db_b_mps2, accel_settling_s: float):
     """The log with the warm-up ``db exp(-t / T)`` added to the x and y specific force,
-    ``db_b_mps2`` (2,) [m/s^2] FRD, t from the first IMU stamp [s]."""
+    ``db_b_mps2`` (2,) [m/s^2] FRD, t from the first IMU stamp [s] (a negative ``db``
+    removes one)."""
     t_run_s = (log.imu.time_ns - log.imu.time_ns[0]) * 1e-9
     f = log.imu.f_ib_b_mps2.copy()
     f[:, 0:2] += np.exp(-t_run_s / accel_settling_s)[:, None] * np.asarray(db_b_mps2, float)
