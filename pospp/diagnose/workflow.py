@@ -168,7 +168,9 @@ names, measured: test_diagnose_null_mc.py seed 1, whitened it does not); the bod
 is present in every IMU, and in m/s the late samples' Gauss-Markov drift dominates the
 held-out gap, which a right vertical drift fitted by weighted least squares can raise (1.1
 deg/h on three 600 s legs: raw 108 -> 137 mm/s on one leg, whitened 0.77 -> 0.16;
-docs/diagnose.md "Power")."""
+docs/diagnose.md "Power"). The default of ``diagnose_replays(heldout_whitened=...)``; the
+pipeline adds ``accel_bias_change`` where A's own warm-up pass is the evidence that one is
+present (a 600 ug warm-up: raw 13 -> 20 mm/s on a late leg, whitened lower on every leg)."""
 
 
 def _heldout_lower(prob: Problem, trial: dict, ho0: list[NDArray], legs: list[int],
