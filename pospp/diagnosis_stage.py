@@ -28,10 +28,12 @@ from pospp.diagnose.alternative import (
     LIBRARY_ALTERNATIVES,
     library_fits,
     named_removed,
+    null_note,
     removed_names,
+    start_removed,
     with_library,
 )
-from pospp.diagnose.effects import effect_by_id
+from pospp.diagnose.effects import ACCEL_SETTLING_S, effect_by_id
 from pospp.diagnose.rerun import (
     PIPELINE_RERUN,
     REFINE_FRACTION,
@@ -40,11 +42,13 @@ from pospp.diagnose.rerun import (
     refine_signatures,
     rerun_signatures,
     signature_at,
+    warmed,
 )
-from pospp.diagnose.workflow import Diagnosis, diagnose_replays
+from pospp.diagnose.workflow import HELDOUT_WHITENED, Diagnosis, diagnose_replays
 from pospp.flight_stages import (
     _lever_arm_and_start,
     _scale_factor_start,
+    _warmup_start,
     imu_increments,
     imu_tuning,
     leg_epochs_ns,
@@ -142,24 +146,25 @@ def _rerun_signatures_at_start(log: mcap_reader.FlightLog, nav: nav_filter.Filte
                                ) -> tuple[dict[str, list[np.ndarray]], dict[str, np.ndarray]]:
     """The diagnosis's first A re-run signatures and the estimates they were made at.
 
-    The lever arm: Gauss-Newton from A's own estimate of it (lever-arm states): the signature
-    made there (secant along it, axis derivatives at the estimate; 1 + 4 A runs) instead of at
-    the configured value, where A's gate and attitude Jacobian are those of the wrong lever
-    arm. The time offset: at the configuration (1 A run). The gyro scale factor: Gauss-Newton
-    from A's own estimate (scale-factor states, one forward pass with the antenna at A's
-    lever-arm estimate) only when that is significant (the secant along it: 1 A run); else
-    the library's signature stands and the usual flight pays the one forward pass (docs/
-    diagnose.md, "Power")."""
+    The lever arm: Gauss-Newton from A's own estimate of it (lever-arm states; 1 + 4 A runs)
+    instead of at the configured value, where A's gate and attitude Jacobian are those of the
+    wrong lever arm. The time offset: at the configuration (1 A run). The gyro scale factor:
+    Gauss-Newton from A's own estimate (one forward pass with scale-factor states) only when
+    that is significant (the secant along it: 1 A run); else the library's signature. The
+    warm-up: Gauss-Newton from A's pass with its dynamics where it explains A's rejections
+    (:func:`_warmup_start`: 3 A runs), else at the configuration (2 A runs). The usual flight
+    pays the scale-factor pass (docs/diagnose.md, "Power")."""
     lever_b_m, p_lever = _lever_arm_and_start(log, nav, config, lever_estimate)
     gn = p_lever is not None and bool(
         np.linalg.norm(p_lever) > REFINE_FRACTION * effect_by_id("lever_arm").plausible_si)
+    starts = {"lever_arm": p_lever if gn else None,
+              "gyro_scale_factor": _scale_factor_start(log, config, lever_b_m),
+              "accel_bias_change": _warmup_start(log, nav, config, lever_b_m)}
     sigs = rerun_signatures(log, nav, calib_run, config,
                             [e for e in PIPELINE_RERUN if e != "gyro_scale_factor"
-                             and not (gn and e == "lever_arm")], navigate=navigate_a,
+                             and starts.get(e) is None], navigate=navigate_a,
                             threads=threads)
     at: dict[str, np.ndarray] = {}
-    starts = {"lever_arm": p_lever if gn else None,
-              "gyro_scale_factor": _scale_factor_start(log, config, lever_b_m)}
     for eid, p in starts.items():
         if p is None:
             continue
@@ -168,10 +173,26 @@ def _rerun_signatures_at_start(log: mcap_reader.FlightLog, nav: nav_filter.Filte
                                      threads=threads)
             at[eid] = p
         except (ValueError, np.linalg.LinAlgError):  # A failed at the estimate
-            if eid == "lever_arm":
+            if eid != "gyro_scale_factor":
                 sigs.update(rerun_signatures(log, nav, calib_run, config, (eid,),
                                              navigate=navigate_a, threads=threads))
     return sigs, at
+
+
+def _null_without_warmup(log: mcap_reader.FlightLog | None, nav: nav_filter.FilterResult | None,
+                         db: np.ndarray | None, calib_run: CalibrationRun,
+                         config: PipelineConfig, null_dv: list | None, threads: int
+                         ) -> tuple[Any, Any, list | None, str]:
+    """(log, A, null realisations, note) of the diagnosis's null: when A's warm-up estimate
+    ``db`` (body x, y, m/s^2) explains A's rejections (:func:`_warmup_start`), re-made on the
+    log without it (with it, A diverged in them: 1800 ug; docs/diagnose.md "Power")."""
+    if not null_dv or log is None or db is None:
+        return log, nav, null_dv, ""
+    log_w = warmed(log, -db, ACCEL_SETTLING_S)
+    nav_w = navigate(log_w, config)
+    return (log_w, nav_w, null_realisations(log_w, nav_w, calib_run, config, len(null_dv),
+                                            threads=threads),
+            "; made on the log with A's warm-up estimate removed")
 
 
 def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution_a: SolutionA,
@@ -197,9 +218,11 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
     sigs: dict[str, list[np.ndarray]] | None = None
     at: dict[str, np.ndarray] = {}
     if log is not None and nav is not None:
-        # lever arm and gyro scale factor by Gauss-Newton from A's own estimates
+        # lever arm, gyro scale factor, warm-up: Gauss-Newton from A's own estimates
         sigs, at = _rerun_signatures_at_start(log, nav, calib_run, config, lever_estimate,
                                               a_as_configured, threads)
+    null_log, null_nav, null_dv, warm_note = _null_without_warmup(
+        log, nav, at.get("accel_bias_change"), calib_run, config, null_dv, threads)
     # B's residuals carry the gyro angle random walk, correlated along each leg: weighting them
     # as white noise would make every F-test too liberal
     arw_radpsqrts = imu_tuning(config).noise().gyro_arw_radpsqrts
@@ -210,11 +233,17 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
             base_formulation=config.pairs.formulation, base_transition=config.pairs.transition,
             noise="gyro_rw", gyro_arw_radpsqrts=arw_radpsqrts, null_dv=null_dv,
             alpha=config.pairs.diagnose_alpha, signatures=signatures,
-            whitening_replays=whitening_replays)
+            whitening_replays=whitening_replays, heldout_whitened=ho_white)
 
-    note = _null_note(null_dv, *null_drift(calib_run, config))
+    note = null_note(null_dv, *null_drift(calib_run, config)) + warm_note
 
-    d = diagnose_with(sigs)
+    # A's warm-up pass started its signature: the whitening under it while it is named, its
+    # held-out in noise units as the vertical drift's (the pass: evidence it is present)
+    white = start_removed(replays, sigs, at, "accel_bias_change") if sigs else None
+    ho_white = (*HELDOUT_WHITENED, *(("accel_bias_change",) if white is not None else ()))
+    d = diagnose_with(sigs, white)
+    if white is not None and "accel_bias_change" not in d.named:
+        white, d = None, diagnose_with(sigs)
     for _ in range(REFINE_ITERATIONS if sigs else 0):
         assert sigs is not None  # the loop runs only with signatures
         # A is not linear in a GNSS-side effect: secants through the current estimates
@@ -223,7 +252,7 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
                                         navigate=a_as_configured, threads=threads)
         if all(refined[k] is sigs[k] for k in sigs):
             break
-        d, sigs = diagnose_with(refined), refined
+        d, sigs = diagnose_with(refined, white), refined
     removed = named_removed(replays, d, sigs) if sigs else None
     # the drift under the alternative: when the effect (re-run effects named; a vertical
     # drift or a gravity gradient, diagnose.alternative.with_library) explains the excess
@@ -235,16 +264,16 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
     drift = (drift_under_alternative(calib_run, alt, config)
              if null_dv and log is not None and nav is not None else None)
     if drift is not None:
-        assert log is not None and nav is not None and sigs is not None and null_dv
-        null_dv = null_realisations(log, nav, calib_run, config, len(null_dv), drift=drift,
-                                    threads=threads)
-        d, d_base = diagnose_with(sigs), d
+        assert null_log is not None and null_nav is not None and sigs is not None and null_dv
+        null_dv = null_realisations(null_log, null_nav, calib_run, config, len(null_dv),
+                                    drift=drift, threads=threads)
+        d, d_base = diagnose_with(sigs, white), d
         if removed is None and not set(LIBRARY_ALTERNATIVES) & set(d.named):
             return replace(d_base, null_model=note)  # the library effect is not borne out
         gone = " + ".join(removed_names(d_base, sigs,
                                         list(library_fits(d_base, candidate=True))))
-        note = _null_note(null_dv, *drift, f"re-estimated with {gone} removed",
-                          base=null_drift(calib_run, config))
+        note = null_note(null_dv, *drift, f"re-estimated with {gone} removed",
+                         base=null_drift(calib_run, config)) + warm_note
         removed = named_removed(replays, d, sigs)
     removed = with_library(replays, removed, d, candidate=False)  # whitened under it too
     if removed is None:
@@ -253,19 +282,3 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
     # estimated under is not self-consistent, and the first stands (measured: a 3 m lever arm)
     d2 = diagnose_with(sigs, removed)
     return replace(d2 if set(d.named) <= set(d2.named) else d, null_model=note)
-
-
-def _null_note(null_dv: list | None, sigma_radps: float, tau_s: float, source: str, *,
-               base: tuple[float, float, str] | None = None) -> str:
-    """One sentence: the null the diagnosis's p-values are calibrated on; ``base``: the
-    drift (sigma [rad/s], tau [s], source) of the base model's null when this one was re-made
-    under the alternative."""
-    if not null_dv:
-        return "no null realisations: nominal F distributions"
-    text = (f"{len(null_dv)} null realisations, gyro drift {sigma_radps / DEG_PER_H_RADPS:.3g} "
-            f"deg/h, tau {tau_s:.0f} s ({source})")
-    if base is not None:
-        text += (f"; re-made: under the base model the flight's drift read "
-                 f"{base[0] / DEG_PER_H_RADPS:.3g} deg/h, tau {base[1]:.0f} s, which the "
-                 "effect explains")
-    return text

@@ -23,9 +23,12 @@ from pospp.calib.segment import Leg
 from pospp.calib.stage import CalibrationRun, calibrate_flight
 from pospp.config import PipelineConfig
 from pospp.diagnose import null_model
-from pospp.diagnose.effects import effect_by_id
+from pospp.diagnose.effects import ACCEL_SETTLING_S, effect_by_id
 from pospp.diagnose.rerun import (
     REFINE_FRACTION,
+    gate_excess,
+    warmed,
+    warmup_fit,
 )
 from pospp.io import mcap_reader
 from pospp.nav import filter as nav_filter
@@ -33,7 +36,7 @@ from pospp.nav import tuning as nav_tuning
 from pospp.nav.strapdown import increments_from_rates
 from pospp.threads import map_in_threads
 from pospp.types import FLU_TO_FRD
-from pospp.units import t_s_from_time_ns
+from pospp.units import UG_MPS2, t_s_from_time_ns
 
 
 def sensor_to_body_dcm(sensor_frame: str, mounting_rpy_deg: tuple[float, float, float]) -> Any:
@@ -184,6 +187,32 @@ def scale_factor_estimate(log: mcap_reader.FlightLog, config: PipelineConfig,
                    estimate_scale_factors=True)
     b = nav.forward_biases
     return np.asarray(b.gyro_sf[-1], dtype=float), np.asarray(b.gyro_sf_sigma[-1], dtype=float)
+
+
+WARMUP_PRIOR_UG = 1000.0
+"""Sigma of the accelerometer Gauss-Markov states in the diagnosis's warm-up pass [ug] (ten
+times the effect's plausible 100 ug; the "vehicle" preset's 5 ug at 3600 s cannot follow a
+warm-up: A's smoothed bias then reads 600 ug as a constant 285 ug, docs/diagnose.md)."""
+WARMUP_START_UG = 200.0
+"""The warm-up pass's estimate starts a Gauss-Newton signature above this norm [ug] (twice the
+plausible size; the warm-up mission's null flights read at most 110 ug): :func:`_warmup_start`."""
+
+
+def warmup_estimate(log: mcap_reader.FlightLog, config: PipelineConfig, lever_b_m: Any = None,
+                    settling_s: float = ACCEL_SETTLING_S) -> np.ndarray:
+    """The accelerometer warm-up ``db`` (body FRD x, y, m/s^2) of ``b_inf + db exp(-t / T)``
+    (t from the first IMU stamp, T = ``settling_s``): one pass of A, smoother on, whose
+    accelerometer Gauss-Markov states have the warm-up's dynamics (``b' = -b / T``, sigma
+    :data:`WARMUP_PRIOR_UG`), antenna at ``lever_b_m``, its smoothed bias fitted
+    (:func:`pospp.diagnose.rerun.warmup_fit`). Warm-up mission, seeds 1-10: 600 ug read
+    483-682, 1800 ug 1669-1868, none -110 to 89 ug (x). Raises ValueError when A fails."""
+    tuning = replace(imu_tuning(config), accel_gm_sigma_ug=WARMUP_PRIOR_UG,
+                     accel_gm_tau_s=settling_s)
+    opts = replace(config.filter_options(), smoother=True, gauss_markov_states=True)
+    nav = navigate(log, config, lever_arm_b_m=lever_b_m, options=opts, tuning=tuning)
+    b = nav.smoothed_biases
+    assert b is not None  # the smoother ran
+    return warmup_fit(b.t_s, b.accel_b_mps2, nav.alignment.t_s, settling_s)
 
 
 def imu_increments(log: mcap_reader.FlightLog) -> ImuIncrements:
@@ -374,3 +403,23 @@ def _scale_factor_start(log: mcap_reader.FlightLog, config: PipelineConfig,
             * effect_by_id("gyro_scale_factor").plausible_si):
         return None
     return sf
+
+
+def _warmup_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
+                  config: PipelineConfig, lever_b_m: np.ndarray | None) -> np.ndarray | None:
+    """A's warm-up estimate (:func:`warmup_estimate`) when it explains A's rejections: A as
+    configured gated more GNSS records than its model allows (:func:`gate_excess`; else no
+    pass), the estimate exceeds :data:`WARMUP_START_UG`, and A re-run without it gates no
+    more than its model allows; else None (also when A fails). The pass alone is no evidence
+    (250 ug on the power flights with nothing hidden; docs/diagnose.md, "Power")."""
+    gate_p = config.filter_options().gate_probability
+    if not gate_excess(nav, gate_p):
+        return None
+    try:
+        db = warmup_estimate(log, config, lever_b_m)
+        if not np.linalg.norm(db) > WARMUP_START_UG * UG_MPS2:
+            return None
+        explained = not gate_excess(navigate(warmed(log, -db, ACCEL_SETTLING_S), config), gate_p)
+    except ValueError:
+        return None
+    return db if explained else None

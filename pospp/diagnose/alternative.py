@@ -16,6 +16,7 @@ import numpy as np
 
 from pospp.diagnose.effects import effect_by_id, signature
 from pospp.diagnose.results import Diagnosis
+from pospp.units import DEG_PER_H_RADPS
 
 LIBRARY_ALTERNATIVES = ("vertical_gyro_drift", "gravity_disturbance")
 """Library effects (signatures along B, no A re-run) whose fitted response is removed for the
@@ -101,6 +102,19 @@ def named_removed(replays: list, d: Diagnosis, sigs: dict[str, list[np.ndarray]]
                             for k in range(len(replays))])
 
 
+def start_removed(replays: list, sigs: dict[str, list[np.ndarray]],
+                  at: dict[str, np.ndarray], effect_id: str) -> list | None:
+    """The replays minus ``effect_id``'s response at its first estimate ``at[effect_id]``
+    (SI; the signature made there: ``S p`` is the secant's whole response), or None when it
+    has none. The whitening of the first diagnosis when A's own estimate of the warm-up
+    started its signature: a 1800 ug warm-up left in B minus A is read as white noise by the
+    REML of the whitening, and the observability screen, in those noise units, then drops
+    the warm-up (measured, docs/diagnose.md "Power")."""
+    if effect_id not in at or effect_id not in sigs:
+        return None
+    return _minus(replays, [s @ at[effect_id] for s in sigs[effect_id]])
+
+
 def _minus(replays: list, responses: list) -> list:
     """Each replay with ``response`` ((M, 2) [m/s], N and E) taken off its B minus A."""
     out = []
@@ -109,3 +123,19 @@ def _minus(replays: list, responses: list) -> list:
         dv[:, 0:2] -= resp
         out.append(replace(r, dv_n_mps=dv))
     return out
+
+
+def null_note(null_dv: list | None, sigma_radps: float, tau_s: float, source: str, *,
+               base: tuple[float, float, str] | None = None) -> str:
+    """One sentence: the null the diagnosis's p-values are calibrated on; ``base``: the
+    drift (sigma [rad/s], tau [s], source) of the base model's null when this one was re-made
+    under the alternative."""
+    if not null_dv:
+        return "no null realisations: nominal F distributions"
+    text = (f"{len(null_dv)} null realisations, gyro drift {sigma_radps / DEG_PER_H_RADPS:.3g} "
+            f"deg/h, tau {tau_s:.0f} s ({source})")
+    if base is not None:
+        text += (f"; re-made: under the base model the flight's drift read "
+                 f"{base[0] / DEG_PER_H_RADPS:.3g} deg/h, tau {base[1]:.0f} s, which the "
+                 "effect explains")
+    return text

@@ -113,6 +113,17 @@ def _down_rate(t: NDArray, w: NDArray, sol: NavSolution) -> NDArray:
     return np.einsum("ij,ij->i", row, w) + earth.EARTH_RATE_RADPS * np.sin(lat)
 
 
+def _innovation_checks(rec: Any, gate_probability: float) -> list[Check]:
+    """The GNSS innovations' NIS band and A's gated records (``rec``: the filter's
+    ``InnovationRecord``; position and velocity records processed after the start)."""
+    gnss = (rec.kind <= 1) & ((rec.status == 0) | (rec.status == 1) | (rec.status == 2))
+    rejected = gnss & (rec.status >= 1)  # gated, or used only after a covariance reset
+    return [qc.nis_band(rec.t_s[gnss], rec.nis[gnss]),
+            qc.gnss_gate(int(np.count_nonzero(gnss)), int(np.count_nonzero(rejected)),
+                         gate_probability,
+                         float(rec.t_s[rejected][0]) if rejected.any() else None)]
+
+
 def quality_checks(log: FlightLog, nav: FilterResult, calib_run: Any, config: Any, *,
                    c_bs: NDArray, lever_estimate: LeverArmEstimate | None = None
                    ) -> QualityReport:
@@ -177,8 +188,7 @@ def quality_checks(log: FlightLog, nav: FilterResult, calib_run: Any, config: An
                                           else (nav.forward.t_s, nav.forward.v_n_mps))))
     rec = getattr(nav, "innovations", None)
     if rec is not None:
-        gnss = (rec.kind <= 1) & ((rec.status == 0) | (rec.status == 1) | (rec.status == 2))
-        out.append(qc.nis_band(rec.t_s[gnss], rec.nis[gnss]))
+        out += _innovation_checks(rec, config.filter_options().gate_probability)
     est = time_offset.estimate_time_offset(t, _down_rate(t, w, sol), v_t, v_n)
     out.append(time_offset.gnss_time_offset(est))
     lev = lever_estimate if lever_estimate is not None else (

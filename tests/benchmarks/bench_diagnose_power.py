@@ -28,9 +28,10 @@ s after power-up, a loiter, the later legs after T = 1200 s; test_diagnose_power
 ``trigger``: on flights with another effect hidden (lever arm, GNSS time offset) or none, A's
 own gyro scale-factor estimate (``flight_stages.scale_factor_estimate`` at A's lever-arm
 estimate) and whether the pipeline would make the scale factor's Gauss-Newton signature
-(``flight_stages._scale_factor_start``): how often the scale factor's extra A run is paid
-where no scale factor is hidden; with ``--mc``, on the 40 flights of the null Monte Carlo
-(tests/unit/test_diagnose_null_mc.py) instead.
+(``flight_stages._scale_factor_start``), and the same for A's warm-up pass
+(``flight_stages.warmup_estimate``, ``_warmup_start``): how often their Gauss-Newton starts
+where no such effect is hidden; with ``--mc``, on the 40 flights of the null Monte Carlo
+(tests/unit/test_diagnose_null_mc.py) instead; with ``--warmup`` on the warm-up mission.
 """
 
 from __future__ import annotations
@@ -158,30 +159,43 @@ TRIGGER_CASES = (("lever_arm", 0.5), ("lever_arm", 1.0), ("lever_arm", 1.5), ("l
                  ("time_offset", 24.0), ("none", 0.0))
 
 
-def _triggered(log, cfg) -> tuple[bool, float]:
-    """(the scale factor's Gauss-Newton started, A's largest axis / sigma) on one flight."""
+def _triggered(log, cfg) -> tuple[bool, float, bool, float]:
+    """(the scale factor's Gauss-Newton started, A's largest axis / sigma, the warm-up's
+    started, its pass's |db| in ug, A's gate in excess) on one flight."""
     nav = pipeline.navigate(log, cfg)
     lever = pipeline.lever_arm_estimate(log, nav, cfg).lever_b_m
     sf, sigma = flight_stages.scale_factor_estimate(log, cfg, lever)
     start = flight_stages._scale_factor_start(log, cfg, lever)
-    return start is not None, float(np.max(np.abs(sf) / sigma))
+    db = flight_stages.warmup_estimate(log, cfg, lever)
+    warm = flight_stages._warmup_start(log, nav, cfg, lever)
+    return (start is not None, float(np.max(np.abs(sf) / sigma)), warm is not None,
+            float(np.linalg.norm(db)) / fx.UG_MPS2,
+            flight_stages.gate_excess(nav, cfg.filter_options().gate_probability))
 
 
-def trigger(seeds: int, mc: bool) -> None:
-    print(f"| hidden | size | triggered (of {40 if mc else seeds}) | largest axis / sigma |")
-    print("|---|---|---|---|")
+def _trigger_row(label: str, res: list) -> str:
+    return (f"{label} | {sum(r[0] for r in res)} | {max(r[1] for r in res):.1f} | "
+            f"{sum(r[4] for r in res)} | {sum(r[2] for r in res)} | "
+            f"{max(r[3] for r in res):.0f} |")
+
+
+def trigger(seeds: int, mc: bool, warmup: bool = False) -> None:
+    print(f"| hidden | size | scale factor triggered (of {40 if mc else seeds}) | largest axis "
+          "/ sigma | A's gate in excess | warm-up triggered | largest warm-up pass (ug) |")
+    print("|---|---|---|---|---|---|---|")
     if mc:
         import test_diagnose_null_mc as tm
 
         res = [_triggered(*tm.null_flight(s)[1:]) for s in range(40)]
-        print(f"| none (null Monte Carlo) | - | {sum(r[0] for r in res)} | "
-              f"{max(r[1] for r in res):.1f} |")
+        print(_trigger_row("| none (null Monte Carlo) | -", res))
         return
     for eff, size in TRIGGER_CASES:
-        res = [_triggered(*tp.simulate_flight(None if eff == "none" else eff, size, s))
+        res = [_triggered(*tp.simulate_flight(None if eff == "none" else eff, size, s,
+                                              **({"n_legs": 4, "warmup": True} if warmup
+                                                 else {})))
                for s in range(1, seeds + 1)]
-        print(f"| {eff} | {size:g} {tp.EFFECT_UNITS.get(eff, '')} | {sum(r[0] for r in res)} "
-              f"| {max(r[1] for r in res):.1f} |", flush=True)
+        print(_trigger_row(f"| {eff} | {size:g} {tp.EFFECT_UNITS.get(eff, '')}", res),
+              flush=True)
 
 
 def main() -> None:
@@ -196,7 +210,8 @@ def main() -> None:
                     help="effect:size (display unit), comma-separated")
     ap.add_argument("--mc", action="store_true",
                     help="trigger: the null Monte Carlo's 40 flights")
-    ap.add_argument("--warmup", action="store_true", help="the warm-up mission (power only)")
+    ap.add_argument("--warmup", action="store_true",
+                    help="the warm-up mission (power, trigger)")
     ap.add_argument("--crossing", action="store_true",
                     help="crossing lines at 40 / 80 m/s (power only; the gravity gradient)")
     ap.add_argument("--n-legs", type=int, default=3)
@@ -206,7 +221,7 @@ def main() -> None:
         cells = [(float(c.split(":")[0]), float(c.split(":")[1])) for c in a.cells.split(",")]
         limits(a.seeds, cells)
     elif a.what == "trigger":
-        trigger(a.seeds, a.mc)
+        trigger(a.seeds, a.mc, a.warmup)
     else:
         sizes = [(s.split(":")[0], float(s.split(":")[1])) for s in a.sizes.split(",")]
         power(a.seeds, sizes, warmup=a.warmup, n_legs=a.n_legs, leg_s=a.leg_s,

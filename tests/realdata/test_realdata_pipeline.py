@@ -117,10 +117,11 @@ def test_ardupilot_runs_end_to_end_and_finds_no_leg(real_data, out_dir):
     convert(real_data / "ardupilot_plane_testlog2", out_dir / "ardupilot.mcap")
     outcome, run_dir = _run(out_dir, "ardupilot", "ardupilot_plane_testlog2")
     s = outcome.summary
-    # no leg (partial), and the QC finds that the GNSS model does not fit this log: NIS, and a
-    # 0.95 m forward lever arm or a 57 ms GNSS lead (AHRS_GPS_DELAY = 2; docs/qc.md)
+    # no leg (partial), and the QC finds that the GNSS model does not fit this log: NIS, A's
+    # gate (208 of 3408 records gated where its model allows 3), and a 0.95 m forward lever
+    # arm or a 57 ms GNSS lead (AHRS_GPS_DELAY = 2; docs/qc.md)
     assert outcome.status == "degraded"
-    assert s["qc_failed_checks"] == "gnss_nis,lever_arm,calibration"
+    assert s["qc_failed_checks"] == "gnss_nis,gnss_gate,lever_arm,calibration"
     assert s["n_legs"] == 0 and s["n_pairs_used"] == 0
     assert s["calibration_reason"].startswith("no calibration: no straight, level, uniform leg")
     assert 612.0 < s["duration_s"] < 614.0 and 30_600 < s["n_imu_samples"] < 30_700

@@ -14,6 +14,7 @@ from dataclasses import replace
 import numpy as np
 import pandas as pd
 import pytest
+from scipy.stats import poisson
 
 from pospp import earth
 from pospp.config import PipelineConfig
@@ -137,6 +138,24 @@ def test_nis_band_passes_chi_square_and_fails_a_mistuned_filter():
     bad = qc.nis_band(t, 4.0 * nis)
     assert not bad.passed and bad.value > 0.9 and bad.time_ns_offset is not None
     assert qc.nis_band(t[:10], nis[:10]).passed  # too few records: not applicable
+
+
+def test_gnss_gate_against_the_filters_own_gate_probability():
+    """gnss_gate: the count of gated records against the Poisson quantile of A's own gate
+    (3300 records at 0.9999: mean 0.33). The warm-up mission's null flights gate 0-2 (pass),
+    a 600 ug warm-up 33-39 with one reset (fail, timed at the first rejection); where A's
+    model holds the check fails in at most 1e-3 of runs (the exact Poisson tail)."""
+    assert qc.gnss_gate(3300, 0, 0.9999).passed
+    ok = qc.gnss_gate(3300, 2, 0.9999, 300.0)
+    assert ok.passed and ok.time_ns_offset is None and ok.threshold == 3.0
+    bad = qc.gnss_gate(3300, 34, 0.9999, 212.0)
+    assert not bad.passed and bad.severity == "degraded"
+    assert bad.time_ns_offset == 212 * 10**9 and "34 of 3300" in bad.suggestion
+    for n, p in ((3300, 0.9999), (40000, 0.9999), (500, 0.999)):
+        lam, limit = n * (1.0 - p), qc.gnss_gate(n, 0, p).threshold
+        # the smallest count whose Poisson upper tail is at most GATE_TAIL
+        assert poisson.sf(limit, lam) <= qc.GATE_TAIL < poisson.sf(limit - 1, lam), (n, p)
+    assert qc.gnss_gate(0, 0, 0.9999).passed  # nothing processed: nothing to reject
 
 
 def _track(tau_s: float, *, noise_rad: float = 0.0, seed: int = 5):
