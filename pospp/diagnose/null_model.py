@@ -207,10 +207,12 @@ def decimate_imu(log: Any, factor: int, keep_time_ns: NDArray | None = None) -> 
         return log
     imu = log.imu
     t = np.asarray(imu.time_ns, dtype=np.int64)
-    keep = np.arange(0, t.size, factor)
+    kept = np.zeros(t.size, dtype=bool)
+    kept[::factor] = True
     if keep_time_ns is not None and np.size(keep_time_ns):
         at = np.searchsorted(t, np.asarray(keep_time_ns, dtype=np.int64))
-        keep = np.union1d(keep, at[(at < t.size)])
+        kept[at[at < t.size]] = True
+    keep = np.flatnonzero(kept)
     dt = np.diff(t).astype(float) * 1e-9
 
     def mean_over_groups(rate: NDArray) -> NDArray:
