@@ -154,9 +154,18 @@ def _lz4_bounded(data: bytes | memoryview, limit: int) -> bytes | bytearray:
     first = dec.decompress(data, max_length=min(limit + 1, _LZ4_PIECE))
     if dec.eof or dec.needs_input or len(first) > limit:
         return first
-    out = bytearray(first)  # grows in place (realloc), not by doubling copies
-    while len(out) <= limit and not (dec.eof or dec.needs_input):
-        out += dec.decompress(b"", max_length=min(limit + 1 - len(out), _LZ4_PIECE))
+    # the claimed size (+1) allocated once and filled: a growing buffer's realloc may copy,
+    # holding old and new at once (a 64 MiB claim then peaked at 167 MiB, depending on the
+    # allocator's state; now at most the claim plus two pieces)
+    out = bytearray(limit + 1)
+    n = len(first)
+    out[:n] = first
+    del first
+    while n <= limit and not (dec.eof or dec.needs_input):
+        piece = dec.decompress(b"", max_length=min(limit + 1 - n, _LZ4_PIECE))
+        out[n:n + len(piece)] = piece
+        n += len(piece)
+    del out[n:]
     return out
 
 
