@@ -7,8 +7,6 @@ the strapdown's own algorithm error is in the base and the realisation alike."""
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 from _missions import SimLog, three_leg_survey
@@ -22,6 +20,7 @@ from pospp.nav import filter as nav_filter
 from pospp.sim.api import simulate
 from pospp.sim.gnss import GnssModel
 from pospp.sim.profile import parse_profile
+from pospp.types import ImuSamples
 
 
 @pytest.fixture(scope="module")
@@ -96,28 +95,18 @@ def test_decimated_increments_are_the_flights_summed():
     t = np.cumsum(rng.integers(4_000_000, 6_000_000, 1003)).astype(np.int64)
     t[500:] += 300_000_000  # a gap inside a group
     w, f = rng.normal(size=(1003, 3)), rng.normal(size=(1003, 3))
-
-    @dataclasses.dataclass(frozen=True)
-    class _Imu:
-        time_ns: np.ndarray
-        w_ib_b_radps: np.ndarray
-        f_ib_b_mps2: np.ndarray
-
-    @dataclasses.dataclass(frozen=True)
-    class _Log:
-        imu: _Imu
-
-    dec = null_model.decimate_imu(_Log(_Imu(t, w, f)), 4).imu
+    log = SimLog(ImuSamples(t, w, f), None, None)
+    dec = null_model.decimate_imu(log, 4).imu
     assert dec.time_ns.size == 251 and np.array_equal(dec.time_ns, t[::4])
     for full, down in ((w, dec.w_ib_b_radps), (f, dec.f_ib_b_mps2)):
         inc = np.cumsum(full[1:] * (np.diff(t) * 1e-9)[:, None], axis=0)[3::4]
         inc_d = np.cumsum(down[1:] * (np.diff(dec.time_ns) * 1e-9)[:, None], axis=0)
         np.testing.assert_allclose(inc_d, inc, rtol=0, atol=1e-12)
         np.testing.assert_array_equal(down[0], full[0])
-    assert null_model.decimate_imu(_Log(_Imu(t, w, f)), 1).imu.time_ns is t
+    assert null_model.decimate_imu(log, 1).imu.time_ns is t
     # stamps to keep (a leg's epochs) split the groups: kept, and the sums still exact
     keep = t[[101, 102, 517, 1001]]
-    dec = null_model.decimate_imu(_Log(_Imu(t, w, f)), 4, keep).imu
+    dec = null_model.decimate_imu(log, 4, keep).imu
     assert set(keep) <= set(dec.time_ns) and set(t[::4][:-1]) <= set(dec.time_ns)
     at = np.searchsorted(t, dec.time_ns)
     inc = np.concatenate([np.zeros((1, 3)), np.cumsum(w[1:] * (np.diff(t) * 1e-9)[:, None],

@@ -26,9 +26,9 @@ from pospp.config import load_config
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def _run(cases: Path, name: str, extra: str = "", lever_arm_m: list[float] | None = None):
-    """(calibrated diagnosis, nominal diagnosis, body bias error / sigma) of a case, with its
-    lever arm configured from its params.json (or ``lever_arm_m``)."""
+def _flight(cases: Path, name: str, extra: str = "", lever_arm_m: list[float] | None = None):
+    """(log, A, calibration run, A's solution, config) of a case, with its lever arm configured
+    from its params.json (or ``lever_arm_m``)."""
     params = json.loads((cases / f"{name}.params.json").read_text())
     lever = params["gnss"]["lever_arm_m"] if lever_arm_m is None else lever_arm_m
     toml = (ROOT / "pipelines" / "flight.toml").read_text().replace(
@@ -40,8 +40,16 @@ def _run(cases: Path, name: str, extra: str = "", lever_arm_m: list[float] | Non
         cfg = load_config(path)
     log = pipeline.ingest(cases / f"{name}.mcap", cfg)
     nav = pipeline.navigate(log, cfg)
+    run, ref = pipeline.calibrate_from_a(pipeline.imu_increments(log), nav, cfg)
+    return log, nav, run, ref, cfg
+
+
+def _run(cases: Path, name: str, extra: str = "", lever_arm_m: list[float] | None = None):
+    """(calibrated diagnosis, nominal diagnosis, body bias error / sigma) of a case, with its
+    lever arm configured from its params.json (or ``lever_arm_m``)."""
+    params = json.loads((cases / f"{name}.params.json").read_text())
+    log, nav, run, ref, cfg = _flight(cases, name, extra, lever_arm_m)
     imu = pipeline.imu_increments(log)
-    run, ref = pipeline.calibrate_from_a(imu, nav, cfg)
     assert run.calibrated, run.reason
     null = pipeline.null_realisations(log, nav, run, cfg, 8, seed=2)
     honest = with_null_covariance(run, null)
@@ -115,25 +123,10 @@ def test_rerun_signatures_at_a_lower_imu_rate(reference_cases):
     from pospp.diagnose.rerun import RERUN_EFFECTS, rerun_signatures
     from pospp.diagnosis_stage import rerun_base
 
-    def setup(name):
-        params = json.loads((reference_cases / f"{name}.params.json").read_text())
-        lever = params["gnss"]["lever_arm_m"]
-        toml = (ROOT / "pipelines" / "flight.toml").read_text().replace(
-            "lever_arm_m = [0.0, 0.0, 0.0]",
-            f"lever_arm_m = [{lever[0]}, {lever[1]}, {lever[2]}]")
-        with tempfile.TemporaryDirectory() as tmp:
-            path = Path(tmp) / "case.toml"
-            path.write_text(toml)
-            cfg = load_config(path)
-        log = pipeline.ingest(reference_cases / f"{name}.mcap", cfg)
-        nav = pipeline.navigate(log, cfg)
-        run, _ = pipeline.calibrate_from_a(pipeline.imu_increments(log), nav, cfg)
-        return log, nav, run, cfg
-
-    log, nav, run, cfg = setup("flight_time_offset_200hz")
+    log, nav, run, _, cfg = _flight(reference_cases, "flight_time_offset_200hz")
     log_r, run_r = rerun_base(log, nav, run, cfg)
     assert log_r is log and run_r is run
-    log, nav, run, cfg = setup("flight_null_200hz")
+    log, nav, run, _, cfg = _flight(reference_cases, "flight_null_200hz")
     log_r, run_r = rerun_base(log, nav, run, cfg)
     assert log_r.imu.time_ns.size < 0.3 * log.imu.time_ns.size
     nav_a = partial(flight_stages.navigate, config=cfg)
