@@ -318,7 +318,13 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
         accel_gm_sigma_mps2=float(si.accel_gm_sigma_mps2), accel_gm_tau_s=float(si.accel_gm_tau_s),
         pos_sigma_ned_m=pos_sig, vel_sigma_ned_mps=vel_sig)
     leg_ns = leg_epochs_ns(log, calib_run.legs)
-    base_dv = b_minus_a(null_model.decimate_imu(base, factor, leg_ns))
+    try:
+        base_dv = b_minus_a(null_model.decimate_imu(base, factor, leg_ns))
+    except ValueError:  # A fails on the summed-down base (its alignment): the flight's rate
+        if factor == 1:
+            raise
+        factor = 1
+        base_dv = b_minus_a(base)
     t_align_ns = int(log.imu.time_ns[0]) + round(nav.alignment.t_s * 1e9)
     rng = np.random.default_rng(seed)
 

@@ -3,10 +3,11 @@
 glibc's allocator keeps what a stage frees in its heap (its mmap threshold grows to 32 MiB
 after large frees, so numpy's large temporaries end up on the heap too) and the process's
 resident set then only grows: on the 1.5 h, 200 Hz flight the freed memory of one stage
-stacked under the next and the run peaked at 960 MiB where 821 MiB was ever live at once
-(docs/benchmarks.md, "Memory"). ``malloc_trim(0)`` returns the free pages (all of them since
-glibc 2.8, not only the heap's top) at a cost of a few milliseconds. Elsewhere (another C
-library, macOS, Windows) it is a no-op.
+stacked under the next and the run peaked at 960 MiB, against 821 MiB with the free pages
+returned at each stage's end (docs/benchmarks.md, "Speed and memory, fifth round").
+``malloc_trim(0)`` returns the free pages (all of them since glibc 2.8, not only the heap's
+top) at a cost of a few milliseconds. Elsewhere (another C library, macOS, Windows) it is a
+no-op.
 """
 
 from __future__ import annotations
