@@ -79,13 +79,12 @@ def rerun_base(log: mcap_reader.FlightLog | None, nav: nav_filter.FilterResult |
     borderline gate decisions and the signatures are not smooth in the step at any rate
     (flight_time_offset_200hz, 62 records gated where 4 are allowed: the four signatures
     moved by 8-95 % between the rates). The log and run themselves when nothing is summed,
-    A gated in excess, or A fails on the summed-down log (or without a log)."""
+    A gated in excess, A fails on the summed-down log, or B there is not on the flight's
+    samples (or without a log)."""
     if log is None or nav is None:
         return log, calib_run
     factor = rerun_decimation(log, config.pairs.rerun_imu_rate_hz)
-    if factor > 1 and gate_excess(nav, config.filter_options().gate_probability):
-        return log, calib_run
-    if factor == 1:
+    if factor == 1 or gate_excess(nav, config.filter_options().gate_probability):
         return log, calib_run
     log_r = null_model.decimate_imu(log, factor, leg_epochs_ns(log, calib_run.legs))
     try:
@@ -99,6 +98,9 @@ def rerun_base(log: mcap_reader.FlightLog | None, nav: nav_filter.FilterResult |
     replays = {i: replace(rep, dv_n_mps=replay_velocity_error(
         imu_r, ref, legs[i], accel_compensation=config.replay.accel_compensation,
         sample_rate_hz=config.replay.sample_rate_hz)) for i, rep in calib_run.replays.items()}
+    if any(replays[i].dv_n_mps.shape != rep.dv_n_mps.shape
+           for i, rep in calib_run.replays.items()):  # B not on the flight's samples
+        return log, calib_run
     return log_r, replace(calib_run, replays=replays)
 
 

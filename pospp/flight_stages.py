@@ -320,6 +320,9 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     leg_ns = leg_epochs_ns(log, calib_run.legs)
     try:
         base_dv = b_minus_a(null_model.decimate_imu(base, factor, leg_ns))
+        if any(d.shape != calib_run.replays[i].dv_n_mps.shape
+               for d, i in zip(base_dv, ids, strict=True)):
+            raise ValueError("B on the summed-down base is not on the flight's samples")
     except ValueError:  # A fails on the summed-down base (its alignment): the flight's rate
         if factor == 1:
             raise
