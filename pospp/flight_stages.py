@@ -2,8 +2,9 @@
 
 Ingestion, algorithm A (with the lever-arm re-estimation the QC stage and the diagnosis share),
 the calibration stage over A (legs, B replays, pairs, least squares, B re-run), B minus A's null
-realisations, and the model-discrepancy diagnosis with its A re-runs. :mod:`pospp.pipeline`
-runs them in order and writes what they return; the names are importable from there too.
+realisations, and A's first estimates the diagnosis starts from (scale factor, warm-up); the
+diagnosis itself is :mod:`pospp.diagnosis_stage`. :mod:`pospp.pipeline` runs them in order and
+writes what they return; the names are importable from there too.
 Nothing here touches files but through :mod:`pospp.io`'s reader.
 """
 
