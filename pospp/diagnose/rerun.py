@@ -42,7 +42,7 @@ from pospp.diagnose.effects import ACCEL_SETTLING_S, effect_by_id
 from pospp.nav import filter as nav_filter
 from pospp.nav.filter import FilterResult
 from pospp.nav.strapdown import increments_from_rates
-from pospp.qc.checks import gnss_gate
+from pospp.qc.stage import gate_check
 from pospp.threads import map_in_threads
 
 STEP_FRACTION = 1.0
@@ -328,13 +328,9 @@ def warmup_fit(t_s, accel_b_mps2, t_from_s: float, settling_s: float = ACCEL_SET
 def gate_excess(nav: nav_filter.FilterResult, gate_probability: float) -> bool:
     """Whether A gated more GNSS records (position and velocity, gated or accepted after a
     covariance reset) than its own model allows (the QC check
-    :func:`pospp.qc.checks.gnss_gate`: Poisson tail 1e-3). Where A's IMU error model does not
+    :func:`pospp.qc.stage.gate_check`: Poisson tail 1e-3). Where A's IMU error model does not
     hold (a 600 ug accelerometer warm-up against the "vehicle" preset's 30 ug: 33-39 of 3300
     records gated, one reset; none to 2 without it: docs/diagnose.md, "Power") A is not
     linear in the effect, and its derivative at zero is no place to start a Gauss-Newton."""
-    rec = nav.innovations
-    if rec is None:
-        return False
-    gnss = (rec.kind <= 1) & (rec.status >= 0) & (rec.status <= 2)
-    return not gnss_gate(int(np.count_nonzero(gnss)),
-                         int(np.count_nonzero(gnss & (rec.status >= 1))), gate_probability).passed
+    return nav.innovations is not None and not gate_check(nav.innovations,
+                                                          gate_probability).passed

@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 
 from pospp import earth, rotation
 from pospp.nav.alignment import static_windows
+from pospp.nav.filter import STATUS_GATED, STATUS_RESET, STATUS_USED
 from pospp.qc import checks as qc
 from pospp.qc import time_offset
 from pospp.qc.checks import Check
@@ -113,15 +114,28 @@ def _down_rate(t: NDArray, w: NDArray, sol: NavSolution) -> NDArray:
     return np.einsum("ij,ij->i", row, w) + earth.EARTH_RATE_RADPS * np.sin(lat)
 
 
+def _gnss_processed(rec: Any) -> NDArray:
+    """The position and velocity records A processed after its start (used, gated, or used
+    after a covariance reset) in the filter's ``InnovationRecord``."""
+    return (rec.kind <= 1) & np.isin(rec.status, (STATUS_USED, STATUS_GATED, STATUS_RESET))
+
+
+def gate_check(rec: Any, gate_probability: float) -> Check:
+    """:func:`pospp.qc.checks.gnss_gate` on A's innovation record: the GNSS records it gated,
+    or used only after a covariance reset, against what its gate allows (the diagnosis's
+    :func:`pospp.diagnose.rerun.gate_excess` asks the same)."""
+    gnss = _gnss_processed(rec)
+    rejected = gnss & ((rec.status == STATUS_GATED) | (rec.status == STATUS_RESET))
+    return qc.gnss_gate(int(np.count_nonzero(gnss)), int(np.count_nonzero(rejected)),
+                        gate_probability,
+                        float(rec.t_s[rejected][0]) if rejected.any() else None)
+
+
 def _innovation_checks(rec: Any, gate_probability: float) -> list[Check]:
     """The GNSS innovations' NIS band and A's gated records (``rec``: the filter's
     ``InnovationRecord``; position and velocity records processed after the start)."""
-    gnss = (rec.kind <= 1) & ((rec.status == 0) | (rec.status == 1) | (rec.status == 2))
-    rejected = gnss & (rec.status >= 1)  # gated, or used only after a covariance reset
-    return [qc.nis_band(rec.t_s[gnss], rec.nis[gnss]),
-            qc.gnss_gate(int(np.count_nonzero(gnss)), int(np.count_nonzero(rejected)),
-                         gate_probability,
-                         float(rec.t_s[rejected][0]) if rejected.any() else None)]
+    gnss = _gnss_processed(rec)
+    return [qc.nis_band(rec.t_s[gnss], rec.nis[gnss]), gate_check(rec, gate_probability)]
 
 
 def quality_checks(log: FlightLog, nav: FilterResult, calib_run: Any, config: Any, *,
