@@ -137,3 +137,44 @@ def test_rerun_signatures_at_a_lower_imu_rate(reference_cases):
         a = np.concatenate([np.ravel(x) for x in full[e]])
         b = np.concatenate([np.ravel(x) for x in down[e]])
         assert np.sqrt(np.mean((a - b) ** 2)) < 2e-3 * np.sqrt(np.mean(a**2)), e
+
+
+@pytest.mark.slow
+def test_null_realisation_summed_down_on_an_independent_flight(reference_cases):
+    # one null noise draw on flight_null_200hz (independent simulator), B minus A's response
+    # at 200 Hz and with the IMU summed down to 50 Hz (as null_realisations does): measured
+    # 1-3e-4 of the 20-36 mm/s response per leg
+    from pospp import flight_stages
+    from pospp.calib.replay import SolutionA, replay_velocity_error
+    from pospp.diagnose import null_model
+    from pospp.nav import filter as nav_filter
+
+    log, nav, run, _, cfg = _flight(reference_cases, "flight_null_200hz")
+    legs = {leg.leg_id: leg for leg in run.legs}
+
+    def b_minus_a(lg):
+        ref = SolutionA(*nav_filter.solution_a_fields(flight_stages.navigate(lg, cfg)))
+        imu = flight_stages.imu_increments(lg)
+        return [replay_velocity_error(imu, ref, legs[i], sample_rate_hz=cfg.replay.sample_rate_hz)
+                [:, 0:2] for i in sorted(run.replays)]
+
+    base = null_model.gnss_on_solution(log, nav.smoothed, int(log.imu.time_ns[0]),
+                                       nav.lever_arm.lever_b_m)
+    arw, vrw = null_model.imu_white_noise_from_samples(log.imu.time_ns, log.imu.w_ib_b_radps,
+                                                       log.imu.f_ib_b_mps2)
+    sigma, tau, _ = flight_stages.null_drift(run, cfg)
+    noise = null_model.NullNoise(float(arw), float(vrw), np.full(3, 0.05), np.full(3, 0.02),
+                                 float(sigma), float(tau))
+    t_align_ns = int(log.imu.time_ns[0]) + round(nav.alignment.t_s * 1e9)
+    pert = null_model.perturb_log(base, noise, np.random.default_rng(3), from_time_ns=t_align_ns)
+    factor = flight_stages.rerun_decimation(log, cfg.pairs.rerun_imu_rate_hz)
+    keep = flight_stages.leg_epochs_ns(log, run.legs)
+    assert factor == 4
+    full = [a - b for a, b in zip(b_minus_a(pert), b_minus_a(base), strict=True)]
+    down = [a - b for a, b in zip(b_minus_a(null_model.decimate_imu(pert, factor, keep)),
+                                  b_minus_a(null_model.decimate_imu(base, factor, keep)),
+                                  strict=True)]
+    for f, d in zip(full, down, strict=True):
+        size = np.sqrt(np.mean(f**2))
+        assert size > 1e-3 and d.shape == f.shape
+        assert np.sqrt(np.mean((d - f) ** 2)) < 2e-3 * size
