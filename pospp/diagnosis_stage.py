@@ -57,6 +57,7 @@ from pospp.flight_stages import (
     null_drift,
     null_realisations,
     rerun_decimation,
+    rerun_options,
 )
 from pospp.io import mcap_reader
 from pospp.nav import filter as nav_filter
@@ -88,7 +89,7 @@ def rerun_base(log: mcap_reader.FlightLog | None, nav: nav_filter.FilterResult |
         return log, calib_run
     log_r = null_model.decimate_imu(log, factor, leg_epochs_ns(log, calib_run.legs))
     try:
-        nav_r = navigate(log_r, config)
+        nav_r = navigate(log_r, config, options=rerun_options(config))
     except ValueError:
         return log, calib_run
     which = config.replay.reference if nav_r.smoothed is not None else "forward"
@@ -230,7 +231,8 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
     if null_dv is None and n_null > 0 and log is not None and nav is not None:
         null_dv = null_realisations(log, nav, calib_run, config, n_null, threads=threads)
     replays = [calib_run.replays[i] for i in sorted(calib_run.replays)]
-    a_as_configured = partial(navigate, config=config)  # PIPELINE_RERUN's re-runs of A
+    # PIPELINE_RERUN's re-runs of A (their states alone)
+    a_as_configured = partial(navigate, config=config, options=rerun_options(config))
 
     sigs: dict[str, list[np.ndarray]] | None = None
     at: dict[str, np.ndarray] = {}

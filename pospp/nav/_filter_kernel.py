@@ -123,7 +123,8 @@ def propagate_covariance(p, phi_acc, x, fm, wm, t_acc, qc, i_gm, i_sf, inv_tau):
 
 @njit(cache=True)
 def propagate_covariance_into(p, phi_acc, x, fm, wm, t_acc, qc, i_gm, i_sf, inv_tau, work):
-    """:func:`propagate_covariance` in place: ``p`` and ``phi_acc`` are overwritten.
+    """:func:`propagate_covariance` in place: ``p`` and ``phi_acc`` are overwritten (``phi_acc``
+    of shape (0, 0): not accumulated, as when the pass keeps no smoother nodes).
 
     ``work``: float64[5, n, n] scratch, reused across steps (the step allocates nothing n x n:
     issue 18, where the allocations and the separate ``Phi Q_c Phi^T`` product were half of
@@ -166,8 +167,9 @@ def propagate_covariance_into(p, phi_acc, x, fm, wm, t_acc, qc, i_gm, i_sf, inv_
             v = 0.5 * (m2[a, b] + m2[b, a]) + half_t * qc[a, b]
             p[a, b] = v
             p[b, a] = v
-    np.dot(phi, phi_acc, m)
-    phi_acc[:, :] = m
+    if phi_acc.shape[0]:  # empty: no smoother nodes kept, the product is not needed
+        np.dot(phi, phi_acc, m)
+        phi_acc[:, :] = m
 
 
 @njit(cache=True)
@@ -401,6 +403,9 @@ def forward_kernel(t, w_imu, f_imu, k0, x0, p0, lever0, layout, inv_tau, flags, 
     ``meas = (m_k, m_type, m_z, m_r, m_dt)`` the records sorted by epoch; ``meas_out =
     (m_status, m_nis, m_dz)``: ``STATUS_*`` code, NIS and innovation (predicted minus measured,
     NED) of each record. ``outs`` / ``nodes``: see :func:`store_output` / :func:`store_node`.
+    Without the smoother ``nodes`` has no rows: node epochs are counted (they still force a
+    covariance step, so the schedule is the smoothed run's), nothing is stored and Phi is
+    not accumulated.
     Fills the output and node arrays; returns (nodes used, outputs used).
     """
     i_gm, i_sf, i_l = layout
@@ -411,7 +416,8 @@ def forward_kernel(t, w_imu, f_imu, k0, x0, p0, lever0, layout, inv_tau, flags, 
     sens = np.zeros(N_SENS)
     lever = lever0.copy()
     p = p0.copy()
-    phi_acc = np.eye(n)
+    keep_nodes = nodes[0].shape[0] > 0  # no smoother: nodes counted, not stored
+    phi_acc = np.eye(n) if keep_nodes else np.empty((0, 0))
     qc = np.diag(q_diag)
     work = np.empty((5, n, n))
     fsum, wsum = np.zeros(3), np.zeros(3)
@@ -449,14 +455,15 @@ def forward_kernel(t, w_imu, f_imu, k0, x0, p0, lever0, layout, inv_tau, flags, 
             fsum[:] = 0.0
             wsum[:] = 0.0
             t_acc, steps = 0.0, 0
-        if is_node:
+        if is_node and keep_nodes:
             nodes[1][i_node] = p  # predicted covariance
         dx_tot[:] = 0.0
         p, im = _update_epoch(k, im, t, x, xp, p, sens, lever, w_b, meas, meas_out, gate,
                               reset_after_s, t_ok, i_gm, i_sf, i_l, dx_tot)
         if is_node:
-            store_node(i_node, k, p, phi_acc, dx_tot, nodes)
-            phi_acc = np.eye(n)
+            if keep_nodes:
+                store_node(i_node, k, p, phi_acc, dx_tot, nodes)
+                phi_acc = np.eye(n)
             i_node += 1
         if is_out:
             store_output(i_out, x, p, sens, lever, i_gm, outs)

@@ -122,6 +122,12 @@ class FilterOptions:
         one random-walk state per axis (:mod:`pospp.nav.tuning`, "Bias model").
     smoother : bool
         Run the RTS smoother.
+    covariance_outputs : bool
+        Form the solutions' covariances. False (A's re-runs in the diagnosis and the null
+        realisations, which read only the states and biases): the smoother runs on the errors
+        alone (:func:`pospp.nav.smoother.rts_smooth_states`) and every sigma and covariance of
+        the solutions and biases is NaN; the states are those of a run with True, to
+        rounding (the forward pass is the same).
     alignment : AlignmentOptions
     """
 
@@ -143,6 +149,7 @@ class FilterOptions:
     max_imu_gap_s: float = 0.5
     gauss_markov_states: bool = True
     smoother: bool = True
+    covariance_outputs: bool = True
     alignment: AlignmentOptions = field(default_factory=AlignmentOptions)
 
     def __post_init__(self) -> None:
@@ -301,9 +308,15 @@ def rpy_covariance(q_nb: NDArray, att_cov: NDArray) -> NDArray:
 
 
 def _solution(time_ns, t_s, states, diag, blocks) -> NavSolution:
-    att_cov, vel_cov, pos_cov = blocks
+    """The states with their covariance; ``diag`` None: NaN (``covariance_outputs`` False)."""
     q = states[:, 6:10]
-    rpy_cov = rpy_covariance(q, att_cov)
+    if diag is None:
+        m = states.shape[0]
+        diag, rpy_cov = np.full((m, 9), np.nan), np.full((m, 3, 3), np.nan)
+        blocks = [np.full((m, 3, 3), np.nan) for _ in range(3)]
+    else:
+        rpy_cov = rpy_covariance(q, blocks[0])
+    att_cov, vel_cov, pos_cov = blocks
     return NavSolution(
         time_ns=time_ns, t_s=t_s, lat_rad=states[:, 0].copy(), lon_rad=states[:, 1].copy(),
         height_m=states[:, 2].copy(), v_n_mps=states[:, 3:6].copy(), q_nb=q.copy(),
@@ -392,10 +405,10 @@ def run_integrated_navigation(
     fw = forward_pass(t, w, f, al, noise, lay, lever0, meas, output_rate_hz, options)
     outcome = _record_outcomes(meas, fw, rejections)
     out_tns = imu_t_ns[fw.out_k]
-    fwd, fwd_bias, lever = _forward_results(t, fw, lay, out_tns)
+    fwd, fwd_bias, lever = _forward_results(t, fw, lay, out_tns, options.covariance_outputs)
     smoothed = sm_bias = None
     if options.smoother:
-        smoothed, sm_bias, lever_s = _smoothed(t, fw, lay, out_tns)
+        smoothed, sm_bias, lever_s = _smoothed(t, fw, lay, out_tns, options.covariance_outputs)
         lever = lever if lever_s is None else lever_s
     return FilterResult(
         forward=fwd, smoothed=smoothed, forward_biases=fwd_bias, smoothed_biases=sm_bias,
@@ -407,14 +420,18 @@ def run_integrated_navigation(
     )
 
 
-def _forward_results(t: NDArray, fw: ForwardArrays, lay: StateLayout, out_tns: NDArray
+def _forward_results(t: NDArray, fw: ForwardArrays, lay: StateLayout, out_tns: NDArray,
+                     with_cov: bool = True
                      ) -> tuple[NavSolution, BiasHistory, tuple[NDArray, NDArray]]:
-    """The forward solution, its biases, and the lever arm (last epoch) with its sigma."""
+    """The forward solution, its biases, and the lever arm (last epoch) with its sigma
+    (``with_cov`` False: every sigma NaN, ``FilterOptions.covariance_outputs``)."""
     out_t = t[fw.out_k]
-    fwd = _solution(out_tns, out_t, fw.out_x, fw.out_diag,
+    diag = fw.out_diag if with_cov else np.full_like(fw.out_diag, np.nan)
+    bvar = fw.out_bvar if with_cov else np.full_like(fw.out_bvar, np.nan)
+    fwd = _solution(out_tns, out_t, fw.out_x, diag if with_cov else None,
                     [fw.out_blk[:, 0].copy(), fw.out_blk[:, 1].copy(), fw.out_blk[:, 2].copy()])
-    fwd_bias = _bias_history(out_t, fw.out_sens, fw.out_bvar, fw.out_diag, lay.i_sf)
-    lever_sig = np.sqrt(fw.out_diag[-1, lay.i_l:lay.i_l + 3]) if lay.i_l >= 0 else np.zeros(3)
+    fwd_bias = _bias_history(out_t, fw.out_sens, bvar, diag, lay.i_sf)
+    lever_sig = np.sqrt(diag[-1, lay.i_l:lay.i_l + 3]) if lay.i_l >= 0 else np.zeros(3)
     return fwd, fwd_bias, (fw.out_lever[-1].copy(), lever_sig)
 
 
@@ -470,28 +487,36 @@ def _record_outcomes(meas: MeasurementRecords, fw: ForwardArrays,
     return _Outcome(tuple(rejections), n_updates, resets)
 
 
-def _smoothed(t: NDArray, fw: ForwardArrays, lay: StateLayout, out_tns: NDArray
+def _smoothed(t: NDArray, fw: ForwardArrays, lay: StateLayout, out_tns: NDArray,
+              with_cov: bool = True
               ) -> tuple[NavSolution, BiasHistory, tuple[NDArray, NDArray] | None]:
     """RTS smoother over the nodes: the smoothed solution, biases and (when estimated) lever
-    arm with its sigma."""
+    arm with its sigma (``with_cov`` False: the errors alone, every sigma NaN)."""
     out_t = t[fw.out_k]
-    e_plus, e_minus, p_s = smoother.rts_smooth(fw.node_pp, fw.node_pu, fw.node_phi, fw.node_dx,
-                                               overwrite_p_upd=True)
     node_t = t[fw.node_k]
+    if with_cov:
+        e_plus, e_minus, p_s = smoother.rts_smooth(fw.node_pp, fw.node_pu, fw.node_phi,
+                                                   fw.node_dx, overwrite_p_upd=True)
+        diag_s, blocks_s = smoother.interpolate_covariance_blocks(node_t, p_s, out_t,
+                                                                  (PHI, DV, DR))
+        tb = total_bias_map(lay)
+        bvar_nodes = np.einsum("ij,kjl,il->ki", tb, p_s, tb)
+        i, a = smoother.interpolation_weights(node_t, out_t)
+        nxt = np.minimum(i + 1, node_t.shape[0] - 1)
+        bvar_s = (1.0 - a)[:, None] * bvar_nodes[i] + a[:, None] * bvar_nodes[nxt]
+    else:
+        e_plus, e_minus = smoother.rts_smooth_states(fw.node_pp, fw.node_pu, fw.node_phi,
+                                                     fw.node_dx)
+        diag_s = np.full((out_t.shape[0], lay.n), np.nan)
+        blocks_s, bvar_s = None, np.full((out_t.shape[0], 6), np.nan)
     err = smoother.interpolate_errors(node_t, e_plus, e_minus, out_t)
-    diag_s, blocks_s = smoother.interpolate_covariance_blocks(node_t, p_s, out_t, (PHI, DV, DR))
     states_s = smoother.correct_states(fw.out_x, np.ascontiguousarray(err))
-    smoothed = _solution(out_tns, out_t, states_s, diag_s, blocks_s)
+    smoothed = _solution(out_tns, out_t, states_s, diag_s if with_cov else None, blocks_s)
     # total bias error (constant + Gauss-Markov) and its smoothed variance
-    tb = total_bias_map(lay)
     sens_s = fw.out_sens.copy()
-    sens_s[:, :6] += err @ tb.T
+    sens_s[:, :6] += err @ total_bias_map(lay).T
     if lay.i_sf >= 0:
         sens_s[:, 6:] += err[:, lay.i_sf:lay.i_sf + 6]
-    bvar_nodes = np.einsum("ij,kjl,il->ki", tb, p_s, tb)
-    i, a = smoother.interpolation_weights(node_t, out_t)
-    nxt = np.minimum(i + 1, node_t.shape[0] - 1)
-    bvar_s = (1.0 - a)[:, None] * bvar_nodes[i] + a[:, None] * bvar_nodes[nxt]
     sm_bias = _bias_history(out_t, sens_s, bvar_s, diag_s, lay.i_sf)
     lever = None
     if lay.i_l >= 0:

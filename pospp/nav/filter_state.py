@@ -124,6 +124,7 @@ def forward_pass(t: NDArray, w: NDArray, f: NDArray, al: AlignmentResult,
     k0 = al.k_start
     flags, out_k = epoch_flags(t, k0, meas.k, output_rate_hz, options.smoother_node_interval_s)
     n_nodes = int(np.count_nonzero(flags[k0:] & FLAG_NODE))
+    n_kept = n_nodes if options.smoother else 0  # without the smoother no node is stored
     p0_diag, q_diag = initial_covariance_and_noise(lay, noise, al,
                                                     options.lever_arm_sigma_m)
     n, n_meas, n_out = lay.n, meas.k.shape[0], out_k.shape[0]
@@ -138,9 +139,9 @@ def forward_pass(t: NDArray, w: NDArray, f: NDArray, al: AlignmentResult,
         out_x=np.empty((n_out, 10)), out_diag=np.empty((n_out, n)),
         out_blk=np.empty((n_out, 3, 3, 3)), out_sens=np.empty((n_out, 12)),
         out_bvar=np.empty((n_out, 6)), out_lever=np.empty((n_out, 3)),
-        node_k=np.empty(n_nodes, dtype=np.int64), node_pp=np.empty((n_nodes, n, n)),
-        node_pu=np.empty((n_nodes, n, n)), node_phi=np.empty((n_nodes, n, n)),
-        node_dx=np.empty((n_nodes, n)),
+        node_k=np.empty(n_kept, dtype=np.int64), node_pp=np.empty((n_kept, n, n)),
+        node_pu=np.empty((n_kept, n, n)), node_phi=np.empty((n_kept, n, n)),
+        node_dx=np.empty((n_kept, n)),
     )
     used_nodes, used_out = forward_kernel(
         t, w, f, k0, x0, np.diag(p0_diag), lever0.copy(), (lay.i_gm, lay.i_sf, lay.i_l),

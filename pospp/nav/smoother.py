@@ -73,6 +73,35 @@ def rts_backward(p_pred, p_upd, phi, dx, e_plus, e_minus, p_smooth):
         p_smooth[k] = 0.5 * (ps + ps.T)
 
 
+@njit(cache=True, nogil=True)
+def rts_backward_states(p_pred, p_upd, phi, dx, e_plus, e_minus):
+    """The backward pass's errors alone (:func:`rts_backward` without P^s): per node one
+    solve with a vector, ``e_k^+ = P_k|k Phi_{k+1}^T (P_{k+1|k}^-1 e_{k+1}^-)`` (the same
+    A_k e_{k+1}^-, associated the other way). Arguments as :func:`rts_backward`."""
+    k_last = p_pred.shape[0] - 1
+    e_plus[k_last, :] = 0.0
+    e_minus[k_last, :] = dx[k_last]
+    for k in range(k_last - 1, -1, -1):
+        y = np.linalg.solve(p_pred[k + 1], e_minus[k + 1])
+        e_plus[k] = np.dot(p_upd[k], np.dot(phi[k + 1].T, y))
+        for i in range(e_plus.shape[1]):
+            e_minus[k, i] = e_plus[k, i] + dx[k, i]
+
+
+def rts_smooth_states(p_pred: NDArray, p_upd: NDArray, phi: NDArray, dx: NDArray
+                      ) -> tuple[NDArray, NDArray]:
+    """The smoothed errors without their covariance: (e_plus, e_minus), shapes (K, n)
+    (:func:`rts_backward_states`; A's re-runs, ``FilterOptions.covariance_outputs`` False)."""
+    k, n = dx.shape
+    e_plus = np.zeros((k, n))
+    e_minus = np.zeros((k, n))
+    if k:
+        rts_backward_states(np.ascontiguousarray(p_pred), np.ascontiguousarray(p_upd),
+                            np.ascontiguousarray(phi), np.ascontiguousarray(dx), e_plus,
+                            e_minus)
+    return e_plus, e_minus
+
+
 def rts_smooth(
     p_pred: NDArray, p_upd: NDArray, phi: NDArray, dx: NDArray, *,
     overwrite_p_upd: bool = False,

@@ -215,6 +215,40 @@ def test_smoother_off_and_every_epoch_output(record):
                options=FilterOptions(smoother=False))
     assert res.smoothed is None and res.smoothed_biases is None
     assert len(res.forward) == 4001
+    # without the smoother no node is stored: the forward pass is the same, bit for bit
+    both = _run(short, fixes, vels, output_rate_hz=None)
+    for name in ("lat_rad", "lon_rad", "height_m", "v_n_mps", "q_nb", "pos_sigma_ned_m",
+                 "att_cov_ned_rad2"):
+        np.testing.assert_array_equal(getattr(res.forward, name), getattr(both.forward, name))
+    np.testing.assert_array_equal(res.innovations.nis, both.innovations.nis)
+
+
+@pytest.mark.parametrize("lever_states", [False, True])
+def test_states_only_run_has_the_same_states_and_nan_sigmas(record, clean, lever_states):
+    # FilterOptions.covariance_outputs=False (A's re-runs): the same forward and smoothed
+    # states and biases (the covariance steps fall on the same epochs when the propagation
+    # interval is the output interval or less), every sigma NaN
+    imu, fixes, vels = record
+    full = clean
+    if lever_states:
+        full = _run(imu, fixes, vels, estimate_lever_arm=True)
+    res = _run(imu, fixes, vels, estimate_lever_arm=lever_states,
+               options=FilterOptions(covariance_outputs=False))
+    for a, b in ((res.forward, full.forward), (res.smoothed, full.smoothed)):
+        np.testing.assert_array_equal(a.time_ns, b.time_ns)
+        for name in ("lat_rad", "lon_rad", "height_m", "v_n_mps", "q_nb"):
+            np.testing.assert_allclose(getattr(a, name), getattr(b, name), rtol=1e-12,
+                                       atol=1e-12)
+        for name in ("pos_sigma_ned_m", "vel_sigma_ned_mps", "rpy_sigma_rad",
+                     "att_cov_ned_rad2"):
+            assert np.isnan(getattr(a, name)).all()
+    for a, b in ((res.forward_biases, full.forward_biases),
+                 (res.smoothed_biases, full.smoothed_biases)):
+        np.testing.assert_allclose(a.gyro_b_radps, b.gyro_b_radps, rtol=1e-9, atol=1e-15)
+        np.testing.assert_allclose(a.accel_b_mps2, b.accel_b_mps2, rtol=1e-9, atol=1e-13)
+        assert np.isnan(a.gyro_sigma_b_radps).all() and np.isnan(a.accel_sigma_b_mps2).all()
+    np.testing.assert_allclose(res.lever_arm.lever_b_m, full.lever_arm.lever_b_m, atol=1e-9)
+    assert np.isnan(res.lever_arm.sigma_b_m).all() == lever_states
 
 
 @pytest.mark.slow

@@ -111,6 +111,19 @@ def test_closed_loop_rts_equals_batch_map(seed):
     np.testing.assert_array_equal(e2, e_plus)
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_states_only_pass_equals_batch_map(seed):
+    # the re-runs' smoother (no covariance): the same batch MAP errors, and rts_smooth's
+    s = _system(seed)
+    nominal, p_pred, p_upd, phis, dx = _closed_loop_forward(s)
+    e_plus, e_minus = smoother.rts_smooth_states(p_pred, p_upd, phis, dx)
+    x_batch, _ = _batch(s)
+    np.testing.assert_allclose(nominal - e_plus, x_batch, atol=1e-9, rtol=0)
+    e_full, e_minus_full, _ = smoother.rts_smooth(p_pred, p_upd, phis, dx)
+    np.testing.assert_allclose(e_plus, e_full, rtol=1e-10, atol=1e-14)
+    np.testing.assert_allclose(e_minus, e_minus_full, rtol=1e-10, atol=1e-14)
+
+
 @settings(max_examples=25, deadline=None)
 @given(st.integers(min_value=0, max_value=2**31 - 1))
 def test_smoothed_covariance_below_filtered_and_symmetric(seed):
