@@ -231,8 +231,7 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
     if null_dv is None and n_null > 0 and log is not None and nav is not None:
         null_dv = null_realisations(log, nav, calib_run, config, n_null, threads=threads)
     replays = [calib_run.replays[i] for i in sorted(calib_run.replays)]
-    # PIPELINE_RERUN's re-runs of A (their states alone)
-    a_as_configured = partial(navigate, config=config, options=rerun_options(config))
+    a_as_configured = partial(navigate, config=config, options=rerun_options(config))  # re-runs
 
     sigs: dict[str, list[np.ndarray]] | None = None
     at: dict[str, np.ndarray] = {}
