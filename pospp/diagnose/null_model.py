@@ -133,9 +133,50 @@ def _robust_rms(r: NDArray) -> NDArray:
                      for k in range(r.shape[1])])
 
 
+@dataclass(frozen=True)
+class NoiseDraw:
+    """One null realisation's standard normal draws, in the order they are drawn (IMU (N, 3),
+    GNSS fixes (M, 3), velocities (V, 3)); the Gauss-Markov ones (path (N, 3), start (3,))
+    None when that process is off. :func:`draw_noise` makes it, :func:`apply_noise` scales
+    and adds it."""
+
+    gyro_white: NDArray
+    gyro_gm: tuple[NDArray, NDArray] | None
+    accel_white: NDArray
+    accel_gm: tuple[NDArray, NDArray] | None
+    pos: NDArray
+    vel: NDArray
+
+
+def _gm_on(sigma: float, tau_s: float) -> bool:
+    return sigma > 0 and bool(np.isfinite(tau_s))
+
+
+def draw_noise(log: Any, noise: NullNoise, rng: np.random.Generator) -> NoiseDraw:
+    """The standard normals of one realisation of :func:`perturb_log`, from ``rng`` in its
+    order (the generator's only work: the null realisations draw in order in one thread and
+    scale in many, the same numbers at any thread count)."""
+    n, shape = len(log.imu.time_ns), np.shape(log.imu.w_ib_b_radps)
+
+    def gm(sigma: float, tau_s: float) -> tuple[NDArray, NDArray] | None:
+        if not _gm_on(sigma, tau_s):
+            return None
+        path = rng.standard_normal((n, 3))
+        return path, rng.standard_normal(3)
+
+    gyro_white = rng.standard_normal(shape)
+    gyro_gm = gm(noise.gyro_gm_sigma_radps, noise.gyro_gm_tau_s)
+    accel_white = rng.standard_normal(np.shape(log.imu.f_ib_b_mps2))
+    accel_gm = gm(noise.accel_gm_sigma_mps2, noise.accel_gm_tau_s)
+    pos = rng.standard_normal((len(log.fix.time_ns), 3))
+    vel = rng.standard_normal(np.shape(log.vel.v_n_mps))
+    return NoiseDraw(gyro_white, gyro_gm, accel_white, accel_gm, pos, vel)
+
+
 def perturb_log(log: Any, noise: NullNoise, rng: np.random.Generator,
                 from_time_ns: int | None = None) -> Any:
-    """The flight log with white IMU and GNSS noise added (one null realisation's input).
+    """The flight log with white IMU and GNSS noise added (one null realisation's input):
+    ``apply_noise(log, noise, draw_noise(log, noise, rng), from_time_ns)``.
 
     IMU: samples are mean rates / specific forces over the interval dt ending at the stamp, so
     white noise of ARW has sigma ``ARW / sqrt(dt)`` per sample (likewise the VRW); a
@@ -158,38 +199,68 @@ def perturb_log(log: Any, noise: NullNoise, rng: np.random.Generator,
     -------
     Same type as ``log``, with ``imu``, ``fix``, ``vel`` replaced.
     """
+    return apply_noise(log, noise, draw_noise(log, noise, rng), from_time_ns)
+
+
+def apply_noise(log: Any, noise: NullNoise, draw: NoiseDraw, from_time_ns: int | None = None
+                ) -> Any:
+    """:func:`perturb_log`'s log from its draws (:func:`draw_noise`): the IMU channels in one
+    compiled pass each (:func:`_noisy_rates`)."""
     imu, fix, vel = log.imu, log.fix, log.vel
     t = np.asarray(imu.time_ns, dtype=np.int64)
     dt = np.diff(t) * 1e-9
     dt = np.concatenate([dt[:1], dt]) if dt.size else np.ones(1)
-    dt = np.clip(dt, np.median(dt) * 0.1, None)[:, None]
+    dt = np.clip(dt, np.median(dt) * 0.1, None)
     t0 = np.iinfo(np.int64).min if from_time_ns is None else int(from_time_ns)
 
     def on(time_ns: NDArray) -> NDArray:
         return (np.asarray(time_ns, dtype=np.int64) >= t0)[:, None]
 
-    m_imu = on(t)
-    e_w = rng.standard_normal(imu.w_ib_b_radps.shape) * (noise.gyro_arw_radpsqrts / np.sqrt(dt))
-    if noise.gyro_gm_sigma_radps > 0 and np.isfinite(noise.gyro_gm_tau_s):
-        e_w = e_w + gauss_markov_path(dt[:, 0], noise.gyro_gm_sigma_radps, noise.gyro_gm_tau_s,
-                                      rng)
-    w = imu.w_ib_b_radps + e_w * m_imu
-    e_f = rng.standard_normal(imu.f_ib_b_mps2.shape) * (noise.accel_vrw_mpspsqrts / np.sqrt(dt))
-    if noise.accel_gm_sigma_mps2 > 0 and np.isfinite(noise.accel_gm_tau_s):
-        e_f = e_f + gauss_markov_path(dt[:, 0], noise.accel_gm_sigma_mps2,
-                                      noise.accel_gm_tau_s, rng)
-    f = imu.f_ib_b_mps2 + e_f * m_imu
-    e_pos = rng.standard_normal((len(fix.time_ns), 3)) * np.asarray(
-        noise.pos_sigma_ned_m) * on(fix.time_ns)
+    m_imu = t >= t0
+
+    def noisy(rate: NDArray, white: NDArray, level: float, gm: tuple | None, sigma: float,
+              tau_s: float) -> NDArray:
+        a = q = np.zeros(0)
+        g0, path = np.zeros(3), np.zeros((0, 3))
+        if gm is not None:
+            a = np.exp(-dt / tau_s)
+            q = sigma * np.sqrt(1.0 - a**2)
+            path, g0 = gm[0], gm[1] * sigma
+        return _noisy_rates(np.asarray(rate, dtype=float), white, level / np.sqrt(dt), path,
+                            a, q, g0, m_imu)
+
+    w = noisy(imu.w_ib_b_radps, draw.gyro_white, noise.gyro_arw_radpsqrts, draw.gyro_gm,
+              noise.gyro_gm_sigma_radps, noise.gyro_gm_tau_s)
+    f = noisy(imu.f_ib_b_mps2, draw.accel_white, noise.accel_vrw_mpspsqrts, draw.accel_gm,
+              noise.accel_gm_sigma_mps2, noise.accel_gm_tau_s)
+    e_pos = draw.pos * np.asarray(noise.pos_sigma_ned_m) * on(fix.time_ns)
     rm, rn = principal_radii_m(fix.lat_rad)
     lat = fix.lat_rad + e_pos[:, 0] / (rm + fix.height_m)
     lon = fix.lon_rad + e_pos[:, 1] / ((rn + fix.height_m) * np.cos(fix.lat_rad))
     h = fix.height_m - e_pos[:, 2]
-    v = vel.v_n_mps + rng.standard_normal(vel.v_n_mps.shape) * np.asarray(
-        noise.vel_sigma_ned_mps) * on(vel.time_ns)
+    v = vel.v_n_mps + draw.vel * np.asarray(noise.vel_sigma_ned_mps) * on(vel.time_ns)
     return replace(log, imu=replace(imu, w_ib_b_radps=w, f_ib_b_mps2=f),
                    fix=replace(fix, lat_rad=lat, lon_rad=lon, height_m=h),
                    vel=replace(vel, v_n_mps=v))
+
+
+@njit(cache=True, nogil=True)
+def _noisy_rates(rate, white, white_sigma, path, a, q, g0, mask):
+    """``rate + mask * (white * white_sigma + x)`` per sample and axis, x the Gauss-Markov
+    path ``x_0 = g0``, ``x_k = a_k x_k-1 + q_k path_k`` (none when ``path`` is empty): the
+    arithmetic of :func:`gauss_markov_path` and the white noise in one pass."""
+    out = np.empty_like(rate)
+    x = g0.copy()
+    with_gm = path.shape[0] > 0
+    for k in range(rate.shape[0]):
+        for j in range(rate.shape[1]):
+            e = white[k, j] * white_sigma[k]
+            if with_gm:
+                if k > 0:
+                    x[j] = a[k] * x[j] + path[k, j] * q[k]
+                e = e + x[j]
+            out[k, j] = rate[k, j] + e * (1.0 if mask[k] else 0.0)
+    return out
 
 
 def decimate_imu(log: Any, factor: int, keep_time_ns: NDArray | None = None) -> Any:

@@ -178,6 +178,37 @@ def test_perturbed_log_has_the_stated_noise():
     assert np.std(late.fix.height_m[~fb]) == pytest.approx(0.3, rel=0.05)
 
 
+def test_compiled_perturbation_is_the_numpy_one():
+    # apply_noise's one compiled pass per IMU channel (the null realisations scale their
+    # draws in the worker threads) against the same noise written with numpy and
+    # gauss_markov_path from the same generator: the same numbers
+    rng = np.random.default_rng(2)
+    n = 5000
+    t = np.cumsum(rng.integers(4_000_000, 6_000_000, n)).astype(np.int64)
+    w, f = rng.normal(size=(n, 3)), rng.normal(size=(n, 3))
+    log = _Log(_Imu(t, w, f), _Fix(t[::100], np.full(50, 0.7), np.full(50, 1.0),
+                                    np.full(50, 500.0)), _Vel(t[::100], np.zeros((50, 3))))
+    noise = null_model.NullNoise(2e-5, 4e-4, np.array([0.1, 0.2, 0.3]), np.full(3, 0.01),
+                                 gyro_gm_sigma_radps=1e-5, gyro_gm_tau_s=50.0,
+                                 accel_gm_sigma_mps2=1e-3, accel_gm_tau_s=20.0)
+    t_from = int(t[n // 3])
+    out = null_model.perturb_log(log, noise, np.random.default_rng(9), from_time_ns=t_from)
+    ref_rng = np.random.default_rng(9)
+    dt = np.diff(t) * 1e-9
+    dt = np.clip(np.concatenate([dt[:1], dt]), np.median(dt) * 0.1, None)
+    on = (t >= t_from)[:, None]
+    e_w = ref_rng.standard_normal((n, 3)) * (2e-5 / np.sqrt(dt))[:, None]
+    e_w = e_w + null_model.gauss_markov_path(dt, 1e-5, 50.0, ref_rng)
+    e_f = ref_rng.standard_normal((n, 3)) * (4e-4 / np.sqrt(dt))[:, None]
+    e_f = e_f + null_model.gauss_markov_path(dt, 1e-3, 20.0, ref_rng)
+    np.testing.assert_array_equal(out.imu.w_ib_b_radps, w + e_w * on)
+    np.testing.assert_array_equal(out.imu.f_ib_b_mps2, f + e_f * on)
+    # the GNSS draws follow, in order
+    e_pos = ref_rng.standard_normal((50, 3))
+    assert np.allclose(out.fix.height_m - 500.0, np.where(t[::100] >= t_from, -0.3 * e_pos[:, 2],
+                                                          0.0))
+
+
 def test_gauss_markov_path_variance_and_correlation():
     dt = np.full(400_000, 0.05)
     x = null_model.gauss_markov_path(dt, 2.0, 30.0, np.random.default_rng(8))
