@@ -310,7 +310,7 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
         book.stage("null_realisations")
         null_dv = null_realisations(log, nav, calib_run, config, config.pairs.null_realisations,
                                     threads=threads)
-        calib_run = with_null_covariance(calib_run, null_dv, threads=threads)
+        calib_run = with_null_covariance(calib_run, null_dv)
 
     # --- compensation: A re-run with the calibrated gyro bias ---------------------------------
     book.stage("compensate")

@@ -38,7 +38,6 @@ from pospp.calib.replay import (
 from pospp.calib.segment import Leg, LegThresholds, find_legs
 from pospp.calib.solve import Calibration, DriftPrior
 from pospp.nav.closed_form import PAPER_FROM_NED
-from pospp.threads import map_in_threads
 from pospp.units import ARCSEC_RAD, DEG_PER_H_RADPS
 from pospp.units import DEG_PER_SQRT_H_RAD_PER_SQRT_S as _DPSH_RADPSQRTS
 
@@ -425,8 +424,8 @@ MIN_NULL_REALISATIONS = 3
 """Fewest null realisations :func:`with_null_covariance` turns into a covariance."""
 
 
-def with_null_covariance(run: CalibrationRun, null_dv: Sequence[Sequence[NDArray]],
-                         threads: int = 1) -> CalibrationRun:
+def with_null_covariance(run: CalibrationRun, null_dv: Sequence[Sequence[NDArray]]
+                         ) -> CalibrationRun:
     """The chosen calibration's covariance from B minus A's null realisations (issue 12).
 
     Each realisation ``d_r`` (one (M, 3) array per leg in id order, the replays' rows:
@@ -447,8 +446,7 @@ def with_null_covariance(run: CalibrationRun, null_dv: Sequence[Sequence[NDArray
     or no calibration, the run is returned unchanged.
 
     The compensation already applied is not redone: the causal compensation weighted A's
-    bias estimate against the GLS sigma (docs/calibration.md). ``threads``: realisations
-    fitted at once (:func:`pospp.threads.map_in_threads`; the result does not depend on it).
+    bias estimate against the GLS sigma (docs/calibration.md).
     """
     chosen = run.chosen
     if chosen is None or len(null_dv) < MIN_NULL_REALISATIONS:
@@ -456,15 +454,14 @@ def with_null_covariance(run: CalibrationRun, null_dv: Sequence[Sequence[NDArray
     ids = sorted(run.replays)
     kw = dict(run.solve_kwargs)
     transition = kw.pop("transition", chosen.transition)
-
-    def fitted(real: Sequence[NDArray]) -> Any:
+    dx = []
+    for real in null_dv:
         reps = {i: replace(run.replays[i], dv_n_mps=run.replays[i].dv_n_mps + np.asarray(d))
                 for i, d in zip(ids, real, strict=True)}
-        return joint_calibration(reps, run.pairs, chosen.formulation, transition=transition,
-                                 **kw)
-
-    dx = [cal.x - chosen.x for cal in map_in_threads(fitted, null_dv, threads)
-          if cal is not None and cal.names == chosen.names]
+        cal = joint_calibration(reps, run.pairs, chosen.formulation, transition=transition,
+                                **kw)
+        if cal is not None and cal.names == chosen.names:
+            dx.append(cal.x - chosen.x)
     if len(dx) < MIN_NULL_REALISATIONS:
         return run
     d = np.asarray(dx)

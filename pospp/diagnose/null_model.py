@@ -154,8 +154,7 @@ def _gm_on(sigma: float, tau_s: float) -> bool:
 
 def draw_noise(log: Any, noise: NullNoise, rng: np.random.Generator) -> NoiseDraw:
     """The standard normals of one realisation of :func:`perturb_log`, from ``rng`` in its
-    order (the generator's only work: the null realisations draw in order in one thread and
-    scale in many, the same numbers at any thread count)."""
+    order (the generator's work, apart from the arithmetic of :func:`apply_noise`)."""
     n, shape = len(log.imu.time_ns), np.shape(log.imu.w_ib_b_radps)
 
     def gm(sigma: float, tau_s: float) -> tuple[NDArray, NDArray] | None:
