@@ -22,11 +22,12 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import linalg, stats
+from scipy import linalg
 
 from pospp.calib.noise_model import NoiseModel, gyro_noise_covariance
 from pospp.calib.replay import LegReplay
 from pospp.diagnose.effects import Effect
+from pospp.distributions import f_sf
 
 
 @dataclass
@@ -197,7 +198,7 @@ def f_test(rss0: float, rss1: float, r: int, dof1: int) -> tuple[float, float]:
     if r <= 0 or dof1 <= 0 or rss1 <= 0:
         return float("nan"), 1.0
     f = max(rss0 - rss1, 0.0) / r / (rss1 / dof1)
-    return float(f), float(stats.f.sf(f, r, dof1))
+    return float(f), f_sf(f, r, dof1)
 
 
 def bic(rss_w: float, n: int, k: int) -> float:

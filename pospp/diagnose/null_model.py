@@ -51,8 +51,8 @@ from typing import Any
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
-from scipy import stats
 
+from pospp.distributions import f_sf, t_sf
 from pospp.earth import principal_radii_m
 from pospp.nav.events import sensor_poses
 from pospp.nav.filter import NavSolution
@@ -398,7 +398,7 @@ def calibrated_p_value(statistic: float, null_statistics: NDArray) -> float:
     if sd <= 0:
         return 0.0 if statistic > float(np.exp(m)) else 1.0
     t = (np.log(statistic) - m) / (sd * np.sqrt(1.0 + 1.0 / s.size))
-    return float(stats.t.sf(t, s.size - 1))
+    return t_sf(t, s.size - 1)
 
 
 def few_parameter_p_value(statistic: float, null_statistics: NDArray) -> float:
@@ -431,7 +431,7 @@ def few_parameter_p_value(statistic: float, null_statistics: NDArray) -> float:
         return float("nan")
     if not statistic > 0:
         return 1.0
-    return float(stats.f.sf(statistic / float(np.mean(s)), 1, s.size))
+    return f_sf(statistic / float(np.mean(s)), 1, s.size)
 
 
 def imu_white_noise_from_samples(time_ns: NDArray, w_ib_b_radps: NDArray, f_ib_b_mps2: NDArray

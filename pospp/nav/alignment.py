@@ -61,9 +61,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.stats import chi2
 
 from pospp import earth, rotation
+from pospp.distributions import chi2_isf
 from pospp.nav.tuning import NoiseParameters
 from pospp.units import G0_MPS2
 
@@ -244,7 +244,7 @@ def gnss_moving_windows(
         cov = np.asarray(vel_cov_ned_m2ps2, dtype=float).reshape(-1, 3, 3)[inside]
         var = np.diagonal(cov, axis1=1, axis2=2)
         var = np.where(np.isfinite(var) & (var > 0.0), var, 0.0)
-    c = float(chi2.isf(options.static_speed_false_alarm, 3))
+    c = chi2_isf(options.static_speed_false_alarm, 3)
     moving = np.zeros(nw, dtype=bool)
     np.logical_or.at(moving, idx, _is_moving(v, var, c, options))
     n = np.bincount(idx, minlength=nw).astype(float)

@@ -13,9 +13,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2
 
 from pospp import rotation
+from pospp.distributions import chi2_ppf
 from pospp.nav._filter_kernel import FLAG_NODE, forward_kernel
 from pospp.nav.alignment import AlignmentResult
 from pospp.nav.error_model import BA, BG, DR, DV, I_BA, I_BG, N_STATES, PHI
@@ -129,7 +129,7 @@ def forward_pass(t: NDArray, w: NDArray, f: NDArray, al: AlignmentResult,
                                                     options.lever_arm_sigma_m)
     n, n_meas, n_out = lay.n, meas.k.shape[0], out_k.shape[0]
     prop_steps = max(1, int(round(options.propagation_interval_s / float(np.median(np.diff(t))))))
-    gate = float(chi2.ppf(options.gate_probability, 3))
+    gate = chi2_ppf(options.gate_probability, 3)
     x0 = np.concatenate([[al.lat_rad, al.lon_rad, al.height_m], al.v_n_mps,
                          rotation.quat_from_euler(al.rpy_rad)])
     inv_tau = np.array([1.0 / noise.gyro_gm_tau_s, 1.0 / noise.accel_gm_tau_s])

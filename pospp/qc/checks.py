@@ -20,9 +20,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.stats import chi2, poisson
 
 from pospp import earth
+from pospp.distributions import chi2_ppf, poisson_isf
 from pospp.units import DEG_PER_H_RADPS, NS_PER_S
 
 STATUS_ORDER = ("ok", "partial", "degraded", "failed")
@@ -299,7 +299,7 @@ def nis_band(t_s: ArrayLike, nis: ArrayLike, dof: int = 3) -> Check:
         return skip("gnss_nis", "navigate", f"{v.shape[0]} GNSS updates (< {NIS_WINDOW})", "1",
                    NIS_MAX_FRACTION)
     vw = v[: n_win * NIS_WINDOW].reshape(n_win, NIS_WINDOW).mean(axis=1)
-    upper = chi2.ppf(NIS_WINDOW_PROBABILITY, dof * NIS_WINDOW) / NIS_WINDOW
+    upper = chi2_ppf(NIS_WINDOW_PROBABILITY, dof * NIS_WINDOW) / NIS_WINDOW
     bad = vw > upper
     frac = float(bad.mean())
     passed = frac <= NIS_MAX_FRACTION
@@ -336,7 +336,7 @@ def gnss_gate(n_records: int, n_rejected: int, gate_probability: float,
     against the "vehicle" preset gated 33-39 of about 3300 records with one reset, where
     ``gnss_nis`` passed on one flight of ten (docs/qc.md)."""
     lam = max(int(n_records), 0) * (1.0 - gate_probability)
-    limit = float(poisson.isf(GATE_TAIL, lam)) if lam > 0 else 0.0
+    limit = poisson_isf(GATE_TAIL, lam) if lam > 0 else 0.0
     passed = int(n_rejected) <= limit
     sug = "" if passed else (
         f"algorithm A rejected {n_rejected} of {n_records} GNSS records where its model allows "

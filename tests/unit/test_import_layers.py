@@ -19,7 +19,8 @@ ARCHITECTURE_DOC = PACKAGE.parent / "docs" / "architecture.md"
 
 LAYERS: tuple[frozenset[str], ...] = (
     # the data contract and the small facts
-    frozenset({"pospp", "types", "units", "earth", "rotation", "threads", "memory"}),
+    frozenset({"pospp", "types", "units", "earth", "rotation", "threads", "memory",
+               "distributions"}),
     # files <-> contract; the navigation core
     frozenset({"io", "nav"}),
     # stage results -> table columns (names the result types of io and nav)
