@@ -41,6 +41,11 @@ class Term:
     effect: Effect | None = None
     wblocks: list[NDArray] | None = None
 
+    def __post_init__(self) -> None:
+        if self.local_leg is not None and any(
+                np.any(b) for j, b in enumerate(self.blocks) if j != self.local_leg):
+            raise ValueError(f"term {self.name}: a per-leg term is zero on the other legs")
+
 
 @dataclass
 class Fit:

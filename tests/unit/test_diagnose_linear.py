@@ -6,6 +6,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import pytest
 from _synthetic import noisy_replays, survey_flight
 from scipy import linalg
 
@@ -19,6 +20,13 @@ def _replays():
     imu = ImuIncrements(fl.imu.t_s, fl.imu.dtheta_b_rad, fl.imu.dv_b_mps.copy())
     ref = fl.solution_a(0.003)
     return noisy_replays(fl, imu, sigma_mps=0.003, rng=np.random.default_rng(3), solution_a=ref)
+
+
+def test_per_leg_term_is_zero_on_the_other_legs():
+    # Problem.wblocks shares those zero blocks instead of whitening them
+    with pytest.raises(ValueError, match="zero on the other legs"):
+        Term("local", [np.ones((4, 1)), np.ones((4, 1))], local_leg=0)
+    assert Term("local", [np.ones((4, 1)), np.zeros((4, 1))], local_leg=0).local_leg == 0
 
 
 def test_rewhitened_eigenbasis_matches_the_cholesky_factor():
@@ -39,7 +47,8 @@ def test_rewhitened_eigenbasis_matches_the_cholesky_factor():
         w_l = shared.whiten(i, linalg.cholesky(cov, lower=True))
         np.testing.assert_allclose(w_l @ w_l.T, np.eye(s.size), atol=1e-8)
     terms = [Term("cols", [rng.normal(size=(z.size, 3)) for z in flight.z]),
-             Term("local", [rng.normal(size=(z.size, 1)) for z in flight.z], local_leg=1)]
+             Term("local", [rng.normal(size=(z.size, 1)) * (i == 1)
+                            for i, z in enumerate(flight.z)], local_leg=1)]
     for sub in (terms[:1], terms):
         f_s, f_d = shared.fit(sub), direct.fit(sub)
         assert f_s.rank == f_d.rank
