@@ -307,13 +307,19 @@ def rpy_covariance(q_nb: NDArray, att_cov: NDArray) -> NDArray:
     return e_inv @ att_cov @ np.swapaxes(e_inv, 1, 2)
 
 
+def _nan(shape: tuple[int, ...]) -> NDArray:
+    """A read-only array of NaN that takes no memory (a broadcast scalar): the sigmas of a
+    run with ``covariance_outputs`` False."""
+    return np.broadcast_to(np.float64(np.nan), shape)
+
+
 def _solution(time_ns, t_s, states, diag, blocks) -> NavSolution:
     """The states with their covariance; ``diag`` None: NaN (``covariance_outputs`` False)."""
     q = states[:, 6:10]
     if diag is None:
         m = states.shape[0]
-        diag, rpy_cov = np.full((m, 9), np.nan), np.full((m, 3, 3), np.nan)
-        blocks = [np.full((m, 3, 3), np.nan) for _ in range(3)]
+        diag, rpy_cov = _nan((m, 9)), _nan((m, 3, 3))
+        blocks = [rpy_cov] * 3
     else:
         rpy_cov = rpy_covariance(q, blocks[0])
     att_cov, vel_cov, pos_cov = blocks
@@ -426,10 +432,10 @@ def _forward_results(t: NDArray, fw: ForwardArrays, lay: StateLayout, out_tns: N
     """The forward solution, its biases, and the lever arm (last epoch) with its sigma
     (``with_cov`` False: every sigma NaN, ``FilterOptions.covariance_outputs``)."""
     out_t = t[fw.out_k]
-    diag = fw.out_diag if with_cov else np.full_like(fw.out_diag, np.nan)
-    bvar = fw.out_bvar if with_cov else np.full_like(fw.out_bvar, np.nan)
-    fwd = _solution(out_tns, out_t, fw.out_x, diag if with_cov else None,
-                    [fw.out_blk[:, 0].copy(), fw.out_blk[:, 1].copy(), fw.out_blk[:, 2].copy()])
+    diag = fw.out_diag if with_cov else _nan(fw.out_diag.shape)
+    bvar = fw.out_bvar if with_cov else _nan(fw.out_bvar.shape)
+    blocks = [fw.out_blk[:, j].copy() for j in range(3)] if with_cov else None
+    fwd = _solution(out_tns, out_t, fw.out_x, diag if with_cov else None, blocks)
     fwd_bias = _bias_history(out_t, fw.out_sens, bvar, diag, lay.i_sf)
     lever_sig = np.sqrt(diag[-1, lay.i_l:lay.i_l + 3]) if lay.i_l >= 0 else np.zeros(3)
     return fwd, fwd_bias, (fw.out_lever[-1].copy(), lever_sig)
@@ -507,8 +513,8 @@ def _smoothed(t: NDArray, fw: ForwardArrays, lay: StateLayout, out_tns: NDArray,
     else:
         e_plus, e_minus = smoother.rts_smooth_states(fw.node_pp, fw.node_pu, fw.node_phi,
                                                      fw.node_dx)
-        diag_s = np.full((out_t.shape[0], lay.n), np.nan)
-        blocks_s, bvar_s = None, np.full((out_t.shape[0], 6), np.nan)
+        diag_s = _nan((out_t.shape[0], lay.n))
+        blocks_s, bvar_s = None, _nan((out_t.shape[0], 6))
     err = smoother.interpolate_errors(node_t, e_plus, e_minus, out_t)
     states_s = smoother.correct_states(fw.out_x, np.ascontiguousarray(err))
     smoothed = _solution(out_tns, out_t, states_s, diag_s if with_cov else None, blocks_s)
