@@ -8,7 +8,7 @@ accel scale factors (6), lever arm (3). Units SI and rad; variances of the NED b
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -114,6 +114,16 @@ class ForwardArrays:
     node_pu: NDArray
     node_phi: NDArray
     node_dx: NDArray
+
+    def without_nodes(self) -> ForwardArrays:
+        """The same arrays with the smoother's nodes emptied (new empty arrays: a slice would
+        keep the nodes' memory alive)."""
+        def empty(a: NDArray) -> NDArray:
+            return np.empty((0, *a.shape[1:]), a.dtype)
+
+        return replace(self, node_k=empty(self.node_k), node_pp=empty(self.node_pp),
+                       node_pu=empty(self.node_pu), node_phi=empty(self.node_phi),
+                       node_dx=empty(self.node_dx))
 
 
 def forward_pass(t: NDArray, w: NDArray, f: NDArray, al: AlignmentResult,
