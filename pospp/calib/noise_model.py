@@ -56,24 +56,37 @@ def accel_noise_covariance(rep: LegReplay, rows: NDArray | None = None) -> NDArr
     return _white_forcing_covariance(rep, DV, rows)
 
 
-def _white_forcing_covariance(rep: LegReplay, cols: slice, rows: NDArray | None) -> NDArray:
-    # dv(t_i) = g_i int_0^t_i w(tau) dn(tau) with g_i = Phi_v(t_i, t0) (2 x 15) and
-    # w(tau) = Phi(tau, t0)^-1 G(tau) (15 x 3), so that
-    # Cov(dv_i, dv_j) = g_i S(min(t_i, t_j)) g_j^T with S(t) = int_0^t w w^T dtau (15 x 15):
-    # one cumulative 15 x 15 sum and one (2R x 15) (15 x 2R) product, where the integrand
-    # written out per row and interval cost R M products (issue 18).
-    # w is taken linear inside each interval of the grid (exact for the last interval before
-    # t_i, where Phi_v,phi(t_i, tau) falls to 0: a left Riemann sum would triple the variance
-    # of each sample's newest increment, the part that whitening weighs):
-    # int w w^T = dt (u u^T + v v^T), u = (w_k + w_k+1) / 2, v = (w_k+1 - w_k) / (2 sqrt 3).
-    idx = np.arange(1, rep.t_s.size) if rows is None else np.asarray(rows)
-    g = rep.phi[idx, 3:5, :]  # (R, 2, 15)
+def forcing_increments(rep: LegReplay, cols: slice = PHI) -> tuple[NDArray, NDArray]:
+    """The state-space form of :func:`gyro_noise_covariance` (``cols`` PHI) and
+    :func:`accel_noise_covariance` (DV): per sample i > 0, ``g_i = Phi_v(t_i, t0)`` (2 x 15)
+    and the increment ``dS_i = S(t_i) - S(t_i-1)`` (15 x 15, symmetric, >= 0) of the forcing's
+    cumulative covariance, so that ``K_ij = g_i S(min(t_i, t_j)) g_j^T``: B's velocity error
+    is ``g_i s_i`` with s a random walk of increments dS_i (what the diagnosis whitens with a
+    Kalman filter, :mod:`pospp.diagnose._linear`). Shapes (M - 1, 2, 15), (M - 1, 15, 15).
+
+    dv(t_i) = g_i int_0^t_i w(tau) dn(tau) with w(tau) = Phi(tau, t0)^-1 G(tau) (15 x 3);
+    w is taken linear inside each interval of the grid (exact for the last interval before
+    t_i, where Phi_v,phi(t_i, tau) falls to 0: a left Riemann sum would triple the variance
+    of each sample's newest increment, the part that whitening weighs):
+    ``int w w^T = dt (u u^T + v v^T)``, ``u = (w_k + w_k+1) / 2``,
+    ``v = (w_k+1 - w_k) / (2 sqrt 3)``.
+    """
     w = np.linalg.inv(rep.phi)[:, :, cols] @ rep.c_nb  # (M, 15, 3) at the grid points
     u = 0.5 * (w[:-1] + w[1:])
     v = (w[1:] - w[:-1]) / (2.0 * np.sqrt(3.0))
     dt = np.diff(rep.t_s)[:, None, None]
+    return rep.phi[1:, 3:5, :], dt * (u @ u.transpose(0, 2, 1) + v @ v.transpose(0, 2, 1))
+
+
+def _white_forcing_covariance(rep: LegReplay, cols: slice, rows: NDArray | None) -> NDArray:
+    # Cov(dv_i, dv_j) = g_i S(min(t_i, t_j)) g_j^T (forcing_increments): one cumulative
+    # 15 x 15 sum and one (2R x 15) (15 x 2R) product, where the integrand written out per
+    # row and interval cost R M products (issue 18)
+    idx = np.arange(1, rep.t_s.size) if rows is None else np.asarray(rows)
+    g_all, ds = forcing_increments(rep, cols)
+    g = g_all[idx - 1]  # (R, 2, 15)
     s_k = np.zeros((rep.t_s.size, 15, 15))
-    np.cumsum(dt * (u @ u.transpose(0, 2, 1) + v @ v.transpose(0, 2, 1)), axis=0, out=s_k[1:])
+    np.cumsum(ds, axis=0, out=s_k[1:])
     n = 2 * idx.size
     q = s_k[idx] @ g.transpose(0, 2, 1)  # (R, 15, 2): S(t_j) g_j^T
     a = g.reshape(n, 15) @ q.transpose(1, 0, 2).reshape(15, n)  # g_i S(t_j) g_j^T

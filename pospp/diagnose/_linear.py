@@ -1,30 +1,32 @@
 """Whitened stacked least squares over legs: the linear-model machinery of the workflow.
 
 Rows are B's horizontal velocity errors [dv_N, dv_E] at the samples t > 0 of each leg
-(sample-major), whitened per leg by A's sigmas or by the Cholesky factor of
-``a diag(sigma^2) + q K`` (K: :func:`pospp.calib.noise_model.gyro_noise_covariance`).
-Problems re-whitened with other variances (the null realisations: the same legs, another
-``a``, ``q``) share one eigenbasis per leg instead: with ``S = diag(sigma)`` and
-``S^-1 K S^-1 = U diag(lam) U^T``, ``a S^2 + q K = S U diag(a + q lam) U^T S``, so
-``W = diag(a + q lam)^-1/2 U^T S^-1`` whitens it (``W Sigma W^T = I``). Whitened residual
-sums of squares (``r^T Sigma^-1 r``) do not depend on which square root whitens, so the fits
-are those of the Cholesky factor to rounding; one basis per leg is held instead of a
-factor per leg per realisation (420 MiB on the 1.5 h flight's 20 null problems).
-Columns come in named blocks (:class:`Term`); fits solve the column-scaled normal equations
-(minimum norm on rank deficiency). SI units.
+(sample-major), whitened per leg by A's sigmas, by the Cholesky factor of a full noise model,
+or, for ``Sigma = a diag(sigma^2) + q K`` (K: :func:`pospp.calib.noise_model.
+gyro_noise_covariance`), by a Kalman filter: K is the covariance of ``g_i s_i`` with s a
+random walk (:func:`pospp.calib.noise_model.forcing_increments`), so the filter's
+innovations, each normalised by its 2 x 2 covariance's Cholesky factor, are ``L^-1 y`` with
+L the Cholesky factor of Sigma in the rows' order (conditioning one row at a time on the
+earlier ones is what Cholesky does). Its gains depend on (a, q) only: a problem holds
+(M, 15, 2) gains per leg, not an (2M)^2 factor, and the null realisations' problems (the same
+legs, another a and q) make their own in milliseconds (the eigenbasis this replaced cost
+0.13 s per leg and 8 MiB per leg on the 1.5 h flight; issue 18). Columns come in named blocks
+(:class:`Term`); fits solve the column-scaled normal equations (minimum norm on rank
+deficiency). SI units.
 """
-
 from __future__ import annotations
 
 import copy
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 from scipy import linalg
 
-from pospp.calib.noise_model import NoiseModel, gyro_noise_covariance
+from pospp.calib.noise_model import NoiseModel, forcing_increments
 from pospp.calib.replay import LegReplay
 from pospp.diagnose.effects import Effect
 from pospp.distributions import f_sf
@@ -68,35 +70,35 @@ class Problem:
         self.z = [r.dv_n_mps[1:, 0:2].reshape(-1) for r in self.reps]
         self.sizes = [z.size for z in self.z]
         self.n = int(sum(self.sizes))
-        self.chol: list[NDArray | None] = []
-        self.sig: list[NDArray] = []
-        self.eig: list[tuple[NDArray, NDArray]] | None = None  # (U, 1 / sqrt(a + q lam))
-        self._basis: list[tuple[NDArray, NDArray]] | None = None  # (U, lam) per leg
-        for r in self.reps:
-            s = r.sigma_v_n_mps[1:, 0:2].reshape(-1)
-            self.sig.append(s)
-            if model is not None:
-                self.chol.append(linalg.cholesky(model.leg_covariance(r), lower=True))
-            elif arw > 0.0:
-                cov = arw**2 * gyro_noise_covariance(r)
-                cov[np.diag_indices_from(cov)] += white_scale * s**2
-                self.chol.append(linalg.cholesky(cov, lower=True))
-            else:
-                self.chol.append(None)
+        self.sig = [r.sigma_v_n_mps[1:, 0:2].reshape(-1) for r in self.reps]
+        self.chol: list[NDArray | None] = [None] * len(self.reps)
+        self.kf: list[tuple[NDArray, NDArray, NDArray]] | None = None  # (g, gains, chol)
+        self._forcing: list[tuple[NDArray, NDArray]] | None = None  # (g, dS) per leg
+        if model is not None:
+            self.chol = [linalg.cholesky(model.leg_covariance(r), lower=True)
+                         for r in self.reps]
+        elif arw > 0.0:
+            self.kf = self._gains(white_scale, arw)
         self.zw = [self.whiten(i, z) for i, z in enumerate(self.z)]
+
+    def _gains(self, white_scale: float, arw: float) -> list[tuple[NDArray, NDArray, NDArray]]:
+        """Per leg the Kalman filter of ``white_scale diag(sigma^2) + arw^2 K`` (module
+        docstring): (g, gains (M - 1, 15, 2), innovation Cholesky factors (M - 1, 3))."""
+        if self._forcing is None:
+            self._forcing = [forcing_increments(r) for r in self.reps]
+        return [(g, *_kalman_gains(g, ds, arw**2, white_scale * s**2))
+                for (g, ds), s in zip(self._forcing, self.sig, strict=True)]
 
     def rewhitened(self, replays: Sequence[LegReplay], white_scale: float, arw: float
                    ) -> Problem:
         """The same design with other data and its own whitening (``replays``: the same legs
         and rows, other ``dv_n_mps``); whitened blocks are cached on the new problem."""
-        if arw <= 0.0:
+        if arw <= 0.0 or self.chol[0] is not None:
             other = Problem(replays, white_scale, arw)
         else:
             other = copy.copy(self)
             other.reps = list(replays)
-            other.chol = [None] * len(other.reps)
-            other.eig = [(u, 1.0 / np.sqrt(white_scale + arw**2 * lam))
-                         for u, lam in self.eigenbasis()]
+            other.kf = self._gains(white_scale, arw)
             other.z = [r.dv_n_mps[1:, 0:2].reshape(-1) for r in other.reps]
             for r, s in zip(other.reps, self.sig, strict=True):
                 if not np.array_equal(r.sigma_v_n_mps[1:, 0:2].reshape(-1), s):
@@ -104,16 +106,6 @@ class Problem:
             other.zw = [other.whiten(i, z) for i, z in enumerate(other.z)]
         other.wcache = {}
         return other
-
-    def eigenbasis(self) -> list[tuple[NDArray, NDArray]]:
-        """Per leg (U, lam): ``S^-1 K S^-1 = U diag(lam) U^T`` (module docstring), lam >= 0."""
-        if self._basis is None:
-            self._basis = []
-            for r, s in zip(self.reps, self.sig, strict=True):
-                lam, u = linalg.eigh(gyro_noise_covariance(r) / np.outer(s, s),
-                                     check_finite=False)
-                self._basis.append((u, np.clip(lam, 0.0, None)))
-        return self._basis
 
     def with_data(self, z: Sequence[NDArray]) -> Problem:
         """The same design and whitening with other data (per leg, rows t > 0, [N, E])."""
@@ -123,10 +115,12 @@ class Problem:
         return other
 
     def whiten(self, i: int, a: NDArray) -> NDArray:
-        if self.eig is not None:
-            u, w = self.eig[i]
-            y = u.T @ (a / (self.sig[i] if a.ndim == 1 else self.sig[i][:, None]))
-            return y * (w if a.ndim == 1 else w[:, None])
+        """``L^-1 a`` for leg i's rows (1-D, or 2-D with columns), L its noise's square root."""
+        if self.kf is not None:
+            g, gains, chol = self.kf[i]
+            y = _kalman_whiten(g, gains, chol, np.ascontiguousarray(
+                a if a.ndim == 2 else a[:, None], dtype=float))
+            return y if a.ndim == 2 else y[:, 0]
         c = self.chol[i]
         if c is None:
             return a / (self.sig[i] if a.ndim == 1 else self.sig[i][:, None])
@@ -215,3 +209,67 @@ def f_test(rss0: float, rss1: float, r: int, dof1: int) -> tuple[float, float]:
 
 def bic(rss_w: float, n: int, k: int) -> float:
     return n * np.log(rss_w / n) + k * np.log(n)
+
+
+@njit(cache=True, nogil=True)
+def _kalman_gains(g, ds, q, r):
+    """The Kalman filter of ``y_k = g_k s_k + e_k`` (2 rows per sample, Cov e_k = diag(r_2k,
+    r_2k+1)), ``s_k = s_k-1 + eta_k`` (Cov q dS_k, s_0 = 0): per sample the gain
+    ``P g^T S^-1`` (15, 2) and the innovation covariance's Cholesky factor (l11, l21, l22).
+    Covariance update ``P - K g P``, symmetrised."""
+    m, n = g.shape[0], g.shape[2]
+    gains = np.empty((m, n, 2))
+    chol = np.empty((m, 3))
+    p = np.zeros((n, n))
+    gp = np.empty((2, n))
+    for k in range(m):
+        for a in range(n):
+            for b in range(n):
+                p[a, b] += q * ds[k, a, b]
+        for i in range(2):
+            for b in range(n):
+                acc = 0.0
+                for a in range(n):
+                    acc += g[k, i, a] * p[a, b]
+                gp[i, b] = acc
+        s00, s01, s11 = r[2 * k], 0.0, r[2 * k + 1]
+        for a in range(n):
+            s00 += gp[0, a] * g[k, 0, a]
+            s01 += gp[0, a] * g[k, 1, a]
+            s11 += gp[1, a] * g[k, 1, a]
+        l11 = math.sqrt(s00)
+        l21 = s01 / l11
+        chol[k, 0], chol[k, 1], chol[k, 2] = l11, l21, math.sqrt(s11 - l21 * l21)
+        det = s00 * s11 - s01 * s01
+        for a in range(n):
+            gains[k, a, 0] = (gp[0, a] * s11 - gp[1, a] * s01) / det
+            gains[k, a, 1] = (gp[1, a] * s00 - gp[0, a] * s01) / det
+        for a in range(n):
+            for b in range(a, n):
+                v = p[a, b] - 0.5 * (gains[k, a, 0] * gp[0, b] + gains[k, a, 1] * gp[1, b]
+                                     + gains[k, b, 0] * gp[0, a] + gains[k, b, 1] * gp[1, a])
+                p[a, b] = v
+                p[b, a] = v
+    return gains, chol
+
+
+@njit(cache=True, nogil=True)
+def _kalman_whiten(g, gains, chol, y):
+    """The filter's normalised innovations of the columns of ``y`` (2M, c):
+    ``w_2k = nu_0 / l11``, ``w_2k+1 = (nu_1 - l21 w_2k) / l22`` (:func:`_kalman_gains`)."""
+    m, n, c = g.shape[0], g.shape[2], y.shape[1]
+    x = np.zeros((n, c))
+    out = np.empty_like(y)
+    for k in range(m):
+        for j in range(c):
+            nu0 = y[2 * k, j]
+            nu1 = y[2 * k + 1, j]
+            for a in range(n):
+                nu0 -= g[k, 0, a] * x[a, j]
+                nu1 -= g[k, 1, a] * x[a, j]
+            w0 = nu0 / chol[k, 0]
+            out[2 * k, j] = w0
+            out[2 * k + 1, j] = (nu1 - chol[k, 1] * w0) / chol[k, 2]
+            for a in range(n):
+                x[a, j] += gains[k, a, 0] * nu0 + gains[k, a, 1] * nu1
+    return out

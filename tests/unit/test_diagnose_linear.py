@@ -29,7 +29,10 @@ def test_per_leg_term_is_zero_on_the_other_legs():
     assert Term("local", [np.ones((4, 1)), np.zeros((4, 1))], local_leg=0).local_leg == 0
 
 
-def test_rewhitened_eigenbasis_matches_the_cholesky_factor():
+def test_kalman_whitening_is_the_cholesky_factors():
+    # the Kalman filter's normalised innovations are L^-1 y, L the Cholesky factor of
+    # Sigma = a S^2 + q K written out (gyro_noise_covariance), on the flight's problem and on
+    # a re-whitened one (the null realisations': other data, another a and q)
     reps = _replays()
     a0, arw0 = 1.3, 2e-6
     flight = Problem(reps, a0, arw0)
@@ -38,22 +41,36 @@ def test_rewhitened_eigenbasis_matches_the_cholesky_factor():
                   for r in reps)
     a1, arw1 = 0.7, 5e-6
     shared = flight.rewhitened(other, a1, arw1)
-    direct = Problem(other, a1, arw1)  # its own Cholesky factors
-    assert shared.eig is not None and direct.eig is None
-    # W Sigma W^T = I on every leg (Sigma = a S^2 + q K written out)
-    for i, r in enumerate(other):
-        s = r.sigma_v_n_mps[1:, 0:2].reshape(-1)
-        cov = arw1**2 * gyro_noise_covariance(r) + np.diag(a1 * s**2)
-        w_l = shared.whiten(i, linalg.cholesky(cov, lower=True))
-        np.testing.assert_allclose(w_l @ w_l.T, np.eye(s.size), atol=1e-8)
+    chol = []
+    for prob, a, arw in ((flight, a0, arw0), (shared, a1, arw1)):
+        factors = []
+        for i, r in enumerate(prob.reps):
+            s = r.sigma_v_n_mps[1:, 0:2].reshape(-1)
+            cov = arw**2 * gyro_noise_covariance(r) + np.diag(a * s**2)
+            ll = linalg.cholesky(cov, lower=True)
+            y = rng.normal(size=(s.size, 3))
+            np.testing.assert_allclose(prob.whiten(i, y),
+                                       linalg.solve_triangular(ll, y, lower=True),
+                                       rtol=1e-8, atol=1e-8 * np.abs(y).max() / s.min())
+            w_l = prob.whiten(i, ll)  # W Sigma W^T = I
+            np.testing.assert_allclose(w_l @ w_l.T, np.eye(s.size), atol=1e-8)
+            factors.append(ll)
+        chol.append(factors)
     terms = [Term("cols", [rng.normal(size=(z.size, 3)) for z in flight.z]),
              Term("local", [rng.normal(size=(z.size, 1)) * (i == 1)
                             for i, z in enumerate(flight.z)], local_leg=1)]
     for sub in (terms[:1], terms):
-        f_s, f_d = shared.fit(sub), direct.fit(sub)
-        assert f_s.rank == f_d.rank
-        np.testing.assert_allclose(f_s.rss_w, f_d.rss_w, rtol=1e-9)
-        np.testing.assert_allclose(f_s.x, f_d.x, rtol=1e-7, atol=1e-12)
+        # the fit against least squares whitened by the Cholesky factors
+        f_s = shared.fit(sub)
+        hw = np.vstack([linalg.solve_triangular(ll, np.hstack([t.blocks[i] for t in sub]),
+                                                lower=True) for i, ll in enumerate(chol[1])])
+        zw = np.concatenate([linalg.solve_triangular(ll, z, lower=True)
+                             for ll, z in zip(chol[1], shared.z, strict=True)])
+        x, rss, rank, _ = np.linalg.lstsq(hw, zw, rcond=None)
+        assert f_s.rank == rank
+        np.testing.assert_allclose(f_s.rss_w, rss[0], rtol=1e-9)
+        np.testing.assert_allclose(f_s.x, x, rtol=1e-7, atol=1e-12)
+    direct = Problem(other, a1, arw1)
     res = [np.ravel(r) for r in shared.fit(terms).res_raw]
     np.testing.assert_allclose(shared.whitened_rms(res, [0, 1, 2]),
                                direct.whitened_rms(res, [0, 1, 2]), rtol=1e-9)
