@@ -133,56 +133,19 @@ def _robust_rms(r: NDArray) -> NDArray:
                      for k in range(r.shape[1])])
 
 
-@dataclass(frozen=True)
-class NoiseDraw:
-    """One null realisation's standard normal draws, in the order they are drawn (IMU (N, 3),
-    GNSS fixes (M, 3), velocities (V, 3)); the Gauss-Markov ones (path (N, 3), start (3,))
-    None when that process is off. :func:`draw_noise` makes it, :func:`apply_noise` scales
-    and adds it."""
-
-    gyro_white: NDArray
-    gyro_gm: tuple[NDArray, NDArray] | None
-    accel_white: NDArray
-    accel_gm: tuple[NDArray, NDArray] | None
-    pos: NDArray
-    vel: NDArray
-
-
-def _gm_on(sigma: float, tau_s: float) -> bool:
-    return sigma > 0 and bool(np.isfinite(tau_s))
-
-
-def draw_noise(log: Any, noise: NullNoise, rng: np.random.Generator) -> NoiseDraw:
-    """The standard normals of one realisation of :func:`perturb_log`, from ``rng`` in its
-    order (the generator's work, apart from the arithmetic of :func:`apply_noise`)."""
-    n, shape = len(log.imu.time_ns), np.shape(log.imu.w_ib_b_radps)
-
-    def gm(sigma: float, tau_s: float) -> tuple[NDArray, NDArray] | None:
-        if not _gm_on(sigma, tau_s):
-            return None
-        path = rng.standard_normal((n, 3))
-        return path, rng.standard_normal(3)
-
-    gyro_white = rng.standard_normal(shape)
-    gyro_gm = gm(noise.gyro_gm_sigma_radps, noise.gyro_gm_tau_s)
-    accel_white = rng.standard_normal(np.shape(log.imu.f_ib_b_mps2))
-    accel_gm = gm(noise.accel_gm_sigma_mps2, noise.accel_gm_tau_s)
-    pos = rng.standard_normal((len(log.fix.time_ns), 3))
-    vel = rng.standard_normal(np.shape(log.vel.v_n_mps))
-    return NoiseDraw(gyro_white, gyro_gm, accel_white, accel_gm, pos, vel)
-
-
 def perturb_log(log: Any, noise: NullNoise, rng: np.random.Generator,
                 from_time_ns: int | None = None) -> Any:
-    """The flight log with white IMU and GNSS noise added (one null realisation's input):
-    ``apply_noise(log, noise, draw_noise(log, noise, rng), from_time_ns)``.
+    """The flight log with white IMU and GNSS noise added (one null realisation's input).
 
     IMU: samples are mean rates / specific forces over the interval dt ending at the stamp, so
     white noise of ARW has sigma ``ARW / sqrt(dt)`` per sample (likewise the VRW); a
-    Gauss-Markov gyro drift and accelerometer bias (:func:`gauss_markov_path`) are added when
-    given. GNSS: NED
+    Gauss-Markov gyro drift and accelerometer bias (:func:`gauss_markov_path`'s draws and
+    arithmetic) are added when given; each IMU channel in one compiled pass
+    (:func:`_noisy_rates`), its draws freed before the next channel's are made. GNSS: NED
     position noise enters latitude / longitude through the principal radii
-    (``dlat = dN / (M + h)``, ``dlon = dE / ((N + h) cos lat)``), height ``- dD``.
+    (``dlat = dN / (M + h)``, ``dlon = dE / ((N + h) cos lat)``), height ``- dD``. The draws
+    from ``rng``, in order: gyro white (N, 3), gyro Gauss-Markov path (N, 3) and start (3,),
+    the same for the accelerometer, fixes (M, 3), velocities (V, 3).
 
     Parameters
     ----------
@@ -198,13 +161,6 @@ def perturb_log(log: Any, noise: NullNoise, rng: np.random.Generator,
     -------
     Same type as ``log``, with ``imu``, ``fix``, ``vel`` replaced.
     """
-    return apply_noise(log, noise, draw_noise(log, noise, rng), from_time_ns)
-
-
-def apply_noise(log: Any, noise: NullNoise, draw: NoiseDraw, from_time_ns: int | None = None
-                ) -> Any:
-    """:func:`perturb_log`'s log from its draws (:func:`draw_noise`): the IMU channels in one
-    compiled pass each (:func:`_noisy_rates`)."""
     imu, fix, vel = log.imu, log.fix, log.vel
     t = np.asarray(imu.time_ns, dtype=np.int64)
     dt = np.diff(t) * 1e-9
@@ -215,29 +171,30 @@ def apply_noise(log: Any, noise: NullNoise, draw: NoiseDraw, from_time_ns: int |
     def on(time_ns: NDArray) -> NDArray:
         return (np.asarray(time_ns, dtype=np.int64) >= t0)[:, None]
 
-    m_imu = t >= t0
-
-    def noisy(rate: NDArray, white: NDArray, level: float, gm: tuple | None, sigma: float,
-              tau_s: float) -> NDArray:
+    def noisy(rate: NDArray, level: float, sigma: float, tau_s: float) -> NDArray:
+        rate = np.asarray(rate, dtype=float)
+        white = rng.standard_normal(rate.shape)
         a = q = np.zeros(0)
         g0, path = np.zeros(3), np.zeros((0, 3))
-        if gm is not None:
+        if sigma > 0 and np.isfinite(tau_s):
             a = np.exp(-dt / tau_s)
             q = sigma * np.sqrt(1.0 - a**2)
-            path, g0 = gm[0], gm[1] * sigma
-        return _noisy_rates(np.asarray(rate, dtype=float), white, level / np.sqrt(dt), path,
-                            a, q, g0, m_imu)
+            path = rng.standard_normal((dt.size, 3))
+            g0 = rng.standard_normal(3) * sigma
+        return _noisy_rates(rate, white, level / np.sqrt(dt), path, a, q, g0, t >= t0)
 
-    w = noisy(imu.w_ib_b_radps, draw.gyro_white, noise.gyro_arw_radpsqrts, draw.gyro_gm,
-              noise.gyro_gm_sigma_radps, noise.gyro_gm_tau_s)
-    f = noisy(imu.f_ib_b_mps2, draw.accel_white, noise.accel_vrw_mpspsqrts, draw.accel_gm,
-              noise.accel_gm_sigma_mps2, noise.accel_gm_tau_s)
-    e_pos = draw.pos * np.asarray(noise.pos_sigma_ned_m) * on(fix.time_ns)
+    w = noisy(imu.w_ib_b_radps, noise.gyro_arw_radpsqrts, noise.gyro_gm_sigma_radps,
+              noise.gyro_gm_tau_s)
+    f = noisy(imu.f_ib_b_mps2, noise.accel_vrw_mpspsqrts, noise.accel_gm_sigma_mps2,
+              noise.accel_gm_tau_s)
+    e_pos = rng.standard_normal((len(fix.time_ns), 3)) * np.asarray(
+        noise.pos_sigma_ned_m) * on(fix.time_ns)
     rm, rn = principal_radii_m(fix.lat_rad)
     lat = fix.lat_rad + e_pos[:, 0] / (rm + fix.height_m)
     lon = fix.lon_rad + e_pos[:, 1] / ((rn + fix.height_m) * np.cos(fix.lat_rad))
     h = fix.height_m - e_pos[:, 2]
-    v = vel.v_n_mps + draw.vel * np.asarray(noise.vel_sigma_ned_mps) * on(vel.time_ns)
+    v = vel.v_n_mps + rng.standard_normal(vel.v_n_mps.shape) * np.asarray(
+        noise.vel_sigma_ned_mps) * on(vel.time_ns)
     return replace(log, imu=replace(imu, w_ib_b_radps=w, f_ib_b_mps2=f),
                    fix=replace(fix, lat_rad=lat, lon_rad=lon, height_m=h),
                    vel=replace(vel, v_n_mps=v))
