@@ -10,6 +10,9 @@ Moved out of :mod:`pospp.calib.solve` (issue 17); frames and units as there (SI)
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from functools import partial
+
 import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg, optimize
@@ -138,6 +141,16 @@ def _full_reml_nll(theta: NDArray, parts: tuple, fixed: tuple[float | None, floa
     return 1e30 if w is None else _reml_whitened(*w)
 
 
+def _eig_reml_nll(theta: NDArray, lam: NDArray, vhz: NDArray) -> float:
+    """:func:`_full_reml_nll` with only a free, from the fixed part's eigendecomposition
+    ``q K + s2 G = V diag(lam) V^T`` and ``vhz = V^T [H z]``: ``C = V diag(lam + a) V^T``."""
+    d = lam + float(np.exp(theta[0]))
+    if not np.all(d > 0.0):
+        return 1e30
+    w = vhz / np.sqrt(d)[:, None]
+    return _reml_whitened(w[:, :-1], w[:, -1], float(np.sum(np.log(d))))
+
+
 def _full_params(theta: NDArray, fixed: tuple[float | None, float | None]
                  ) -> tuple[float, float, float]:
     a = float(np.exp(theta[0]))
@@ -194,12 +207,13 @@ def _reml_nll(theta: NDArray, blocks: list[_LegNoise], q_fixed: float | None) ->
 
 
 def _calibrate_gm(legs, h, z, edges, noise_step_s, bases, gm_ops, arw_given, sigma_given,
-                  tau_s, bin_s, prior=None):
+                  tau_s, bin_s, prior=None, noise_cache=None):
     """GLS + REML with the Gauss-Markov drift (full covariance over all legs).
 
     With ``prior`` (:class:`DriftPrior`) and the sigma estimated, tau is profiled over the
     prior's candidates and the grade's weak prior is added to the restricted likelihood
     (maximum a posteriori); the returned profile holds (tau, penalised nll) per candidate.
+    ``noise_cache``: see :func:`pospp.calib.solve.fit_calibration`.
     """
     rows, sqs, kb, ops = [], [], [], []
     for i, rep in enumerate(legs):
@@ -228,7 +242,15 @@ def _calibrate_gm(legs, h, z, edges, noise_step_s, bases, gm_ops, arw_given, sig
         parts = (hs, zs, k, _gm_covariance(ops, tau))
         pen = ((lambda th, tau=tau: prior.penalty(_full_params(th, fixed)[2], tau))
                if use_prior else None)
-        th, val = _fit_variances(parts, fixed, pen)
+        eig = None
+        if noise_cache is not None and None not in fixed:  # only A's scale is fitted
+            key = (tuple(rep.leg.leg_id for rep in legs), noise_step_s, bin_s, float(tau),
+                   fixed, hs.shape)
+            if key not in noise_cache:
+                noise_cache[key] = linalg.eigh(_full_cov(np.array([-np.inf]), k, parts[3],
+                                                         fixed), check_finite=False)
+            eig = noise_cache[key]
+        th, val = _fit_variances(parts, fixed, pen, eig)
         profile.append((float(tau), val, th, parts))
     tau_best, _, th, parts = min(profile, key=lambda p: p[1])
     source = ""
@@ -259,21 +281,27 @@ def _calibrate_gm(legs, h, z, edges, noise_step_s, bases, gm_ops, arw_given, sig
             tau_profile, source)
 
 
-def _fit_variances(parts: tuple, fixed: tuple[float | None, float | None], penalty=None
-                   ) -> tuple[NDArray, float]:
+def _fit_variances(parts: tuple, fixed: tuple[float | None, float | None], penalty=None,
+                   eig: tuple[NDArray, NDArray] | None = None) -> tuple[NDArray, float]:
     """REML (plus an optional penalty of theta) of a and the free ones of (q, s2).
 
     A coarse grid (each evaluation is a Cholesky of the full covariance), then bounded Brent
-    (only a free) or Nelder-Mead. Returns (theta, objective at theta).
+    (only a free) or Nelder-Mead. Returns (theta, objective at theta). ``eig``: (lam, V) of
+    the fixed part ``q K + s2 G`` when only a is free: ``C = V diag(lam + a) V^T``, so each
+    evaluation scales ``V^T [H z]`` instead of factoring C (the same likelihood to rounding).
     """
     bounds = [(np.log(1e-6), np.log(1e4))]
     if fixed[0] is None:
         bounds.append((np.log(1e-22), np.log(1e-6)))
     if fixed[1] is None:
         bounds.append((np.log(1e-17), np.log(1e-8)))
+    nll: Callable[[NDArray], float] = partial(_full_reml_nll, parts=parts, fixed=fixed)
+    if eig is not None:
+        nll = partial(_eig_reml_nll, lam=eig[0],
+                      vhz=eig[1].T @ np.column_stack([parts[0], parts[1]]))
 
     def obj(th: NDArray) -> float:
-        v = _full_reml_nll(th, parts, fixed)
+        v = nll(th)
         return v if penalty is None else v + penalty(th)
 
     best, axes = _grid_argmin(obj, bounds, 9 if len(bounds) == 1 else 6)

@@ -454,6 +454,7 @@ def with_null_covariance(run: CalibrationRun, null_dv: Sequence[Sequence[NDArray
     ids = sorted(run.replays)
     kw = dict(run.solve_kwargs)
     transition = kw.pop("transition", chosen.transition)
+    kw["noise_cache"] = {}  # the realisations share the fixed noise's eigendecomposition
     dx = []
     for real in null_dv:
         reps = {i: replace(run.replays[i], dv_n_mps=run.replays[i].dv_n_mps + np.asarray(d))

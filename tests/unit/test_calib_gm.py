@@ -10,6 +10,8 @@ Carlo is tests/unit/test_calib_gm_montecarlo.py (slow).
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from _gm_mission import run_once
@@ -119,3 +121,24 @@ def test_stage_estimates_the_drift_sigma_by_reml(tmp_path):
     r = run_once("flight", 5, tmp_path, estimate_gm_sigma=True)
     assert 0.25 * DPH < r.gm_sigma_radps < 1.0 * DPH, r.gm_sigma_radps / DPH
     assert np.all(np.abs(r.err_b_radps) < 3 * r.sigma_b_radps)
+
+
+def test_shared_eigendecomposition_gives_the_cholesky_fit():
+    # fit_calibration(noise_cache=...) with the ARW and drift sigma given (only A's scale
+    # fitted): the fixed part q K + s2 G factored once by eigh and shared by the calls; the
+    # same fit as the Cholesky of every REML step, here with an interior optimum
+    legs = (_leg(1, 0.0, _bias), _leg(2, 180.0, _bias))
+    rng = np.random.default_rng(5)
+    draws = [tuple(replace(r, dv_n_mps=r.dv_n_mps + rng.normal(0.0, 0.01, r.dv_n_mps.shape))
+                   for r in legs) for _ in range(2)]
+    kw = dict(gyro_arw_radpsqrts=np.radians(0.01) / 60.0, gyro_gm_sigma_radps=0.5 * DPH,
+              gyro_gm_tau_s=300.0)
+    cache: dict = {}
+    for reps in draws:  # the second call reuses the first's decomposition
+        plain = fit_calibration(reps, "body", **kw)
+        shared = fit_calibration(reps, "body", noise_cache=cache, **kw)
+        assert len(cache) == 1
+        assert np.log(plain.variance_factor) > np.log(1e-6) + 0.1  # not at the bound
+        np.testing.assert_allclose(shared.variance_factor, plain.variance_factor, rtol=1e-6)
+        np.testing.assert_allclose(shared.x, plain.x, rtol=1e-6, atol=1e-14)
+        np.testing.assert_allclose(shared.cov, plain.cov, rtol=1e-5)
