@@ -10,7 +10,6 @@ Nothing here touches files but through :mod:`pospp.io`'s reader.
 
 from __future__ import annotations
 
-import itertools
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -35,7 +34,7 @@ from pospp.io import mcap_reader
 from pospp.nav import filter as nav_filter
 from pospp.nav import tuning as nav_tuning
 from pospp.nav.strapdown import increments_from_rates
-from pospp.threads import map_in_threads
+from pospp.threads import first_kept
 from pospp.types import FLU_TO_FRD
 from pospp.units import UG_MPS2, t_s_from_time_ns
 
@@ -291,8 +290,8 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     lists of (M, 3) arrays, legs in id order (fewer when A fails on more than ``n`` of
     ``2 n`` perturbed logs). ``drift``: (sigma [rad/s], tau [s]) of the gyro drift to inject instead
     (:func:`drift_under_alternative`). ``threads``: realisations made at once
-    (:func:`pospp.threads.map_in_threads`); the perturbed logs are drawn in the same order
-    from the same generator, so the result does not depend on it.
+    (:func:`pospp.threads.first_kept`, the next log drawn while A runs); the logs are drawn
+    in the same order from the same generator, so the result does not depend on it.
     """
     si = imu_tuning(config).noise()
     gm_sigma, gm_tau, _ = null_drift(calib_run, config) if drift is None else (*drift, "")
@@ -352,17 +351,10 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     perturbed = (null_model.decimate_imu(
         null_model.perturb_log(base, noise, rng, from_time_ns=t_align_ns), factor, leg_ns)
         for _ in range(2 * n))
-    out: list[list[np.ndarray]] = []
-    while len(out) < n:
-        # never more logs drawn than realisations still missing: the draws, and so the
-        # realisations, are those of one log at a time
-        batch = list(itertools.islice(perturbed, min(max(threads, 1), n - len(out))))
-        if not batch:
-            break
-        for dv in map_in_threads(attempt, batch, threads):
-            if dv is not None:
-                out.append([d - d0 for d, d0 in zip(dv, base_dv, strict=True)])
-    return out
+    # never more logs drawn than realisations still missing: the draws, and so the
+    # realisations, are those of one log at a time; the next drawn while A runs on the others
+    return [[d - d0 for d, d0 in zip(dv, base_dv, strict=True)]
+            for dv in first_kept(attempt, perturbed, n, threads)]
 
 
 def rerun_decimation(log: mcap_reader.FlightLog, rate_hz: float) -> int:

@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from pospp.threads import available_cores, map_in_threads
+from pospp.threads import available_cores, first_kept, map_in_threads
 
 
 def test_results_in_the_items_order_whatever_finishes_first():
@@ -57,3 +57,31 @@ def test_available_cores_is_the_affinity_mask():
     import os
 
     assert available_cores() == len(os.sched_getaffinity(0))
+
+
+def test_first_kept_takes_the_same_items_at_any_thread_count():
+    # the null realisations' contract: the first n results that are not None, in the items'
+    # order, and never an item taken beyond what might still be needed
+    def attempt(x):
+        time.sleep(0.01 * (x % 3))
+        return None if x in (2, 5) else 10 * x
+
+    for threads in (1, 2, 3):
+        taken: list[int] = []
+
+        def items(into=taken):
+            for i in range(100):
+                into.append(i)
+                yield i
+
+        assert first_kept(attempt, items(), 4, threads) == [0, 10, 30, 40]
+        assert taken == [0, 1, 2, 3, 4]  # one more than 4 for the failed 2, none beyond
+        assert first_kept(attempt, iter([2, 5, 1]), 3, threads) == [10]  # items run out
+
+    def fail_on_three(x):
+        if x == 3:
+            raise ValueError("three")
+        return x
+
+    with pytest.raises(ValueError, match="three"):
+        first_kept(fail_on_three, iter(range(10)), 8, 2)
