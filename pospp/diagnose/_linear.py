@@ -93,7 +93,7 @@ class Problem:
                    ) -> Problem:
         """The same design with other data and its own whitening (``replays``: the same legs
         and rows, other ``dv_n_mps``); whitened blocks are cached on the new problem."""
-        if arw <= 0.0 or self.chol[0] is not None:
+        if arw <= 0.0 or self.kf is None:  # white, or a full noise model: its own problem
             other = Problem(replays, white_scale, arw)
         else:
             other = copy.copy(self)
