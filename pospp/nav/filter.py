@@ -414,7 +414,7 @@ def run_integrated_navigation(
     smoothed = sm_bias = lever_s = None
     if options.smoother:
         smoothed, sm_bias, lever_s = _smoothed(t, fw, lay, out_tns, options.covariance_outputs)
-    # the nodes are freed before the forward solution is made (36 kB per second of flight)
+    # the smoother's nodes (three n x n matrices each) are freed before the forward solution
     fw = fw.without_nodes()
     fwd, fwd_bias, lever = _forward_results(t, fw, lay, out_tns, options.covariance_outputs)
     lever = lever if lever_s is None else lever_s
