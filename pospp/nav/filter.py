@@ -411,11 +411,13 @@ def run_integrated_navigation(
     fw = forward_pass(t, w, f, al, noise, lay, lever0, meas, output_rate_hz, options)
     outcome = _record_outcomes(meas, fw, rejections)
     out_tns = imu_t_ns[fw.out_k]
-    smoothed = sm_bias = lever_s = None
-    if options.smoother:
-        smoothed, sm_bias, lever_s = _smoothed(t, fw, lay, out_tns, options.covariance_outputs)
-    # the smoother's nodes (three n x n matrices each) are freed before the forward solution
+    errors = _smoothed_errors(t, fw, lay, options.covariance_outputs) if options.smoother \
+        else None
+    # the smoother's nodes (three n x n matrices each) are freed before the solutions are made
     fw = fw.without_nodes()
+    smoothed = sm_bias = lever_s = None
+    if errors is not None:
+        smoothed, sm_bias, lever_s = _smoothed(t, fw, lay, out_tns, *errors)
     fwd, fwd_bias, lever = _forward_results(t, fw, lay, out_tns, options.covariance_outputs)
     lever = lever if lever_s is None else lever_s
     return FilterResult(
@@ -495,11 +497,11 @@ def _record_outcomes(meas: MeasurementRecords, fw: ForwardArrays,
     return _Outcome(tuple(rejections), n_updates, resets)
 
 
-def _smoothed(t: NDArray, fw: ForwardArrays, lay: StateLayout, out_tns: NDArray,
-              with_cov: bool = True
-              ) -> tuple[NavSolution, BiasHistory, tuple[NDArray, NDArray] | None]:
-    """RTS smoother over the nodes: the smoothed solution, biases and (when estimated) lever
-    arm with its sigma (``with_cov`` False: the errors alone, every sigma NaN)."""
+def _smoothed_errors(t: NDArray, fw: ForwardArrays, lay: StateLayout, with_cov: bool = True
+                     ) -> tuple[NDArray, NDArray, list[NDArray] | None, NDArray]:
+    """RTS smoother over the nodes, interpolated to the outputs: (error (N, n), diagonal of
+    P^s (N, n), its [phi, dv, dr] blocks, total bias variance (N, 6)); ``with_cov`` False:
+    the errors alone, the rest NaN. What reads the nodes: they can be freed after it."""
     out_t = t[fw.out_k]
     node_t = t[fw.node_k]
     if with_cov:
@@ -517,9 +519,18 @@ def _smoothed(t: NDArray, fw: ForwardArrays, lay: StateLayout, out_tns: NDArray,
                                                      fw.node_dx)
         diag_s = _nan((out_t.shape[0], lay.n))
         blocks_s, bvar_s = None, _nan((out_t.shape[0], 6))
-    err = smoother.interpolate_errors(node_t, e_plus, e_minus, out_t)
+    return smoother.interpolate_errors(node_t, e_plus, e_minus, out_t), diag_s, blocks_s, bvar_s
+
+
+def _smoothed(t: NDArray, fw: ForwardArrays, lay: StateLayout, out_tns: NDArray,
+              err: NDArray, diag_s: NDArray, blocks_s: list[NDArray] | None, bvar_s: NDArray
+              ) -> tuple[NavSolution, BiasHistory, tuple[NDArray, NDArray] | None]:
+    """The smoothed solution, biases and (when estimated) lever arm with its sigma, from the
+    forward outputs and :func:`_smoothed_errors` (``blocks_s`` None: every sigma NaN)."""
+    out_t = t[fw.out_k]
     states_s = smoother.correct_states(fw.out_x, np.ascontiguousarray(err))
-    smoothed = _solution(out_tns, out_t, states_s, diag_s if with_cov else None, blocks_s)
+    smoothed = _solution(out_tns, out_t, states_s, None if blocks_s is None else diag_s,
+                         blocks_s)
     # total bias error (constant + Gauss-Markov) and its smoothed variance
     sens_s = fw.out_sens.copy()
     sens_s[:, :6] += err @ total_bias_map(lay).T
