@@ -160,26 +160,32 @@ def rerun_signatures(log, nav, calib_run, config, effect_ids=RERUN_EFFECTS, *,
     if bad:
         raise ValueError(f"effect_ids: {bad} have no re-run signature; expected a subset of "
                          f"{RERUN_EFFECTS}")
-    def response(run: tuple) -> list[NDArray]:  # run: (perturbed log, lever arm or None)
-        return _response(run[0], nav, calib_run, config, navigate, run[1])
+    def response(run: tuple) -> list[NDArray] | Exception:  # (perturbed log, lever or None)
+        try:
+            return _response(run[0], nav, calib_run, config, navigate, run[1])
+        except (ValueError, np.linalg.LinAlgError) as exc:  # A failed: the effect is left out
+            return exc
 
-    out: dict[str, list[NDArray]] = {}
+    # every effect's runs in one map: the threads stay busy across them
+    steps: dict[str, float] = {}
+    runs: list[tuple[str, Any, NDArray | None]] = []
     for eid in effect_ids:
-        h = STEP_FRACTION * effect_by_id(eid).plausible_si
-        runs: list[tuple[Any, NDArray | None]]
+        steps[eid] = h = STEP_FRACTION * effect_by_id(eid).plausible_si
         if eid == "lever_arm":
             lever0 = np.asarray(config.gnss.lever_arm_m, dtype=float)
-            runs = [(log, lever0 + h * e) for e in np.eye(3)]
+            runs += [(eid, log, lever0 + h * e) for e in np.eye(3)]
         elif eid == "time_offset":
-            runs = [(_gnss_earlier(log, h), None)]
+            runs += [(eid, _gnss_earlier(log, h), None)]
         elif eid == "gyro_scale_factor":
             w = log.imu.w_ib_b_radps
-            runs = [(_with_rates(log, w * (1.0 + h * e)), None) for e in np.eye(3)]
+            runs += [(eid, _with_rates(log, w * (1.0 + h * e)), None) for e in np.eye(3)]
         else:  # accel_bias_change
-            runs = [(warmed(log, h * e, accel_settling_s), None) for e in np.eye(2)]
-        try:
-            cols = map_in_threads(response, runs, threads)
-        except (ValueError, np.linalg.LinAlgError):
+            runs += [(eid, warmed(log, h * e, accel_settling_s), None) for e in np.eye(2)]
+    results = map_in_threads(lambda run: response(run[1:]), runs, threads)
+    out: dict[str, list[NDArray]] = {}
+    for eid, h in steps.items():
+        cols = [c for run, c in zip(runs, results, strict=True) if run[0] == eid]
+        if any(isinstance(c, Exception) for c in cols):
             continue
         out[eid] = [np.stack([c[k] for c in cols], axis=-1) / h
                     for k in range(len(calib_run.replays))]
