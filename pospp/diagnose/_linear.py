@@ -216,7 +216,8 @@ def _kalman_gains(g, ds, q, r):
     """The Kalman filter of ``y_k = g_k s_k + e_k`` (2 rows per sample, Cov e_k = diag(r_2k,
     r_2k+1)), ``s_k = s_k-1 + eta_k`` (Cov q dS_k, s_0 = 0): per sample the gain
     ``P g^T S^-1`` (15, 2) and the innovation covariance's Cholesky factor (l11, l21, l22).
-    Covariance update ``P - K g P``, symmetrised."""
+    Covariance update ``P - K g P``, symmetrised. Raises ValueError when an innovation
+    covariance is not positive definite (as the Cholesky factor of Sigma would fail)."""
     m, n = g.shape[0], g.shape[2]
     gains = np.empty((m, n, 2))
     chol = np.empty((m, 3))
@@ -237,6 +238,8 @@ def _kalman_gains(g, ds, q, r):
             s00 += gp[0, a] * g[k, 0, a]
             s01 += gp[0, a] * g[k, 1, a]
             s11 += gp[1, a] * g[k, 1, a]
+        if not (s00 > 0.0 and s11 - s01 * s01 / s00 > 0.0):
+            raise ValueError("whitening: the noise covariance is not positive definite")
         l11 = math.sqrt(s00)
         l21 = s01 / l11
         chol[k, 0], chol[k, 1], chol[k, 2] = l11, l21, math.sqrt(s11 - l21 * l21)

@@ -74,3 +74,16 @@ def test_kalman_whitening_is_the_cholesky_factors():
     res = [np.ravel(r) for r in shared.fit(terms).res_raw]
     np.testing.assert_allclose(shared.whitened_rms(res, [0, 1, 2]),
                                direct.whitened_rms(res, [0, 1, 2]), rtol=1e-9)
+
+
+def test_kalman_whitening_refuses_a_covariance_that_is_not_positive_definite():
+    from pospp.diagnose._linear import _kalman_gains
+
+    g = np.zeros((3, 2, 15))
+    g[:, 0, 0] = g[:, 1, 1] = 1.0
+    ds = np.zeros((3, 15, 15))
+    with pytest.raises(ValueError, match="not positive definite"):
+        _kalman_gains(g, ds, 1.0, np.zeros(6))  # no noise at all: a singular covariance
+    gains, chol = _kalman_gains(g, ds, 1.0, np.ones(6))
+    np.testing.assert_allclose(chol, [[1.0, 0.0, 1.0]] * 3)
+    assert not gains.any()
