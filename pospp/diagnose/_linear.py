@@ -86,8 +86,13 @@ class Problem:
         docstring): (g, gains (M - 1, 15, 2), innovation Cholesky factors (M - 1, 3))."""
         if self._forcing is None:
             self._forcing = [forcing_increments(r) for r in self.reps]
-        return [(g, *_kalman_gains(g, ds, arw**2, white_scale * s**2))
-                for (g, ds), s in zip(self._forcing, self.sig, strict=True)]
+        out = []
+        for (g, ds), s, r in zip(self._forcing, self.sig, self.reps, strict=True):
+            try:
+                out.append((g, *_kalman_gains(g, ds, arw**2, white_scale * s**2)))
+            except ValueError as exc:
+                raise ValueError(f"leg {r.leg.leg_id}: {exc}") from exc
+        return out
 
     def rewhitened(self, replays: Sequence[LegReplay], white_scale: float, arw: float
                    ) -> Problem:

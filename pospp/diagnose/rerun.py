@@ -160,9 +160,9 @@ def rerun_signatures(log, nav, calib_run, config, effect_ids=RERUN_EFFECTS, *,
     if bad:
         raise ValueError(f"effect_ids: {bad} have no re-run signature; expected a subset of "
                          f"{RERUN_EFFECTS}")
-    def response(run: tuple) -> list[NDArray] | Exception:  # (perturbed log, lever or None)
+    def response(run: tuple) -> list[NDArray] | Exception:  # (effect, log, lever or None)
         try:
-            return _response(run[0], nav, calib_run, config, navigate, run[1])
+            return _response(run[1], nav, calib_run, config, navigate, run[2])
         except (ValueError, np.linalg.LinAlgError) as exc:  # A failed: the effect is left out
             return exc
 
@@ -181,7 +181,7 @@ def rerun_signatures(log, nav, calib_run, config, effect_ids=RERUN_EFFECTS, *,
             runs += [(eid, _with_rates(log, w * (1.0 + h * e)), None) for e in np.eye(3)]
         else:  # accel_bias_change
             runs += [(eid, warmed(log, h * e, accel_settling_s), None) for e in np.eye(2)]
-    results = map_in_threads(lambda run: response(run[1:]), runs, threads)
+    results = map_in_threads(response, runs, threads)
     out: dict[str, list[NDArray]] = {}
     for eid, h in steps.items():
         cols = [c for run, c in zip(runs, results, strict=True) if run[0] == eid]

@@ -125,9 +125,9 @@ class FilterOptions:
     covariance_outputs : bool
         Form the solutions' covariances. False (A's re-runs in the diagnosis and the null
         realisations, which read only the states and biases): the smoother runs on the errors
-        alone (:func:`pospp.nav.smoother.rts_smooth_states`) and every sigma and covariance of
-        the solutions and biases is NaN; the states are those of a run with True, to
-        rounding (the forward pass is the same).
+        alone (:func:`pospp.nav.smoother.rts_smooth`, ``covariance=False``) and every sigma
+        and covariance of the solutions and biases is NaN; the states are those of a run with
+        True, to rounding (the forward pass is the same).
     alignment : AlignmentOptions
     """
 
@@ -515,8 +515,8 @@ def _smoothed_errors(t: NDArray, fw: ForwardArrays, lay: StateLayout, with_cov: 
         nxt = np.minimum(i + 1, node_t.shape[0] - 1)
         bvar_s = (1.0 - a)[:, None] * bvar_nodes[i] + a[:, None] * bvar_nodes[nxt]
     else:
-        e_plus, e_minus = smoother.rts_smooth_states(fw.node_pp, fw.node_pu, fw.node_phi,
-                                                     fw.node_dx)
+        e_plus, e_minus, _ = smoother.rts_smooth(fw.node_pp, fw.node_pu, fw.node_phi,
+                                                 fw.node_dx, covariance=False)
         diag_s = _nan((out_t.shape[0], lay.n))
         blocks_s, bvar_s = None, _nan((out_t.shape[0], 6))
     return smoother.interpolate_errors(node_t, e_plus, e_minus, out_t), diag_s, blocks_s, bvar_s

@@ -88,23 +88,9 @@ def rts_backward_states(p_pred, p_upd, phi, dx, e_plus, e_minus):
             e_minus[k, i] = e_plus[k, i] + dx[k, i]
 
 
-def rts_smooth_states(p_pred: NDArray, p_upd: NDArray, phi: NDArray, dx: NDArray
-                      ) -> tuple[NDArray, NDArray]:
-    """The smoothed errors without their covariance: (e_plus, e_minus), shapes (K, n)
-    (:func:`rts_backward_states`; A's re-runs, ``FilterOptions.covariance_outputs`` False)."""
-    k, n = dx.shape
-    e_plus = np.zeros((k, n))
-    e_minus = np.zeros((k, n))
-    if k:
-        rts_backward_states(np.ascontiguousarray(p_pred), np.ascontiguousarray(p_upd),
-                            np.ascontiguousarray(phi), np.ascontiguousarray(dx), e_plus,
-                            e_minus)
-    return e_plus, e_minus
-
-
 def rts_smooth(
     p_pred: NDArray, p_upd: NDArray, phi: NDArray, dx: NDArray, *,
-    overwrite_p_upd: bool = False,
+    overwrite_p_upd: bool = False, covariance: bool = True,
 ) -> tuple[NDArray, NDArray, NDArray]:
     """Run the backward pass; returns (e_plus, e_minus, p_smooth), shapes (K, n), (K, n),
     (K, n, n).
@@ -112,7 +98,9 @@ def rts_smooth(
     ``overwrite_p_upd``: the smoothed covariances are written over ``p_upd`` (C-contiguous
     float64) and it is returned as p_smooth: node k's updated covariance is last read by step
     k, which then writes node k's smoothed one (the same values, one (K, n, n) array fewer:
-    36 MiB on a 1.5 h flight; issue 18).
+    36 MiB on a 1.5 h flight; issue 18). ``covariance`` False: the errors alone
+    (:func:`rts_backward_states`; A's re-runs, ``FilterOptions.covariance_outputs`` False),
+    p_smooth of shape (0, n, n).
     """
     k, n = dx.shape
     for name, arr in (("p_pred", p_pred), ("p_upd", p_upd), ("phi", phi)):
@@ -121,6 +109,11 @@ def rts_smooth(
     e_plus = np.zeros((k, n))
     e_minus = np.zeros((k, n))
     p_upd = np.ascontiguousarray(p_upd, dtype=float)
+    if not covariance:
+        if k:
+            rts_backward_states(np.ascontiguousarray(p_pred), p_upd, np.ascontiguousarray(phi),
+                                np.ascontiguousarray(dx), e_plus, e_minus)
+        return e_plus, e_minus, np.empty((0, n, n))
     p_smooth = p_upd if overwrite_p_upd else np.empty((k, n, n))
     if k:
         rts_backward(

@@ -116,7 +116,8 @@ def test_states_only_pass_equals_batch_map(seed):
     # the re-runs' smoother (no covariance): the same batch MAP errors, and rts_smooth's
     s = _system(seed)
     nominal, p_pred, p_upd, phis, dx = _closed_loop_forward(s)
-    e_plus, e_minus = smoother.rts_smooth_states(p_pred, p_upd, phis, dx)
+    e_plus, e_minus, p_s = smoother.rts_smooth(p_pred, p_upd, phis, dx, covariance=False)
+    assert p_s.shape == (0, s["n"], s["n"])
     x_batch, _ = _batch(s)
     np.testing.assert_allclose(nominal - e_plus, x_batch, atol=1e-9, rtol=0)
     e_full, e_minus_full, _ = smoother.rts_smooth(p_pred, p_upd, phis, dx)
