@@ -11,6 +11,7 @@ Moved out of :mod:`pospp.calib.solve` (issue 17); frames and units as there (SI)
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 from functools import partial
 
 import numpy as np
@@ -18,6 +19,7 @@ from numpy.typing import NDArray
 from scipy import linalg, optimize
 from scipy.linalg import lapack
 
+from pospp.calib._drift_kernel import drift_filter_whiten
 from pospp.calib.noise_model import (
     DriftSmoother,
     NoiseBasis,
@@ -88,7 +90,16 @@ def _reml_whitened(hw: NDArray, zw: NDArray, logdet: float) -> float:
 
     ``0.5 (log det C + log det H^T C^-1 H + r^T C^-1 r)`` (constants dropped), with the
     information's determinant from the column-scaled SVD (rank-deficient directions dropped).
+    A tall system is first reduced to the R of its QR factorisation (LAPACK dgeqrf): an
+    orthogonal transform of the rows, which leaves every term unchanged (column norms,
+    singular values, residual) and makes the SVD one of (p + 1) rows (issue 18).
     """
+    if hw.shape[0] > hw.shape[1] + 1:
+        qr, _, _, info = lapack.dgeqrf(np.column_stack([hw, zw]))
+        if info != 0:
+            raise ValueError(f"dgeqrf: argument {-info} illegal")
+        r = np.triu(qr[:hw.shape[1] + 1])
+        hw, zw = r[:, :-1], r[:, -1]
     norms, u, sv, _, keep = _scaled_svd(hw)
     proj = u[:, keep].T @ zw
     rss = float(zw @ zw - proj @ proj)
@@ -177,6 +188,133 @@ def _tri_solve(ll: NDArray, b: NDArray) -> NDArray:
     return linalg.solve_triangular(ll, b, lower=True, check_finite=False)
 
 
+@dataclass(frozen=True)
+class DriftLegs:
+    """The legs of a drift fit in time order, with the parts of C that do not depend on tau:
+    the Gauss-Markov drift's restricted likelihood by a Kalman filter over the legs.
+
+    The calibration's full covariance (:func:`_calibrate_gm`, scaled units)
+
+        C = a I + q K + s2 S E S^T,   E_jk = exp(-|tau_j - tau_k| / tau) I_3
+
+    couples every leg to every other through the drift bins' correlation E, so factoring C costs
+    the legs cubed (1.15 s at 45 min, 4.7 s at 90, issue 18). The drift is a first-order
+    Gauss-Markov (Ornstein-Uhlenbeck) process, which is Markov: given the drift at the last bin of
+    leg L - 1, leg L's bins are independent of every earlier leg. A Kalman filter over the legs
+    (in time order) whose state is the unit-variance drift e at the previous leg's last bin (3
+    body axes) therefore gives the same likelihood, exactly (to rounding), at a cost linear in
+    the legs. With the legs' data in the regression-augmented form (the columns of [H z] filtered
+    as data, de Jong's augmented Kalman filter), the filter yields W [H z] with W C W^T = I, which
+    is all REML needs (its value is invariant to the choice of W).
+
+    Per leg L with bins t_1 < ... < t_J (body axis a's columns S_a, n x J), E_L the bins'
+    correlation, m = E_L[:, 0], rho = exp(-(t_1 - t_last of L-1) / tau) (1 and e ~ N(0, I) before
+    the first leg), and e | past ~ N(mu, P)::
+
+        d_L | past ~ N(rho m mu, E_L - rho^2 m m^T + rho^2 m P m^T)            (per axis pair)
+        V   = a I + q K_L + s2 (G_LL - rho^2 M (I - P) M^T),  G_LL = sum_a S_a E_L S_a^T
+        nu  = [H z]_L - sqrt(s2) rho M mu,                    M = [S_a m]_a (n x 3)
+        C_ye = sqrt(s2) (N - rho^2 m_J M (I - P)),            N = [S_a E_L[:, J]]_a
+        mu' = rho m_J mu + C_ye^T V^-1 nu
+        P'  = rho^2 m_J^2 P + (1 - rho^2 m_J^2) I - C_ye^T V^-1 C_ye
+
+    and the rows V^-1/2 nu (V = L L^T, Cholesky) with log det C = sum 2 log diag L.
+
+    Attributes
+    ----------
+    hz : ndarray, (n, p + 1)
+        [H z] of the legs' rows, leg after leg, in the scaled units of the fit (rows divided
+        by sigma_A).
+    off : ndarray of int, (L + 1,)
+        Each leg's rows ``off[l]:off[l+1]``.
+    k_flat : ndarray
+        Each leg's gyro-noise covariance K (n_L x n_L, same units) raveled from
+        ``sq_off[l]``.
+    sq_off : ndarray of int, (L + 1,)
+    s_axes : tuple of ndarray, (3, n_L, J_L)
+        The drift operator S per body axis (bins with no effect on the rows dropped).
+    t_bin_s : tuple of ndarray, (J_L,)
+        The bins' run times [s], increasing within and across legs.
+    """
+
+    hz: NDArray
+    off: NDArray
+    k_flat: NDArray
+    sq_off: NDArray
+    s_axes: tuple[NDArray, ...]
+    t_bin_s: tuple[NDArray, ...]
+
+    @classmethod
+    def from_blocks(cls, hz: list[NDArray], k: list[NDArray],
+                    ops: list[tuple[NDArray, NDArray]]) -> DriftLegs | None:
+        """From each leg's [H z] rows, K block and (S, bin times) (:func:`gm_noise_operator`
+        layout: columns bin-major, axis-minor), sorted by time. None when the legs' bins
+        interleave in time (legs that overlap, where the Markov order does not hold) or a
+        leg has no drift bin at all."""
+        legs = []
+        for h_l, k_l, (s, t) in zip(hz, k, ops, strict=True):
+            sp = s.reshape(s.shape[0], -1, 3)
+            used = np.any(sp != 0.0, axis=(0, 2))  # a bin no row sees does not enter C
+            if not used.any():
+                return None
+            legs.append((h_l, k_l, np.ascontiguousarray(sp[:, used, :].transpose(2, 0, 1)),
+                         np.asarray(t, dtype=float)[used]))
+        legs.sort(key=lambda leg: float(leg[3][0]))
+        if np.any(np.diff(np.concatenate([leg[3] for leg in legs])) < 0.0):
+            return None
+        sizes = np.array([leg[0].shape[0] for leg in legs])
+        return cls(np.ascontiguousarray(np.vstack([leg[0] for leg in legs])),
+                   np.concatenate([[0], np.cumsum(sizes)]),
+                   np.concatenate([leg[1].ravel() for leg in legs]),
+                   np.concatenate([[0], np.cumsum(sizes**2)]),
+                   tuple(leg[2] for leg in legs), tuple(leg[3] for leg in legs))
+
+    def at_tau(self, tau_s: float) -> DriftFilter:
+        """The tau-dependent parts of the filter (:class:`DriftFilter`)."""
+        g, m, nn, rho, m_j = [], [], [], [], []
+        prev_s = None
+        for s_ax, t in zip(self.s_axes, self.t_bin_s, strict=True):
+            e = np.exp(-np.abs(t[:, None] - t[None, :]) / tau_s)
+            g.append(sum(s_ax[a] @ e @ s_ax[a].T for a in range(3)).ravel())
+            m.append((s_ax @ e[:, 0]).T)
+            nn.append((s_ax @ e[:, -1]).T)
+            rho.append(1.0 if prev_s is None else float(np.exp(-(t[0] - prev_s) / tau_s)))
+            m_j.append(float(e[-1, 0]))
+            prev_s = float(t[-1])
+        return DriftFilter(self, np.concatenate(g), np.ascontiguousarray(np.vstack(m)),
+                           np.ascontiguousarray(np.vstack(nn)), np.array(rho), np.array(m_j))
+
+
+@dataclass(frozen=True)
+class DriftFilter:
+    """:class:`DriftLegs` at one tau: G_LL raveled per leg, M and N stacked (n, 3), rho and
+    m_J per leg, of :class:`DriftLegs`' equations."""
+
+    legs: DriftLegs
+    g_flat: NDArray
+    m: NDArray
+    nn: NDArray
+    rho: NDArray
+    m_j: NDArray
+
+    def whiten(self, a: float, q: float, s2: float) -> tuple[NDArray, float] | None:
+        """(W [H z], log det C) with W C W^T = I (rows leg after leg in time order); None
+        when a leg's innovation covariance is not positive definite."""
+        lg = self.legs
+        out = np.empty_like(lg.hz)
+        logdet = drift_filter_whiten(a, q, s2, lg.hz, lg.off, lg.k_flat, self.g_flat,
+                                     lg.sq_off, self.m, self.nn, self.rho, self.m_j, out)
+        return None if not np.isfinite(logdet) else (out, float(logdet))
+
+    def reml_nll(self, a: float, q: float, s2: float) -> float:
+        """The negative restricted log-likelihood of :func:`_full_reml_nll` (constants
+        dropped), 1e30 when C is not positive definite."""
+        w = self.whiten(a, q, s2)
+        if w is None:
+            return 1e30
+        return _reml_whitened(w[0][:, :-1], w[0][:, -1], w[1])
+
+
 class _LegNoise:
     """Projected H and z of one leg in its :class:`NoiseBasis`."""
 
@@ -213,7 +351,9 @@ def _calibrate_gm(legs, h, z, edges, noise_step_s, bases, gm_ops, arw_given, sig
     With ``prior`` (:class:`DriftPrior`) and the sigma estimated, tau is profiled over the
     prior's candidates and the grade's weak prior is added to the restricted likelihood
     (maximum a posteriori); the returned profile holds (tau, penalised nll) per candidate.
-    ``noise_cache``: see :func:`pospp.calib.solve.fit_calibration`.
+    ``noise_cache``: see :func:`pospp.calib.solve.fit_calibration`. The likelihood is
+    evaluated by the Kalman filter over the legs (:class:`DriftLegs`, linear in the legs);
+    the chosen model's GLS factors the full covariance once.
     """
     rows, sqs, kb, ops = [], [], [], []
     for i, rep in enumerate(legs):
@@ -232,46 +372,52 @@ def _calibrate_gm(legs, h, z, edges, noise_step_s, bases, gm_ops, arw_given, sig
     sq = np.concatenate(sqs)
     hs, zs = h[r_all] / sq[:, None], z[r_all] / sq
     k = linalg.block_diag(*kb)
+    cuts = np.cumsum([rr.size for rr in rows])[:-1]
+    dlegs = DriftLegs.from_blocks(np.split(np.column_stack([hs, zs]), cuts), kb, ops)
     q_fixed = None if arw_given is None else float(arw_given) ** 2
     s2_fixed = None if sigma_given is None else float(sigma_given) ** 2
     fixed = (q_fixed, s2_fixed)
     use_prior = prior is not None and s2_fixed is None
-    taus = prior.candidates_s() if use_prior else (float(tau_s),)
-    profile = []
-    for tau in taus:
-        parts = (hs, zs, k, _gm_covariance(ops, tau))
-        pen = ((lambda th, tau=tau: prior.penalty(_full_params(th, fixed)[2], tau))
-               if use_prior else None)
-        eig = None
+
+    def likelihood(tau: float, fixed: tuple) -> Callable[[NDArray], float]:
         if noise_cache is not None and None not in fixed:  # only A's scale is fitted
             key = (tuple(rep.leg.leg_id for rep in legs), noise_step_s, bin_s, float(tau),
                    fixed, hs.shape)
             if key not in noise_cache:
-                noise_cache[key] = linalg.eigh(_full_cov(np.array([-np.inf]), k, parts[3],
-                                                         fixed), check_finite=False)
-            eig = noise_cache[key]
-        th, val = _fit_variances(parts, fixed, pen, eig)
-        profile.append((float(tau), val, th, parts))
-    tau_best, _, th, parts = min(profile, key=lambda p: p[1])
+                noise_cache[key] = linalg.eigh(_full_cov(np.array([-np.inf]), k,
+                                                         _gm_covariance(ops, tau), fixed),
+                                               check_finite=False)
+            lam, v = noise_cache[key]
+            return partial(_eig_reml_nll, lam=lam, vhz=v.T @ np.column_stack([hs, zs]))
+        if dlegs is None:  # legs that overlap in time: the full covariance
+            return partial(_full_reml_nll, parts=(hs, zs, k, _gm_covariance(ops, tau)),
+                           fixed=fixed)
+        filt = dlegs.at_tau(tau)
+        return lambda th: filt.reml_nll(*_full_params(th, fixed))
+
+    taus = prior.candidates_s() if use_prior else (float(tau_s),)
+    profile = []
+    for tau in taus:
+        pen = ((lambda th, tau=tau: prior.penalty(_full_params(th, fixed)[2], tau))
+               if use_prior else None)
+        nll = likelihood(tau, fixed)
+        th, val = _fit_variances(nll, fixed, pen)
+        profile.append((float(tau), val, th, nll))
+    tau_best, _, th, nll = min(profile, key=lambda p: p[1])
     source = ""
     if use_prior:
         source = "flight"
-        nll_best = _full_reml_nll(th, parts, fixed)
         g_fixed = (q_fixed, float(prior.sigma_radps) ** 2)
-        g_parts = (hs, zs, k, _gm_covariance(ops, float(prior.tau_s)))
-        g_th, g_nll = _fit_variances(g_parts, g_fixed)
-        if g_nll - nll_best < GM_REJECT_DNLL:  # the flight does not reject the grade
-            source, tau_best, parts, fixed = "grade", float(prior.tau_s), g_parts, g_fixed
-            th = g_th
-    gm = parts[3]
+        g_th, g_nll = _fit_variances(likelihood(float(prior.tau_s), g_fixed), g_fixed)
+        if g_nll - nll(th) < GM_REJECT_DNLL:  # the flight does not reject the grade
+            source, tau_best, fixed, th = "grade", float(prior.tau_s), g_fixed, g_th
     a, q, s2 = _full_params(th, fixed)
-    ll = _cholesky_lower(_full_cov(th, k, gm, fixed))
+    ll = _cholesky_lower(_full_cov(th, k, _gm_covariance(ops, tau_best), fixed))
     if ll is None:
         raise np.linalg.LinAlgError("the drift fit's covariance is not positive definite")
     x, cov, deficient = _solve_scaled(_tri_solve(ll, hs), _tri_solve(ll, zs))
     r = zs - hs @ x
     wr = _tri_solve(ll, r)  # innovations: time-ordered within each leg
-    cuts = np.cumsum([rr.size for rr in rows])[:-1]
     white = np.split(wr, cuts)
     alpha = np.split(linalg.cho_solve((ll, True), r), cuts)
     u = np.vstack([(o[0].T @ al).reshape(-1, 3) for o, al in zip(ops, alpha, strict=True)])
@@ -281,24 +427,19 @@ def _calibrate_gm(legs, h, z, edges, noise_step_s, bases, gm_ops, arw_given, sig
             tau_profile, source)
 
 
-def _fit_variances(parts: tuple, fixed: tuple[float | None, float | None], penalty=None,
-                   eig: tuple[NDArray, NDArray] | None = None) -> tuple[NDArray, float]:
-    """REML (plus an optional penalty of theta) of a and the free ones of (q, s2).
+def _fit_variances(nll: Callable[[NDArray], float], fixed: tuple[float | None, float | None],
+                   penalty=None) -> tuple[NDArray, float]:
+    """REML (plus an optional penalty of theta) of log a and the logs of the free ones of
+    (q, s2) (None in ``fixed``), the negative restricted likelihood ``nll`` of theta given.
 
-    A coarse grid (each evaluation is a Cholesky of the full covariance), then bounded Brent
-    (only a free) or Nelder-Mead. Returns (theta, objective at theta). ``eig``: (lam, V) of
-    the fixed part ``q K + s2 G`` when only a is free: ``C = V diag(lam + a) V^T``, so each
-    evaluation scales ``V^T [H z]`` instead of factoring C (the same likelihood to rounding).
+    A coarse grid, then bounded Brent (only a free) or Nelder-Mead. Returns (theta,
+    objective at theta).
     """
     bounds = [(np.log(1e-6), np.log(1e4))]
     if fixed[0] is None:
         bounds.append((np.log(1e-22), np.log(1e-6)))
     if fixed[1] is None:
         bounds.append((np.log(1e-17), np.log(1e-8)))
-    nll: Callable[[NDArray], float] = partial(_full_reml_nll, parts=parts, fixed=fixed)
-    if eig is not None:
-        nll = partial(_eig_reml_nll, lam=eig[0],
-                      vhz=eig[1].T @ np.column_stack([parts[0], parts[1]]))
 
     def obj(th: NDArray) -> float:
         v = nll(th)
