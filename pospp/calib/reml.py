@@ -211,7 +211,7 @@ class DriftLegs:
     correlation, m = E_L[:, 0], rho = exp(-(t_1 - t_last of L-1) / tau) (1 and e ~ N(0, I) before
     the first leg), and e | past ~ N(mu, P)::
 
-        d_L | past ~ N(rho m mu, E_L - rho^2 m m^T + rho^2 m P m^T)            (per axis pair)
+        d_L,a | past ~ N(rho m mu_a, E_L - rho^2 m m^T + rho^2 P_aa m m^T)   (axis a; P couples)
         V   = a I + q K_L + s2 (G_LL - rho^2 M (I - P) M^T),  G_LL = sum_a S_a E_L S_a^T
         nu  = [H z]_L - sqrt(s2) rho M mu,                    M = [S_a m]_a (n x 3)
         C_ye = sqrt(s2) (N - rho^2 m_J M (I - P)),            N = [S_a E_L[:, J]]_a
@@ -231,6 +231,7 @@ class DriftLegs:
         Each leg's gyro-noise covariance K (n_L x n_L, same units) raveled from
         ``sq_off[l]``.
     sq_off : ndarray of int, (L + 1,)
+        Where each leg's n_L^2 block starts in ``k_flat`` (and in ``DriftFilter.g_flat``).
     s_axes : tuple of ndarray, (3, n_L, J_L)
         The drift operator S per body axis (bins with no effect on the rows dropped).
     t_bin_s : tuple of ndarray, (J_L,)
