@@ -79,6 +79,8 @@ def navigate(
     options: nav_filter.FilterOptions | None = None,
     tuning: nav_tuning.ImuTuning | None = None,
     estimate_scale_factors: bool | None = None,
+    record_gains: bool = False,
+    replay: nav_filter.GainReplay | None = None,
 ) -> nav_filter.FilterResult:
     """Algorithm A over the whole log; optionally with a calibrated gyro bias removed first.
 
@@ -87,7 +89,8 @@ def navigate(
     unchanged. ``lever_arm_b_m`` and ``options`` replace the configured lever arm and the
     filter options (the QC stage's lever-arm re-estimation); ``tuning`` and
     ``estimate_scale_factors`` the configured IMU tuning and ``[filter]
-    estimate_scale_factors`` (the diagnosis's scale-factor estimate).
+    estimate_scale_factors`` (the diagnosis's scale-factor estimate); ``record_gains`` and
+    ``replay`` as :func:`pospp.nav.filter.run_integrated_navigation` (the null realisations).
     """
     imu = log.imu
     if gyro_bias_correction_b_radps is not None:
@@ -110,6 +113,8 @@ def navigate(
         else estimate_scale_factors,
         output_rate_hz=f.output_rate_hz,
         options=options,
+        record_gains=record_gains,
+        replay=replay,
     )
 
 
@@ -305,13 +310,17 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     rc = config.replay
     which = rc.reference if nav.smoothed is not None else "forward"
 
-    def b_minus_a(log_r: mcap_reader.FlightLog) -> list[np.ndarray]:
-        nav_r = navigate(log_r, config, options=rerun_options(config))
+    def b_minus_a(log_r: mcap_reader.FlightLog, record: bool = False,
+                  replay: nav_filter.GainReplay | None = None
+                  ) -> tuple[list[np.ndarray], nav_filter.GainReplay | None]:
+        nav_r = navigate(log_r, config, options=rerun_options(config), record_gains=record,
+                         replay=replay)
         ref_r = SolutionA(*nav_filter.solution_a_fields(nav_r, which=which))
         imu_r = imu_increments(log_r)
         return [replay_velocity_error(imu_r, ref_r, legs[i],
                                       accel_compensation=rc.accel_compensation,
-                                      sample_rate_hz=rc.sample_rate_hz) for i in ids]
+                                      sample_rate_hz=rc.sample_rate_hz)
+                for i in ids], nav_r.gain_replay
 
     # the base: the flight with its GNSS replaced by A's solution at the antenna
     # (null_model.gnss_on_solution: noise on top of the flight's own GNSS noise is not linear)
@@ -327,7 +336,7 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
         pos_sigma_ned_m=pos_sig, vel_sigma_ned_mps=vel_sig)
     leg_ns = leg_epochs_ns(log, calib_run.legs)
     try:
-        base_dv = b_minus_a(null_model.decimate_imu(base, factor, leg_ns))
+        base_dv, gains = b_minus_a(null_model.decimate_imu(base, factor, leg_ns), True)
         if any(d.shape != calib_run.replays[i].dv_n_mps.shape
                for d, i in zip(base_dv, ids, strict=True)):
             raise ValueError("B on the summed-down base is not on the flight's samples")
@@ -335,13 +344,13 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
         if factor == 1:
             raise
         factor = 1
-        base_dv = b_minus_a(base)
+        base_dv, gains = b_minus_a(base, True)
     t_align_ns = int(log.imu.time_ns[0]) + round(nav.alignment.t_s * 1e9)
     rng = np.random.default_rng(seed)
 
     def attempt(log_r: mcap_reader.FlightLog) -> list[np.ndarray] | None:
-        try:
-            return b_minus_a(log_r)
+        try:  # A with the base's gains (nav_filter.GainReplay): first order in the noise
+            return b_minus_a(log_r, replay=gains)[0]
         except ValueError:  # a realisation whose A fails (alignment) is skipped
             return None
 

@@ -347,13 +347,24 @@ def store_node(i_node, k, p_upd, phi_acc, dx_tot, nodes):
 
 @njit(cache=True)
 def _update_epoch(k, im, t, x, xp, p, sens, lever, w_b, meas, meas_out, gate, reset_after_s,
-                  t_ok, i_gm, i_sf, i_l, dx_tot):
+                  t_ok, i_gm, i_sf, i_l, dx_tot, gains, replay, record, n_gated):
     """All measurement records of epoch ``k`` from index ``im``: model, gate (or reset),
-    update, feedback. Returns the new P and the index after the epoch's records."""
+    update, feedback. Returns the new P and the index after the epoch's records.
+
+    ``gains = (K, S^-1)``, (records, n, 3) and (records, 3, 3). ``record``: each used
+    record's K and S^-1 are stored in them. ``replay``: they are read instead (another pass's,
+    :class:`pospp.nav.filter_state.GainReplay`), with that pass's record status in
+    ``m_status``: a record it used is gated here when ``dz^T S^-1 dz`` exceeds the gate with
+    its S, else ``dx = K dz``; a record it reset with is used; no covariance is touched. A
+    second record of a kind gated in a row (``n_gated`` counts them per kind) ends the replay:
+    the index returned is -1 (the full filter's covariance would have grown over the gap and
+    its gains with it, and it would reset after ``reset_after_s``: no longer this pass's).
+    """
     m_k, m_type, m_z, m_r, m_dt = meas
     if not (im < m_k.shape[0] and m_k[im] == k):  # most epochs: nothing to allocate
         return p, im
     m_status, m_nis, m_dz = meas_out
+    k_gain, k_sinv = gains
     n = p.shape[0]
     h_mat = np.zeros((3, n))
     dz = np.empty(3)
@@ -361,6 +372,26 @@ def _update_epoch(k, im, t, x, xp, p, sens, lever, w_b, meas, meas_out, gate, re
     while im < m_k.shape[0] and m_k[im] == k:
         kind = m_type[im]
         measurement_model(kind, x, lever, w_b, m_z[im], m_dt[im], i_gm, i_sf, i_l, h_mat, dz)
+        if replay:
+            for a in range(3):
+                m_dz[im, a] = dz[a]
+            st = m_status[im]
+            if st == STATUS_USED or st == STATUS_RESET:
+                nis = normalised_innovation(dz, k_sinv[im])
+                m_nis[im] = nis
+                if st == STATUS_USED and not (nis <= gate):
+                    m_status[im] = STATUS_GATED
+                    n_gated[kind] += 1
+                    if n_gated[kind] > 1:
+                        return p, -1
+                else:
+                    n_gated[kind] = 0
+                    dxk = np.dot(k_gain[im], dz)
+                    feedback(x, xp, sens, lever, dxk, i_gm, i_sf, i_l)
+                    for a in range(n):
+                        dx_tot[a] += dxk[a]
+            im += 1
+            continue
         ph, ok = innovation_covariance(p, h_mat, m_r[im], s_inv)
         nis = normalised_innovation(dz, s_inv) if ok else math.inf
         m_nis[im] = nis
@@ -384,6 +415,9 @@ def _update_epoch(k, im, t, x, xp, p, sens, lever, w_b, meas, meas_out, gate, re
                 continue
         t_ok[kind] = t[k]
         m_status[im] = status
+        if record:
+            k_gain[im] = np.dot(ph, s_inv)  # kalman_update's K, the same product
+            k_sinv[im] = s_inv
         p, dxk = kalman_update(p, ph, s_inv, h_mat, dz, m_r[im])
         feedback(x, xp, sens, lever, dxk, i_gm, i_sf, i_l)
         for a in range(n):
@@ -394,7 +428,8 @@ def _update_epoch(k, im, t, x, xp, p, sens, lever, w_b, meas, meas_out, gate, re
 
 @njit(cache=True, nogil=True)
 def forward_kernel(t, w_imu, f_imu, k0, x0, p0, lever0, layout, inv_tau, flags, meas,
-                   meas_out, prop_steps, q_diag, gate, reset_after_s, outs, nodes):
+                   meas_out, prop_steps, q_diag, gate, reset_after_s, outs, nodes, gains,
+                   replay_from):
     """Closed-loop forward pass over IMU epochs ``k0 .. N-1`` (module docstring).
 
     ``w_imu[k]``, ``f_imu[k]``: mean rates over (t[k-1], t[k]]. ``layout = (i_gm, i_sf,
@@ -405,8 +440,12 @@ def forward_kernel(t, w_imu, f_imu, k0, x0, p0, lever0, layout, inv_tau, flags, 
     NED) of each record. ``outs`` / ``nodes``: see :func:`store_output` / :func:`store_node`.
     Without the smoother ``nodes`` has no rows: node epochs are counted (they still force a
     covariance step, so the schedule is the smoothed run's), nothing is stored and Phi is
-    not accumulated.
-    Fills the output and node arrays; returns (nodes used, outputs used).
+    not accumulated. ``gains``: see :func:`_update_epoch`; stored when they have rows and
+    ``replay_from`` is -1, replayed from epoch ``replay_from`` on otherwise: from there no
+    covariance is propagated, and the nodes keep only their epoch and summed feedback (their
+    P and Phi are kept for the node rows the P arrays have: the nodes before the replay).
+    Fills the output and node arrays; returns (nodes used, outputs used), (-1, -1) when a
+    replay ended.
     """
     i_gm, i_sf, i_l = layout
     m_k = meas[0]
@@ -417,7 +456,9 @@ def forward_kernel(t, w_imu, f_imu, k0, x0, p0, lever0, layout, inv_tau, flags, 
     lever = lever0.copy()
     p = p0.copy()
     keep_nodes = nodes[0].shape[0] > 0  # no smoother: nodes counted, not stored
-    phi_acc = np.eye(n) if keep_nodes else np.empty((0, 0))
+    n_cov = nodes[1].shape[0]  # nodes whose P and Phi are kept (a replay's: before it)
+    record = gains[0].shape[0] > 0 and replay_from < 0
+    phi_acc = np.eye(n) if n_cov > 0 else np.empty((0, 0))
     qc = np.diag(q_diag)
     work = np.empty((5, n, n))
     fsum, wsum = np.zeros(3), np.zeros(3)
@@ -425,6 +466,7 @@ def forward_kernel(t, w_imu, f_imu, k0, x0, p0, lever0, layout, inv_tau, flags, 
                                      np.zeros(3))
     dx_tot = np.zeros(n)
     t_ok = np.full(3, t[k0])  # last accepted record of each kind
+    n_gated = np.zeros(3, dtype=np.int64)  # a replay's records gated in a row, per kind
     t_acc, steps, im, i_out, i_node = 0.0, 0, 0, 0, 0
     while im < m_k.shape[0] and m_k[im] < k0:
         m_status[im] = STATUS_BEFORE_START
@@ -449,21 +491,30 @@ def forward_kernel(t, w_imu, f_imu, k0, x0, p0, lever0, layout, inv_tau, flags, 
         has_meas = im < m_k.shape[0] and m_k[im] == k
         is_node = (flags[k] & FLAG_NODE) != 0 or has_meas or k == k0
         is_out = (flags[k] & FLAG_OUTPUT) != 0
+        replay = replay_from >= 0 and k >= replay_from
         if steps > 0 and (steps >= prop_steps or has_meas or is_node or is_out):
-            propagate_covariance_into(p, phi_acc, x, fsum / t_acc, wsum / t_acc, t_acc, qc,
-                                      i_gm, i_sf, inv_tau, work)
+            if not replay:
+                propagate_covariance_into(p, phi_acc, x, fsum / t_acc, wsum / t_acc, t_acc,
+                                          qc, i_gm, i_sf, inv_tau, work)
             fsum[:] = 0.0
             wsum[:] = 0.0
             t_acc, steps = 0.0, 0
-        if is_node and keep_nodes:
+        keep_cov = keep_nodes and i_node < n_cov
+        if is_node and keep_cov:
             nodes[1][i_node] = p  # predicted covariance
         dx_tot[:] = 0.0
         p, im = _update_epoch(k, im, t, x, xp, p, sens, lever, w_b, meas, meas_out, gate,
-                              reset_after_s, t_ok, i_gm, i_sf, i_l, dx_tot)
+                              reset_after_s, t_ok, i_gm, i_sf, i_l, dx_tot, gains, replay,
+                              record, n_gated)
+        if im < 0:  # the replay ended (_update_epoch): the caller runs the pass in full
+            return -1, -1
         if is_node:
-            if keep_nodes:
+            if keep_cov:
                 store_node(i_node, k, p, phi_acc, dx_tot, nodes)
                 phi_acc = np.eye(n)
+            elif keep_nodes:
+                nodes[0][i_node] = k
+                nodes[4][i_node] = dx_tot
             i_node += 1
         if is_out:
             store_output(i_out, x, p, sens, lever, i_gm, outs)

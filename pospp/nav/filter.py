@@ -61,20 +61,17 @@ from numpy.typing import ArrayLike, NDArray
 
 from pospp import rotation
 from pospp.nav import filter_input, smoother
-from pospp.nav._filter_kernel import (
-    MEAS_KINDS,
-    STATUS_BEFORE_START,
-    STATUS_GATED,
-    STATUS_RESET,
-    STATUS_USED,
-)
+from pospp.nav._filter_kernel import STATUS_GATED, STATUS_RESET, STATUS_USED
 from pospp.nav.alignment import AlignmentOptions, AlignmentResult, align
 from pospp.nav.error_model import DR, DV, PHI
 from pospp.nav.filter_input import GnssRejection, MeasurementRecords
 from pospp.nav.filter_state import (
     ForwardArrays,
+    GainReplay,
     StateLayout,
     forward_pass,
+    gain_replay,
+    record_outcomes,
     state_layout,
     total_bias_map,
 )
@@ -279,6 +276,8 @@ class FilterResult:
     """(t_s at the end, duration_s) of the IMU gaps bridged (FilterOptions.max_imu_gap_*)."""
     innovations: InnovationRecord | None = None
     """NIS and innovation of every processed GNSS/ZUPT record (pospp.qc reads them)."""
+    gain_replay: GainReplay | None = None
+    """The pass's gains when asked for (``record_gains``), for replays on noisier logs."""
 
 
 def rpy_covariance(q_nb: NDArray, att_cov: NDArray) -> NDArray:
@@ -356,6 +355,8 @@ def run_integrated_navigation(
     estimate_scale_factors: bool = False,
     output_rate_hz: float | None = 10.0,
     options: FilterOptions = FilterOptions(),
+    record_gains: bool = False,
+    replay: GainReplay | None = None,
 ) -> FilterResult:
     """Forward closed-loop EKF and RTS smoother over a whole IMU/GNSS record (algorithm A).
 
@@ -382,6 +383,12 @@ def run_integrated_navigation(
     output_rate_hz : float or None
         Rate of the output epochs (None: every IMU epoch).
     options : FilterOptions
+    record_gains : bool
+        Keep the pass's Kalman and smoother gains (``FilterResult.gain_replay``).
+    replay : GainReplay, optional
+        Apply another pass's gains from its ``k_from`` on instead of propagating a covariance
+        (states only; a log whose stamps, alignment or records differ from that pass's runs
+        in full instead).
 
     Returns
     -------
@@ -408,11 +415,19 @@ def run_integrated_navigation(
     al, meas = _align_and_measurements(t, w, f, gnss_fixes, gnss_velocities, epoch_ns, noise,
                                        lever0, options, rejections)
     lay = state_layout(options.gauss_markov_states, estimate_scale_factors, estimate_lever_arm)
-    fw = forward_pass(t, w, f, al, noise, lay, lever0, meas, output_rate_hz, options)
-    outcome = _record_outcomes(meas, fw, rejections)
+    if replay is not None and (not replay.matches(t, al.k_start, meas, lay.n)
+                               or options.smoother != (replay.smoother_gains is not None)):
+        replay = None
+    fw = forward_pass(t, w, f, al, noise, lay, lever0, meas, output_rate_hz, options,
+                      record_gains=record_gains, replay=replay)
+    replay = replay if fw.replayed else None  # a replay that ended ran in full
+    outcome = record_outcomes(meas, fw, rejections)
     out_tns = imu_t_ns[fw.out_k]
-    errors = _smoothed_errors(t, fw, lay, options.covariance_outputs) if options.smoother \
-        else None
+    # before the smoother, which may write over the nodes' P
+    gains = gain_replay(fw, t, al.k_start, meas, options.smoother) \
+        if record_gains and replay is None else None
+    errors = _smoothed_errors(t, fw, lay, options.covariance_outputs and replay is None,
+                              replay) if options.smoother else None
     # the smoother's nodes (three n x n matrices each) are freed before the solutions are made
     fw = fw.without_nodes()
     smoothed = sm_bias = lever_s = None
@@ -426,7 +441,7 @@ def run_integrated_navigation(
         alignment=al, n_updates=outcome.n_updates, gate_nis=fw.gate, resets=outcome.resets,
         imu_gaps=imu_gaps,
         innovations=InnovationRecord(meas.t_s.copy(), meas.kind.copy(), fw.m_status.copy(),
-                                     fw.m_nis, fw.m_dz),
+                                     fw.m_nis, fw.m_dz), gain_replay=gains,
     )
 
 
@@ -466,44 +481,28 @@ def _align_and_measurements(
     return al, meas
 
 
-@dataclass(frozen=True)
-class _Outcome:
-    rejections: tuple[GnssRejection, ...]
-    n_updates: dict[str, int]
-    resets: tuple[tuple[float, str], ...]
-
-
-def _record_outcomes(meas: MeasurementRecords, fw: ForwardArrays,
-                     rejections: list[GnssRejection]) -> _Outcome:
-    """Rejections (entry checks, gate, before the start) sorted by time; updates per kind;
-    covariance resets."""
-    st, kind = fw.m_status, meas.kind
-    for i in np.flatnonzero(st == STATUS_GATED):
-        rejections.append(GnssRejection(int(meas.time_ns[i]), float(meas.t_s[i]),
-                                        MEAS_KINDS[kind[i]],
-                                        f"innovation gate (NIS > {fw.gate:.2f})",
-                                        float(fw.m_nis[i])))
-    for i in np.flatnonzero(st == STATUS_BEFORE_START):
-        rejections.append(GnssRejection(int(meas.time_ns[i]), float(meas.t_s[i]),
-                                        MEAS_KINDS[kind[i]],
-                                        "before the filter start (alignment)", math.nan))
-    rejections.sort(key=lambda r: (r.time_ns, r.kind))
-    n_updates = {name: int(np.count_nonzero((st == STATUS_USED) & (kind == i)))
-                 for i, name in enumerate(MEAS_KINDS)}
-    for j, name in enumerate(MEAS_KINDS[:2]):
-        n_updates[f"{name}_reset"] = int(np.count_nonzero((st == STATUS_RESET) & (kind == j)))
-    resets = tuple((float(meas.t_s[i]), MEAS_KINDS[kind[i]])
-                   for i in np.flatnonzero(st == STATUS_RESET))
-    return _Outcome(tuple(rejections), n_updates, resets)
-
-
-def _smoothed_errors(t: NDArray, fw: ForwardArrays, lay: StateLayout, with_cov: bool = True
+def _smoothed_errors(t: NDArray, fw: ForwardArrays, lay: StateLayout, with_cov: bool = True,
+                     replay: GainReplay | None = None
                      ) -> tuple[NDArray, NDArray, list[NDArray] | None, NDArray]:
     """RTS smoother over the nodes, interpolated to the outputs: (error (N, n), diagonal of
     P^s (N, n), its [phi, dv, dr] blocks, total bias variance (N, 6)); ``with_cov`` False:
-    the errors alone, the rest NaN. What reads the nodes: they can be freed after it."""
+    the errors alone, the rest NaN (with ``replay``, by its smoother gains). What reads the
+    nodes: they can be freed after it."""
     out_t = t[fw.out_k]
     node_t = t[fw.node_k]
+    if replay is not None and replay.smoother_gains is not None:
+        if replay.smoother_gains.shape[0] != fw.node_dx.shape[0]:
+            raise RuntimeError("gain replay: the smoother's nodes differ from the replayed pass's")
+        e_plus, e_minus = np.zeros_like(fw.node_dx), np.zeros_like(fw.node_dx)
+        a, n_own = replay.smoother_gains, fw.node_pp.shape[0]
+        if n_own > 1:  # its own gains over the nodes before the switch (their P are its own)
+            a = a.copy()
+            a[:n_own - 1] = smoother.smoother_gains(fw.node_pp, fw.node_pu,
+                                                    fw.node_phi)[:n_own - 1]
+        if e_plus.shape[0]:
+            smoother.rts_backward_gains(a, fw.node_dx, e_plus, e_minus)
+        return (smoother.interpolate_errors(node_t, e_plus, e_minus, out_t),
+                _nan((out_t.shape[0], lay.n)), None, _nan((out_t.shape[0], 6)))
     if with_cov:
         e_plus, e_minus, p_s = smoother.rts_smooth(fw.node_pp, fw.node_pu, fw.node_phi,
                                                    fw.node_dx, overwrite_p_upd=True)
@@ -590,8 +589,8 @@ def solution_a_fields(
 
 
 __all__ = [
-    "BiasHistory", "FilterOptions", "FilterResult", "GnssRejection", "InnovationRecord",
-    "LeverArmEstimate",
-    "NavSolution", "solution_a_fields",
+    "STATUS_GATED", "STATUS_RESET", "STATUS_USED",
+    "BiasHistory", "FilterOptions", "FilterResult", "GainReplay", "GnssRejection",
+    "InnovationRecord", "LeverArmEstimate", "NavSolution", "solution_a_fields",
     "run_integrated_navigation",
 ]

@@ -8,6 +8,7 @@ accel scale factors (6), lever arm (3). Units SI and rad; variances of the NED b
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
@@ -16,17 +17,27 @@ from numpy.typing import NDArray
 
 from pospp import rotation
 from pospp.distributions import chi2_ppf
-from pospp.nav._filter_kernel import FLAG_NODE, forward_kernel
+from pospp.nav._filter_kernel import (
+    FLAG_NODE,
+    MEAS_KINDS,
+    STATUS_BEFORE_START,
+    STATUS_GATED,
+    STATUS_RESET,
+    STATUS_USED,
+    forward_kernel,
+)
 from pospp.nav.alignment import AlignmentResult
 from pospp.nav.error_model import BA, BG, DR, DV, I_BA, I_BG, N_STATES, PHI
-from pospp.nav.filter_input import MeasurementRecords, epoch_flags
+from pospp.nav.filter_input import GnssRejection, MeasurementRecords, epoch_flags
+from pospp.nav.smoother import smoother_gains
 from pospp.nav.tuning import NoiseParameters
 
 if TYPE_CHECKING:
     from pospp.nav.filter import FilterOptions
 
-__all__ = ["ForwardArrays", "StateLayout", "forward_pass", "initial_covariance_and_noise",
-           "state_layout", "total_bias_map"]
+__all__ = ["ForwardArrays", "GainReplay", "Outcome", "StateLayout", "forward_pass",
+           "gain_replay", "initial_covariance_and_noise", "record_outcomes", "state_layout",
+           "switch_epoch", "total_bias_map"]
 
 
 @dataclass(frozen=True)
@@ -114,6 +125,13 @@ class ForwardArrays:
     node_pu: NDArray
     node_phi: NDArray
     node_dx: NDArray
+    m_gain: NDArray
+    """Each used record's Kalman gain (records, n, 3) when the pass stored them, else no
+    rows."""
+    m_sinv: NDArray
+    """Each used record's S^-1 (records, 3, 3), likewise."""
+    replayed: bool = False
+    """Whether another pass's gains were replayed (:class:`GainReplay`)."""
 
     def without_nodes(self) -> ForwardArrays:
         """The same arrays with the smoother's nodes emptied (new empty arrays: a slice would
@@ -126,11 +144,91 @@ class ForwardArrays:
                        node_dx=empty(self.node_dx))
 
 
+@dataclass(frozen=True)
+class GainReplay:
+    """A pass's Kalman and smoother gains, for passes over logs that differ from its own only
+    in their values (the null realisations: the same IMU and GNSS stamps, noise added).
+
+    Such a pass (:func:`forward_pass` with ``replay``) is A as configured up to ``k_from``;
+    from there it runs the strapdown and the closed-loop feedback as A does, but applies these
+    gains to its own innovations (``dx = K dz``; a record this pass used is gated when
+    ``dz^T S^-1 dz`` with this pass's S exceeds the gate) instead of propagating a covariance,
+    and it smooths with these smoother gains (``e_k^+ = A_k e_{k+1}^-``; its own before
+    ``k_from``). The gains depend on the trajectory and the noise model, which a difference
+    of noise level moves at second order, as long as the two attitudes are close:
+    ``k_from`` is where A's heading sigma has come within twice its median over the flight
+    (:func:`switch_epoch`), before which a static alignment can leave a realisation's heading
+    degrees from this pass's (docs/filter.md, "Gain replay"; issue 18).
+
+    Attributes
+    ----------
+    t_s : ndarray, (N,)
+        The pass's IMU epochs [s from its epoch]; a replay's must be the same.
+    k_start : int
+        The pass's first epoch (alignment).
+    meas_k, meas_kind : ndarray of int, (M,)
+        Its measurement records' epochs and kinds.
+    status : ndarray of int, (M,)
+        What it did with each record (``STATUS_*``).
+    gains : ndarray, (M, n, 3)
+        The Kalman gain K of each used record.
+    s_inv : ndarray, (M, 3, 3)
+        Its innovation covariance's inverse S^-1 [per (m or m/s)^2].
+    smoother_gains : ndarray, (K, n, n) or None
+        ``A_k`` per smoother node (:func:`pospp.nav.smoother.smoother_gains`); None without
+        the smoother.
+    k_from : int
+        The epoch from which a replay applies them.
+    """
+
+    t_s: NDArray
+    k_start: int
+    meas_k: NDArray
+    meas_kind: NDArray
+    status: NDArray
+    gains: NDArray
+    s_inv: NDArray
+    smoother_gains: NDArray | None
+    k_from: int
+
+    def matches(self, t: NDArray, k_start: int, meas: MeasurementRecords, n: int) -> bool:
+        """Whether a pass over epochs ``t`` from ``k_start`` with records ``meas`` and ``n``
+        states has this pass's schedule (else it cannot use these gains)."""
+        return (k_start == self.k_start and self.gains.shape[1] == n
+                and np.array_equal(t, self.t_s) and np.array_equal(meas.k, self.meas_k)
+                and np.array_equal(meas.kind, self.meas_kind))
+
+
+def switch_epoch(fw: ForwardArrays, k_start: int) -> int:
+    """The first smoother node's epoch where A's heading sigma (its updated P) is within twice
+    its median over the nodes: where a replay of this pass's gains starts
+    (:class:`GainReplay`); ``k_start`` without nodes."""
+    if not fw.node_k.shape[0]:
+        return k_start
+    sig = np.sqrt(np.maximum(fw.node_pu[:, PHI.start + 2, PHI.start + 2], 0.0))
+    return int(fw.node_k[int(np.argmax(sig <= 2.0 * np.median(sig)))])
+
+
+def gain_replay(fw: ForwardArrays, t: NDArray, k_start: int, meas: MeasurementRecords,
+                smoother_on: bool) -> GainReplay:
+    """The :class:`GainReplay` of a pass made with ``record_gains`` (before its smoother,
+    which may write over the nodes' P)."""
+    return GainReplay(t, k_start, meas.k, meas.kind, fw.m_status.copy(), fw.m_gain,
+                      fw.m_sinv, smoother_gains(fw.node_pp, fw.node_pu, fw.node_phi)
+                      if smoother_on else None, switch_epoch(fw, k_start))
+
+
 def forward_pass(t: NDArray, w: NDArray, f: NDArray, al: AlignmentResult,
                   noise: NoiseParameters, lay: StateLayout, lever0: NDArray,
                   meas: MeasurementRecords, output_rate_hz: float | None,
-                  options: FilterOptions) -> ForwardArrays:
-    """Initial state and covariance, the output arrays, and the compiled forward pass."""
+                  options: FilterOptions, *, record_gains: bool = False,
+                  replay: GainReplay | None = None) -> ForwardArrays:
+    """Initial state and covariance, the output arrays, and the compiled forward pass.
+
+    ``record_gains``: store each used record's K and S^-1 (``m_gain``, ``m_sinv``).
+    ``replay``: apply another pass's gains from its ``k_from`` (:class:`GainReplay`, whose
+    ``matches`` the caller has checked), keeping node P and Phi only before it; when the
+    replay ends (two records of a kind gated in a row), the pass in full."""
     k0 = al.k_start
     flags, out_k = epoch_flags(t, k0, meas.k, output_rate_hz, options.smoother_node_interval_s)
     n_nodes = int(np.count_nonzero(flags[k0:] & FLAG_NODE))
@@ -143,24 +241,67 @@ def forward_pass(t: NDArray, w: NDArray, f: NDArray, al: AlignmentResult,
     x0 = np.concatenate([[al.lat_rad, al.lon_rad, al.height_m], al.v_n_mps,
                          rotation.quat_from_euler(al.rpy_rad)])
     inv_tau = np.array([1.0 / noise.gyro_gm_tau_s, 1.0 / noise.accel_gm_tau_s])
+    n_cov = n_kept if replay is None or not n_kept else int(np.count_nonzero(
+        flags[k0:max(k0, replay.k_from)] & FLAG_NODE))  # a replay's own nodes: before it
+    status = np.full(n_meas, -1, dtype=np.int64) if replay is None else replay.status.copy()
+    m_rec = n_meas if record_gains and replay is None else 0
+    gains = (replay.gains, replay.s_inv) if replay is not None else (
+        np.empty((m_rec, n, 3)), np.empty((m_rec, 3, 3)))
     fw = ForwardArrays(
-        gate=gate, out_k=out_k, m_status=np.full(n_meas, -1, dtype=np.int64),
+        gate=gate, out_k=out_k, m_status=status,
         m_nis=np.full(n_meas, np.nan), m_dz=np.full((n_meas, 3), np.nan),
         out_x=np.empty((n_out, 10)), out_diag=np.empty((n_out, n)),
         out_blk=np.empty((n_out, 3, 3, 3)), out_sens=np.empty((n_out, 12)),
         out_bvar=np.empty((n_out, 6)), out_lever=np.empty((n_out, 3)),
-        node_k=np.empty(n_kept, dtype=np.int64), node_pp=np.empty((n_kept, n, n)),
-        node_pu=np.empty((n_kept, n, n)), node_phi=np.empty((n_kept, n, n)),
-        node_dx=np.empty((n_kept, n)),
+        node_k=np.empty(n_kept, dtype=np.int64), node_pp=np.empty((n_cov, n, n)),
+        node_pu=np.empty((n_cov, n, n)), node_phi=np.empty((n_cov, n, n)),
+        node_dx=np.empty((n_kept, n)), m_gain=gains[0] if replay is None else gains[0][:0],
+        m_sinv=gains[1] if replay is None else gains[1][:0], replayed=replay is not None,
     )
     used_nodes, used_out = forward_kernel(
         t, w, f, k0, x0, np.diag(p0_diag), lever0.copy(), (lay.i_gm, lay.i_sf, lay.i_l),
         inv_tau, flags, (meas.k, meas.kind, meas.z, meas.r, meas.dt_s),
         (fw.m_status, fw.m_nis, fw.m_dz), prop_steps, q_diag, gate, options.gate_reset_s,
         (fw.out_x, fw.out_diag, fw.out_blk, fw.out_sens, fw.out_bvar, fw.out_lever),
-        (fw.node_k, fw.node_pp, fw.node_pu, fw.node_phi, fw.node_dx),
+        (fw.node_k, fw.node_pp, fw.node_pu, fw.node_phi, fw.node_dx), gains,
+        -1 if replay is None else max(int(replay.k_from), k0),
     )
+    if replay is not None and used_nodes < 0:  # the replay ended: A in full
+        return forward_pass(t, w, f, al, noise, lay, lever0, meas, output_rate_hz, options)
     if used_nodes != n_nodes or used_out != n_out:
         raise RuntimeError(f"filter kernel: node/output count mismatch ({used_nodes} vs "
                            f"{n_nodes}, {used_out} vs {n_out})")
     return fw
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What became of A's measurement records (:func:`record_outcomes`)."""
+
+    rejections: tuple[GnssRejection, ...]
+    n_updates: dict[str, int]
+    resets: tuple[tuple[float, str], ...]
+
+
+def record_outcomes(meas: MeasurementRecords, fw: ForwardArrays,
+                     rejections: list[GnssRejection]) -> Outcome:
+    """Rejections (entry checks, gate, before the start) sorted by time; updates per kind;
+    covariance resets."""
+    st, kind = fw.m_status, meas.kind
+    for i in np.flatnonzero(st == STATUS_GATED):
+        rejections.append(GnssRejection(int(meas.time_ns[i]), float(meas.t_s[i]),
+                                        MEAS_KINDS[kind[i]],
+                                        f"innovation gate (NIS > {fw.gate:.2f})",
+                                        float(fw.m_nis[i])))
+    for i in np.flatnonzero(st == STATUS_BEFORE_START):
+        rejections.append(GnssRejection(int(meas.time_ns[i]), float(meas.t_s[i]),
+                                        MEAS_KINDS[kind[i]],
+                                        "before the filter start (alignment)", math.nan))
+    rejections.sort(key=lambda r: (r.time_ns, r.kind))
+    n_updates = {name: int(np.count_nonzero((st == STATUS_USED) & (kind == i)))
+                 for i, name in enumerate(MEAS_KINDS)}
+    for j, name in enumerate(MEAS_KINDS[:2]):
+        n_updates[f"{name}_reset"] = int(np.count_nonzero((st == STATUS_RESET) & (kind == j)))
+    resets = tuple((float(meas.t_s[i]), MEAS_KINDS[kind[i]])
+                   for i in np.flatnonzero(st == STATUS_RESET))
+    return Outcome(tuple(rejections), n_updates, resets)

@@ -88,6 +88,32 @@ def rts_backward_states(p_pred, p_upd, phi, dx, e_plus, e_minus):
             e_minus[k, i] = e_plus[k, i] + dx[k, i]
 
 
+@njit(cache=True, nogil=True)
+def smoother_gains(p_pred, p_upd, phi):
+    """The backward pass's gains ``A_k = P_k|k Phi_{k+1}^T P_{k+1|k}^-1`` (K, n, n), row K - 1
+    zero: what a replay of the same schedule (:func:`rts_backward_gains`) applies to its own
+    errors. Arguments as :func:`rts_backward`."""
+    k_n, n = p_pred.shape[0], p_pred.shape[1]
+    a = np.zeros((k_n, n, n))
+    for k in range(k_n - 1):
+        b = np.dot(phi[k + 1], p_upd[k])
+        a[k] = np.linalg.solve(p_pred[k + 1], b).T  # (P^-1 Phi P_k|k)^T, as rts_backward
+    return a
+
+
+@njit(cache=True, nogil=True)
+def rts_backward_gains(a, dx, e_plus, e_minus):
+    """:func:`rts_backward_states` with given gains ``a`` (:func:`smoother_gains` of another
+    pass on the same schedule): ``e_k^+ = A_k e_{k+1}^-``, ``e_k^- = e_k^+ + dx_k``."""
+    k_last = a.shape[0] - 1
+    e_plus[k_last, :] = 0.0
+    e_minus[k_last, :] = dx[k_last]
+    for k in range(k_last - 1, -1, -1):
+        e_plus[k] = np.dot(a[k], e_minus[k + 1])
+        for i in range(e_plus.shape[1]):
+            e_minus[k, i] = e_plus[k, i] + dx[k, i]
+
+
 def rts_smooth(
     p_pred: NDArray, p_upd: NDArray, phi: NDArray, dx: NDArray, *,
     overwrite_p_upd: bool = False, covariance: bool = True,
