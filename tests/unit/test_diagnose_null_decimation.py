@@ -51,14 +51,26 @@ def flight():
     return log, nav, run, cfg
 
 
-def _b_minus_a(log, run, cfg):
-    nav = fs.navigate(log, cfg)
+def _b_minus_a(log, run, cfg, **nav_kw):
+    """(A, B minus A per leg) on ``log``; ``nav_kw`` to flight_stages.navigate."""
+    nav = fs.navigate(log, cfg, **nav_kw)
     ref = SolutionA(*nav_filter.solution_a_fields(nav, which="smoothed"))
     imu = fs.imu_increments(log)
     legs = {leg.leg_id: leg for leg in run.legs}
-    return [replay_velocity_error(imu, ref, legs[i], sample_rate_hz=cfg.replay.sample_rate_hz,
-                                  accel_compensation=cfg.replay.accel_compensation)[:, 0:2]
-            for i in sorted(run.replays)]
+    return nav, [replay_velocity_error(imu, ref, legs[i], sample_rate_hz=cfg.replay.sample_rate_hz,
+                                       accel_compensation=cfg.replay.accel_compensation)[:, 0:2]
+                 for i in sorted(run.replays)]
+
+
+NOISE = null_model.NullNoise(
+    gyro_arw_radpsqrts=np.radians(0.01) / 60.0, accel_vrw_mpspsqrts=5e-5,
+    pos_sigma_ned_m=np.array([0.05, 0.05, 0.1]), vel_sigma_ned_mps=np.full(3, 0.02),
+    gyro_gm_sigma_radps=np.radians(0.5) / 3600.0, gyro_gm_tau_s=300.0)
+"""The injected noise: the paper_flight grade's ARW and drift, GNSS 0.05 / 0.1 m, 0.02 m/s."""
+
+
+def _t_align_ns(log, nav):
+    return int(log.imu.time_ns[0]) + round(nav.alignment.t_s * 1e9)
 
 
 def test_decimation_factor_from_the_rate(flight):
@@ -74,23 +86,20 @@ def test_summed_down_response_is_the_full_rate_response(flight):
     log, nav, run, cfg = flight
     base = null_model.gnss_on_solution(log, nav.smoothed, int(log.imu.time_ns[0]),
                                        nav.lever_arm.lever_b_m)
-    noise = null_model.NullNoise(
-        gyro_arw_radpsqrts=np.radians(0.01) / 60.0, accel_vrw_mpspsqrts=5e-5,
-        pos_sigma_ned_m=np.array([0.05, 0.05, 0.1]), vel_sigma_ned_mps=np.full(3, 0.02),
-        gyro_gm_sigma_radps=np.radians(0.5) / 3600.0, gyro_gm_tau_s=300.0)
-    t_align_ns = int(log.imu.time_ns[0]) + round(nav.alignment.t_s * 1e9)
+    t_align_ns = _t_align_ns(log, nav)
     rng = np.random.default_rng(11)
     for _ in range(2):
-        pert = null_model.perturb_log(base, noise, rng, from_time_ns=t_align_ns)
-        full = [a - b for a, b in zip(_b_minus_a(pert, run, cfg), _b_minus_a(base, run, cfg),
+        pert = null_model.perturb_log(base, NOISE, rng, from_time_ns=t_align_ns)
+        full = [a - b for a, b in zip(_b_minus_a(pert, run, cfg)[1], _b_minus_a(base, run, cfg)[1],
                                       strict=True)]
         size = np.sqrt(np.mean(np.concatenate(full) ** 2))
         assert size > 1e-3  # the response is there: mm/s
         keep = fs.leg_epochs_ns(log, run.legs)
         for factor in (4, 8):
             dec = [a - b for a, b in zip(
-                _b_minus_a(null_model.decimate_imu(pert, factor, keep), run, cfg),
-                _b_minus_a(null_model.decimate_imu(base, factor, keep), run, cfg), strict=True)]
+                _b_minus_a(null_model.decimate_imu(pert, factor, keep), run, cfg)[1],
+                _b_minus_a(null_model.decimate_imu(base, factor, keep), run, cfg)[1],
+                strict=True)]
             # B starts and ends on the flight's epochs: the flight's rows, sample for sample
             assert [d.shape for d in dec] == [r.dv_n_mps[:, 0:2].shape
                                               for _, r in sorted(run.replays.items())]
@@ -126,23 +135,17 @@ def test_decimated_increments_are_the_flights_summed():
     np.testing.assert_allclose(inc_d, inc, rtol=0, atol=1e-12)
 
 
-def _replay_b_minus_a(log, run, cfg, **gain_kw):
-    nav = fs.navigate(log, cfg, options=fs.rerun_options(cfg), **gain_kw)
-    ref = SolutionA(*nav_filter.solution_a_fields(nav, which="smoothed"))
-    imu = fs.imu_increments(log)
-    legs = {leg.leg_id: leg for leg in run.legs}
-    return nav, [replay_velocity_error(imu, ref, legs[i], sample_rate_hz=cfg.replay.sample_rate_hz,
-                                       accel_compensation=cfg.replay.accel_compensation)[:, 0:2]
-                 for i in sorted(run.replays)]
-
-
 def test_gain_replay_response_is_the_full_response(flight):
     log, nav, run, cfg = flight
+
+    def rerun(log_r, **gain_kw):  # A as the null realisations run it
+        return _b_minus_a(log_r, run, cfg, options=fs.rerun_options(cfg), **gain_kw)
+
     base = null_model.decimate_imu(null_model.gnss_on_solution(
         log, nav.smoothed, int(log.imu.time_ns[0]), nav.lever_arm.lever_b_m), 4,
         fs.leg_epochs_ns(log, run.legs))
-    plain, dv_plain = _replay_b_minus_a(base, run, cfg)
-    rec, dv_base = _replay_b_minus_a(base, run, cfg, record_gains=True)
+    plain, dv_plain = rerun(base)
+    rec, dv_base = rerun(base, record_gains=True)
     gains = rec.gain_replay
     assert plain.gain_replay is None and gains is not None
     n_rec = rec.innovations.t_s.size
@@ -153,25 +156,20 @@ def test_gain_replay_response_is_the_full_response(flight):
     for a, b in zip(dv_plain, dv_base, strict=True):  # recording changes nothing
         np.testing.assert_array_equal(a, b)
     for k_from in (gains.k_from, gains.k_start):  # on the base itself: A's states again
-        same, dv_same = _replay_b_minus_a(base, run, cfg,
-                                          replay=replace(gains, k_from=k_from))
+        same, dv_same = rerun(base, replay=replace(gains, k_from=k_from))
         np.testing.assert_array_equal(same.forward.trajectory.v_n_mps,
                                       rec.forward.trajectory.v_n_mps)
         for a, b in zip(dv_same, dv_base, strict=True):  # the smoother's A_k: rounding only
             np.testing.assert_allclose(a, b, rtol=0, atol=1e-9)
-    noise = null_model.NullNoise(
-        gyro_arw_radpsqrts=np.radians(0.01) / 60.0, accel_vrw_mpspsqrts=5e-5,
-        pos_sigma_ned_m=np.array([0.05, 0.05, 0.1]), vel_sigma_ned_mps=np.full(3, 0.02),
-        gyro_gm_sigma_radps=np.radians(0.5) / 3600.0, gyro_gm_tau_s=300.0)
-    t_align_ns = int(log.imu.time_ns[0]) + round(nav.alignment.t_s * 1e9)
+    t_align_ns = _t_align_ns(log, nav)
     rng = np.random.default_rng(11)
 
     def response(log_r, **kw):
-        return np.concatenate([a - b for a, b in zip(_replay_b_minus_a(log_r, run, cfg, **kw)[1],
-                                                     dv_base, strict=True)])
+        return np.concatenate([a - b for a, b in zip(rerun(log_r, **kw)[1], dv_base,
+                                                     strict=True)])
 
     for i in range(3):
-        pert = null_model.perturb_log(base, noise, rng, from_time_ns=t_align_ns)
+        pert = null_model.perturb_log(base, NOISE, rng, from_time_ns=t_align_ns)
         if i == 2:  # one fix 10 m north, after the switch: the gate refuses it in both
             j = int(np.searchsorted(pert.fix.time_ns, log.imu.time_ns[0] + 300_000_000_000))
             lat = pert.fix.lat_rad.copy()
@@ -183,7 +181,7 @@ def test_gain_replay_response_is_the_full_response(flight):
         gap = np.sqrt(np.mean((fast - full) ** 2))
         # measured 0.03-0.07 % with the switch, 0.7-1.6 % replaying from the alignment on
         assert gap < 0.005 * size, (i, gap, size)
-    st = _replay_b_minus_a(pert, run, cfg, replay=gains)[0].innovations.status
+    st = rerun(pert, replay=gains)[0].innovations.status
     assert np.count_nonzero(st == nav_filter.STATUS_GATED) >= 1
     # two fixes in a row 10 m north: the replay ends and A runs in full (the same numbers)
     lat = pert.fix.lat_rad.copy()
@@ -194,6 +192,6 @@ def test_gain_replay_response_is_the_full_response(flight):
     fewer = replace(base, fix=replace(base.fix, **{
         f: getattr(base.fix, f)[np.arange(base.fix.time_ns.size) != 200]
         for f in ("time_ns", "lat_rad", "lon_rad", "height_m", "pos_cov_ned_m2")}))
-    for a, b in zip(_replay_b_minus_a(fewer, run, cfg, replay=gains)[1],
-                    _replay_b_minus_a(fewer, run, cfg)[1], strict=True):
+    for a, b in zip(rerun(fewer, replay=gains)[1],
+                    rerun(fewer)[1], strict=True):
         np.testing.assert_array_equal(a, b)
