@@ -66,7 +66,8 @@ from pospp.units import DEG_PER_H_RADPS
 
 def rerun_base(log: mcap_reader.FlightLog | None, nav: nav_filter.FilterResult | None,
                calib_run: CalibrationRun, config: PipelineConfig
-               ) -> tuple[mcap_reader.FlightLog | None, CalibrationRun]:
+               ) -> tuple[mcap_reader.FlightLog | None, CalibrationRun,
+                          nav_filter.GainReplay | None]:
     """The log and calibration run the diagnosis's A re-run signatures are made against.
 
     The log's IMU summed down to ``[pairs] rerun_imu_rate_hz`` (:func:`rerun_decimation`,
@@ -81,17 +82,20 @@ def rerun_base(log: mcap_reader.FlightLog | None, nav: nav_filter.FilterResult |
     (flight_time_offset_200hz, 62 records gated where 4 are allowed: the four signatures
     moved by 8-95 % between the rates). The log and run themselves when nothing is summed,
     A gated in excess, A fails on the summed-down log, or B there is not on the flight's
-    samples (or without a log)."""
+    samples (or without a log). The third element: A's gains on the summed-down log, which
+    the re-runs replay (:class:`pospp.nav.filter.GainReplay`, as the null realisations do;
+    a re-run whose records differ, the time offset's, runs in full); None with the flight's
+    own log."""
     if log is None or nav is None:
-        return log, calib_run
+        return log, calib_run, None
     factor = rerun_decimation(log, config.pairs.rerun_imu_rate_hz)
     if factor == 1 or gate_excess(nav, config.filter_options().gate_probability):
-        return log, calib_run
+        return log, calib_run, None
     log_r = null_model.decimate_imu(log, factor, leg_epochs_ns(log, calib_run.legs))
     try:
-        nav_r = navigate(log_r, config, options=rerun_options(config))
+        nav_r = navigate(log_r, config, options=rerun_options(config), record_gains=True)
     except ValueError:
-        return log, calib_run
+        return log, calib_run, None
     which = config.replay.reference if nav_r.smoothed is not None else "forward"
     ref = SolutionA(*nav_filter.solution_a_fields(nav_r, which=which))
     imu_r = imu_increments(log_r)
@@ -101,8 +105,8 @@ def rerun_base(log: mcap_reader.FlightLog | None, nav: nav_filter.FilterResult |
         sample_rate_hz=config.replay.sample_rate_hz)) for i, rep in calib_run.replays.items()}
     if any(replays[i].dv_n_mps.shape != rep.dv_n_mps.shape
            for i, rep in calib_run.replays.items()):  # B not on the flight's samples
-        return log, calib_run
-    return log_r, replace(calib_run, replays=replays)
+        return log, calib_run, None
+    return log_r, replace(calib_run, replays=replays), nav_r.gain_replay
 
 
 def drift_under_alternative(calib_run: CalibrationRun, replays_minus_effect: list,
@@ -231,11 +235,11 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
     if null_dv is None and n_null > 0 and log is not None and nav is not None:
         null_dv = null_realisations(log, nav, calib_run, config, n_null, threads=threads)
     replays = [calib_run.replays[i] for i in sorted(calib_run.replays)]
-    a_as_configured = partial(navigate, config=config, options=rerun_options(config))  # re-runs
-
     sigs: dict[str, list[np.ndarray]] | None = None
     at: dict[str, np.ndarray] = {}
-    log_r, run_r = rerun_base(log, nav, calib_run, config)  # what the re-runs are made on
+    log_r, run_r, gains = rerun_base(log, nav, calib_run, config)  # what re-runs are made on
+    a_as_configured = partial(navigate, config=config, options=rerun_options(config),
+                              replay=gains)  # the re-runs
     if log is not None and nav is not None:
         # lever arm, gyro scale factor, warm-up: Gauss-Newton from A's own estimates
         sigs, at = _rerun_signatures_at_start(log, nav, calib_run, config, lever_estimate,
