@@ -152,13 +152,14 @@ class GainReplay:
     Such a pass (:func:`forward_pass` with ``replay``) is A as configured up to ``k_from``;
     from there it runs the strapdown and the closed-loop feedback as A does, but applies these
     gains to its own innovations (``dx = K dz``; a record this pass used is gated when
-    ``dz^T S^-1 dz`` with this pass's S exceeds the gate) instead of propagating a covariance,
-    and it smooths with these smoother gains (``e_k^+ = A_k e_{k+1}^-``; its own before
-    ``k_from``). The gains depend on the trajectory and the noise model, which a difference
-    of noise level moves at second order, as long as the two attitudes are close:
-    ``k_from`` is where A's heading sigma has come within twice its median over the flight
-    (:func:`switch_epoch`), before which a static alignment can leave a realisation's heading
-    degrees from this pass's (docs/filter.md, "Gain replay"; issue 18).
+    ``dz^T S^-1 dz`` with this pass's S exceeds the gate; a second in a row of a kind ends
+    the replay, and the pass runs in full) instead of propagating a covariance, and it smooths
+    with these smoother gains (``e_k^+ = A_k e_{k+1}^-``; its own before ``k_from``). The
+    gains depend on the trajectory and the noise model, which a difference of noise level
+    moves at second order, as long as the two attitudes are close: ``k_from`` is where A's
+    heading sigma has come within twice its median over the flight (:func:`switch_epoch`),
+    before which a static alignment can leave a realisation's heading degrees from this
+    pass's (docs/filter.md, "Gain replay"; issue 18).
 
     Attributes
     ----------
@@ -200,13 +201,13 @@ class GainReplay:
 
 
 def switch_epoch(fw: ForwardArrays, k_start: int) -> int:
-    """The first smoother node's epoch where A's heading sigma (its updated P) is within twice
-    its median over the nodes: where a replay of this pass's gains starts
-    (:class:`GainReplay`); ``k_start`` without nodes."""
-    if not fw.node_k.shape[0]:
+    """The first output epoch where A's heading sigma (the forward P there) is within twice
+    its median over the outputs: where a replay of this pass's gains starts
+    (:class:`GainReplay`); ``k_start`` without outputs."""
+    if not fw.out_k.shape[0]:
         return k_start
-    sig = np.sqrt(np.maximum(fw.node_pu[:, PHI.start + 2, PHI.start + 2], 0.0))
-    return int(fw.node_k[int(np.argmax(sig <= 2.0 * np.median(sig)))])
+    sig = np.sqrt(np.maximum(fw.out_diag[:, PHI.start + 2], 0.0))
+    return int(fw.out_k[int(np.argmax(sig <= 2.0 * np.median(sig)))])
 
 
 def gain_replay(fw: ForwardArrays, t: NDArray, k_start: int, meas: MeasurementRecords,
