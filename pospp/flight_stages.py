@@ -336,7 +336,8 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
         pos_sigma_ned_m=pos_sig, vel_sigma_ned_mps=vel_sig)
     leg_ns = leg_epochs_ns(log, calib_run.legs)
     try:
-        base_dv, gains = b_minus_a(null_model.decimate_imu(base, factor, leg_ns), True)
+        base_dv, gains = b_minus_a(null_model.decimate_imu(base, factor, leg_ns),
+                                   record=True)
         if any(d.shape != calib_run.replays[i].dv_n_mps.shape
                for d, i in zip(base_dv, ids, strict=True)):
             raise ValueError("B on the summed-down base is not on the flight's samples")
@@ -344,7 +345,7 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
         if factor == 1:
             raise
         factor = 1
-        base_dv, gains = b_minus_a(base, True)
+        base_dv, gains = b_minus_a(base, record=True)
     t_align_ns = int(log.imu.time_ns[0]) + round(nav.alignment.t_s * 1e9)
     rng = np.random.default_rng(seed)
 

@@ -486,23 +486,10 @@ def _smoothed_errors(t: NDArray, fw: ForwardArrays, lay: StateLayout, with_cov: 
                      ) -> tuple[NDArray, NDArray, list[NDArray] | None, NDArray]:
     """RTS smoother over the nodes, interpolated to the outputs: (error (N, n), diagonal of
     P^s (N, n), its [phi, dv, dr] blocks, total bias variance (N, 6)); ``with_cov`` False:
-    the errors alone, the rest NaN (with ``replay``, by its smoother gains). What reads the
-    nodes: they can be freed after it."""
+    the errors alone, the rest NaN (with ``replay``, which comes with ``with_cov`` False, by
+    its smoother gains). What reads the nodes: they can be freed after it."""
     out_t = t[fw.out_k]
     node_t = t[fw.node_k]
-    if replay is not None and replay.smoother_gains is not None:
-        if replay.smoother_gains.shape[0] != fw.node_dx.shape[0]:
-            raise RuntimeError("gain replay: the smoother's nodes differ from the replayed pass's")
-        e_plus, e_minus = np.zeros_like(fw.node_dx), np.zeros_like(fw.node_dx)
-        a, n_own = replay.smoother_gains, fw.node_pp.shape[0]
-        if n_own > 1:  # its own gains over the nodes before the switch (their P are its own)
-            a = a.copy()
-            a[:n_own - 1] = smoother.smoother_gains(fw.node_pp, fw.node_pu,
-                                                    fw.node_phi)[:n_own - 1]
-        if e_plus.shape[0]:
-            smoother.rts_backward_gains(a, fw.node_dx, e_plus, e_minus)
-        return (smoother.interpolate_errors(node_t, e_plus, e_minus, out_t),
-                _nan((out_t.shape[0], lay.n)), None, _nan((out_t.shape[0], 6)))
     if with_cov:
         e_plus, e_minus, p_s = smoother.rts_smooth(fw.node_pp, fw.node_pu, fw.node_phi,
                                                    fw.node_dx, overwrite_p_upd=True)
@@ -515,7 +502,10 @@ def _smoothed_errors(t: NDArray, fw: ForwardArrays, lay: StateLayout, with_cov: 
         bvar_s = (1.0 - a)[:, None] * bvar_nodes[i] + a[:, None] * bvar_nodes[nxt]
     else:
         e_plus, e_minus, _ = smoother.rts_smooth(fw.node_pp, fw.node_pu, fw.node_phi,
-                                                 fw.node_dx, covariance=False)
+                                                 fw.node_dx, covariance=False) \
+            if replay is None or replay.smoother_gains is None else \
+            smoother.rts_smooth_replayed(replay.smoother_gains, fw.node_pp, fw.node_pu,
+                                         fw.node_phi, fw.node_dx)
         diag_s = _nan((out_t.shape[0], lay.n))
         blocks_s, bvar_s = None, _nan((out_t.shape[0], 6))
     return smoother.interpolate_errors(node_t, e_plus, e_minus, out_t), diag_s, blocks_s, bvar_s

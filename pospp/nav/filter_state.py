@@ -206,8 +206,9 @@ def switch_epoch(fw: ForwardArrays, k_start: int) -> int:
     (:class:`GainReplay`); ``k_start`` without outputs."""
     if not fw.out_k.shape[0]:
         return k_start
-    sig = np.sqrt(np.maximum(fw.out_diag[:, PHI.start + 2], 0.0))
-    return int(fw.out_k[int(np.argmax(sig <= 2.0 * np.median(sig)))])
+    heading_sigma_rad = np.sqrt(np.maximum(fw.out_diag[:, PHI.start + 2], 0.0))
+    converged = heading_sigma_rad <= 2.0 * np.median(heading_sigma_rad)
+    return int(fw.out_k[int(np.argmax(converged))])
 
 
 def gain_replay(fw: ForwardArrays, t: NDArray, k_start: int, meas: MeasurementRecords,
@@ -246,8 +247,6 @@ def forward_pass(t: NDArray, w: NDArray, f: NDArray, al: AlignmentResult,
         flags[k0:max(k0, replay.k_from)] & FLAG_NODE))  # a replay's own nodes: before it
     status = np.full(n_meas, -1, dtype=np.int64) if replay is None else replay.status.copy()
     m_rec = n_meas if record_gains and replay is None else 0
-    gains = (replay.gains, replay.s_inv) if replay is not None else (
-        np.empty((m_rec, n, 3)), np.empty((m_rec, 3, 3)))
     fw = ForwardArrays(
         gate=gate, out_k=out_k, m_status=status,
         m_nis=np.full(n_meas, np.nan), m_dz=np.full((n_meas, 3), np.nan),
@@ -256,9 +255,10 @@ def forward_pass(t: NDArray, w: NDArray, f: NDArray, al: AlignmentResult,
         out_bvar=np.empty((n_out, 6)), out_lever=np.empty((n_out, 3)),
         node_k=np.empty(n_kept, dtype=np.int64), node_pp=np.empty((n_cov, n, n)),
         node_pu=np.empty((n_cov, n, n)), node_phi=np.empty((n_cov, n, n)),
-        node_dx=np.empty((n_kept, n)), m_gain=gains[0] if replay is None else gains[0][:0],
-        m_sinv=gains[1] if replay is None else gains[1][:0], replayed=replay is not None,
+        node_dx=np.empty((n_kept, n)), m_gain=np.empty((m_rec, n, 3)),
+        m_sinv=np.empty((m_rec, 3, 3)), replayed=replay is not None,
     )
+    gains = (fw.m_gain, fw.m_sinv) if replay is None else (replay.gains, replay.s_inv)
     used_nodes, used_out = forward_kernel(
         t, w, f, k0, x0, np.diag(p0_diag), lever0.copy(), (lay.i_gm, lay.i_sf, lay.i_l),
         inv_tau, flags, (meas.k, meas.kind, meas.z, meas.r, meas.dt_s),

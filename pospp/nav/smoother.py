@@ -149,6 +149,27 @@ def rts_smooth(
     return e_plus, e_minus, p_smooth
 
 
+def rts_smooth_replayed(gains: NDArray, p_pred: NDArray, p_upd: NDArray, phi: NDArray,
+                        dx: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+    """:func:`rts_smooth` (errors alone) of a pass that replayed another's gains
+    (``pospp.nav.filter_state.GainReplay``): its own gains (:func:`smoother_gains`) over the
+    nodes whose P it kept (``p_pred`` etc. hold the first of them: those before the replay
+    started), ``gains`` (K, n, n) after. Returns (e_plus, e_minus, p_smooth of shape (0, n, n)).
+    """
+    k, n = dx.shape
+    if gains.shape != (k, n, n):
+        raise ValueError(f"gains: expected shape ({k}, {n}, {n}) (the replayed pass's nodes), "
+                         f"got {gains.shape}")
+    n_own = p_pred.shape[0]
+    if n_own > 1:
+        gains = gains.copy()
+        gains[:n_own - 1] = smoother_gains(p_pred, p_upd, phi)[:n_own - 1]
+    e_plus, e_minus = np.zeros((k, n)), np.zeros((k, n))
+    if k:
+        rts_backward_gains(gains, np.ascontiguousarray(dx), e_plus, e_minus)
+    return e_plus, e_minus, np.empty((0, n, n))
+
+
 def interpolation_weights(node_t_s: NDArray, t_s: NDArray) -> tuple[NDArray, NDArray]:
     """Node index i (last node at or before t) and weight alpha in [0, 1) towards node i + 1."""
     i = np.clip(np.searchsorted(node_t_s, t_s, side="right") - 1, 0, node_t_s.shape[0] - 1)

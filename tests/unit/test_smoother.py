@@ -125,6 +125,27 @@ def test_states_only_pass_equals_batch_map(seed):
     np.testing.assert_allclose(e_minus, e_minus_full, rtol=1e-10, atol=1e-14)
 
 
+@pytest.mark.parametrize("seed", [0, 1])
+def test_replayed_gains_smooth_as_the_batch_map(seed):
+    # a replay's smoother: its own gains over the nodes it kept, the given ones after; with
+    # the pass's own gains throughout (any split) it is the batch MAP again
+    s = _system(seed)
+    nominal, p_pred, p_upd, phis, dx = _closed_loop_forward(s)
+    gains = smoother.smoother_gains(p_pred, p_upd, phis)
+    x_batch, _ = _batch(s)
+    for n_own in (0, 1, 10, p_pred.shape[0]):
+        e_plus, _, p_s = smoother.rts_smooth_replayed(gains, p_pred[:n_own], p_upd[:n_own],
+                                                      phis[:n_own], dx)
+        assert p_s.shape == (0, s["n"], s["n"])
+        np.testing.assert_allclose(nominal - e_plus, x_batch, atol=1e-9, rtol=0)
+    # other gains after the split, its own before: the nodes before use its own
+    bad = np.zeros_like(gains)
+    e_split, _, _ = smoother.rts_smooth_replayed(bad, p_pred[:10], p_upd[:10], phis[:10], dx)
+    assert not np.allclose(e_split, nominal - x_batch)
+    with pytest.raises(ValueError, match="replayed pass's nodes"):
+        smoother.rts_smooth_replayed(gains[1:], p_pred, p_upd, phis, dx)
+
+
 @settings(max_examples=25, deadline=None)
 @given(st.integers(min_value=0, max_value=2**31 - 1))
 def test_smoothed_covariance_below_filtered_and_symmetric(seed):
