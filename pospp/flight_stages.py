@@ -288,11 +288,13 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     added to the base from A's alignment point on; A re-run exactly as configured, B replayed
     on the same legs (same start and end times), minus the base's own B minus A. The base is
     the flight with its GNSS replaced by A's solution at the antenna
-    (:func:`pospp.diagnose.null_model.gnss_on_solution`). The noise is drawn at the flight's
-    IMU rate, and A and B run on the IMU summed down to ``[pairs] rerun_imu_rate_hz``
-    (:func:`rerun_decimation`, :func:`null_model.decimate_imu`): the same realisations as at
-    the flight's rate to about 1e-4 of their size, at a fraction of the cost. Returns ``n``
-    lists of (M, 3) arrays, legs in id order (fewer when A fails on more than ``n`` of
+    (:func:`pospp.diagnose.null_model.gnss_on_solution`). A and B run on the IMU summed down
+    to ``[pairs] rerun_imu_rate_hz`` (:func:`rerun_decimation`, :func:`null_model.decimate_imu`;
+    the same responses as at the flight's rate to about 1e-4 of their size), and the noise is
+    drawn on the summed-down samples (:func:`null_sample_stamps_ns`): white noise of a group's
+    mean is exactly the flight-rate draws' mean in distribution (sigma ``ARW / sqrt(T)``), the
+    Gauss-Markov path is sampled at the groups' ends (O(T / tau) from its group means).
+    Returns ``n`` lists of (M, 3) arrays, legs in id order (fewer when A fails on more than ``n`` of
     ``2 n`` perturbed logs). ``drift``: (sigma [rad/s], tau [s]) of the gyro drift to inject instead
     (:func:`drift_under_alternative`). ``threads``: realisations made at once
     (:func:`pospp.threads.first_kept`, the next log drawn while A runs); the logs are drawn
@@ -334,19 +336,19 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
         gyro_gm_sigma_radps=float(gm_sigma), gyro_gm_tau_s=float(gm_tau),
         accel_gm_sigma_mps2=float(si.accel_gm_sigma_mps2), accel_gm_tau_s=float(si.accel_gm_tau_s),
         pos_sigma_ned_m=pos_sig, vel_sigma_ned_mps=vel_sig)
-    leg_ns = leg_epochs_ns(log, calib_run.legs)
+    t_align_ns = int(log.imu.time_ns[0]) + round(nav.alignment.t_s * 1e9)
+    leg_ns = null_sample_stamps_ns(log, calib_run.legs, t_align_ns)
+    base_r = null_model.decimate_imu(base, factor, leg_ns)
     try:
-        base_dv, gains = b_minus_a(null_model.decimate_imu(base, factor, leg_ns),
-                                   record=True)
+        base_dv, gains = b_minus_a(base_r, record=True)
         if any(d.shape != calib_run.replays[i].dv_n_mps.shape
                for d, i in zip(base_dv, ids, strict=True)):
             raise ValueError("B on the summed-down base is not on the flight's samples")
     except ValueError:  # A fails on the summed-down base (its alignment): the flight's rate
         if factor == 1:
             raise
-        factor = 1
-        base_dv, gains = b_minus_a(base, record=True)
-    t_align_ns = int(log.imu.time_ns[0]) + round(nav.alignment.t_s * 1e9)
+        base_r = base
+        base_dv, gains = b_minus_a(base_r, record=True)
     rng = np.random.default_rng(seed)
 
     def attempt(log_r: mcap_reader.FlightLog) -> list[np.ndarray] | None:
@@ -355,12 +357,11 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
         except ValueError:  # a realisation whose A fails (alignment) is skipped
             return None
 
-    # drawn at the flight's rate (the same draws at any rerun_imu_rate_hz), then summed down;
+    # drawn on the summed-down samples (a quarter of the flight-rate draws at 200 -> 50 Hz);
     # in this thread (drawing and scaling them in the workers held a draw per thread, +230
     # MiB on the 1.5 h flight, for no time: the generator's draws are serial)
-    perturbed = (null_model.decimate_imu(
-        null_model.perturb_log(base, noise, rng, from_time_ns=t_align_ns), factor, leg_ns)
-        for _ in range(2 * n))
+    perturbed = (null_model.perturb_log(base_r, noise, rng, from_time_ns=t_align_ns)
+                 for _ in range(2 * n))
     # never more logs drawn than realisations still missing: the draws, and so the
     # realisations, are those of one log at a time; the next drawn while A runs on the others
     return [[d - d0 for d, d0 in zip(dv, base_dv, strict=True)]
@@ -390,6 +391,18 @@ def leg_epochs_ns(log: mcap_reader.FlightLog, legs: Sequence[Leg]) -> np.ndarray
         k1 = int(np.searchsorted(t_s, leg.end_s, side="right")) - 1
         out += [k0 - 1, k0, max(k1, k0)]
     return t_ns[np.clip(out, 0, t_ns.size - 1)] if out else np.zeros(0, np.int64)
+
+
+def null_sample_stamps_ns(log: mcap_reader.FlightLog, legs: Sequence[Leg],
+                          from_time_ns: int) -> np.ndarray:
+    """The IMU stamps [ns] the null's summed-down log keeps: the legs' (:func:`leg_epochs_ns`)
+    and the last one before ``from_time_ns`` (where the noise starts: a summed sample then
+    holds flight samples all before it or all at or after it, as the flight-rate noise
+    :func:`pospp.diagnose.null_model.perturb_log` adds to them)."""
+    t_ns = np.asarray(log.imu.time_ns, dtype=np.int64)
+    before = int(np.searchsorted(t_ns, int(from_time_ns))) - 1
+    extra = t_ns[before:before + 1] if before >= 0 else np.zeros(0, np.int64)
+    return np.concatenate([leg_epochs_ns(log, legs), extra])
 
 
 def _lever_arm_and_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,

@@ -357,14 +357,21 @@ def _calibrate_gm(legs, h, z, edges, noise_step_s, bases, gm_ops, arw_given, sig
     the chosen model's GLS factors the full covariance once.
     """
     rows, sqs, kb, ops = [], [], [], []
+    memo = {} if noise_cache is None else noise_cache  # the refits share the legs' grids
     for i, rep in enumerate(legs):
         lid = rep.leg.leg_id
         basis = None if bases is None else bases.get(lid)
         if basis is None:
-            basis = noise_basis(rep, noise_step_s=noise_step_s)
+            basis = memo.get(("basis", lid, noise_step_s))
+        if basis is None:
+            basis = memo[("basis", lid, noise_step_s)] = noise_basis(
+                rep, noise_step_s=noise_step_s)
         op = None if gm_ops is None else gm_ops.get(lid)
         if op is None:
-            op = gm_noise_operator(rep, basis.samples, bin_s=bin_s)
+            op = memo.get(("gm_op", lid, noise_step_s, bin_s))
+        if op is None:
+            op = memo[("gm_op", lid, noise_step_s, bin_s)] = gm_noise_operator(
+                rep, basis.samples, bin_s=bin_s)
         rows.append(basis.rows + edges[i])
         sqs.append(basis.sq)
         kb.append((basis.u * basis.lam) @ basis.u.T)

@@ -134,10 +134,12 @@ def test_shared_eigendecomposition_gives_the_cholesky_fit():
     kw = dict(gyro_arw_radpsqrts=np.radians(0.01) / 60.0, gyro_gm_sigma_radps=0.5 * DPH,
               gyro_gm_tau_s=300.0)
     cache: dict = {}
-    for reps in draws:  # the second call reuses the first's decomposition
+    for reps in draws:  # the second call reuses the first's decomposition and leg bases
         plain = fit_calibration(reps, "body", **kw)
         shared = fit_calibration(reps, "body", noise_cache=cache, **kw)
-        assert len(cache) == 1
+        # one decomposition; each leg's noise basis and drift operator
+        assert len([k for k in cache if k[0] not in ("basis", "gm_op")]) == 1
+        assert len(cache) == 5
         assert np.log(plain.variance_factor) > np.log(1e-6) + 0.1  # not at the bound
         np.testing.assert_allclose(shared.variance_factor, plain.variance_factor, rtol=1e-6)
         np.testing.assert_allclose(shared.x, plain.x, rtol=1e-6, atol=1e-14)

@@ -209,6 +209,45 @@ def test_compiled_perturbation_is_the_numpy_one():
                                                           0.0))
 
 
+def test_noise_on_the_summed_down_log_is_the_summed_flight_rate_noise():
+    # the null draws its noise on the summed-down log (flight_stages.null_realisations): a
+    # summed sample's white noise must have the distribution of the flight-rate draws' mean
+    # over its group (sigma ARW / sqrt(T), T the group's span, gaps and short groups
+    # included), and none may reach the samples before the noise starts; checked against
+    # many flight-rate draws summed by decimate_imu (the reference: that is what the
+    # flight-rate null did), by the variance of each summed sample
+    from pospp import flight_stages
+
+    rng = np.random.default_rng(11)
+    n = 400
+    t = np.cumsum(rng.integers(4_000_000, 6_000_000, n)).astype(np.int64)
+    t[200:] += 70_000_000  # a gap
+    zeros = np.zeros((n, 3))
+    log = _Log(_Imu(t, zeros, zeros), _Fix(t[:1], np.full(1, 0.7), np.ones(1), np.ones(1)),
+               _Vel(t[:1], np.zeros((1, 3))))
+    t_from = int(t[123]) - 1  # the noise starts mid-group at factor 4
+    keep = flight_stages.null_sample_stamps_ns(log, [], t_from)
+    assert keep.tolist() == [t[122]]
+    noise = null_model.NullNoise(2e-3, 4e-2, np.zeros(3), np.zeros(3))
+    summed = null_model.decimate_imu(log, 4, keep)
+    r = 3000
+    flight_rate = np.array([null_model.decimate_imu(null_model.perturb_log(
+        log, noise, rng, from_time_ns=t_from), 4, keep).imu.w_ib_b_radps for _ in range(r)])
+    on_summed = np.array([null_model.perturb_log(summed, noise, rng, from_time_ns=t_from)
+                          .imu.w_ib_b_radps for _ in range(r)])
+    before = summed.imu.time_ns < t_from
+    assert before.sum() == 32 and not flight_rate[:, before].any()  # 0, 4, ..., 120; 122
+    assert not on_summed[:, before].any()
+    v_ref = flight_rate[:, ~before].var(axis=0)
+    v_new = on_summed[:, ~before].var(axis=0)
+    span_s = np.diff(summed.imu.time_ns)[~before[1:]] * 1e-9
+    expected = np.repeat((2e-3**2 / span_s)[:, None], 3, axis=1)
+    # both against ARW^2 / T (chi-square(3000): 5 sigma of the variance ratio is 13 %)
+    np.testing.assert_allclose(v_ref, expected, rtol=0.13)
+    np.testing.assert_allclose(v_new, expected, rtol=0.13)
+    assert abs(np.mean(v_new / v_ref) - 1.0) < 0.01  # over ~300 samples: ~0.2 % spread
+
+
 def test_gauss_markov_path_variance_and_correlation():
     dt = np.full(400_000, 0.05)
     x = null_model.gauss_markov_path(dt, 2.0, 30.0, np.random.default_rng(8))
