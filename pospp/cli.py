@@ -148,8 +148,10 @@ def main(debug: bool) -> None:
               help="Print every calibrated parameter (per-leg misalignments, every "
                    "formulation), not only the headline.")
 @click.option("--threads", default=None, type=click.IntRange(min=1),
-              help="A re-runs (null realisations, diagnosis) made at once; the outputs do "
-                   "not depend on it.  [default: the cores this process may use]")
+              help="A re-runs (null realisations, diagnosis) made at once; above 1, A's "
+                   "other passes also run alongside the calibration and the null (more "
+                   "memory); the outputs do not depend on it.  [default: the cores this "
+                   "process may use]")
 def run(mcap_file: str, pipeline_file: str | None, out_dir: str, force: bool,
         verbose: bool, threads: int | None) -> None:
     """Process one flight log: A, legs, B, pairs, calibration, compensation, report.

@@ -12,7 +12,7 @@ Nothing here touches files.
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from functools import partial
 from typing import Any
 
@@ -157,31 +157,44 @@ def drift_under_alternative(calib_run: CalibrationRun, replays_minus_effect: lis
     return None
 
 
+def signature_starts(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
+                     config: PipelineConfig,
+                     lever_estimate: nav_filter.LeverArmEstimate | None
+                     ) -> dict[str, np.ndarray | None]:
+    """A's own first estimates the diagnosis's Gauss-Newton signatures start from (None: the
+    signature at the configuration): effect id -> estimate. They need A and its lever-arm
+    estimate only, not the calibration, so a run on two threads makes them while it calibrates
+    (:mod:`pospp.pipeline`).
+
+    The lever arm: from A's own estimate of it (lever-arm states) when it is far enough from
+    the configured value (:data:`pospp.diagnose.rerun.REFINE_FRACTION`), where A's gate and
+    attitude Jacobian are those of the wrong lever arm. The gyro scale factor: A's own
+    estimate (one forward pass with scale-factor states) only when it is significant. The
+    warm-up: A's pass with its dynamics where it explains A's rejections
+    (:func:`_warmup_start`). The usual flight pays the scale-factor pass (docs/diagnose.md,
+    "Power")."""
+    lever_b_m, p_lever = _lever_arm_and_start(log, nav, config, lever_estimate)
+    gn = p_lever is not None and bool(
+        np.linalg.norm(p_lever) > REFINE_FRACTION * effect_by_id("lever_arm").plausible_si)
+    return {"lever_arm": p_lever if gn else None,
+            "gyro_scale_factor": _scale_factor_start(log, config, lever_b_m),
+            "accel_bias_change": _warmup_start(log, nav, config, lever_b_m)}
+
+
 def _rerun_signatures_at_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                                calib_run: CalibrationRun, config: PipelineConfig,
-                               lever_estimate: nav_filter.LeverArmEstimate | None,
+                               starts: dict[str, np.ndarray | None],
                                navigate_a: Any, threads: int = 1,
                                rerun: tuple[Any, CalibrationRun] | None = None
                                ) -> tuple[dict[str, list[np.ndarray]], dict[str, np.ndarray]]:
     """The diagnosis's first A re-run signatures and the estimates they were made at.
 
-    A's first estimates are read on the flight's ``log``; the re-runs are made on ``rerun``
-    = (log, run) of :func:`rerun_base` (the flight's own when None).
-
-    The lever arm: Gauss-Newton from A's own estimate of it (lever-arm states; 1 + 4 A runs)
-    instead of at the configured value, where A's gate and attitude Jacobian are those of the
-    wrong lever arm. The time offset: at the configuration (1 A run). The gyro scale factor:
-    Gauss-Newton from A's own estimate (one forward pass with scale-factor states) only when
-    that is significant (the secant along it: 1 A run); else the library's signature. The
-    warm-up: Gauss-Newton from A's pass with its dynamics where it explains A's rejections
-    (:func:`_warmup_start`: 3 A runs), else at the configuration (2 A runs). The usual flight
-    pays the scale-factor pass (docs/diagnose.md, "Power")."""
-    lever_b_m, p_lever = _lever_arm_and_start(log, nav, config, lever_estimate)
-    gn = p_lever is not None and bool(
-        np.linalg.norm(p_lever) > REFINE_FRACTION * effect_by_id("lever_arm").plausible_si)
-    starts = {"lever_arm": p_lever if gn else None,
-              "gyro_scale_factor": _scale_factor_start(log, config, lever_b_m),
-              "accel_bias_change": _warmup_start(log, nav, config, lever_b_m)}
+    The re-runs are made on ``rerun`` = (log, run) of :func:`rerun_base` (the flight's own
+    when None); ``starts``: :func:`signature_starts`. An effect with a start: Gauss-Newton
+    from it (the lever arm: 1 + 4 A runs; the scale factor: the secant along it, 1 A run;
+    the warm-up: 3 A runs); else at the configuration (the lever arm and the time offset: 1
+    A run each, the warm-up 2); the gyro scale factor without a start keeps the library's
+    signature."""
     log_r, run_r = (log, calib_run) if rerun is None else rerun
     sigs = rerun_signatures(log_r, nav, run_r, config,
                             [e for e in PIPELINE_RERUN if e != "gyro_scale_factor"
@@ -218,32 +231,73 @@ def _null_without_warmup(log: mcap_reader.FlightLog | None, nav: nav_filter.Filt
             "; made on the log with A's warm-up estimate removed")
 
 
+@dataclass(frozen=True)
+class DiagnosisStart:
+    """The diagnosis's A re-runs that do not need the null (:func:`diagnosis_reruns`)."""
+
+    log_r: Any
+    """The log the re-runs are made on (:func:`rerun_base`: summed down, or the flight's)."""
+    run_r: CalibrationRun
+    """The calibrated run with its B minus A on ``log_r``."""
+    navigate_a: Any
+    """A as configured for the re-runs (with ``log_r``'s gains when it has them)."""
+    sigs: dict[str, list[np.ndarray]] | None
+    """The first re-run signatures (None without the log and A)."""
+    at: dict[str, np.ndarray]
+    """The estimates the Gauss-Newton signatures were made at."""
+
+
+def diagnosis_reruns(calib_run: CalibrationRun, config: PipelineConfig, *,
+                     log: mcap_reader.FlightLog | None = None,
+                     nav: nav_filter.FilterResult | None = None,
+                     lever_estimate: nav_filter.LeverArmEstimate | None = None,
+                     threads: int = 1,
+                     starts: dict[str, np.ndarray | None] | None = None) -> DiagnosisStart:
+    """The diagnosis's base for its re-runs (:func:`rerun_base`) and its first re-run
+    signatures (:func:`_rerun_signatures_at_start`): the A passes that need the calibration
+    and A's lever-arm estimate but not the null realisations, so that a run on two threads
+    makes them while the null is made (:mod:`pospp.pipeline`). ``starts``:
+    :func:`signature_starts` with the same arguments (None: made here)."""
+    log_r, run_r, gains = rerun_base(log, nav, calib_run, config)  # what re-runs are made on
+    a_as_configured = partial(navigate, config=config, options=rerun_options(config),
+                              replay=gains)  # the re-runs
+    sigs: dict[str, list[np.ndarray]] | None = None
+    at: dict[str, np.ndarray] = {}
+    if log is not None and nav is not None:
+        # lever arm, gyro scale factor, warm-up: Gauss-Newton from A's own estimates
+        if starts is None:
+            starts = signature_starts(log, nav, config, lever_estimate)
+        sigs, at = _rerun_signatures_at_start(log, nav, calib_run, config, starts,
+                                              a_as_configured, threads, (log_r, run_r))
+    return DiagnosisStart(log_r, run_r, a_as_configured, sigs, at)
+
+
 def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution_a: SolutionA,
              config: PipelineConfig, *, log: mcap_reader.FlightLog | None = None,
              nav: nav_filter.FilterResult | None = None,
              null_dv: list[list[np.ndarray]] | None = None,
              lever_estimate: nav_filter.LeverArmEstimate | None = None,
-             threads: int = 1) -> Diagnosis:
+             threads: int = 1, start: DiagnosisStart | None = None) -> Diagnosis:
     """Model-discrepancy workflow on the calibrated run's B-minus-A curves (pospp.diagnose).
 
     Every test's null distribution is calibrated on ``null_dv`` (:func:`null_realisations`)
     when given, else on ``[pairs] null_realisations`` realisations made here when the log and
     A's result are given (seed 0: a run is reproducible). ``threads``: A re-runs made at once
-    (:func:`pospp.threads.map_in_threads`; the result does not depend on it).
+    (:func:`pospp.threads.map_in_threads`; the result does not depend on it). ``start``: the
+    re-runs :func:`diagnosis_reruns` made with the same arguments; None: made here.
     """
     n_null = config.pairs.null_realisations
     if null_dv is None and n_null > 0 and log is not None and nav is not None:
         null_dv = null_realisations(log, nav, calib_run, config, n_null, threads=threads)
     replays = [calib_run.replays[i] for i in sorted(calib_run.replays)]
-    sigs: dict[str, list[np.ndarray]] | None = None
-    at: dict[str, np.ndarray] = {}
-    log_r, run_r, gains = rerun_base(log, nav, calib_run, config)  # what re-runs are made on
-    a_as_configured = partial(navigate, config=config, options=rerun_options(config),
-                              replay=gains)  # the re-runs
-    if log is not None and nav is not None:
-        # lever arm, gyro scale factor, warm-up: Gauss-Newton from A's own estimates
-        sigs, at = _rerun_signatures_at_start(log, nav, calib_run, config, lever_estimate,
-                                              a_as_configured, threads, (log_r, run_r))
+    if start is None:
+        start = diagnosis_reruns(calib_run, config, log=log, nav=nav,
+                                 lever_estimate=lever_estimate, threads=threads)
+    # the re-runs read only the legs and replays: the run given (its null covariance) with
+    # the re-run base's replays
+    log_r, a_as_configured = start.log_r, start.navigate_a
+    run_r = replace(calib_run, replays=start.run_r.replays)
+    sigs, at = start.sigs, dict(start.at)
     null_log, null_nav, null_dv, warm_note = _null_without_warmup(
         log, nav, at.get("accel_bias_change"), calib_run, config, null_dv, threads)
     # B's residuals carry the gyro angle random walk, correlated along each leg: weighting them

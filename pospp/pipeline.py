@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -44,7 +45,7 @@ from pospp.flight_stages import (  # the stage functions, importable from here a
     imu_increments,
     imu_tuning,  # noqa: F401  (re-exported: compare_sim and the tests call pipeline.imu_tuning)
     ingest,
-    lever_arm_estimate,
+    lever_arm_estimate,  # noqa: F401  (re-exported: the power benchmark calls it)
     navigate,
     null_realisations,
     sensor_to_body_dcm,
@@ -55,6 +56,7 @@ from pospp.io.files import sha256_file
 from pospp.memory import release_free_heap
 from pospp.nav import events as sensor_events
 from pospp.nav import filter as nav_filter
+from pospp.passes_ahead import lever_re_estimate, passes_ahead, passes_on_a
 from pospp.qc.checks import comparison_text
 from pospp.qc.stage import QualityReport, qc_columns, quality_checks, worst_status
 from pospp.report import figures
@@ -174,8 +176,11 @@ def process_flight(
     force : bool
         Replace an earlier pospp run in ``out_dir``.
     threads : int, optional
-        A re-runs (null realisations, the diagnosis's) made at once; the cores this process
-        may use when None (:func:`pospp.threads.available_cores`). The outputs do not depend on it.
+        A re-runs (null realisations, the diagnosis's) made at once; above 1, A's passes that
+        do not need the null (lever arm, scale factor, compensated A, the diagnosis's first
+        re-runs) also run on a second lane alongside the calibration and the null
+        (:mod:`pospp.passes_ahead`). The cores this process may use when
+        None (:func:`pospp.threads.available_cores`). The outputs do not depend on it.
 
     Returns
     -------
@@ -237,7 +242,21 @@ def _write_failed(mcap_path: str | Path, sha: str, config: PipelineConfig, out: 
 
 def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
                 book: _Progress, threads: int) -> RunOutcome:
-    """Every stage of :func:`process_flight`, writing into the (staging) folder ``out``."""
+    """Every stage of :func:`process_flight`, writing into the (staging) folder ``out``; with
+    more than one thread, with a second lane (one worker thread) for the A passes that run
+    alongside the calibration and the null realisations (:mod:`pospp.passes_ahead`)."""
+    if threads <= 1:
+        return _stages(mcap_path, sha, config, out, book, threads, None)
+    lane = ThreadPoolExecutor(max_workers=1, thread_name_prefix="pospp-lane")
+    try:
+        return _stages(mcap_path, sha, config, out, book, threads, lane)
+    finally:  # a failed run: the pass running ends, the ones not started never do
+        lane.shutdown(wait=True, cancel_futures=True)
+
+
+def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
+            book: _Progress, threads: int, lane: ThreadPoolExecutor | None) -> RunOutcome:
+    """:func:`_run_stages` with its second lane (None: one thread)."""
     meta = {
         "input_file": run_folder.display_path(mcap_path),
         "input_sha256": sha,
@@ -294,6 +313,8 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
     if nav.smoothed is not None:
         solutions["smoothed"] = nav.smoothed
 
+    ahead = passes_on_a(log, nav, config, lane)
+
     # --- calibration: legs, B, pairs, least squares -------------------------------------------
     book.stage("calibrate")
     imu = imu_increments(log)
@@ -303,6 +324,8 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
     if not calib_run.calibrated:
         book.note("warning", "calibrate", calib_run.reason)
     status = "ok" if calib_run.calibrated else "partial"
+
+    ahead = passes_ahead(ahead, log, nav, calib_run, config, lane, threads)
 
     # --- null realisations of B minus A: the calibration's sigmas and the diagnosis's null ----
     null_dv = None
@@ -314,22 +337,21 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
 
     # --- compensation: A re-run with the calibrated gyro bias ---------------------------------
     book.stage("compensate")
-    if calib_run.calibrated and config.compensation.rerun_filter:
-        comp = navigate(log, config,
-                        gyro_bias_correction_b_radps=calib_run.gyro_bias_b_radps)
+    if ahead.compensated is not None:
+        comp = ahead.compensated.take()
         solutions["compensated"] = comp.smoothed if comp.smoothed is not None else comp.forward
         del comp  # the rest of the second A pass (forward, biases, innovations) is not used
 
     # --- diagnosis -----------------------------------------------------------------------------
     book.stage("diagnose")
     # A's lever-arm estimate, made once: the diagnosis starts from it and QC checks it
-    lever = _lever_re_estimate(log, nav, config)
+    lever = ahead.lever.result()
     diagnosis = None
-    if config.outputs.diagnose and calib_run.calibrated:
+    if ahead.diagnosis is not None:
         try:
             diagnosis = diagnose_calibration(calib_run, imu, solution_a, config, log=log, nav=nav,
                                              null_dv=null_dv, lever_estimate=lever[0],
-                                             threads=threads)
+                                             threads=threads, start=ahead.diagnosis.take())
             book.note("info", "diagnose", f"p-values calibrated on {diagnosis.null_model}")
             if diagnosis.location is not None:  # "unexplained": where the gap sits (issue 12)
                 book.note("warning", "diagnose", diagnosis.location.text)
@@ -386,19 +408,6 @@ def _event_poses(log: mcap_reader.FlightLog, solution: nav_filter.NavSolution, n
     return outputs.events_table(poses, log.events_ns, name)
 
 
-def _lever_re_estimate(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
-                       config: PipelineConfig
-                       ) -> tuple[nav_filter.LeverArmEstimate | None, str | None]:
-    """(A's lever-arm estimate, None) by :func:`lever_arm_estimate`, or (None, why it failed);
-    (None, None) when A estimates the lever arm itself."""
-    if config.gnss.estimate_lever_arm:
-        return None, None
-    try:
-        return lever_arm_estimate(log, nav, config), None
-    except ValueError as exc:
-        return None, str(exc)
-
-
 def quality_control(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                     calib_run: CalibrationRun | None, config: PipelineConfig,
                     book: _Progress | None = None, *,
@@ -409,9 +418,9 @@ def quality_control(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     Unless A already estimated it, the lever arm is estimated by one more forward pass of A
     with lever-arm states (:func:`lever_arm_estimate`; about a third of A's time). Failed
     checks are noted in ``book`` (stage "qc"). ``lever``: that estimate and why it failed, when
-    already made (:func:`_lever_re_estimate`); None: made here.
+    already made (:func:`pospp.passes_ahead.lever_re_estimate`); None: made here.
     """
-    estimate, failure = _lever_re_estimate(log, nav, config) if lever is None else lever
+    estimate, failure = lever_re_estimate(log, nav, config) if lever is None else lever
     if failure is not None and book is not None:
         book.note("warning", "qc", f"lever arm not re-estimated: {failure}")
     cin = config.input

@@ -13,6 +13,7 @@ import os
 from collections import deque
 from collections.abc import Callable, Iterable
 from concurrent.futures import Future, ThreadPoolExecutor
+from functools import partial
 from typing import Any
 
 
@@ -79,3 +80,37 @@ def first_kept(fn: Callable[[Any], Any], items: Iterable[Any], n: int, threads: 
             if r is not None:
                 out.append(r)
     return out
+
+
+class Later:
+    """``fn(*args, **kwargs)``, made on ``pool``'s thread when a pool is given (from now on,
+    alongside the caller), else in the caller's thread when :meth:`result` is first asked
+    for: the same value either way, and without a pool the same order of work as a plain
+    call where the result is used. An exception raised by ``fn`` is raised by
+    :meth:`result`."""
+
+    def __init__(self, pool: ThreadPoolExecutor | None, fn: Callable[..., Any], *args: Any,
+                 **kwargs: Any) -> None:
+        self._call: Callable[[], Any] | None = partial(fn, *args, **kwargs)
+        self._future = pool.submit(self._call) if pool is not None else None
+        self._value: Any = None
+        self._taken = False
+
+    def result(self) -> Any:
+        """The value (made now when there is no pool and it was not made before)."""
+        if self._taken:
+            raise RuntimeError("Later.result: the value was taken")
+        if self._future is not None:
+            return self._future.result()
+        if self._call is not None:
+            self._value, self._call = self._call(), None
+        return self._value
+
+    def take(self) -> Any:
+        """The value, which this object then lets go of (its only user has it: its memory is
+        freed with that user's last reference); asking again raises RuntimeError."""
+        if self._taken:
+            raise RuntimeError("Later.take: the value was already taken")
+        value = self.result()
+        self._future, self._call, self._value, self._taken = None, None, None, True
+        return value

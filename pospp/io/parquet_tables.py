@@ -180,7 +180,9 @@ TABLES: dict[str, list[Column]] = {
                               ("null_realisations", " (A re-run on the noise draws that "
                                                     "give the calibration its sigmas and the "
                                                     "diagnosis its null)"),
-                              ("compensate", ""), ("diagnose", ""),
+                              ("compensate", " (on 2+ threads: the wait for its A pass, "
+                                             "made alongside the null)"),
+                              ("diagnose", " (on 2+ threads: likewise its first A passes)"),
                               ("qc", " (quality checks)"),
                               ("write", " (tables and trajectory MCAP)"),
                               ("report", " (report.html)"))],

@@ -113,7 +113,8 @@ def test_trajectory_mcap_reads_back(sample_run):
 
 @pytest.mark.slow
 def test_outputs_are_deterministic(sample_run, tmp_path):
-    # and independent of the threads making the A re-runs (sample_run made them on 2)
+    # and independent of the threads making the A re-runs and of the second lane that makes
+    # A's other passes alongside the calibration and the null (sample_run: 2 threads)
     again = tmp_path / "again"
     code, text = _cli("run", str(SAMPLE), "-p", str(SAMPLE_PIPELINE), "-o", str(again),
                       "--threads", "1")

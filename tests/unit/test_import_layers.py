@@ -31,6 +31,7 @@ LAYERS: tuple[frozenset[str], ...] = (
     frozenset({"config"}),
     frozenset({"flight_stages"}),
     frozenset({"diagnosis_stage"}),
+    frozenset({"passes_ahead"}),
     frozenset({"pipeline", "convert"}),
     frozenset({"batch", "compare_sim"}),
     frozenset({"cli"}),

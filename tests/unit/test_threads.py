@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 import pytest
 
-from pospp.threads import available_cores, first_kept, map_in_threads
+from pospp.threads import Later, available_cores, first_kept, map_in_threads
 
 
 def test_results_in_the_items_order_whatever_finishes_first():
@@ -85,3 +86,39 @@ def test_first_kept_takes_the_same_items_at_any_thread_count():
 
     with pytest.raises(ValueError, match="three"):
         first_kept(fail_on_three, iter(range(10)), 8, 2)
+
+
+def test_later_without_a_pool_is_made_where_it_is_used_once():
+    calls: list[int] = []
+
+    def make(x: int, *, y: int) -> int:
+        calls.append(x)
+        return x + y
+
+    later = Later(None, make, 2, y=3)
+    assert calls == []  # nothing made until asked for (a stage that does not use it)
+    assert later.result() == 5 and later.result() == 5 and calls == [2]
+    assert later.take() == 5
+    with pytest.raises(RuntimeError, match="taken"):
+        later.result()
+    with pytest.raises(RuntimeError, match="taken"):
+        later.take()
+
+
+def test_later_with_a_pool_runs_alongside_and_raises_where_used():
+    started = threading.Event()
+
+    def make() -> str:
+        started.set()
+        return threading.current_thread().name
+
+    def fail() -> None:
+        raise ValueError("the pass failed")
+
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="lane") as pool:
+        later, bad = Later(pool, make), Later(pool, fail)
+        assert started.wait(5.0)  # started without being asked for
+        assert later.take().startswith("lane")
+        with pytest.raises(ValueError, match="the pass failed"):
+            bad.result()
+    assert Later(None, lambda: None).take() is None  # None is a value, taken once
