@@ -431,7 +431,8 @@ def fit_calibration(
         realisations' refits, :func:`pospp.calib.stage.with_null_covariance`: 1.9 -> 0.4 s
         on the 1.5 h flight; the same likelihood to rounding). It also keeps each leg's
         :func:`noise_basis` and drift operator (by leg id; neither reads B minus A, only
-        the leg's samples, sigmas and transition), where ``bases`` / ``gm_ops`` lack them.
+        the leg's samples, sigmas and transition), where ``bases`` / ``gm_ops`` lack them
+        (with or without the drift: the diagnosis's null whitening refits share one too).
 
     Returns
     -------
@@ -471,10 +472,14 @@ def fit_calibration(
             gyro_gm_sigma_radps, float(gyro_gm_tau_s), gm_bin_s, gm_prior, noise_cache)
     else:
         blocks, rows_all = [], []
+        memo = {} if noise_cache is None else noise_cache  # the refits share the legs' grids
         for i, rep in enumerate(legs):
             basis = None if bases is None else bases.get(rep.leg.leg_id)
             if basis is None:
-                basis = noise_basis(rep, noise_step_s=noise_step_s)
+                basis = memo.get(("basis", rep.leg.leg_id, noise_step_s))
+            if basis is None:
+                basis = memo[("basis", rep.leg.leg_id, noise_step_s)] = noise_basis(
+                    rep, noise_step_s=noise_step_s)
             r = basis.rows + edges[i]
             rows_all.append(r)
             blocks.append(_LegNoise(basis, h[r], z[r]))

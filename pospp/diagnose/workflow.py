@@ -420,9 +420,11 @@ def diagnose_replays(
                 raise ValueError("null_dv: expected one array per leg with the replays' rows")
         whitening = None
         if noise == "gyro_rw" and rewhiten_null:
+            shared: dict = {}  # the realisations' legs are the flight's: bases made once
+
             def whitening(reps: tuple[LegReplay, ...]) -> tuple[float, float]:
                 c = fit_calibration(reps, "body", noise="gyro_rw",
-                              gyro_arw_radpsqrts=gyro_arw_radpsqrts)
+                              gyro_arw_radpsqrts=gyro_arw_radpsqrts, noise_cache=shared)
                 return c.variance_factor, c.gyro_arw_radpsqrts
         null = _NullCalibration(prob, null_dv, whitening)
     suffix = "_null_calibrated" if null is not None else ""

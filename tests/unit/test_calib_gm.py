@@ -144,3 +144,20 @@ def test_shared_eigendecomposition_gives_the_cholesky_fit():
         np.testing.assert_allclose(shared.variance_factor, plain.variance_factor, rtol=1e-6)
         np.testing.assert_allclose(shared.x, plain.x, rtol=1e-6, atol=1e-14)
         np.testing.assert_allclose(shared.cov, plain.cov, rtol=1e-5)
+
+
+def test_shared_noise_bases_without_the_drift_give_the_same_fit():
+    # the diagnosis's null whitening (gyro_rw, ARW given, no drift) shares a noise_cache over
+    # its realisations: each leg's noise basis made once, the fits those without it
+    legs = (_leg(1, 0.0, _bias), _leg(2, 180.0, _bias))
+    rng = np.random.default_rng(8)
+    cache: dict = {}
+    for _ in range(2):
+        reps = tuple(replace(r, dv_n_mps=r.dv_n_mps + rng.normal(0.0, 0.01, r.dv_n_mps.shape))
+                     for r in legs)
+        kw = dict(noise="gyro_rw", gyro_arw_radpsqrts=np.radians(0.01) / 60.0)
+        plain = fit_calibration(reps, "body", **kw)
+        shared = fit_calibration(reps, "body", noise_cache=cache, **kw)
+        assert sorted(k[:2] for k in cache) == [("basis", 1), ("basis", 2)]
+        assert shared.variance_factor == plain.variance_factor
+        np.testing.assert_array_equal(shared.x, plain.x)
