@@ -164,7 +164,7 @@ def signature_starts(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     """A's own first estimates the diagnosis's Gauss-Newton signatures start from (None: the
     signature at the configuration): effect id -> estimate. They need A and its lever-arm
     estimate only, not the calibration, so a run on two threads makes them while it calibrates
-    (:mod:`pospp.pipeline`).
+    (:mod:`pospp.passes_ahead`).
 
     The lever arm: from A's own estimate of it (lever-arm states) when it is far enough from
     the configured value (:data:`pospp.diagnose.rerun.REFINE_FRACTION`), where A's gate and
@@ -256,7 +256,7 @@ def diagnosis_reruns(calib_run: CalibrationRun, config: PipelineConfig, *,
     """The diagnosis's base for its re-runs (:func:`rerun_base`) and its first re-run
     signatures (:func:`_rerun_signatures_at_start`): the A passes that need the calibration
     and A's lever-arm estimate but not the null realisations, so that a run on two threads
-    makes them while the null is made (:mod:`pospp.pipeline`). ``starts``:
+    makes them while the null is made (:mod:`pospp.passes_ahead`). ``starts``:
     :func:`signature_starts` with the same arguments (None: made here)."""
     log_r, run_r, gains = rerun_base(log, nav, calib_run, config)  # what re-runs are made on
     a_as_configured = partial(navigate, config=config, options=rerun_options(config),
