@@ -315,3 +315,64 @@ def test_batch_on_a_dask_scheduler(sample_log, tmp_path):
     assert [r.status for r in rows] == ["partial", "partial"]
     man = parquet_tables.read_table(tmp_path / "out" / "manifest.parquet")
     assert sorted(man.file) == sorted(str(f) for f in files)
+
+
+# ------------------------------------------------------------------ the second lane's failures
+
+
+@pytest.fixture(scope="module")
+def lane_config():
+    """The sample pipeline, three null realisations, no report or trajectory MCAP."""
+    from pospp.config import load_config
+
+    cfg = load_config(SAMPLE_PIPELINE)
+    return replace(cfg, pairs=replace(cfg.pairs, null_realisations=3),
+                   outputs=replace(cfg.outputs, report=False, mcap=False))
+
+
+def _no_lane_thread_left() -> bool:
+    import threading
+
+    return not any(t.name.startswith("pospp-lane") for t in threading.enumerate())
+
+
+@pytest.mark.slow
+def test_a_failed_pass_on_the_second_lane_fails_the_run_as_in_its_stage(lane_config, tmp_path,
+                                                                         monkeypatch):
+    # two threads: the compensated A runs on the lane alongside the null; an unexpected
+    # error there must fail the run at its stage (a failed run folder saying why) and leave
+    # no thread behind, as it does on one thread where the pass runs in its stage
+    from pospp import passes_ahead, pipeline
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("injected: the compensated pass broke")
+
+    monkeypatch.setattr(passes_ahead, "navigate", broken)
+    for threads in (2, 1):
+        out = tmp_path / f"t{threads}"
+        with pytest.raises(RuntimeError, match="injected"):
+            pipeline.process_flight(SAMPLE, lane_config, out, threads=threads)
+        assert _no_lane_thread_left()
+        summary = parquet_tables.read_table(out / "summary.parquet").iloc[0]
+        msgs = parquet_tables.read_table(out / "messages.parquet")
+        assert summary.status == "failed"
+        assert msgs.text.str.contains("injected: the compensated pass broke").any()
+
+
+@pytest.mark.slow
+def test_a_failed_diagnosis_re_run_on_the_lane_is_a_partial_run(lane_config, tmp_path,
+                                                                 monkeypatch):
+    # the diagnosis's first re-runs on the lane: their ValueError is the stage's "no
+    # diagnosis" (status partial), on two threads as on one
+    from pospp import passes_ahead, pipeline
+
+    def broken(*args, **kwargs):
+        raise ValueError("injected: A failed on the re-run base")
+
+    monkeypatch.setattr(passes_ahead, "diagnosis_reruns", broken)
+    for threads in (2, 1):
+        outcome = pipeline.process_flight(SAMPLE, lane_config, tmp_path / f"t{threads}",
+                                          threads=threads)
+        assert outcome.status == "partial" and _no_lane_thread_left()
+        assert outcome.messages.text.str.contains(
+            "no diagnosis: injected: A failed on the re-run base").any()
