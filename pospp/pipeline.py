@@ -53,7 +53,7 @@ from pospp.flight_stages import (  # the stage functions, importable from here a
 from pospp.io import mcap_reader, parquet_tables, report_files, run_folder, trajectory_mcap
 from pospp.io.errors import IngestError
 from pospp.io.files import sha256_file
-from pospp.memory import release_free_heap
+from pospp.memory import release_free_heap, share_one_heap
 from pospp.nav import events as sensor_events
 from pospp.nav import filter as nav_filter
 from pospp.passes_ahead import lever_re_estimate, passes_ahead, passes_on_a
@@ -247,6 +247,7 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
     alongside the calibration and the null realisations (:mod:`pospp.passes_ahead`)."""
     if threads <= 1:
         return _stages(mcap_path, sha, config, out, book, threads, None)
+    share_one_heap()  # the threads' passes in one heap, not one each (pospp.memory)
     lane = ThreadPoolExecutor(max_workers=1, thread_name_prefix="pospp-lane")
     try:
         return _stages(mcap_path, sha, config, out, book, threads, lane)
@@ -535,6 +536,8 @@ def diagnose_run(run_dir: str | Path, *, progress: ProgressFn | None = None) -> 
         raise ValueError(f"{run}: no calibration to diagnose: {calib_run.reason}")
     book.stage("null_realisations")
     threads = available_cores()
+    if threads > 1:
+        share_one_heap()  # as in a run (pospp.memory)
     null_dv = (null_realisations(log, nav, calib_run, config, config.pairs.null_realisations,
                                  threads=threads)
                if config.pairs.null_realisations > 0 else None)

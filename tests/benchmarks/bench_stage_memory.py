@@ -8,7 +8,8 @@ Default MCAP: the 1.5 h, 200 Hz flight of bench_pipeline.py (/tmp/pospp_bench, m
 ``python tests/benchmarks/bench_pipeline.py --minutes 90`` once). At each stage's end it prints
 the process's resident set (VmRSS), its peak so far (VmHWM) and, with ``--trace``, what
 tracemalloc saw allocated then and at its peak within the stage (numpy's arrays included;
-tracing slows the run). One thread, so that one A pass is in flight at a time.
+tracing slows the run). One thread by default, so that one A pass is in flight at a time;
+``--threads 2`` shows what the second lane and the null's workers hold at once.
 Results: docs/benchmarks.md, "Speed and memory, fifth round".
 """
 
@@ -37,6 +38,9 @@ def main() -> None:
     ap.add_argument("mcap", nargs="?", default="/tmp/pospp_bench/flight_90min_200hz.mcap")
     ap.add_argument("--pipeline", default=str(REPO / "pipelines" / "flight.toml"))
     ap.add_argument("--trace", action="store_true", help="also tracemalloc (slower)")
+    ap.add_argument("--threads", type=int, default=1,
+                    help="the run's threads (above 1: the second lane and the null's workers "
+                         "hold their passes at once)")
     a = ap.parse_args()
     from pospp import pipeline
     from pospp.config import load_config
@@ -62,7 +66,7 @@ def main() -> None:
 
     with tempfile.TemporaryDirectory() as out:
         pipeline.process_flight(a.mcap, load_config(a.pipeline), out, progress=progress,
-                                force=True, threads=1)
+                                force=True, threads=a.threads)
     progress("done", 1.0)
 
 
