@@ -13,8 +13,9 @@ Threads: glibc gives each new thread that allocates a heap ("arena") of its own,
 per core, and what one thread frees stays in its arena for that thread. A run on two
 threads (the null's workers, the second lane: :mod:`pospp.passes_ahead`) then held the
 memory of each thread's largest pass at once in separate heaps: 1051-1065 MiB peak on the
-1.5 h flight, against 894 MiB with one heap for all threads (``MALLOC_ARENA_MAX=1``) at the
-same wall time (12.6 s against 11.9-13.0 s; docs/benchmarks.md, eighth round).
+1.5 h flight, against 930-947 MiB with one heap for all threads (``MALLOC_ARENA_MAX=1``, or
+this module's call) at the same wall time (12.0-13.8 s against 11.9-13.0 s; docs/benchmarks.md,
+eighth round).
 :func:`share_one_heap` sets that limit from inside the process.
 """
 
