@@ -10,6 +10,7 @@ kernels), the first-order Gauss-Markov body drift (:func:`gm_noise_operator`,
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, cast
 
@@ -287,6 +288,22 @@ def noise_basis(rep: LegReplay, *, noise_step_s: float = 10.0) -> NoiseBasis:
     kp = gyro_noise_covariance(rep, smp) / np.outer(sq, sq)
     lam, u = np.linalg.eigh(0.5 * (kp + kp.T))
     return NoiseBasis(smp, rows, sq, u, np.clip(lam, 0.0, None))
+
+
+def leg_noise_basis(rep: LegReplay, noise_step_s: float, bases: Mapping | None = None,
+                    memo: dict | None = None) -> NoiseBasis:
+    """The leg's :func:`noise_basis`: ``bases[leg id]`` when there, else ``memo``'s (a fit's
+    ``noise_cache``, shared by refits of the same legs: the basis reads the leg's samples,
+    sigmas and transition, not B minus A), else made now (and kept in ``memo``)."""
+    lid = rep.leg.leg_id
+    basis = None if bases is None else bases.get(lid)
+    if basis is None and memo is not None:
+        basis = memo.get(("basis", lid, noise_step_s))
+    if basis is None:
+        basis = noise_basis(rep, noise_step_s=noise_step_s)
+        if memo is not None:
+            memo[("basis", lid, noise_step_s)] = basis
+    return basis
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,7 @@ from pospp.calib.noise_model import (
     NoiseBasis,
     _gm_covariance,
     gm_noise_operator,
-    noise_basis,
+    leg_noise_basis,
 )
 
 GM_REJECT_DNLL = 0.5 * 5.991
@@ -360,12 +360,7 @@ def _calibrate_gm(legs, h, z, edges, noise_step_s, bases, gm_ops, arw_given, sig
     memo = {} if noise_cache is None else noise_cache  # the refits share the legs' grids
     for i, rep in enumerate(legs):
         lid = rep.leg.leg_id
-        basis = None if bases is None else bases.get(lid)
-        if basis is None:
-            basis = memo.get(("basis", lid, noise_step_s))
-        if basis is None:
-            basis = memo[("basis", lid, noise_step_s)] = noise_basis(
-                rep, noise_step_s=noise_step_s)
+        basis = leg_noise_basis(rep, noise_step_s, bases, memo)
         op = None if gm_ops is None else gm_ops.get(lid)
         if op is None:
             op = memo.get(("gm_op", lid, noise_step_s, bin_s))

@@ -75,7 +75,7 @@ from pospp.calib.noise_model import (
     accel_noise_covariance,
     gm_noise_operator,
     gyro_noise_covariance,
-    noise_basis,
+    leg_noise_basis,
     reference_error_covariance,
 )
 from pospp.calib.reml import (
@@ -472,14 +472,8 @@ def fit_calibration(
             gyro_gm_sigma_radps, float(gyro_gm_tau_s), gm_bin_s, gm_prior, noise_cache)
     else:
         blocks, rows_all = [], []
-        memo = {} if noise_cache is None else noise_cache  # the refits share the legs' grids
         for i, rep in enumerate(legs):
-            basis = None if bases is None else bases.get(rep.leg.leg_id)
-            if basis is None:
-                basis = memo.get(("basis", rep.leg.leg_id, noise_step_s))
-            if basis is None:
-                basis = memo[("basis", rep.leg.leg_id, noise_step_s)] = noise_basis(
-                    rep, noise_step_s=noise_step_s)
+            basis = leg_noise_basis(rep, noise_step_s, bases, noise_cache)
             r = basis.rows + edges[i]
             rows_all.append(r)
             blocks.append(_LegNoise(basis, h[r], z[r]))
