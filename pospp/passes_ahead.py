@@ -1,15 +1,17 @@
 """A's passes of one flight that need neither the null realisations nor each other's stage,
-made ahead on a second lane (issue 18).
+and the QC checks, made ahead on a second lane (issue 18).
 
 With more than one thread, :mod:`pospp.pipeline` gives a run a second lane (one worker
 thread) and puts on it, in this order: A's lever-arm pass and the diagnosis's signature
 starts (:func:`passes_on_a`: they need A only, so they run alongside the calibration), then
 the compensated A and the diagnosis's first re-runs (:func:`passes_ahead`: they need the
-calibration, not the null, so they run alongside the null realisations). Measured before
-the lane: a run on two threads kept 1.2 cores busy. Each pass is a
+calibration, not the null, so they run alongside the null realisations), then the QC checks
+(:func:`checks_ahead`: they need the calibration with its null covariance and the lever-arm
+estimate, not the diagnosis, so they run alongside the diagnosis's tests). Measured before
+the lane: a run on two threads kept 1.2 cores busy. Each is a
 :class:`pospp.threads.Later`: with no lane it is made where its stage uses it, as a plain
 call there would be (and not at all when no stage does), so a run on one thread does the
-same work in the same order as before. The values do not depend on the lane: none of these
+same work in the same order as before. The values do not depend on the lane: none of the
 passes reads the null (the compensation's gyro bias and the re-runs' legs and replays are
 the calibration's, which the null covariance leaves as they are), and the tables of a run on
 one and on two threads are the same (tests/e2e).
@@ -23,9 +25,10 @@ from dataclasses import dataclass, replace
 from pospp.calib.stage import CalibrationRun
 from pospp.config import PipelineConfig
 from pospp.diagnosis_stage import diagnosis_reruns, signature_starts
-from pospp.flight_stages import lever_arm_estimate, navigate
+from pospp.flight_stages import lever_arm_estimate, navigate, sensor_to_body_dcm
 from pospp.io import mcap_reader
 from pospp.nav import filter as nav_filter
+from pospp.qc.stage import quality_checks
 from pospp.threads import Later
 
 
@@ -41,6 +44,8 @@ class Ahead:
     """A with the calibrated gyro bias removed (None: no calibration or no re-run)."""
     diagnosis: Later | None = None
     """:func:`pospp.diagnosis_stage.diagnosis_reruns` (None: no calibration or diagnosis)."""
+    checks: Later | None = None
+    """:func:`pospp.qc.stage.quality_checks` on the final calibration (:func:`checks_ahead`)."""
 
 
 def lever_re_estimate(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
@@ -84,3 +89,18 @@ def passes_ahead(ahead: Ahead, log: mcap_reader.FlightLog, nav: nav_filter.Filte
         calib_run, config, log=log, nav=nav, lever_estimate=ahead.lever.result()[0],
         threads=1 if lane is not None else threads, starts=starts.result()))
     return replace(ahead, compensated=comp, diagnosis=diag)
+
+
+def checks_ahead(ahead: Ahead, log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
+                 calib_run: CalibrationRun | None, config: PipelineConfig,
+                 lane: ThreadPoolExecutor | None) -> Ahead:
+    """``ahead`` with the QC stage's checks (:func:`pospp.qc.stage.quality_checks`, pure: the
+    stage notes their failures), on ``lane`` after the passes already there, alongside the
+    diagnosis's tests; ``calib_run``: the calibration as the run reports it (its null
+    covariance in). They need A's lever-arm estimate, not the diagnosis."""
+    cin = config.input
+    return replace(ahead, checks=Later(
+        lane, lambda: quality_checks(log, nav, calib_run, config,
+                                     lever_estimate=ahead.lever.result()[0],
+                                     c_bs=sensor_to_body_dcm(cin.sensor_frame,
+                                                             cin.mounting_rpy_deg))))

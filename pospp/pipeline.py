@@ -56,7 +56,7 @@ from pospp.io.files import sha256_file
 from pospp.memory import release_free_heap, share_one_heap
 from pospp.nav import events as sensor_events
 from pospp.nav import filter as nav_filter
-from pospp.passes_ahead import lever_re_estimate, passes_ahead, passes_on_a
+from pospp.passes_ahead import checks_ahead, lever_re_estimate, passes_ahead, passes_on_a
 from pospp.qc.checks import comparison_text
 from pospp.qc.stage import QualityReport, qc_columns, quality_checks, worst_status
 from pospp.report import figures
@@ -336,6 +336,8 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
                                     threads=threads)
         calib_run = with_null_covariance(calib_run, null_dv)
 
+    ahead = checks_ahead(ahead, log, nav, calib_run, config, lane)
+
     # --- compensation: A re-run with the calibrated gyro bias ---------------------------------
     book.stage("compensate")
     if ahead.compensated is not None:
@@ -362,7 +364,8 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
 
     # --- quality checks: the run is ok only when every check passes (docs/qc.md) -------------
     book.stage("qc")
-    report = quality_control(log, nav, calib_run, config, book, lever=lever)
+    report = quality_control(log, nav, calib_run, config, book, lever=lever,
+                             checks=ahead.checks.take() if ahead.checks is not None else None)
     status = worst_status(status, report.status)
 
     # --- outputs -------------------------------------------------------------------------------
@@ -412,21 +415,24 @@ def _event_poses(log: mcap_reader.FlightLog, solution: nav_filter.NavSolution, n
 def quality_control(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                     calib_run: CalibrationRun | None, config: PipelineConfig,
                     book: _Progress | None = None, *,
-                    lever: tuple[nav_filter.LeverArmEstimate | None, str | None] | None = None
-                    ) -> QualityReport:
+                    lever: tuple[nav_filter.LeverArmEstimate | None, str | None] | None = None,
+                    checks: QualityReport | None = None) -> QualityReport:
     """The QC stage (pospp.qc): every check, with the lever arm re-estimated by A.
 
     Unless A already estimated it, the lever arm is estimated by one more forward pass of A
     with lever-arm states (:func:`lever_arm_estimate`; about a third of A's time). Failed
     checks are noted in ``book`` (stage "qc"). ``lever``: that estimate and why it failed, when
     already made (:func:`pospp.passes_ahead.lever_re_estimate`); None: made here.
+    ``checks``: the checks already made with that estimate
+    (:func:`pospp.passes_ahead.checks_ahead`); None: made here.
     """
     estimate, failure = lever_re_estimate(log, nav, config) if lever is None else lever
     if failure is not None and book is not None:
         book.note("warning", "qc", f"lever arm not re-estimated: {failure}")
     cin = config.input
-    report = quality_checks(log, nav, calib_run, config, lever_estimate=estimate,
-                            c_bs=sensor_to_body_dcm(cin.sensor_frame, cin.mounting_rpy_deg))
+    report = checks if checks is not None else quality_checks(
+        log, nav, calib_run, config, lever_estimate=estimate,
+        c_bs=sensor_to_body_dcm(cin.sensor_frame, cin.mounting_rpy_deg))
     if book is not None:
         for c in report.failed:
             book.note("error" if c.severity == "failed" else "warning", "qc",

@@ -183,7 +183,7 @@ TABLES: dict[str, list[Column]] = {
                               ("compensate", " (on 2+ threads: the wait for its A pass, "
                                              "made alongside the null)"),
                               ("diagnose", " (on 2+ threads: likewise its first A passes)"),
-                              ("qc", " (quality checks)"),
+                              ("qc", " (quality checks; on 2+ threads: the wait for them)"),
                               ("write", " (tables and trajectory MCAP)"),
                               ("report", " (report.html)"))],
         _opt(Column("qc_failed_checks", _S, "", "comma-joined names of the failed QC checks "
