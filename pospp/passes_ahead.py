@@ -34,7 +34,8 @@ from pospp.threads import Later
 
 @dataclass(frozen=True)
 class Ahead:
-    """A's passes made ahead, each a :class:`pospp.threads.Later` (None: not made)."""
+    """A's passes and the QC checks made ahead, each a :class:`pospp.threads.Later` (None: not
+    made)."""
 
     lever: Later
     """:func:`lever_re_estimate`."""
