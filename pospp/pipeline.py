@@ -61,7 +61,7 @@ from pospp.qc.checks import comparison_text
 from pospp.qc.stage import QualityReport, qc_columns, quality_checks, worst_status
 from pospp.report import figures
 from pospp.report.html import render_report
-from pospp.threads import available_cores
+from pospp.threads import Later, available_cores
 from pospp.units import t_s_from_time_ns
 
 ProgressFn = Callable[[str, float], None]
@@ -381,6 +381,13 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
         tables["diagnosis"] = diagnosis_columns(diagnosis)
         tables["diagnosis_curves"] = residual_curve_columns(diagnosis)
     best_name = next(k for k in ("compensated", "smoothed", "forward") if k in solutions)
+    # the trajectory MCAP on the lane while the tables are written (one thread: after them)
+    mcap = Later(lane, trajectory_mcap.write_trajectory_mcap, out / "trajectory.mcap",
+                 solutions[best_name], epoch_ns, rate_hz=config.outputs.mcap_rate_hz,
+                 legs=tables.get("legs"),
+                 metadata={"input_file": meta["input_file"], "input_sha256": sha,
+                           "status": status, "solution": best_name}
+                 ) if config.outputs.mcap else None
     if len(log.events_ns):
         tables["events"] = _event_poses(log, solutions[best_name], best_name, config, book)
     for name, table in tables.items():
@@ -388,12 +395,8 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
     summary.update(calib_run.summary())
     summary.update(outputs.diagnosis_summary(diagnosis.steps if diagnosis is not None else None))
     summary["calibration_reason"] = calib_run.reason
-    if config.outputs.mcap:
-        trajectory_mcap.write_trajectory_mcap(
-            out / "trajectory.mcap", solutions[best_name], epoch_ns,
-            rate_hz=config.outputs.mcap_rate_hz, legs=tables.get("legs"),
-            metadata={"input_file": meta["input_file"], "input_sha256": sha,
-                      "status": status, "solution": best_name})
+    if mcap is not None:
+        mcap.result()
     return finish(status, report=config.outputs.report)
 
 
