@@ -178,9 +178,10 @@ def process_flight(
     threads : int, optional
         A re-runs (null realisations, the diagnosis's) made at once; above 1, A's passes that
         do not need the null (lever arm, scale factor, compensated A, the diagnosis's first
-        re-runs) also run on a second lane alongside the calibration and the null
-        (:mod:`pospp.passes_ahead`). The cores this process may use when
-        None (:func:`pospp.threads.available_cores`). The outputs do not depend on it.
+        re-runs), the QC checks and the trajectory MCAP also run on a second lane alongside
+        the calibration, the null, the diagnosis and the tables (:mod:`pospp.passes_ahead`).
+        The cores this process may use when None (:func:`pospp.threads.available_cores`). The
+        outputs do not depend on it.
 
     Returns
     -------
