@@ -313,23 +313,28 @@ def feedback(x, xp, sens, lever, dxk, i_gm, i_sf, i_l):
 @njit(cache=True)
 def store_output(i_out, x, p, sens, lever, i_gm, outs):
     """Row ``i_out`` of the outputs ``(x, diag P, [phi, dv, dr] blocks, sensor errors, total
-    bias variance, lever)``; the total bias is constant + Gauss-Markov."""
+    bias variance, lever)``; the total bias is constant + Gauss-Markov. P's outputs (diag,
+    blocks, bias variance) without rows are not stored (a run without covariance outputs)."""
     out_x, out_diag, out_blk, out_sens, out_bvar, out_lever = outs
     n = p.shape[0]
+    keep_p = out_diag.shape[0] > 0
     out_x[i_out] = x
-    for a in range(n):
-        out_diag[i_out, a] = p[a, a]
-    for ib, blk in enumerate((I_PHI, I_DV, I_DR)):
-        for a in range(3):
-            for b in range(3):
-                out_blk[i_out, ib, a, b] = p[blk + a, blk + b]
+    if keep_p:
+        for a in range(n):
+            out_diag[i_out, a] = p[a, a]
+        for ib, blk in enumerate((I_PHI, I_DV, I_DR)):
+            for a in range(3):
+                for b in range(3):
+                    out_blk[i_out, ib, a, b] = p[blk + a, blk + b]
     for a in range(SENS_GM_G):
         out_sens[i_out, a] = sens[a]
     for a in range(6):  # total bias = constant + Gauss-Markov, and its variance
-        out_bvar[i_out, a] = p[I_BG + a, I_BG + a]
         if i_gm >= 0:
             out_sens[i_out, SENS_BG + a] += sens[SENS_GM_G + a]
-            out_bvar[i_out, a] += p[i_gm + a, i_gm + a] + 2.0 * p[I_BG + a, i_gm + a]
+        if keep_p:
+            out_bvar[i_out, a] = p[I_BG + a, I_BG + a]
+            if i_gm >= 0:
+                out_bvar[i_out, a] += p[i_gm + a, i_gm + a] + 2.0 * p[I_BG + a, i_gm + a]
     for a in range(3):
         out_lever[i_out, a] = lever[a]
 

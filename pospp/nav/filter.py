@@ -451,8 +451,9 @@ def _forward_results(t: NDArray, fw: ForwardArrays, lay: StateLayout, out_tns: N
     """The forward solution, its biases, and the lever arm (last epoch) with its sigma
     (``with_cov`` False: every sigma NaN, ``FilterOptions.covariance_outputs``)."""
     out_t = t[fw.out_k]
-    diag = fw.out_diag if with_cov else _nan(fw.out_diag.shape)
-    bvar = fw.out_bvar if with_cov else _nan(fw.out_bvar.shape)
+    n_out = fw.out_x.shape[0]  # (without covariance outputs P's arrays may have no rows)
+    diag = fw.out_diag if with_cov else _nan((n_out, fw.out_diag.shape[1]))
+    bvar = fw.out_bvar if with_cov else _nan((n_out, 6))
     blocks = [fw.out_blk[:, j].copy() for j in range(3)] if with_cov else None
     fwd = _solution(out_tns, out_t, fw.out_x, diag if with_cov else None, blocks)
     fwd_bias = _bias_history(out_t, fw.out_sens, bvar, diag, lay.i_sf)

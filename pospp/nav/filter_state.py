@@ -107,7 +107,10 @@ def total_bias_map(lay: StateLayout) -> NDArray:
 
 @dataclass(frozen=True)
 class ForwardArrays:
-    """The arrays the compiled forward pass filled (:mod:`pospp.nav._filter_kernel`)."""
+    """The arrays the compiled forward pass filled (:mod:`pospp.nav._filter_kernel`).
+    ``out_diag``, ``out_blk``, ``out_bvar`` (P at the outputs) have no rows in a pass without
+    covariance outputs that records no gains (the re-runs: 20 MiB at 50 Hz on the 1.5 h
+    flight, held by each realisation in flight)."""
 
     gate: float
     out_k: NDArray
@@ -247,12 +250,14 @@ def forward_pass(t: NDArray, w: NDArray, f: NDArray, al: AlignmentResult,
         flags[k0:max(k0, replay.k_from)] & FLAG_NODE))  # a replay's own nodes: before it
     status = np.full(n_meas, -1, dtype=np.int64) if replay is None else replay.status.copy()
     m_rec = n_meas if record_gains and replay is None else 0
+    # P at the outputs: for the solutions' sigmas, and a recording pass's switch_epoch
+    n_pout = n_out if options.covariance_outputs or m_rec else 0
     fw = ForwardArrays(
         gate=gate, out_k=out_k, m_status=status,
         m_nis=np.full(n_meas, np.nan), m_dz=np.full((n_meas, 3), np.nan),
-        out_x=np.empty((n_out, 10)), out_diag=np.empty((n_out, n)),
-        out_blk=np.empty((n_out, 3, 3, 3)), out_sens=np.empty((n_out, 12)),
-        out_bvar=np.empty((n_out, 6)), out_lever=np.empty((n_out, 3)),
+        out_x=np.empty((n_out, 10)), out_diag=np.empty((n_pout, n)),
+        out_blk=np.empty((n_pout, 3, 3, 3)), out_sens=np.empty((n_out, 12)),
+        out_bvar=np.empty((n_pout, 6)), out_lever=np.empty((n_out, 3)),
         node_k=np.empty(n_kept, dtype=np.int64), node_pp=np.empty((n_cov, n, n)),
         node_pu=np.empty((n_cov, n, n)), node_phi=np.empty((n_cov, n, n)),
         node_dx=np.empty((n_kept, n)), m_gain=np.empty((m_rec, n, 3)),
