@@ -382,19 +382,24 @@ def _calibrate_gm(legs, h, z, edges, noise_step_s, bases, gm_ops, arw_given, sig
     fixed = (q_fixed, s2_fixed)
     use_prior = prior is not None and s2_fixed is None
 
+    leg_ids = tuple(rep.leg.leg_id for rep in legs)
+
+    def gm_cov(tau: float) -> NDArray:  # S E S^T, kept in the refits' memo (not in B - A)
+        key = ("gm_cov", leg_ids, noise_step_s, bin_s, float(tau))
+        if key not in memo:
+            memo[key] = _gm_covariance(ops, tau)
+        return memo[key]
+
     def likelihood(tau: float, fixed: tuple) -> Callable[[NDArray], float]:
         if noise_cache is not None and None not in fixed:  # only A's scale is fitted
-            key = (tuple(rep.leg.leg_id for rep in legs), noise_step_s, bin_s, float(tau),
-                   fixed, hs.shape)
+            key = (leg_ids, noise_step_s, bin_s, float(tau), fixed, hs.shape)
             if key not in noise_cache:
-                noise_cache[key] = linalg.eigh(_full_cov(np.array([-np.inf]), k,
-                                                         _gm_covariance(ops, tau), fixed),
-                                               check_finite=False)
+                noise_cache[key] = linalg.eigh(_full_cov(np.array([-np.inf]), k, gm_cov(tau),
+                                                         fixed), check_finite=False)
             lam, v = noise_cache[key]
             return partial(_eig_reml_nll, lam=lam, vhz=v.T @ np.column_stack([hs, zs]))
         if dlegs is None:  # legs that overlap in time: the full covariance
-            return partial(_full_reml_nll, parts=(hs, zs, k, _gm_covariance(ops, tau)),
-                           fixed=fixed)
+            return partial(_full_reml_nll, parts=(hs, zs, k, gm_cov(tau)), fixed=fixed)
         filt = dlegs.at_tau(tau)
         return lambda th: filt.reml_nll(*_full_params(th, fixed))
 
@@ -415,7 +420,7 @@ def _calibrate_gm(legs, h, z, edges, noise_step_s, bases, gm_ops, arw_given, sig
         if g_nll - nll(th) < GM_REJECT_DNLL:  # the flight does not reject the grade
             source, tau_best, fixed, th = "grade", float(prior.tau_s), g_fixed, g_th
     a, q, s2 = _full_params(th, fixed)
-    ll = _cholesky_lower(_full_cov(th, k, _gm_covariance(ops, tau_best), fixed))
+    ll = _cholesky_lower(_full_cov(th, k, gm_cov(tau_best), fixed))
     if ll is None:
         raise np.linalg.LinAlgError("the drift fit's covariance is not positive definite")
     x, cov, deficient = _solve_scaled(_tri_solve(ll, hs), _tri_solve(ll, zs))

@@ -137,9 +137,10 @@ def test_shared_eigendecomposition_gives_the_cholesky_fit():
     for reps in draws:  # the second call reuses the first's decomposition and leg bases
         plain = fit_calibration(reps, "body", **kw)
         shared = fit_calibration(reps, "body", noise_cache=cache, **kw)
-        # one decomposition; each leg's noise basis and drift operator
-        assert len([k for k in cache if k[0] not in ("basis", "gm_op")]) == 1
-        assert len(cache) == 5
+        # one decomposition; each leg's noise basis and drift operator; the drift's S E S^T
+        assert len([k for k in cache if k[0] not in ("basis", "gm_op", "gm_cov")]) == 1
+        assert sorted(str(k[0]) for k in cache if isinstance(k[0], str)) == [
+            "basis", "basis", "gm_cov", "gm_op", "gm_op"]
         assert np.log(plain.variance_factor) > np.log(1e-6) + 0.1  # not at the bound
         np.testing.assert_allclose(shared.variance_factor, plain.variance_factor, rtol=1e-6)
         np.testing.assert_allclose(shared.x, plain.x, rtol=1e-6, atol=1e-14)
