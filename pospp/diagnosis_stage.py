@@ -12,6 +12,7 @@ Nothing here touches files.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from functools import partial
 from typing import Any
@@ -19,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from pospp.calib.compensate import joint_calibration
-from pospp.calib.replay import ImuIncrements, SolutionA, replay_velocity_error
+from pospp.calib.replay import ImuIncrements, LegReplay, SolutionA, replay_velocity_error
 from pospp.calib.solve import DriftPrior
 from pospp.calib.stage import CalibrationRun
 from pospp.config import PipelineConfig
@@ -237,8 +238,9 @@ class DiagnosisStart:
 
     log_r: Any
     """The log the re-runs are made on (:func:`rerun_base`: summed down, or the flight's)."""
-    run_r: CalibrationRun
-    """The calibrated run with its B minus A on ``log_r``."""
+    replays_r: Mapping[int, LegReplay]
+    """The calibration's replays with their B minus A on ``log_r`` (what the re-runs read of
+    the run: the diagnosis puts them in the run it is given, its null covariance in)."""
     navigate_a: Any
     """A as configured for the re-runs (with ``log_r``'s gains when it has them)."""
     sigs: dict[str, list[np.ndarray]] | None
@@ -269,7 +271,7 @@ def diagnosis_reruns(calib_run: CalibrationRun, config: PipelineConfig, *,
             starts = signature_starts(log, nav, config, lever_estimate)
         sigs, at = _rerun_signatures_at_start(log, nav, calib_run, config, starts,
                                               a_as_configured, threads, (log_r, run_r))
-    return DiagnosisStart(log_r, run_r, a_as_configured, sigs, at)
+    return DiagnosisStart(log_r, run_r.replays, a_as_configured, sigs, at)
 
 
 def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution_a: SolutionA,
@@ -293,10 +295,8 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution
     if start is None:
         start = diagnosis_reruns(calib_run, config, log=log, nav=nav,
                                  lever_estimate=lever_estimate, threads=threads)
-    # the re-runs read only the legs and replays: the run given (its null covariance) with
-    # the re-run base's replays
     log_r, a_as_configured = start.log_r, start.navigate_a
-    run_r = replace(calib_run, replays=start.run_r.replays)
+    run_r = replace(calib_run, replays=start.replays_r)
     sigs, at = start.sigs, dict(start.at)
     null_log, null_nav, null_dv, warm_note = _null_without_warmup(
         log, nav, at.get("accel_bias_change"), calib_run, config, null_dv, threads)

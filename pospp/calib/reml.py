@@ -13,6 +13,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -345,6 +346,14 @@ def _reml_nll(theta: NDArray, blocks: list[_LegNoise], q_fixed: float | None) ->
     return _reml_whitened(hw, zw, logdet)
 
 
+def _kept(memo: dict, key: tuple, make: Callable[[], Any]) -> Any:
+    """``memo[key]``, made by ``make()`` and kept there the first time (a fit's noise cache:
+    what its refits of the same legs share)."""
+    if key not in memo:
+        memo[key] = make()
+    return memo[key]
+
+
 def _calibrate_gm(legs, h, z, edges, noise_step_s, bases, gm_ops, arw_given, sigma_given,
                   tau_s, bin_s, prior=None, noise_cache=None):
     """GLS + REML with the Gauss-Markov drift (full covariance over all legs).
@@ -363,10 +372,8 @@ def _calibrate_gm(legs, h, z, edges, noise_step_s, bases, gm_ops, arw_given, sig
         basis = leg_noise_basis(rep, noise_step_s, bases, memo)
         op = None if gm_ops is None else gm_ops.get(lid)
         if op is None:
-            op = memo.get(("gm_op", lid, noise_step_s, bin_s))
-        if op is None:
-            op = memo[("gm_op", lid, noise_step_s, bin_s)] = gm_noise_operator(
-                rep, basis.samples, bin_s=bin_s)
+            op = _kept(memo, ("gm_op", lid, noise_step_s, bin_s),
+                       partial(gm_noise_operator, rep, basis.samples, bin_s=bin_s))
         rows.append(basis.rows + edges[i])
         sqs.append(basis.sq)
         kb.append((basis.u * basis.lam) @ basis.u.T)
@@ -385,18 +392,15 @@ def _calibrate_gm(legs, h, z, edges, noise_step_s, bases, gm_ops, arw_given, sig
     leg_ids = tuple(rep.leg.leg_id for rep in legs)
 
     def gm_cov(tau: float) -> NDArray:  # S E S^T, kept in the refits' memo (not in B - A)
-        key = ("gm_cov", leg_ids, noise_step_s, bin_s, float(tau))
-        if key not in memo:
-            memo[key] = _gm_covariance(ops, tau)
-        return memo[key]
+        return _kept(memo, ("gm_cov", leg_ids, noise_step_s, bin_s, float(tau)),
+                     partial(_gm_covariance, ops, tau))
 
     def likelihood(tau: float, fixed: tuple) -> Callable[[NDArray], float]:
         if noise_cache is not None and None not in fixed:  # only A's scale is fitted
-            key = (leg_ids, noise_step_s, bin_s, float(tau), fixed, hs.shape)
-            if key not in noise_cache:
-                noise_cache[key] = linalg.eigh(_full_cov(np.array([-np.inf]), k, gm_cov(tau),
-                                                         fixed), check_finite=False)
-            lam, v = noise_cache[key]
+            lam, v = _kept(noise_cache, (leg_ids, noise_step_s, bin_s, float(tau), fixed,
+                                         hs.shape),
+                           lambda: linalg.eigh(_full_cov(np.array([-np.inf]), k, gm_cov(tau),
+                                                         fixed), check_finite=False))
             return partial(_eig_reml_nll, lam=lam, vhz=v.T @ np.column_stack([hs, zs]))
         if dlegs is None:  # legs that overlap in time: the full covariance
             return partial(_full_reml_nll, parts=(hs, zs, k, gm_cov(tau)), fixed=fixed)
