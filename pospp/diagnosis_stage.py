@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from pospp.calib.compensate import joint_calibration
-from pospp.calib.replay import ImuIncrements, LegReplay, SolutionA, replay_velocity_error
+from pospp.calib.replay import ImuSource, LegReplay, SolutionA, replay_velocity_error
 from pospp.calib.solve import DriftPrior
 from pospp.calib.stage import CalibrationRun
 from pospp.config import PipelineConfig
@@ -274,7 +274,7 @@ def diagnosis_reruns(calib_run: CalibrationRun, config: PipelineConfig, *,
     return DiagnosisStart(log_r, run_r.replays, a_as_configured, sigs, at)
 
 
-def diagnose_calibration(calib_run: CalibrationRun, imu: ImuIncrements, solution_a: SolutionA,
+def diagnose_calibration(calib_run: CalibrationRun, imu: ImuSource, solution_a: SolutionA,
              config: PipelineConfig, *, log: mcap_reader.FlightLog | None = None,
              nav: nav_filter.FilterResult | None = None,
              null_dv: list[list[np.ndarray]] | None = None,

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from pospp import rotation
-from pospp.calib.replay import ImuIncrements, SolutionA, replay_velocity_error
+from pospp.calib.replay import ImuRates, ImuSource, SolutionA, replay_velocity_error
 from pospp.calib.segment import Leg
 from pospp.calib.stage import CalibrationRun, calibrate_flight
 from pospp.config import PipelineConfig
@@ -33,7 +33,6 @@ from pospp.diagnose.rerun import (
 from pospp.io import mcap_reader
 from pospp.nav import filter as nav_filter
 from pospp.nav import tuning as nav_tuning
-from pospp.nav.strapdown import increments_from_rates
 from pospp.threads import first_kept
 from pospp.types import FLU_TO_FRD
 from pospp.units import UG_MPS2, t_s_from_time_ns
@@ -228,14 +227,14 @@ def warmup_estimate(log: mcap_reader.FlightLog, config: PipelineConfig, lever_b_
     return warmup_fit(b.t_s, b.accel_b_mps2, nav.alignment.t_s, settling_s)
 
 
-def imu_increments(log: mcap_reader.FlightLog) -> ImuIncrements:
-    """The log's IMU as increments on the run's time axis (t_s from the first IMU stamp)."""
-    t_s, dth, dv = increments_from_rates(log.imu.time_ns, log.imu.w_ib_b_radps,
-                                         log.imu.f_ib_b_mps2, epoch_ns=int(log.imu.time_ns[0]))
-    return ImuIncrements(t_s, dth, dv)
+def imu_increments(log: mcap_reader.FlightLog) -> ImuRates:
+    """The log's IMU for B on the run's time axis (t_s from the first IMU stamp): its rates,
+    whose increments are made a leg at a time (:class:`pospp.calib.replay.ImuRates`)."""
+    return ImuRates.from_rates(log.imu.time_ns, log.imu.w_ib_b_radps, log.imu.f_ib_b_mps2,
+                               epoch_ns=int(log.imu.time_ns[0]))
 
 
-def calibrate_from_a(imu: ImuIncrements, nav: nav_filter.FilterResult,
+def calibrate_from_a(imu: ImuSource, nav: nav_filter.FilterResult,
               config: PipelineConfig) -> tuple[CalibrationRun, SolutionA]:
     """Legs, B replays, pairs, least squares and B re-run (pospp.calib.stage)."""
     which = config.replay.reference if nav.smoothed is not None else "forward"

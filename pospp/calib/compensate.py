@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pospp.calib.pairs import Pair
-from pospp.calib.replay import ImuIncrements, LegReplay, SolutionA, replay_leg
+from pospp.calib.replay import ImuIncrements, ImuSource, LegReplay, SolutionA, replay_leg
 from pospp.calib.solve import Calibration, fit_calibration
 
 
@@ -115,7 +115,7 @@ def prior_sigma_b_radps(constant_sigma_b_radps: NDArray, cal: Calibration) -> ND
     return np.hypot(np.asarray(constant_sigma_b_radps, dtype=float), cal.gyro_gm_sigma_radps)
 
 
-def _bias_removed(imu: ImuIncrements, rep: LegReplay, t_s: NDArray, b_radps: NDArray,
+def _bias_removed(imu: ImuSource, rep: LegReplay, t_s: NDArray, b_radps: NDArray,
                   *, hold: bool) -> ImuIncrements:
     """The IMU increments around one leg minus a time-varying gyro bias b(t) (body, rad/s).
 
@@ -132,11 +132,12 @@ def _bias_removed(imu: ImuIncrements, rep: LegReplay, t_s: NDArray, b_radps: NDA
     else:
         mid = 0.5 * (t[lo:hi] + t[lo + 1:hi + 1])
         bias = np.stack([np.interp(mid, t_s, b_radps[:, c]) for c in range(3)], axis=1)
-    dth = imu.dtheta_b_rad[lo:hi] - bias * np.diff(t[lo:hi + 1])[:, None]
-    return ImuIncrements(t[lo:hi + 1], dth, imu.dv_b_mps[lo:hi])
+    win = imu.window(lo, hi)
+    dth = win.dtheta_b_rad - bias * np.diff(t[lo:hi + 1])[:, None]
+    return ImuIncrements(win.t_s, dth, win.dv_b_mps)
 
 
-def _drift_removed(imu: ImuIncrements, rep: LegReplay, cal: Calibration) -> ImuIncrements:
+def _drift_removed(imu: ImuSource, rep: LegReplay, cal: Calibration) -> ImuIncrements:
     """The IMU increments around one leg with the smoothed drift removed from the gyro."""
     t = imu.t_s
     k0 = int(np.searchsorted(t, rep.leg.start_s))
@@ -147,7 +148,7 @@ def _drift_removed(imu: ImuIncrements, rep: LegReplay, cal: Calibration) -> ImuI
 
 
 def compensate_legs(
-    imu: ImuIncrements,
+    imu: ImuSource,
     solution_a: SolutionA,
     before: dict[int, LegReplay],
     cal: Calibration,

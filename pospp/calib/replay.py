@@ -24,6 +24,7 @@ from pospp import earth, rotation
 from pospp.calib.segment import Leg
 from pospp.nav import strapdown
 from pospp.nav.error_model import transition_matrices
+from pospp.units import S_PER_NS, t_s_from_time_ns
 
 
 @dataclass(frozen=True)
@@ -47,6 +48,48 @@ class ImuIncrements:
     t_s: NDArray
     dtheta_b_rad: NDArray
     dv_b_mps: NDArray
+
+    def window(self, k0: int, k1: int) -> ImuIncrements:
+        """The increments of intervals ``k0 .. k1 - 1`` (epochs ``t_s[k0 .. k1]``): views."""
+        return ImuIncrements(self.t_s[k0:k1 + 1], self.dtheta_b_rad[k0:k1],
+                             self.dv_b_mps[k0:k1])
+
+
+@dataclass(frozen=True)
+class ImuRates:
+    """A log's IMU as mean rates (the data contract, body FRD), whose increments are made per
+    window: B reads a leg at a time, so the whole flight's increments (52 MiB on a 1.5 h,
+    200 Hz flight, the same samples as the rates) are never held (issue 18).
+
+    ``w_ib_b_radps[k]``, ``f_ib_b_mps2[k]`` are the mean rates over (time_ns[k-1],
+    time_ns[k]]; ``t_s`` [s] from the run's epoch. A window's increments are
+    :func:`pospp.nav.strapdown.increments_from_rates`' over the whole log, bit for bit (the
+    same products ``rate * dt``, ``dt = diff(time_ns) * 1e-9``).
+    """
+
+    t_s: NDArray
+    time_ns: NDArray
+    w_ib_b_radps: NDArray
+    f_ib_b_mps2: NDArray
+
+    @classmethod
+    def from_rates(cls, time_ns: ArrayLike, w_ib_b_radps: ArrayLike, f_ib_b_mps2: ArrayLike,
+                   *, epoch_ns: int) -> ImuRates:
+        """The rates as logged (arrays not copied) and their epochs from ``epoch_ns``."""
+        t_ns = np.asarray(time_ns, dtype=np.int64)
+        return cls(t_s_from_time_ns(t_ns, epoch_ns), t_ns,
+                   np.asarray(w_ib_b_radps, dtype=float), np.asarray(f_ib_b_mps2, dtype=float))
+
+    def window(self, k0: int, k1: int) -> ImuIncrements:
+        """The increments of intervals ``k0 .. k1 - 1`` (epochs ``t_s[k0 .. k1]``), made."""
+        dt = (np.diff(self.time_ns[k0:k1 + 1]) * S_PER_NS)[:, None]
+        return ImuIncrements(self.t_s[k0:k1 + 1], self.w_ib_b_radps[k0 + 1:k1 + 1] * dt,
+                             self.f_ib_b_mps2[k0 + 1:k1 + 1] * dt)
+
+
+ImuSource = ImuIncrements | ImuRates
+"""IMU increments held (:class:`ImuIncrements`) or made per window (:class:`ImuRates`): what
+B reads, through ``t_s`` and ``window``."""
 
 
 @dataclass(frozen=True)
@@ -144,7 +187,7 @@ def solution_a_from_trajectory(
 
 
 def replay_leg(
-    imu: ImuIncrements,
+    imu: ImuSource,
     solution_a: SolutionA,
     leg: Leg,
     *,
@@ -159,8 +202,8 @@ def replay_leg(
 
     Parameters
     ----------
-    imu : ImuIncrements
-        The whole flight's raw increments.
+    imu : ImuIncrements or ImuRates
+        The whole flight's raw increments (or its rates, increments made for the leg).
     solution_a : SolutionA
         Algorithm A (smoothed by default, see the pipeline config).
     leg : Leg
@@ -180,8 +223,9 @@ def replay_leg(
     transition_step : int
         IMU intervals per F evaluation for the numerical transition matrices.
     """
-    b, x0, c_nb0, ba, (k0, k1) = _b_over_leg(imu, solution_a, leg, gyro_bias_b_radps,
-                                             attitude_correction_n_rad, accel_compensation)
+    b, x0, c_nb0, ba, (k0, k1), dv_b = _b_over_leg(imu, solution_a, leg, gyro_bias_b_radps,
+                                                   attitude_correction_n_rad,
+                                                   accel_compensation)
     t_imu, ref_traj = imu.t_s, solution_a.trajectory
     t0, ts, b_s, a_s = _samples(b, ref_traj, t_imu[k0], t_imu[k1], sample_rate_hz)
     dv = b_s.v_n_mps - a_s.v_n_mps
@@ -194,7 +238,7 @@ def replay_leg(
     sig = np.maximum(sig, sigma_floor_mps)
     # numerical transition matrices along B's actual trajectory
     dt = np.diff(b.t_s)
-    f_b = (imu.dv_b_mps[k0:k1] - ba * dt[:, None]) / dt[:, None]
+    f_b = (dv_b - ba * dt[:, None]) / dt[:, None]
     phi_all = transition_matrices(b, f_b, step=transition_step)
     t_phi = b.t_s[:: transition_step][: phi_all.shape[0]] - t0
     idx = np.clip(np.searchsorted(t_phi, ts - 1e-9), 0, phi_all.shape[0] - 1)
@@ -215,7 +259,7 @@ def replay_leg(
 
 
 def replay_velocity_error(
-    imu: ImuIncrements,
+    imu: ImuSource,
     solution_a: SolutionA,
     leg: Leg,
     *,
@@ -227,18 +271,19 @@ def replay_velocity_error(
     """B minus A in velocity over one leg, NED [m/s], shape (M, 3): ``replay_leg(...).dv_n_mps``
     (same arguments, samples and values) without the transition matrices, which cost most of
     a replay and which the null realisations and the re-run signatures do not use."""
-    b, _, _, _, (k0, k1) = _b_over_leg(imu, solution_a, leg, gyro_bias_b_radps,
+    b, _, _, _, (k0, k1), _ = _b_over_leg(imu, solution_a, leg, gyro_bias_b_radps,
                                        attitude_correction_n_rad, accel_compensation)
     _, _, b_s, a_s = _samples(b, solution_a.trajectory, imu.t_s[k0], imu.t_s[k1],
                               sample_rate_hz)
     return b_s.v_n_mps - a_s.v_n_mps
 
 
-def _b_over_leg(imu: ImuIncrements, solution_a: SolutionA, leg: Leg,
+def _b_over_leg(imu: ImuSource, solution_a: SolutionA, leg: Leg,
                 gyro_bias_b_radps: NDArray | None, attitude_correction_n_rad: NDArray | None,
                 accel_compensation: str) -> tuple:
     """B integrated over the leg from A's state at its first IMU epoch (``replay_leg``):
-    (trajectory, initial NavState, initial C_nb, accelerometer bias removed, (k0, k1))."""
+    (trajectory, initial NavState, initial C_nb, accelerometer bias removed, (k0, k1), the
+    leg's velocity increments ``dv_b_mps[k0:k1]``)."""
     t_imu = imu.t_s
     k0 = int(np.searchsorted(t_imu, leg.start_s))
     k1 = int(np.searchsorted(t_imu, leg.end_s, side="right")) - 1
@@ -264,16 +309,17 @@ def _b_over_leg(imu: ImuIncrements, solution_a: SolutionA, leg: Leg,
             f"accel_compensation: expected 'filter' or 'none', got {accel_compensation!r}"
         )
     bg = np.zeros(3) if gyro_bias_b_radps is None else np.asarray(gyro_bias_b_radps, dtype=float)
+    win = imu.window(k0 - 1, k1)  # with the interval before k0 (B's first extrapolation)
     b = strapdown.integrate(
         t_imu[k0 : k1 + 1],
-        imu.dtheta_b_rad[k0:k1],
-        imu.dv_b_mps[k0:k1],
+        win.dtheta_b_rad[1:],
+        win.dv_b_mps[1:],
         x0,
         gyro_bias_b_radps=bg,
         accel_bias_b_mps2=ba,
-        previous_increments=(imu.dtheta_b_rad[k0 - 1], imu.dv_b_mps[k0 - 1]),
+        previous_increments=(win.dtheta_b_rad[0], win.dv_b_mps[0]),
     )
-    return b, x0, c_nb0, ba, (k0, k1)
+    return b, x0, c_nb0, ba, (k0, k1), win.dv_b_mps[1:]
 
 
 def _samples(b: strapdown.Trajectory, ref_traj: strapdown.Trajectory, t_start_s: float,

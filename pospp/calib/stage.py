@@ -29,7 +29,7 @@ from pospp.calib.design import FORMULATIONS
 from pospp.calib.noise_model import gm_noise_operator, noise_basis
 from pospp.calib.pairs import Pair, PairPolicy, evaluate_pairs
 from pospp.calib.replay import (
-    ImuIncrements,
+    ImuSource,
     LegReplay,
     ReplayOptions,
     SolutionA,
@@ -186,7 +186,7 @@ class CalibrationRun:
 
 
 def calibrate_flight(
-    imu: ImuIncrements,
+    imu: ImuSource,
     solution_a: SolutionA,
     *,
     legs_cfg: LegThresholds | None = None,
@@ -210,7 +210,7 @@ def calibrate_flight(
 
     Parameters
     ----------
-    imu : ImuIncrements
+    imu : ImuIncrements or ImuRates
         Raw IMU increments of the whole flight (body FRD, rad and m/s).
     solution_a : SolutionA
         Algorithm A (the smoothed solution by default: its errors at each leg start and along

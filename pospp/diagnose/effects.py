@@ -80,7 +80,13 @@ from numpy.typing import NDArray
 
 from pospp import earth, rotation
 from pospp.calib.design import leg_sensitivities
-from pospp.calib.replay import ImuIncrements, LegReplay, SolutionA, replay_velocity_error
+from pospp.calib.replay import (
+    ImuIncrements,
+    ImuSource,
+    LegReplay,
+    SolutionA,
+    replay_velocity_error,
+)
 from pospp.effects_catalog import catalog_entry
 from pospp.nav.error_model import BG, DR, DV, PHI
 from pospp.units import ARCSEC_RAD, UG_MPS2  # noqa: F401  (display units, used as fx.*)
@@ -159,8 +165,8 @@ class ReplayContext:
 
     Attributes
     ----------
-    imu : ImuIncrements
-        The flight's raw increments.
+    imu : ImuIncrements or ImuRates
+        The flight's raw increments (or its rates).
     solution_a : SolutionA
         Algorithm A.
     replay_kwargs : dict
@@ -169,7 +175,7 @@ class ReplayContext:
         taken from the replays.
     """
 
-    imu: ImuIncrements
+    imu: ImuSource
     solution_a: SolutionA
     replay_kwargs: dict = dataclasses.field(default_factory=dict)
 
@@ -289,12 +295,11 @@ def _rerun_dv(rep: LegReplay, ctx: ReplayContext, imu: ImuIncrements) -> NDArray
     return out
 
 
-def _leg_window(imu: ImuIncrements, rep: LegReplay) -> tuple[ImuIncrements, int]:
+def _leg_window(imu: ImuSource, rep: LegReplay) -> tuple[ImuIncrements, int]:
     """A slice of the increments around a leg (faster re-runs); (window, first index)."""
     k0 = max(int(np.searchsorted(imu.t_s, rep.leg.start_s)) - 200, 0)
     k1 = min(int(np.searchsorted(imu.t_s, rep.leg.end_s, side="right")) + 200, imu.t_s.size - 1)
-    return ImuIncrements(imu.t_s[k0:k1 + 1], imu.dtheta_b_rad[k0:k1],
-                         imu.dv_b_mps[k0:k1]), k0
+    return imu.window(k0, k1), k0
 
 
 def _sig_time_offset(rep: LegReplay, ctx: ReplayContext, tau_s: float = 2e-3) -> NDArray:

@@ -37,11 +37,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from pospp.calib.replay import ImuIncrements, SolutionA, replay_velocity_error
+from pospp.calib.replay import ImuRates, SolutionA, replay_velocity_error
 from pospp.diagnose.effects import ACCEL_SETTLING_S, effect_by_id
 from pospp.nav import filter as nav_filter
 from pospp.nav.filter import FilterResult
-from pospp.nav.strapdown import increments_from_rates
 from pospp.qc.stage import gate_check
 from pospp.threads import map_in_threads
 
@@ -98,8 +97,8 @@ def _response(log_p, nav, calib_run, config, navigate: Navigate, lever_b_m=None
     nav_p = navigate(log_p, lever_arm_b_m=lever_b_m)
     ref_p = SolutionA(*nav_filter.solution_a_fields(nav_p, which=which))
     t0 = int(log_p.imu.time_ns[0])
-    imu = ImuIncrements(*increments_from_rates(log_p.imu.time_ns, log_p.imu.w_ib_b_radps,
-                                               log_p.imu.f_ib_b_mps2, epoch_ns=t0))
+    imu = ImuRates.from_rates(log_p.imu.time_ns, log_p.imu.w_ib_b_radps,
+                              log_p.imu.f_ib_b_mps2, epoch_ns=t0)
     return [replay_velocity_error(imu, ref_p, legs[i], accel_compensation=rc.accel_compensation,
                                   sample_rate_hz=rc.sample_rate_hz)[:, 0:2]
             - calib_run.replays[i].dv_n_mps[:, 0:2] for i in sorted(calib_run.replays)]

@@ -63,7 +63,7 @@ from numpy.typing import NDArray
 
 from pospp.calib.noise_model import NoiseModel
 from pospp.calib.pairs import PairPolicy, heading_difference_rad
-from pospp.calib.replay import ImuIncrements, LegReplay, SolutionA
+from pospp.calib.replay import ImuSource, LegReplay, SolutionA
 from pospp.calib.segment import Leg
 from pospp.calib.solve import fit_calibration, fit_noise_model
 from pospp.diagnose import effects as fx
@@ -267,7 +267,7 @@ class _NullCalibration:
 def diagnose_replays(
     replays: Sequence[LegReplay],
     *,
-    imu: ImuIncrements | None = None,
+    imu: ImuSource | None = None,
     solution_a: SolutionA | None = None,
     replay_kwargs: dict | None = None,
     base_formulation: str = "body",
@@ -294,7 +294,7 @@ def diagnose_replays(
     ----------
     replays : sequence of LegReplay
         B minus A over each leg (at least 3 legs for held-out prediction to mean much).
-    imu, solution_a : ImuIncrements, SolutionA, optional
+    imu, solution_a : ImuIncrements or ImuRates, SolutionA, optional
         The flight's increments and A, for effects whose signature re-runs B (``time_offset``;
         ``gyro_scale_factor`` is then exact, otherwise linearised). Without them
         ``time_offset`` is not evaluated.

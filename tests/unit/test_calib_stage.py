@@ -201,3 +201,38 @@ def test_replay_velocity_error_is_replay_legs_dv():
         dv = replay_velocity_error(imu, ref, leg, **kw)
         assert np.abs(dv).max() > 1e-3  # the injected bias shows
         np.testing.assert_array_equal(dv, replay_leg(imu, ref, leg, **kw).dv_n_mps)
+
+
+def test_rates_give_the_whole_logs_increments_and_replays_bit_for_bit():
+    """ImuRates' windows are increments_from_rates' over the whole log, bit for bit (uneven
+    stamps), and B replayed from the rates (increments made per leg) equals B replayed from
+    the whole log's increments exactly (issue 18: the increments are never all held)."""
+    from pospp.calib.replay import ImuRates, replay_leg
+    from pospp.nav.strapdown import increments_from_rates
+
+    tr = rhumb_line(LAT, 1000.0, 60.0, 0.5, 10.0, 200.0)
+    rng = np.random.default_rng(3)
+    epoch_ns = 1_700_000_000_000_000_000
+    time_ns = epoch_ns + np.round(tr.t_s * 1e9).astype(np.int64)
+    time_ns[1:-1] += rng.integers(-200_000, 200_000, time_ns.size - 2)  # jitter
+    dt = np.diff(tr.t_s)[:, None]
+    w = np.vstack([tr.dtheta_b_rad[:1] / dt[:1], tr.dtheta_b_rad / dt]) + 1e-6
+    f = np.vstack([tr.dv_b_mps[:1] / dt[:1], tr.dv_b_mps / dt])
+    t_s, dth, dv = increments_from_rates(time_ns, w, f, epoch_ns=epoch_ns)
+    rates = ImuRates.from_rates(time_ns, w, f, epoch_ns=epoch_ns)
+    np.testing.assert_array_equal(rates.t_s, t_s)
+    for k0, k1 in ((0, t_s.size - 1), (17, 4000), (5, 6)):
+        win = rates.window(k0, k1)
+        np.testing.assert_array_equal(win.t_s, t_s[k0:k1 + 1])
+        np.testing.assert_array_equal(win.dtheta_b_rad, dth[k0:k1])
+        np.testing.assert_array_equal(win.dv_b_mps, dv[k0:k1])
+    held = ImuIncrements(t_s, dth, dv)
+    traj = Trajectory(t_s, np.full(t_s.size, LAT), np.full(t_s.size, 0.0),
+                      np.full(t_s.size, tr.height_m), np.tile(tr.v_n_mps, (t_s.size, 1)),
+                      np.tile(rotation.quat_from_dcm(tr.c_nb), (t_s.size, 1)))
+    ref = solution_a_from_trajectory(traj, v_sigma_n_mps=[0.02, 0.02, 0.05])
+    leg = Leg(0, 5.0, 195.0, 0.5, 60.0, 1000.0, 0, 0, 0, 0)
+    a, b = replay_leg(held, ref, leg), replay_leg(rates, ref, leg)
+    for name in ("dv_n_mps", "dr_n_m", "phi", "c_nb"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    assert np.abs(a.dv_n_mps).max() > 1e-3  # the injected gyro bias shows
