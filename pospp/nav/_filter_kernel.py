@@ -345,7 +345,7 @@ def store_node(i_node, k, p_upd, phi_acc, dx_tot, nodes):
     feedback of the epoch (the predicted P was stored before the updates)."""
     node_k, node_pp, node_pu, node_phi, node_dx = nodes
     node_k[i_node] = k
-    node_pu[i_node] = p_upd
+    smoother.pack_symmetric_into(p_upd, node_pu[i_node])  # P is exactly symmetric here
     node_phi[i_node] = phi_acc
     node_dx[i_node] = dx_tot
 
@@ -506,7 +506,7 @@ def forward_kernel(t, w_imu, f_imu, k0, x0, p0, lever0, layout, inv_tau, flags, 
             t_acc, steps = 0.0, 0
         keep_cov = keep_nodes and i_node < n_cov
         if is_node and keep_cov:
-            nodes[1][i_node] = p  # predicted covariance
+            smoother.pack_symmetric_into(p, nodes[1][i_node])  # predicted P (symmetric)
         dx_tot[:] = 0.0
         p, im = _update_epoch(k, im, t, x, xp, p, sens, lever, w_b, meas, meas_out, gate,
                               reset_after_s, t_ok, i_gm, i_sf, i_l, dx_tot, gains, replay,

@@ -495,9 +495,8 @@ def _smoothed_errors(t: NDArray, fw: ForwardArrays, lay: StateLayout, with_cov: 
         e_plus, e_minus, p_s = smoother.rts_smooth(fw.node_pp, fw.node_pu, fw.node_phi,
                                                    fw.node_dx, overwrite_p_upd=True)
         diag_s, blocks_s = smoother.interpolate_covariance_blocks(node_t, p_s, out_t,
-                                                                  (PHI, DV, DR))
-        tb = total_bias_map(lay)
-        bvar_nodes = np.einsum("ij,kjl,il->ki", tb, p_s, tb)
+                                                                  (PHI, DV, DR), lay.n)
+        bvar_nodes = _total_bias_variance(p_s, lay)
         i, a = smoother.interpolation_weights(node_t, out_t)
         nxt = np.minimum(i + 1, node_t.shape[0] - 1)
         bvar_s = (1.0 - a)[:, None] * bvar_nodes[i] + a[:, None] * bvar_nodes[nxt]
@@ -510,6 +509,18 @@ def _smoothed_errors(t: NDArray, fw: ForwardArrays, lay: StateLayout, with_cov: 
         diag_s = _nan((out_t.shape[0], lay.n))
         blocks_s, bvar_s = None, _nan((out_t.shape[0], 6))
     return smoother.interpolate_errors(node_t, e_plus, e_minus, out_t), diag_s, blocks_s, bvar_s
+
+
+def _total_bias_variance(p_packed: NDArray, lay: StateLayout, chunk: int = 2048) -> NDArray:
+    """diag(T P T^T) per node (K, 6): the total [gyro, accel] bias variance
+    (:func:`pospp.nav.filter_state.total_bias_map` T) of packed covariances (K, n (n + 1) / 2),
+    unpacked ``chunk`` nodes at a time (the same sums as over the whole (K, n, n) array)."""
+    tb = total_bias_map(lay)
+    out = np.empty((p_packed.shape[0], 6))
+    for c in range(0, p_packed.shape[0], chunk):
+        full = smoother.unpack_symmetric(p_packed[c:c + chunk], lay.n)
+        out[c:c + chunk] = np.einsum("ij,kjl,il->ki", tb, full, tb)
+    return out
 
 
 def _smoothed(t: NDArray, fw: ForwardArrays, lay: StateLayout, out_tns: NDArray,

@@ -29,7 +29,7 @@ from pospp.nav._filter_kernel import (
 from pospp.nav.alignment import AlignmentResult
 from pospp.nav.error_model import BA, BG, DR, DV, I_BA, I_BG, N_STATES, PHI
 from pospp.nav.filter_input import GnssRejection, MeasurementRecords, epoch_flags
-from pospp.nav.smoother import smoother_gains
+from pospp.nav.smoother import packed_size, smoother_gains
 from pospp.nav.tuning import NoiseParameters
 
 if TYPE_CHECKING:
@@ -125,7 +125,10 @@ class ForwardArrays:
     out_lever: NDArray
     node_k: NDArray
     node_pp: NDArray
+    """The nodes' predicted covariances, packed ((nodes, n (n + 1) / 2),
+    :func:`pospp.nav.smoother.pack_symmetric`)."""
     node_pu: NDArray
+    """Their updated covariances, packed likewise."""
     node_phi: NDArray
     node_dx: NDArray
     m_gain: NDArray
@@ -258,8 +261,8 @@ def forward_pass(t: NDArray, w: NDArray, f: NDArray, al: AlignmentResult,
         out_x=np.empty((n_out, 10)), out_diag=np.empty((n_pout, n)),
         out_blk=np.empty((n_pout, 3, 3, 3)), out_sens=np.empty((n_out, 12)),
         out_bvar=np.empty((n_pout, 6)), out_lever=np.empty((n_out, 3)),
-        node_k=np.empty(n_kept, dtype=np.int64), node_pp=np.empty((n_cov, n, n)),
-        node_pu=np.empty((n_cov, n, n)), node_phi=np.empty((n_cov, n, n)),
+        node_k=np.empty(n_kept, dtype=np.int64), node_pp=np.empty((n_cov, packed_size(n))),
+        node_pu=np.empty((n_cov, packed_size(n))), node_phi=np.empty((n_cov, n, n)),
         node_dx=np.empty((n_kept, n)), m_gain=np.empty((m_rec, n, 3)),
         m_sinv=np.empty((m_rec, 3, 3)), replayed=replay is not None,
     )

@@ -26,8 +26,10 @@ linearly from e_k^+ (just after node k) to e_{k+1}^- (just before node k+1); ove
 the error dynamics are linear to well below the noise (Phi = I + F dt). Smoothed covariances are
 interpolated the same way (an approximation documented in docs/method.md).
 
-Memory: three n x n matrices per node (1 Hz: about 7.8 kB per second of flight for 18 states),
-never per IMU epoch.
+Memory: per node the two covariances packed (their upper triangles, n (n + 1) / 2 numbers
+each: :func:`pack_symmetric`; A's P is exactly symmetric wherever a node stores it, so the
+packing is exact: 35 MiB less on a 1.5 h flight's nodes, issue 18) and Phi (n x n); never per
+IMU epoch.
 """
 
 from __future__ import annotations
@@ -42,35 +44,92 @@ from pospp.nav._kernels import X_POS, X_QUAT, X_VEL, _radii, quat_from_rotvec, q
 from pospp.nav.error_model import I_DR, I_DV, I_PHI
 
 
+def packed_size(n: int) -> int:
+    """Numbers in a packed symmetric n x n matrix: its upper triangle, n (n + 1) / 2."""
+    return n * (n + 1) // 2
+
+
+@njit(cache=True, nogil=True)
+def pack_symmetric_into(p, out):
+    """The upper triangle of the symmetric n x n ``p``, row by row, into ``out``
+    (n (n + 1) / 2,): the smoother nodes' covariance layout."""
+    j = 0
+    for a in range(p.shape[0]):
+        for b in range(a, p.shape[0]):
+            out[j] = p[a, b]
+            j += 1
+
+
+@njit(cache=True, nogil=True)
+def unpack_symmetric_into(packed, p):
+    """The n x n symmetric ``p`` from its packed upper triangle (:func:`pack_symmetric_into`)."""
+    j = 0
+    for a in range(p.shape[0]):
+        for b in range(a, p.shape[0]):
+            p[a, b] = packed[j]
+            p[b, a] = packed[j]
+            j += 1
+
+
+def packed_index(n: int) -> NDArray:
+    """(n, n) int: where element (a, b) of a symmetric n x n matrix sits in its packed form
+    (``packed[..., packed_index(n)[s, s]]`` is a diagonal block)."""
+    idx = np.empty((n, n), dtype=np.int64)
+    rows, cols = np.triu_indices(n)
+    idx[rows, cols] = np.arange(rows.size)
+    idx[cols, rows] = idx[rows, cols]
+    return idx
+
+
+def pack_symmetric(p: NDArray) -> NDArray:
+    """(K, n, n) -> (K, n (n + 1) / 2): the upper triangles (:func:`pack_symmetric_into`)."""
+    rows, cols = np.triu_indices(p.shape[-1])
+    return np.ascontiguousarray(p[..., rows, cols], dtype=float)
+
+
+def unpack_symmetric(packed: NDArray, n: int) -> NDArray:
+    """(K, n (n + 1) / 2) -> (K, n, n): the symmetric matrices (:func:`unpack_symmetric_into`)."""
+    return packed[..., packed_index(n)]
+
+
 @njit(cache=True, nogil=True)
 def rts_backward(p_pred, p_upd, phi, dx, e_plus, e_minus, p_smooth):
     """Backward RTS pass over ``K`` nodes (see the module docstring).
 
     Parameters
     ----------
-    p_pred, p_upd, phi : float64[K, n, n]
-        Predicted and updated covariances, and Phi[k] = transition from node k-1 to node k.
+    p_pred, p_upd : float64[K, n (n + 1) / 2]
+        Predicted and updated covariances, packed (:func:`pack_symmetric_into`).
+    phi : float64[K, n, n]
+        Phi[k] = transition from node k-1 to node k.
     dx : float64[K, n]
         Corrections fed back at each node.
     e_plus, e_minus : float64[K, n]
         Output: smoothed error just after / just before the feedback at each node.
-    p_smooth : float64[K, n, n]
-        Output: smoothed covariance.
+    p_smooth : float64[K, n (n + 1) / 2]
+        Output: smoothed covariance, packed (may be ``p_upd``: node k's updated covariance is
+        last read before node k's smoothed one is written).
     """
     k_last = p_pred.shape[0] - 1
+    n = phi.shape[1]
+    pp, pu, ps_next = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
     e_plus[k_last, :] = 0.0
     e_minus[k_last, :] = dx[k_last]
     p_smooth[k_last] = p_upd[k_last]
+    unpack_symmetric_into(p_smooth[k_last], ps_next)
     for k in range(k_last - 1, -1, -1):
-        b = np.dot(phi[k + 1], p_upd[k])
-        a_t = np.linalg.solve(p_pred[k + 1], b)  # = P_{k+1|k}^-1 Phi P_k|k = A^T
+        unpack_symmetric_into(p_upd[k], pu)
+        unpack_symmetric_into(p_pred[k + 1], pp)
+        b = np.dot(phi[k + 1], pu)
+        a_t = np.linalg.solve(pp, b)  # = P_{k+1|k}^-1 Phi P_k|k = A^T
         a = np.ascontiguousarray(a_t.T)
         e_plus[k] = np.dot(a, e_minus[k + 1])
         for i in range(e_plus.shape[1]):
             e_minus[k, i] = e_plus[k, i] + dx[k, i]
-        d = p_smooth[k + 1] - p_pred[k + 1]
-        ps = p_upd[k] + np.dot(np.dot(a, d), a_t)
-        p_smooth[k] = 0.5 * (ps + ps.T)
+        d = ps_next - pp
+        ps = pu + np.dot(np.dot(a, d), a_t)
+        ps_next = 0.5 * (ps + ps.T)
+        pack_symmetric_into(ps_next, p_smooth[k])
 
 
 @njit(cache=True, nogil=True)
@@ -79,11 +138,15 @@ def rts_backward_states(p_pred, p_upd, phi, dx, e_plus, e_minus):
     solve with a vector, ``e_k^+ = P_k|k Phi_{k+1}^T (P_{k+1|k}^-1 e_{k+1}^-)`` (the same
     A_k e_{k+1}^-, associated the other way). Arguments as :func:`rts_backward`."""
     k_last = p_pred.shape[0] - 1
+    n = phi.shape[1]
+    pp, pu = np.empty((n, n)), np.empty((n, n))
     e_plus[k_last, :] = 0.0
     e_minus[k_last, :] = dx[k_last]
     for k in range(k_last - 1, -1, -1):
-        y = np.linalg.solve(p_pred[k + 1], e_minus[k + 1])
-        e_plus[k] = np.dot(p_upd[k], np.dot(phi[k + 1].T, y))
+        unpack_symmetric_into(p_pred[k + 1], pp)
+        unpack_symmetric_into(p_upd[k], pu)
+        y = np.linalg.solve(pp, e_minus[k + 1])
+        e_plus[k] = np.dot(pu, np.dot(phi[k + 1].T, y))
         for i in range(e_plus.shape[1]):
             e_minus[k, i] = e_plus[k, i] + dx[k, i]
 
@@ -92,12 +155,15 @@ def rts_backward_states(p_pred, p_upd, phi, dx, e_plus, e_minus):
 def smoother_gains(p_pred, p_upd, phi):
     """The backward pass's gains ``A_k = P_k|k Phi_{k+1}^T P_{k+1|k}^-1`` (K, n, n), row K - 1
     zero: what a replay of the same schedule (:func:`rts_backward_gains`) applies to its own
-    errors. Arguments as :func:`rts_backward`."""
-    k_n, n = p_pred.shape[0], p_pred.shape[1]
+    errors. Arguments as :func:`rts_backward` (the covariances packed)."""
+    k_n, n = p_pred.shape[0], phi.shape[1]
+    pp, pu = np.empty((n, n)), np.empty((n, n))
     a = np.zeros((k_n, n, n))
     for k in range(k_n - 1):
-        b = np.dot(phi[k + 1], p_upd[k])
-        a[k] = np.linalg.solve(p_pred[k + 1], b).T  # (P^-1 Phi P_k|k)^T, as rts_backward
+        unpack_symmetric_into(p_upd[k], pu)
+        unpack_symmetric_into(p_pred[k + 1], pp)
+        b = np.dot(phi[k + 1], pu)
+        a[k] = np.linalg.solve(pp, b).T  # (P^-1 Phi P_k|k)^T, as rts_backward
     return a
 
 
@@ -119,19 +185,18 @@ def rts_smooth(
     overwrite_p_upd: bool = False, covariance: bool = True,
 ) -> tuple[NDArray, NDArray, NDArray]:
     """Run the backward pass; returns (e_plus, e_minus, p_smooth), shapes (K, n), (K, n),
-    (K, n, n).
+    (K, n (n + 1) / 2): ``p_pred``, ``p_upd`` and ``p_smooth`` packed (:func:`pack_symmetric`),
+    ``phi`` (K, n, n).
 
     ``overwrite_p_upd``: the smoothed covariances are written over ``p_upd`` (C-contiguous
     float64) and it is returned as p_smooth: node k's updated covariance is last read by step
-    k, which then writes node k's smoothed one (the same values, one (K, n, n) array fewer:
-    36 MiB on a 1.5 h flight; issue 18). ``covariance`` False: the errors alone
-    (:func:`rts_backward_states`; A's re-runs, ``FilterOptions.covariance_outputs`` False),
-    p_smooth of shape (0, n, n).
+    k, which then writes node k's smoothed one (the same values, one array of the nodes'
+    covariances fewer: 19 MiB on a 1.5 h flight; issue 18). ``covariance`` False: the errors
+    alone (:func:`rts_backward_states`; A's re-runs, ``FilterOptions.covariance_outputs``
+    False), p_smooth with no rows.
     """
     k, n = dx.shape
-    for name, arr in (("p_pred", p_pred), ("p_upd", p_upd), ("phi", phi)):
-        if arr.shape != (k, n, n):
-            raise ValueError(f"{name}: expected shape ({k}, {n}, {n}), got {arr.shape}")
+    _check_nodes(k, n, p_pred, p_upd, phi)
     e_plus = np.zeros((k, n))
     e_minus = np.zeros((k, n))
     p_upd = np.ascontiguousarray(p_upd, dtype=float)
@@ -139,8 +204,8 @@ def rts_smooth(
         if k:
             rts_backward_states(np.ascontiguousarray(p_pred), p_upd, np.ascontiguousarray(phi),
                                 np.ascontiguousarray(dx), e_plus, e_minus)
-        return e_plus, e_minus, np.empty((0, n, n))
-    p_smooth = p_upd if overwrite_p_upd else np.empty((k, n, n))
+        return e_plus, e_minus, np.empty((0, packed_size(n)))
+    p_smooth = p_upd if overwrite_p_upd else np.empty((k, packed_size(n)))
     if k:
         rts_backward(
             np.ascontiguousarray(p_pred), p_upd, np.ascontiguousarray(phi),
@@ -154,9 +219,11 @@ def rts_smooth_replayed(gains: NDArray, p_pred: NDArray, p_upd: NDArray, phi: ND
     """:func:`rts_smooth` (errors alone) of a pass that replayed another's gains
     (``pospp.nav.filter_state.GainReplay``): its own gains (:func:`smoother_gains`) over the
     nodes whose P it kept (``p_pred`` etc. hold the first of them: those before the replay
-    started), ``gains`` (K, n, n) after. Returns (e_plus, e_minus, p_smooth of shape (0, n, n)).
+    started; packed), ``gains`` (K, n, n) after. Returns (e_plus, e_minus, p_smooth with no
+    rows).
     """
     k, n = dx.shape
+    _check_nodes(p_pred.shape[0], n, p_pred, p_upd, phi)
     if gains.shape != (k, n, n):
         raise ValueError(f"gains: expected shape ({k}, {n}, {n}) (the replayed pass's nodes), "
                          f"got {gains.shape}")
@@ -167,7 +234,16 @@ def rts_smooth_replayed(gains: NDArray, p_pred: NDArray, p_upd: NDArray, phi: ND
     e_plus, e_minus = np.zeros((k, n)), np.zeros((k, n))
     if k:
         rts_backward_gains(gains, np.ascontiguousarray(dx), e_plus, e_minus)
-    return e_plus, e_minus, np.empty((0, n, n))
+    return e_plus, e_minus, np.empty((0, packed_size(n)))
+
+
+def _check_nodes(k: int, n: int, p_pred: NDArray, p_upd: NDArray, phi: NDArray) -> None:
+    """ValueError unless the nodes' covariances are (k, n (n + 1) / 2) (packed) and Phi
+    (k, n, n)."""
+    for name, arr, shape in (("p_pred", p_pred, (k, packed_size(n))),
+                             ("p_upd", p_upd, (k, packed_size(n))), ("phi", phi, (k, n, n))):
+        if arr.shape != shape:
+            raise ValueError(f"{name}: expected shape {shape}, got {arr.shape}")
 
 
 def interpolation_weights(node_t_s: NDArray, t_s: NDArray) -> tuple[NDArray, NDArray]:
@@ -189,16 +265,18 @@ def interpolate_errors(
 
 
 def interpolate_covariance_blocks(
-    node_t_s: NDArray, p_smooth: NDArray, t_s: NDArray, blocks: tuple[slice, ...]
+    node_t_s: NDArray, p_smooth: NDArray, t_s: NDArray, blocks: tuple[slice, ...], n: int
 ) -> tuple[NDArray, list[NDArray]]:
-    """Diagonal (N, n) and the requested diagonal blocks (N, b, b) of P^s interpolated to t_s."""
+    """Diagonal (N, n) and the requested diagonal blocks (N, b, b) of P^s (``p_smooth``
+    packed, (K, n (n + 1) / 2), :func:`pack_symmetric`) interpolated to t_s."""
     i, a = interpolation_weights(node_t_s, t_s)
     nxt = np.minimum(i + 1, node_t_s.shape[0] - 1)
-    diag_nodes = np.diagonal(p_smooth, axis1=1, axis2=2)
+    idx = packed_index(n)
+    diag_nodes = p_smooth[:, np.diagonal(idx)]
     diag = (1.0 - a)[:, None] * diag_nodes[i] + a[:, None] * diag_nodes[nxt]
     out = []
     for s in blocks:
-        blk = p_smooth[:, s, s]
+        blk = p_smooth[:, idx[s, s]]
         out.append((1.0 - a)[:, None, None] * blk[i] + a[:, None, None] * blk[nxt])
     return diag, out
 

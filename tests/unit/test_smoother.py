@@ -36,7 +36,8 @@ def _system(seed, n=4, k=25, m=2):
 
 
 def _closed_loop_forward(s):
-    """Closed-loop filter in the pospp form: returns nominal states and the node arrays."""
+    """Closed-loop filter in the pospp form: returns nominal states and the node arrays (the
+    covariances symmetrised as A does, and packed as A stores them)."""
     n, k = s["n"], s["k"]
     p_pred = np.empty((k, n, n))
     p_upd = np.empty((k, n, n))
@@ -48,6 +49,7 @@ def _closed_loop_forward(s):
         if i > 0:
             x_hat = s["phi"] @ x_hat  # nominal propagation; the error state stays zero
             p = s["phi"] @ p @ s["phi"].T + s["q"]
+            p = 0.5 * (p + p.T)
         phis[i] = s["phi"] if i > 0 else np.eye(n)
         p_pred[i] = p
         if s["has_z"][i]:
@@ -58,9 +60,11 @@ def _closed_loop_forward(s):
             x_hat = x_hat - dx[i]  # feedback; error state reset
             ikh = np.eye(n) - kg @ h
             p = ikh @ p @ ikh.T + kg @ r @ kg.T
+            p = 0.5 * (p + p.T)
         p_upd[i] = p
         nominal[i] = x_hat
-    return nominal, p_pred, p_upd, phis, dx
+    return (nominal, smoother.pack_symmetric(p_pred), smoother.pack_symmetric(p_upd), phis,
+            dx)
 
 
 def _batch(s):
@@ -93,7 +97,8 @@ def _batch(s):
 def test_closed_loop_rts_equals_batch_map(seed):
     s = _system(seed)
     nominal, p_pred, p_upd, phis, dx = _closed_loop_forward(s)
-    e_plus, e_minus, p_s = smoother.rts_smooth(p_pred, p_upd, phis, dx)
+    e_plus, e_minus, p_packed = smoother.rts_smooth(p_pred, p_upd, phis, dx)
+    p_s = smoother.unpack_symmetric(p_packed, s["n"])
     x_batch, cov = _batch(s)
     np.testing.assert_allclose(nominal - e_plus, x_batch, atol=1e-9, rtol=0)
     np.testing.assert_allclose(e_minus - e_plus, dx, atol=1e-12)
@@ -107,7 +112,7 @@ def test_closed_loop_rts_equals_batch_map(seed):
     p_upd_copy = np.array(p_upd, dtype=float)
     e2, _, p_s2 = smoother.rts_smooth(p_pred, p_upd_copy, phis, dx, overwrite_p_upd=True)
     assert p_s2 is p_upd_copy
-    np.testing.assert_array_equal(p_s2, p_s)
+    np.testing.assert_array_equal(p_s2, p_packed)
     np.testing.assert_array_equal(e2, e_plus)
 
 
@@ -117,7 +122,7 @@ def test_states_only_pass_equals_batch_map(seed):
     s = _system(seed)
     nominal, p_pred, p_upd, phis, dx = _closed_loop_forward(s)
     e_plus, e_minus, p_s = smoother.rts_smooth(p_pred, p_upd, phis, dx, covariance=False)
-    assert p_s.shape == (0, s["n"], s["n"])
+    assert p_s.shape == (0, smoother.packed_size(s["n"]))
     x_batch, _ = _batch(s)
     np.testing.assert_allclose(nominal - e_plus, x_batch, atol=1e-9, rtol=0)
     e_full, e_minus_full, _ = smoother.rts_smooth(p_pred, p_upd, phis, dx)
@@ -136,7 +141,7 @@ def test_replayed_gains_smooth_as_the_batch_map(seed):
     for n_own in (0, 1, 10, p_pred.shape[0]):
         e_plus, _, p_s = smoother.rts_smooth_replayed(gains, p_pred[:n_own], p_upd[:n_own],
                                                       phis[:n_own], dx)
-        assert p_s.shape == (0, s["n"], s["n"])
+        assert p_s.shape == (0, smoother.packed_size(s["n"]))
         np.testing.assert_allclose(nominal - e_plus, x_batch, atol=1e-9, rtol=0)
     # other gains after the split, its own before: the nodes before use its own
     bad = np.zeros_like(gains)
@@ -152,6 +157,8 @@ def test_smoothed_covariance_below_filtered_and_symmetric(seed):
     s = _system(seed, n=5, k=15, m=2)
     _, p_pred, p_upd, phis, dx = _closed_loop_forward(s)
     _, _, p_s = smoother.rts_smooth(p_pred, p_upd, phis, dx)
+    p_s = smoother.unpack_symmetric(p_s, s["n"])
+    p_upd = smoother.unpack_symmetric(p_upd, s["n"])
     for i in range(s["k"]):
         np.testing.assert_allclose(p_s[i], p_s[i].T, atol=0)
         assert np.linalg.eigvalsh(p_s[i]).min() > 0.0
@@ -185,3 +192,30 @@ def test_correction_round_trip():
     ang = rotation.angle_between_rad(rotation.dcm_from_quat(x[6:10]),
                                      rotation.dcm_from_quat(q_true))
     assert ang < 1e-12
+
+
+def test_packed_covariances_round_trip_and_blocks():
+    """A symmetric matrix packed (upper triangle, row by row) and unpacked is itself, bit for
+    bit, in numpy and in the compiled kernels; packed_index picks its diagonal blocks."""
+    rng = np.random.default_rng(5)
+    a = rng.normal(size=(7, 6, 6))
+    p = a @ a.transpose(0, 2, 1)
+    p = 0.5 * (p + p.transpose(0, 2, 1))
+    packed = smoother.pack_symmetric(p)
+    assert packed.shape == (7, smoother.packed_size(6)) == (7, 21)
+    np.testing.assert_array_equal(smoother.unpack_symmetric(packed, 6), p)
+    out, back = np.empty(21), np.empty((6, 6))
+    smoother.pack_symmetric_into(p[3], out)
+    np.testing.assert_array_equal(out, packed[3])
+    smoother.unpack_symmetric_into(out, back)
+    np.testing.assert_array_equal(back, p[3])
+    idx = smoother.packed_index(6)
+    np.testing.assert_array_equal(packed[:, idx[2:5, 2:5]], p[:, 2:5, 2:5])
+    np.testing.assert_array_equal(packed[:, np.diagonal(idx)], np.diagonal(p, axis1=1, axis2=2))
+
+
+def test_packed_nodes_of_another_shape_are_refused():
+    s = _system(0)
+    _, p_pred, p_upd, phis, dx = _closed_loop_forward(s)
+    with pytest.raises(ValueError, match="p_pred: expected shape"):
+        smoother.rts_smooth(smoother.unpack_symmetric(p_pred, s["n"]), p_upd, phis, dx)
