@@ -398,6 +398,9 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
     summary["calibration_reason"] = calib_run.reason
     if mcap is not None:
         mcap.result()
+    # the report reads the tables back: the run's arrays are let go first, so that it
+    # reuses their memory instead of adding to the peak (1.5 h flight: 110 MiB)
+    del log, nav, imu, solution_a, calib_run, null_dv, diagnosis, solutions, tables, ahead, mcap
     return finish(status, report=config.outputs.report)
 
 
