@@ -62,6 +62,7 @@ from pospp.flight_stages import (
 )
 from pospp.io import mcap_reader
 from pospp.nav import filter as nav_filter
+from pospp.threads import Threads
 from pospp.units import DEG_PER_H_RADPS
 
 
@@ -185,7 +186,7 @@ def signature_starts(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
 def _rerun_signatures_at_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                                calib_run: CalibrationRun, config: PipelineConfig,
                                starts: dict[str, np.ndarray | None],
-                               navigate_a: Any, threads: int = 1,
+                               navigate_a: Any, threads: Threads = 1,
                                rerun: tuple[Any, CalibrationRun] | None = None
                                ) -> tuple[dict[str, list[np.ndarray]], dict[str, np.ndarray]]:
     """The diagnosis's first A re-run signatures and the estimates they were made at.
@@ -253,7 +254,7 @@ def diagnosis_reruns(calib_run: CalibrationRun, config: PipelineConfig, *,
                      log: mcap_reader.FlightLog | None = None,
                      nav: nav_filter.FilterResult | None = None,
                      lever_estimate: nav_filter.LeverArmEstimate | None = None,
-                     threads: int = 1,
+                     threads: Threads = 1,
                      starts: dict[str, np.ndarray | None] | None = None) -> DiagnosisStart:
     """The diagnosis's base for its re-runs (:func:`rerun_base`) and its first re-run
     signatures (:func:`_rerun_signatures_at_start`): the A passes that need the calibration

@@ -29,7 +29,7 @@ from pospp.flight_stages import lever_arm_estimate, navigate, sensor_to_body_dcm
 from pospp.io import mcap_reader
 from pospp.nav import filter as nav_filter
 from pospp.qc.stage import quality_checks
-from pospp.threads import Later
+from pospp.threads import Later, SharedWork
 
 
 @dataclass(frozen=True)
@@ -77,18 +77,22 @@ def passes_ahead(ahead: Ahead, log: mcap_reader.FlightLog, nav: nav_filter.Filte
                  lane: ThreadPoolExecutor | None, threads: int) -> Ahead:
     """``ahead`` with the compensated A and the diagnosis's first re-runs, on ``lane`` after
     the passes already there, alongside the null realisations (None: each where its stage
-    uses it). On the lane the re-runs are made one at a time: the null's ``threads``
-    workers hold the cores then (measured on the 1.5 h flight, two at a time: no faster, 200
-    MiB more); without a lane, ``threads`` at a time as in the diagnosis stage."""
+    uses it). On the lane the re-runs are made one at a time (the null's ``threads``
+    workers hold the cores then; measured on the 1.5 h flight, two at a time: no faster, 200
+    MiB more), and the main thread joins them when it has nothing left but to wait for them
+    (:class:`pospp.threads.SharedWork`: it waited 0.9 s for the last ones); without a lane,
+    ``threads`` at a time as in the diagnosis stage."""
     if not calib_run.calibrated:
         return ahead
     comp = (Later(lane, navigate, log, config,
                   gyro_bias_correction_b_radps=calib_run.gyro_bias_b_radps)
             if config.compensation.rerun_filter else None)
     starts = ahead.starts
+    shared = SharedWork()  # on the lane: the re-runs one at a time, the main thread joins
     diag = None if starts is None else Later(lane, lambda: diagnosis_reruns(
         calib_run, config, log=log, nav=nav, lever_estimate=ahead.lever.result()[0],
-        threads=1 if lane is not None else threads, starts=starts.result()))
+        threads=shared if lane is not None else threads, starts=starts.result()),
+        helped=shared)
     return replace(ahead, compensated=comp, diagnosis=diag)
 
 
