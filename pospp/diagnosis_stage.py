@@ -311,7 +311,7 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuSource, solution_a: 
             base_formulation=config.pairs.formulation, base_transition=config.pairs.transition,
             noise="gyro_rw", gyro_arw_radpsqrts=arw_radpsqrts, null_dv=null_dv,
             alpha=config.pairs.diagnose_alpha, signatures=signatures,
-            whitening_replays=whitening_replays, heldout_whitened=ho_white)
+            whitening_replays=whitening_replays, heldout_whitened=ho_white, threads=threads)
 
     note = null_note(null_dv, *null_drift(calib_run, config)) + warm_note
 

@@ -89,6 +89,7 @@ from pospp.calib.replay import (
 )
 from pospp.effects_catalog import catalog_entry
 from pospp.nav.error_model import BG, DR, DV, PHI
+from pospp.threads import map_in_threads
 from pospp.units import ARCSEC_RAD, UG_MPS2  # noqa: F401  (display units, used as fx.*)
 from pospp.units import DEG_PER_H_RADPS as DEG_PER_H  # noqa: F401
 from pospp.units import G0_MPS2 as GRAVITY_MPS2  # noqa: F401
@@ -370,6 +371,9 @@ def signature(effect_id: str, rep: LegReplay, *, context: ReplayContext | None =
     raise ValueError(f"effect: expected one of {EFFECT_IDS}, got {effect_id!r}")
 
 
-def signatures(effect_id: str, replays: Sequence[LegReplay], **kwargs) -> list[NDArray]:
-    """:func:`signature` of every leg."""
-    return [signature(effect_id, r, **kwargs) for r in replays]
+def signatures(effect_id: str, replays: Sequence[LegReplay], *, threads: int = 1,
+               **kwargs) -> list[NDArray]:
+    """:func:`signature` of every leg, ``threads`` legs at once
+    (:func:`pospp.threads.map_in_threads`: B's re-runs release the GIL; the result does not
+    depend on it)."""
+    return map_in_threads(lambda r: signature(effect_id, r, **kwargs), replays, threads)

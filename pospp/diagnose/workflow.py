@@ -287,6 +287,7 @@ def diagnose_replays(
     rewhiten_null: bool = True,
     signatures: Mapping[str, Sequence[NDArray]] | None = None,
     heldout_whitened: Sequence[str] = HELDOUT_WHITENED,
+    threads: int = 1,
 ) -> Diagnosis:
     """Find, with evidence, what the calibration model is missing (module docstring).
 
@@ -361,6 +362,9 @@ def diagnose_replays(
         Per effect id, per leg (order of ``replays``) a signature (M, 2, P) in SI parameters
         that replaces the library's (:func:`pospp.diagnose.rerun.rerun_signatures`: A re-run,
         A's own response included).
+    threads : int
+        Legs whose library signatures are made at once by B re-runs
+        (:func:`pospp.diagnose.effects.signatures`; the result does not depend on it).
 
     Returns
     -------
@@ -433,7 +437,7 @@ def diagnose_replays(
     fixed_sigs = {e.effect_id: [np.asarray(a, dtype=float) for a in given[e.effect_id]]
                   if e.effect_id in given else
                   fx.signatures(e.effect_id, replays, context=ctx,
-                                accel_settling_s=accel_settling_s)
+                                accel_settling_s=accel_settling_s, threads=threads)
                   for e in pool if e.effect_id != "earth_rate_coupling"}
 
     base_fit = prob.fit(terms)
