@@ -8,7 +8,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import pytest
 
-from pospp.threads import Later, available_cores, first_kept, map_in_threads
+from pospp.threads import Later, SharedWork, available_cores, first_kept, map_in_threads
 
 
 def test_results_in_the_items_order_whatever_finishes_first():
@@ -122,3 +122,40 @@ def test_later_with_a_pool_runs_alongside_and_raises_where_used():
         with pytest.raises(ValueError, match="the pass failed"):
             bad.result()
     assert Later(None, lambda: None).take() is None  # None is a value, taken once
+
+
+def test_shared_work_is_joined_by_the_thread_waiting_for_it():
+    """The lane's calls (SharedWork.map on the pool's thread) are helped by the thread that
+    waits for the lane's result: the lane's first call can only end once another thread
+    ran a second; every call runs once, the results in the items' order."""
+    shared, ran, gate = SharedWork(), {}, threading.Event()
+
+    def item(x):
+        if x == 0:
+            assert gate.wait(10.0)  # a helper has run another item
+        else:
+            gate.set()
+        ran.setdefault(x, []).append(threading.current_thread().name)
+        return x * x
+
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="lane") as pool:
+        later = Later(pool, shared.map, item, range(5), helped=shared)
+        assert later.take() == [0, 1, 4, 9, 16]
+    assert sorted(ran) == [0, 1, 2, 3, 4] and all(len(v) == 1 for v in ran.values())
+    assert ran[0][0].startswith("lane")
+    assert any(not v[0].startswith("lane") for v in ran.values())
+
+
+def test_shared_work_raises_the_first_error_in_order_after_every_call_and_alone_runs_all():
+    shared, ran = SharedWork(), []
+
+    def item(x):
+        ran.append(x)
+        if x in (1, 3):
+            raise ValueError(f"item {x}")
+        return x
+
+    with pytest.raises(ValueError, match="item 1"):
+        map_in_threads(item, range(5), shared)  # no helper: all in this thread
+    assert ran == [0, 1, 2, 3, 4]
+    assert map_in_threads(lambda x: -x, [2, 5], shared) == [-2, -5]
