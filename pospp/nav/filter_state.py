@@ -29,15 +29,22 @@ from pospp.nav._filter_kernel import (
 from pospp.nav.alignment import AlignmentResult
 from pospp.nav.error_model import BA, BG, DR, DV, I_BA, I_BG, N_STATES, PHI
 from pospp.nav.filter_input import GnssRejection, MeasurementRecords, epoch_flags
-from pospp.nav.smoother import packed_size, smoother_gains
+from pospp.nav.smoother import (
+    packed_size,
+    rts_smooth,
+    rts_smooth_replayed,
+    smoother_gains,
+    unpack_symmetric,
+)
 from pospp.nav.tuning import NoiseParameters
 
 if TYPE_CHECKING:
     from pospp.nav.filter import FilterOptions
 
 __all__ = ["ForwardArrays", "GainReplay", "Outcome", "StateLayout", "forward_pass",
-           "gain_replay", "initial_covariance_and_noise", "record_outcomes", "state_layout",
-           "switch_epoch", "total_bias_map"]
+           "gain_replay", "initial_covariance_and_noise", "record_outcomes",
+           "smoothed_backward", "state_layout", "switch_epoch", "total_bias_map",
+           "total_bias_variance"]
 
 
 @dataclass(frozen=True)
@@ -314,3 +321,33 @@ def record_outcomes(meas: MeasurementRecords, fw: ForwardArrays,
     resets = tuple((float(meas.t_s[i]), MEAS_KINDS[kind[i]])
                    for i in np.flatnonzero(st == STATUS_RESET))
     return Outcome(tuple(rejections), n_updates, resets)
+
+
+def smoothed_backward(fw: ForwardArrays, with_cov: bool, replay: GainReplay | None
+                      ) -> tuple[NDArray, NDArray, NDArray | None]:
+    """RTS smoother's backward pass over the nodes: (e_plus, e_minus, P^s packed or None);
+    P^s is written over the nodes' updated P (``with_cov`` False: the errors alone, by
+    ``replay``'s smoother gains when it has them). What reads the nodes' P and Phi: the
+    caller frees them after it (:meth:`ForwardArrays.without_nodes`)."""
+    if with_cov:
+        return rts_smooth(fw.node_pp, fw.node_pu, fw.node_phi, fw.node_dx,
+                          overwrite_p_upd=True)
+    if replay is None or replay.smoother_gains is None:
+        e_plus, e_minus, _ = rts_smooth(fw.node_pp, fw.node_pu, fw.node_phi, fw.node_dx,
+                                        covariance=False)
+    else:
+        e_plus, e_minus, _ = rts_smooth_replayed(replay.smoother_gains, fw.node_pp,
+                                                 fw.node_pu, fw.node_phi, fw.node_dx)
+    return e_plus, e_minus, None
+
+
+def total_bias_variance(p_packed: NDArray, lay: StateLayout, chunk: int = 2048) -> NDArray:
+    """diag(T P T^T) per node (K, 6): the total [gyro, accel] bias variance
+    (:func:`total_bias_map` T) of packed covariances (K, n (n + 1) / 2), unpacked ``chunk``
+    nodes at a time (the same sums as over the whole (K, n, n) array)."""
+    tb = total_bias_map(lay)
+    out = np.empty((p_packed.shape[0], 6))
+    for c in range(0, p_packed.shape[0], chunk):
+        full = unpack_symmetric(p_packed[c:c + chunk], lay.n)
+        out[c:c + chunk] = np.einsum("ij,kjl,il->ki", tb, full, tb)
+    return out
