@@ -100,6 +100,8 @@ def rerun_base(log: mcap_reader.FlightLog | None, nav: nav_filter.FilterResult |
         return log, calib_run, None
     which = config.replay.reference if nav_r.smoothed is not None else "forward"
     ref = SolutionA(*nav_filter.solution_a_fields(nav_r, which=which))
+    gains = nav_r.gain_replay
+    del nav_r  # the rest of A (its forward solution, biases: 30 MiB) is not read by B
     imu_r = imu_increments(log_r)
     legs = {leg.leg_id: leg for leg in calib_run.legs}
     replays = {i: replace(rep, dv_n_mps=replay_velocity_error(
@@ -108,7 +110,7 @@ def rerun_base(log: mcap_reader.FlightLog | None, nav: nav_filter.FilterResult |
     if any(replays[i].dv_n_mps.shape != rep.dv_n_mps.shape
            for i, rep in calib_run.replays.items()):  # B not on the flight's samples
         return log, calib_run, None
-    return log_r, replace(calib_run, replays=replays), nav_r.gain_replay
+    return log_r, replace(calib_run, replays=replays), gains
 
 
 def drift_under_alternative(calib_run: CalibrationRun, replays_minus_effect: list,

@@ -317,11 +317,13 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
         nav_r = navigate(log_r, config, options=rerun_options(config), record_gains=record,
                          replay=replay)
         ref_r = SolutionA(*nav_filter.solution_a_fields(nav_r, which=which))
+        gains = nav_r.gain_replay
+        del nav_r  # the rest of A (its forward solution, biases: 30 MiB) is not read by B
         imu_r = imu_increments(log_r)
         return [replay_velocity_error(imu_r, ref_r, legs[i],
                                       accel_compensation=rc.accel_compensation,
                                       sample_rate_hz=rc.sample_rate_hz)
-                for i in ids], nav_r.gain_replay
+                for i in ids], gains
 
     # the base: the flight with its GNSS replaced by A's solution at the antenna
     # (null_model.gnss_on_solution: noise on top of the flight's own GNSS noise is not linear)

@@ -96,6 +96,7 @@ def _response(log_p, nav, calib_run, config, navigate: Navigate, lever_b_m=None
     legs = {leg.leg_id: leg for leg in calib_run.legs}
     nav_p = navigate(log_p, lever_arm_b_m=lever_b_m)
     ref_p = SolutionA(*nav_filter.solution_a_fields(nav_p, which=which))
+    del nav_p  # the rest of A (its forward solution, biases: 30 MiB) is not read by B
     t0 = int(log_p.imu.time_ns[0])
     imu = ImuRates.from_rates(log_p.imu.time_ns, log_p.imu.w_ib_b_radps,
                               log_p.imu.f_ib_b_mps2, epoch_ns=t0)
