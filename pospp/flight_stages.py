@@ -273,10 +273,25 @@ def null_drift(calib_run: CalibrationRun, config: PipelineConfig) -> tuple[float
     return si.gyro_gm_sigma_radps, si.gyro_gm_tau_s, "configured"
 
 
+def null_white_noise(log: mcap_reader.FlightLog, config: PipelineConfig
+                     ) -> tuple[float, float]:
+    """The IMU white noise the null realisations add: (gyro ARW [rad/s^0.5], accelerometer
+    VRW [m/s^1.5]), read from the log's samples (``[pairs] null_imu_noise`` "measured",
+    :func:`pospp.diagnose.null_model.imu_white_noise_from_samples`) or the configured grade's
+    ("grade"). It needs the log alone: a run on two threads makes it while A runs."""
+    if config.pairs.null_imu_noise == "grade":
+        si = imu_tuning(config).noise()
+        return float(si.gyro_arw_radpsqrts), float(si.accel_vrw_mpspsqrts)
+    arw, vrw = null_model.imu_white_noise_from_samples(
+        log.imu.time_ns, log.imu.w_ib_b_radps, log.imu.f_ib_b_mps2)
+    return float(arw), float(vrw)
+
+
 def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                       calib_run: CalibrationRun, config: PipelineConfig, n: int, *,
                       seed: int = 0, drift: tuple[float, float] | None = None,
-                      threads: int = 1) -> list[list[np.ndarray]]:
+                      threads: int = 1, white_noise: tuple[float, float] | None = None
+                      ) -> list[list[np.ndarray]]:
     """B minus A's null realisations along this flight (pospp.diagnose.null_model).
 
     Each: the log with IMU noise (white: ``[pairs] null_imu_noise`` "measured", the
@@ -295,17 +310,14 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     Gauss-Markov path is sampled at the groups' ends (O(T / tau) from its group means).
     Returns ``n`` lists of (M, 3) arrays, legs in id order (fewer when A fails on more than ``n`` of
     ``2 n`` perturbed logs). ``drift``: (sigma [rad/s], tau [s]) of the gyro drift to inject instead
-    (:func:`drift_under_alternative`). ``threads``: realisations made at once
+    (:func:`drift_under_alternative`). ``white_noise``: :func:`null_white_noise` of the log,
+    made before (None: made here). ``threads``: realisations made at once
     (:func:`pospp.threads.first_kept`, the next log drawn while A runs); the logs are drawn
     in the same order from the same generator, so the result does not depend on it.
     """
     si = imu_tuning(config).noise()
     gm_sigma, gm_tau, _ = null_drift(calib_run, config) if drift is None else (*drift, "")
-    if config.pairs.null_imu_noise == "grade":
-        arw, vrw = si.gyro_arw_radpsqrts, si.accel_vrw_mpspsqrts
-    else:
-        arw, vrw = null_model.imu_white_noise_from_samples(
-            log.imu.time_ns, log.imu.w_ib_b_radps, log.imu.f_ib_b_mps2)
+    arw, vrw = null_white_noise(log, config) if white_noise is None else white_noise
     ids = sorted(calib_run.replays)
     legs = {leg.leg_id: leg for leg in calib_run.legs}
     rc = config.replay

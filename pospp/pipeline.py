@@ -48,6 +48,7 @@ from pospp.flight_stages import (  # the stage functions, importable from here a
     lever_arm_estimate,  # noqa: F401  (re-exported: the power benchmark calls it)
     navigate,
     null_realisations,
+    null_white_noise,
     sensor_to_body_dcm,
 )
 from pospp.io import mcap_reader, parquet_tables, report_files, run_folder, trajectory_mcap
@@ -300,6 +301,10 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
         book.messages.append(outputs.issue_message(issue))
     summary.update(outputs.log_summary(log))
 
+    # the null's IMU white noise needs the log alone: on the second lane while A runs
+    white = Later(lane, null_white_noise, log, config) \
+        if config.pairs.null_realisations > 0 else None
+
     # --- algorithm A --------------------------------------------------------------------------
     book.stage("navigate")
     epoch_ns = int(log.imu.time_ns[0])
@@ -334,7 +339,8 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
     if calib_run.calibrated and config.pairs.null_realisations > 0:
         book.stage("null_realisations")
         null_dv = null_realisations(log, nav, calib_run, config, config.pairs.null_realisations,
-                                    threads=threads)
+                                    threads=threads,
+                                    white_noise=white.take() if white is not None else None)
         calib_run = with_null_covariance(calib_run, null_dv)
 
     ahead = checks_ahead(ahead, log, nav, calib_run, config, lane)
@@ -401,6 +407,7 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
     # the report reads the tables back: the run's arrays are let go first, so that it
     # reuses their memory instead of adding to the peak (1.5 h flight: 110 MiB)
     del log, nav, imu, solution_a, calib_run, null_dv, diagnosis, solutions, tables, ahead, mcap
+    del white
     return finish(status, report=config.outputs.report)
 
 
