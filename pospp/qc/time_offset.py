@@ -82,7 +82,7 @@ def estimate_time_offset(imu_t_s: ArrayLike, w_d_radps: ArrayLike, vel_t_s: Arra
 
     def fit(keep: NDArray) -> float:
         grid = np.arange(-TIME_OFFSET_SEARCH_S, TIME_OFFSET_SEARCH_S + 1e-9, 0.02)
-        cost = np.array([np.sum(resid(g, keep) ** 2) for g in grid])
+        cost = _grid_costs(grid, t, psi, t0[keep], t1[keep], dchi[keep])
         i = int(np.clip(np.argmin(cost), 1, grid.shape[0] - 2))
         c0, c1, c2 = cost[i - 1], cost[i], cost[i + 1]
         den = c0 - 2.0 * c1 + c2
@@ -106,6 +106,24 @@ def estimate_time_offset(imu_t_s: ArrayLike, w_d_radps: ArrayLike, vel_t_s: Arra
     tot = float(np.sum((dchi[keep] - dchi[keep].mean()) ** 2))
     explained = 1.0 - float(np.sum(r**2)) / tot if tot > 0 else 0.0
     return TimeOffsetEstimate(tau, sigma, int(keep.sum()), rms, explained)
+
+
+def _grid_costs(grid: NDArray, t: NDArray, psi: NDArray, t0: NDArray, t1: NDArray,
+                dchi: NDArray, chunk: int = 64) -> NDArray:
+    """``sum((dchi - (Psi(t1 - tau) - Psi(t0 - tau)))^2)`` for every ``tau`` of ``grid``: the
+    numbers of one ``np.interp`` and one sum per tau, bit for bit, with the queries laid out
+    record by record, tau descending (each record's queries then increase a few IMU samples
+    apart, and ``np.interp`` finds each next to the last one found instead of bisecting the
+    whole flight: 0.47 -> 0.1 s on the 1.5 h, 200 Hz flight; ``chunk`` taus at a time)."""
+    cost = np.empty(grid.shape[0])
+    for c in range(0, grid.shape[0], chunk):
+        taus = grid[c:c + chunk][::-1]
+        psi1 = np.interp((t1[:, None] - taus[None, :]).ravel(), t, psi)
+        psi0 = np.interp((t0[:, None] - taus[None, :]).ravel(), t, psi)
+        r = dchi[:, None] - (psi1 - psi0).reshape(t1.shape[0], taus.shape[0])
+        r = np.ascontiguousarray(r[:, ::-1].T)  # a row per tau, as grid's
+        cost[c:c + taus.shape[0]] = [np.sum(row ** 2) for row in r]
+    return cost
 
 
 def gnss_time_offset(est: TimeOffsetEstimate | None) -> Check:

@@ -204,6 +204,24 @@ def test_time_offset_not_applicable_without_turns_or_when_flying_sideways():
     assert chk.passed and "course does not follow" in chk.statistic
 
 
+def test_time_offset_grid_costs_are_one_interp_and_one_sum_per_tau_bit_for_bit():
+    """The grid's costs laid out record by record (np.interp then finds each query next to
+    the last) are the per-tau evaluation's numbers exactly: uneven IMU stamps, records
+    inside and at the ends, chunks that do not divide the grid."""
+    rng = np.random.default_rng(11)
+    t = np.cumsum(rng.uniform(0.004, 0.006, 20000))
+    psi = np.cumsum(rng.normal(0.0, 1e-3, t.shape[0]))
+    t0 = np.sort(rng.uniform(t[0] + 5.0, t[-1] - 6.0, 300))
+    t1 = t0 + rng.uniform(0.5, 1.0, t0.shape[0])
+    dchi = rng.normal(0.0, 0.01, t0.shape[0])
+    grid = np.arange(-5.0, 5.0 + 1e-9, 0.02)
+    ref = np.array([np.sum((dchi - (np.interp(t1 - g, t, psi) - np.interp(t0 - g, t, psi)))
+                           ** 2) for g in grid])
+    for chunk in (1, 64, 500, 1000):
+        np.testing.assert_array_equal(
+            time_offset._grid_costs(grid, t, psi, t0, t1, dchi, chunk=chunk), ref)
+
+
 def test_gnss_jump_of_5km_is_found_with_its_time():
     rng = np.random.default_rng(6)
     t = np.arange(0.0, 600.0, 1.0)
