@@ -24,7 +24,7 @@ from pospp import earth, rotation
 from pospp.calib.segment import Leg
 from pospp.nav import strapdown
 from pospp.nav.error_model import transition_matrices
-from pospp.units import S_PER_NS, t_s_from_time_ns
+from pospp.units import t_s_from_time_ns
 
 
 @dataclass(frozen=True)
@@ -81,10 +81,13 @@ class ImuRates:
                    np.asarray(w_ib_b_radps, dtype=float), np.asarray(f_ib_b_mps2, dtype=float))
 
     def window(self, k0: int, k1: int) -> ImuIncrements:
-        """The increments of intervals ``k0 .. k1 - 1`` (epochs ``t_s[k0 .. k1]``), made."""
-        dt = (np.diff(self.time_ns[k0:k1 + 1]) * S_PER_NS)[:, None]
-        return ImuIncrements(self.t_s[k0:k1 + 1], self.w_ib_b_radps[k0 + 1:k1 + 1] * dt,
-                             self.f_ib_b_mps2[k0 + 1:k1 + 1] * dt)
+        """The increments of intervals ``k0 .. k1 - 1`` (epochs ``t_s[k0 .. k1]``), made by
+        :func:`pospp.nav.strapdown.increments_from_rates` on the window's samples."""
+        sl = slice(k0, k1 + 1)
+        _, dth, dv = strapdown.increments_from_rates(
+            self.time_ns[sl], self.w_ib_b_radps[sl], self.f_ib_b_mps2[sl],
+            epoch_ns=int(self.time_ns[k0]))
+        return ImuIncrements(self.t_s[sl], dth, dv)
 
 
 ImuSource = ImuIncrements | ImuRates
