@@ -10,16 +10,23 @@ Nothing here touches files but through :mod:`pospp.io`'s reader.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import replace
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from pospp import rotation
-from pospp.calib.replay import ImuRates, ImuSource, SolutionA, replay_velocity_error
-from pospp.calib.segment import Leg
+from pospp.calib.replay import (
+    ImuRates,
+    ImuSource,
+    LegReplay,
+    SolutionA,
+    replay_legs,
+    replay_velocity_error,
+)
+from pospp.calib.segment import Leg, find_legs
 from pospp.calib.stage import CalibrationRun, calibrate_flight
 from pospp.config import PipelineConfig
 from pospp.diagnose import null_model
@@ -33,7 +40,7 @@ from pospp.diagnose.rerun import (
 from pospp.io import mcap_reader
 from pospp.nav import filter as nav_filter
 from pospp.nav import tuning as nav_tuning
-from pospp.threads import first_kept
+from pospp.threads import Threads, first_kept
 from pospp.types import FLU_TO_FRD
 from pospp.units import UG_MPS2, t_s_from_time_ns
 
@@ -134,26 +141,34 @@ LEVER_ARM_PASS_STEP_M = 0.1
 """Another pass when the estimate moved more than this from where its pass started [m]."""
 
 
-def lever_arm_estimate(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
+def lever_arm_seen(nav: nav_filter.FilterResult) -> np.ndarray:
+    """The lever-arm axes (FRD, (3,) bool) A's attitude history reveals
+    (:func:`pospp.qc.checks.lever_arm_observable` of its smoothed attitude, else its forward
+    one): :func:`lever_arm_estimate`'s ``seen``."""
+    from pospp.qc.checks import lever_arm_observable
+
+    sol = nav.smoothed if nav.smoothed is not None else nav.forward
+    return lever_arm_observable(sol.rpy_rad)
+
+
+def lever_arm_estimate(log: mcap_reader.FlightLog, seen: np.ndarray,
                        config: PipelineConfig) -> nav_filter.LeverArmEstimate:
     """The antenna lever arm (body FRD, m) estimated by forward passes of A with lever-arm
     states (no smoother; a second and third pass from the previous estimate while it moves
     by more than :data:`LEVER_ARM_PASS_STEP_M` and differs from the configured value by as
     much) and a :data:`QC_LEVER_ARM_SIGMA_M` prior
     sigma (the QC stage's, and the diagnosis's starting point for ``lever_arm``). The axes
-    A's attitude history reveals (:func:`pospp.qc.checks.lever_arm_observable`) start from
+    A's attitude history reveals (``seen``: :func:`lever_arm_seen`) start from
     zero, so that the configured value does not pull them; the others start from the
     configured value, where they stay instead of floating and leaking into the revealed ones
     (all from zero, a 1.5 m down lever that one banked turn cannot reveal bent the forward
     estimate by 0.3 m at 14 sigma: 2 false alarms in 100 clean flights, docs/qc.md). Raises
-    ValueError when A fails."""
-    from pospp.qc.checks import lever_arm_observable
-
+    ValueError when A fails. It needs the log and ``seen`` alone, not A's solution
+    (:mod:`pospp.passes_ahead` starts it from a guess of ``seen`` while A runs)."""
     rerun = replace(config, gnss=replace(config.gnss, estimate_lever_arm=True))
     opts = replace(config.filter_options(), smoother=False,
                    lever_arm_sigma_m=QC_LEVER_ARM_SIGMA_M)
-    sol = nav.smoothed if nav.smoothed is not None else nav.forward
-    seen = lever_arm_observable(sol.rpy_rad)
+    seen = np.asarray(seen, dtype=bool)
     configured = np.asarray(config.gnss.lever_arm_m, dtype=float)
     start = np.where(seen, 0.0, configured)
     est = navigate(log, rerun, lever_arm_b_m=start, options=opts).lever_arm
@@ -234,15 +249,47 @@ def imu_increments(log: mcap_reader.FlightLog) -> ImuRates:
                                epoch_ns=int(log.imu.time_ns[0]))
 
 
-def calibrate_from_a(imu: ImuSource, nav: nav_filter.FilterResult,
-              config: PipelineConfig) -> tuple[CalibrationRun, SolutionA]:
-    """Legs, B replays, pairs, least squares and B re-run (pospp.calib.stage)."""
+@dataclass(frozen=True)
+class LegReplays:
+    """A's reference solution, the legs found on it and B's replays over them
+    (:func:`calibration_replays`): what the calibration's fit and the null's base share."""
+
+    solution_a: SolutionA
+    legs: tuple[Leg, ...]
+    replays: dict[int, LegReplay]
+    """By leg id, the legs whose replay did not fail."""
+    failed: tuple[str, ...]
+    """A message per leg whose replay failed."""
+
+
+def calibration_replays(imu: ImuSource, nav: nav_filter.FilterResult, config: PipelineConfig,
+                        threads: Threads = 1) -> LegReplays:
+    """The calibration's legs (:func:`pospp.calib.segment.find_legs` on A's ``[replay]
+    reference`` solution) and B's replays over them
+    (:func:`pospp.calib.replay.replay_legs`, ``threads`` legs at once)."""
     which = config.replay.reference if nav.smoothed is not None else "forward"
     solution_a = SolutionA(*nav_filter.solution_a_fields(nav, which=which))
+    traj = solution_a.trajectory
+    legs = tuple(find_legs(traj.t_s, traj.v_n_mps, traj.height_m,
+                           thresholds=config.legs.thresholds()))
+    replays, failed = replay_legs(imu, solution_a, legs, config.replay.options(), threads)
+    return LegReplays(solution_a, legs, replays, failed)
+
+
+def calibrate_from_a(imu: ImuSource, nav: nav_filter.FilterResult,
+                     config: PipelineConfig, made: LegReplays | None = None,
+                     threads: Threads = 1) -> tuple[CalibrationRun, SolutionA]:
+    """Legs, B replays, pairs, least squares and B re-run (pospp.calib.stage); ``made``: the
+    legs and replays of :func:`calibration_replays`, made before (None: made here);
+    ``threads``: B's replays made that many legs at once."""
+    made = calibration_replays(imu, nav, config, threads) if made is None else made
+    solution_a = made.solution_a
     tuning = imu_tuning(config)
     gm = bool(np.isfinite(tuning.gyro_gm_tau_s) and tuning.gyro_gm_sigma_dph > 0)
     return calibrate_flight(
-        imu, solution_a, legs_cfg=config.legs.thresholds(), replay_cfg=config.replay.options(),
+        imu, solution_a, legs=made.legs, made_replays=(made.replays, made.failed),
+        threads=threads,
+        legs_cfg=config.legs.thresholds(), replay_cfg=config.replay.options(),
         pairs_cfg=config.pairs.policy(), gyro_arw_dpsh=tuning.gyro_arw_dpsh,
         noise=config.pairs.noise, noise_step_s=config.pairs.noise_step_s,
         estimate_gyro_z=config.pairs.estimate_gyro_z,
@@ -290,8 +337,8 @@ def null_white_noise(log: mcap_reader.FlightLog, config: PipelineConfig
 def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                       calib_run: CalibrationRun, config: PipelineConfig, n: int, *,
                       seed: int = 0, drift: tuple[float, float] | None = None,
-                      threads: int = 1, white_noise: tuple[float, float] | None = None
-                      ) -> list[list[np.ndarray]]:
+                      threads: int = 1, white_noise: tuple[float, float] | None = None,
+                      base: NullBase | None = None) -> list[list[np.ndarray]]:
     """B minus A's null realisations along this flight (pospp.diagnose.null_model).
 
     Each: the log with IMU noise (white: ``[pairs] null_imu_noise`` "measured", the
@@ -314,71 +361,108 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     made before (None: made here). ``threads``: realisations made at once
     (:func:`pospp.threads.first_kept`, the next log drawn while A runs); the logs are drawn
     in the same order from the same generator, so the result does not depend on it.
+    ``base``: :func:`null_base` on the run's legs and replays, made before (None: made here).
     """
     si = imu_tuning(config).noise()
     gm_sigma, gm_tau, _ = null_drift(calib_run, config) if drift is None else (*drift, "")
     arw, vrw = null_white_noise(log, config) if white_noise is None else white_noise
-    ids = sorted(calib_run.replays)
-    legs = {leg.leg_id: leg for leg in calib_run.legs}
-    rc = config.replay
-    which = rc.reference if nav.smoothed is not None else "forward"
-
-    def b_minus_a(log_r: mcap_reader.FlightLog, record: bool = False,
-                  replay: nav_filter.GainReplay | None = None
-                  ) -> tuple[list[np.ndarray], nav_filter.GainReplay | None]:
-        nav_r = navigate(log_r, config, options=rerun_options(config), record_gains=record,
-                         replay=replay)
-        ref_r = SolutionA(*nav_filter.solution_a_fields(nav_r, which=which))
-        gains = nav_r.gain_replay
-        del nav_r  # the rest of A (its forward solution, biases: 30 MiB) is not read by B
-        imu_r = imu_increments(log_r)
-        return [replay_velocity_error(imu_r, ref_r, legs[i],
-                                      accel_compensation=rc.accel_compensation,
-                                      sample_rate_hz=rc.sample_rate_hz)
-                for i in ids], gains
-
-    # the base: the flight with its GNSS replaced by A's solution at the antenna
-    # (null_model.gnss_on_solution: noise on top of the flight's own GNSS noise is not linear)
-    solution = nav.smoothed if which == "smoothed" and nav.smoothed is not None else nav.forward
-    base = null_model.gnss_on_solution(log, solution, int(log.imu.time_ns[0]),
-                                       nav.lever_arm.lever_b_m)
-    pos_sig, vel_sig = null_model.gnss_noise_from_residuals(log, base)
-    factor = rerun_decimation(log, config.pairs.rerun_imu_rate_hz)
+    b = null_base(log, nav, calib_run.legs, calib_run.replays, config) if base is None \
+        else base
     noise = null_model.NullNoise(
         gyro_arw_radpsqrts=float(arw), accel_vrw_mpspsqrts=float(vrw),
         gyro_gm_sigma_radps=float(gm_sigma), gyro_gm_tau_s=float(gm_tau),
         accel_gm_sigma_mps2=float(si.accel_gm_sigma_mps2), accel_gm_tau_s=float(si.accel_gm_tau_s),
-        pos_sigma_ned_m=pos_sig, vel_sigma_ned_mps=vel_sig)
-    t_align_ns = int(log.imu.time_ns[0]) + round(nav.alignment.t_s * 1e9)
-    leg_ns = null_sample_stamps_ns(log, calib_run.legs, t_align_ns)
-    base_r = null_model.decimate_imu(base, factor, leg_ns)
-    try:
-        base_dv, gains = b_minus_a(base_r, record=True)
-        if any(d.shape != calib_run.replays[i].dv_n_mps.shape
-               for d, i in zip(base_dv, ids, strict=True)):
-            raise ValueError("B on the summed-down base is not on the flight's samples")
-    except ValueError:  # A fails on the summed-down base (its alignment): the flight's rate
-        if factor == 1:
-            raise
-        base_r = base
-        base_dv, gains = b_minus_a(base_r, record=True)
+        pos_sigma_ned_m=b.pos_sigma_ned_m, vel_sigma_ned_mps=b.vel_sigma_ned_mps)
     rng = np.random.default_rng(seed)
 
     def attempt(log_r: mcap_reader.FlightLog) -> list[np.ndarray] | None:
         try:  # A with the base's gains (nav_filter.GainReplay): first order in the noise
-            return b_minus_a(log_r, replay=gains)[0]
+            return _b_minus_a(log_r, nav, calib_run.legs, calib_run.replays, config,
+                              replay=b.gains)[0]
         except ValueError:  # a realisation whose A fails (alignment) is skipped
             return None
 
     # drawn on the summed-down samples (a quarter of the flight-rate draws at 200 -> 50 Hz);
     # in this thread (drawing and scaling them in the workers held a draw per thread, +230
     # MiB on the 1.5 h flight, for no time: the generator's draws are serial)
-    perturbed = (null_model.perturb_log(base_r, noise, rng, from_time_ns=t_align_ns)
+    perturbed = (null_model.perturb_log(b.log, noise, rng, from_time_ns=b.t_align_ns)
                  for _ in range(2 * n))
     # never more logs drawn than realisations still missing: the draws, and so the
     # realisations, are those of one log at a time; the next drawn while A runs on the others
-    return [[d - d0 for d, d0 in zip(dv, base_dv, strict=True)]
+    return [[d - d0 for d, d0 in zip(dv, b.dv_n_mps, strict=True)]
             for dv in first_kept(attempt, perturbed, n, threads)]
+
+
+@dataclass(frozen=True)
+class NullBase:
+    """What the null realisations perturb and subtract (:func:`null_base`): none of it
+    depends on the calibration's fit (its drift sets the noise only)."""
+
+    log: mcap_reader.FlightLog
+    """The flight with its GNSS on A's solution at the antenna, IMU summed down (or not)."""
+    dv_n_mps: list[np.ndarray]
+    """B minus A on ``log`` per leg with a replay, in id order (M, 3) [m/s]."""
+    gains: nav_filter.GainReplay | None
+    """A's gains on ``log``, which the realisations' A re-uses."""
+    pos_sigma_ned_m: np.ndarray
+    """The GNSS position noise the realisations add (NED) [m]."""
+    vel_sigma_ned_mps: np.ndarray
+    """The GNSS velocity noise the realisations add (NED) [m/s]."""
+    t_align_ns: int
+    """The noise is added from A's alignment point on [ns, log stamps]."""
+
+
+def null_base(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult, legs: Sequence[Leg],
+              replays: Mapping[int, LegReplay], config: PipelineConfig) -> NullBase:
+    """The base of :func:`null_realisations` on ``legs`` and their B ``replays`` (before the
+    fit: a run on two threads makes it while it calibrates): the flight with its GNSS replaced
+    by A's solution at the antenna (:func:`pospp.diagnose.null_model.gnss_on_solution`; noise
+    on top of the flight's own GNSS noise is not linear), the IMU summed down to ``[pairs]
+    rerun_imu_rate_hz`` (the flight's rate when A fails on the summed-down base), A re-run on
+    it recording its gains and B replayed on the legs. Raises ValueError when A fails on it
+    at the flight's rate."""
+    which = config.replay.reference if nav.smoothed is not None else "forward"
+    solution = nav.smoothed if which == "smoothed" and nav.smoothed is not None else nav.forward
+    base = null_model.gnss_on_solution(log, solution, int(log.imu.time_ns[0]),
+                                       nav.lever_arm.lever_b_m)
+    pos_sig, vel_sig = null_model.gnss_noise_from_residuals(log, base)
+    factor = rerun_decimation(log, config.pairs.rerun_imu_rate_hz)
+    t_align_ns = int(log.imu.time_ns[0]) + round(nav.alignment.t_s * 1e9)
+    leg_ns = null_sample_stamps_ns(log, legs, t_align_ns)
+    base_r = null_model.decimate_imu(base, factor, leg_ns)
+    try:
+        base_dv, gains = _b_minus_a(base_r, nav, legs, replays, config, record=True)
+        if any(d.shape != replays[i].dv_n_mps.shape
+               for d, i in zip(base_dv, sorted(replays), strict=True)):
+            raise ValueError("B on the summed-down base is not on the flight's samples")
+    except ValueError:  # A fails on the summed-down base (its alignment): the flight's rate
+        if factor == 1:
+            raise
+        base_r = base
+        base_dv, gains = _b_minus_a(base_r, nav, legs, replays, config, record=True)
+    return NullBase(base_r, base_dv, gains, pos_sig, vel_sig, t_align_ns)
+
+
+def _b_minus_a(log_r: mcap_reader.FlightLog, nav: nav_filter.FilterResult, legs: Sequence[Leg],
+               replays: Mapping[int, LegReplay], config: PipelineConfig, record: bool = False,
+               replay: nav_filter.GainReplay | None = None
+               ) -> tuple[list[np.ndarray], nav_filter.GainReplay | None]:
+    """A re-run on ``log_r`` as the null realisations run it (``record``: recording its
+    gains; ``replay``: with those gains), then B minus it on the legs with a replay, in id
+    order: (M, 3) NED velocity errors [m/s], and the gains recorded (else None)."""
+    which = config.replay.reference if nav.smoothed is not None else "forward"
+    nav_r = navigate(log_r, config, options=rerun_options(config), record_gains=record,
+                     replay=replay)
+    ref_r = SolutionA(*nav_filter.solution_a_fields(nav_r, which=which))
+    gains = nav_r.gain_replay
+    del nav_r  # the rest of A (its forward solution, biases: 30 MiB) is not read by B
+    imu_r = imu_increments(log_r)
+    by_id = {leg.leg_id: leg for leg in legs}
+    rc = config.replay
+    return [replay_velocity_error(imu_r, ref_r, by_id[i],
+                                  accel_compensation=rc.accel_compensation,
+                                  sample_rate_hz=rc.sample_rate_hz)
+            for i in sorted(replays)], gains
 
 
 def rerun_decimation(log: mcap_reader.FlightLog, rate_hz: float) -> int:
@@ -429,7 +513,7 @@ def _lever_arm_and_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResul
         return None, None
     if est is None:
         try:
-            est = lever_arm_estimate(log, nav, config)
+            est = lever_arm_estimate(log, lever_arm_seen(nav), config)
         except ValueError:
             return None, None
     return est.lever_b_m, np.asarray(config.gnss.lever_arm_m, dtype=float) - est.lever_b_m

@@ -2,8 +2,11 @@
 and the QC checks, made ahead on a second lane (issue 18).
 
 With more than one thread, :mod:`pospp.pipeline` gives a run a second lane (one worker
-thread) and puts on it, in this order: A's lever-arm pass and the diagnosis's signature
-starts (:func:`passes_on_a`: they need A only, so they run alongside the calibration), then
+thread) and puts on it, in this order: A's lever-arm pass and the diagnosis's scale-factor
+start (:func:`passes_on_log`: they need the log and the lever-arm axes A will reveal, guessed
+from the GNSS track, so they run alongside A; made again by :func:`passes_on_a` when A's
+attitude reveals other axes), the diagnosis's other signature starts (:func:`passes_on_a`:
+they need A only, so they run alongside the calibration), then
 the compensated A and the diagnosis's first re-runs (:func:`passes_ahead`: they need the
 calibration, not the null, so they run alongside the null realisations), then the QC checks
 (:func:`checks_ahead`: they need the calibration with its null covariance and the lever-arm
@@ -22,12 +25,15 @@ from __future__ import annotations
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 
+import numpy as np
+
 from pospp.calib.stage import CalibrationRun
 from pospp.config import PipelineConfig
-from pospp.diagnosis_stage import diagnosis_reruns, signature_starts
-from pospp.flight_stages import lever_arm_estimate, navigate, sensor_to_body_dcm
+from pospp.diagnosis_stage import diagnosis_reruns, scale_factor_start, signature_starts
+from pospp.flight_stages import lever_arm_estimate, lever_arm_seen, navigate, sensor_to_body_dcm
 from pospp.io import mcap_reader
 from pospp.nav import filter as nav_filter
+from pospp.qc.checks import lever_arm_observable_from_track
 from pospp.qc.stage import quality_checks
 from pospp.threads import Later, SharedWork
 
@@ -49,25 +55,70 @@ class Ahead:
     """:func:`pospp.qc.stage.quality_checks` on the final calibration (:func:`checks_ahead`)."""
 
 
-def lever_re_estimate(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
-                      config: PipelineConfig
+@dataclass(frozen=True)
+class Guess:
+    """A's lever-arm pass and the diagnosis's scale-factor start, started before A
+    (:func:`passes_on_log`) for the lever-arm axes a rough attitude from the GNSS track
+    reveals."""
+
+    seen: np.ndarray
+    """The guessed axes (FRD, (3,) bool):
+    :func:`pospp.qc.checks.lever_arm_observable_from_track`."""
+    lever: Later
+    """:func:`lever_re_estimate` for ``seen``."""
+    scale_factor: Later | None
+    """:func:`pospp.diagnosis_stage.scale_factor_start` at that estimate (None: no diagnosis)."""
+
+
+def lever_re_estimate(log: mcap_reader.FlightLog, seen: np.ndarray, config: PipelineConfig
                       ) -> tuple[nav_filter.LeverArmEstimate | None, str | None]:
-    """(A's lever-arm estimate, None) by :func:`pospp.flight_stages.lever_arm_estimate`, or
-    (None, why it failed); (None, None) when A estimates the lever arm itself."""
+    """(A's lever-arm estimate, None) by :func:`pospp.flight_stages.lever_arm_estimate` for
+    the revealed axes ``seen`` (:func:`pospp.flight_stages.lever_arm_seen`), or (None, why it
+    failed); (None, None) when A estimates the lever arm itself."""
     if config.gnss.estimate_lever_arm:
         return None, None
     try:
-        return lever_arm_estimate(log, nav, config), None
+        return lever_arm_estimate(log, seen, config), None
     except ValueError as exc:
         return None, str(exc)
 
 
+def passes_on_log(log: mcap_reader.FlightLog, config: PipelineConfig,
+                  lane: ThreadPoolExecutor | None) -> Guess | None:
+    """A's lever-arm pass and the diagnosis's scale-factor start, on ``lane`` from now on,
+    alongside A: they need the log and the lever-arm axes A's attitude will reveal, which are
+    guessed here from the GNSS velocity track
+    (:func:`pospp.qc.checks.lever_arm_observable_from_track`). :func:`passes_on_a` keeps
+    them when A's attitude reveals the same axes and makes them again when it does not, so
+    the values are those of A's axes either way (measured on the 1.5 h flight: the second
+    core was idle through A's 1.4 s). None: no lane, or no GNSS velocity to guess from."""
+    if lane is None or len(log.vel) < 2:
+        return None
+    t_s = (log.vel.time_ns - log.vel.time_ns[0]) * 1e-9
+    seen = lever_arm_observable_from_track(t_s, log.vel.v_n_mps)
+    lever = Later(lane, lever_re_estimate, log, seen, config)
+    sf = (Later(lane, lambda: scale_factor_start(log, config, lever.result()[0]))
+          if config.outputs.diagnose else None)
+    return Guess(seen, lever, sf)
+
+
 def passes_on_a(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
-                config: PipelineConfig, lane: ThreadPoolExecutor | None) -> Ahead:
+                config: PipelineConfig, lane: ThreadPoolExecutor | None,
+                guess: Guess | None = None) -> Ahead:
     """A's lever-arm pass and the diagnosis's signature starts (the scale-factor pass), on
-    ``lane`` from now on, alongside the calibration (None: each where its stage uses it)."""
-    lever = Later(lane, lever_re_estimate, log, nav, config)
-    starts = (Later(lane, lambda: signature_starts(log, nav, config, lever.result()[0]))
+    ``lane`` from now on, alongside the calibration (None: each where its stage uses it);
+    ``guess``'s passes (:func:`passes_on_log`) when it guessed the axes A's attitude reveals
+    (else they are cancelled, or let run out and dropped)."""
+    seen = lever_arm_seen(nav)
+    if guess is not None and np.array_equal(guess.seen, seen):
+        lever, sf = guess.lever, guess.scale_factor
+    else:
+        if guess is not None:
+            for later in (guess.scale_factor, guess.lever):
+                if later is not None:
+                    later.cancel()
+        lever, sf = Later(lane, lever_re_estimate, log, seen, config), None
+    starts = (Later(lane, lambda: signature_starts(log, nav, config, lever.result()[0], sf))
               if config.outputs.diagnose else None)
     return Ahead(lever, starts)
 

@@ -42,11 +42,14 @@ from pospp.diagnosis_stage import diagnose_calibration
 from pospp.evaluate import evaluation_rows, solution_errors
 from pospp.flight_stages import (  # the stage functions, importable from here as before
     calibrate_from_a,
+    calibration_replays,
     imu_increments,
     imu_tuning,  # noqa: F401  (re-exported: compare_sim and the tests call pipeline.imu_tuning)
     ingest,
     lever_arm_estimate,  # noqa: F401  (re-exported: the power benchmark calls it)
+    lever_arm_seen,
     navigate,
+    null_base,
     null_realisations,
     null_white_noise,
     sensor_to_body_dcm,
@@ -57,7 +60,13 @@ from pospp.io.files import sha256_file
 from pospp.memory import release_free_heap, share_one_heap
 from pospp.nav import events as sensor_events
 from pospp.nav import filter as nav_filter
-from pospp.passes_ahead import checks_ahead, lever_re_estimate, passes_ahead, passes_on_a
+from pospp.passes_ahead import (
+    checks_ahead,
+    lever_re_estimate,
+    passes_ahead,
+    passes_on_a,
+    passes_on_log,
+)
 from pospp.qc.checks import comparison_text
 from pospp.qc.stage import QualityReport, qc_columns, quality_checks, worst_status
 from pospp.report import figures
@@ -305,6 +314,10 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
     white = Later(lane, null_white_noise, log, config) \
         if config.pairs.null_realisations > 0 else None
 
+    # A's lever-arm and scale-factor passes need the log and the axes A will reveal (guessed
+    # from the GNSS track, checked against A's attitude): on the second lane while A runs
+    guess = passes_on_log(log, config, lane)
+
     # --- algorithm A --------------------------------------------------------------------------
     book.stage("navigate")
     epoch_ns = int(log.imu.time_ns[0])
@@ -320,12 +333,17 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
     if nav.smoothed is not None:
         solutions["smoothed"] = nav.smoothed
 
-    ahead = passes_on_a(log, nav, config, lane)
+    ahead = passes_on_a(log, nav, config, lane, guess)
 
     # --- calibration: legs, B, pairs, least squares -------------------------------------------
     book.stage("calibrate")
     imu = imu_increments(log)
-    calib_run, solution_a = calibrate_from_a(imu, nav, config)
+    made = calibration_replays(imu, nav, config, threads)
+    # the null's base needs the legs and B's replays, not the fit: on the lane while it runs
+    base = Later(lane, null_base, log, nav, made.legs, made.replays, config) \
+        if config.pairs.null_realisations > 0 and made.replays else None
+    calib_run, solution_a = calibrate_from_a(imu, nav, config, made, threads)
+    del made
     for text in calib_run.messages:
         book.note("warning", "calibrate", text)
     if not calib_run.calibrated:
@@ -336,12 +354,15 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
 
     # --- null realisations of B minus A: the calibration's sigmas and the diagnosis's null ----
     null_dv = None
-    if calib_run.calibrated and config.pairs.null_realisations > 0:
+    if calib_run.calibrated and base is not None:
         book.stage("null_realisations")
         null_dv = null_realisations(log, nav, calib_run, config, config.pairs.null_realisations,
                                     threads=threads,
-                                    white_noise=white.take() if white is not None else None)
+                                    white_noise=white.take() if white is not None else None,
+                                    base=base.take())
         calib_run = with_null_covariance(calib_run, null_dv)
+    elif base is not None:
+        base.cancel()
 
     ahead = checks_ahead(ahead, log, nav, calib_run, config, lane)
 
@@ -440,7 +461,8 @@ def quality_control(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     ``checks``: the checks already made with that estimate
     (:func:`pospp.passes_ahead.checks_ahead`); None: made here.
     """
-    estimate, failure = lever_re_estimate(log, nav, config) if lever is None else lever
+    estimate, failure = (lever_re_estimate(log, lever_arm_seen(nav), config) if lever is None
+                         else lever)
     if failure is not None and book is not None:
         book.note("warning", "qc", f"lever arm not re-estimated: {failure}")
     cin = config.input

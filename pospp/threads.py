@@ -13,7 +13,7 @@ import os
 import threading
 from collections import deque
 from collections.abc import Callable, Iterable
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import CancelledError, Future, ThreadPoolExecutor
 from functools import partial
 from typing import Any
 
@@ -158,6 +158,7 @@ class Later:
         self._helped = helped if pool is not None else None
         self._value: Any = None
         self._taken = False
+        self._cancelled = False
 
     def result(self) -> Any:
         """The value (made now when there is no pool and it was not made before). ``helped``
@@ -165,6 +166,8 @@ class Later:
         asking for the value helps with while it waits."""
         if self._taken:
             raise RuntimeError("Later.result: the value was taken")
+        if self._cancelled:
+            raise CancelledError("Later.result: cancelled")
         if self._future is not None:
             if self._helped is not None:
                 self._helped.help_until(self._future)
@@ -172,6 +175,14 @@ class Later:
         if self._call is not None:
             self._value, self._call = self._call(), None
         return self._value
+
+    def cancel(self) -> None:
+        """A value no one will ask for: not made when its pool has not started it (one
+        already running ends and is let go of), never made without a pool; :meth:`result`
+        then raises ``concurrent.futures.CancelledError``."""
+        if self._future is not None:
+            self._future.cancel()
+        self._future, self._call, self._helped, self._cancelled = None, None, None, True
 
     def take(self) -> Any:
         """The value, which this object then lets go of (its only user has it: its memory is

@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 from pospp.calib.pairs import Pair
 from pospp.calib.replay import ImuIncrements, ImuSource, LegReplay, SolutionA, replay_leg
 from pospp.calib.solve import Calibration, fit_calibration
+from pospp.threads import Threads, map_in_threads
 
 
 @dataclass(frozen=True)
@@ -162,6 +163,7 @@ def compensate_legs(
     smoothed_drift: bool = False,
     gyro_bias_by_leg: Mapping[int, NDArray] | None = None,
     gyro_bias_history: tuple[NDArray, NDArray] | None = None,
+    threads: Threads = 1,
 ) -> tuple[dict[int, LegReplay], tuple[LegImprovement, ...]]:
     """Re-run B on every leg with the calibration applied; report the improvement.
 
@@ -187,10 +189,11 @@ def compensate_legs(
         A time-varying body gyro bias [s, rad/s] removed instead of any of the above (the
         causal mode: :func:`causal_gyro_bias_b_radps` of A's forward estimate); each IMU
         interval gets the last value at or before its start, so no later data is used.
+    threads : int or SharedWork
+        Legs replayed at once (B's kernels release the GIL; the same replays at any number).
     """
-    after: dict[int, LegReplay] = {}
-    rows: list[LegImprovement] = []
-    for leg_id, rep in before.items():
+    def one(item: tuple[int, LegReplay]) -> tuple[LegReplay, LegImprovement]:
+        leg_id, rep = item
         in_fit = leg_id in cal.leg_ids
         phi = cal.misalignment_n_rad(leg_id) if in_fit else None
         bg = cal.gyro_bias_b_radps(rep.c_nb0)
@@ -208,8 +211,10 @@ def compensate_legs(
             accel_compensation=accel_compensation, transition_step=transition_step,
             sample_rate_hz=sample_rate_hz, sigma_floor_mps=sigma_floor_mps,
         )
-        after[leg_id] = new
         h, v0, p0 = horizontal_error_at(rep, horizon_s)
         _, v1, p1 = horizontal_error_at(new, horizon_s)
-        rows.append(LegImprovement(leg_id, h, v0, v1, p0, p1, in_fit))
-    return after, tuple(rows)
+        return new, LegImprovement(leg_id, h, v0, v1, p0, p1, in_fit)
+
+    made = map_in_threads(one, before.items(), threads)
+    return ({leg_id: m[0] for leg_id, m in zip(before, made, strict=True)},
+            tuple(m[1] for m in made))

@@ -15,6 +15,7 @@ rows). Frames and units as in :mod:`pospp.nav.error_model`.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,6 +25,7 @@ from pospp import earth, rotation
 from pospp.calib.segment import Leg
 from pospp.nav import strapdown
 from pospp.nav.error_model import transition_matrices
+from pospp.threads import Threads, map_in_threads
 from pospp.units import t_s_from_time_ns
 
 
@@ -259,6 +261,28 @@ def replay_leg(
         height_m=float(x0.height_m),
         v_n0_mps=x0.v_n_mps.copy(),
     )
+
+
+def replay_legs(imu: ImuSource, solution_a: SolutionA, legs: Sequence[Leg],
+                options: ReplayOptions | None = None, threads: Threads = 1
+                ) -> tuple[dict[int, LegReplay], tuple[str, ...]]:
+    """B replayed over every leg (:func:`replay_leg` with ``options``' settings; defaults when
+    None) on up to ``threads`` threads (B's kernels release the GIL): ({leg id: replay} in
+    the legs' order, and a message for each leg whose replay failed, naming it and why)."""
+    rc = options if options is not None else ReplayOptions()
+
+    def one(leg: Leg) -> LegReplay | str:
+        try:
+            return replay_leg(imu, solution_a, leg, accel_compensation=rc.accel_compensation,
+                              sample_rate_hz=rc.sample_rate_hz,
+                              sigma_floor_mps=rc.sigma_floor_mps,
+                              transition_step=int(rc.transition_step))
+        except ValueError as exc:
+            return f"leg {leg.leg_id}: B replay failed: {exc}"
+
+    made = map_in_threads(one, legs, threads)
+    return ({leg.leg_id: r for leg, r in zip(legs, made, strict=True)
+             if isinstance(r, LegReplay)}, tuple(r for r in made if isinstance(r, str)))
 
 
 def replay_velocity_error(

@@ -33,11 +33,12 @@ from pospp.calib.replay import (
     LegReplay,
     ReplayOptions,
     SolutionA,
-    replay_leg,
+    replay_legs,
 )
 from pospp.calib.segment import Leg, LegThresholds, find_legs
 from pospp.calib.solve import Calibration, DriftPrior
 from pospp.nav.closed_form import PAPER_FROM_NED
+from pospp.threads import Threads
 from pospp.units import ARCSEC_RAD, DEG_PER_H_RADPS
 from pospp.units import DEG_PER_SQRT_H_RAD_PER_SQRT_S as _DPSH_RADPSQRTS
 
@@ -205,6 +206,8 @@ def calibrate_flight(
     forward_biases: Any = None,
     gyro_gm_prior_sigma_dph: float | None = None,
     causal_prior_scale: float = CAUSAL_PRIOR_SCALE,
+    made_replays: tuple[dict[int, LegReplay], tuple[str, ...]] | None = None,
+    threads: Threads = 1,
 ) -> CalibrationRun:
     """Run the double-strapdown calibration on one flight.
 
@@ -255,6 +258,12 @@ def calibrate_flight(
         remove A's forward (causal) gyro-bias estimate as it changes inside each leg, fused
         with the calibrated bias as its prior
         (:func:`pospp.calib.compensate.causal_gyro_bias_b_radps`; needs ``forward_biases``).
+    made_replays : (replays, messages), optional
+        :func:`pospp.calib.replay.replay_legs` of ``legs`` (given with them) with
+        ``replay_cfg``, already made (a run on two threads starts the null's base from them
+        while it calibrates); made here when None.
+    threads : int or SharedWork
+        B's replays before and after the compensation made that many legs at once.
     noise_step_s : float
         Spacing of the samples of the correlated-noise least squares [s] (a leg shorter than
         ten steps is sampled every tenth of its length).
@@ -297,16 +306,12 @@ def calibrate_flight(
     traj = solution_a.trajectory
     messages: list[str] = []
     if legs is None:
+        if made_replays is not None:
+            raise ValueError("calibrate_flight: made_replays given without their legs")
         legs = find_legs(traj.t_s, traj.v_n_mps, traj.height_m, thresholds=th)
-    replays: dict[int, LegReplay] = {}
-    for leg in legs:
-        try:
-            replays[leg.leg_id] = replay_leg(
-                imu, solution_a, leg, accel_compensation=rc.accel_compensation,
-                sample_rate_hz=rc.sample_rate_hz, sigma_floor_mps=rc.sigma_floor_mps,
-                transition_step=int(rc.transition_step))
-        except ValueError as exc:
-            messages.append(f"leg {leg.leg_id}: B replay failed: {exc}")
+    replays, failed = (replay_legs(imu, solution_a, legs, rc, threads) if made_replays is None
+                       else made_replays)
+    messages.extend(failed)
 
     def done(reason: str, pairs: tuple[Pair, ...] = (), joint: tuple[Calibration, ...] = ()
              ) -> CalibrationRun:
@@ -394,7 +399,7 @@ def calibrate_flight(
         imu, solution_a, replays, chosen, accel_compensation=rc.accel_compensation,
         horizon_s=rc.horizon_s, transition_step=int(rc.transition_step),
         sample_rate_hz=rc.sample_rate_hz, sigma_floor_mps=rc.sigma_floor_mps,
-        per_leg_drift=compensation == "per_leg", gyro_bias_history=history)
+        per_leg_drift=compensation == "per_leg", gyro_bias_history=history, threads=threads)
     mis = {i: chosen.misalignment_n_rad(i) for i in chosen.leg_ids}
     return CalibrationRun(legs, replays, pairs, joint, chosen, after, improvements, bg, sig, mis,
                           "ok", tuple(messages),

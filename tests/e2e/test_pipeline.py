@@ -119,9 +119,14 @@ def test_outputs_are_deterministic(sample_run, tmp_path):
     code, text = _cli("run", str(SAMPLE), "-p", str(SAMPLE_PIPELINE), "-o", str(again),
                       "--threads", "1")
     assert code == 0, text
-    for name in TABLES:
-        a = parquet_tables.read_table(sample_run / f"{name}.parquet")
-        b = parquet_tables.read_table(again / f"{name}.parquet")
+    _assert_same_tables(sample_run, again)
+
+
+def _assert_same_tables(run_a, run_b, names=TABLES):
+    """The runs' tables are equal bit for bit (the summary's timings aside)."""
+    for name in names:
+        a = parquet_tables.read_table(run_a / f"{name}.parquet")
+        b = parquet_tables.read_table(run_b / f"{name}.parquet")
         if name == "summary":
             timing = [c for c in a.columns if c == "wall_time_s" or c.startswith("stage_")]
             a, b = a.drop(columns=timing), b.drop(columns=timing)
@@ -376,3 +381,32 @@ def test_a_failed_diagnosis_re_run_on_the_lane_is_a_partial_run(lane_config, tmp
         assert outcome.status == "partial" and _no_lane_thread_left()
         assert outcome.messages.text.str.contains(
             "no diagnosis: injected: A failed on the re-run base").any()
+
+
+@pytest.mark.slow
+def test_a_wrong_guess_of_the_revealed_axes_makes_the_lever_arm_pass_again(lane_config,
+                                                                           tmp_path,
+                                                                           monkeypatch):
+    # two threads start A's lever-arm and scale-factor passes while A runs, for the axes a
+    # rough attitude from the GNSS track reveals; guessed wrong (none, where the sample's A
+    # reveals all three), they are made again for A's axes: the tables are one thread's
+    from pospp import passes_ahead, pipeline
+
+    made_for: list[list[bool]] = []
+    real = passes_ahead.lever_arm_estimate
+
+    def recording(log, seen, config):
+        made_for.append(np.asarray(seen).tolist())
+        return real(log, seen, config)
+
+    monkeypatch.setattr(passes_ahead, "lever_arm_observable_from_track",
+                        lambda t_s, v_n_mps: np.zeros(3, dtype=bool))
+    monkeypatch.setattr(passes_ahead, "lever_arm_estimate", recording)
+    for threads in (2, 1):
+        outcome = pipeline.process_flight(SAMPLE, lane_config, tmp_path / f"t{threads}",
+                                          threads=threads)
+        assert outcome.status == "ok" and _no_lane_thread_left()
+    assert made_for.count([True, True, True]) == 2  # once per run: A's axes
+    assert made_for.count([False, False, False]) <= 1  # the guess, if not cancelled first
+    _assert_same_tables(tmp_path / "t2", tmp_path / "t1",
+                        [n for n in TABLES if (tmp_path / "t1" / f"{n}.parquet").is_file()])

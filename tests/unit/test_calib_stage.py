@@ -89,6 +89,33 @@ def test_leg_outside_the_imu_data_is_reported_not_raised(one_line):
     assert run.pairs[0].reason == "no B replay for leg(s) [2]" and not run.calibrated
 
 
+def test_replays_on_two_threads_are_the_replays_on_one(one_line):
+    """B's replays before (replay_legs) and after the compensation (compensate_legs, through
+    the stage) made two legs at once are those made one at a time, bit for bit, in the legs'
+    order, and a failed leg is named in its message either way."""
+    from _synthetic import survey_flight
+
+    from pospp.calib.replay import replay_legs
+
+    (imu, ref), legs = one_line
+    late = Leg(2, 800.0, 1100.0, 0.5 + np.pi, 20.0, 100.0, 0, 0, 0, 0)
+    one, failed_one = replay_legs(imu, ref, (*legs, late), threads=1)
+    two, failed_two = replay_legs(imu, ref, (late, *legs), threads=2)
+    assert list(one) == [0, 1] and list(two) == [0, 1]
+    assert failed_one == failed_two and failed_one[0].startswith("leg 2: B replay failed")
+    fl = survey_flight(headings_deg=(0.0, 90.0, 180.0), rate_hz=20.0, leg_duration_s=300.0)
+    drift = type(fl.imu)(fl.imu.t_s, fl.imu.dtheta_b_rad + np.diff(fl.imu.t_s)[:, None]
+                         * np.radians([0.5, -0.3, 0.2]) / 3600.0, fl.imu.dv_b_mps)
+    runs = [calibrate_flight(drift, fl.solution_a(), legs=fl.legs, noise="white", threads=t)
+            for t in (1, 2)]
+    assert runs[0].calibrated and len(runs[0].replays_after) == 3
+    assert runs[0].improvements == runs[1].improvements
+    for i, rep in runs[0].replays_after.items():
+        np.testing.assert_array_equal(rep.dv_n_mps, runs[1].replays_after[i].dv_n_mps)
+        np.testing.assert_array_equal(runs[0].replays[i].dv_n_mps, runs[1].replays[i].dv_n_mps)
+        assert np.abs(rep.dv_n_mps - runs[0].replays[i].dv_n_mps).max() > 1e-3
+
+
 def test_condition_number_follows_paper_fig4_and_fig5():
     dh = np.array([0.0, 10.0, 30.0, 60.0, 90.0, 120.0, 150.0, 170.0, 180.0])
     dv = np.array([0.0, 10.0, 20.0, 40.0])

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import threading
 import time
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import CancelledError, ThreadPoolExecutor
 
 import pytest
 
@@ -122,6 +122,26 @@ def test_later_with_a_pool_runs_alongside_and_raises_where_used():
         with pytest.raises(ValueError, match="the pass failed"):
             bad.result()
     assert Later(None, lambda: None).take() is None  # None is a value, taken once
+
+
+def test_a_cancelled_later_is_not_made_and_says_so():
+    """A Later no one will ask for (a speculative pass whose guess A refuted): not made when
+    its pool has not started it, never made without one; asking for it raises."""
+    release, made = threading.Event(), []
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        busy = Later(pool, release.wait, 5.0)  # holds the lane's one worker
+        queued = Later(pool, made.append, "queued")
+        queued.cancel()
+        release.set()
+        assert busy.result() is True
+    assert made == []
+    with pytest.raises(CancelledError):
+        queued.result()
+    lazy = Later(None, made.append, "lazy")
+    lazy.cancel()
+    with pytest.raises(CancelledError):
+        lazy.result()
+    assert made == []
 
 
 def test_shared_work_is_joined_by_the_thread_waiting_for_it():
