@@ -86,6 +86,7 @@ from pospp.diagnose.tables import (  # noqa: F401  (the tables' home before issu
     leg_gap_columns,
     residual_curve_columns,
 )
+from pospp.threads import Threads, map_in_threads
 
 BASE_FORMULATIONS = ("body", "paper")
 BASE_TRANSITIONS = ("numerical", "closed_form")
@@ -214,22 +215,25 @@ class _NullCalibration:
     """
 
     def __init__(self, prob: Problem, null_dv: Sequence[Sequence[NDArray]],
-                 whitening: Callable[[tuple[LegReplay, ...]], tuple[float, float]] | None = None):
+                 whitening: Callable[[tuple[LegReplay, ...]], tuple[float, float]] | None = None,
+                 threads: Threads = 1):
+        self._threads = threads  # realisations refitted at once (the same fits at any number)
         if whitening is None:
             self.probs = [prob.with_data([np.asarray(d)[1:, 0:2] for d in real])
                           for real in null_dv]
         else:
-            self.probs = []
-            for real in null_dv:
+            def rewhitened(real: Sequence[NDArray]) -> Problem:
                 reps = tuple(replace(r, dv_n_mps=np.asarray(d))
                              for r, d in zip(prob.reps, real, strict=True))
-                self.probs.append(prob.rewhitened(reps, *whitening(reps)))
+                return prob.rewhitened(reps, *whitening(reps))
+
+            self.probs = map_in_threads(rewhitened, null_dv, threads)
         self._rss: dict[tuple[int, ...], tuple[list[Term], list[tuple[float, int]]]] = {}
 
     def _fits(self, terms: Sequence[Term]) -> list[tuple[float, int]]:
         key = tuple(id(t) for t in terms)
         if key not in self._rss:  # the entry holds the terms: freed ids could be reused
-            fits = [q.fit(terms) for q in self.probs]
+            fits = map_in_threads(lambda q: q.fit(terms), self.probs, self._threads)
             self._rss[key] = (list(terms), [(f.rss_w, f.rank) for f in fits])
         return self._rss[key][1]
 
@@ -364,7 +368,8 @@ def diagnose_replays(
         A's own response included).
     threads : int
         Legs whose library signatures are made at once by B re-runs
-        (:func:`pospp.diagnose.effects.signatures`; the result does not depend on it).
+        (:func:`pospp.diagnose.effects.signatures`), and null realisations re-whitened and
+        refitted at once (the result does not depend on it).
 
     Returns
     -------
@@ -430,7 +435,7 @@ def diagnose_replays(
                 c = fit_calibration(reps, "body", noise="gyro_rw",
                               gyro_arw_radpsqrts=gyro_arw_radpsqrts, noise_cache=shared)
                 return c.variance_factor, c.gyro_arw_radpsqrts
-        null = _NullCalibration(prob, null_dv, whitening)
+        null = _NullCalibration(prob, null_dv, whitening, threads)
     suffix = "_null_calibrated" if null is not None else ""
     terms = _base_terms(replays, base_formulation, base_transition)
     lof = _lof_term(replays, lof_terms)

@@ -280,6 +280,27 @@ def _draws(replays, model, n, rng):
     return out
 
 
+def test_the_null_refits_on_two_threads_are_the_refits_on_one(replays):
+    """diagnose_replays re-whitens and refits its null realisations ``threads`` at a time:
+    the same statistics, p-values and conclusion as one at a time, bit for bit."""
+    model = NoiseModel(white_scale=0.01, gyro_arw_radpsqrts=2e-6,
+                       reference_sigma_mps=1e-3, reference_length_s=40.0)
+    rng = np.random.default_rng(11)
+    data = _draws(replays, model, 1, rng)[0]
+    null = _draws(replays, model, 6, rng)
+    reps = [dataclasses.replace(r, dv_n_mps=r.dv_n_mps + d)
+            for r, d in zip(replays, data, strict=True)]
+    kw = dict(noise="gyro_rw", gyro_arw_radpsqrts=2e-6, alpha=0.05, null_dv=null,
+              effects=("accel_bias_change", "gravity_disturbance", "vertical_gyro_drift"))
+    one, two = (diagnose_replays(reps, threads=t, **kw) for t in (1, 2))
+    assert one.conclusion == two.conclusion
+    assert one.steps[-1].criterion == "lack_of_fit_F_null_calibrated"
+    tests = [(x.effect, x.statistic, x.p_value) for d in (one, two)
+             for x in (*d.steps, *d.candidates)]
+    assert len(tests) >= 4 and tests[:len(tests) // 2] == tests[len(tests) // 2:]
+    assert all(np.isfinite(p) for _, _, p in tests)
+
+
 def test_workflow_calibrated_on_null_realisations_holds_alpha(replays):
     # B minus A's noise: A's Matern-3/2 error (1 mm/s, 40 s) entering at the leg start and at
     # t, plus a little white noise and ARW; the workflow whitens with "gyro_rw" (wrong shape)
