@@ -527,8 +527,12 @@ def write_table(
         b"pospp.metadata": user.encode(),
     }
     table = table.replace_schema_metadata(kv)
+    # dictionary encoding for the text columns only: on the numbers (unique floats) it cost a
+    # 1.5 h flight's trajectory.parquet 0.24 s instead of 0.07 and 4 MB (issue 18)
+    text = [f.name for f in table.schema
+            if pa.types.is_string(f.type) or pa.types.is_large_string(f.type)]
     with atomic_path(path) as tmp:
-        pq.write_table(table, tmp, compression="zstd")
+        pq.write_table(table, tmp, compression="zstd", use_dictionary=text)
     return Path(path)
 
 
