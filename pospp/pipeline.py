@@ -372,6 +372,13 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
         comp = ahead.compensated.take()
         solutions["compensated"] = comp.smoothed if comp.smoothed is not None else comp.forward
         del comp  # the rest of the second A pass (forward, biases, innovations) is not used
+    # the trajectory MCAP's messages on the lane while the run diagnoses (one thread: in the
+    # write stage); its metadata record, with the run's status, is written there
+    calib_tables = calib_run.tables(epoch_ns)
+    best_name = next(k for k in ("compensated", "smoothed", "forward") if k in solutions)
+    mcap = Later(lane, trajectory_mcap.trajectory_messages, solutions[best_name], epoch_ns,
+                 rate_hz=config.outputs.mcap_rate_hz, legs=calib_tables.get("legs")
+                 ) if config.outputs.mcap else None
 
     # --- diagnosis -----------------------------------------------------------------------------
     book.stage("diagnose")
@@ -404,18 +411,10 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
     tables["qc"] = qc_columns(report, epoch_ns)
     summary["qc_failed_checks"] = report.failed_names
     summary["qc_suggestions"] = report.suggestions
-    tables.update(calib_run.tables(epoch_ns))
+    tables.update(calib_tables)
     if diagnosis is not None:
         tables["diagnosis"] = diagnosis_columns(diagnosis)
         tables["diagnosis_curves"] = residual_curve_columns(diagnosis)
-    best_name = next(k for k in ("compensated", "smoothed", "forward") if k in solutions)
-    # the trajectory MCAP on the lane while the tables are written (one thread: after them)
-    mcap = Later(lane, trajectory_mcap.write_trajectory_mcap, out / "trajectory.mcap",
-                 solutions[best_name], epoch_ns, rate_hz=config.outputs.mcap_rate_hz,
-                 legs=tables.get("legs"),
-                 metadata={"input_file": meta["input_file"], "input_sha256": sha,
-                           "status": status, "solution": best_name}
-                 ) if config.outputs.mcap else None
     if len(log.events_ns):
         tables["events"] = _event_poses(log, solutions[best_name], best_name, config, book)
     for name, table in tables.items():
@@ -424,11 +423,13 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
     summary.update(outputs.diagnosis_summary(diagnosis.steps if diagnosis is not None else None))
     summary["calibration_reason"] = calib_run.reason
     if mcap is not None:
-        mcap.result()
+        mcap.take().finish(out / "trajectory.mcap", {
+            "input_file": meta["input_file"], "input_sha256": sha, "status": status,
+            "solution": best_name})
     # the report reads the tables back: the run's arrays are let go first, so that it
     # reuses their memory instead of adding to the peak (1.5 h flight: 110 MiB)
     del log, nav, imu, solution_a, calib_run, null_dv, diagnosis, solutions, tables, ahead, mcap
-    del white
+    del white, calib_tables
     return finish(status, report=config.outputs.report)
 
 

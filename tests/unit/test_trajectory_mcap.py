@@ -94,3 +94,22 @@ def test_leg_paths_and_metadata(mcap_file):
     assert meta["pospp"]["pospp_version"]
     topics = {m.channel.topic for m in read_ros2_messages(str(mcap_file))}
     assert topics == {"/pospp/fix", "/pospp/pose", "/tf", "/pospp/odom", "/pospp/legs"}
+
+
+def test_messages_written_before_the_metadata_is_known(tmp_path):
+    # a run writes the messages while it works out its status (trajectory_messages), then the
+    # metadata record and the file (finish): the file is the one-call writer's, byte for byte
+    from pospp.io.trajectory_mcap import trajectory_messages
+
+    sol, meta = _solution(), {"status": "failed", "solution": "smoothed"}
+    pending = trajectory_messages(sol, T0_NS, rate_hz=2.0)
+    assert not any(tmp_path.iterdir())  # nothing on disk until finished
+    later = pending.finish(tmp_path / "later.mcap", meta)
+    once = write_trajectory_mcap(tmp_path / "once.mcap", sol, T0_NS, rate_hz=2.0, metadata=meta)
+    assert later.read_bytes() == once.read_bytes()
+    with open(later, "rb") as f:
+        assert {m.name: m.metadata for m in make_reader(f).iter_metadata()}["pospp"][
+            "status"] == "failed"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["later.mcap", "once.mcap"]
+    with pytest.raises(RuntimeError, match="already finished"):
+        pending.finish(tmp_path / "again.mcap", meta)
