@@ -135,7 +135,7 @@ def rerun_options(config: PipelineConfig) -> nav_filter.FilterOptions:
 QC_LEVER_ARM_SIGMA_M = 2.0
 """Prior sigma of the lever-arm states in the QC stage's re-estimation [m]."""
 LEVER_ARM_PASSES = 3
-"""At most this many forward passes of :func:`lever_arm_estimate`, each from the last one's
+"""At most this many forward passes of :func:`lever_arm_passes`, each from the last one's
 estimate."""
 LEVER_ARM_PASS_STEP_M = 0.1
 """Another pass when the estimate moved more than this from where its pass started [m]."""
@@ -144,15 +144,23 @@ LEVER_ARM_PASS_STEP_M = 0.1
 def lever_arm_seen(nav: nav_filter.FilterResult) -> np.ndarray:
     """The lever-arm axes (FRD, (3,) bool) A's attitude history reveals
     (:func:`pospp.qc.checks.lever_arm_observable` of its smoothed attitude, else its forward
-    one): :func:`lever_arm_estimate`'s ``seen``."""
+    one): :func:`lever_arm_passes`'s ``seen``."""
     from pospp.qc.checks import lever_arm_observable
 
     sol = nav.smoothed if nav.smoothed is not None else nav.forward
     return lever_arm_observable(sol.rpy_rad)
 
 
-def lever_arm_estimate(log: mcap_reader.FlightLog, seen: np.ndarray,
+def lever_arm_estimate(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                        config: PipelineConfig) -> nav_filter.LeverArmEstimate:
+    """The antenna lever arm (body FRD, m) A's lever-arm passes estimate for the axes A's
+    attitude history reveals: :func:`lever_arm_passes` with :func:`lever_arm_seen` of
+    ``nav``. Raises ValueError when A fails."""
+    return lever_arm_passes(log, lever_arm_seen(nav), config)
+
+
+def lever_arm_passes(log: mcap_reader.FlightLog, seen: np.ndarray,
+                     config: PipelineConfig) -> nav_filter.LeverArmEstimate:
     """The antenna lever arm (body FRD, m) estimated by forward passes of A with lever-arm
     states (no smoother; a second and third pass from the previous estimate while it moves
     by more than :data:`LEVER_ARM_PASS_STEP_M` and differs from the configured value by as
@@ -513,7 +521,7 @@ def _lever_arm_and_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResul
         return None, None
     if est is None:
         try:
-            est = lever_arm_estimate(log, lever_arm_seen(nav), config)
+            est = lever_arm_estimate(log, nav, config)
         except ValueError:
             return None, None
     return est.lever_b_m, np.asarray(config.gnss.lever_arm_m, dtype=float) - est.lever_b_m

@@ -10,7 +10,11 @@ they need A only, so they run alongside the calibration), then
 the compensated A and the diagnosis's first re-runs (:func:`passes_ahead`: they need the
 calibration, not the null, so they run alongside the null realisations), then the QC checks
 (:func:`checks_ahead`: they need the calibration with its null covariance and the lever-arm
-estimate, not the diagnosis, so they run alongside the diagnosis's tests). Measured before
+estimate, not the diagnosis, so they run alongside the diagnosis's tests). The pipeline puts
+two more there itself: the null's base (:func:`pospp.flight_stages.null_base`, which needs
+the legs and B's replays, not the fit, so it runs alongside the fit) and the trajectory MCAP's
+messages (:func:`pospp.io.trajectory_mcap.trajectory_messages`, alongside the diagnosis; the
+metadata record with the run's status is written at the end). Measured before
 the lane: a run on two threads kept 1.2 cores busy. Each is a
 :class:`pospp.threads.Later`: with no lane it is made where its stage uses it, as a plain
 call there would be (and not at all when no stage does), so a run on one thread does the
@@ -30,7 +34,7 @@ import numpy as np
 from pospp.calib.stage import CalibrationRun
 from pospp.config import PipelineConfig
 from pospp.diagnosis_stage import diagnosis_reruns, scale_factor_start, signature_starts
-from pospp.flight_stages import lever_arm_estimate, lever_arm_seen, navigate, sensor_to_body_dcm
+from pospp.flight_stages import lever_arm_passes, lever_arm_seen, navigate, sensor_to_body_dcm
 from pospp.io import mcap_reader
 from pospp.nav import filter as nav_filter
 from pospp.qc.checks import lever_arm_observable_from_track
@@ -72,13 +76,13 @@ class Guess:
 
 def lever_re_estimate(log: mcap_reader.FlightLog, seen: np.ndarray, config: PipelineConfig
                       ) -> tuple[nav_filter.LeverArmEstimate | None, str | None]:
-    """(A's lever-arm estimate, None) by :func:`pospp.flight_stages.lever_arm_estimate` for
+    """(A's lever-arm estimate, None) by :func:`pospp.flight_stages.lever_arm_passes` for
     the revealed axes ``seen`` (:func:`pospp.flight_stages.lever_arm_seen`), or (None, why it
     failed); (None, None) when A estimates the lever arm itself."""
     if config.gnss.estimate_lever_arm:
         return None, None
     try:
-        return lever_arm_estimate(log, seen, config), None
+        return lever_arm_passes(log, seen, config), None
     except ValueError as exc:
         return None, str(exc)
 

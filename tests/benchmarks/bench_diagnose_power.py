@@ -163,7 +163,7 @@ def _triggered(log, cfg) -> tuple[bool, float, bool, float]:
     """(the scale factor's Gauss-Newton started, A's largest axis / sigma, the warm-up's
     started, its pass's |db| in ug, A's gate in excess) on one flight."""
     nav = pipeline.navigate(log, cfg)
-    lever = pipeline.lever_arm_estimate(log, pipeline.lever_arm_seen(nav), cfg).lever_b_m
+    lever = pipeline.lever_arm_estimate(log, nav, cfg).lever_b_m
     sf, sigma = flight_stages.scale_factor_estimate(log, cfg, lever)
     start = flight_stages._scale_factor_start(log, cfg, lever)
     db = flight_stages.warmup_estimate(log, cfg, lever)

@@ -393,7 +393,7 @@ def test_a_wrong_guess_of_the_revealed_axes_makes_the_lever_arm_pass_again(lane_
     from pospp import passes_ahead, pipeline
 
     made_for: list[list[bool]] = []
-    real = passes_ahead.lever_arm_estimate
+    real = passes_ahead.lever_arm_passes
 
     def recording(log, seen, config):
         made_for.append(np.asarray(seen).tolist())
@@ -401,7 +401,7 @@ def test_a_wrong_guess_of_the_revealed_axes_makes_the_lever_arm_pass_again(lane_
 
     monkeypatch.setattr(passes_ahead, "lever_arm_observable_from_track",
                         lambda t_s, v_n_mps: np.zeros(3, dtype=bool))
-    monkeypatch.setattr(passes_ahead, "lever_arm_estimate", recording)
+    monkeypatch.setattr(passes_ahead, "lever_arm_passes", recording)
     for threads in (2, 1):
         outcome = pipeline.process_flight(SAMPLE, lane_config, tmp_path / f"t{threads}",
                                           threads=threads)
