@@ -23,7 +23,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from pospp import earth
 from pospp.distributions import chi2_ppf, poisson_isf
-from pospp.units import DEG_PER_H_RADPS, NS_PER_S
+from pospp.units import DEG_PER_H_RADPS, G0_MPS2, NS_PER_S
 
 STATUS_ORDER = ("ok", "partial", "degraded", "failed")
 """Run statuses from best to worst."""
@@ -427,7 +427,7 @@ def lever_arm_observable_from_track(time_s: ArrayLike, v_n_mps: ArrayLike) -> ND
 
     At the records faster than TRACK_MIN_SPEED_MPS: yaw the course ``atan2(v_E, v_N)``,
     pitch the flight-path angle ``atan2(-v_D, v_h)``, roll the bank of a coordinated turn
-    ``atan(v_h dcourse/dt / g)`` (g = 9.80665 m/s^2). A guess only (no crab angle, angle of
+    ``atan(v_h dcourse/dt / g0)`` (standard gravity). A guess only (no crab angle, angle of
     attack or slipping turn): :mod:`pospp.passes_ahead` starts A's lever-arm pass from it
     while A runs and keeps that pass only when A's own attitude reveals the same axes.
     """
@@ -442,7 +442,7 @@ def lever_arm_observable_from_track(time_s: ArrayLike, v_n_mps: ArrayLike) -> ND
     dt = np.diff(t)
     rate = np.zeros_like(yaw)
     rate[1:] = np.diff(yaw) / np.where(dt > 0, dt, np.inf)
-    roll = np.arctan(v_h * rate / 9.80665)
+    roll = np.arctan(v_h * rate / G0_MPS2)
     pitch = np.arctan2(-v[:, 2], v_h)
     return lever_arm_observable(np.column_stack([roll, pitch, yaw]))
 
