@@ -9,6 +9,7 @@ place, :func:`exit_code_for_status`.
 
 from __future__ import annotations
 
+import gc
 import os
 import sys
 from pathlib import Path
@@ -468,5 +469,19 @@ def compare_sim(run_dir: str, out_model: str | None, max_steps: int) -> None:
     click.echo(f"left significant: {n_left}")
 
 
+def entry() -> None:
+    """The ``pospp`` console script (and ``python -m pospp.cli``): :func:`main`, then the
+    garbage collector frozen before the interpreter ends. Its teardown otherwise walks the
+    objects numba, pandas and scipy hold (170,000 after a sample run) for 0.2-0.4 s after the
+    run's files are closed and renamed (measured: 0.03-0.08 s frozen; issue 18). Every
+    ``atexit`` handler and stream flush still runs. Not in :func:`main`, which tests call in
+    their own process."""
+    try:
+        main()
+    finally:
+        gc.disable()
+        gc.freeze()
+
+
 if __name__ == "__main__":  # pragma: no cover
-    main()
+    entry()

@@ -31,3 +31,15 @@ def test_help_does_not_import_the_heavy_modules():
                          text=True, timeout=120, check=True)
     loaded = json.loads(out.stdout.strip().splitlines()[-1])
     assert loaded == [], f"pospp --help imported {loaded}"
+
+
+def test_the_console_entry_keeps_the_commands_exit_status_and_output(tmp_path):
+    # pospp.cli.entry (the console script and ``python -m pospp.cli``) freezes the garbage
+    # collector after the command: the status, stdout and stderr are the command's
+    ok = subprocess.run([sys.executable, "-m", "pospp.cli", "--version"], cwd=REPO,
+                        capture_output=True, text=True, timeout=120)
+    assert ok.returncode == 0 and ok.stdout.startswith("pospp")
+    bad = subprocess.run([sys.executable, "-m", "pospp.cli", "run", str(tmp_path / "no.mcap"),
+                          "-o", str(tmp_path / "out")], cwd=REPO, capture_output=True,
+                         text=True, timeout=120)
+    assert bad.returncode != 0 and "pospp: error:" in bad.stderr and "no.mcap" in bad.stderr
