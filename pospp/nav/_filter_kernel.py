@@ -508,11 +508,12 @@ def forward_kernel(t, w_imu, f_imu, k0, x0, p0, lever0, layout, inv_tau, flags, 
         if is_node and keep_cov:
             smoother.pack_symmetric_into(p, nodes[1][i_node])  # predicted P (symmetric)
         dx_tot[:] = 0.0
-        p, im = _update_epoch(k, im, t, x, xp, p, sens, lever, w_b, meas, meas_out, gate,
-                              reset_after_s, t_ok, i_gm, i_sf, i_l, dx_tot, gains, replay,
-                              record, n_gated)
-        if im < 0:  # the replay ended (_update_epoch): the caller runs the pass in full
-            return -1, -1
+        if has_meas:  # the call alone, with its 22 arguments, was a third of an epoch's time
+            p, im = _update_epoch(k, im, t, x, xp, p, sens, lever, w_b, meas, meas_out, gate,
+                                  reset_after_s, t_ok, i_gm, i_sf, i_l, dx_tot, gains, replay,
+                                  record, n_gated)
+            if im < 0:  # the replay ended (_update_epoch): the caller runs the pass in full
+                return -1, -1
         if is_node:
             if keep_cov:
                 store_node(i_node, k, p, phi_acc, dx_tot, nodes)
