@@ -71,9 +71,10 @@ def imu_epochs(
     if n < 3 or w.shape != (n, 3) or f.shape != (n, 3):
         raise ValueError(f"imu: expected N >= 3 stamps with (N, 3) rates, got {time_ns.shape}, "
                          f"{w.shape}, {f.shape}")
-    bad = ~(np.isfinite(w).all(axis=1) & np.isfinite(f).all(axis=1))
-    if bad.any():
-        k = int(np.argmax(bad))
+    # one flat pass each in the usual case (the per-row test, 30 ms at 1 M samples, only to
+    # name the first bad sample)
+    if not (np.isfinite(w).all() and np.isfinite(f).all()):
+        k = int(np.argmax(~(np.isfinite(w).all(axis=1) & np.isfinite(f).all(axis=1))))
         raise ValueError(f"imu: non-finite rate in sample {k} (time_ns {time_ns[k]}): "
                          f"w {w[k].tolist()}, f {f[k].tolist()}")
     dt_ns = np.diff(time_ns)
