@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from pospp.calib.compensate import joint_calibration
-from pospp.calib.replay import ImuSource, LegReplay, SolutionA, replay_velocity_error
+from pospp.calib.replay import ImuSource, LegReplay, SolutionA
 from pospp.calib.solve import DriftPrior
 from pospp.calib.stage import CalibrationRun
 from pospp.config import PipelineConfig
@@ -51,12 +51,12 @@ from pospp.flight_stages import (
     _lever_arm_and_start,
     _scale_factor_start,
     _warmup_start,
-    imu_increments,
     imu_tuning,
     leg_epochs_ns,
     navigate,
     null_drift,
     null_realisations,
+    rerun_b_minus_a,
     rerun_decimation,
     rerun_options,
 )
@@ -83,11 +83,12 @@ def rerun_base(log: mcap_reader.FlightLog | None, nav: nav_filter.FilterResult |
     borderline gate decisions and the signatures are not smooth in the step at any rate
     (flight_time_offset_200hz, 62 records gated where 4 are allowed: the four signatures
     moved by 8-95 % between the rates). The log and run themselves when nothing is summed,
-    A gated in excess, A fails on the summed-down log, or B there is not on the flight's
-    samples (or without a log). The third element: A's gains on the summed-down log, which
-    the re-runs replay (:class:`pospp.nav.filter.GainReplay`, as the null realisations do;
-    a re-run whose records differ, the time offset's, runs in full); None with the flight's
-    own log."""
+    A gated in excess, A or B fails on the summed-down log, or B there is not on the flight's
+    samples (or without a log); A and B as the null realisations run them
+    (:func:`pospp.flight_stages.rerun_b_minus_a`). The third element: A's gains on the
+    summed-down log, which the re-runs replay (:class:`pospp.nav.filter.GainReplay`, as the
+    null realisations do; a re-run whose records differ, the time offset's, runs in full);
+    None with the flight's own log."""
     if log is None or nav is None:
         return log, calib_run, None
     factor = rerun_decimation(log, config.pairs.rerun_imu_rate_hz)
@@ -95,18 +96,12 @@ def rerun_base(log: mcap_reader.FlightLog | None, nav: nav_filter.FilterResult |
         return log, calib_run, None
     log_r = null_model.decimate_imu(log, factor, leg_epochs_ns(log, calib_run.legs))
     try:
-        nav_r = navigate(log_r, config, options=rerun_options(config), record_gains=True)
+        dv, gains = rerun_b_minus_a(log_r, nav, calib_run.legs, calib_run.replays, config,
+                                    record=True)
     except ValueError:
         return log, calib_run, None
-    which = config.replay.reference if nav_r.smoothed is not None else "forward"
-    ref = SolutionA(*nav_filter.solution_a_fields(nav_r, which=which))
-    gains = nav_r.gain_replay
-    del nav_r  # the rest of A (its forward solution, biases: 30 MiB) is not read by B
-    imu_r = imu_increments(log_r)
-    legs = {leg.leg_id: leg for leg in calib_run.legs}
-    replays = {i: replace(rep, dv_n_mps=replay_velocity_error(
-        imu_r, ref, legs[i], accel_compensation=config.replay.accel_compensation,
-        sample_rate_hz=config.replay.sample_rate_hz)) for i, rep in calib_run.replays.items()}
+    by_id = dict(zip(sorted(calib_run.replays), dv, strict=True))
+    replays = {i: replace(rep, dv_n_mps=by_id[i]) for i, rep in calib_run.replays.items()}
     if any(replays[i].dv_n_mps.shape != rep.dv_n_mps.shape
            for i, rep in calib_run.replays.items()):  # B not on the flight's samples
         return log, calib_run, None

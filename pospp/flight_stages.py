@@ -385,7 +385,7 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
 
     def attempt(log_r: mcap_reader.FlightLog) -> list[np.ndarray] | None:
         try:  # A with the base's gains (nav_filter.GainReplay): first order in the noise
-            return _b_minus_a(log_r, nav, calib_run.legs, calib_run.replays, config,
+            return rerun_b_minus_a(log_r, nav, calib_run.legs, calib_run.replays, config,
                               replay=b.gains)[0]
         except ValueError:  # a realisation whose A fails (alignment) is skipped
             return None
@@ -439,7 +439,7 @@ def null_base(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult, legs: Se
     leg_ns = null_sample_stamps_ns(log, legs, t_align_ns)
     base_r = null_model.decimate_imu(base, factor, leg_ns)
     try:
-        base_dv, gains = _b_minus_a(base_r, nav, legs, replays, config, record=True)
+        base_dv, gains = rerun_b_minus_a(base_r, nav, legs, replays, config, record=True)
         if any(d.shape != replays[i].dv_n_mps.shape
                for d, i in zip(base_dv, sorted(replays), strict=True)):
             raise ValueError("B on the summed-down base is not on the flight's samples")
@@ -447,17 +447,19 @@ def null_base(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult, legs: Se
         if factor == 1:
             raise
         base_r = base
-        base_dv, gains = _b_minus_a(base_r, nav, legs, replays, config, record=True)
+        base_dv, gains = rerun_b_minus_a(base_r, nav, legs, replays, config, record=True)
     return NullBase(base_r, base_dv, gains, pos_sig, vel_sig, t_align_ns)
 
 
-def _b_minus_a(log_r: mcap_reader.FlightLog, nav: nav_filter.FilterResult, legs: Sequence[Leg],
-               replays: Mapping[int, LegReplay], config: PipelineConfig, record: bool = False,
-               replay: nav_filter.GainReplay | None = None
-               ) -> tuple[list[np.ndarray], nav_filter.GainReplay | None]:
-    """A re-run on ``log_r`` as the null realisations run it (``record``: recording its
-    gains; ``replay``: with those gains), then B minus it on the legs with a replay, in id
-    order: (M, 3) NED velocity errors [m/s], and the gains recorded (else None)."""
+def rerun_b_minus_a(log_r: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
+                    legs: Sequence[Leg], replays: Mapping[int, LegReplay],
+                    config: PipelineConfig, record: bool = False,
+                    replay: nav_filter.GainReplay | None = None
+                    ) -> tuple[list[np.ndarray], nav_filter.GainReplay | None]:
+    """A re-run on ``log_r`` as the null realisations and the diagnosis's re-run base run it
+    (``record``: recording its gains; ``replay``: with those gains), then B minus it on the
+    legs with a replay, in id order: (M, 3) NED velocity errors [m/s], and the gains recorded
+    (else None). Raises ValueError when A or B fails on ``log_r``."""
     which = config.replay.reference if nav.smoothed is not None else "forward"
     nav_r = navigate(log_r, config, options=rerun_options(config), record_gains=record,
                      replay=replay)

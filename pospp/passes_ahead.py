@@ -40,6 +40,7 @@ from pospp.nav import filter as nav_filter
 from pospp.qc.checks import lever_arm_observable_from_track
 from pospp.qc.stage import quality_checks
 from pospp.threads import Later, SharedWork
+from pospp.units import t_s_from_time_ns
 
 
 @dataclass(frozen=True)
@@ -98,7 +99,7 @@ def passes_on_log(log: mcap_reader.FlightLog, config: PipelineConfig,
     core was idle through A's 1.4 s). None: no lane, or no GNSS velocity to guess from."""
     if lane is None or len(log.vel) < 2:
         return None
-    t_s = (log.vel.time_ns - log.vel.time_ns[0]) * 1e-9
+    t_s = t_s_from_time_ns(log.vel.time_ns, int(log.vel.time_ns[0]))
     seen = lever_arm_observable_from_track(t_s, log.vel.v_n_mps)
     lever = Later(lane, lever_re_estimate, log, seen, config)
     sf = (Later(lane, lambda: scale_factor_start(log, config, lever.result()[0]))

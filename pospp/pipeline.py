@@ -361,8 +361,9 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
                                     white_noise=white.take() if white is not None else None,
                                     base=base.take())
         calib_run = with_null_covariance(calib_run, null_dv)
-    elif base is not None:
-        base.cancel()
+    else:  # no null: the lane's base and white noise for it are not wanted
+        for later in filter(None, (base, white)):
+            later.cancel()
 
     ahead = checks_ahead(ahead, log, nav, calib_run, config, lane)
 
