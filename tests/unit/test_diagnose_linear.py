@@ -76,6 +76,32 @@ def test_kalman_whitening_is_the_cholesky_factors():
                                direct.whitened_rms(res, [0, 1, 2]), rtol=1e-9)
 
 
+def test_fit_with_every_legs_own_terms_is_the_stacked_least_squares():
+    # Problem.fit adds each leg's normal equations over its own columns only (the common
+    # terms and its per-leg ones, as the lack-of-fit terms): against least squares on the
+    # whole stacked design with its zero blocks, whitened by the sigmas, on all legs and on
+    # some (the held-out fits')
+    reps = _replays()
+    prob = Problem(reps, 1.0, 0.0)
+    rng = np.random.default_rng(11)
+    terms = [Term("common", [rng.normal(size=(z.size, 2)) for z in prob.z])]
+    terms += [Term(f"own{j}", [rng.normal(size=(z.size, 2 + j)) * (i == j)
+                               for i, z in enumerate(prob.z)], local_leg=j)
+              for j in range(len(prob.z))]
+    for legs in ([0, 1, 2], [0, 2]):
+        fit = prob.fit(terms, legs)
+        hw = np.vstack([np.hstack([t.blocks[i] for t in terms]) / prob.sig[i][:, None]
+                        for i in legs])
+        zw = np.concatenate([prob.z[i] / prob.sig[i] for i in legs])
+        x, rss, rank, _ = np.linalg.lstsq(hw, zw, rcond=None)
+        assert fit.rank == rank  # leg 1's own columns are all zero without leg 1: minimum norm
+        np.testing.assert_allclose(fit.rss_w, np.sum((zw - hw @ x) ** 2), rtol=1e-9)
+        np.testing.assert_allclose(fit.x, x, rtol=1e-7, atol=1e-12 * np.abs(x).max())
+        for i, res in zip(legs, fit.res_raw, strict=True):
+            np.testing.assert_allclose(res, prob.z[i] - np.hstack([t.blocks[i] for t in terms])
+                                       @ x, rtol=1e-9, atol=1e-12 * np.abs(prob.z[i]).max())
+
+
 def test_kalman_whitening_refuses_a_covariance_that_is_not_positive_definite():
     from pospp.diagnose._linear import _kalman_gains
 
