@@ -275,7 +275,7 @@ def calibration_replays(imu: ImuSource, nav: nav_filter.FilterResult, config: Pi
     """The calibration's legs (:func:`pospp.calib.segment.find_legs` on A's ``[replay]
     reference`` solution) and B's replays over them
     (:func:`pospp.calib.replay.replay_legs`, ``threads`` legs at once)."""
-    which = config.replay.reference if nav.smoothed is not None else "forward"
+    which = nav_filter.reference_name(nav, config.replay.reference)
     solution_a = SolutionA(*nav_filter.solution_a_fields(nav, which=which))
     traj = solution_a.trajectory
     legs = tuple(find_legs(traj.t_s, traj.v_n_mps, traj.height_m,
@@ -386,7 +386,7 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     def attempt(log_r: mcap_reader.FlightLog) -> list[np.ndarray] | None:
         try:  # A with the base's gains (nav_filter.GainReplay): first order in the noise
             return rerun_b_minus_a(log_r, nav, calib_run.legs, calib_run.replays, config,
-                              replay=b.gains)[0]
+                                   replay=b.gains)[0]
         except ValueError:  # a realisation whose A fails (alignment) is skipped
             return None
 
@@ -429,7 +429,7 @@ def null_base(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult, legs: Se
     rerun_imu_rate_hz`` (the flight's rate when A fails on the summed-down base), A re-run on
     it recording its gains and B replayed on the legs. Raises ValueError when A fails on it
     at the flight's rate."""
-    which = config.replay.reference if nav.smoothed is not None else "forward"
+    which = nav_filter.reference_name(nav, config.replay.reference)
     solution = nav.smoothed if which == "smoothed" and nav.smoothed is not None else nav.forward
     base = null_model.gnss_on_solution(log, solution, int(log.imu.time_ns[0]),
                                        nav.lever_arm.lever_b_m)
@@ -460,7 +460,7 @@ def rerun_b_minus_a(log_r: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     (``record``: recording its gains; ``replay``: with those gains), then B minus it on the
     legs with a replay, in id order: (M, 3) NED velocity errors [m/s], and the gains recorded
     (else None). Raises ValueError when A or B fails on ``log_r``."""
-    which = config.replay.reference if nav.smoothed is not None else "forward"
+    which = nav_filter.reference_name(nav, config.replay.reference)
     nav_r = navigate(log_r, config, options=rerun_options(config), record_gains=record,
                      replay=replay)
     ref_r = SolutionA(*nav_filter.solution_a_fields(nav_r, which=which))

@@ -92,7 +92,7 @@ def _response(log_p, nav, calib_run, config, navigate: Navigate, lever_b_m=None
               ) -> list[NDArray]:
     """(B - A)[log_p, lever] - (B - A)[flight] per leg (legs in id order), (M, 2) [m/s]."""
     rc = config.replay
-    which = rc.reference if nav.smoothed is not None else "forward"
+    which = nav_filter.reference_name(nav, rc.reference)
     legs = {leg.leg_id: leg for leg in calib_run.legs}
     nav_p = navigate(log_p, lever_arm_b_m=lever_b_m)
     ref_p = SolutionA(*nav_filter.solution_a_fields(nav_p, which=which))

@@ -548,6 +548,12 @@ def _bias_history(t_s: NDArray, sens: NDArray, bias_var: NDArray, diag: NDArray,
     )
 
 
+def reference_name(result: FilterResult, preferred: str) -> str:
+    """The solution of ``result`` B is referenced to (``[replay] reference``): ``preferred``
+    ("smoothed" or "forward"), "forward" when the smoother did not run."""
+    return preferred if result.smoothed is not None else "forward"
+
+
 def solution_a_fields(
     result: FilterResult, *, which: str = "smoothed"
 ) -> tuple[Trajectory, NDArray, NDArray]:
@@ -581,6 +587,6 @@ def solution_a_fields(
 __all__ = [
     "STATUS_GATED", "STATUS_RESET", "STATUS_USED",
     "BiasHistory", "FilterOptions", "FilterResult", "GainReplay", "GnssRejection",
-    "InnovationRecord", "LeverArmEstimate", "NavSolution", "solution_a_fields",
+    "InnovationRecord", "LeverArmEstimate", "NavSolution", "reference_name", "solution_a_fields",
     "run_integrated_navigation",
 ]
