@@ -10,6 +10,33 @@ always named in the suffix (``_deg``, ``_dph``, ``_ug``). Time: int64 ``time_ns`
 float64 ``t_s`` from a per-run epoch in numeric code.
 Errors are computed minus true: ``dv_n = v_hat - v``; the misalignment phi (NED) satisfies
 ``C_nb_hat = (I - [phi x]) C_nb``; sensors read ``true + bias``.
+
+Public API (docs/api.md): ``pospp.open_run(path)`` -> ``Run``, ``pospp.open_archive(root)`` ->
+``Archive``, ``pospp.diff_paths(a, b)`` and the rest of ``pospp.api.__all__``, loaded on first
+use (``import pospp`` imports neither numpy nor pandas).
 """
 
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
 __version__ = "0.1.0"
+
+_API = ("Archive", "DiffResult", "Run", "SchemaError", "Summary", "TableNotInRun",
+        "Tolerances", "diff_paths", "diff_runs", "load_tolerances", "open_archive", "open_run")
+"""Names of ``pospp.api`` re-exported here, imported on first access (PEP 562)."""
+
+__all__ = ["__version__", *_API]
+
+
+def __getattr__(name: str) -> Any:
+    if name in _API:
+        value = getattr(importlib.import_module("pospp.api"), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'pospp' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_API))

@@ -15,6 +15,7 @@ No printing: the CLI renders the report.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
@@ -103,7 +104,42 @@ def convert(
     parsed, estimate = estimate_parsed_mounting(parsed, mounting=mounting)
     out = Path(out_mcap)
     out.parent.mkdir(parents=True, exist_ok=True)
-    return write_parsed(parsed, out, mounting=estimate)
+    report = write_parsed(parsed, out, mounting=estimate)
+    hint = HINTS.get(report.fmt)
+    return replace(report, hints=hint(report, source_dir_or_file)) if hint else report
+
+
+def _span_s(rep: ConversionReport) -> float:
+    return (rep.end_ns - rep.start_ns) * 1e-9 if rep.start_ns is not None and \
+        rep.end_ns is not None else 0.0
+
+
+def _run_with(pipeline: str) -> Callable[[ConversionReport, str | Path], tuple[str, ...]]:
+    def hint(rep: ConversionReport, source: str | Path) -> tuple[str, ...]:
+        return (f"process it with: pospp run {rep.mcap_path} -p pipelines/realdata/"
+                f"{pipeline} -o OUT (docs/realdata.md, docs/results.md)",)
+    return hint
+
+
+def _ansfl_clip(rep: ConversionReport, source: str | Path) -> tuple[str, ...]:
+    return (f"this is one of the authors' trimmed paths, {_span_s(rep):.0f} s: too short for "
+            "a pospp run, whose alignment needs a 30 s static period or steady GNSS velocity "
+            "above 5 m/s (none here); for a run convert the whole DOT recording: pospp "
+            f"convert {source} -o OUT.mcap --format ansfl_quadrotor_raw --option unit=1 "
+            "--option recording=2",
+            "then: pospp run OUT.mcap -p pipelines/realdata/ansfl_quadrotor_straightline.toml "
+            "-o OUT (docs/results.md)")
+
+
+HINTS: dict[str, Callable[[ConversionReport, str | Path], tuple[str, ...]]] = {
+    "ansfl_quadrotor": _ansfl_clip,
+    "ansfl_quadrotor_raw": _run_with("ansfl_quadrotor_straightline.toml"),
+    "ardupilot_csv": _run_with("ardupilot_plane_testlog2.toml"),
+    "comma2k19": _run_with("comma2k19_example1.toml"),
+}
+"""Format -> what to do next with the converted log (``ConversionReport.hints``; the CLI
+prints them): the documented pipeline file, or why this log cannot make a run and which
+conversion does."""
 
 
 def estimate_unit_mounting(source: str | Path, imu: int | str = 1, *,

@@ -1,6 +1,8 @@
 """Errors of a navigation solution against a reference trajectory (``pospp evaluate``).
 
-Errors are computed minus reference (docs/method.md): position in local NED metres about the
+A reference that does not share an epoch with the solution, or lies kilometres away from it,
+is refused (:class:`TruthMismatchError`): it is not this flight's. Errors are computed minus
+reference (docs/method.md): position in local NED metres about the
 reference point (exact llh difference, pospp.earth.llh_difference_ned_m), velocity NED m/s,
 attitude as the rotation vector phi (NED, rad) with C_nb_est = (I - [phi x]) C_nb_ref, split
 into tilt (north, east) and heading (down) components; attitudes are compared as rotations,
@@ -19,6 +21,15 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from pospp import earth, rotation
 from pospp.units import ARCSEC_RAD
+
+MAX_TRUTH_DISTANCE_M = 1000.0
+"""A reference whose median horizontal distance from the solution exceeds this [m] is not of
+this flight (another flight's truth, another site): refused, not evaluated. GNSS-aided
+solutions of any grade pospp handles lie within metres of their truth."""
+
+
+class TruthMismatchError(ValueError):
+    """The reference is not of this flight: no epoch in common, or kilometres away."""
 
 
 @dataclass(frozen=True)
@@ -80,9 +91,9 @@ def solution_errors(
     rt = np.asarray(ref_time_ns, dtype=np.int64)
     m = (t >= rt[0]) & (t <= rt[-1])
     if not m.any():
-        raise ValueError(
+        raise TruthMismatchError(
             f"the solution [{t[0]}, {t[-1]}] ns and the reference [{rt[0]}, {rt[-1]}] ns do "
-            "not overlap in time (different time bases?)")
+            "not overlap in time: not this flight's reference (or another time base)")
     t = t[m]
     x = (t - rt[0]).astype(float)
     xr = (rt - rt[0]).astype(float)
@@ -102,6 +113,12 @@ def solution_errors(
                                      np.asarray(height_m)[m], lat_r, lon_r, h_r)
     vel = np.asarray(v_n_mps, dtype=float)[m] - v_r
     att = rotation.attitude_error_n_rad(c_est, c_ref)
+    distance_m = float(np.median(np.hypot(pos[:, 0], pos[:, 1])))
+    if not distance_m <= MAX_TRUTH_DISTANCE_M:
+        raise TruthMismatchError(
+            f"the reference lies {distance_m / 1e3:.3g} km from the solution (median over "
+            f"{len(t)} common epochs; at most {MAX_TRUTH_DISTANCE_M / 1e3:g} km is taken as "
+            "the same flight): not this flight's reference")
     return SolutionErrors(t, pos, vel, att)
 
 

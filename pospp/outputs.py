@@ -122,6 +122,36 @@ def events_table(poses: SensorPoses, events_ns: ArrayLike, solution: str) -> pd.
     return pd.DataFrame(cols)
 
 
+def with_sensor_axes(summary: Mapping[str, Any], c_bs: ArrayLike) -> dict[str, Any]:
+    """``summary`` with the calibrated body gyro bias also in the IMU's logged axes.
+
+    The bias is estimated in the body frame b (FRD); the log's IMU axes s (FLU for ROS, or
+    as configured) differ by ``C_bs`` (sensor to body, ``[input] sensor_frame`` and
+    ``mounting_rpy_deg``): ``b_s = C_bs^T b_b`` (for FLU: x the same, y and z negated). The
+    sigmas map as ``sigma_s_i = sqrt(sum_j C_bs[j, i]^2 sigma_b_j^2)`` (exact for a signed
+    permutation such as FLU; the body sigmas' correlations are not in the summary). Columns
+    ``gyro_bias_sensor_{x,y,z}_dph`` and ``..._sigma_dph``, and ``imu_axes`` naming those axes
+    ("FLU", "FRD", or "as logged" for another mounting); absent when no body bias is.
+    """
+    out = dict(summary)
+    if not all(f"gyro_bias_{ax}_dph" in out for ax in "xyz"):
+        return out
+    c = np.asarray(c_bs, dtype=float)
+    out["imu_axes"] = ("FLU" if np.allclose(c, np.diag([1.0, -1.0, -1.0]), atol=1e-12) else
+                       "FRD" if np.allclose(c, np.eye(3), atol=1e-12) else "as logged")
+    b = np.array([out[f"gyro_bias_{ax}_dph"] for ax in "xyz"], dtype=float)
+    s2 = np.array([out[f"gyro_bias_{ax}_sigma_dph"] for ax in "xyz"], dtype=float) ** 2
+    known = np.isfinite(b)
+    b_s = c.T @ np.where(known, b, 0.0)
+    s_s = np.sqrt((c.T ** 2) @ np.where(known, s2, 0.0))
+    for i, ax in enumerate("xyz"):  # an axis fed by an unestimated body axis is unknown too
+        fed = np.abs(c[:, i]) > 1e-12
+        ok = bool(np.all(known[fed]))
+        out[f"gyro_bias_sensor_{ax}_dph"] = float(b_s[i]) if ok else float("nan")
+        out[f"gyro_bias_sensor_{ax}_sigma_dph"] = float(s_s[i]) if ok else float("nan")
+    return out
+
+
 def issue_message(issue: IngestIssue) -> dict[str, Any]:
     """One :class:`pospp.io.errors.IngestIssue` -> a messages row."""
     return {

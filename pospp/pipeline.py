@@ -269,11 +269,8 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
 def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
             book: _Progress, threads: int, lane: ThreadPoolExecutor | None) -> RunOutcome:
     """:func:`_run_stages` with its second lane (None: one thread)."""
-    meta = {
-        "input_file": run_folder.display_path(mcap_path),
-        "input_sha256": sha,
-        "config": config.to_dict(),
-    }
+    meta = {"input_file": run_folder.display_path(mcap_path), "input_sha256": sha,
+            "config": config.to_dict()}
     summary: dict[str, Any] = {"input_file": meta["input_file"],
                                "input_sha256": meta["input_sha256"]}
 
@@ -420,7 +417,8 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
         tables["events"] = _event_poses(log, solutions[best_name], best_name, config, book)
     for name, table in tables.items():
         write(name, table)
-    summary.update(calib_run.summary())
+    c_bs = sensor_to_body_dcm(config.input.sensor_frame, config.input.mounting_rpy_deg)
+    summary.update(outputs.with_sensor_axes(calib_run.summary(), c_bs))
     summary.update(outputs.diagnosis_summary(diagnosis.steps if diagnosis is not None else None))
     summary["calibration_reason"] = calib_run.reason
     if mcap is not None:

@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
-__all__ = ["IngestError", "IngestIssue", "Severity"]
+__all__ = ["IngestError", "IngestIssue", "MissingTopicError", "Severity"]
 
 Severity = Literal["info", "warning", "error"]
 
@@ -81,6 +81,11 @@ class IngestError(ValueError):
         self.log_time_ns = log_time_ns
         self.byte_offset = byte_offset
         super().__init__(reason + _facts(file, topic, index, time_ns, log_time_ns, byte_offset))
+
+
+class MissingTopicError(IngestError):
+    """A required topic is not in an intact file: the configuration names a topic the log
+    does not have (``[input] imu_topic``, ``fix_topic``); the message lists those it has."""
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,12 @@ Formats (layouts in docs/formats.md, "Exports"):
 - **geojson** (RFC 7946): one FeatureCollection: the track (LineString), each straight leg
   (LineString), and each trigger event (Point); coordinates [lon, lat, ellipsoidal height].
 - **kml**: the same features as KML Placemarks, clamped to the ground (KML heights are above
-  the geoid, pospp's above the ellipsoid).
+  the geoid, pospp's above the ellipsoid); each feature's properties are the Placemark's
+  ``ExtendedData`` fields (``<Data name="heading_deg">``), which GIS tools read as attribute
+  columns.
+
+``--events`` (``data="events"``) gives the sensor's pose at each trigger: sbet and csv one
+record per event, geojson and kml one Point per event and nothing else.
 
 GPS time: GPS = UTC + leap seconds (18 s since 2017-01-01, ``LEAP_SECONDS``); weeks counted
 from 1980-01-06T00:00:00 UTC. Stamps in a run are UTC nanoseconds as logged.
@@ -44,7 +49,8 @@ SOLUTIONS = ("best", "compensated", "smoothed", "forward")
 EXTENSIONS = {"sbet": "out", "csv": "csv", "geojson": "geojson", "kml": "kml"}
 """File extension of each format (SBET files are ``*.out``, as POSPac names them)."""
 DEFAULT_NAMES = frozenset({"trajectory.out", "trajectory.csv", "trajectory.geojson",
-                           "trajectory.kml", "events.out", "events.csv"})
+                           "trajectory.kml", "events.out", "events.csv", "events.geojson",
+                           "events.kml"})
 """The files ``export_run`` writes into a run folder when no output is given."""
 
 SBET_FIELDS = (
@@ -126,18 +132,21 @@ def _utc_text(ns: int) -> str:
     return pd.Timestamp(int(ns), unit="ns", tz="UTC").strftime("%Y-%m-%dT%H:%M:%S.%fZ")
 
 
-def _features(track: pd.DataFrame, legs: pd.DataFrame | None, events: pd.DataFrame | None
-              ) -> list[dict[str, Any]]:
-    """GeoJSON features (track, legs, events) as plain dicts."""
+def _features(track: pd.DataFrame | None, legs: pd.DataFrame | None,
+              events: pd.DataFrame | None) -> list[dict[str, Any]]:
+    """GeoJSON features (track, legs, events) as plain dicts (no track: the events alone)."""
     def line(rows: pd.DataFrame) -> dict[str, Any]:
         return {"type": "LineString",
                 "coordinates": rows[["lon_deg", "lat_deg", "height_m"]].to_numpy().tolist()}
 
-    t = track["time_ns"].to_numpy(np.int64)
-    feats = [{"type": "Feature", "geometry": line(track), "properties": {
-        "kind": "track", "solution": str(track["solution"].iloc[0]),
-        "start_utc": _utc_text(t[0]), "end_utc": _utc_text(t[-1])}}]
-    for leg in ([] if legs is None else legs.itertuples()):
+    feats: list[dict[str, Any]] = []
+    if track is not None:
+        t = track["time_ns"].to_numpy(np.int64)
+        feats.append({"type": "Feature", "geometry": line(track), "properties": {
+            "kind": "track", "solution": str(track["solution"].iloc[0]),
+            "start_utc": _utc_text(t[0]), "end_utc": _utc_text(t[-1])}})
+    for leg in ([] if legs is None or track is None else legs.itertuples()):
+        assert track is not None
         rows = track[(t >= leg.start_ns) & (t <= leg.end_ns)]
         if len(rows) < 2:
             continue
@@ -158,8 +167,8 @@ def _features(track: pd.DataFrame, legs: pd.DataFrame | None, events: pd.DataFra
     return feats
 
 
-def write_geojson(path: str | Path, track: pd.DataFrame, legs: pd.DataFrame | None = None,
-                  events: pd.DataFrame | None = None) -> Path:
+def write_geojson(path: str | Path, track: pd.DataFrame | None,
+                  legs: pd.DataFrame | None = None, events: pd.DataFrame | None = None) -> Path:
     """Write the track, the legs and the events as one GeoJSON FeatureCollection."""
     out = Path(path)
     doc = {"type": "FeatureCollection", "features": _features(track, legs, events)}
@@ -168,8 +177,8 @@ def write_geojson(path: str | Path, track: pd.DataFrame, legs: pd.DataFrame | No
     return out
 
 
-def write_kml(path: str | Path, track: pd.DataFrame, legs: pd.DataFrame | None = None,
-              events: pd.DataFrame | None = None) -> Path:
+def write_kml(path: str | Path, track: pd.DataFrame | None,
+              legs: pd.DataFrame | None = None, events: pd.DataFrame | None = None) -> Path:
     """Write the same features as KML 2.2 Placemarks (clamped to the ground)."""
     ns = "http://www.opengis.net/kml/2.2"
     kml = ET.Element("kml", xmlns=ns)
@@ -180,7 +189,10 @@ def write_kml(path: str | Path, track: pd.DataFrame, legs: pd.DataFrame | None =
         pm = ET.SubElement(doc, "Placemark")
         ET.SubElement(pm, "name").text = {"track": "track", "leg": f"leg {p.get('leg_id')}",
                                           "event": f"event {p.get('event_id')}"}[p["kind"]]
-        ET.SubElement(pm, "description").text = json.dumps(p)
+        data = ET.SubElement(pm, "ExtendedData")
+        for key, value in p.items():
+            field = ET.SubElement(data, "Data", name=key)
+            ET.SubElement(field, "value").text = str(value)
         g = f["geometry"]
         geom = ET.SubElement(pm, "LineString" if g["type"] == "LineString" else "Point")
         ET.SubElement(geom, "altitudeMode").text = "clampToGround"
@@ -227,8 +239,9 @@ def export_run(run_dir: str | Path, fmt: str, *, rate_hz: float | None = None,
         Output file (default ``RUN_DIR/<data>.<fmt>``, "out" for SBET as POSPac names it).
     solution : {"best", "compensated", "smoothed", "forward"}
     data : {"trajectory", "events"}
-        For sbet and csv: the track, or the sensor's pose at each trigger (events.parquet).
-        geojson and kml always hold the track, the legs and the events there are.
+        The track, or the sensor's pose at each trigger (events.parquet). For geojson and
+        kml, "trajectory" is the track, the legs and the events there are; "events" the
+        events alone, one Point each.
     """
     if fmt not in FORMATS:
         raise ValueError(f"format: expected one of {list(FORMATS)}, got {fmt!r}")
@@ -248,7 +261,7 @@ def export_run(run_dir: str | Path, fmt: str, *, rate_hz: float | None = None,
             return None
         return parquet_tables.read_table(p)
 
-    name = data if fmt in ("sbet", "csv") else "trajectory"
+    name = data
     target = Path(out) if out is not None else run / f"{name}.{EXTENSIONS[fmt]}"
     if fmt in ("sbet", "csv"):
         if data == "events":
@@ -257,7 +270,9 @@ def export_run(run_dir: str | Path, fmt: str, *, rate_hz: float | None = None,
             rows = _thin(select_solution(table("trajectory", required=True), solution),
                          rate_hz)
         return (write_sbet if fmt == "sbet" else write_csv)(target, rows)
-    track = _thin(select_solution(table("trajectory", required=True), solution), rate_hz)
     writer = write_geojson if fmt == "geojson" else write_kml
+    if data == "events":
+        return writer(target, None, None, table("events", required=True))
+    track = _thin(select_solution(table("trajectory", required=True), solution), rate_hz)
     return writer(target, track, table("legs", required=False),
                   table("events", required=False))

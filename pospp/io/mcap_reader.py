@@ -60,7 +60,7 @@ import numpy as np
 from pospp.io._blockwise import rotation_sums, row_norms
 from pospp.io._mcap_decode import EVENT_SPEC, FIX_SPEC, IMU_SPEC, VEL_SPEC, Collector
 from pospp.io._mcap_scan import MAX_CHUNK_BYTES, Scan
-from pospp.io.errors import IngestError, IngestIssue
+from pospp.io.errors import IngestError, IngestIssue, MissingTopicError
 from pospp.types import (
     ENU_TO_NED,
     FLU_TO_FRD,
@@ -442,7 +442,7 @@ def _check_topics(scan: Scan, cols: dict[str, Collector], path: str,
     available = ", ".join(f"{t} ({s})" for t, s in sorted(scan.topics.items())) or "none"
     for topic in required:
         if topic not in scan.topics:
-            raise IngestError(
+            raise (IngestError if broken else MissingTopicError)(
                 f"required topic {topic!r} ({cols[topic].spec.type_name}) not found; "
                 f"available topics: {available}{note}", file=path, topic=topic,
                 byte_offset=broken[0].byte_offset if broken else None, issues=tuple(issues),

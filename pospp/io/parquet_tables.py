@@ -19,7 +19,7 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -27,7 +27,9 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from pospp import __version__
+from pospp.io.columns import BOOL, FLOAT, INT, TEXT, Column, optional
 from pospp.io.files import atomic_path
+from pospp.io.root_tables import DIFF_COLUMNS, MANIFEST_COLUMNS
 from pospp.types import ReferenceTrajectory
 
 __all__ = [
@@ -49,29 +51,12 @@ SCHEMA_VERSION = "1.0"
 _RESERVED_KEYS = ("pospp_version", "schema_name", "schema_version")
 
 
-class Column(NamedTuple):
-    """One column: name (unit suffix included), pyarrow type, unit, description, frame."""
-
-    name: str
-    type: pa.DataType
-    unit: str
-    description: str
-    frame: str = ""
-    required: bool = True
-
-
-_F = pa.float64()
-_I = pa.int64()
-_S = pa.string()
-_B = pa.bool_()
+_F, _I, _S, _B = FLOAT, INT, TEXT, BOOL
 _NED = "n (NED)"
 _ATT = "b (FRD) w.r.t. n (NED), z-y-x"
 _FRD = "b (FRD)"
 _SENSOR_ATT = "s (sensor, [sensor] boresight in b) w.r.t. n (NED), z-y-x"
-
-
-def _opt(c: Column) -> Column:
-    return c._replace(required=False)
+_opt = optional
 
 
 _TIME = Column("time_ns", _I, "ns", "sample time (UTC nanoseconds, as stamped in the input)")
@@ -209,6 +194,13 @@ TABLES: dict[str, list[Column]] = {
         *[_opt(Column(f"gyro_bias_{ax}{kind}_dph", _F, "deg/h", f"calibrated gyro bias, body "
                       f"{ax} (FRD){' 1-sigma' if kind else ''}; NaN: not estimated", "b (FRD)"))
           for ax in "xyz" for kind in ("", "_sigma")],
+        *[_opt(Column(f"gyro_bias_sensor_{ax}{kind}_dph", _F, "deg/h", f"the calibrated gyro "
+                      f"bias{' 1-sigma' if kind else ''} in the IMU's logged axes, {ax} (FLU for "
+                      "ROS logs: x as body x, y and z negated; [input] sensor_frame, "
+                      "mounting_rpy_deg); NaN: not estimated", "s (sensor, as logged)"))
+          for ax in "xyz" for kind in ("", "_sigma")],
+        _opt(Column("imu_axes", _S, "", "the IMU's logged axes of gyro_bias_sensor_*: 'FLU', "
+                    "'FRD' or 'as logged' (another [input] mounting_rpy_deg)")),
         _opt(Column("not_observable", _S, "", "'; '-joined 'parameter: sigma > bound: why' of "
                     "the applied fit's parameters not observable on these legs (docs/report.md)"
                     )),
@@ -316,22 +308,8 @@ TABLES: dict[str, list[Column]] = {
         _opt(Column("log_time_ns", _I, "ns", "MCAP log time of the message concerned (where "
                     "it is in the file; time_ns is its header stamp)")),
     ],
-    "manifest": [
-        Column("file", _S, "", "input file"),
-        Column("sha256", _S, "", "SHA-256 of the input file"),
-        Column("status", _S, "", "'done', 'failed' or 'skipped'"),
-        Column("duration_s", _F, "s", "processing wall time"),
-        Column("error", _S, "", "error text (null when done)"),
-        _opt(Column("n_legs", _I, "", "legs found")),
-        _opt(Column("dv_after_mps", _F, "m/s", "summary dv_after_mps")),
-        _opt(Column("dp_after_m", _F, "m", "summary dp_after_m")),
-        _opt(Column("qc_failed_checks", _S, "", "summary qc_failed_checks")),
-        _opt(Column("dv_before_mps", _F, "m/s", "summary dv_before_mps")),
-        *[_opt(Column(f"gyro_bias_{ax}{kind}_dph", _F, "deg/h", f"summary gyro_bias_{ax}{kind}"
-                      "_dph", "b (FRD)")) for ax in "xy" for kind in ("", "_sigma")],
-        _opt(Column("gap_heldout_mps", _F, "m/s", "summary gap_heldout_mps")),
-        _opt(Column("not_observable", _S, "", "summary not_observable")),
-    ],
+    "manifest": MANIFEST_COLUMNS,
+    "diff": DIFF_COLUMNS,
     "reference": [_TIME, *_NAV],
     "events": [
         _TIME,

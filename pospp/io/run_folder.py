@@ -50,7 +50,8 @@ _OTHER_OUTPUTS = frozenset({"report.html", "trajectory.mcap", "evaluation.png",
                             "observability.png", MARKER,
                             # pospp export's default files (pospp.io.exports.DEFAULT_NAMES)
                             "trajectory.out", "trajectory.csv", "trajectory.geojson",
-                            "trajectory.kml", "events.out", "events.csv"})
+                            "trajectory.kml", "events.out", "events.csv", "events.geojson",
+                            "events.kml"})
 _RENAME_EXCHANGE = 2  # linux/fs.h
 
 

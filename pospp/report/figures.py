@@ -45,11 +45,19 @@ def pyplot() -> Any:
 
 
 def subplots(backend: str, *args: Any, **kw: Any) -> tuple[Any, Any]:
-    """``pyplot.subplots`` of the backend, "mpl" or "svg"."""
+    """``pyplot.subplots`` of the backend: "mpl" (pyplot with Agg), "svg" (the report's own
+    writer) or "figure" (a plain matplotlib ``Figure``, outside pyplot: no global backend is
+    set, so a notebook's stays as it was; ``pospp.api``'s plots)."""
     if backend == "svg":
         return svg.subplots(*args, **kw)
+    if backend == "figure":
+        from matplotlib.figure import Figure as PlainFigure
+
+        size = {k: kw.pop(k) for k in ("figsize", "dpi") if k in kw}
+        fig = PlainFigure(**size)
+        return fig, fig.subplots(*args, **kw)
     if backend != "mpl":
-        raise ValueError(f"unknown figure backend {backend!r} (mpl, svg)")
+        raise ValueError(f"unknown figure backend {backend!r} (mpl, svg, figure)")
     return pyplot().subplots(*args, **kw)
 
 

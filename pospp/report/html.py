@@ -20,6 +20,7 @@ import pandas as pd
 from pospp.outputs import not_observable
 from pospp.report import figures, svg
 from pospp.report.summary import (
+    BODY_AXES,
     Headline,
     group_messages,
     headline,
@@ -165,6 +166,9 @@ def _pm(value: float, sigma: float, unit: str = "") -> str:
     return html.escape(pm_text(value, sigma, unit).replace(" +- ", " \u00b1 "))
 
 
+_PM = " \u00b1 "
+
+
 def _answer_section(h: Headline, tables: Mapping[str, pd.DataFrame]) -> list[str]:
     """The answer first: verdict, calibrated values with sigma, what was not observable and
     why, the improvement in-sample and held out (each labelled)."""
@@ -176,7 +180,13 @@ def _answer_section(h: Headline, tables: Mapping[str, pd.DataFrame]) -> list[str
     for e in h.results:
         rows.append(f"<tr><th class='l'>{html.escape(e.name)}</th><td class='headline'>"
                     f"{_pm(e.value, e.sigma, e.unit)}</td><td class='l'>calibrated "
-                    f"({html.escape(h.formulation)} formulation, all pairs, 1-sigma)</td></tr>")
+                    f"({html.escape(h.formulation)} formulation, all pairs, 1-sigma; "
+                    f"{html.escape(BODY_AXES)})</td></tr>")
+    if h.sensor_axes:
+        rows.append(f"<tr><th class='l'>gyro bias, IMU axes</th><td class='headline'>"
+                    f"{html.escape(h.sensor_axes_text.replace(' +- ', _PM))}</td>"
+                    f"<td class='l'>the same, in the IMU's axes "
+                    f"({html.escape(h.sensor_axes_name)})</td></tr>")
     for e in h.not_observable:
         rows.append(f"<tr><th class='l'>{html.escape(e.name)}</th><td class='flag'>not "
                     f"observable</td><td class='l'>{html.escape(e.why_not)}</td></tr>")

@@ -24,6 +24,11 @@ UNIT_TEXT = {"deg_per_h": "deg/h", "arcsec": "arcsec", "m_per_s": "m/s", "mps": 
 """Unit names of the tables -> what a reader expects on a label."""
 
 _PER_LEG = re.compile(r"_leg\d+$")
+BODY_AXES = "body axes FRD: x forward, y right, z down"
+"""How the headline names the frame of the calibrated values."""
+SENSOR_AXES = {"FLU": "FLU: x forward, y left, z up", "FRD": "FRD, as the body",
+               "as logged": "as logged, before [input] mounting_rpy_deg"}
+"""How it names the IMU's logged axes (summary ``imu_axes``; docs/formats.md)."""
 
 
 def unit_text(unit: str) -> str:
@@ -106,6 +111,19 @@ class Headline:
     gap_uncalibrated_mps: float
     gap_fit_mps: float
     gap_heldout_mps: float
+    sensor_axes: tuple[Estimate, ...] = ()
+    """The calibrated gyro bias in the IMU's logged axes (summary ``gyro_bias_sensor_*``)."""
+    sensor_axes_name: str = ""
+    """Those axes in words (``SENSOR_AXES`` of the summary's ``imu_axes``)."""
+
+    @property
+    def sensor_axes_text(self) -> str:
+        """"x +0.94 +- 0.32, y +0.55 +- 0.33 deg/h" (the gyro bias in the IMU's logged axes)."""
+        if not self.sensor_axes:
+            return ""
+        unit = unit_text(self.sensor_axes[0].unit)
+        return ", ".join(f"{e.name[-1]} {pm_text(e.value, e.sigma)}"
+                         for e in self.sensor_axes) + f" {unit}"
 
     @property
     def in_sample_text(self) -> str:
@@ -195,7 +213,13 @@ def headline(tables: Mapping[str, pd.DataFrame]) -> Headline:
     if not np.isfinite(gap_ho) and diag is not None and not diag.empty:
         first = diag.sort_values("step").iloc[0]
         gap_fit, gap_ho = float(first.gap_before_mps), float(first.heldout_gap_before_mps)
+    sensor = tuple(Estimate(f"gyro_bias_{ax}", _num(row, f"gyro_bias_sensor_{ax}_dph"),
+                            _num(row, f"gyro_bias_sensor_{ax}_sigma_dph"), "deg_per_h")
+                   for ax in "xyz"
+                   if any(e.name == f"gyro_bias_{ax}" for e in results)
+                   and np.isfinite(_num(row, f"gyro_bias_sensor_{ax}_dph")))
     return Headline(
+        sensor_axes=sensor, sensor_axes_name=SENSOR_AXES.get(str(row.get("imu_axes")), ""),
         status=str(row.get("status") or "?"), qc_verdict=verdict, qc_failed=failed,
         calibration_reason=str(row.get("calibration_reason") or ""), formulation=form,
         results=tuple(results), per_leg=tuple(per_leg), not_observable=tuple(unobs),
@@ -217,8 +241,11 @@ def headline_lines(h: Headline) -> list[str]:
     the improvement in-sample and held out."""
     lines = [f"  status: {h.status} ({h.qc_verdict})"]
     if h.results:
-        lines.append(f"  calibrated ({h.formulation} formulation, all pairs): "
+        lines.append(f"  calibrated ({h.formulation} formulation, all pairs; {BODY_AXES}): "
                      + ", ".join(f"{e.name} {e.text}" for e in h.results))
+        if h.sensor_axes:
+            lines.append(f"  the same gyro bias in the IMU's axes ({h.sensor_axes_name}): "
+                         f"{h.sensor_axes_text}")
     elif h.calibration_reason and h.calibration_reason != "ok":
         lines.append(f"  calibration: {h.calibration_reason}")
     if h.not_observable:

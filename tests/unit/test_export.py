@@ -181,3 +181,40 @@ def test_cli_export_errors_are_one_line(tmp_path):
     assert res.exit_code != 0 and "compensated" in res.output and "Traceback" not in res.output
     res = CliRunner().invoke(main, ["export", str(tmp_path), "--format", "csv"])
     assert res.exit_code != 0 and "Traceback" not in res.output
+
+
+def test_kml_properties_are_extended_data_fields(tmp_path):
+    """Issue 39 item 12: each property a <Data name=...> field (GIS tools read them as
+    attribute columns), not a JSON blob in the description."""
+    tr = _track()
+    path = exports.write_kml(tmp_path / "t.kml", tr, _legs(), _events(tr))
+    ns = {"k": "http://www.opengis.net/kml/2.2"}
+    marks = ET.parse(path).getroot().findall(".//k:Placemark", ns)
+    fields = [{d.get("name"): d.find("k:value", ns).text
+               for d in m.findall("k:ExtendedData/k:Data", ns)} for m in marks]
+    assert [f["kind"] for f in fields] == ["track", "leg", "leg", "event", "event", "event"]
+    assert float(fields[1]["heading_deg"]) == 90.0 and fields[1]["leg_id"] == "0"
+    assert float(fields[4]["gps_sow_s"]) == pytest.approx(518423.0)
+    assert all(m.find("k:description", ns) is None for m in marks)
+
+
+@pytest.mark.parametrize("fmt", ["geojson", "kml"])
+def test_events_flag_with_geojson_and_kml_gives_the_events_alone(tmp_path, fmt):
+    """Issue 39 item 12: --events with --format geojson/kml was ignored silently (the track
+    came out); it now gives one Point per event and nothing else."""
+    run = _run_folder(tmp_path)
+    res = CliRunner().invoke(main, ["export", str(run), "--format", fmt, "--events"])
+    assert res.exit_code == 0, res.output
+    out = run / f"events.{fmt}"
+    assert out.is_file() and run_folder.is_pospp_file(out.name)
+    assert res.output.strip().splitlines()[-1] == f"pospp export: ok ({out})"
+    if fmt == "geojson":
+        feats = json.loads(out.read_text())["features"]
+        kinds = [f["properties"]["kind"] for f in feats]
+        points = [f["geometry"]["type"] for f in feats]
+    else:
+        ns = {"k": "http://www.opengis.net/kml/2.2"}
+        marks = ET.parse(out).getroot().findall(".//k:Placemark", ns)
+        kinds = [m.find("k:ExtendedData/k:Data[@name='kind']/k:value", ns).text for m in marks]
+        points = ["Point" if m.find("k:Point", ns) is not None else "other" for m in marks]
+    assert kinds == ["event"] * 3 and points == ["Point"] * 3

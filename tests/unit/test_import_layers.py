@@ -32,7 +32,7 @@ LAYERS: tuple[frozenset[str], ...] = (
     frozenset({"flight_stages"}),
     frozenset({"diagnosis_stage"}),
     frozenset({"passes_ahead"}),
-    frozenset({"pipeline", "convert"}),
+    frozenset({"pipeline", "convert", "api"}),
     frozenset({"batch", "compare_sim"}),
     frozenset({"cli"}),
 )

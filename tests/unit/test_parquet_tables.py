@@ -67,6 +67,11 @@ UNITLESS |= {"gap_legs", "gap_channel", "gap_part", "gap_basis", "gap_location"}
 UNITLESS |= {"gyro_drift_source"}
 # diagnosis: the null its p-values are calibrated on (issue 12)
 UNITLESS |= {"null_model"}
+# manifest: what a batch did; summary: the IMU's axes of the sensor-frame bias (issues 37, 39)
+UNITLESS |= {"action", "imu_axes"}
+# diff (pospp diff, issue 37): the row's unit column names the unit of its numbers
+UNITLESS |= {"flight", "item", "text_a", "text_b", "within", "note"}
+ROW_UNIT |= {"value_a", "value_b", "max_diff", "rms_diff", "tolerance"}
 
 
 @pytest.mark.parametrize("name", sorted(PROMISED))

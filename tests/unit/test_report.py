@@ -13,7 +13,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pospp.batch import FlightOutcome, _read_manifest, _write_manifest
+from pospp.batch.outcome import FlightOutcome, read_rows, write_rows
 from pospp.config import PipelineConfig
 from pospp.evaluate import SolutionErrors
 from pospp.outputs import NOT_OBSERVABLE_SIGMA, not_observable, velocity_gap_rms_mps
@@ -186,11 +186,11 @@ def test_evaluation_figure_respects_skip_s() -> None:
 
 
 def test_manifest_keeps_the_headline_columns(tmp_path) -> None:
-    rows = [FlightOutcome("a.mcap", "ab", "done", 1.0, None, 4, 0.3, 45.0, "a",
+    rows = [FlightOutcome("a.mcap", "ab", "ok", 1.0, None, 4, 0.3, 45.0, "a",
                           "", 2.27, 0.937, 0.293, -0.547, 0.287, 0.39, "phi_z: why"),
             FlightOutcome("b.mcap", "cd", "failed", 1.0, "boom", run_dir="b")]
-    _write_manifest(tmp_path, rows, PipelineConfig())
-    back = _read_manifest(tmp_path)
+    write_rows(tmp_path, rows, PipelineConfig())
+    back = read_rows(tmp_path)
     assert back["a.mcap"].gyro_bias_x_dph == 0.937 and back["a.mcap"].not_observable == \
         "phi_z: why"
     assert back["b.mcap"].gyro_bias_x_dph is None

@@ -17,7 +17,7 @@ Formats (``FORMATS`` keys)
 - ``comma2k19``: comma2k19 segment CSV export (imu.csv, gnss_ublox.csv, pose_reference.csv).
 - ``ansfl_quadrotor``: ANSFL quadrotor straight-line set (processed/path_N, raw/*Airdata.csv).
 - ``ansfl_quadrotor_raw``: one untrimmed Xsens DOT recording of that set with the Airdata log
-  over its span (never detected: pass ``fmt=``).
+  over its span (never detected: ``--format ansfl_quadrotor_raw``, ``fmt=``).
 - ``kfgins_rtk``: KF-GINS ``GNSS-RTK.txt`` (reference only, no IMU).
 - ``navego_reference``: NaveGo ``ref.csv`` (reference only, no IMU).
 """
@@ -102,8 +102,8 @@ def detect_format(source: str | Path) -> str:
             return "kfgins_rtk"
         if p.name == "ref.csv":
             return "navego_reference"
-        raise ConversionError(f"{p}: unknown file; give its folder or fmt= one of "
-                              f"{sorted(FORMATS)}")
+        raise ConversionError(f"{p}: unknown file; give its folder, or the format with "
+                              f"--format NAME (fmt= in Python), one of {sorted(FORMATS)}")
     if not p.is_dir():
         raise ConversionError(f"{p}: no such file or folder")
     names = {x.name for x in p.iterdir()}
@@ -117,8 +117,8 @@ def detect_format(source: str | Path) -> str:
         return "kfgins_rtk"
     if "ref.csv" in names:
         return "navego_reference"
-    raise ConversionError(f"{p}: no known layout (found {sorted(names)}); pass fmt= one of "
-                          f"{sorted(FORMATS)}")
+    raise ConversionError(f"{p}: no known layout (found {sorted(names)}); give the format "
+                          f"with --format NAME (fmt= in Python), one of {sorted(FORMATS)}")
 
 
 def parse(source_dir_or_file: str | Path, *, fmt: str | None = None,

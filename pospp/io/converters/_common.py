@@ -196,6 +196,8 @@ class ConversionReport:
     checks : dict of str to float
         Measured realism figures (names carry units).
     notes, warnings : tuple of str
+    hints : tuple of str
+        What to do next with this log (``pospp.convert``: e.g. a clip too short for a run).
     """
 
     fmt: str
@@ -218,6 +220,7 @@ class ConversionReport:
     checks: dict[str, float] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
     warnings: tuple[str, ...] = ()
+    hints: tuple[str, ...] = ()
 
 
 # --------------------------------------------------------------------------- time

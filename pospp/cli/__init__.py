@@ -4,7 +4,8 @@ Every command is a thin shell over a function of the package (named in its help)
 everything the CLI does can be done from Python too. No command ends with a traceback: every
 error is one line ``pospp: error: ...`` on stderr and an exit status from :data:`EXIT_CODES`
 (``--debug`` shows the traceback instead). A run's status maps to its exit status in one
-place, :func:`exit_code_for_status`.
+place, :func:`exit_code_for_status`; every command ends with one status line
+(``pospp COMMAND: STATUS``, :func:`pospp.cli._status.status_line`).
 """
 
 from __future__ import annotations
@@ -25,28 +26,21 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import click  # noqa: E402
 
 from pospp import __version__  # noqa: E402
+from pospp.cli._diff import diff  # noqa: E402
+from pospp.cli._status import (  # noqa: E402
+    EXIT_CODES,
+    StageBar,
+    diagnosis_step_line,
+    exit_code_for_status,
+    status_line,
+    worst_status,
+)
 from pospp.config import ConfigError, PipelineConfig, load_config  # noqa: E402
 
 if TYPE_CHECKING:
     from pospp.batch import FlightOutcome
 
-EXIT_CODES = {"ok": 0, "failed": 1, "usage": 2, "degraded": 3}
-"""Exit status of every command: 0 ok (a run that completed, "ok" or "partial"), 1 failed
-(a run or flight that failed, any other error), 2 usage or configuration error (bad option,
-pipeline file, or an output folder pospp must not write into), 3 degraded (the run completed
-but a quality check failed)."""
-
-_STATUS_EXIT = {"ok": "ok", "done": "ok", "partial": "ok", "skipped": "ok",
-                "degraded": "degraded", "failed": "failed"}
-
-
-def exit_code_for_status(*statuses: str) -> int:
-    """The exit status of one or more run statuses: the worst of them (failed > degraded)."""
-    kinds = {_STATUS_EXIT.get(s, "failed") for s in statuses}
-    for kind in ("failed", "degraded"):
-        if kind in kinds:
-            return EXIT_CODES[kind]
-    return EXIT_CODES["ok"]
+__all__ = ["EXIT_CODES", "entry", "exit_code_for_status", "main"]
 
 
 def _printable(text: str) -> str:
@@ -59,10 +53,19 @@ def _one_line(exc: BaseException) -> str:
     return _printable(str(exc)) or type(exc).__name__
 
 
-def _exit_code_for(exc: BaseException) -> int:
+def _usage_errors() -> tuple[type[BaseException], ...]:
+    """The errors that are the user's to fix in the command or its configuration (exit 2): a
+    bad pipeline file or tolerance file, an output folder pospp must not write into, a topic
+    the log does not have, a reference that is not of this flight."""
+    from pospp.evaluate import TruthMismatchError
+    from pospp.io.errors import MissingTopicError
     from pospp.io.run_folder import RunFolderError
 
-    usage = isinstance(exc, ConfigError | RunFolderError)
+    return (ConfigError, RunFolderError, MissingTopicError, TruthMismatchError)
+
+
+def _exit_code_for(exc: BaseException) -> int:
+    usage = isinstance(exc, _usage_errors())
     return EXIT_CODES["usage"] if usage else EXIT_CODES["failed"]
 
 
@@ -76,6 +79,9 @@ class _Cli(click.Group):
             return super().main(args, prog_name, complete_var, False, **extra)
         try:
             rv = super().main(args, prog_name, complete_var, False, **extra)
+        except click.exceptions.NoArgsIsHelpError as exc:  # bare "pospp": the help, as is
+            click.echo(exc.ctx.get_help() if exc.ctx is not None else exc.format_message())
+            sys.exit(EXIT_CODES["usage"])
         except click.ClickException as exc:  # usage errors: one line too (click prints 3)
             click.echo(f"pospp: error: {_printable(exc.format_message())}", err=True)
             sys.exit(exc.exit_code)
@@ -107,23 +113,6 @@ class _Cli(click.Group):
 
 def _config(path: str | None) -> PipelineConfig:
     return PipelineConfig() if path is None else load_config(path)
-
-
-class _StageBar:
-    """A progress bar over the pipeline's stages (stderr; silent when not a terminal)."""
-
-    def __init__(self) -> None:
-        from tqdm import tqdm
-
-        self._bar = tqdm(total=100, unit="%", file=sys.stderr, leave=False,
-                         disable=not sys.stderr.isatty(), bar_format="{l_bar}{bar}| {desc}")
-
-    def __call__(self, stage: str, fraction: float) -> None:
-        self._bar.set_description_str(stage)
-        self._bar.update(round(100 * fraction) - self._bar.n)
-
-    def close(self) -> None:
-        self._bar.close()
 
 
 @click.group(cls=_Cli, context_settings={"help_option_names": ["-h", "--help"]})
@@ -168,13 +157,14 @@ def run(mcap_file: str, pipeline_file: str | None, out_dir: str, force: bool,
         from pospp.report.summary import summary_text
 
     config = _config(pipeline_file)
-    bar = _StageBar()
+    bar = StageBar()
     try:
         outcome = pipeline.process_flight(mcap_file, config, out_dir, progress=bar, force=force,
                                            threads=threads)
     finally:
         bar.close()
     click.echo(summary_text(read_run_tables(outcome.out_dir), verbose=verbose))
+    status_line("run", outcome.status, str(outcome.out_dir))
     sys.exit(exit_code_for_status(outcome.status))
 
 
@@ -192,21 +182,35 @@ def run(mcap_file: str, pipeline_file: str | None, out_dir: str, force: bool,
 @click.option("--threads", default=None, type=click.IntRange(min=1),
               help="A re-runs each flight makes at once; the outputs do not depend on it.  "
                    "[default: the cores shared out among the workers]")
+@click.option("--baseline", "baseline_root", default=None,
+              type=click.Path(exists=True, file_okay=False),
+              help="An earlier batch root: when done, compare every flight with it (pospp "
+                   "diff BASELINE ROOT): ROOT/diff.parquet, ROOT/diff.html; exit 3 on a change "
+                   "beyond tolerance.")
+@click.option("--tolerances", "tolerance_file", default=None,
+              type=click.Path(exists=True, dir_okay=False),
+              help="Tolerances of the --baseline comparison (TOML, as pospp diff).")
 def batch(inputs: tuple[str, ...], pipeline_file: str | None, out_root: str, workers: int,
           scheduler: str | None, scheduler_timeout_s: float, force: bool,
-          threads: int | None) -> None:
-    """Process an archive: MCAP files and/or folders of them (pospp.batch.run_batch)."""
-    from pospp.batch import run_batch
+          threads: int | None, baseline_root: str | None, tolerance_file: str | None) -> None:
+    """Process an archive: MCAP files and/or folders of them (pospp.batch.run_batch).
 
-    files: list[Path] = []
-    root = Path(os.path.realpath(out_root))
-    for item in map(Path, inputs):
-        found = sorted(item.rglob("*.mcap")) if item.is_dir() else [item]
-        # a root inside the archive holds pospp's own trajectory.mcap files: never inputs
-        files.extend(f for f in found if root not in Path(os.path.realpath(f)).parents)
+    Each flight's line gives its result (ok, degraded, partial, failed, as pospp run) and what
+    this batch did (ran, skipped, resumed); the manifest keeps both.
+    """
+    from pospp.batch import baseline_diff, find_flight_logs, run_batch
+
+    if tolerance_file and not baseline_root:
+        raise click.UsageError("--tolerances needs --baseline")
+    files = find_flight_logs(inputs, out_root)
     if not files:
         raise click.UsageError(f"no .mcap files found in {', '.join(inputs)}")
     config = _config(pipeline_file)
+    tolerances = None
+    if tolerance_file:
+        from pospp.api.diff import load_tolerances
+
+        tolerances = load_tolerances(tolerance_file)
 
     def show(o: FlightOutcome) -> None:
         from pospp.report.summary import pm_text
@@ -214,18 +218,32 @@ def batch(inputs: tuple[str, ...], pipeline_file: str | None, out_root: str, wor
         tail = f": {o.error}" if o.error else ""
         if o.gyro_bias_x_dph is not None and o.gyro_bias_y_dph is not None:
             tail += (f"  gyro bias x {pm_text(o.gyro_bias_x_dph, o.gyro_bias_x_sigma_dph)}, y "
-                     f"{pm_text(o.gyro_bias_y_dph, o.gyro_bias_y_sigma_dph)} deg/h")
+                     f"{pm_text(o.gyro_bias_y_dph, o.gyro_bias_y_sigma_dph)} deg/h (body FRD)")
         if o.qc_failed_checks:
             tail += f"  QC failed: {o.qc_failed_checks}"
-        click.echo(_printable(f"{o.status:8s} {o.duration_s:7.1f} s  {o.file}{tail}"))
+        click.echo(_printable(f"{o.status or '-':8s} {o.action:7s} {o.duration_s:7.1f} s  "
+                              f"{o.file}{tail}"))
 
     rows = run_batch(files, config, out_root, workers=workers, scheduler=scheduler,
                      scheduler_timeout_s=scheduler_timeout_s, force=force, on_result=show,
                      threads=threads)
-    n_failed = sum(r.status == "failed" for r in rows)
-    click.echo(f"{len(rows)} flights: {len(rows) - n_failed} processed or skipped, "
-               f"{n_failed} failed; manifest: {Path(out_root) / 'manifest.parquet'}")
-    sys.exit(exit_code_for_status(*(r.status for r in rows)))
+    statuses = [r.status or "failed" for r in rows]
+    counts = ", ".join(f"{statuses.count(k)} {k}" for k in ("ok", "degraded", "partial",
+                                                           "failed") if statuses.count(k))
+    actions = ", ".join(f"{a} {n}" for a in ("ran", "resumed", "skipped")
+                        if (n := sum(r.action == a for r in rows)))
+    detail = (f"{len(rows)} flights: {counts}; {actions}; manifest "
+              f"{Path(out_root) / 'manifest.parquet'}")
+    if baseline_root:
+        from pospp.api.diff_text import diff_lines, diff_status
+
+        result = baseline_diff(out_root, baseline_root, tolerances)
+        for line in diff_lines(result):
+            click.echo(line)
+        statuses.append(diff_status(result))
+        detail += f"; against the baseline: {diff_status(result)}"
+    status_line("batch", worst_status(*statuses), _printable(detail))
+    sys.exit(exit_code_for_status(*statuses))
 
 
 @main.command()
@@ -235,7 +253,9 @@ def report(run_dir: str) -> None:
     with _imports_for_the_process():
         from pospp.pipeline import write_report
 
-    click.echo(str(write_report(run_dir)))
+    page = write_report(run_dir)
+    click.echo(str(page))
+    status_line("report", "ok", str(page))
 
 
 @main.command()
@@ -276,6 +296,7 @@ def simulate(ctx: click.Context, preset: str | None, profile_file: str | None, i
 
     if (preset is None) == (profile_file is None):
         raise click.UsageError("give exactly one of --preset and --profile")
+    _check_choice("--preset", preset, _simulation_choices()[0])
 
     def given(name: str) -> bool:
         return ctx.get_parameter_source(name) != click.core.ParameterSource.DEFAULT
@@ -283,6 +304,8 @@ def simulate(ctx: click.Context, preset: str | None, profile_file: str | None, i
     if model_file is not None and not given("imu_grade"):
         imu_grade = model_file
     grade = {"flight": "paper_flight", "vehicle": "paper_vehicle"}.get(imu_grade, imu_grade)
+    if not grade.endswith(".toml"):
+        _check_choice("--imu-grade", grade, ["flight", "vehicle", *_simulation_choices()[1]])
     gnss = GnssModel(rate_hz=gnss_rate_hz, lever_arm_b_m=lever_arm_m,
                      outages_s=tuple(tuple(o) for o in outages))
     if model_file is not None:
@@ -297,7 +320,7 @@ def simulate(ctx: click.Context, preset: str | None, profile_file: str | None, i
                                                           ("outages_s", "outages",
                                                            gnss.outages_s)) if given(p)}
             gnss = replace(from_file, **over)
-    bar = _StageBar()
+    bar = StageBar()
     try:
         source: str = profile_file or preset or ""
         sim = run_simulation(source, imu_grade=grade, gnss=gnss, seed=seed,
@@ -310,6 +333,21 @@ def simulate(ctx: click.Context, preset: str | None, profile_file: str | None, i
                f"straight legs")
     for kind, path in paths.items():
         click.echo(f"  {kind}: {path}")
+    status_line("simulate", "ok", str(paths.get("mcap", out)))
+
+
+def _simulation_choices() -> tuple[list[str], list[str]]:
+    """The mission presets and IMU grades ``pospp simulate`` knows (pospp/presets)."""
+    from pospp.sim.profile import preset_names
+    from pospp.sim.sensors import grade_names
+
+    return preset_names(), grade_names()
+
+
+def _check_choice(option: str, value: str | None, choices: list[str]) -> None:
+    """A usage error (exit 2) naming the option when ``value`` is not one of ``choices``."""
+    if value is not None and value not in choices:
+        raise click.UsageError(f"{option} {value!r}: expected one of {', '.join(choices)}")
 
 
 @main.command()
@@ -328,15 +366,17 @@ def simulate(ctx: click.Context, preset: str | None, profile_file: str | None, i
               help="Which solution of trajectory.parquet (best: compensated > smoothed > "
                    "forward).")
 @click.option("--events", "events", is_flag=True,
-              help="sbet, csv: the sensor's pose at each trigger (events.parquet) instead of "
-                   "the trajectory.")
+              help="The sensor's pose at each trigger (events.parquet) instead of the "
+                   "trajectory: sbet, csv one record each; geojson, kml one point each.")
 def export(run_dir: str, fmt: str, rate_hz: float | None, out_file: str | None,
            solution: str, events: bool) -> None:
     """Export a run's trajectory or trigger poses for other tools (pospp.io.exports)."""
     from pospp.io.exports import export_run
 
-    click.echo(str(export_run(run_dir, fmt, rate_hz=rate_hz, out=out_file, solution=solution,
-                              data="events" if events else "trajectory")))
+    path = export_run(run_dir, fmt, rate_hz=rate_hz, out=out_file, solution=solution,
+                      data="events" if events else "trajectory")
+    click.echo(str(path))
+    status_line("export", "ok", str(path))
 
 
 @main.command()
@@ -350,7 +390,9 @@ def export(run_dir: str, fmt: str, rate_hz: float | None, out_file: str | None,
 def convert(source: str, out_mcap: str, fmt: str | None, options: tuple[str, ...]) -> None:
     """Convert a measured log to the MCAP data contract (pospp.convert.convert)."""
     from pospp.convert import convert as run_convert
+    from pospp.io.converters import FORMATS
 
+    _check_choice("--format", fmt, sorted(FORMATS))
     kw: dict[str, Any] = {}
     for item in options:
         key, sep, value = item.partition("=")
@@ -371,6 +413,9 @@ def convert(source: str, out_mcap: str, fmt: str | None, options: tuple[str, ...
             click.echo(f"  {label}: {path}")
     for w in rep.warnings:
         click.echo(f"  warning: {w}")
+    for hint in rep.hints:
+        click.echo(f"  hint: {hint}")
+    status_line("convert", "ok", f"{len(rep.warnings)} warning(s)" if rep.warnings else "")
 
 
 @main.command()
@@ -392,6 +437,7 @@ def evaluate(run_dir: str, truth_file: str, skip_s: float) -> None:
     units = table.groupby("metric").unit.first()
     wide.insert(0, "unit", units)
     click.echo(wide.to_string(float_format=lambda v: f"{v:.4g}"))
+    status_line("evaluate", "ok", str(Path(run_dir) / "evaluation.parquet"))
 
 
 @main.command()
@@ -418,6 +464,7 @@ def observability(out_dir: str, speed_mps: float, duration_s: float, lat_deg: fl
         click.echo(f"{form}: smallest scaled condition number {best.cond_scaled:.3g} at dH = "
                    f"{best.dheading_deg:g} deg (equal speeds)")
     click.echo(f"tables and figure in {out_dir}")
+    status_line("observability", "ok", out_dir)
 
 
 @main.command()
@@ -432,16 +479,14 @@ def diagnose(run_dir: str) -> None:
     with _imports_for_the_process():
         from pospp.pipeline import diagnose_run
 
-    bar = _StageBar()
+    bar = StageBar()
     try:
         diag = diagnose_run(run_dir, progress=bar)
     finally:
         bar.close()
     for s in diag.steps:
-        click.echo(f"step {s.step}: {s.effect:22s} value {s.value:+.4g} +- {s.sigma:.3g} "
-                   f"{s.unit:10s} p = {s.p_value:.3g}  gap {s.gap_before_mps:.4f} -> "
-                   f"{s.gap_after_mps:.4f} m/s, held-out {s.heldout_gap_before_mps:.4f} -> "
-                   f"{s.heldout_gap_after_mps:.4f} m/s")
+        click.echo(diagnosis_step_line(s))
+    status_line("diagnose", "ok", str(Path(run_dir) / "diagnosis.parquet"))
 
 
 @main.command("compare-sim")
@@ -474,6 +519,10 @@ def compare_sim(run_dir: str, out_model: str | None, max_steps: int) -> None:
         click.echo(f"step {s.step}: {s.target}: {s.effect} {size}; z {b.z:+.2f} -> {a.z:+.2f}")
     n_left = sum(g.significant for g in comp.final.values())
     click.echo(f"left significant: {n_left}")
+    status_line("compare-sim", "ok", f"{n_left} statistic(s) left significant")
+
+
+main.add_command(diff)
 
 
 @contextmanager
