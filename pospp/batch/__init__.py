@@ -117,6 +117,7 @@ def run_batch(
         own outcomes are in their run folders, and the error names the cause).
     """
     root = Path(out_root)
+    run_folder.refuse_symlink_loop(root)
     root.mkdir(parents=True, exist_ok=True)
     paths = sorted({os.path.abspath(os.fspath(f)) for f in files})
     with run_folder.BatchLock(root):

@@ -38,8 +38,8 @@ from pospp.io.files import atomic_path
 from pospp.io.parquet_tables import TABLES
 
 __all__ = ["MARKER", "BatchLock", "RunFolderError", "check_target", "discard",
-           "display_path", "display_text", "new_staging", "read_marker", "require_run_folder",
-           "swap_in", "write_marker"]
+           "display_path", "display_text", "new_staging", "read_marker", "refuse_symlink_loop",
+           "require_run_folder", "swap_in", "write_marker"]
 
 MARKER = ".pospp-run.json"
 """Marker file of a run folder (JSON, the run's identity)."""
@@ -48,6 +48,8 @@ _STAGING = ".pospp-staging-"
 _TRASH = ".pospp-trash-"
 _OTHER_OUTPUTS = frozenset({"report.html", "trajectory.mcap", "evaluation.png",
                             "observability.png", MARKER,
+                            # pospp compare-sim's fitted model (pospp.compare_sim)
+                            "sim_model.toml",
                             # pospp export's default files (pospp.io.exports.DEFAULT_NAMES)
                             "trajectory.out", "trajectory.csv", "trajectory.geojson",
                             "trajectory.kml", "events.out", "events.csv", "events.geojson",
@@ -170,6 +172,18 @@ def recover(target: str | Path) -> None:
         shutil.rmtree(p, ignore_errors=True)
 
 
+def refuse_symlink_loop(path: str | Path) -> None:
+    """A :class:`RunFolderError` at once when ``path`` (or a folder on the way to it) is a
+    symbolic link loop: nothing could be written there, and finding out only at the final
+    swap would cost the whole run."""
+    try:
+        os.stat(path)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise RunFolderError(f"{display_path(path)}: a symbolic link loop (too many levels "
+                                 "of symbolic links); choose another output folder") from None
+
+
 def check_target(target: str | Path, *, input_file: str | Path, force: bool) -> Path:
     """Check that a run may be written to ``target``; returns its absolute path.
 
@@ -180,6 +194,7 @@ def check_target(target: str | Path, *, input_file: str | Path, force: bool) -> 
         earlier pospp run and ``force`` is False.
     """
     t = Path(os.path.abspath(target))
+    refuse_symlink_loop(t)
     if t.is_symlink():  # swap the folder the link points to, keep the link
         t = Path(os.path.realpath(t))
     shown = display_path(t)

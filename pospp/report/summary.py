@@ -321,15 +321,30 @@ def summary_text(tables: Mapping[str, pd.DataFrame], *, verbose: bool = False) -
                 text = f"not observable ({flag})" if flag else pm_text(row.value, row.sigma,
                                                                          row.unit)
                 lines.append(f"    {row.formulation:6s} {row.parameter:14s} {text}")
-    msgs = tables.get("messages")
-    if msgs is not None and len(msgs):
-        n_err = int((msgs.severity == "error").sum())
-        n_warn = int((msgs.severity == "warning").sum())
-        lines.append(f"  messages: {n_err} errors, {n_warn} warnings (messages.parquet)")
-        for g in group_messages(msgs[msgs.stage == "calibrate"]).itertuples():
-            times = f" x{g.count}" if g.count > 1 else ""
-            lines.append(f"    {g.severity}: {g.text}{times}")
+    lines.extend(message_lines(tables.get("messages")))
     return "\n".join(lines)
+
+
+MAX_MESSAGE_KINDS = 6
+"""Kinds of warnings (messages equal up to their numbers) the console lists."""
+
+
+def message_lines(msgs: pd.DataFrame | None) -> list[str]:
+    """The messages' counts by severity, then the errors and warnings grouped (identical up
+    to their numbers, :func:`group_messages`), most frequent first; the quality checks' own
+    messages are left out (their lines come first) and info is only counted."""
+    if msgs is None or not len(msgs):
+        return []
+    n = {k: int((msgs.severity == k).sum()) for k in ("error", "warning", "info")}
+    shown = group_messages(msgs[(msgs.severity != "info") & (msgs.stage != "qc")])
+    lines = [f"  messages: {n['error']} errors, {n['warning']} warnings, {n['info']} info "
+             "(messages.parquet)"]
+    for g in shown.head(MAX_MESSAGE_KINDS).itertuples():
+        times = f" x{g.count}" if g.count > 1 else ""
+        lines.append(f"    {g.severity}: {g.text}{times}")
+    if len(shown) > MAX_MESSAGE_KINDS:
+        lines.append(f"    and {len(shown) - MAX_MESSAGE_KINDS} more kinds (messages.parquet)")
+    return lines
 
 
 _NUMBER = re.compile(r"[-+]?\d+(?:\.\d*)?(?:[eE][-+]?\d+)?")
