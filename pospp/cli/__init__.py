@@ -430,9 +430,13 @@ def evaluate(run_dir: str, truth_file: str, skip_s: float) -> None:
     Calls pospp.evaluate.solution_errors for every solution in RUN_DIR/trajectory.parquet.
     """
     with _imports_for_the_process():
+        from pospp.evaluate import TruthMismatchError
         from pospp.pipeline import evaluate_run
 
-    table = evaluate_run(run_dir, truth_file, skip_s=skip_s)
+    try:
+        table = evaluate_run(run_dir, truth_file, skip_s=skip_s)
+    except TruthMismatchError as exc:  # name the file given
+        raise TruthMismatchError(f"--truth {truth_file}: {exc}") from exc
     wide = table.pivot(index="metric", columns="solution", values="value")
     units = table.groupby("metric").unit.first()
     wide.insert(0, "unit", units)
