@@ -196,3 +196,32 @@ def test_attitude_difference_is_the_rotation_angle_not_euler(tmp_path):
     att = _row(diff_paths(a, b), "attitude", "compensated")
     assert att.max_diff == pytest.approx(0.0002 * 3600 * math.cos(0.0), rel=1e-3)
     assert att.max_diff * ARCSEC_RAD < 1e-5
+
+
+def test_the_ci_workflow_commands_parse_and_its_tolerances_load(tmp_path, monkeypatch):
+    """docs/examples/pospp-reprocess.yml: every ``pospp`` command line parses with the CLI's
+    own options (nothing runs), in a checkout where the first step made the baseline."""
+    import shlex
+
+    import yaml
+
+    repo = Path(__file__).parents[2]
+    for name in ("sample_data", "pipelines", "docs"):
+        (tmp_path / name).symlink_to(repo / name)
+    (tmp_path / "out" / "baseline").mkdir(parents=True)
+    monkeypatch.chdir(tmp_path)
+    flow = yaml.safe_load((repo / "docs" / "examples" / "pospp-reprocess.yml").read_text())
+    env = {k: v for k, v in flow["env"].items()}
+    lines = [line.strip() for step in flow["jobs"]["reprocess"]["steps"]
+             for line in step.get("run", "").splitlines() if "/bin/pospp " in line]
+    assert len(lines) == 2 and "--baseline" in lines[1]
+    for line in lines:
+        for k, v in env.items():
+            line = line.replace(f'"${k}"', v)
+        args = shlex.split(line)[1:]
+        ctx = main.make_context("pospp", list(args), resilient_parsing=False)
+        with ctx:
+            sub = main.get_command(ctx, args[0])
+            sub.make_context(args[0], args[1:], parent=ctx)  # raises on a bad option
+    assert (repo / env["TOLERANCES"]).is_file() and (repo / env["ARCHIVE"]).is_dir()
+    assert (repo / env["PIPELINE"]).is_file()
