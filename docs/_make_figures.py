@@ -12,7 +12,7 @@ The PNG figures the docs show (:data:`PNGS`) are drawn again; each carries the f
 in its PNG text metadata (``pospp-figures``), which ``--check`` compares with the run, so a
 stale picture fails too. The report's screenshot (``report_answer.png``) needs chromium
 (``.ci/run`` installs it); without it the old screenshot is kept and checked.
-tests/e2e/test_first_hour.py runs ``--check`` against its sample run in CI.
+tests/e2e/test_first_hour_walk.py runs ``--check`` against its sample run in CI.
 """
 
 from __future__ import annotations
@@ -101,17 +101,22 @@ def sample_figures(run_dir: Path) -> dict[str, str]:
     ev = ev[ev.solution == "smoothed"].set_index("metric").value
     bias = pd.read_parquet(BIAS)
     inside = np.zeros(len(bias), bool)
+    t_ns = bias.time_ns.to_numpy()
     for leg in legs.itertuples():
-        inside |= (bias.time_ns >= leg.start_ns).to_numpy() & (bias.time_ns <= leg.end_ns).to_numpy()
+        inside |= (t_ns >= leg.start_ns) & (t_ns <= leg.end_ns)
     cal = run.calibration
     phi_z = cal[(cal.pair_id == -1) & (cal.parameter == "phi_z")
                 & (cal.formulation == s["calibration_formulation"])]
     headings = [f"{h:.0f}" for h in legs.heading_deg]
+
+    def word(n: int) -> str:
+        return NUMBER_WORDS[n] if n < len(NUMBER_WORDS) else str(n)
+
     return {
-        "n_legs_word": NUMBER_WORDS[len(legs)] if len(legs) < len(NUMBER_WORDS) else str(len(legs)),
+        "n_legs_word": word(len(legs)),
         "headings": ", ".join(headings[:-1]) + f" and {headings[-1]}" if len(headings) > 1
         else "".join(headings),
-        "n_pairs_word": NUMBER_WORDS[len(used)] if len(used) < len(NUMBER_WORDS) else str(len(used)),
+        "n_pairs_word": word(len(used)),
         "cond_range": f"{used.cond_scaled.min():.0f} to {used.cond_scaled.max():.0f}",
         "bias_x": pm_text(s["gyro_bias_x_dph"], s["gyro_bias_x_sigma_dph"]),
         "bias_y": pm_text(s["gyro_bias_y_dph"], s["gyro_bias_y_sigma_dph"]),

@@ -33,6 +33,8 @@ from pospp.io.mcap_reader import read_flight_log
 from pospp.io.mcap_writer import write_flight_log
 
 REPO = Path(__file__).resolve().parents[2]
+PARTIAL = 4
+"""Exit status of a run (or batch) whose worst status is partial (pospp.cli.EXIT_CODES)."""
 SAMPLE = REPO / "sample_data" / "sample_flight.mcap"
 PIPELINE = REPO / "pipelines" / "sample.toml"
 
@@ -155,7 +157,7 @@ def test_commands_that_add_to_a_run_refuse_other_folders(flight, tmp_path):
 def test_failed_rerun_says_failed_and_keeps_no_table_of_the_earlier_run(flight, tmp_path):
     out = tmp_path / "run"
     code, _, err = _cli("run", str(flight), "-p", str(PIPELINE), "-o", str(out))
-    assert code == 0, err
+    assert code == PARTIAL, err
     assert (out / "trajectory.parquet").is_file() and (out / "report.html").is_file()
     bad = tmp_path / "other.mcap"
     bad.write_bytes(b"\x89MCAP0\r\n" + bytes(np.random.default_rng(13).integers(0, 256, 4000,
@@ -242,7 +244,7 @@ def test_kill_9_of_the_cli_leaves_one_complete_run(flight, tmp_path):
     """The real command in a subprocess, killed at a seeded moment after it started staging."""
     out = tmp_path / "run"
     code, _, err = _cli("run", str(flight), "-p", str(PIPELINE), "-o", str(out))
-    assert code == 0, err
+    assert code == PARTIAL, err
     before = _hashes(out)
     delay_s = float(np.random.default_rng(7).uniform(0.0, 1.0))
     proc = subprocess.Popen([sys.executable, "-m", "pospp.cli", "run", str(flight), "-p",
@@ -261,7 +263,7 @@ def test_kill_9_of_the_cli_leaves_one_complete_run(flight, tmp_path):
     if proc.returncode == -signal.SIGKILL and _hashes(out) != before:
         assert run_folder.read_marker(out)["status"] == "partial"  # the new run, whole
     code, _, err = _cli("run", str(flight), "-p", str(PIPELINE), "-o", str(out), "--force")
-    assert code == 0, err
+    assert code == PARTIAL, err
     _assert_one_complete_run(out, status="partial")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
 
@@ -300,10 +302,11 @@ def test_batch_names_are_safe_and_unique_and_the_manifest_keeps_every_flight(fli
     # a batch over a subset updates its rows and keeps the others
     code, out, err = _cli("batch", str(arch / "a" / "flight.mcap"), "-p", str(PIPELINE), "-o",
                           str(root), "-j", "1")
-    assert code == 0, (out, err)
+    assert code == PARTIAL, (out, err)
     man2 = _manifest(root)
     assert sorted(man2.index) == sorted(man.index)
-    assert man2.loc[str(arch / "a" / "flight.mcap"), "status"] == "skipped"
+    assert man2.loc[str(arch / "a" / "flight.mcap"), "status"] == "partial"  # its result
+    assert man2.loc[str(arch / "a" / "flight.mcap"), "action"] == "skipped"
     assert man2.loc[str(arch / "a" / "flight.mcap"), "run_dir"] == "a__flight"
     assert (man2.drop(index=str(arch / "a" / "flight.mcap")).status ==
             man.drop(index=str(arch / "a" / "flight.mcap")).status).all()
@@ -318,7 +321,8 @@ def test_idempotent_skip_needs_marker_and_summary_to_match(flight, tmp_path):
     quick = replace(cfg, outputs=replace(cfg.outputs, report=False, mcap=False))
     root = tmp_path / "out"
     assert [r.status for r in run_batch([flight], quick, root, workers=1)] == ["partial"]
-    assert [r.status for r in run_batch([flight], quick, root, workers=1)] == ["skipped"]
+    again = run_batch([flight], quick, root, workers=1)
+    assert [(r.status, r.action) for r in again] == [("partial", "skipped")]
     other = replace(quick, name="other")  # another configuration: re-run, not skipped
     assert [r.status for r in run_batch([flight], other, root, workers=1)] == ["partial"]
     # a marker that names another input (a mixed folder) is never skipped
@@ -362,7 +366,7 @@ def test_unreachable_scheduler_is_one_line_after_a_bounded_time(flight, tmp_path
 
 def test_workers_die_with_their_parent():
     """A process-pool worker (initialised as run_batch does) ends when its parent is killed."""
-    from pospp.batch import _die_with_parent
+    from pospp.batch.workers import _die_with_parent
 
     r, w = os.pipe()
     middle = os.fork()
@@ -433,10 +437,11 @@ def test_batch_root_inside_the_archive_does_not_take_its_own_outputs(flight, tmp
     for _ in range(2):
         code, out, err = _cli("batch", str(arch), "-p", str(PIPELINE), "-o", str(arch / "out"),
                               "-j", "1")
-        assert code == 0, (out, err)
+        assert code == PARTIAL, (out, err)
     assert (arch / "out" / "f" / "trajectory.mcap").is_file()
     man = _manifest(arch / "out")
-    assert list(man.index) == [str(arch / "f.mcap")] and man.status.iloc[0] == "skipped"
+    assert list(man.index) == [str(arch / "f.mcap")] and man.status.iloc[0] == "partial"
+    assert man.action.iloc[0] == "skipped"
 
 
 def test_run_folder_names_are_safe_unique_and_short():

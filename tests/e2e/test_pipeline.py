@@ -164,7 +164,11 @@ def test_missing_gnss_topic_is_named(sample_log, tmp_path):
     imu, fix, vel = _window(sample_log, 120.0)
     path = tmp_path / "no_gnss.mcap"
     write_flight_log(path, imu, fix, vel, fix_topic="/other/fix")
-    text, msgs = _failed_run(path, tmp_path / "out")
+    out = tmp_path / "out"
+    code, text = _cli("run", str(path), "-p", str(SAMPLE_PIPELINE), "-o", str(out))
+    assert code == 2, text  # a topic the configuration names and the log lacks: usage
+    assert parquet_tables.read_table(out / "summary.parquet").status.iloc[0] == "failed"
+    msgs = parquet_tables.read_table(out / "messages.parquet")
     assert "'/gnss/fix'" in text and "no_gnss.mcap" in text and "/other/fix" in text
     assert (msgs.severity == "error").any()
 
@@ -204,7 +208,7 @@ def test_truncated_file_ends_non_ok_and_keeps_no_table_of_the_earlier_run(sample
     out = tmp_path / "out"
     code, text = _cli("run", str(good), "-p", str(SAMPLE_PIPELINE), "-o", str(out))
     # 400 s of static and climb: A runs, no leg is found, and the run says so plainly
-    assert code == 0, text
+    assert code == 4, text  # partial (issue 39 item 4)
     s = parquet_tables.read_table(out / "summary.parquet").iloc[0]
     assert s.status == "partial" and "no straight" in s.calibration_reason
     assert set(_tables_of(out).values()) == {sha256_file(good)}
@@ -264,7 +268,8 @@ def test_batch_records_every_outcome_and_skips_finished(sample_log, tmp_path):
     code, text = _cli("batch", str(arch), "-p", str(SAMPLE_PIPELINE), "-o", str(root), "-j",
                       "1")
     man = parquet_tables.read_table(root / "manifest.parquet").set_index("file")
-    assert man.loc[str(arch / "a.mcap"), "status"] == "skipped"
+    assert man.loc[str(arch / "a.mcap"), "status"] == "partial"  # its result, kept
+    assert man.loc[str(arch / "a.mcap"), "action"] == "skipped"
 
 
 def test_unknown_config_key_is_named(tmp_path):
@@ -284,7 +289,7 @@ def test_rerun_into_a_folder_leaves_no_stale_table(sample_log, tmp_path):
     path = tmp_path / "short.mcap"
     write_flight_log(path, imu, fix, vel)
     code, text = _cli("run", str(path), "-p", str(SAMPLE_PIPELINE), "-o", str(out))
-    assert code == 0, text
+    assert code == 4, text  # partial: no legs
     # stand-ins for an earlier run's diagnosis table (pospp's name, another input's hash)
     parquet_tables.write_table(out / "legs.parquet", {
         "leg_id": [0], "start_ns": [0], "end_ns": [1], "duration_s": [1.0],
@@ -294,7 +299,7 @@ def test_rerun_into_a_folder_leaves_no_stale_table(sample_log, tmp_path):
     code, text = _cli("run", str(path), "-p", str(SAMPLE_PIPELINE), "-o", str(out))
     assert code == 2 and "--force" in text  # an earlier run is replaced only when asked
     code, text = _cli("run", str(path), "-p", str(SAMPLE_PIPELINE), "-o", str(out), "--force")
-    assert code == 0, text
+    assert code == 4, text
     legs = parquet_tables.read_table(out / "legs.parquet")
     assert len(legs) == 0
     assert set(_tables_of(out).values()) == {sha256_file(path)}

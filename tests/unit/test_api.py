@@ -4,7 +4,7 @@ the lazy ``import pospp``, and open_archive over a manifest.
 Every table of ``pospp.io.parquet_tables.TABLES`` (the schemas docs/formats.md renders) is
 written with values of each column's type, read back through :func:`pospp.open_run` (or
 ``open_archive`` for the manifest) and written again: the Arrow schema and the values
-round-trip exactly. tests/e2e/test_first_hour.py does the same on a real sample run.
+round-trip exactly. tests/e2e/test_first_hour_walk.py does the same on a real sample run.
 """
 
 from __future__ import annotations
@@ -108,9 +108,9 @@ def test_a_missing_table_says_why_and_the_folder_must_be_a_run(tmp_path):
     run = pospp.open_run(_run(tmp_path / "run", ["summary", "trajectory"]))
     assert not run.has("events") and run.tables() == ["trajectory", "summary"]
     with pytest.raises(TableNotInRun, match="no events.parquet .no trigger events"):
-        run.events
+        _ = run.events
     with pytest.raises(TableNotInRun, match="pospp evaluate"):
-        run.evaluation
+        _ = run.evaluation
     with pytest.raises(KeyError, match="no table 'legz'"):
         run.table("legz")
     (tmp_path / "plain").mkdir()
@@ -135,7 +135,7 @@ def test_read_by_name_added_columns_kept_older_optional_columns_filled(tmp_path)
     pq.write_table(bad, run_dir / "legs.parquet")
     with pytest.raises(SchemaError, match=r"legs.parquet: column 'duration_s' is string, "
                                           r"documented as double"):
-        pospp.open_run(run_dir).legs
+        _ = pospp.open_run(run_dir).legs
 
 
 def test_plots_are_matplotlib_figures_and_save(every_table_run, tmp_path):

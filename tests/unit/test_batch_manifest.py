@@ -2,7 +2,7 @@
 
 The flights here are stand-ins: ``process_one`` is replaced by a function that writes a run
 folder's marker and summary (or kills its own worker), so each case runs in milliseconds;
-tests/e2e/test_first_hour.py runs real flights, a kill -9 of the batch and its re-run.
+tests/e2e/test_first_hour_walk.py runs real flights, a kill -9 of the batch and its re-run.
 """
 
 from __future__ import annotations

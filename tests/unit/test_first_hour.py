@@ -1,5 +1,5 @@
 """A new user's first hour (issue 39), item by item, on small inputs; the end-to-end walk of
-the README's commands is tests/e2e/test_first_hour.py.
+the README's commands is tests/e2e/test_first_hour_walk.py.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from pospp.diagnose.results import DiagnosisStep
 from pospp.evaluate import TruthMismatchError, solution_errors
 from pospp.flight_stages import sensor_to_body_dcm
 from pospp.io import parquet_tables, run_folder
-from pospp.report.summary import headline_lines, headline, message_lines
+from pospp.report.summary import headline, headline_lines, message_lines
 
 REPO = Path(__file__).resolve().parents[2]
 DOCS = REPO / "docs"
@@ -54,7 +54,7 @@ def _figures_script():
 
 def test_every_quote_of_the_figures_script_is_in_its_doc():
     """Each pattern of docs/_make_figures.py matches its doc once (a reworded sentence would
-    silently escape the check); the run-level check is tests/e2e/test_first_hour.py."""
+    silently escape the check); the run-level check is tests/e2e/test_first_hour_walk.py."""
     mod = _figures_script()
     for q in mod.QUOTES:
         assert len(mod._matches(q)) == 1, (q.doc, q.keys)
@@ -309,3 +309,34 @@ def test_the_first_numba_compilation_is_said_once(monkeypatch):
     bar.compiling()
     assert bar._text() == f"navigate ({StageBar.COMPILING})"
     bar.close()
+
+
+# -- item 4: a status line from every command -------------------------------------------------
+
+TINY_PROFILE = """name = "tiny"
+imu_rate_hz = 50
+[start]
+lat_deg = 34.0
+lon_deg = 108.0
+height_m = 400.0
+heading_deg = 20.0
+[[segment]]
+type = "static"
+duration_s = 20.0
+[[segment]]
+type = "accelerate"
+to_speed_mps = 30.0
+duration_s = 20.0
+"""
+
+
+def test_simulate_observability_and_report_end_with_a_status_line(tmp_path):
+    profile = tmp_path / "tiny.toml"
+    profile.write_text(TINY_PROFILE)
+    res = CliRunner().invoke(main, ["simulate", "--profile", str(profile), "-o",
+                                    str(tmp_path / "tiny.mcap")])
+    assert res.exit_code == 0, res.output
+    assert res.stdout.strip().splitlines()[-1] == f"pospp simulate: ok ({tmp_path / 'tiny.mcap'})"
+    res = CliRunner().invoke(main, ["observability", "-o", str(tmp_path / "obs")])
+    assert res.exit_code == 0, res.output
+    assert res.stdout.strip().splitlines()[-1] == f"pospp observability: ok ({tmp_path / 'obs'})"

@@ -147,7 +147,9 @@ def test_console_prints_the_answer_first_and_legs_only_when_verbose() -> None:
     assert "in-sample" in short and "held out" in short
     assert "phi_x_leg0" not in short and "8 per-leg misalignments" in short
     assert "phi_x_leg0" in summary_text(tables, verbose=True)
-    assert "x200" not in short  # navigate warnings are counted, not listed
+    # the 200 innovation rejections are one grouped line (issue 39 item 10)
+    grouped = [line for line in lines if "GNSS position rejected" in line]
+    assert len(grouped) == 1 and grouped[0].endswith(" x200")
 
 
 def test_identical_messages_are_grouped_with_a_count() -> None:
