@@ -169,25 +169,35 @@ def issue_message(issue: IngestIssue) -> dict[str, Any]:
 ROUTINE_REJECTIONS = frozenset({"before the filter start (alignment)",
                                 "outside the IMU time span"})
 """Reasons (``GnssRejection.reason``) for which every flight leaves GNSS records out: the
-records logged while A aligns, or before the IMU starts and after it stops. Messages of
-severity "info", not warnings: they say nothing about the data's quality (issue 39: 172 of
-the 176 warnings of the comma2k19 run)."""
+records logged while A aligns, or before the IMU starts and after it stops. They say nothing
+about the data's quality (issue 39: 172 of the 176 warnings of the comma2k19 run): one "info"
+row per kind and reason with the count, not a warning per record."""
 
 
 def rejection_messages(rejections: Iterable[GnssRejection], *, limit: int = 200
                        ) -> list[dict[str, Any]]:
-    """GNSS measurements algorithm A did not use -> messages rows (at most ``limit``, then one
-    row counting the rest, so a flight with a bad receiver does not flood the table); the
-    routine ones (:data:`ROUTINE_REJECTIONS`) as "info"."""
-    rows = []
-    rejections = list(rejections)
-    for r in rejections[:limit]:
-        rows.append({"severity": "info" if r.reason in ROUTINE_REJECTIONS else "warning",
-                     "stage": "navigate", "time_ns": int(r.time_ns),
+    """GNSS measurements algorithm A did not use -> messages rows: a warning per rejection
+    (at most ``limit``, then one row counting the rest, so a flight with a bad receiver does
+    not flood the table), and for the routine ones (:data:`ROUTINE_REJECTIONS`) one info row
+    per kind and reason, at the first one's time, with their count."""
+    rows: list[dict[str, Any]] = []
+    routine: dict[tuple[str, str], list[GnssRejection]] = {}
+    other = []
+    for r in rejections:
+        if r.reason in ROUTINE_REJECTIONS:
+            routine.setdefault((r.kind, r.reason), []).append(r)
+        else:
+            other.append(r)
+    for (kind, reason), group in routine.items():
+        rows.append({"severity": "info", "stage": "navigate", "time_ns": int(group[0].time_ns),
+                     "text": f"GNSS {kind} rejected: {reason}: {len(group)} records "
+                             "(routine)"})
+    for r in other[:limit]:
+        rows.append({"severity": "warning", "stage": "navigate", "time_ns": int(r.time_ns),
                      "text": f"GNSS {r.kind} rejected: {r.reason}"})
-    if len(rejections) > limit:
+    if len(other) > limit:
         rows.append({"severity": "warning", "stage": "navigate", "time_ns": None,
-                     "text": f"{len(rejections) - limit} more GNSS rejections not listed"})
+                     "text": f"{len(other) - limit} more GNSS rejections not listed"})
     return rows
 
 

@@ -273,12 +273,19 @@ def test_routine_gnss_rejections_are_info_and_warnings_are_grouped():
            for i in range(86) for kind in ("position", "velocity")]
     rej += [GnssRejection(100 + i, 100.0 + i, "position", f"innovation gate (NIS > {9 + i:.2f})",
                           30.0) for i in range(3)]
+    rows = outputs.rejection_messages(rej, limit=2)
+    info = [r for r in rows if r["severity"] == "info"]
+    assert [r["text"] for r in info] == [
+        "GNSS position rejected: before the filter start (alignment): 86 records (routine)",
+        "GNSS velocity rejected: before the filter start (alignment): 86 records (routine)"]
+    assert info[0]["time_ns"] == 0
+    warned = [r["text"] for r in rows if r["severity"] == "warning"]
+    assert warned[-1] == "1 more GNSS rejections not listed" and len(warned) == 3
     rows = outputs.rejection_messages(rej)
-    assert sum(r["severity"] == "info" for r in rows) == 172
     msgs = pd.DataFrame(rows + [{"severity": "warning", "stage": "qc", "time_ns": None,
                                  "text": "QC check x failed"}])
     lines = message_lines(msgs)
-    assert lines[0] == "  messages: 0 errors, 4 warnings, 172 info (messages.parquet)"
+    assert lines[0] == "  messages: 0 errors, 4 warnings, 2 info (messages.parquet)"
     assert lines[1:] == ["    warning: GNSS position rejected: innovation gate (NIS > 9.00) x3"]
     for reason in outputs.ROUTINE_REJECTIONS:  # the filter still words them so
         assert reason in (REPO / "pospp" / "nav" / "filter_state.py").read_text() + (
