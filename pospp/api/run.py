@@ -159,23 +159,55 @@ class Run:
         rows = traj[traj.solution == name].sort_values("time_ns", kind="stable")
         return rows.reset_index(drop=True)
 
-    legs = property(lambda self: self.table("legs"), doc="Straight uniform legs (legs).")
-    pairs = property(lambda self: self.table("pairs"), doc="Leg pairs (pairs).")
-    calibration = property(lambda self: self.table("calibration"),
-                           doc="Calibrated parameters, long form (calibration).")
-    leg_errors = property(lambda self: self.table("leg_errors"),
-                          doc="B minus A per leg before and after compensation (leg_errors).")
-    qc = property(lambda self: self.table("qc"), doc="Every quality check (qc).")
-    diagnosis = property(lambda self: self.table("diagnosis"),
-                         doc="The model-discrepancy workflow's steps (diagnosis).")
-    events = property(lambda self: self.table("events"),
-                      doc="The sensor's pose at each trigger event (events).")
-    biases = property(lambda self: self.table("biases"),
-                      doc="Algorithm A's estimated IMU biases over time (biases).")
-    messages = property(lambda self: self.table("messages"),
-                        doc="Every warning and error (messages).")
-    evaluation = property(lambda self: self.table("evaluation"),
-                          doc="Errors against a reference, after pospp evaluate (evaluation).")
+    @property
+    def legs(self) -> pd.DataFrame:
+        """Straight uniform legs: start, end, heading, speed, height (``legs``)."""
+        return self.table("legs")
+
+    @property
+    def pairs(self) -> pd.DataFrame:
+        """Leg pairs: heading and speed change, condition numbers, used or why not (``pairs``)."""
+        return self.table("pairs")
+
+    @property
+    def calibration(self) -> pd.DataFrame:
+        """Calibrated parameters per pair and formulation, long form (``calibration``)."""
+        return self.table("calibration")
+
+    @property
+    def leg_errors(self) -> pd.DataFrame:
+        """B minus A per leg before and after compensation (``leg_errors``)."""
+        return self.table("leg_errors")
+
+    @property
+    def qc(self) -> pd.DataFrame:
+        """Every quality check: statistic, threshold, passed, suggestion (``qc``)."""
+        return self.table("qc")
+
+    @property
+    def diagnosis(self) -> pd.DataFrame:
+        """The model-discrepancy workflow's steps (``diagnosis``)."""
+        return self.table("diagnosis")
+
+    @property
+    def events(self) -> pd.DataFrame:
+        """The sensor's pose at each trigger event (``events``)."""
+        return self.table("events")
+
+    @property
+    def biases(self) -> pd.DataFrame:
+        """Algorithm A's estimated IMU biases over time, body FRD (``biases``)."""
+        return self.table("biases")
+
+    @property
+    def messages(self) -> pd.DataFrame:
+        """Every warning and error with stage and time (``messages``)."""
+        return self.table("messages")
+
+    @property
+    def evaluation(self) -> pd.DataFrame:
+        """Errors against a reference, after ``pospp evaluate`` (``evaluation``)."""
+        return self.table("evaluation")
 
     # ---------------------------------------------------------------- configuration
 

@@ -174,3 +174,15 @@ def test_batch_root_on_a_symlink_loop_fails_at_once(tmp_path):
     assert res.exit_code == 2 and "symbolic link loop" in res.stderr
     res = CliRunner().invoke(main, ["run", str(f), "-o", str(loop)])
     assert res.exit_code == 2 and "symbolic link loop" in res.stderr
+
+
+def test_a_failed_flight_keeps_a_one_line_error_without_the_class_path(tmp_path):
+    from pospp.batch.flight import process_one
+
+    bad = tmp_path / "arch" / "bad.mcap"
+    bad.parent.mkdir()
+    bad.write_bytes(b"not an mcap file\nsecond line")
+    out = process_one(str(bad), CONFIG.to_dict(), str(tmp_path / "root"), run_name="bad")
+    assert out.status == "failed" and out.action == "ran"
+    assert "\n" not in out.error and "bad.mcap" in out.error
+    assert "Error:" not in out.error and "pospp." not in out.error, out.error
