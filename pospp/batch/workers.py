@@ -119,17 +119,22 @@ def run_local(tasks: list[Task], workers: int, root: Path, record: Record) -> No
     """Run ``tasks`` on ``workers`` local processes, calling ``record`` with each outcome."""
     pending = list(reversed(tasks))
     pool: list[_Worker] = []
+
+    def give(w: _Worker) -> None:
+        w.task = pending.pop()
+        try:
+            w.conn.send(w.task)
+        except OSError:  # died while idle: its sentinel says so below
+            pass
+
     try:
         while pending or any(w.task is not None for w in pool):
             for w in pool:
                 if w.task is None and pending:
-                    w.task = pending.pop()
-                    w.conn.send(w.task)
+                    give(w)
             while pending and len(pool) < workers:
-                w = _start_worker()
-                w.task = pending.pop()
-                w.conn.send(w.task)
-                pool.append(w)
+                pool.append(_start_worker())
+                give(pool[-1])
             busy = [w for w in pool if w.task is not None]
             ready = wait([w.conn for w in busy] + [w.process.sentinel for w in busy])
             for w in busy:
