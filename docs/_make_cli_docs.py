@@ -53,7 +53,8 @@ maps a run's status to it):
 A batch exits with the code of its worst flight (failed, then degraded, then partial). Every
 command ends with one status line on stdout, `pospp COMMAND: STATUS (detail)`, STATUS being
 `ok`, `degraded`, `partial` or `failed` for a run or batch (`unchanged` or `changed` for
-`pospp diff`).
+`pospp diff`); a command that stops on an error ends with its one error line on stderr
+instead.
 
 ## Run folders: nothing of the user's is lost
 
