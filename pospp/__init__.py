@@ -19,15 +19,32 @@ use (``import pospp`` imports neither numpy nor pandas).
 from __future__ import annotations
 
 import importlib
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # for type checkers and editors only: nothing is imported at run time
+    from pospp.api import (
+        Archive,
+        DiffResult,
+        Run,
+        SchemaError,
+        Summary,
+        TableNotInRun,
+        Tolerances,
+        diff_paths,
+        diff_runs,
+        load_tolerances,
+        open_archive,
+        open_run,
+    )
 
 __version__ = "0.1.0"
 
-_API = ("Archive", "DiffResult", "Run", "SchemaError", "Summary", "TableNotInRun",
-        "Tolerances", "diff_paths", "diff_runs", "load_tolerances", "open_archive", "open_run")
-"""Names of ``pospp.api`` re-exported here, imported on first access (PEP 562)."""
+__all__ = ["Archive", "DiffResult", "Run", "SchemaError", "Summary", "TableNotInRun",
+           "Tolerances", "__version__", "diff_paths", "diff_runs", "load_tolerances",
+           "open_archive", "open_run"]
 
-__all__ = ["__version__", *_API]
+_API = frozenset(__all__) - {"__version__"}
+"""Names of ``pospp.api`` re-exported here, imported on first access (PEP 562)."""
 
 
 def __getattr__(name: str) -> Any:
