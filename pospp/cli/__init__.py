@@ -122,7 +122,8 @@ def main(debug: bool) -> None:
     """pospp: POS post-processing with double strapdown online calibration.
 
     Exit status: 0 ok, 1 failed, 2 usage or configuration error, 3 degraded (a quality check
-    failed).
+    failed; pospp diff: changed), 4 partial (a stage produced nothing). Every command ends
+    with a status line: pospp COMMAND: STATUS (detail).
     """
 
 
