@@ -17,11 +17,11 @@ uncompressed_size u64, uncompressed_crc u32, compression string, records_length 
 
 from __future__ import annotations
 
+import os
 import struct
 import zlib
 from dataclasses import dataclass
 from io import BytesIO
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -33,6 +33,7 @@ from numba.core.errors import NumbaError
 
 from pospp.io._mcap_decode import _REC, Collector, _walk_records
 from pospp.io.errors import IngestError, IngestIssue
+from pospp.io.files import open_regular
 
 # --------------------------------------------------------------------------- streaming pass
 
@@ -385,8 +386,8 @@ class Scan:
         return crc
 
     def run(self) -> None:
-        size = Path(self.path).stat().st_size
-        with open(self.path, "rb") as f:
+        with open_regular(self.path) as f:
+            size = os.fstat(f.fileno()).st_size
             if f.read(8) != _MAGIC:
                 raise IngestError("not an MCAP file (bad magic bytes)", file=self.path)
             self._hints = _count_hints(f, size)

@@ -52,6 +52,7 @@ bounded by the chunk header's size and by ``max_chunk_bytes``.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -61,6 +62,7 @@ from pospp.io._blockwise import rotation_sums, row_norms
 from pospp.io._mcap_decode import EVENT_SPEC, FIX_SPEC, IMU_SPEC, VEL_SPEC, Collector
 from pospp.io._mcap_scan import MAX_CHUNK_BYTES, Scan
 from pospp.io.errors import IngestError, IngestIssue, MissingTopicError
+from pospp.io.files import require_regular
 from pospp.types import (
     ENU_TO_NED,
     FLU_TO_FRD,
@@ -426,8 +428,9 @@ def _check_read_arguments(path: str, max_chunk_bytes: int, imu_topic: str, fix_t
     if isinstance(max_chunk_bytes, bool) or not isinstance(max_chunk_bytes, int | np.integer) \
             or max_chunk_bytes <= 0:
         raise ValueError(f"max_chunk_bytes must be a positive integer, got {max_chunk_bytes!r}")
-    if not Path(path).is_file():
+    if not os.path.exists(path):
         raise FileNotFoundError(f"MCAP file not found: {path}")
+    require_regular(path)  # a FIFO or a device: refused, never read forever
     if len({imu_topic, fix_topic, vel_topic}) != 3 or events_topic in (imu_topic, fix_topic,
                                                                        vel_topic):
         raise ValueError(f"topics must differ: {imu_topic!r}, {fix_topic!r}, {vel_topic!r}"

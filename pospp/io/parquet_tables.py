@@ -534,6 +534,9 @@ def read_metadata(path: str | Path) -> dict[str, Any]:
 
 def read_reference_trajectory(path: str | Path) -> ReferenceTrajectory:
     """Read a reference Parquet (columns of ``TABLES["reference"]``; others are ignored)."""
+    from pospp.io.files import require_regular
+
+    require_regular(path)  # a FIFO would block pyarrow's read forever
     names = [c.name for c in TABLES["reference"]]
     have = pq.read_schema(path).names
     missing = [n for n in names if n not in have]

@@ -63,25 +63,14 @@ def worst_status(*statuses: str) -> str:
 
 
 def config_problems(config: Any) -> list[str]:
-    """Values of a :class:`pospp.config.PipelineConfig` that make no sense (key named)."""
-    out = []
-    positive = (("replay", "horizon_s"), ("replay", "sample_rate_hz"),
-                ("filter", "output_rate_hz"), ("outputs", "mcap_rate_hz"),
-                ("legs", "min_duration_s"), ("legs", "max_duration_s"))
-    for section, key in positive:
-        value = getattr(getattr(config, section), key, None)
-        if value is not None and not (isinstance(value, int | float) and value > 0
-                                      and math.isfinite(value)):
-            out.append(f"[{section}] {key} = {value!r} must be a finite number > 0")
+    """Values of a :class:`pospp.config.PipelineConfig` that make no sense (key named): every
+    key outside its physical range (``PipelineConfig.problems``: what the loader refuses, for
+    a configuration made in Python), and a lever arm longer than 100 m."""
+    out = list(config.problems())
     lever = np.asarray(config.gnss.lever_arm_m, dtype=float)
     if not np.isfinite(lever).all() or float(np.linalg.norm(lever)) > 100.0:
         out.append(f"[gnss] lever_arm_m = {list(config.gnss.lever_arm_m)} m is not an antenna "
                    "lever arm (|l| > 100 m)")
-    s, e = config.input.start_s, config.input.end_s
-    if s is not None and s < 0:
-        out.append(f"[input] start_s = {s!r} must be >= 0")
-    if s is not None and e is not None and not e > s:
-        out.append(f"[input] end_s = {e!r} must be after start_s = {s!r}")
     return out
 
 
