@@ -54,6 +54,13 @@ MAX_CHUNK_BYTES = 256 * 1024 * 1024
 """Default cap on one chunk's decompressed size [bytes] (``max_chunk_bytes``): a chunk whose
 header claims more is corrupt (or written with huge chunks: raise the cap), and no chunk's
 decompression may produce more than the smaller of this and what its header claims."""
+DECODED_PER_FILE_BYTE = 64
+"""Largest decoded size per byte of the file: the decoded arrays of a log may take at most
+this many times its size (and at least :data:`MIN_DECODED_BYTES`). Measured: a log of pospp's
+simulator decodes to 1.0 x its size (the sample flight, zstd), messages that differ only in
+their stamps to about 6 x; a decompression bomb of repeated messages to 2000 x (issue 38 item
+11: a 2 MB file to 4.1 GB)."""
+MIN_DECODED_BYTES = 64 * 1024 * 1024
 _LZ4_PIECE = 16 * 1024 * 1024  # lz4 output produced at a time beyond the first call
 _READ_PIECE = 1 << 20  # bytes read at a time when a byte range is only checksummed
 
@@ -72,6 +79,10 @@ class _RawChunk:
     compression: str
     data: bytes | memoryview
     truncated: bool
+    """The file ends inside the chunk: ``data`` is what the file holds of its records."""
+    overstated_by: int = 0
+    """Bytes that ``records_length`` claims beyond the end of a whole Chunk record (its
+    header is corrupt; the records present are still checked by size and CRC)."""
 
 
 @dataclass(frozen=True)
@@ -96,7 +107,11 @@ def _parse_chunk(body: bytes, truncated: bool) -> _RawChunk:
     if dlen is None:
         raise _Truncated("chunk header cut off")
     data = memoryview(body)[p + 8 : p + 8 + dlen]  # not a copy of the compressed records
-    return _RawChunk(start, end, usize, crc, comp, data, truncated or len(data) < dlen)
+    # records_length beyond a whole record is a corrupt header, not a cut file: the records
+    # present are checked like any chunk's (size, CRC), never let through unchecked
+    short = dlen - len(data)
+    return _RawChunk(start, end, usize, crc, comp, data, truncated and short > 0,
+                     0 if truncated else short)
 
 
 def _parse_stats(body: bytes, offset: int) -> _Stats:
@@ -268,6 +283,8 @@ class Scan:
         self._loose: list[bytes] = []
         self._after_data_end_noted = False
         self._hints: dict[int, int] = {}  # channel id -> Statistics message count
+        self.decoded_bytes = 0  # what the collectors' arrays hold so far
+        self.max_decoded_bytes = MIN_DECODED_BYTES  # set from the file size by run()
 
     # -- issues
     def _when(self) -> str:
@@ -358,6 +375,7 @@ class Scan:
             col = self.route[ch]
             if col is None:
                 continue
+            self._budget(col, len(p))
             col.add(ch, arr, p)
             first_t = struct.unpack_from("<Q", buf, int(p[0]) + 15)[0]
             last_t = struct.unpack_from("<Q", buf, int(p[-1]) + 15)[0]
@@ -388,6 +406,7 @@ class Scan:
     def run(self) -> None:
         with open_regular(self.path) as f:
             size = os.fstat(f.fileno()).st_size
+            self.max_decoded_bytes = max(MIN_DECODED_BYTES, DECODED_PER_FILE_BYTE * size)
             if f.read(8) != _MAGIC:
                 raise IngestError("not an MCAP file (bad magic bytes)", file=self.path)
             self._hints = _count_hints(f, size)
@@ -560,6 +579,8 @@ class Scan:
         try:
             data = _decompress(chunk, self.max_chunk_bytes)
             self._records(data, partial=chunk.truncated)
+            if chunk.overstated_by:
+                self._overstated(chunk, offset)
         except (IngestError, NumbaError):
             raise  # a compiled pass that fails is pospp's error, not a corrupt chunk
         except Exception as exc:  # noqa: BLE001 - zstd/lz4 errors have their own classes
@@ -574,3 +595,29 @@ class Scan:
                 f"{chunk.start_ns}..{chunk.end_ns} ns): {cause}",
                 offset, log_time_ns=chunk.start_ns, time_ns=chunk.start_ns,
             )
+
+    def _overstated(self, chunk: _RawChunk, offset: int) -> None:
+        """A chunk whose ``records_length`` claims more than its record holds, and whose
+        records passed the size check: kept. With a CRC that matched, the records are intact
+        (a warning); without one (CRC 0), nothing vouches for them (an error issue: the file
+        is damaged, ``complete`` False)."""
+        text = (f"chunk at byte {offset}: its records_length claims {chunk.overstated_by} bytes "
+                f"more than the record holds (a corrupt header); the {len(chunk.data)} bytes "
+                "of records present")
+        if chunk.crc:
+            self._warning(f"MCAP {text} match the chunk's size and CRC: kept", offset)
+        else:
+            self._error(f"MCAP corrupt: {text} match the chunk's size but it has no CRC to "
+                        "check them against: kept, unverified", offset,
+                        log_time_ns=chunk.start_ns, time_ns=chunk.start_ns)
+
+    def _budget(self, col: Collector, n: int) -> None:
+        """Count ``n`` more messages of ``col`` against the decoded-size budget; beyond it, the
+        file is refused (an :class:`IngestError`, one line) before they are decoded."""
+        self.decoded_bytes += n * col.row_bytes
+        if self.decoded_bytes > self.max_decoded_bytes:
+            raise IngestError(
+                f"the messages decode to more than {DECODED_PER_FILE_BYTE} times the file's "
+                f"size ({self.max_decoded_bytes / 2**20:.0f} MiB of samples; stopped in "
+                f"{col.topic!r} at log time {self._when()}): a decompression bomb or a corrupt "
+                "file, refused", file=self.path, topic=col.topic)
