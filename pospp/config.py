@@ -192,7 +192,7 @@ class GnssConfig:
     vel_sigma_floor_mps: float | None = _key(None, ge=1.0e-5, le=100.0)
     """Least GNSS velocity sigma the filter uses [m/s]; omitted: the grade's default."""
     use_velocity: bool = True
-    gate_probability: float = _key(0.9999, ge=0.5, le=1.0 - 1.0e-10)
+    gate_probability: float = _key(0.9999, ge=0.5, le=0.999999)
 
 
 @dataclass(frozen=True)

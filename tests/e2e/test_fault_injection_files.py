@@ -11,6 +11,7 @@ simulator); the run's correctness is not the point here, its files are.
 
 from __future__ import annotations
 
+import fcntl
 import hashlib
 import os
 import signal
@@ -456,3 +457,156 @@ def test_run_folder_names_are_safe_unique_and_short():
         assert name not in (".", "..") and 0 < len(name) <= MAX_RUN_NAME_LEN
     assert names["/x/../y/z.mcap"] == "y__z"  # relative to the common folder, "/"
     assert names["/x/...mcap"] == "x__%2E%2E" and names["/x/a b%.MCAP"] == "x__a%20b%25"
+
+
+# ----------------------------------------------------------- issue 38: run folder safety
+
+
+def _hold_lock(folder: Path) -> int:
+    """Another process's lock on a run folder, as pospp takes it (``flock`` on the folder):
+    a descriptor of its own, so pospp's lock conflicts with it as with another process's."""
+    fd = os.open(folder, os.O_RDONLY)
+    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    return fd
+
+
+def test_files_put_into_the_folder_during_a_run_stop_the_swap(flight, quick_config,
+                                                              tmp_path):
+    """A file put into OUT while the run works was deleted with the previous run at the swap
+    (issue 38 item 6): the folder is checked again at the swap, nothing is replaced."""
+    out = tmp_path / "run"
+    pipeline.process_flight(flight, quick_config, out)
+    before = _hashes(out)
+
+    def meddle(stage: str, fraction: float) -> None:
+        if stage == "qc":
+            (out / "notes.txt").write_text("the user's notes, written during the run")
+
+    with pytest.raises(run_folder.RunFolderError, match="notes.txt"):
+        pipeline.process_flight(flight, replace(quick_config, name="new"), out, force=True,
+                                progress=meddle)
+    assert (out / "notes.txt").read_text().startswith("the user's notes")
+    after = _hashes(out)
+    del after["notes.txt"]
+    assert after == before  # the previous run, whole
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]  # no staging left
+
+
+def test_a_second_run_into_the_same_new_folder_is_refused_while_the_first_works(
+        flight, quick_config, tmp_path):
+    """Two runs into one new folder replaced each other, both exit 0 (issue 38 item 6): the
+    first holds the folder's lock for the whole run, the second is refused at once."""
+    out = tmp_path / "new"
+    refused: list[str] = []
+
+    def second(stage: str, fraction: float) -> None:
+        if stage == "calibrate":
+            try:
+                pipeline.process_flight(flight, quick_config, out)
+            except run_folder.RunFolderError as exc:
+                refused.append(str(exc))
+
+    first = pipeline.process_flight(flight, replace(quick_config, name="first"), out,
+                                    progress=second)
+    assert refused and f"another pospp command (pid {os.getpid()})" in refused[0]
+    marker = _assert_one_complete_run(out)
+    assert marker["config_sha256"] == run_folder.config_sha256(
+        replace(quick_config, name="first").to_json()) and first.status == "partial"
+
+
+def test_a_full_disk_during_force_keeps_the_previous_run(flight, tmp_path, monkeypatch):
+    """A full disk during ``--force`` replaced a good run with a 3-file failed stub (issue 38
+    item 7): a run that fails without a verdict on its input keeps the previous one."""
+    out = tmp_path / "run"
+    code, _, err = _cli("run", str(flight), "-p", str(PIPELINE), "-o", str(out))
+    assert code == 0, err
+    before = _hashes(out)
+    real = parquet_tables.write_table
+
+    def full(path, data, schema_name, **kw):
+        if schema_name in ("trajectory", "messages"):  # the run's tables and a failed stub's
+            raise OSError(28, "No space left on device", str(path))
+        return real(path, data, schema_name, **kw)
+
+    monkeypatch.setattr(parquet_tables, "write_table", full)
+    code, _, err = _cli("run", str(flight), "-p", str(PIPELINE), "-o", str(out), "--force")
+    _one_clear_line(code, err, 1, "No space left on device", "the previous run is kept")
+    assert _hashes(out) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["flight.mcap", "run"] or \
+        sorted(p.name for p in tmp_path.iterdir()) == ["run"]
+
+
+@pytest.fixture(scope="module")
+def finished_run(flight, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("finished") / "run"
+    code, _, err = _cli("run", str(flight), "-p", str(PIPELINE), "-o", str(out))
+    assert code == 0, err
+    return out
+
+
+@pytest.mark.parametrize("command", ["export", "compare-sim"])
+def test_outputs_of_export_and_compare_sim_never_replace_the_run_or_its_input(
+        command, finished_run, flight, tmp_path):
+    """``export -o`` and ``compare-sim -o`` overwrote the run's input log, its
+    trajectory.parquet or its marker, exit 0 (issue 38 item 8): the rules of ``run`` hold."""
+    other = tmp_path / "mine.csv"
+    other.write_text("the user's file")
+    watched = {"input": flight, "other": other,
+               **{p.name: p for p in finished_run.iterdir()}}
+    before = {k: hashlib.sha256(p.read_bytes()).hexdigest() for k, p in watched.items()}
+    args = (["export", str(finished_run), "--format", "csv"] if command == "export"
+            else ["compare-sim", str(finished_run)])
+    for target, needle in ((flight, "is the run's input log"),
+                           (finished_run / "trajectory.parquet", "is in the pospp run folder"),
+                           (finished_run / run_folder.MARKER, "is in the pospp run folder"),
+                           (other, "exists; use --force")):
+        code, _, err = _cli(*args, "-o", str(target))
+        _one_clear_line(code, err, 2, needle)
+    assert before == {k: hashlib.sha256(p.read_bytes()).hexdigest() for k, p in watched.items()}
+    if command == "export":  # an existing file of the user's: with --force only
+        code, _, err = _cli(*args, "-o", str(other), "--force")
+        assert code == 0, err
+        assert other.read_text().startswith("gps_week")
+
+
+@pytest.mark.parametrize("command", ["run", "diagnose", "evaluate", "report", "export",
+                                     "compare-sim"])
+def test_commands_that_write_a_run_wait_for_no_one(command, finished_run, flight, tmp_path):
+    """``diagnose`` or ``evaluate`` while ``run --force`` replaced the folder left the old
+    flight's diagnosis in the new run (issue 38 item 10): every command that writes a run
+    folder holds its lock; a second is refused at once, naming the holder."""
+    truth = tmp_path / "truth.parquet"
+    truth.write_bytes(b"x")
+    args = {"run": ["run", str(flight), "-p", str(PIPELINE), "-o", str(finished_run),
+                    "--force"],
+            "diagnose": ["diagnose", str(finished_run)],
+            "evaluate": ["evaluate", str(finished_run), "--truth", str(truth)],
+            "report": ["report", str(finished_run)],
+            "export": ["export", str(finished_run), "--format", "csv"],
+            "compare-sim": ["compare-sim", str(finished_run)]}[command]
+    before = _hashes(finished_run)
+    fd = _hold_lock(finished_run)
+    try:
+        code, _, err = _cli(*args)
+    finally:
+        os.close(fd)
+    _one_clear_line(code, err, 2, f"another pospp command (pid {os.getpid()}) is writing "
+                    "this run folder")
+    assert _hashes(finished_run) == before
+
+
+def test_a_named_pipe_as_the_log_or_the_pipeline_is_refused(flight, tmp_path, make_fifo):
+    """A FIFO as ``-p`` or as the log blocked forever (issue 38 item 12)."""
+    for name, args in (("pipe.toml", lambda f: ("run", str(flight), "-p", str(f), "-o",
+                                                 str(tmp_path / "o1"))),
+                       ("pipe.mcap", lambda f: ("run", str(f), "-p", str(PIPELINE), "-o",
+                                                 str(tmp_path / "o2")))):
+        code, _, err = _cli(*args(make_fifo(tmp_path / name)))
+        _one_clear_line(code, err, 2, f"{name}: is a named pipe (FIFO), not a regular file")
+    assert not (tmp_path / "o1").exists() and not (tmp_path / "o2").exists()
+
+
+def test_compare_sims_model_file_is_a_file_of_the_run():
+    """sim_model.toml, which ``compare-sim`` writes into the run, made ``run --force`` refuse
+    the folder as one holding files pospp did not write."""
+    assert run_folder.is_pospp_file("sim_model.toml")

@@ -375,17 +375,11 @@ def test_decoded_size_is_bounded_by_the_file_size(tmp_path: Path, small_log):
     assert growth < 2 * 64 + 64, f"peak resident set grew by {growth:.0f} MiB"
 
 
-def test_a_named_pipe_is_refused_not_read(tmp_path: Path):
+def test_a_named_pipe_is_refused_not_read(tmp_path: Path, make_fifo):
     """A FIFO named like a log blocked the reader forever (issue 38 item 12)."""
-    from test_config import unblocked_fifo
-
     from pospp.io.files import NotRegularFileError, sha256_file
 
-    fifo = tmp_path / "pipe.mcap"
-    done = unblocked_fifo(fifo)
-    try:
-        for read in (read_flight_log, sha256_file):
-            with pytest.raises(NotRegularFileError, match="pipe.mcap: is a named pipe"):
-                read(fifo)
-    finally:
-        done.set()
+    fifo = make_fifo(tmp_path / "pipe.mcap")
+    for read in (read_flight_log, sha256_file):
+        with pytest.raises(NotRegularFileError, match="pipe.mcap: is a named pipe"):
+            read(fifo)
