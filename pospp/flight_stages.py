@@ -11,7 +11,7 @@ Nothing here touches files but through :mod:`pospp.io`'s reader.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +40,7 @@ from pospp.diagnose.rerun import (
 from pospp.io import mcap_reader
 from pospp.nav import filter as nav_filter
 from pospp.nav import tuning as nav_tuning
+from pospp.nav.aiding import aiding_of, leg_aiding_problem
 from pospp.threads import Threads, first_kept
 from pospp.types import FLU_TO_FRD
 from pospp.units import UG_MPS2, t_s_from_time_ns
@@ -267,21 +268,33 @@ class LegReplays:
     replays: dict[int, LegReplay]
     """By leg id, the legs whose replay did not fail."""
     failed: tuple[str, ...]
-    """A message per leg whose replay failed."""
+    """A message per leg whose replay failed or that was refused."""
+    refused: dict[int, str] = field(default_factory=dict)
+    """By leg id, the legs not replayed because A is not GNSS-aided over them, with why
+    (:func:`pospp.nav.aiding.leg_aiding_problem`)."""
 
 
 def calibration_replays(imu: ImuSource, nav: nav_filter.FilterResult, config: PipelineConfig,
                         threads: Threads = 1) -> LegReplays:
     """The calibration's legs (:func:`pospp.calib.segment.find_legs` on A's ``[replay]
     reference`` solution) and B's replays over them
-    (:func:`pospp.calib.replay.replay_legs`, ``threads`` legs at once)."""
+    (:func:`pospp.calib.replay.replay_legs`, ``threads`` legs at once). A leg over which A is
+    not GNSS-aided (:func:`pospp.nav.aiding.leg_aiding_problem`) is refused, not replayed:
+    B minus a free-inertial A is not B's error (issue 38 item 1)."""
     which = nav_filter.reference_name(nav, config.replay.reference)
     solution_a = SolutionA(*nav_filter.solution_a_fields(nav, which=which))
     traj = solution_a.trajectory
     legs = tuple(find_legs(traj.t_s, traj.v_n_mps, traj.height_m,
                            thresholds=config.legs.thresholds()))
-    replays, failed = replay_legs(imu, solution_a, legs, config.replay.options(), threads)
-    return LegReplays(solution_a, legs, replays, failed)
+    aid = aiding_of(nav)
+    refused = {g.leg_id: why for g in legs if (why := leg_aiding_problem(
+        aid, g.start_s, g.end_s, traj.t_s, solution_a.v_sigma_n_mps)) is not None}
+    replays, failed = replay_legs(imu, solution_a, tuple(g for g in legs
+                                                         if g.leg_id not in refused),
+                                  config.replay.options(), threads)
+    return LegReplays(solution_a, legs, replays,
+                      tuple(f"leg {i} refused: {why}" for i, why in refused.items()) + failed,
+                      refused)
 
 
 def calibrate_from_a(imu: ImuSource, nav: nav_filter.FilterResult,
@@ -296,7 +309,7 @@ def calibrate_from_a(imu: ImuSource, nav: nav_filter.FilterResult,
     gm = bool(np.isfinite(tuning.gyro_gm_tau_s) and tuning.gyro_gm_sigma_dph > 0)
     return calibrate_flight(
         imu, solution_a, legs=made.legs, made_replays=(made.replays, made.failed),
-        threads=threads,
+        threads=threads, leg_refusals=made.refused,
         legs_cfg=config.legs.thresholds(), replay_cfg=config.replay.options(),
         pairs_cfg=config.pairs.policy(), gyro_arw_dpsh=tuning.gyro_arw_dpsh,
         noise=config.pairs.noise, noise_step_s=config.pairs.noise_step_s,

@@ -311,10 +311,10 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
     epoch_ns = int(log.imu.time_ns[0])
     try:
         nav = navigate(log, config)
-    except ValueError as exc:
-        book.note("error", "navigate", f"algorithm A failed: {exc}")
+    except ValueError as exc:  # named with the reader's finding that caused it, if any
+        book.note("error", "navigate", text := log.cause_of(f"algorithm A failed: {exc}"))
         finish("failed")
-        raise
+        raise ValueError(text) from exc
     book.messages.extend(outputs.rejection_messages(nav.rejections))
     book.messages.extend(outputs.filter_event_messages(nav.resets, nav.imu_gaps, epoch_ns))
     solutions = {"forward": nav.forward}

@@ -118,6 +118,8 @@ class CalibrationRun:
     drift_sigma_radps: float = 0.0
     drift_tau_s: float = float("inf")
     drift_source: str = "none"
+    leg_refusals: Mapping[int, str] = field(default_factory=dict)
+    """Legs left out before B was replayed, with why (their reference A not GNSS-aided)."""
 
     @property
     def calibrated(self) -> bool:
@@ -179,7 +181,8 @@ class CalibrationRun:
             UTC nanoseconds of t_s = 0 (the run's epoch).
         """
         return {
-            "legs": _legs_table(self.legs, epoch_ns),
+            "legs": {**_legs_table(self.legs, epoch_ns),
+                     "reason": [self.leg_refusals.get(g.leg_id, "ok") for g in self.legs]},
             "pairs": _pairs_table(self.pairs),
             "calibration": _calibration_table(self.pairs, self.joint),
             "leg_errors": _leg_errors_table(self.replays, self.replays_after),
@@ -208,6 +211,7 @@ def calibrate_flight(
     causal_prior_scale: float = CAUSAL_PRIOR_SCALE,
     made_replays: tuple[dict[int, LegReplay], tuple[str, ...]] | None = None,
     threads: Threads = 1,
+    leg_refusals: Mapping[int, str] | None = None,
 ) -> CalibrationRun:
     """Run the double-strapdown calibration on one flight.
 
@@ -264,6 +268,8 @@ def calibrate_flight(
         while it calibrates); made here when None.
     threads : int or SharedWork
         B's replays before and after the compensation made that many legs at once.
+    leg_refusals : Mapping of int to str, optional
+        Legs not replayed, with why (reference A not GNSS-aided): in their pairs' reasons.
     noise_step_s : float
         Spacing of the samples of the correlated-noise least squares [s] (a leg shorter than
         ten steps is sampled every tenth of its length).
@@ -312,11 +318,13 @@ def calibrate_flight(
     replays, failed = (replay_legs(imu, solution_a, legs, rc, threads) if made_replays is None
                        else made_replays)
     messages.extend(failed)
+    refusals = dict(leg_refusals or {})  # in the legs table and their pairs' reasons
 
     def done(reason: str, pairs: tuple[Pair, ...] = (), joint: tuple[Calibration, ...] = ()
              ) -> CalibrationRun:
         return CalibrationRun(legs, replays, pairs, joint, None, {}, (), np.zeros(3),
-                              np.full(3, np.inf), {}, reason, tuple(messages))
+                              np.full(3, np.inf), {}, reason, tuple(messages),
+                              leg_refusals=refusals)
 
     if not legs:
         return done(
@@ -345,7 +353,8 @@ def calibrate_flight(
         # the drift's sigma by REML once, on the joint fit of the compensation formulation
         # over the legs of the usable pairs; the pairs and the other formulations reuse it
         # (a pair alone has too few legs to estimate it, and it saves most of the cost)
-        screened = evaluate_pairs(replays, legs, policy, formulations=(), **cal_kw)
+        screened = evaluate_pairs(replays, legs, policy, formulations=(), leg_reasons=refusals,
+                                  **cal_kw)
         coarse = {i: noise_basis(r, noise_step_s=_REML_STEP_S) for i, r in replays.items()}
         first_fit = joint_calibration(
             replays, screened, policy.formulation, transition=policy.transition,
@@ -371,7 +380,8 @@ def calibrate_flight(
                 messages.append("Gauss-Markov gyro drift sigma by REML on the joint "
                                 f"{policy.formulation} fit: "
                                 f"{first_fit.gyro_gm_sigma_radps / DEG_PER_H_RADPS:.3f} deg/h")
-    pairs = evaluate_pairs(replays, legs, policy, formulations=forms, **cal_kw)
+    pairs = evaluate_pairs(replays, legs, policy, formulations=forms, leg_reasons=refusals,
+                           **cal_kw)
     if not any(p.used for p in pairs):
         why = "; ".join(f"pair {p.pair_id} (legs {p.leg_a}, {p.leg_b}): {p.reason}"
                         for p in pairs)
@@ -406,7 +416,8 @@ def calibrate_flight(
                           solve_kwargs={**cal_kw, "transition": policy.transition},
                           drift_sigma_radps=float(chosen.gyro_gm_sigma_radps),
                           drift_tau_s=float(chosen.gyro_gm_tau_s),
-                          drift_source=drift_source if gm_on else "none")
+                          drift_source=drift_source if gm_on else "none",
+                          leg_refusals=refusals)
 
 
 def _gyro_bias_sigma_b_radps(chosen: Calibration, first: LegReplay) -> NDArray:

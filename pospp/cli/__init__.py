@@ -413,7 +413,12 @@ def convert(source: str, out_mcap: str, fmt: str | None, options: tuple[str, ...
                 kw[key] = float(value)
             except ValueError:
                 kw[key] = value
-    rep = run_convert(source, out_mcap, fmt=fmt, **kw)
+    from pospp.io.converters import UnknownOptionError
+
+    try:
+        rep = run_convert(source, out_mcap, fmt=fmt, **kw)
+    except UnknownOptionError as exc:
+        raise click.UsageError(f"--option: {exc}") from None
     click.echo(f"{rep.fmt}: {rep.n_imu} IMU samples ({rep.imu_rate_hz or 0:.1f} Hz), "
                f"{rep.n_fix} GNSS fixes, {rep.n_reference} reference epochs")
     for label, path in (("mcap", rep.mcap_path), ("reference", rep.reference_path)):

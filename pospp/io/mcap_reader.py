@@ -120,6 +120,18 @@ class FlightLog:
     """Header stamps of the trigger events (``events_topic``), int64 ns, sorted (empty when
     no events topic was asked for or found)."""
 
+    def cause_of(self, failure: str) -> str:
+        """``failure`` (a later stage's one-line error) led by the damage the reader found,
+        when it found any: a skipped chunk shows downstream as an IMU gap or a failed
+        alignment, and the line must name the corruption, not only that symptom."""
+        broken = [i for i in self.issues if i.severity == "error"]
+        if not broken:
+            return failure
+        at = "" if broken[0].byte_offset is None else f" at byte {broken[0].byte_offset}"
+        more = f" (and {len(broken) - 1} more)" if len(broken) > 1 else ""
+        return (f"{Path(self.path).name} is damaged{at}: {broken[0].message}{more}; because of "
+                f"it, {failure}")
+
 
 # --------------------------------------------------------------------------- checks & assembly
 

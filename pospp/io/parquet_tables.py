@@ -104,6 +104,8 @@ TABLES: dict[str, list[Column]] = {
         _opt(Column("vertical_speed_mps", _F, "m/s", "mean vertical speed, down positive",
                     _NED)),
         _opt(Column("heading_rate_max_dps", _F, "deg/s", "max |yaw rate| over the leg")),
+        _opt(Column("reason", _S, "", "'ok', or why the leg was not replayed (its reference A "
+                    "not GNSS-aided: docs/qc.md, gnss_coverage)")),
     ],
     "pairs": [
         Column("pair_id", _I, "", "pair number"),

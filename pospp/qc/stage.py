@@ -19,11 +19,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pospp import earth, rotation
+from pospp.nav.aiding import aiding_of
 from pospp.nav.alignment import static_windows
 from pospp.nav.filter import STATUS_GATED, STATUS_RESET, STATUS_USED
 from pospp.qc import checks as qc
 from pospp.qc import time_offset
 from pospp.qc.checks import Check
+from pospp.qc.coverage import gnss_coverage
 from pospp.units import t_s_from_time_ns
 
 if TYPE_CHECKING:
@@ -211,6 +213,10 @@ def quality_checks(log: FlightLog, nav: FilterResult, calib_run: Any, config: An
     if not toff.passed and not lev_check.passed:  # a late GNSS bends the lever-arm estimate
         out[-1] = replace(lev_check, suggestion="fix the GNSS time offset first, the lever-arm "
                           "estimate is not reliable until then; " + lev_check.suggestion)
+
+    # --- where A was GNSS-aided, against the legs (issue 38 item 1) ---------------------------
+    legs = [] if calib_run is None else [(g.leg_id, g.start_s, g.end_s) for g in calib_run.legs]
+    out.append(gnss_coverage(aiding_of(nav), legs, getattr(calib_run, "leg_refusals", None)))
 
     # --- calibration and compensation --------------------------------------------------------
     if calib_run is not None:

@@ -15,6 +15,7 @@ import fcntl
 import hashlib
 import os
 import signal
+import struct
 import subprocess
 import sys
 import time
@@ -610,3 +611,30 @@ def test_compare_sims_model_file_is_a_file_of_the_run():
     """sim_model.toml, which ``compare-sim`` writes into the run, made ``run --force`` refuse
     the folder as one holding files pospp did not write."""
     assert run_folder.is_pospp_file("sim_model.toml")
+
+
+def test_an_error_caused_by_a_corrupt_chunk_names_the_corruption(flight, tmp_path):
+    """A corrupt chunk, skipped, leaves a 29 s hole; algorithm A then stops on the IMU gap,
+    and the one-line error named only that symptom (issue 38 item 13)."""
+    data = bytearray(flight.read_bytes())
+    pos, chunks = 8, []
+    while pos + 9 <= len(data):  # the top-level records (MCAP spec: opcode u8, length u64)
+        op, ln = struct.unpack_from("<BQ", data, pos)
+        chunks += [(pos, ln)] if op == 0x06 else []
+        pos += 9 + ln
+    off, ln = chunks[1]
+    data[off + 9 + ln // 2] ^= 0xFF
+    bad = tmp_path / "damaged.mcap"
+    bad.write_bytes(bytes(data))
+    code, _, err = _cli("run", str(bad), "-p", str(PIPELINE), "-o", str(tmp_path / "o"))
+    _one_clear_line(code, err, 1, f"damaged.mcap is damaged at byte {off}: corrupt chunk at "
+                    f"byte {off} skipped", "because of it, algorithm A failed: imu: gap of")
+
+
+def test_an_unknown_converter_option_is_a_usage_error(tmp_path):
+    """``convert --option foo=1`` was an internal error (TypeError) (issue 38 item 13)."""
+    code, _, err = _cli("convert", str(tmp_path), "-o", str(tmp_path / "x.mcap"), "--format",
+                        "comma2k19", "--option", "foo=1")
+    _one_clear_line(code, err, 2, "--option: format 'comma2k19' has no option 'foo'; its "
+                    "options: ")
+    assert not (tmp_path / "x.mcap").exists()

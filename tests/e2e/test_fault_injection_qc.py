@@ -144,7 +144,7 @@ def test_non_positive_horizon_fails(window, tmp_path):
     out, qc = _run(tmp_path, *window, config=_config(replay={"horizon_s": -300.0}),
                    name="horizon")
     assert out.status == "failed"
-    assert "replay.horizon_s: expected a value >= 1, <= 86400, got -300.0" in _failed(qc)["config"]
+    assert "replay.horizon_s: expected a value >= 30, <= 86400, got -300.0" in _failed(qc)["config"]
 
 
 def test_window_longer_than_the_data_is_not_ok(window, tmp_path):
@@ -152,3 +152,23 @@ def test_window_longer_than_the_data_is_not_ok(window, tmp_path):
                    name="window")
     assert out.status == "degraded"
     assert "of the 900.0 s configured window" in _failed(qc)["data_complete"]
+
+
+def test_gnss_lost_over_the_leg_is_not_ok_and_the_leg_is_refused(window, tmp_path):
+    """GNSS stopping 400 s in (the window's leg starts at 338 s): every check passed, the
+    trajectory drifted free-inertial and the calibration used the leg (issue 38 item 1)."""
+    imu, fix, vel = window
+
+    def before(obj):
+        m = obj.time_ns < imu.time_ns[0] + 400 * 10**9
+        return replace(obj, **{k: v[m] for k, v in vars(obj).items()
+                               if isinstance(v, np.ndarray) and v.shape[:1] == m.shape})
+
+    out, qc = _run(tmp_path, imu, before(fix), before(vel), name="gnss_lost")
+    assert out.status == "degraded"
+    sug = _failed(qc)["gnss_coverage"]
+    assert "no GNSS from t = 400 s to the end of the data (320 s, 44 % of the flight" in sug
+    assert "leg 0 in it" in sug and "leg 0 refused by the calibration" in sug
+    legs = parquet_tables.read_table(out.out_dir / "legs.parquet")
+    assert legs.reason.iloc[0].startswith("reference A not GNSS-aided: no GNSS record used "
+                                          "from t = 400 s to the end of the data")
