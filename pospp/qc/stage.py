@@ -23,7 +23,7 @@ from pospp.nav.aiding import aiding_of
 from pospp.nav.alignment import static_windows
 from pospp.nav.filter import STATUS_GATED, STATUS_RESET, STATUS_USED
 from pospp.qc import checks as qc
-from pospp.qc import time_offset
+from pospp.qc import mounting, time_offset
 from pospp.qc.checks import Check
 from pospp.qc.coverage import gnss_coverage
 from pospp.units import t_s_from_time_ns
@@ -213,6 +213,15 @@ def quality_checks(log: FlightLog, nav: FilterResult, calib_run: Any, config: An
     if not toff.passed and not lev_check.passed:  # a late GNSS bends the lever-arm estimate
         out[-1] = replace(lev_check, suggestion="fix the GNSS time offset first, the lever-arm "
                           "estimate is not reliable until then; " + lev_check.suggestion)
+
+    # --- the mounting yaw: A's heading against the GNSS course (issue 38 item 2) --------------
+    head = mounting.heading_offset(v_t, v_n, sol.t_s, sol.q_nb)
+    out.append(mount := mounting.mounting_yaw(head, cin.mounting_rpy_deg))
+    if lev is not None:  # a lever arm "wrong" by a rotation names the mounting instead
+        i = next(i for i, c in enumerate(out) if c.name == "lever_arm")
+        out[i] = mounting.lever_arm_naming_mounting(
+            out[i], config.gnss.lever_arm_m, lev.lever_b_m, lev.sigma_b_m,
+            qc.lever_arm_observable(sol.rpy_rad), mount, None if head is None else head.offset_rad)
 
     # --- where A was GNSS-aided, against the legs (issue 38 item 1) ---------------------------
     legs = [] if calib_run is None else [(g.leg_id, g.start_s, g.end_s) for g in calib_run.legs]

@@ -172,3 +172,22 @@ def test_gnss_lost_over_the_leg_is_not_ok_and_the_leg_is_refused(window, tmp_pat
     legs = parquet_tables.read_table(out.out_dir / "legs.parquet")
     assert legs.reason.iloc[0].startswith("reference A not GNSS-aided: no GNSS record used "
                                           "from t = 400 s to the end of the data")
+
+
+@pytest.mark.parametrize("lever", [None, (-0.10, 0.30, -1.52)], ids=["configured", "advised"])
+def test_wrong_mounting_yaw_is_named_not_the_lever_arm(window, tmp_path, lever):
+    """``mounting_rpy_deg = [0, 0, 90]`` on the sample: "degraded" with the advice to rotate the
+    lever arm by 90 deg, and following it gave "ok" with an 89 deg heading error (issue 38
+    item 2). A's heading is compared with the GNSS course; the lever-arm suggestion names the
+    mounting."""
+    cfg = _config(input={"mounting_rpy_deg": (0.0, 0.0, 90.0)},
+                  **({} if lever is None else {"gnss": {"lever_arm_m": lever}}))
+    out, qc = _run(tmp_path, *window, config=cfg, name=f"yaw90_{lever is None}")
+    assert out.status == "failed"
+    failed = _failed(qc)
+    assert "A's heading is -90.0 deg off the GNSS course" in failed["mounting_yaw"]
+    assert "mounting_rpy_deg = [0, 0, 0]" in failed["mounting_yaw"]
+    if lever is None:
+        assert "is the configured lever arm rotated by +90 deg about body z: the IMU mounting " \
+            "is wrong, not the lever arm" in failed["lever_arm"]
+        assert "set [gnss] lever_arm_m" not in failed["lever_arm"]
