@@ -309,7 +309,7 @@ class ReplayConfig:
     """"filter": remove A's accelerometer bias estimate; "none": raw, as the paper."""
     sample_rate_hz: float = _key(1.0, ge=0.01, le=MAX_REPLAY_RATE_HZ)
     sigma_floor_mps: float = _key(0.005, ge=1.0e-6, le=10.0)
-    horizon_s: float = _key(300.0, ge=30.0, le=MAX_LEG_S)
+    horizon_s: float = _key(300.0, ge=1.0, le=MAX_LEG_S)
     transition_step: int = _key(10, ge=1, le=100000)
 
     def options(self) -> ReplayOptions:

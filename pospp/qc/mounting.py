@@ -37,8 +37,9 @@ MOUNTING_YAW_MAX_DEG = 45.0
 """Largest |mean(A's heading - GNSS course)| in straight, level flight at speed [deg]: beyond
 any crab of an aircraft at cruise or a car (the clean logs of docs/qc.md: 0.0-5 deg), and half
 of the quarter turn an IMU mounted on the wrong face is off by."""
-MIN_SPEED_MPS = 10.0
-"""Epochs compared: horizontal GNSS speed above this [m/s]..."""
+MIN_SPEED_MPS = 5.0
+"""Epochs compared: horizontal GNSS speed above this [m/s] (a car on the reference case
+drives at 9 m/s)..."""
 MAX_COURSE_RATE_DPS = 1.0
 """... the course turning slower than this [deg/s] ..."""
 MAX_FLIGHT_PATH_DEG = 5.0
@@ -49,7 +50,10 @@ MIN_EXPLAINED = 0.5
 """The course changes between GNSS epochs at speed must follow A's heading changes at least
 this well (R^2) for the comparison to mean anything (as for the time-offset check)."""
 MIN_TURN_DEG = 30.0
-"""... over turns adding up to at least this much course change [deg]."""
+"""... over turns adding up to at least this much course change [deg]; the changes are taken
+over intervals of at least COURSE_INTERVAL_S, so that a 10 Hz receiver's course noise does not
+drown them."""
+COURSE_INTERVAL_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -91,8 +95,9 @@ def heading_offset(vel_t_s: ArrayLike, v_n_mps: ArrayLike, sol_t_s: ArrayLike,
     if np.count_nonzero(steady) < MIN_EPOCHS:
         return None
     z = np.exp(1j * _wrap(yaw[steady] - course[steady])).mean()
-    both = fast[1:] & fast[:-1]
-    dc, dy = np.diff(course)[both], np.diff(yaw)[both]
+    k = max(1, int(round(COURSE_INTERVAL_S / float(np.median(np.diff(tv))))))
+    both = fast[k::k] & fast[:-k:k]
+    dc, dy = np.diff(course[::k])[both], np.diff(yaw[::k])[both]
     turned = float(np.sum(np.abs(dc)))
     explained = (1.0 - float(np.sum((dc - dy) ** 2)) / float(np.sum(dc**2))
                  if turned >= math.radians(MIN_TURN_DEG) else math.nan)

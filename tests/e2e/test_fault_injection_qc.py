@@ -144,7 +144,7 @@ def test_non_positive_horizon_fails(window, tmp_path):
     out, qc = _run(tmp_path, *window, config=_config(replay={"horizon_s": -300.0}),
                    name="horizon")
     assert out.status == "failed"
-    assert "replay.horizon_s: expected a value >= 30, <= 86400, got -300.0" in _failed(qc)["config"]
+    assert "replay.horizon_s: expected a value >= 1, <= 86400, got -300.0" in _failed(qc)["config"]
 
 
 def test_window_longer_than_the_data_is_not_ok(window, tmp_path):

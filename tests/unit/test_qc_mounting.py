@@ -56,7 +56,7 @@ def test_not_applicable_without_turns_or_when_the_course_ignores_the_heading():
     assert no_turn.passed and math.isnan(no_turn.value) and "no turn" in no_turn.statistic
     side = mounting_yaw(heading_offset(*_track(sideways=True)), (0, 0, 0))
     assert side.passed and "does not follow the heading" in side.statistic
-    slow = mounting_yaw(heading_offset(*(_track()[0], 0.1 * _track()[1], *_track()[2:])),
+    slow = mounting_yaw(heading_offset(*(_track()[0], 0.05 * _track()[1], *_track()[2:])),
                         (0, 0, 0))
     assert slow.passed and "fewer than" in slow.statistic
 
