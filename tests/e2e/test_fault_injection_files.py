@@ -638,3 +638,19 @@ def test_an_unknown_converter_option_is_a_usage_error(tmp_path):
     _one_clear_line(code, err, 2, "--option: format 'comma2k19' has no option 'foo'; its "
                     "options: ")
     assert not (tmp_path / "x.mcap").exists()
+
+
+def test_a_named_pipe_in_an_archive_fails_that_flight_only(flight, tmp_path, make_fifo):
+    """A FIFO named ``*.mcap`` in an archive blocked the batch forever (issue 38 item 12)."""
+    arch = tmp_path / "archive"
+    arch.mkdir()
+    (arch / "good.mcap").write_bytes(flight.read_bytes())
+    make_fifo(arch / "pipe.mcap")
+    code, out, err = _cli("batch", str(arch), "-p", str(PIPELINE), "-o", str(tmp_path / "out"),
+                          "-j", "1")
+    assert code == 1, (out, err)
+    man = _manifest(tmp_path / "out")
+    assert man.loc[str(arch / "pipe.mcap"), "status"] == "failed"
+    assert "is a named pipe (FIFO), not a regular file" in man.loc[str(arch / "pipe.mcap"),
+                                                                   "error"]
+    assert man.loc[str(arch / "good.mcap"), "status"] == "partial"
