@@ -129,8 +129,7 @@ class FlightLog:
             return failure
         at = "" if broken[0].byte_offset is None else f" at byte {broken[0].byte_offset}"
         more = f" (and {len(broken) - 1} more)" if len(broken) > 1 else ""
-        return (f"{Path(self.path).name} is damaged{at}: {broken[0].message}{more}; because of "
-                f"it, {failure}")
+        return f"{Path(self.path).name} is damaged{at}: {broken[0].message}{more}; then {failure}"
 
 
 # --------------------------------------------------------------------------- checks & assembly

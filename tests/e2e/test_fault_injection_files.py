@@ -628,7 +628,7 @@ def test_an_error_caused_by_a_corrupt_chunk_names_the_corruption(flight, tmp_pat
     bad.write_bytes(bytes(data))
     code, _, err = _cli("run", str(bad), "-p", str(PIPELINE), "-o", str(tmp_path / "o"))
     _one_clear_line(code, err, 1, f"damaged.mcap is damaged at byte {off}: corrupt chunk at "
-                    f"byte {off} skipped", "because of it, algorithm A failed: imu: gap of")
+                    f"byte {off} skipped", "; then algorithm A failed: imu: gap of")
 
 
 def test_an_unknown_converter_option_is_a_usage_error(tmp_path):
