@@ -409,7 +409,16 @@ def test_workers_die_with_their_parent():
      ("[outputs]\nmcap_rate_hz = 0\n", "outputs.mcap_rate_hz"),
      ("[replay]\nsample_rate_hz = 0\n", "replay.sample_rate_hz"),
      ("[filter]\noutput_rate_hz = -10\n", "filter.output_rate_hz"),
-     ("[replay]\nhorizon_s = -300\n", "replay.horizon_s")],
+     ("[replay]\nhorizon_s = -300\n", "replay.horizon_s"),
+     # issue 38 item 13: each of these ended in "internal error" or an error naming no key
+     *[(f"[{s}]\n{k} = {v}\n", f"{s}.{k}") for s, k, v in (
+         ("imu", "gyro_bias_sigma_dph", "1e300"), ("imu", "gyro_arw_dpsh", "1e300"),
+         ("imu", "gyro_gm_sigma_dph", "1e300"), ("imu", "gyro_gm_tau_s", "1e-300"),
+         ("imu", "accel_bias_sigma_ug", "1e300"), ("imu", "accel_vrw_mpsph", "1e300"),
+         ("imu", "accel_gm_sigma_ug", "1e300"), ("imu", "accel_gm_tau_s", "1e-300"),
+         ("gnss", "pos_sigma_floor_m", "1e300"), ("gnss", "vel_sigma_floor_mps", "1e300"),
+         ("legs", "trim_s", "1e300"), ("legs", "smoothing_s", "1e300"),
+         ("replay", "sample_rate_hz", "1e-300"))]],
 )
 def test_bad_config_value_is_one_line_and_exit_2(flight, tmp_path, toml, needle):
     p = tmp_path / "bad.toml"
