@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import os
 import struct
-import zlib
 from dataclasses import dataclass
 from io import BytesIO
 from typing import Any
@@ -31,6 +30,14 @@ from mcap.exceptions import McapError
 from mcap.records import Channel, Schema
 from numba.core.errors import NumbaError
 
+from pospp.io._mcap_chunk import (  # noqa: F401  (MAX_CHUNK_BYTES: re-exported)
+    MAX_CHUNK_BYTES,
+    _decompress,
+    _is_corrupt_data_error,
+    _parse_chunk,
+    _RawChunk,
+    _Truncated,
+)
 from pospp.io._mcap_decode import _REC, Collector, _walk_records
 from pospp.io.errors import IngestError, IngestIssue
 from pospp.io.files import open_regular
@@ -38,7 +45,6 @@ from pospp.io.files import open_regular
 # --------------------------------------------------------------------------- streaming pass
 
 _U16 = struct.Struct("<H").unpack_from
-_CHUNK_HEAD = struct.Struct("<QQQII")  # start, end, uncompressed size, crc, compression len
 # Statistics: message_count u64, schema_count u16, channel_count u32, attachment_count u32,
 # metadata_count u32, chunk_count u32, message_start_time u64, message_end_time u64,
 # channel_message_counts byte length u32 (then channel_id u16, count u64 pairs)
@@ -50,10 +56,6 @@ _FOOTER_LEN = 20  # summary_start u64, summary_offset_start u64, summary_crc u32
 _MAX_SUMMARY_BYTES = 64 * 1024 * 1024  # a larger summary section is not read for hints
 _MAX_RATIO = 64  # no hint above 64 x (file bytes / 31-byte minimal Message record) messages
 
-MAX_CHUNK_BYTES = 256 * 1024 * 1024
-"""Default cap on one chunk's decompressed size [bytes] (``max_chunk_bytes``): a chunk whose
-header claims more is corrupt (or written with huge chunks: raise the cap), and no chunk's
-decompression may produce more than the smaller of this and what its header claims."""
 DECODED_PER_FILE_BYTE = 64
 """Largest decoded size per byte of the file: the decoded arrays of a log may take at most
 this many times its size (and at least :data:`MIN_DECODED_BYTES`). Measured: a log of pospp's
@@ -61,28 +63,8 @@ simulator decodes to 1.0 x its size (the sample flight, zstd), messages that dif
 their stamps to about 6 x; a decompression bomb of repeated messages to 2000 x (issue 38 item
 11: a 2 MB file to 4.1 GB)."""
 MIN_DECODED_BYTES = 64 * 1024 * 1024
-_LZ4_PIECE = 16 * 1024 * 1024  # lz4 output produced at a time beyond the first call
 _READ_PIECE = 1 << 20  # bytes read at a time when a byte range is only checksummed
 
-
-
-class _Truncated(Exception):
-    """The file ends inside a record or before the Footer."""
-
-
-@dataclass(frozen=True)
-class _RawChunk:
-    start_ns: int
-    end_ns: int
-    uncompressed_size: int
-    crc: int
-    compression: str
-    data: bytes | memoryview
-    truncated: bool
-    """The file ends inside the chunk: ``data`` is what the file holds of its records."""
-    overstated_by: int = 0
-    """Bytes that ``records_length`` claims beyond the end of a whole Chunk record (its
-    header is corrupt; the records present are still checked by size and CRC)."""
 
 
 @dataclass(frozen=True)
@@ -94,24 +76,6 @@ class _Stats:
     end_ns: int
     per_channel: dict[int, int]
     offset: int
-
-
-def _parse_chunk(body: bytes, truncated: bool) -> _RawChunk:
-    if len(body) < _CHUNK_HEAD.size:
-        raise _Truncated("chunk header cut off")
-    start, end, usize, crc, clen = _CHUNK_HEAD.unpack_from(body, 0)
-    p = _CHUNK_HEAD.size
-    comp = body[p : p + clen].decode("utf-8")
-    p += clen
-    (dlen,) = struct.unpack_from("<Q", body, p) if len(body) >= p + 8 else (None,)
-    if dlen is None:
-        raise _Truncated("chunk header cut off")
-    data = memoryview(body)[p + 8 : p + 8 + dlen]  # not a copy of the compressed records
-    # records_length beyond a whole record is a corrupt header, not a cut file: the records
-    # present are checked like any chunk's (size, CRC), never let through unchecked
-    short = dlen - len(data)
-    return _RawChunk(start, end, usize, crc, comp, data, truncated and short > 0,
-                     0 if truncated else short)
 
 
 def _parse_stats(body: bytes, offset: int) -> _Stats:
@@ -159,87 +123,6 @@ def _count_hints(f: Any, size: int) -> dict[int, int]:
         return {}
     finally:
         f.seek(len(_MAGIC))
-
-
-def _lz4_bounded(data: bytes | memoryview, limit: int) -> bytes | bytearray:
-    """Decompress an lz4 frame, producing at most ``limit + 1`` bytes (one more than allowed,
-    so that the caller sees an overrun); the readable part of a cut-off frame is returned."""
-    import lz4.frame
-
-    dec = lz4.frame.LZ4FrameDecompressor()
-    first = dec.decompress(data, max_length=min(limit + 1, _LZ4_PIECE))
-    if dec.eof or dec.needs_input or len(first) > limit:
-        return first
-    # the claimed size (+1) allocated once and filled: a growing buffer's realloc may copy,
-    # holding old and new at once (a 64 MiB claim then peaked at 167 MiB, depending on the
-    # allocator's state; now at most the claim plus two pieces)
-    out = bytearray(limit + 1)
-    n = len(first)
-    out[:n] = first
-    del first
-    while n <= limit and not (dec.eof or dec.needs_input):
-        piece = dec.decompress(b"", max_length=min(limit + 1 - n, _LZ4_PIECE))
-        out[n:n + len(piece)] = piece
-        n += len(piece)
-    del out[n:]
-    return out
-
-
-_CORRUPT_DATA_ERRORS = (ValueError, struct.error, IndexError, KeyError, EOFError,
-                        OverflowError, RuntimeError, zlib.error, McapError, MemoryError)
-"""What corrupt chunk bytes raise: the record walk's bounds and struct errors, lz4's
-RuntimeError, zlib, the mcap library's errors, a declared size that cannot be allocated
-(UnicodeDecodeError is a ValueError); zstandard's ZstdError is matched by name (imported
-lazily)."""
-
-
-def _is_corrupt_data_error(exc: BaseException) -> bool:
-    """True when ``exc`` is what corrupt chunk bytes raise (:data:`_CORRUPT_DATA_ERRORS`, or
-    zstandard's ``ZstdError``), False for anything else (a bug in pospp, which propagates)."""
-    return isinstance(exc, _CORRUPT_DATA_ERRORS) or type(exc).__name__ == "ZstdError"
-
-
-def _decompress(chunk: _RawChunk,
-                max_bytes: int = MAX_CHUNK_BYTES) -> bytes | bytearray | memoryview:
-    """Chunk records; for a truncated chunk, as many bytes as can be decompressed.
-
-    Memory is bounded: a header claiming more than ``max_bytes`` is rejected before anything
-    is decompressed, and decompression stops one byte past what the header claims (zstd
-    through a bounded ``stream_reader.read``, lz4 through ``max_length``), so a chunk that
-    would inflate to gigabytes costs at most ``max_bytes`` (lz4: plus 32 MiB of pieces).
-    """
-    usize = chunk.uncompressed_size
-    if usize > max_bytes:
-        raise ValueError(f"chunk claims {usize} uncompressed bytes, over the cap of {max_bytes} "
-                         "(max_chunk_bytes; a corrupt header, or raise the cap)")
-    data: bytes | bytearray | memoryview
-    if chunk.compression == "zstd":
-        import zstandard
-
-        declared = zstandard.frame_content_size(chunk.data) if len(chunk.data) >= 18 else -1
-        if not chunk.truncated and declared not in (-1, usize):
-            raise ValueError(f"zstd frame declares {declared} bytes, chunk header {usize}")
-        if not chunk.truncated and declared == usize and usize > 0:
-            data = zstandard.ZstdDecompressor().decompress(chunk.data)  # allocates usize
-        else:  # no size in the frame, or cut off: read at most usize + 1 bytes
-            reader = zstandard.ZstdDecompressor().stream_reader(chunk.data,
-                                                                 read_across_frames=False)
-            data = reader.read(usize + 1)
-    elif chunk.compression == "lz4":
-        data = _lz4_bounded(chunk.data, usize)
-    elif chunk.compression == "":
-        data = chunk.data
-    else:
-        raise ValueError(f"unsupported chunk compression {chunk.compression!r}")
-    if len(data) > usize:
-        raise ValueError(f"chunk decompresses to more than the {usize} bytes its header claims")
-    if chunk.truncated:
-        return data
-    if len(data) != usize:
-        raise ValueError(f"chunk decompressed to {len(data)} bytes, header says {usize}")
-    if chunk.crc != 0 and crc32(data) != chunk.crc:
-        raise ValueError("chunk CRC mismatch")
-    return data
 
 
 def log_time_text(ns: int | None, first_ns: int | None = None) -> str:

@@ -214,18 +214,8 @@ def quality_checks(log: FlightLog, nav: FilterResult, calib_run: Any, config: An
         out[-1] = replace(lev_check, suggestion="fix the GNSS time offset first, the lever-arm "
                           "estimate is not reliable until then; " + lev_check.suggestion)
 
-    # --- the mounting yaw: A's heading against the GNSS course (issue 38 item 2) --------------
-    head = mounting.heading_offset(v_t, v_n, sol.t_s, sol.q_nb)
-    out.append(mount := mounting.mounting_yaw(head, cin.mounting_rpy_deg))
-    if lev is not None:  # a lever arm "wrong" by a rotation names the mounting instead
-        i = next(i for i, c in enumerate(out) if c.name == "lever_arm")
-        out[i] = mounting.lever_arm_naming_mounting(
-            out[i], config.gnss.lever_arm_m, lev.lever_b_m, lev.sigma_b_m,
-            qc.lever_arm_observable(sol.rpy_rad), mount, None if head is None else head.offset_rad)
-
-    # --- where A was GNSS-aided, against the legs (issue 38 item 1) ---------------------------
-    legs = [] if calib_run is None else [(g.leg_id, g.start_s, g.end_s) for g in calib_run.legs]
-    out.append(gnss_coverage(aiding_of(nav), legs, getattr(calib_run, "leg_refusals", None)))
+    # --- A's heading against the GNSS course; where A was GNSS-aided ------------------------
+    _heading_and_aiding_checks(out, config, v_t, v_n, sol, lev, nav, calib_run)
 
     # --- calibration and compensation --------------------------------------------------------
     if calib_run is not None:
@@ -234,6 +224,24 @@ def quality_checks(log: FlightLog, nav: FilterResult, calib_run: Any, config: An
                                           int(s["n_pairs_used"])))
         out.append(qc.compensation_gain(float(s["dv_before_mps"]), float(s["dv_after_mps"])))
     return QualityReport(tuple(out))
+
+
+def _heading_and_aiding_checks(out: list[Check], config: Any, v_t: NDArray, v_n: NDArray,
+                               sol: NavSolution, lev: LeverArmEstimate | None,
+                               nav: FilterResult, calib_run: Any) -> None:
+    """Append ``mounting_yaw`` (A's heading against the GNSS course ``v_n`` at ``v_t``, issue
+    38 item 2; the lever-arm check in ``out`` then names the mounting when its estimate is the
+    configured lever arm rotated) and ``gnss_coverage`` (where A was GNSS-aided, against the
+    calibration's legs and the legs it refused, item 1)."""
+    head = mounting.heading_offset(v_t, v_n, sol.t_s, sol.q_nb)
+    out.append(mount := mounting.mounting_yaw(head, config.input.mounting_rpy_deg))
+    if lev is not None:
+        i = next(i for i, c in enumerate(out) if c.name == "lever_arm")
+        out[i] = mounting.lever_arm_naming_mounting(
+            out[i], config.gnss.lever_arm_m, lev.lever_b_m, lev.sigma_b_m,
+            qc.lever_arm_observable(sol.rpy_rad), mount, None if head is None else head.offset_rad)
+    legs = [] if calib_run is None else [(g.leg_id, g.start_s, g.end_s) for g in calib_run.legs]
+    out.append(gnss_coverage(aiding_of(nav), legs, getattr(calib_run, "leg_refusals", None)))
 
 
 def qc_columns(report: QualityReport, epoch_ns: int) -> dict[str, list[Any]]:
