@@ -7,12 +7,18 @@ leg it drifts with B rather than holding B to the truth, so B minus A there is n
 a sigma 2-7 times too small, the run "ok"). Two facts of A's own result say where it was
 aided:
 
-- the GNSS position and velocity records it used (its innovation record: used, or used after
-  a covariance reset; gated records and records before its start do not aid), whose gaps
-  longer than :data:`GNSS_GAP_MAX_S` are the stretches A ran free;
-- its horizontal velocity sigma, sqrt(P_vN + P_vE): GNSS records that are present but carry
-  a huge covariance aid nothing, and A's sigma then grows as in a gap. The level where A is
-  aided is the median of the forward pass's sigma outside the gaps.
+- the GNSS position and velocity records it received after its start (its innovation record:
+  used, gated, or used after a covariance reset), whose gaps longer than
+  :data:`GNSS_GAP_MAX_S` are the stretches with no GNSS to aid it;
+- its horizontal velocity sigma, sqrt(P_vN + P_vE): GNSS records that are present but aid
+  nothing (a huge covariance, or records A's gate rejects) leave A's sigma growing as in a
+  gap. The level where A is aided is the median of the forward pass's sigma outside the gaps.
+
+Gated records count as present for the gaps: A rejecting records is what the ``gnss_gate``
+check judges, and over a stretch of them (up to ``[filter] gate_reset_s``, 30 s) the smoothed
+reference is bridged from both sides; its sigma says whether it still holds (the warm-up
+missions of tests/unit/test_diagnose_power.py gate 18-23 s inside legs whose calibration the
+diagnosis needs).
 
 Times ``t_s`` are seconds from the run epoch (A's time axis); sigmas m/s.
 """
@@ -25,7 +31,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pospp.nav._filter_kernel import STATUS_RESET, STATUS_USED
+from pospp.nav._filter_kernel import STATUS_GATED, STATUS_RESET, STATUS_USED
 
 if TYPE_CHECKING:
     from pospp.nav.filter import FilterResult
@@ -34,10 +40,9 @@ __all__ = ["AIDED_SIGMA_FACTOR", "GNSS_GAP_MAX_S", "GnssAiding", "aiding_of", "g
            "leg_aiding_problem"]
 
 GNSS_GAP_MAX_S = 10.0
-"""Longest stretch of A's span without a GNSS record A used that still counts as aided [s]:
+"""Longest stretch of A's span without a GNSS record that still counts as aided [s]:
 ten 1 Hz epochs; a nav-grade A drifts millimetres per second in it, a MEMS A decimetres.
-Receivers drop a few epochs and A gates an odd record (0-2 of 3300 on the clean flights of
-docs/qc.md), so a 2-3 s stretch is common on clean data."""
+Receivers drop a few epochs, so a 2-3 s stretch is common on clean data."""
 AIDED_SIGMA_FACTOR = 5.0
 """A is taken as GNSS-aided at an epoch when its horizontal velocity sigma is at most this
 many times the level where it is aided (the sample flight: the smoothed sigma on its legs
@@ -47,7 +52,7 @@ and so gets no smoothing from after it, 0.8; without GNSS after 350 s, 50-1500 t
 
 @dataclass(frozen=True)
 class GnssAiding:
-    """Where A used GNSS over its span.
+    """Where A had GNSS over its span.
 
     Attributes
     ----------
@@ -55,7 +60,7 @@ class GnssAiding:
         A's first and last epoch [s].
     gaps_s : ndarray, shape (K, 2)
         [start, end] of each stretch of the span longer than :data:`GNSS_GAP_MAX_S` without a
-        GNSS record A used (the span's ends count as edges) [s].
+        GNSS record (the span's ends count as edges) [s].
     longest_gap_s, longest_at_s : float
         The longest such stretch of any length, and where it starts [s].
     aided_vel_sigma_mps : float
@@ -85,7 +90,7 @@ def gnss_aiding(used_t_s: ArrayLike, t_s: ArrayLike, vel_sigma_n_mps: ArrayLike
 
     Parameters
     ----------
-    used_t_s : (M,) times of the GNSS position and velocity records A used [s]
+    used_t_s : (M,) times of the GNSS position and velocity records A received [s]
     t_s : (N,) A's forward epochs [s]
     vel_sigma_n_mps : (N, 3) A's forward velocity sigma, NED [m/s]
     """
@@ -119,7 +124,7 @@ def leg_aiding_problem(aiding: GnssAiding, start_s: float, end_s: float, ref_t_s
         a, b = gaps[0]
         inside = float(np.sum(np.minimum(gaps[:, 1], end_s) - np.maximum(gaps[:, 0], start_s)))
         to = "the end of the data" if b >= aiding.span_s[1] else f"t = {b:.0f} s"
-        return (f"reference A not GNSS-aided: no GNSS record used from t = {a:.0f} s to {to} "
+        return (f"reference A not GNSS-aided: no GNSS record from t = {a:.0f} s to {to} "
                 f"({b - a:.0f} s), {inside:.0f} s of the leg's {end_s - start_s:.0f} s")
     t = np.asarray(ref_t_s, dtype=float)
     on = (t >= start_s) & (t <= end_s)
@@ -137,12 +142,14 @@ def leg_aiding_problem(aiding: GnssAiding, start_s: float, end_s: float, ref_t_s
 
 def aiding_of(result: FilterResult) -> GnssAiding:
     """:func:`gnss_aiding` of an A run: the GNSS position and velocity records its forward
-    pass used (or used after a covariance reset), its forward epochs and velocity sigmas.
+    pass received after its start (used, gated or used after a covariance reset), its
+    forward epochs and velocity sigmas.
     Without an innovation record (never, from :func:`pospp.nav.filter.
     run_integrated_navigation`), every epoch counts as aided."""
     rec, fwd = result.innovations, result.forward
     if rec is None:
         used = np.asarray(fwd.t_s, dtype=float)
     else:
-        used = rec.t_s[(rec.kind <= 1) & np.isin(rec.status, (STATUS_USED, STATUS_RESET))]
+        used = rec.t_s[(rec.kind <= 1) & np.isin(rec.status, (STATUS_USED, STATUS_GATED,
+                                                               STATUS_RESET))]
     return gnss_aiding(used, fwd.t_s, fwd.vel_sigma_ned_mps)

@@ -5,8 +5,8 @@ GNSS lost 300-400 s into the sample flight left every other check passing (a NIS
 gate count need GNSS records to judge; the lever-arm and time-offset checks need turns with
 GNSS), the trajectory 40 m to 1.2 km off and the calibration up to 3.5 sigma off with a sigma
 2-7 times too small: "ok". This check measures where A was GNSS-aided
-(:mod:`pospp.nav.aiding`): the gaps between the GNSS records A used, where they fall against
-the legs, and A's velocity sigma along each leg. Times ``t_s`` from the run epoch.
+(:mod:`pospp.nav.aiding`): the gaps between the GNSS records A received, where they fall
+against the legs, and A's velocity sigma along each leg. Times ``t_s`` from the run epoch.
 """
 
 from __future__ import annotations
@@ -37,10 +37,10 @@ def gnss_coverage(aiding: GnssAiding, legs: Sequence[tuple[int, float, float]] =
     """The longest stretch of A's span without GNSS aiding against :data:`GNSS_GAP_MAX_S`.
 
     Statistic [s]: the longest of (a) the gaps between the GNSS position and velocity records
-    A used (the span's ends count), and (b) the legs the calibration refused because A's
-    velocity sigma on them says A was not aided (GNSS records present with a covariance that
-    aids nothing). Fails (degraded) above the threshold. The suggestion names the gaps (time,
-    length, share of the span), the legs inside them, and the legs refused.
+    A received (the span's ends count), and (b) the legs the calibration refused because A's
+    velocity sigma on them says A was not aided (GNSS records present that aid nothing: a
+    huge covariance, or gated). Fails (degraded) above the threshold. The suggestion names
+    the gaps (time, length, share of the span), the legs inside them, and the legs refused.
 
     Parameters
     ----------
@@ -75,6 +75,6 @@ def gnss_coverage(aiding: GnssAiding, legs: Sequence[tuple[int, float, float]] =
     at = float(aiding.gaps_s[0, 0]) if aiding.gaps_s.shape[0] else (
         by_id[min(sigma_only)][0] if sigma_only else aiding.longest_at_s)
     return Check("gnss_coverage", "navigate",
-                 "longest stretch of A's span without GNSS aiding (no GNSS record used, or a "
+                 "longest stretch of A's span without GNSS aiding (no GNSS record, or a "
                  "leg where A's velocity sigma says it was not aided)", value, GNSS_GAP_MAX_S,
                  "s", passed, "degraded", sug, None if passed else int(round(at * NS_PER_S)))

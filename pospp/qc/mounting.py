@@ -122,11 +122,11 @@ def mounting_yaw(est: HeadingOffset | None, mounting_rpy_deg: ArrayLike) -> Chec
     off = math.degrees(est.offset_rad)
     passed = abs(off) <= MOUNTING_YAW_MAX_DEG
     rpy = [float(x) for x in np.asarray(mounting_rpy_deg, dtype=float)]
-    new_yaw = (rpy[2] + off + 180.0) % 360.0 - 180.0
+    new_yaw = (int(round(rpy[2] + off)) + 180) % 360 - 180  # whole degrees, no "-0"
     sug = "" if passed else (
         f"A's heading is {off:+.1f} deg off the GNSS course in straight, level flight "
         f"({est.n_epochs} epochs at speed): the IMU's mounting yaw looks wrong; set [input] "
-        f"mounting_rpy_deg = [{rpy[0]:g}, {rpy[1]:g}, {new_yaw:.0f}] (configured yaw "
+        f"mounting_rpy_deg = [{rpy[0]:g}, {rpy[1]:g}, {new_yaw}] (configured yaw "
         f"{rpy[2]:g} deg)")
     return Check("mounting_yaw", "navigate",
                  "|mean A heading - GNSS course| in straight, level flight at speed "

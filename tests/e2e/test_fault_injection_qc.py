@@ -170,7 +170,7 @@ def test_gnss_lost_over_the_leg_is_not_ok_and_the_leg_is_refused(window, tmp_pat
     assert "no GNSS from t = 400 s to the end of the data (320 s, 44 % of the flight" in sug
     assert "leg 0 in it" in sug and "leg 0 refused by the calibration" in sug
     legs = parquet_tables.read_table(out.out_dir / "legs.parquet")
-    assert legs.reason.iloc[0].startswith("reference A not GNSS-aided: no GNSS record used "
+    assert legs.reason.iloc[0].startswith("reference A not GNSS-aided: no GNSS record "
                                           "from t = 400 s to the end of the data")
 
 

@@ -41,7 +41,7 @@ def test_gnss_lost_before_the_end_is_a_gap_over_the_legs_inside():
     assert aid.gaps_s.shape == (1, 2)
     assert aid.gaps_s[0] == pytest.approx([349.5, T[-1]])
     why = leg_aiding_problem(aid, 400.0, 700.0, T, SIGMA)
-    assert why is not None and "no GNSS record used from t = 350 s to the end of the data" in why
+    assert why is not None and "no GNSS record from t = 350 s to the end of the data" in why
     assert leg_aiding_problem(aid, 20.0, 340.0, T, SIGMA) is None  # before the loss
     check = gnss_coverage(aid, [(0, 20.0, 340.0), (1, 400.0, 700.0)], {1: why})
     assert not check.passed and check.severity == "degraded"
