@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from pospp import rotation
+from pospp.calib.bias_smoother import ForwardBiases
 from pospp.calib.replay import (
     ImuRates,
     ImuSource,
@@ -294,6 +295,7 @@ def calibrate_from_a(imu: ImuSource, nav: nav_filter.FilterResult,
     solution_a = made.solution_a
     tuning = imu_tuning(config)
     gm = bool(np.isfinite(tuning.gyro_gm_tau_s) and tuning.gyro_gm_sigma_dph > 0)
+    mode = config.compensation.mode
     return calibrate_flight(
         imu, solution_a, legs=made.legs, made_replays=(made.replays, made.failed),
         threads=threads,
@@ -301,9 +303,8 @@ def calibrate_from_a(imu: ImuSource, nav: nav_filter.FilterResult,
         pairs_cfg=config.pairs.policy(), gyro_arw_dpsh=tuning.gyro_arw_dpsh,
         noise=config.pairs.noise, noise_step_s=config.pairs.noise_step_s,
         estimate_gyro_z=config.pairs.estimate_gyro_z,
-        compensation=config.compensation.mode if gm or config.compensation.mode == "causal"
-        else "constant",
-        forward_biases=nav.forward_biases,
+        compensation=mode if gm or mode != "per_leg" else "constant",
+        forward_biases=forward_bias_record(nav, tuning),
         # the grade's Gauss-Markov ("random") drift enters the least squares' noise model;
         # its level and correlation time are the flight's own (REML on the joint fit, tau
         # profiled), the grade's a weak prior (solve.DriftPrior; issue 16, item 3)
@@ -311,6 +312,18 @@ def calibrate_from_a(imu: ImuSource, nav: nav_filter.FilterResult,
         gyro_gm_tau_s=tuning.gyro_gm_tau_s if gm else None,
         gyro_gm_prior_sigma_dph=tuning.gyro_gm_sigma_dph if gm else None,
     ), solution_a
+
+
+def forward_bias_record(nav: nav_filter.FilterResult, tuning: nav_tuning.ImuTuning
+                        ) -> ForwardBiases:
+    """A's forward gyro-bias estimates, the times of the GNSS records it used and its bias
+    process noise: what the smoothed compensation reads
+    (:class:`pospp.calib.bias_smoother.ForwardBiases`)."""
+    fb, inn = nav.forward_biases, nav.innovations
+    used = np.zeros(0) if inn is None else np.unique(inn.t_s[inn.status
+                                                             == nav_filter.STATUS_USED])
+    return ForwardBiases(fb.t_s, fb.gyro_b_radps, fb.gyro_sigma_b_radps, used,
+                         float(tuning.noise().gyro_bias_psd_radps2ps))
 
 
 def null_drift(calib_run: CalibrationRun, config: PipelineConfig) -> tuple[float, float, str]:

@@ -19,11 +19,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pospp.calib.compensate import (
+    COMPENSATION_MODES,
     LegImprovement,
-    causal_gyro_bias_b_radps,
+    ModeInputs,
     compensate_legs,
     joint_calibration,
-    prior_sigma_b_radps,
 )
 from pospp.calib.design import FORMULATIONS
 from pospp.calib.noise_model import gm_noise_operator, noise_basis
@@ -43,7 +43,7 @@ from pospp.units import ARCSEC_RAD, DEG_PER_H_RADPS
 from pospp.units import DEG_PER_SQRT_H_RAD_PER_SQRT_S as _DPSH_RADPSQRTS
 
 """One deg/sqrt(h) in rad/sqrt(s)."""
-COMPENSATIONS = ("constant", "per_leg", "causal")
+COMPENSATIONS = tuple(COMPENSATION_MODES)
 CAUSAL_PRIOR_SCALE = 3.0
 """Default factor on the calibrated prior's sigma in the causal compensation (1: kept; > 1
 weakened; inf: dropped, A's forward estimate alone). Weakened three times: on held-out legs
@@ -118,6 +118,10 @@ class CalibrationRun:
     drift_sigma_radps: float = 0.0
     drift_tau_s: float = float("inf")
     drift_source: str = "none"
+    compensation_source: str = ""
+    """What the compensation removed: "constant", "per_leg", "causal", or for "smoothed" the
+    history chosen on the fitted legs ("constant", "fit", "smoothed x<alpha>";
+    :func:`pospp.calib.compensate.choose_bias_history`)."""
 
     @property
     def calibrated(self) -> bool:
@@ -251,13 +255,14 @@ def calibrate_flight(
     causal_prior_scale : float
         ``compensation="causal"``: the calibrated prior's sigma is multiplied by this (1: the
         prior kept, > 1 weakened, ``inf``: dropped, A's forward estimate alone).
-    compensation : {"constant", "per_leg"}
-        Re-run B with the constant bias (default), or with the constant plus the smoothed
-        Gauss-Markov drift's mean over each leg (needs the Gauss-Markov model). The constant
-        bias is what ``gyro_bias_b_radps`` feeds back into A either way. ``"causal"``:
-        remove A's forward (causal) gyro-bias estimate as it changes inside each leg, fused
-        with the calibrated bias as its prior
-        (:func:`pospp.calib.compensate.causal_gyro_bias_b_radps`; needs ``forward_biases``).
+    compensation : {"constant", "per_leg", "causal", "smoothed"}
+        What B is re-run with (:data:`pospp.calib.compensate.COMPENSATION_MODES`): the
+        constant bias (this function's default), the constant plus the smoothed drift's mean
+        over each leg (``"per_leg"``, needs the Gauss-Markov model), A's forward estimate
+        fused with the constant (``"causal"``), or the gyro error's history smoothed from the
+        fit and A's forward estimates (``"smoothed"``, :mod:`pospp.calib.bias_smoother`; the
+        pipeline's default). The constant bias is what ``gyro_bias_b_radps`` feeds back into
+        A either way.
     made_replays : (replays, messages), optional
         :func:`pospp.calib.replay.replay_legs` of ``legs`` (given with them) with
         ``replay_cfg``, already made (a run on two threads starts the null's base from them
@@ -267,10 +272,11 @@ def calibrate_flight(
     noise_step_s : float
         Spacing of the samples of the correlated-noise least squares [s] (a leg shorter than
         ten steps is sampled every tenth of its length).
-    forward_biases : pospp.nav.filter.BiasHistory, optional
-        A's forward (filter) sensor-error history on the run's time axis: ``t_s`` (K,),
-        ``gyro_b_radps`` and ``gyro_sigma_b_radps`` (K, 3), body FRD. Used by
-        ``compensation="causal"`` only.
+    forward_biases : ForwardBiases or pospp.nav.filter.BiasHistory, optional
+        A's forward (filter) gyro-bias record on the run's time axis: ``t_s`` (K,),
+        ``gyro_b_radps`` and ``gyro_sigma_b_radps`` (K, 3), body FRD; ``"smoothed"`` needs a
+        :class:`pospp.calib.bias_smoother.ForwardBiases` (with A's update times). Used by
+        ``"causal"`` and ``"smoothed"`` only.
 
     Returns
     -------
@@ -288,9 +294,9 @@ def calibrate_flight(
         raise ValueError(f"compensation: expected one of {COMPENSATIONS}, got {compensation!r}")
     gm_on = noise == "gyro_rw" and gyro_gm_tau_s is not None and (
         gyro_gm_sigma_dph is None or gyro_gm_sigma_dph > 0)
-    if compensation == "causal" and forward_biases is None:
-        raise ValueError("compensation='causal' needs A's forward bias history "
-                         "(forward_biases=FilterResult.forward_biases)")
+    if compensation in ("causal", "smoothed") and forward_biases is None:
+        raise ValueError(f"compensation={compensation!r} needs A's forward bias record "
+                         "(forward_biases=)")
     if compensation == "per_leg" and not gm_on:
         raise ValueError("compensation='per_leg' needs the Gauss-Markov drift model "
                          "(noise='gyro_rw' and gyro_gm_tau_s given)")
@@ -388,25 +394,21 @@ def calibrate_flight(
     if chosen.formulation != "body":
         messages.append("paper formulation chosen: its nav-frame drift is rotated into the body "
                         f"with leg {first.leg.leg_id}'s attitude")
-    history = None
-    if compensation == "causal":
-        fb = forward_biases
-        history = (np.asarray(fb.t_s, dtype=float), causal_gyro_bias_b_radps(
-            fb.gyro_b_radps, fb.gyro_sigma_b_radps, bg,
-            np.full(3, np.inf) if np.isinf(causal_prior_scale)
-            else causal_prior_scale * prior_sigma_b_radps(sig, chosen)))
+    mode = COMPENSATION_MODES[compensation](ModeInputs(
+        imu, solution_a, replays, chosen, sig, rc, forward_biases, causal_prior_scale, threads))
     after, improvements = compensate_legs(
         imu, solution_a, replays, chosen, accel_compensation=rc.accel_compensation,
         horizon_s=rc.horizon_s, transition_step=int(rc.transition_step),
-        sample_rate_hz=rc.sample_rate_hz, sigma_floor_mps=rc.sigma_floor_mps,
-        per_leg_drift=compensation == "per_leg", gyro_bias_history=history, threads=threads)
+        sample_rate_hz=rc.sample_rate_hz, sigma_floor_mps=rc.sigma_floor_mps, threads=threads,
+        **mode.kwargs)
     mis = {i: chosen.misalignment_n_rad(i) for i in chosen.leg_ids}
     return CalibrationRun(legs, replays, pairs, joint, chosen, after, improvements, bg, sig, mis,
                           "ok", tuple(messages),
                           solve_kwargs={**cal_kw, "transition": policy.transition},
                           drift_sigma_radps=float(chosen.gyro_gm_sigma_radps),
                           drift_tau_s=float(chosen.gyro_gm_tau_s),
-                          drift_source=drift_source if gm_on else "none")
+                          drift_source=drift_source if gm_on else "none",
+                          compensation_source=mode.source)
 
 
 def _gyro_bias_sigma_b_radps(chosen: Calibration, first: LegReplay) -> NDArray:
