@@ -51,7 +51,7 @@ follows A's estimates.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -60,6 +60,7 @@ from numpy.typing import NDArray
 from pospp.calib._bias_kernel import smooth_two_gm
 from pospp.calib.replay import LegReplay
 from pospp.calib.solve import Calibration
+from pospp.nav.filter import STATUS_USED, FilterResult
 
 WHITE_TAU_S = 10.0
 """Correlation time of the Gauss-Markov component standing for the white rate noise in the
@@ -93,6 +94,28 @@ class ForwardBiases:
     gyro_sigma_b_radps: NDArray
     update_t_s: NDArray
     bias_psd_radps2ps: float
+
+    @classmethod
+    def of_filter(cls, result: FilterResult, bias_psd_radps2ps: float) -> ForwardBiases:
+        """From A's :class:`pospp.nav.filter.FilterResult`: its forward biases and the times
+        of the GNSS records it used (innovation status "used")."""
+        fb, inn = result.forward_biases, result.innovations
+        used = (np.zeros(0) if inn is None
+                else np.unique(inn.t_s[inn.status == STATUS_USED]))
+        return cls(fb.t_s, fb.gyro_b_radps, fb.gyro_sigma_b_radps, used,
+                   float(bias_psd_radps2ps))
+
+
+def span_means(time_ns: NDArray, values: NDArray, spans: Sequence[tuple[int, int]]) -> NDArray:
+    """Mean of ``values`` (N, 3) over the samples stamped in each span (a, e] [ns], (L, 3)
+    (zeros for a span without samples): a leg's mean of a rate series."""
+    t = np.asarray(time_ns, dtype=np.int64)
+    out = np.zeros((len(spans), 3))
+    for i, (a, e) in enumerate(spans):
+        k0, k1 = np.searchsorted(t, a, side="right"), np.searchsorted(t, e, side="right")
+        if k1 > k0:
+            out[i] = np.asarray(values[k0:k1]).mean(axis=0)
+    return out
 
 
 def pseudo_measurements(fwd: ForwardBiases) -> tuple[NDArray, NDArray, NDArray]:
@@ -138,6 +161,15 @@ def fitted_leg_bias(cal: Calibration, rep: LegReplay) -> NDArray:
     length = float(rep.t_s[-1])
     inside = (d.tau_bin_s >= rep.t0_s) & (d.tau_bin_s <= rep.t0_s + length)
     return b + cal.gyro_arw_radpsqrts**2 / length * d.u[inside].sum(axis=0)
+
+
+def flight_bias_b_radps(cal: Calibration, replays: Mapping[int, LegReplay]) -> NDArray:
+    """The gyro bias over the flight's fitted legs, body FRD [rad/s], (3,): the legs'
+    duration-weighted mean of :func:`fitted_leg_bias` (b_c plus the estimated mean drift and
+    white rate noise over the legs: what the compensation used on them)."""
+    reps = [replays[i] for i in cal.leg_ids if i in replays]
+    w = np.array([float(r.t_s[-1]) for r in reps])
+    return (w @ np.array([fitted_leg_bias(cal, r) for r in reps])) / w.sum()
 
 
 def fit_bias_history(cal: Calibration, replays: Mapping[int, LegReplay], t_s: NDArray

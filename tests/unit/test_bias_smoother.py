@@ -151,3 +151,42 @@ def test_the_history_chosen_is_the_one_b_matches_best(gm_legs):
     assert pick.source == "constant" and dict(pick.kwargs) == {}
     assert history_score_m(inputs, fit_h) < history_score_m(inputs, None) < \
         history_score_m(inputs, off_h)
+
+
+def test_two_sigmas_from_null_realisations(gm_legs):
+    """Null realisations that are each a constant gyro offset on every leg (B minus A's exact
+    response to it, the offset recorded as what was injected): the turn-on constant's sigma
+    is the offsets' spread (the fit cannot tell an offset from the constant), the flight's
+    bias follows each offset exactly, so its sigma against the injected truth is ~0; without
+    the injected means the flight's sigma is the constant's."""
+    from pospp.calib.replay import replay_leg
+    from pospp.calib.stage import calibrate_flight, with_null_covariance
+
+    cal, reps, _, imu, sol, _ = gm_legs
+    legs = tuple(r.leg for r in reps.values())
+    run = calibrate_flight(imu, sol, legs=legs, formulations=("body",), gyro_arw_dpsh=0.01,
+                           gyro_gm_sigma_dph=0.001, gyro_gm_tau_s=300.0)
+    rng = np.random.default_rng(11)
+    offsets = rng.normal(0.0, 0.05, (6, 3)) * DPH * np.array([1.0, 1.0, 0.0])
+    null, injected = [], []
+    for d in offsets:
+        shifted = type(imu)(imu.t_s, imu.dtheta_b_rad + d * np.diff(imu.t_s)[:, None],
+                            imu.dv_b_mps)
+        null.append([replay_leg(shifted, sol, r.leg).dv_n_mps - replay_leg(imu, sol, r.leg)
+                     .dv_n_mps for _, r in sorted(run.replays.items())])
+        injected.append(np.tile(d, (len(run.replays), 1)))
+    spread = np.sqrt(np.mean(offsets[:, :2] ** 2, axis=0))
+    both = with_null_covariance(run, null, injected)
+    assert np.allclose(both.gyro_bias_sigma_b_radps[:2], spread, rtol=0.02)
+    assert np.all(both.flight_gyro_bias_sigma_b_radps[:2] < 0.02 * spread)
+    one = with_null_covariance(run, null)
+    assert np.allclose(one.flight_gyro_bias_sigma_b_radps[:2], one.gyro_bias_sigma_b_radps[:2])
+    cols = both.tables(0)["calibration"]
+    rows = {p: s for p, s, pid in zip(cols["parameter"], cols["sigma"], cols["pair_id"],
+                                      strict=True) if pid == -1}
+    assert rows["gyro_bias_x_flight"] == pytest.approx(
+        both.flight_gyro_bias_sigma_b_radps[0] / DPH)
+    assert rows["gyro_bias_x"] == pytest.approx(both.gyro_bias_sigma_b_radps[0] / DPH)
+    summary = both.summary()
+    assert summary["gyro_bias_y_flight_sigma_dph"] == pytest.approx(
+        both.flight_gyro_bias_sigma_b_radps[1] / DPH)
