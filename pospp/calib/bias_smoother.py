@@ -172,6 +172,19 @@ def flight_bias_b_radps(cal: Calibration, replays: Mapping[int, LegReplay]) -> N
     return (w @ np.array([fitted_leg_bias(cal, r) for r in reps])) / w.sum()
 
 
+def constant_history(cal: Calibration, replays: Mapping[int, LegReplay], t_s: NDArray
+                     ) -> NDArray:
+    """The constant b_c at run times ``t_s``, (N, 3) [rad/s] (``paper``: rotated into the body
+    with each leg's attitude inside it, the first fitted leg's elsewhere)."""
+    t = np.asarray(t_s, dtype=float)
+    out = np.tile(cal.gyro_bias_b_radps(replays[cal.leg_ids[0]].c_nb0), (t.size, 1))
+    if cal.formulation != "body":
+        for rep in replays.values():
+            out[(t >= rep.t0_s) & (t <= rep.t0_s + rep.t_s[-1])] = cal.gyro_bias_b_radps(
+                rep.c_nb0)
+    return out
+
+
 def fit_bias_history(cal: Calibration, replays: Mapping[int, LegReplay], t_s: NDArray
                      ) -> NDArray:
     """m_B(t): the fit's estimate of the gyro error at run times ``t_s``, (N, 3) [rad/s].

@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 
 from pospp.calib.bias_smoother import flight_bias_b_radps
 from pospp.calib.compensate import (
+    CAUSAL_PRIOR_SCALE,
     COMPENSATION_MODES,
     LegImprovement,
     ModeInputs,
@@ -52,12 +53,6 @@ from pospp.units import DEG_PER_SQRT_H_RAD_PER_SQRT_S as _DPSH_RADPSQRTS
 
 """One deg/sqrt(h) in rad/sqrt(s)."""
 COMPENSATIONS = tuple(COMPENSATION_MODES)
-CAUSAL_PRIOR_SCALE = 3.0
-"""Default factor on the calibrated prior's sigma in the causal compensation (1: kept; > 1
-weakened; inf: dropped, A's forward estimate alone). Weakened three times: on held-out legs
-it ties with dropping the prior (within 5 %) and beats keeping it by 10-30 % at tau <= 300 s,
-while the calibration still steadies A's estimate where that is loose (docs/calibration.md
-section 9, issue 16 item 4)."""
 _REML_STEP_S = 20.0
 """Sample spacing of the one REML fit of the Gauss-Markov sigma [s] (the GLS uses 10 s)."""
 

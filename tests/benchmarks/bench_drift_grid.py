@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -42,29 +41,28 @@ def main() -> None:
     print(f"| tau | where | {modes} | error/sigma RMS: turn-on constant, flight's bias "
           "(x and y) |")
     print("|---|---|" + "---|" * len(_reach.MODES) + "---|")
-    with tempfile.TemporaryDirectory() as tmp:
-        for tau in _reach.GRID_TAUS_S:
-            t0 = time.perf_counter()
-            runs = [_reach.grid_flight(tau, seed, Path(tmp), n_null=args.null)
-                    for seed in range(args.seeds)]
-            for r, seed in zip(runs, range(args.seeds), strict=True):
-                print(f"  tau {tau} seed {seed}: {r['source']}, drift {r['drift_dph']:.3f} "
-                      f"deg/h {r['drift_tau_s']:.0f} s; constant err {r['err_const_dph']} "
-                      f"sigma {r['sigma_const_dph']}; flight err {r['err_flight_dph']} sigma "
-                      f"{r['sigma_flight_dph']}", file=sys.stderr)
-            zc = np.concatenate([r["z_const"] for r in runs])
-            zf = np.concatenate([r["z_flight"] for r in runs])
-            label = "none" if tau is None else f"{tau:g} s"
-            for where, text in (("in", "in-sample"), ("held", "held out")):
-                cells = []
-                for m in _reach.MODES:
-                    v = np.median([r[where][m][0] for r in runs])
-                    p = np.median([r[where][m][1] for r in runs])
-                    cells.append(f"{v:.1f}x / {p:.1f}x")
-                rms = (f"{np.sqrt(np.mean(zc**2)):.2f}, {np.sqrt(np.mean(zf**2)):.2f}"
-                       if where == "in" else "")
-                print(f"| {label} | {text} | " + " | ".join(cells) + f" | {rms} |", flush=True)
-            print(f"(tau {label}: {time.perf_counter() - t0:.0f} s wall)", file=sys.stderr)
+    for tau in _reach.GRID_TAUS_S:
+        t0 = time.perf_counter()
+        runs = [_reach.grid_flight(tau, seed, n_null=args.null)
+                for seed in range(args.seeds)]
+        for r, seed in zip(runs, range(args.seeds), strict=True):
+            print(f"  tau {tau} seed {seed}: {r['source']}, drift {r['drift_dph']:.3f} "
+                  f"deg/h {r['drift_tau_s']:.0f} s; constant err {r['err_const_dph']} "
+                  f"sigma {r['sigma_const_dph']}; flight err {r['err_flight_dph']} sigma "
+                  f"{r['sigma_flight_dph']}", file=sys.stderr)
+        zc = np.concatenate([r["z_const"] for r in runs])
+        zf = np.concatenate([r["z_flight"] for r in runs])
+        label = "none" if tau is None else f"{tau:g} s"
+        for where, text in (("in", "in-sample"), ("held", "held out")):
+            cells = []
+            for m in _reach.MODES:
+                v = np.median([r[where][m][0] for r in runs])
+                p = np.median([r[where][m][1] for r in runs])
+                cells.append(f"{v:.1f}x / {p:.1f}x")
+            rms = (f"{np.sqrt(np.mean(zc**2)):.2f}, {np.sqrt(np.mean(zf**2)):.2f}"
+                   if where == "in" else "")
+            print(f"| {label} | {text} | " + " | ".join(cells) + f" | {rms} |", flush=True)
+        print(f"(tau {label}: {time.perf_counter() - t0:.0f} s wall)", file=sys.stderr)
 
 
 if __name__ == "__main__":

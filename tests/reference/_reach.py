@@ -37,31 +37,18 @@ REPO = Path(__file__).resolve().parents[2]
 GRID_TAUS_S: tuple[float | None, ...] = (100.0, 300.0, 3600.0, 36000.0, None)
 """Gauss-Markov correlation times of the drift grid (None: no drift)."""
 GRID_DRIFT_DPH = 0.3
-GRID_PROFILE = """name = "reach_grid"
-imu_rate_hz = 100
-[start]
-lat_deg = 34.25
-lon_deg = 108.95
-height_m = 2600.0
-heading_deg = 0.0
-[options]
-turn_bank = "coordinated"
-blend_s = 5.0
-[[segment]]
-type = "static"
-duration_s = 180.0
-[[segment]]
-type = "accelerate"
-to_speed_mps = 60.0
-duration_s = 40.0
-[[segment]]
-type = "survey"
-legs = 5
-heading_deg = 0.0
-leg_duration_s = 300.0
-turn_rate_dps = 3.0
-turn_direction = "alternate"
-"""
+GRID_PROFILE = {
+    "name": "reach_grid", "imu_rate_hz": 100,
+    "start": {"lat_deg": 34.25, "lon_deg": 108.95, "height_m": 2600.0, "heading_deg": 0.0},
+    "options": {"turn_bank": "coordinated", "blend_s": 5.0},
+    "segment": [
+        {"type": "static", "duration_s": 180.0},
+        {"type": "accelerate", "to_speed_mps": 60.0, "duration_s": 40.0},
+        {"type": "survey", "legs": 5, "heading_deg": 0.0, "leg_duration_s": 300.0,
+         "turn_rate_dps": 3.0, "turn_direction": "alternate"},
+    ],
+}
+"""The drift grid's mission (a pospp.sim profile)."""
 
 
 def pipeline_kind(name: str) -> str:
@@ -127,18 +114,18 @@ def reach_of_checkout(code: Path, mcap: Path, kind: str, lever_arm_m: Any) -> di
     return {"v": v, "p": p, "legs": len(rows["after"]), "source": ""}
 
 
-def grid_simulation(tau_s: float | None, seed: int, folder: Path) -> Any:
-    """One flight of the drift grid (module docstring), simulated by pospp.sim."""
+def grid_simulation(tau_s: float | None, seed: int, *, errors: bool = True) -> Any:
+    """One flight of the drift grid (module docstring), simulated by pospp.sim (``errors``
+    False: the same flight with an error-free IMU)."""
     from pospp.sim.api import simulate
+    from pospp.sim.profile import parse_profile
     from pospp.sim.sensors import imu_grade
 
-    model = imu_grade("paper_flight")
-    sigma = 0.0 if tau_s is None else GRID_DRIFT_DPH
+    model = imu_grade("paper_flight" if errors else "errorfree")
+    sigma = 0.0 if tau_s is None or not errors else GRID_DRIFT_DPH
     model = dataclasses.replace(model, gyro_gm_sigma_dph=(sigma,) * 3,
                                 gyro_gm_tau_s=float(tau_s or 300.0))
-    profile = Path(folder) / "reach_grid.toml"
-    profile.write_text(GRID_PROFILE)
-    return simulate(profile, imu_grade=model, seed=seed, imu_rate_hz=100.0)
+    return simulate(parse_profile(GRID_PROFILE), imu_grade=model, seed=seed, imu_rate_hz=100.0)
 
 
 def grid_mcap(tau_s: float | None, seed: int, folder: Path) -> Path:
@@ -146,7 +133,7 @@ def grid_mcap(tau_s: float | None, seed: int, folder: Path) -> Path:
     from pospp.io.simulation_files import write_simulation
 
     name = f"grid_tau{'none' if tau_s is None else int(tau_s)}_seed{seed}"
-    return write_simulation(grid_simulation(tau_s, seed, folder), folder, name)["mcap"]
+    return write_simulation(grid_simulation(tau_s, seed), folder, name)["mcap"]
 
 
 def cases_in(folder: Path) -> list[tuple[str, Path, list[float]]]:
@@ -163,8 +150,7 @@ MODES = ("constant", "causal", "smoothed")
 """Compensation modes the drift grid compares (pospp.calib.compensate.COMPENSATION_MODES)."""
 
 
-def grid_flight(tau_s: float | None, seed: int, folder: Path, *, n_null: int = 10
-                ) -> dict[str, Any]:
+def grid_flight(tau_s: float | None, seed: int, *, n_null: int = 10) -> dict[str, Any]:
     """One flight of the drift grid through the pipeline's stages, measured three ways.
 
     A (pospp's filter and smoother, ``pipelines/flight.toml``), legs, B and the fit as
@@ -177,7 +163,8 @@ def grid_flight(tau_s: float | None, seed: int, folder: Path, *, n_null: int = 1
     and the two quantities' errors over their sigmas (``n_null`` null realisations and
     ``with_null_covariance`` as in the pipeline): the turn-on constant against the simulated
     constant, the flight's bias against the realised mean gyro error (constant, drift and
-    white noise: the simulated rates minus the error-free run's) over the fitted legs.
+    white noise: the simulated rates minus the error-free run's) over the fitted legs
+    (``n_null`` 0: the reach alone).
 
     Returns ``{"in": {mode: (v, p)}, "held": {...}, "z_const": (2,), "z_flight": (2,),
     "err_const_dph", "err_flight_dph", "sigma_const_dph", "sigma_flight_dph", "source",
@@ -191,12 +178,10 @@ def grid_flight(tau_s: float | None, seed: int, folder: Path, *, n_null: int = 1
     from pospp.calib.stage import with_null_covariance
     from pospp.config import config_from_dict
     from pospp.io.mcap_reader import FlightLog
-    from pospp.sim.api import simulate
     from pospp.units import DEG_PER_H_RADPS
 
-    sim = grid_simulation(tau_s, seed, folder)
-    clean = simulate(Path(folder) / "reach_grid.toml", imu_grade="errorfree", seed=seed,
-                     imu_rate_hz=100.0)
+    sim = grid_simulation(tau_s, seed)
+    clean = grid_simulation(tau_s, seed, errors=False)
     config = config_from_dict(tomllib.loads(pipeline_text("flight", [0.0, 0.0, 0.0])))
     log = FlightLog(sim.imu, sim.fix, sim.vel, f"grid tau {tau_s} seed {seed}")
     nav = fs.navigate(log, config)
@@ -224,6 +209,8 @@ def grid_flight(tau_s: float | None, seed: int, folder: Path, *, n_null: int = 1
                         {i: made.replays[i] for i in mid}, ())
     run_mid, _ = fs.calibrate_from_a(imu, nav, config, sub)
     result: dict[str, Any] = {"in": reach(run, ids), "held": reach(run_mid, [ids[0], ids[-1]])}
+    if n_null == 0:
+        return result
     injected: list[Any] = []
     null = fs.null_realisations(log, nav, run, config, n_null, seed=seed, injected_out=injected)
     run = with_null_covariance(run, null, injected)

@@ -12,11 +12,8 @@ change that moves them on purpose re-records them here, saying why in its commit
 
 from __future__ import annotations
 
-import tempfile
-from pathlib import Path
-
 import pytest
-from _reach import GRID_TAUS_S, cases_in, grid_simulation, pipeline_kind, reach_here
+from _reach import GRID_TAUS_S, cases_in, grid_flight, pipeline_kind, reach_here
 
 pytestmark = pytest.mark.slow
 
@@ -55,11 +52,16 @@ def test_reference_case_reach_holds(name, reference_cases):
 
 
 @pytest.mark.parametrize("tau_s", GRID_TAUS_S, ids=lambda t: f"tau_{t}")
-def test_drift_grid_reach_holds(tau_s):
-    from pospp.io.mcap_reader import FlightLog
-
-    with tempfile.TemporaryDirectory() as tmp:
-        sim = grid_simulation(tau_s, 0, Path(tmp))
-    log = FlightLog(sim.imu, sim.fix, sim.vel, f"drift grid tau {tau_s}")
-    _check(reach_here(log, "flight", [0.0, 0.0, 0.0]), RECORDED_GRID[tau_s],
+def test_drift_grid_reach_holds_and_the_smoother_predicts(tau_s):
+    """In-sample: the pipeline's reach (the smoothed compensation) holds its recorded value.
+    Held out (the fit on the middle three legs, the reach on the first and the last): the
+    smoothed history is within 5 % of the better of the constant and the causal mode, in
+    velocity and in position (issue 35; 1.4-3.7x better in the 6-seed benchmark)."""
+    got = grid_flight(tau_s, 0, n_null=0)
+    v, p = got["in"]["smoothed"]
+    _check({"v": v, "p": p, "source": "smoothed"}, RECORDED_GRID[tau_s],
            f"drift grid tau {tau_s}")
+    held = got["held"]
+    for k, what in enumerate(("velocity", "position")):
+        best = max(held["constant"][k], held["causal"][k])
+        assert held["smoothed"][k] >= 0.95 * best, (tau_s, what, held)

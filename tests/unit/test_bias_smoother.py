@@ -132,25 +132,34 @@ def gm_legs():
 
 def test_the_history_chosen_is_the_one_b_matches_best(gm_legs):
     """Among the constant, the fit's history (which holds leg 1's offset) and the injected
-    bias 1 deg/h off, the choice is the fit's (B's position error over the legs 1.6 m RMS
-    against 2.5 m with the constant); without it, the constant. The injected history itself
-    is not a candidate that can win: the fitted tilts were made with the fit's constant."""
+    bias 1 deg/h off, the fitted legs take the fit's (B's position error over the legs 1.6 m
+    RMS against 2.5 m with the constant); time outside the fitted legs takes the best of the
+    candidates named for it (the constant over the off one). Without the fit's, the constant
+    everywhere."""
     from pospp.calib.compensate import ModeInputs, choose_bias_history, history_score_m
     from pospp.calib.replay import ReplayOptions
 
     cal, reps, _, imu, sol, bias = gm_legs
     inputs = ModeInputs(imu, sol, reps, cal, np.full(3, 0.01 * DPH), ReplayOptions())
     grid = np.arange(0.0, imu.t_s[-1], 1.0)
+    const_h = (grid, np.tile(cal.gyro_bias_b_radps(), (grid.size, 1)))
     fit_h = (grid, fit_bias_history(cal, reps, grid))
-    off_h = (0.5 * (imu.t_s[:-1] + imu.t_s[1:]), bias + 1.0 * DPH)
-    made = {"constant": None, "fit": fit_h, "off": off_h}
-    pick = choose_bias_history(inputs, made)
-    assert pick.source == "fit" and pick.kwargs["gyro_bias_history"] is fit_h
+    off_h = (grid, np.interp(grid, imu.t_s[:-1], bias[:, 0])[:, None] * [1, 0, 0]
+             + bias[0] * [0, 1, 1] + 1.0 * DPH)
+    made = {"constant": const_h, "fit": fit_h, "off": off_h}
+    pick = choose_bias_history(inputs, made, ("constant", "off"))
+    assert pick.source == "fit on the fitted legs, constant elsewhere"
+    t, b = pick.kwargs["gyro_bias_history"]
+    inside = (t >= reps[1].t0_s) & (t <= reps[1].t0_s + reps[1].t_s[-1])
+    assert np.array_equal(b[inside], fit_h[1][inside])
+    before = t < reps[0].t0_s - 2.0
+    assert before.any() and np.array_equal(b[before], const_h[1][before])
     del made["fit"]
-    pick = choose_bias_history(inputs, made)
-    assert pick.source == "constant" and dict(pick.kwargs) == {}
-    assert history_score_m(inputs, fit_h) < history_score_m(inputs, None) < \
+    pick = choose_bias_history(inputs, made, ("constant", "off"))
+    assert pick.source == "constant"
+    assert history_score_m(inputs, fit_h) < history_score_m(inputs, const_h) < \
         history_score_m(inputs, off_h)
+    assert history_score_m(inputs, None) == pytest.approx(history_score_m(inputs, const_h))
 
 
 def test_two_sigmas_from_null_realisations(gm_legs):
