@@ -290,7 +290,8 @@ class ModeInputs:
 @dataclass(frozen=True)
 class ModeChoice:
     """A mode's answer: the keyword arguments of :func:`compensate_legs` and what they remove
-    (``source``: "constant", "per_leg", "causal", "fit", "smoothed x<alpha>")."""
+    (``source``: "constant", "per_leg", "causal", or the smoothed mode's choice:
+    :func:`choose_bias_history`)."""
 
     kwargs: Mapping[str, Any]
     source: str
