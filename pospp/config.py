@@ -111,6 +111,7 @@ class NullImuNoise(StrEnum):
 
 
 class CompensationMode(StrEnum):
+    SMOOTHED = "smoothed"
     CAUSAL = "causal"
     PER_LEG = "per_leg"
     CONSTANT = "constant"
@@ -367,11 +368,10 @@ class CompensationConfig:
 
     rerun_filter: bool = True
     """Re-run algorithm A with the calibrated gyro bias removed (the compensated trajectory)."""
-    mode: CompensationMode = CompensationMode.CAUSAL
-    """How B is re-run: "causal" (A's causal gyro-bias estimate inside each leg, fused with
-    the calibrated bias as its prior: best held out, docs/calibration.md section 9),
-    "per_leg" (the constant bias plus the drift's estimated mean over each leg, when the
-    grade has a drift) or "constant" (one bias for all legs)."""
+    mode: CompensationMode = CompensationMode.SMOOTHED
+    """How B is re-run: "smoothed" (the gyro error's history from the fit and A's forward
+    estimates: docs/calibration.md section 5), "causal" (A's forward estimate fused with the
+    constant), "per_leg" (the constant plus the drift's mean over each leg) or "constant"."""
 
 
 @dataclass(frozen=True)

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from pospp import rotation
+from pospp.calib.bias_smoother import ForwardBiases, span_means
 from pospp.calib.replay import (
     ImuRates,
     ImuSource,
@@ -307,6 +308,7 @@ def calibrate_from_a(imu: ImuSource, nav: nav_filter.FilterResult,
     solution_a = made.solution_a
     tuning = imu_tuning(config)
     gm = bool(np.isfinite(tuning.gyro_gm_tau_s) and tuning.gyro_gm_sigma_dph > 0)
+    mode = config.compensation.mode
     return calibrate_flight(
         imu, solution_a, legs=made.legs, made_replays=(made.replays, made.failed),
         threads=threads, leg_refusals=made.refused,
@@ -314,9 +316,8 @@ def calibrate_from_a(imu: ImuSource, nav: nav_filter.FilterResult,
         pairs_cfg=config.pairs.policy(), gyro_arw_dpsh=tuning.gyro_arw_dpsh,
         noise=config.pairs.noise, noise_step_s=config.pairs.noise_step_s,
         estimate_gyro_z=config.pairs.estimate_gyro_z,
-        compensation=config.compensation.mode if gm or config.compensation.mode == "causal"
-        else "constant",
-        forward_biases=nav.forward_biases,
+        compensation=mode if gm or mode != "per_leg" else "constant",
+        forward_biases=forward_bias_record(nav, tuning),
         # the grade's Gauss-Markov ("random") drift enters the least squares' noise model;
         # its level and correlation time are the flight's own (REML on the joint fit, tau
         # profiled), the grade's a weak prior (solve.DriftPrior; issue 16, item 3)
@@ -324,6 +325,12 @@ def calibrate_from_a(imu: ImuSource, nav: nav_filter.FilterResult,
         gyro_gm_tau_s=tuning.gyro_gm_tau_s if gm else None,
         gyro_gm_prior_sigma_dph=tuning.gyro_gm_sigma_dph if gm else None,
     ), solution_a
+
+
+def forward_bias_record(nav: nav_filter.FilterResult, tuning: nav_tuning.ImuTuning
+                        ) -> ForwardBiases:
+    """What the smoothed compensation reads of A (:meth:`ForwardBiases.of_filter`)."""
+    return ForwardBiases.of_filter(nav, tuning.noise().gyro_bias_psd_radps2ps)
 
 
 def null_drift(calib_run: CalibrationRun, config: PipelineConfig) -> tuple[float, float, str]:
@@ -359,7 +366,8 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                       calib_run: CalibrationRun, config: PipelineConfig, n: int, *,
                       seed: int = 0, drift: tuple[float, float] | None = None,
                       threads: int = 1, white_noise: tuple[float, float] | None = None,
-                      base: NullBase | None = None) -> list[list[np.ndarray]]:
+                      base: NullBase | None = None, injected_out: list[np.ndarray] | None = None
+                      ) -> list[list[np.ndarray]]:
     """B minus A's null realisations along this flight (pospp.diagnose.null_model).
 
     Each: the log with IMU noise (white: ``[pairs] null_imu_noise`` "measured", the
@@ -383,6 +391,10 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     (:func:`pospp.threads.first_kept`, the next log drawn while A runs); the logs are drawn
     in the same order from the same generator, so the result does not depend on it.
     ``base``: :func:`null_base` on the run's legs and replays, made before (None: made here).
+    ``injected_out``: when a list, each kept realisation appends the mean over each leg (id
+    order, the replays' span; (L, 3), body FRD [rad/s]) of the gyro error it injected (white
+    noise and drift): the truth a realisation's flight bias is measured against
+    (:func:`pospp.calib.stage.with_null_covariance`).
     """
     si = imu_tuning(config).noise()
     gm_sigma, gm_tau, _ = null_drift(calib_run, config) if drift is None else (*drift, "")
@@ -396,12 +408,20 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
         pos_sigma_ned_m=b.pos_sigma_ned_m, vel_sigma_ned_mps=b.vel_sigma_ned_mps)
     rng = np.random.default_rng(seed)
 
-    def attempt(log_r: mcap_reader.FlightLog) -> list[np.ndarray] | None:
+    epoch_ns = int(log.imu.time_ns[0])
+    spans = [(epoch_ns + round(r.t0_s * 1e9), epoch_ns + round((r.t0_s + r.t_s[-1]) * 1e9))
+             for _, r in sorted(calib_run.replays.items())]
+
+    def attempt(log_r: mcap_reader.FlightLog
+                ) -> tuple[list[np.ndarray], np.ndarray | None] | None:
         try:  # A with the base's gains (nav_filter.GainReplay): first order in the noise
-            return rerun_b_minus_a(log_r, nav, calib_run.legs, calib_run.replays, config,
-                                   replay=b.gains)[0]
+            dv = rerun_b_minus_a(log_r, nav, calib_run.legs, calib_run.replays, config,
+                                 replay=b.gains)[0]
         except ValueError:  # a realisation whose A fails (alignment) is skipped
             return None
+        return dv, (span_means(b.log.imu.time_ns, log_r.imu.w_ib_b_radps
+                               - b.log.imu.w_ib_b_radps, spans) if injected_out is not None
+                    else None)
 
     # drawn on the summed-down samples (a quarter of the flight-rate draws at 200 -> 50 Hz);
     # in this thread (drawing and scaling them in the workers held a draw per thread, +230
@@ -410,8 +430,11 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                  for _ in range(2 * n))
     # never more logs drawn than realisations still missing: the draws, and so the
     # realisations, are those of one log at a time; the next drawn while A runs on the others
-    return [[d - d0 for d, d0 in zip(dv, b.dv_n_mps, strict=True)]
-            for dv in first_kept(attempt, perturbed, n, threads)]
+    kept = first_kept(attempt, perturbed, n, threads)
+    if injected_out is not None:
+        injected_out.extend(k[1] for k in kept if k[1] is not None)
+    return [[d - d0 for d, d0 in zip(k[0], b.dv_n_mps, strict=True)] for k in kept]
+
 
 
 @dataclass(frozen=True)

@@ -345,10 +345,10 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
     if calib_run.calibrated and base is not None:
         book.stage("null_realisations")
         null_dv = null_realisations(log, nav, calib_run, config, config.pairs.null_realisations,
-                                    threads=threads,
+                                    threads=threads, injected_out=(injected := list[Any]()),
                                     white_noise=white.take() if white is not None else None,
-                                    base=base.take())
-        calib_run = with_null_covariance(calib_run, null_dv)
+                                    base=base.take())  # injected: the flight bias's truths
+        calib_run = with_null_covariance(calib_run, null_dv, injected)
     else:  # no null: the lane's base and white noise for it are not wanted
         for later in filter(None, (base, white)):
             later.cancel()
