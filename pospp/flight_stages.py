@@ -32,12 +32,7 @@ from pospp.calib.stage import CalibrationRun, calibrate_flight
 from pospp.config import PipelineConfig
 from pospp.diagnose import null_model
 from pospp.diagnose.effects import ACCEL_SETTLING_S, effect_by_id
-from pospp.diagnose.rerun import (
-    REFINE_FRACTION,
-    gate_excess,
-    warmed,
-    warmup_fit,
-)
+from pospp.diagnose.rerun import REFINE_FRACTION, gate_excess, warmed, warmup_fit
 from pospp.io import mcap_reader
 from pospp.nav import filter as nav_filter
 from pospp.nav import tuning as nav_tuning
