@@ -62,7 +62,7 @@ from pospp.flight_stages import (
 )
 from pospp.io import mcap_reader
 from pospp.nav import filter as nav_filter
-from pospp.threads import Later, Threads
+from pospp.threads import Threads
 from pospp.units import DEG_PER_H_RADPS
 
 
@@ -156,28 +156,12 @@ def drift_under_alternative(calib_run: CalibrationRun, replays_minus_effect: lis
     return None
 
 
-def scale_factor_start(log: mcap_reader.FlightLog, config: PipelineConfig,
-                       lever_estimate: nav_filter.LeverArmEstimate | None
-                       ) -> np.ndarray | None:
-    """:func:`signature_starts`' gyro scale-factor start, at A's lever-arm estimate
-    ``lever_estimate`` as made (None: the configured lever arm; the estimate is None only when
-    A estimates the lever arm itself or the lever-arm pass failed). It needs the log and that
-    estimate alone, so a run on two threads makes it while A runs
-    (:mod:`pospp.passes_ahead`)."""
-    lever_b_m = (None if config.gnss.estimate_lever_arm or lever_estimate is None
-                 else lever_estimate.lever_b_m)
-    return _scale_factor_start(log, config, lever_b_m)
-
-
 def signature_starts(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                      config: PipelineConfig,
-                     lever_estimate: nav_filter.LeverArmEstimate | None,
-                     scale_factor: Later | None = None
+                     lever_estimate: nav_filter.LeverArmEstimate | None
                      ) -> dict[str, np.ndarray | None]:
     """A's own first estimates the diagnosis's Gauss-Newton signatures start from (None: the
-    signature at the configuration): effect id -> estimate. They need A and its lever-arm
-    estimate only, not the calibration, so a run on two threads makes them while it calibrates
-    (:mod:`pospp.passes_ahead`).
+    signature at the configuration): effect id -> estimate.
 
     The lever arm: from A's own estimate of it (lever-arm states) when it is far enough from
     the configured value (:data:`pospp.diagnose.rerun.REFINE_FRACTION`), where A's gate and
@@ -185,14 +169,12 @@ def signature_starts(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     estimate (one forward pass with scale-factor states) only when it is significant. The
     warm-up: A's pass with its dynamics where it explains A's rejections
     (:func:`_warmup_start`). The usual flight pays the scale-factor pass (docs/diagnose.md,
-    "Power"). ``scale_factor``: that start made before (a Later of :func:`scale_factor_start`
-    at the made ``lever_estimate``); None: made here."""
+    "Power")."""
     lever_b_m, p_lever = _lever_arm_and_start(log, nav, config, lever_estimate)
     gn = p_lever is not None and bool(
         np.linalg.norm(p_lever) > REFINE_FRACTION * effect_by_id("lever_arm").plausible_si)
     return {"lever_arm": p_lever if gn else None,
-            "gyro_scale_factor": _scale_factor_start(log, config, lever_b_m)
-            if scale_factor is None else scale_factor.result(),
+            "gyro_scale_factor": _scale_factor_start(log, config, lever_b_m),
             "accel_bias_change": _warmup_start(log, nav, config, lever_b_m)}
 
 
@@ -271,8 +253,7 @@ def diagnosis_reruns(calib_run: CalibrationRun, config: PipelineConfig, *,
                      starts: dict[str, np.ndarray | None] | None = None) -> DiagnosisStart:
     """The diagnosis's base for its re-runs (:func:`rerun_base`) and its first re-run
     signatures (:func:`_rerun_signatures_at_start`): the A passes that need the calibration
-    and A's lever-arm estimate but not the null realisations, so that a run on two threads
-    makes them while the null is made (:mod:`pospp.passes_ahead`). ``starts``:
+    and A's lever-arm estimate but not the null realisations. ``starts``:
     :func:`signature_starts` with the same arguments (None: made here)."""
     log_r, run_r, gains = rerun_base(log, nav, calib_run, config)  # what re-runs are made on
     a_as_configured = partial(navigate, config=config, options=rerun_options(config),

@@ -168,8 +168,7 @@ def lever_arm_passes(log: mcap_reader.FlightLog, seen: np.ndarray,
     configured value, where they stay instead of floating and leaking into the revealed ones
     (all from zero, a 1.5 m down lever that one banked turn cannot reveal bent the forward
     estimate by 0.3 m at 14 sigma: 2 false alarms in 100 clean flights, docs/qc.md). Raises
-    ValueError when A fails. It needs the log and ``seen`` alone, not A's solution
-    (:mod:`pospp.passes_ahead` starts it from a guess of ``seen`` while A runs)."""
+    ValueError when A fails."""
     rerun = replace(config, gnss=replace(config.gnss, estimate_lever_arm=True))
     opts = replace(config.filter_options(), smoother=False,
                    lever_arm_sigma_m=QC_LEVER_ARM_SIGMA_M)

@@ -1,22 +1,11 @@
-"""Freed heap memory given back to the operating system between pipeline stages (issue 18).
+"""Freed heap memory given back to the operating system between pipeline stages.
 
-glibc's allocator keeps what a stage frees in its heap (its mmap threshold grows to 32 MiB
-after large frees, so numpy's large temporaries end up on the heap too) and the process's
-resident set then only grows: on the 1.5 h, 200 Hz flight the freed memory of one stage
-stacked under the next and the run peaked at 960 MiB, against 821 MiB with the free pages
-returned at each stage's end (docs/benchmarks.md, "Speed and memory, fifth round").
-``malloc_trim(0)`` returns the free pages (all of them since glibc 2.8, not only the heap's
-top) at a cost of a few milliseconds. Elsewhere (another C library, macOS, Windows) it is a
-no-op.
-
-Threads: glibc gives each new thread that allocates a heap ("arena") of its own, up to eight
-per core, and what one thread frees stays in its arena for that thread. A run on two
-threads (the null's workers, the second lane: :mod:`pospp.passes_ahead`) then held the
-memory of each thread's largest pass at once in separate heaps: 1051-1065 MiB peak on the
-1.5 h flight, against 930-947 MiB with one heap for all threads (``MALLOC_ARENA_MAX=1``, or
-this module's call) at the same wall time (12.0-13.8 s against 11.9-13.0 s; docs/benchmarks.md,
-eighth round).
-:func:`share_one_heap` sets that limit from inside the process.
+glibc's allocator keeps what a stage frees in its heap and the process's resident set then
+only grows; :func:`release_free_heap` (``malloc_trim(0)``, a few milliseconds) returns the free
+pages at each stage's end. glibc also gives each new thread that allocates a heap ("arena") of
+its own, where what that thread frees stays: :func:`share_one_heap` (``M_ARENA_MAX`` = 1) puts
+the threads of the run's parallel loops (B's replays, the A re-runs) in one heap. Elsewhere
+(another C library, macOS, Windows) both are no-ops. Measured effect: docs/decisions.md.
 """
 
 from __future__ import annotations

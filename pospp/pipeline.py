@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
@@ -43,16 +42,14 @@ from pospp.diagnosis_stage import diagnose_calibration
 from pospp.evaluate import evaluation_rows, solution_errors
 from pospp.flight_stages import (  # the stage functions, importable from here as before
     calibrate_from_a,
-    calibration_replays,
     imu_increments,
     imu_tuning,  # noqa: F401  (re-exported: compare_sim and the tests call pipeline.imu_tuning)
     ingest,
     lever_arm_estimate,  # noqa: F401  (re-exported: the power benchmark calls it)
+    lever_arm_passes,
     lever_arm_seen,
     navigate,
-    null_base,
     null_realisations,
-    null_white_noise,
     sensor_to_body_dcm,
 )
 from pospp.io import mcap_reader, parquet_tables, report_files, run_folder, trajectory_mcap
@@ -62,18 +59,11 @@ from pospp.io.run_lock import locked
 from pospp.memory import release_free_heap, share_one_heap
 from pospp.nav import events as sensor_events
 from pospp.nav import filter as nav_filter
-from pospp.passes_ahead import (
-    checks_ahead,
-    lever_re_estimate,
-    passes_ahead,
-    passes_on_a,
-    passes_on_log,
-)
 from pospp.qc.checks import comparison_text
 from pospp.qc.stage import QualityReport, qc_columns, quality_checks, worst_status
 from pospp.report import figures
 from pospp.report.html import render_report
-from pospp.threads import Later, available_cores
+from pospp.threads import available_cores
 from pospp.units import t_s_from_time_ns
 
 ProgressFn = Callable[[str, float], None]
@@ -190,12 +180,9 @@ def process_flight(
     force : bool
         Replace an earlier pospp run in ``out_dir``.
     threads : int, optional
-        A re-runs (null realisations, the diagnosis's) made at once; above 1, A's passes that
-        do not need the null (lever arm, scale factor, compensated A, the diagnosis's first
-        re-runs), the QC checks and the trajectory MCAP also run on a second lane alongside
-        the calibration, the null, the diagnosis and the tables (:mod:`pospp.passes_ahead`).
-        The cores this process may use when None (:func:`pospp.threads.available_cores`). The
-        outputs do not depend on it.
+        Threads of the embarrassingly parallel loops (B's replays, the null's and the
+        diagnosis's A re-runs); None: the cores this process may use
+        (:func:`pospp.threads.available_cores`). The outputs do not depend on it.
 
     Returns
     -------
@@ -244,22 +231,14 @@ def _write_failed(mcap_path: str | Path, sha: str, config: PipelineConfig, out: 
 
 def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
                 book: _Progress, threads: int) -> RunOutcome:
-    """Every stage of :func:`process_flight`, writing into the (staging) folder ``out``; with
-    more than one thread, with a second lane (one worker thread) for the A passes that run
-    alongside the calibration and the null realisations (:mod:`pospp.passes_ahead`)."""
-    if threads <= 1:
-        return _stages(mcap_path, sha, config, out, book, threads, None)
-    share_one_heap()  # the threads' passes in one heap, not one each (pospp.memory)
-    lane = ThreadPoolExecutor(max_workers=1, thread_name_prefix="pospp-lane")
-    try:
-        return _stages(mcap_path, sha, config, out, book, threads, lane)
-    finally:  # a failed run: the pass running ends, the ones not started never do
-        lane.shutdown(wait=True, cancel_futures=True)
-
-
-def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
-            book: _Progress, threads: int, lane: ThreadPoolExecutor | None) -> RunOutcome:
-    """:func:`_run_stages` with its second lane (None: one thread)."""
+    """Every stage of :func:`process_flight` in the method's order, writing into the (staging)
+    folder ``out``: ingest -> navigate (A) -> calibrate (legs, B, pairs, least squares) ->
+    null (B minus A's null, the calibration's covariance) -> compensate -> diagnose -> qc ->
+    write. Each stage is a function of the results before it; ``threads`` is used only
+    inside the embarrassingly parallel loops (B's replays, the null's and the diagnosis's
+    A re-runs)."""
+    if threads > 1:
+        share_one_heap()  # the loops' threads in one heap, not one each (pospp.memory)
     meta = {"input_file": run_folder.display_path(mcap_path), "input_sha256": sha,
             "config": config.to_dict()}
     summary: dict[str, Any] = {"input_file": meta["input_file"],
@@ -298,14 +277,6 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
         book.messages.append(outputs.issue_message(issue))
     summary.update(outputs.log_summary(log))
 
-    # the null's IMU white noise needs the log alone: on the second lane while A runs
-    white = Later(lane, null_white_noise, log, config) \
-        if config.pairs.null_realisations > 0 else None
-
-    # A's lever-arm and scale-factor passes need the log and the axes A will reveal (guessed
-    # from the GNSS track, checked against A's attitude): on the second lane while A runs
-    guess = passes_on_log(log, config, lane)
-
     # --- algorithm A --------------------------------------------------------------------------
     book.stage("navigate")
     epoch_ns = int(log.imu.time_ns[0])
@@ -321,64 +292,42 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
     if nav.smoothed is not None:
         solutions["smoothed"] = nav.smoothed
 
-    ahead = passes_on_a(log, nav, config, lane, guess)
-
     # --- calibration: legs, B, pairs, least squares -------------------------------------------
     book.stage("calibrate")
     imu = imu_increments(log)
-    made = calibration_replays(imu, nav, config, threads)
-    # the null's base needs the legs and B's replays, not the fit: on the lane while it runs
-    base = Later(lane, null_base, log, nav, made.legs, made.replays, config) \
-        if config.pairs.null_realisations > 0 and made.replays else None
-    calib_run, solution_a = calibrate_from_a(imu, nav, config, made, threads)
-    del made
+    calib_run, solution_a = calibrate_from_a(imu, nav, config, threads=threads)
     for text in calib_run.messages:
         book.note("warning", "calibrate", text)
     if not calib_run.calibrated:
         book.note("warning", "calibrate", calib_run.reason)
     status = "ok" if calib_run.calibrated else "partial"
 
-    ahead = passes_ahead(ahead, log, nav, calib_run, config, lane, threads)
-
     # --- null realisations of B minus A: the calibration's sigmas and the diagnosis's null ----
     null_dv = None
-    if calib_run.calibrated and base is not None:
+    if calib_run.calibrated and config.pairs.null_realisations > 0 and calib_run.replays:
         book.stage("null_realisations")
         null_dv = null_realisations(log, nav, calib_run, config, config.pairs.null_realisations,
-                                    threads=threads, injected_out=(injected := list[Any]()),
-                                    white_noise=white.take() if white is not None else None,
-                                    base=base.take())  # injected: the flight bias's truths
-        calib_run = with_null_covariance(calib_run, null_dv, injected)
-    else:  # no null: the lane's base and white noise for it are not wanted
-        for later in filter(None, (base, white)):
-            later.cancel()
-
-    ahead = checks_ahead(ahead, log, nav, calib_run, config, lane)
+                                    threads=threads, injected_out=(injected := list[Any]()))
+        calib_run = with_null_covariance(calib_run, null_dv, injected)  # injected: the truths
 
     # --- compensation: A re-run with the calibrated gyro bias ---------------------------------
     book.stage("compensate")
-    if ahead.compensated is not None:
-        comp = ahead.compensated.take()
+    if calib_run.calibrated and config.compensation.rerun_filter:
+        comp = navigate(log, config, gyro_bias_correction_b_radps=calib_run.gyro_bias_b_radps)
         solutions["compensated"] = comp.smoothed if comp.smoothed is not None else comp.forward
         del comp  # the rest of the second A pass (forward, biases, innovations) is not used
-    # the trajectory MCAP's messages on the lane while the run diagnoses (one thread: in the
-    # write stage); its metadata record, with the run's status, is written there
-    calib_tables = calib_run.tables(epoch_ns)
     best_name = next(k for k in ("compensated", "smoothed", "forward") if k in solutions)
-    mcap = Later(lane, trajectory_mcap.trajectory_messages, solutions[best_name], epoch_ns,
-                 rate_hz=config.outputs.mcap_rate_hz, legs=calib_tables.get("legs")
-                 ) if config.outputs.mcap else None
 
     # --- diagnosis -----------------------------------------------------------------------------
     book.stage("diagnose")
     # A's lever-arm estimate, made once: the diagnosis starts from it and QC checks it
-    lever = ahead.lever.result()
+    lever = lever_re_estimate(log, lever_arm_seen(nav), config)
     diagnosis = None
-    if ahead.diagnosis is not None:
+    if calib_run.calibrated and config.outputs.diagnose:
         try:
             diagnosis = diagnose_calibration(calib_run, imu, solution_a, config, log=log, nav=nav,
                                              null_dv=null_dv, lever_estimate=lever[0],
-                                             threads=threads, start=ahead.diagnosis.take())
+                                             threads=threads)
             book.note("info", "diagnose", f"p-values calibrated on {diagnosis.null_model}")
             if diagnosis.location is not None:  # "unexplained": where the gap sits (issue 12)
                 book.note("warning", "diagnose", diagnosis.location.text)
@@ -388,8 +337,7 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
 
     # --- quality checks: the run is ok only when every check passes (docs/qc.md) -------------
     book.stage("qc")
-    report = quality_control(log, nav, calib_run, config, book, lever=lever,
-                             checks=ahead.checks.take() if ahead.checks is not None else None)
+    report = quality_control(log, nav, calib_run, config, book, lever=lever)
     status = worst_status(status, report.status)
 
     # --- outputs -------------------------------------------------------------------------------
@@ -400,6 +348,7 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
     tables["qc"] = qc_columns(report, epoch_ns)
     summary["qc_failed_checks"] = report.failed_names
     summary["qc_suggestions"] = report.suggestions
+    calib_tables = calib_run.tables(epoch_ns)
     tables.update(calib_tables)
     if diagnosis is not None:
         tables["diagnosis"] = diagnosis_columns(diagnosis)
@@ -412,14 +361,15 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
     summary.update(outputs.with_sensor_axes(calib_run.summary(), c_bs))
     summary.update(outputs.diagnosis_summary(diagnosis.steps if diagnosis is not None else None))
     summary["calibration_reason"] = calib_run.reason
-    if mcap is not None:
-        mcap.take().finish(out / "trajectory.mcap", {
+    if config.outputs.mcap:
+        trajectory_mcap.trajectory_messages(
+            solutions[best_name], epoch_ns, rate_hz=config.outputs.mcap_rate_hz,
+            legs=calib_tables.get("legs")).finish(out / "trajectory.mcap", {
             "input_file": meta["input_file"], "input_sha256": sha, "status": status,
             "solution": best_name})
     # the report reads the tables back: the run's arrays are let go first, so that it
     # reuses their memory instead of adding to the peak (1.5 h flight: 110 MiB)
-    del log, nav, imu, solution_a, calib_run, null_dv, diagnosis, solutions, tables, ahead, mcap
-    del white, calib_tables
+    del log, nav, imu, solution_a, calib_run, null_dv, diagnosis, solutions, tables, calib_tables
     return finish(status, report=config.outputs.report)
 
 
@@ -438,26 +388,37 @@ def _event_poses(log: mcap_reader.FlightLog, solution: nav_filter.NavSolution, n
     return outputs.events_table(poses, log.events_ns, name)
 
 
+def lever_re_estimate(log: mcap_reader.FlightLog, seen: np.ndarray, config: PipelineConfig
+                      ) -> tuple[nav_filter.LeverArmEstimate | None, str | None]:
+    """(:func:`pospp.flight_stages.lever_arm_passes`' estimate, None), or (None, why A
+    failed); (None, None) when A estimates the lever arm itself (``[gnss]
+    estimate_lever_arm``)."""
+    if config.gnss.estimate_lever_arm:
+        return None, None
+    try:
+        return lever_arm_passes(log, seen, config), None
+    except ValueError as exc:
+        return None, str(exc)
+
+
 def quality_control(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                     calib_run: CalibrationRun | None, config: PipelineConfig,
                     book: _Progress | None = None, *,
-                    lever: tuple[nav_filter.LeverArmEstimate | None, str | None] | None = None,
-                    checks: QualityReport | None = None) -> QualityReport:
+                    lever: tuple[nav_filter.LeverArmEstimate | None, str | None] | None = None
+                    ) -> QualityReport:
     """The QC stage (pospp.qc): every check, with the lever arm re-estimated by A.
 
     Unless A already estimated it, the lever arm is estimated by one more forward pass of A
     with lever-arm states (:func:`lever_arm_estimate`; about a third of A's time). Failed
     checks are noted in ``book`` (stage "qc"). ``lever``: that estimate and why it failed, when
-    already made (:func:`pospp.passes_ahead.lever_re_estimate`); None: made here.
-    ``checks``: the checks already made with that estimate
-    (:func:`pospp.passes_ahead.checks_ahead`); None: made here.
+    already made (:func:`lever_re_estimate`); None: made here.
     """
     estimate, failure = (lever_re_estimate(log, lever_arm_seen(nav), config) if lever is None
                          else lever)
     if failure is not None and book is not None:
         book.note("warning", "qc", f"lever arm not re-estimated: {failure}")
     cin = config.input
-    report = checks if checks is not None else quality_checks(
+    report = quality_checks(
         log, nav, calib_run, config, lever_estimate=estimate,
         c_bs=sensor_to_body_dcm(cin.sensor_frame, cin.mounting_rpy_deg))
     if book is not None:

@@ -213,7 +213,7 @@ def compensate_legs(
     history_hold : bool
         False: each IMU interval gets ``gyro_bias_history`` interpolated at its middle
         instead (a smoothed history, which is not causal anyway).
-    threads : int or SharedWork
+    threads : int
         Legs replayed at once (B's kernels release the GIL; the same replays at any number).
     """
     def one(item: tuple[int, LegReplay]) -> tuple[LegReplay, LegImprovement]:
@@ -272,7 +272,7 @@ class ModeInputs:
         ``gyro_sigma_b_radps``; ``smoothed``: a :class:`ForwardBiases`).
     causal_prior_scale : float
         ``causal``: factor on the calibrated prior's sigma.
-    threads : int or SharedWork
+    threads : int
         Replays made at once.
     """
 

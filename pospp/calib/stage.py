@@ -295,7 +295,7 @@ def calibrate_flight(
         :func:`pospp.calib.replay.replay_legs` of ``legs`` (given with them) with
         ``replay_cfg``, already made (a run on two threads starts the null's base from them
         while it calibrates); made here when None.
-    threads : int or SharedWork
+    threads : int
         B's replays before and after the compensation made that many legs at once.
     leg_refusals : Mapping of int to str, optional
         Legs not replayed, with why (reference A not GNSS-aided): in their pairs' reasons.

@@ -146,7 +146,7 @@ def rerun_signatures(log, nav, calib_run, config, effect_ids=RERUN_EFFECTS, *,
         A as configured (:data:`Navigate`).
     accel_settling_s : float
         Warm-up time constant of ``accel_bias_change`` [s] (the workflow's).
-    threads : int or SharedWork
+    threads : int
         An effect's A re-runs made at once (:func:`pospp.threads.map_in_threads`; the
         result does not depend on it).
 

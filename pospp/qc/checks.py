@@ -23,7 +23,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from pospp import earth
 from pospp.distributions import chi2_ppf, poisson_isf
-from pospp.units import DEG_PER_H_RADPS, G0_MPS2, NS_PER_S
+from pospp.units import DEG_PER_H_RADPS, NS_PER_S
 
 STATUS_ORDER = ("ok", "partial", "degraded", "failed")
 """Run statuses from best to worst."""
@@ -415,36 +415,6 @@ def lever_arm_observable(rpy_rad: ArrayLike) -> NDArray:
     tilt_span = math.degrees(float(max(np.ptp(rpy[:, 0]), np.ptp(rpy[:, 1]))))
     h = yaw_span >= LEVER_ARM_MIN_YAW_SPAN_DEG
     return np.array([h, h, tilt_span >= LEVER_ARM_MIN_TILT_SPAN_DEG])
-
-
-TRACK_MIN_SPEED_MPS = 5.0
-""":func:`lever_arm_observable_from_track` reads the course only above this speed [m/s]."""
-
-
-def lever_arm_observable_from_track(time_s: ArrayLike, v_n_mps: ArrayLike) -> NDArray:
-    """:func:`lever_arm_observable` of a rough attitude made from a GNSS velocity track (time
-    [s], NED velocity [m/s]) before algorithm A has run, (3,) bool.
-
-    At the records faster than TRACK_MIN_SPEED_MPS: yaw the course ``atan2(v_E, v_N)``,
-    pitch the flight-path angle ``atan2(-v_D, v_h)``, roll the bank of a coordinated turn
-    ``atan(v_h dcourse/dt / g0)`` (standard gravity). A guess only (no crab angle, angle of
-    attack or slipping turn): :mod:`pospp.passes_ahead` starts A's lever-arm pass from it
-    while A runs and keeps that pass only when A's own attitude reveals the same axes.
-    """
-    t = np.asarray(time_s, dtype=float)
-    v = np.asarray(v_n_mps, dtype=float)
-    v_h = np.hypot(v[:, 0], v[:, 1]) if v.shape[0] else np.zeros(0)
-    moving = v_h > TRACK_MIN_SPEED_MPS
-    if np.count_nonzero(moving) < 2:
-        return np.zeros(3, dtype=bool)
-    t, v, v_h = t[moving], v[moving], v_h[moving]
-    yaw = np.unwrap(np.arctan2(v[:, 1], v[:, 0]))
-    dt = np.diff(t)
-    rate = np.zeros_like(yaw)
-    rate[1:] = np.diff(yaw) / np.where(dt > 0, dt, np.inf)
-    roll = np.arctan(v_h * rate / G0_MPS2)
-    pitch = np.arctan2(-v[:, 2], v_h)
-    return lever_arm_observable(np.column_stack([roll, pitch, yaw]))
 
 
 def lever_arm(configured_b_m: ArrayLike, estimated_b_m: ArrayLike, sigma_b_m: ArrayLike,

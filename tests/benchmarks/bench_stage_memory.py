@@ -9,7 +9,7 @@ Default MCAP: the 1.5 h, 200 Hz flight of bench_pipeline.py (/tmp/pospp_bench, m
 the process's resident set (VmRSS), its peak so far (VmHWM) and, with ``--trace``, what
 tracemalloc saw allocated then and at its peak within the stage (numpy's arrays included;
 tracing slows the run). One thread by default, so that one A pass is in flight at a time;
-``--threads 2`` shows what the second lane and the null's workers hold at once.
+``--threads 2`` shows what the parallel loops (B's replays, the null's A re-runs) hold at once.
 Results: docs/benchmarks.md, "Speed and memory, fifth round".
 """
 
@@ -39,7 +39,7 @@ def main() -> None:
     ap.add_argument("--pipeline", default=str(REPO / "pipelines" / "flight.toml"))
     ap.add_argument("--trace", action="store_true", help="also tracemalloc (slower)")
     ap.add_argument("--threads", type=int, default=1,
-                    help="the run's threads (above 1: the second lane and the null's workers "
+                    help="the run's threads (above 1: the parallel loops' workers "
                          "hold their passes at once)")
     a = ap.parse_args()
     from pospp import pipeline

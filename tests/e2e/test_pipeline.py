@@ -113,8 +113,7 @@ def test_trajectory_mcap_reads_back(sample_run):
 
 @pytest.mark.slow
 def test_outputs_are_deterministic(sample_run, tmp_path):
-    # and independent of the threads making the A re-runs and of the second lane that makes
-    # A's other passes alongside the calibration and the null (sample_run: 2 threads)
+    # and independent of the threads making the loops' A re-runs (sample_run: 2 threads)
     again = tmp_path / "again"
     code, text = _cli("run", str(SAMPLE), "-p", str(SAMPLE_PIPELINE), "-o", str(again),
                       "--threads", "1")
@@ -327,11 +326,11 @@ def test_batch_on_a_dask_scheduler(sample_log, tmp_path):
     assert sorted(man.file) == sorted(str(f) for f in files)
 
 
-# ------------------------------------------------------------------ the second lane's failures
+# ------------------------------------------------------------------ a stage's failures
 
 
 @pytest.fixture(scope="module")
-def lane_config():
+def small_config():
     """The sample pipeline, three null realisations, no report or trajectory MCAP."""
     from pospp.config import load_config
 
@@ -340,78 +339,44 @@ def lane_config():
                    outputs=replace(cfg.outputs, report=False, mcap=False))
 
 
-def _no_lane_thread_left() -> bool:
+@pytest.mark.slow
+def test_a_failed_compensation_pass_fails_the_run_in_its_stage(small_config, tmp_path,
+                                                               monkeypatch):
+    # an unexpected error in the compensated A pass fails the run: a failed run folder that
+    # says why and in which stage, and no thread of the run's loops left behind
     import threading
 
-    return not any(t.name.startswith("pospp-lane") for t in threading.enumerate())
+    from pospp import pipeline
 
-
-@pytest.mark.slow
-def test_a_failed_pass_on_the_second_lane_fails_the_run_as_in_its_stage(lane_config, tmp_path,
-                                                                         monkeypatch):
-    # two threads: the compensated A runs on the lane alongside the null; an unexpected
-    # error there must fail the run at its stage (a failed run folder saying why) and leave
-    # no thread behind, as it does on one thread where the pass runs in its stage
-    from pospp import passes_ahead, pipeline
+    real = pipeline.navigate
 
     def broken(*args, **kwargs):
-        raise RuntimeError("injected: the compensated pass broke")
+        if "gyro_bias_correction_b_radps" in kwargs:
+            raise RuntimeError("injected: the compensated pass broke")
+        return real(*args, **kwargs)
 
-    monkeypatch.setattr(passes_ahead, "navigate", broken)
-    for threads in (2, 1):
-        out = tmp_path / f"t{threads}"
-        with pytest.raises(RuntimeError, match="injected"):
-            pipeline.process_flight(SAMPLE, lane_config, out, threads=threads)
-        assert _no_lane_thread_left()
-        summary = parquet_tables.read_table(out / "summary.parquet").iloc[0]
-        msgs = parquet_tables.read_table(out / "messages.parquet")
-        assert summary.status == "failed"
-        assert msgs.text.str.contains("injected: the compensated pass broke").any()
+    monkeypatch.setattr(pipeline, "navigate", broken)
+    before = threading.active_count()
+    with pytest.raises(RuntimeError, match="injected"):
+        pipeline.process_flight(SAMPLE, small_config, tmp_path / "out", threads=2)
+    assert threading.active_count() == before
+    summary = parquet_tables.read_table(tmp_path / "out" / "summary.parquet").iloc[0]
+    msgs = parquet_tables.read_table(tmp_path / "out" / "messages.parquet")
+    assert summary.status == "failed"
+    assert msgs.text.str.contains("injected: the compensated pass broke").any()
+    assert summary.stage_compensate_s >= 0 and "stage_diagnose_s" not in summary
 
 
 @pytest.mark.slow
-def test_a_failed_diagnosis_re_run_on_the_lane_is_a_partial_run(lane_config, tmp_path,
-                                                                 monkeypatch):
-    # the diagnosis's first re-runs on the lane: their ValueError is the stage's "no
-    # diagnosis" (status partial), on two threads as on one
-    from pospp import passes_ahead, pipeline
+def test_a_failed_diagnosis_re_run_is_a_partial_run(small_config, tmp_path, monkeypatch):
+    # the diagnosis's re-runs failing with a ValueError: the stage's "no diagnosis" (partial)
+    from pospp import diagnosis_stage, pipeline
 
     def broken(*args, **kwargs):
         raise ValueError("injected: A failed on the re-run base")
 
-    monkeypatch.setattr(passes_ahead, "diagnosis_reruns", broken)
-    for threads in (2, 1):
-        outcome = pipeline.process_flight(SAMPLE, lane_config, tmp_path / f"t{threads}",
-                                          threads=threads)
-        assert outcome.status == "partial" and _no_lane_thread_left()
-        assert outcome.messages.text.str.contains(
-            "no diagnosis: injected: A failed on the re-run base").any()
-
-
-@pytest.mark.slow
-def test_a_wrong_guess_of_the_revealed_axes_makes_the_lever_arm_pass_again(lane_config,
-                                                                           tmp_path,
-                                                                           monkeypatch):
-    # two threads start A's lever-arm and scale-factor passes while A runs, for the axes a
-    # rough attitude from the GNSS track reveals; guessed wrong (none, where the sample's A
-    # reveals all three), they are made again for A's axes: the tables are one thread's
-    from pospp import passes_ahead, pipeline
-
-    made_for: list[list[bool]] = []
-    real = passes_ahead.lever_arm_passes
-
-    def recording(log, seen, config):
-        made_for.append(np.asarray(seen).tolist())
-        return real(log, seen, config)
-
-    monkeypatch.setattr(passes_ahead, "lever_arm_observable_from_track",
-                        lambda t_s, v_n_mps: np.zeros(3, dtype=bool))
-    monkeypatch.setattr(passes_ahead, "lever_arm_passes", recording)
-    for threads in (2, 1):
-        outcome = pipeline.process_flight(SAMPLE, lane_config, tmp_path / f"t{threads}",
-                                          threads=threads)
-        assert outcome.status == "ok" and _no_lane_thread_left()
-    assert made_for.count([True, True, True]) == 2  # once per run: A's axes
-    assert made_for.count([False, False, False]) <= 1  # the guess, if not cancelled first
-    _assert_same_tables(tmp_path / "t2", tmp_path / "t1",
-                        [n for n in TABLES if (tmp_path / "t1" / f"{n}.parquet").is_file()])
+    monkeypatch.setattr(diagnosis_stage, "diagnosis_reruns", broken)
+    outcome = pipeline.process_flight(SAMPLE, small_config, tmp_path / "out", threads=2)
+    assert outcome.status == "partial"
+    assert outcome.messages.text.str.contains(
+        "no diagnosis: injected: A failed on the re-run base").any()

@@ -34,7 +34,7 @@ FUNCTION_EXCEPTIONS = {
                                        "fits, compensation, drift source) in one readable list",
     "diagnose/workflow.py:diagnose_replays": "the diagnosis's step loop (screen, candidates, "
                                              "nested tests, closing lack of fit) in one place",
-    "pipeline.py:_stages": "the stage runner: each stage's call, its clock and its "
+    "pipeline.py:_run_stages": "the stage runner: each stage's call, its clock and its "
                                "failure record, in the order a run takes",
 }
 

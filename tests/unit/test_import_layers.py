@@ -31,7 +31,6 @@ LAYERS: tuple[frozenset[str], ...] = (
     frozenset({"config"}),
     frozenset({"flight_stages"}),
     frozenset({"diagnosis_stage"}),
-    frozenset({"passes_ahead"}),
     frozenset({"pipeline", "convert", "api"}),
     frozenset({"batch", "compare_sim"}),
     frozenset({"cli"}),

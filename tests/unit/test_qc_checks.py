@@ -264,24 +264,6 @@ def test_lever_arm_counts_only_the_axes_the_attitude_reveals():
     assert qc.lever_arm_observable(turn).all()
 
 
-def test_the_track_guesses_the_axes_a_survey_flight_reveals():
-    """lever_arm_observable_from_track from GNSS velocities alone: a straight level leg
-    reveals nothing, a climb of 20 deg the down axis only, a coordinated 180 deg turn at
-    60 m/s and 4 deg/s (bank 23 deg, above the 15 deg tilt bar) all three; a slow turn on the
-    ground (4 m/s) is not read."""
-    t = np.arange(0.0, 120.0, 1.0)
-    v = np.tile([60.0, 0.0, 0.0], (t.size, 1))
-    assert not qc.lever_arm_observable_from_track(t, v).any()
-    climb = v.copy()
-    climb[40:80] = [60.0 * math.cos(0.35), 0.0, -60.0 * math.sin(0.35)]
-    assert qc.lever_arm_observable_from_track(t, climb).tolist() == [False, False, True]
-    course = np.clip(np.radians(4.0) * (t - 30.0), 0.0, math.pi)
-    turn = 60.0 * np.column_stack([np.cos(course), np.sin(course), np.zeros(t.size)])
-    assert qc.lever_arm_observable_from_track(t, turn).all()
-    assert not qc.lever_arm_observable_from_track(t, turn / 15.0).any()
-    assert not qc.lever_arm_observable_from_track(t[:0], v[:0]).any()
-
-
 def test_completeness_calibration_compensation_and_config():
     assert qc.data_complete(True, 0, "", 100.0, None).passed
     cut = qc.data_complete(False, 1, "truncated at byte 8931240", 1316.0, None)

@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import threading
 import time
-from concurrent.futures import CancelledError, ThreadPoolExecutor
 
 import pytest
 
-from pospp.threads import Later, SharedWork, available_cores, first_kept, map_in_threads
+from pospp.threads import available_cores, first_kept, map_in_threads
 
 
 def test_results_in_the_items_order_whatever_finishes_first():
@@ -86,96 +85,3 @@ def test_first_kept_takes_the_same_items_at_any_thread_count():
 
     with pytest.raises(ValueError, match="three"):
         first_kept(fail_on_three, iter(range(10)), 8, 2)
-
-
-def test_later_without_a_pool_is_made_where_it_is_used_once():
-    calls: list[int] = []
-
-    def make(x: int, *, y: int) -> int:
-        calls.append(x)
-        return x + y
-
-    later = Later(None, make, 2, y=3)
-    assert calls == []  # nothing made until asked for (a stage that does not use it)
-    assert later.result() == 5 and later.result() == 5 and calls == [2]
-    assert later.take() == 5
-    with pytest.raises(RuntimeError, match="taken"):
-        later.result()
-    with pytest.raises(RuntimeError, match="taken"):
-        later.take()
-
-
-def test_later_with_a_pool_runs_alongside_and_raises_where_used():
-    started = threading.Event()
-
-    def make() -> str:
-        started.set()
-        return threading.current_thread().name
-
-    def fail() -> None:
-        raise ValueError("the pass failed")
-
-    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="lane") as pool:
-        later, bad = Later(pool, make), Later(pool, fail)
-        assert started.wait(5.0)  # started without being asked for
-        assert later.take().startswith("lane")
-        with pytest.raises(ValueError, match="the pass failed"):
-            bad.result()
-    assert Later(None, lambda: None).take() is None  # None is a value, taken once
-
-
-def test_a_cancelled_later_is_not_made_and_says_so():
-    """A Later no one will ask for (a speculative pass whose guess A refuted): not made when
-    its pool has not started it, never made without one; asking for it raises."""
-    release, made = threading.Event(), []
-    with ThreadPoolExecutor(max_workers=1) as pool:
-        busy = Later(pool, release.wait, 5.0)  # holds the lane's one worker
-        queued = Later(pool, made.append, "queued")
-        queued.cancel()
-        release.set()
-        assert busy.result() is True
-    assert made == []
-    with pytest.raises(CancelledError):
-        queued.result()
-    lazy = Later(None, made.append, "lazy")
-    lazy.cancel()
-    with pytest.raises(CancelledError):
-        lazy.result()
-    assert made == []
-
-
-def test_shared_work_is_joined_by_the_thread_waiting_for_it():
-    """The lane's calls (SharedWork.map on the pool's thread) are helped by the thread that
-    waits for the lane's result: the lane's first call can only end once another thread
-    ran a second; every call runs once, the results in the items' order."""
-    shared, ran, gate = SharedWork(), {}, threading.Event()
-
-    def item(x):
-        if x == 0:
-            assert gate.wait(10.0)  # a helper has run another item
-        else:
-            gate.set()
-        ran.setdefault(x, []).append(threading.current_thread().name)
-        return x * x
-
-    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="lane") as pool:
-        later = Later(pool, shared.map, item, range(5), helped=shared)
-        assert later.take() == [0, 1, 4, 9, 16]
-    assert sorted(ran) == [0, 1, 2, 3, 4] and all(len(v) == 1 for v in ran.values())
-    assert ran[0][0].startswith("lane")
-    assert any(not v[0].startswith("lane") for v in ran.values())
-
-
-def test_shared_work_raises_the_first_error_in_order_after_every_call_and_alone_runs_all():
-    shared, ran = SharedWork(), []
-
-    def item(x):
-        ran.append(x)
-        if x in (1, 3):
-            raise ValueError(f"item {x}")
-        return x
-
-    with pytest.raises(ValueError, match="item 1"):
-        map_in_threads(item, range(5), shared)  # no helper: all in this thread
-    assert ran == [0, 1, 2, 3, 4]
-    assert map_in_threads(lambda x: -x, [2, 5], shared) == [-2, -5]
