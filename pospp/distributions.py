@@ -5,7 +5,7 @@ Each is the function :mod:`scipy.stats` evaluates for it (scipy 1.17's ``chi2._p
 ``poisson.isf``), so the values are the same; tests/unit/test_distributions.py checks them
 against scipy.stats on grids. Why not scipy.stats itself: importing it costs every run
 0.3 s and 45 MiB of resident memory (``python -X importtime -c "import pospp.pipeline"``;
-docs/benchmarks.md, "Speed and memory, sixth round"), for five scalar functions.
+docs/history/speed_rounds.md, "Speed and memory, sixth round"), for five scalar functions.
 """
 
 from __future__ import annotations

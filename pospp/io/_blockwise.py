@@ -2,7 +2,8 @@
 
 Private to :mod:`pospp.io.mcap_reader`'s checks: they give the same bits as numpy's whole-array
 expressions (tests/unit/test_mcap_reader_batches.py), without an (N, 3) temporary, so that
-reading a log peaks near its decoded arrays (docs/benchmarks.md, "The reader, third round").
+reading a log peaks near its decoded arrays (docs/history/speed_rounds.md, "The reader, third
+round").
 """
 
 from __future__ import annotations

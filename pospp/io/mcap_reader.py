@@ -33,7 +33,7 @@ is also decoded by ``mcap_ros2``'s generic decoder and the two must agree bit fo
 that layout falls back to the generic decoder; messages that are not little-endian plain CDR
 always go through it. The IMU vectors are rotated to the body frame in place, and the checks
 keep their (N, 3) temporaries a block long, so that the peak is close to the decoded arrays
-plus one chunk (docs/benchmarks.md, "The reader, third round").
+plus one chunk (docs/history/speed_rounds.md, "The reader, third round").
 
 Checks
 ------

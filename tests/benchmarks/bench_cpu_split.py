@@ -11,7 +11,7 @@ Default MCAP: the 1.5 h, 200 Hz flight of bench_pipeline.py (/tmp/pospp_bench, m
 with a timer (``time.thread_time``; one thread, so the run's CPU is the main thread's): a
 profiler such as cProfile inflates Python-heavy code several times over (the trajectory
 MCAP's messages: 0.97 s under cProfile, 0.24 s without) and would mislead. Numba's cache must
-be warm (one run first). Results: docs/benchmarks.md, "Speed, eleventh round".
+be warm (one run first). Results: docs/history/speed_rounds.md, "Speed, eleventh round".
 """
 
 from __future__ import annotations

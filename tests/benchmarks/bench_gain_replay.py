@@ -9,7 +9,7 @@ gains from the switch its rule picks (:func:`pospp.nav.filter_state.switch_epoch
 each ``--switch-s`` after the alignment (0: the replay from the start). Prints each one's RMS
 gap to the full response as a fraction of the response, three draws. ``survey``: a short
 simulated three-leg survey whose first leg starts 84 s after a static alignment; ``sample``:
-the bundled sample flight. Results: docs/benchmarks.md, "Speed, seventh round".
+the bundled sample flight. Results: docs/history/speed_rounds.md, "Speed, seventh round".
 """
 
 from __future__ import annotations

@@ -10,7 +10,7 @@ the process's resident set (VmRSS), its peak so far (VmHWM) and, with ``--trace`
 tracemalloc saw allocated then and at its peak within the stage (numpy's arrays included;
 tracing slows the run). One thread by default, so that one A pass is in flight at a time;
 ``--threads 2`` shows what the parallel loops (B's replays, the null's A re-runs) hold at once.
-Results: docs/benchmarks.md, "Speed and memory, fifth round".
+Results: docs/history/speed_rounds.md, "Speed and memory, fifth round".
 """
 
 from __future__ import annotations
