@@ -31,6 +31,8 @@ from __future__ import annotations
 import datetime as dt
 import json
 import xml.etree.ElementTree as ET
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -42,17 +44,11 @@ from pospp.io import parquet_tables, run_folder
 from pospp.io.files import atomic_path
 from pospp.io.run_lock import locked
 
-__all__ = ["FORMATS", "LEAP_SECONDS", "SBET_FIELDS", "export_run", "gps_week_seconds",
-           "sbet_records", "write_csv", "write_geojson", "write_kml", "write_sbet"]
+__all__ = ["EXPORT_FORMATS", "FORMATS", "LEAP_SECONDS", "SBET_FIELDS", "ExportFormat",
+           "export_run", "gps_week_seconds", "sbet_records", "write_csv", "write_geojson",
+           "write_kml", "write_sbet"]
 
-FORMATS = ("sbet", "csv", "geojson", "kml")
 SOLUTIONS = ("best", "compensated", "smoothed", "forward")
-EXTENSIONS = {"sbet": "out", "csv": "csv", "geojson": "geojson", "kml": "kml"}
-"""File extension of each format (SBET files are ``*.out``, as POSPac names them)."""
-DEFAULT_NAMES = frozenset({"trajectory.out", "trajectory.csv", "trajectory.geojson",
-                           "trajectory.kml", "events.out", "events.csv", "events.geojson",
-                           "events.kml"})
-"""The files ``export_run`` writes into a run folder when no output is given."""
 
 SBET_FIELDS = (
     "gps_sow_s", "lat_rad", "lon_rad", "height_m", "vx_mps", "vy_mps", "vz_mps", "roll_rad",
@@ -206,6 +202,40 @@ def write_kml(path: str | Path, track: pd.DataFrame | None,
     return out
 
 
+@dataclass(frozen=True)
+class ExportFormat:
+    """One export format: a row of :data:`EXPORT_FORMATS`.
+
+    ``records``: ``write(path, rows)`` of one table's rows (a solution's epochs, or the
+    events), thinned by ``--rate``; otherwise ``write(path, track, legs, events)`` of map
+    features (the track and legs None for ``--events``)."""
+
+    extension: str
+    """File extension of the default output name ``RUN_DIR/<trajectory|events>.<ext>``."""
+    records: bool
+    write: Callable[..., Path]
+    help: str
+    """One line for ``pospp export --help``."""
+
+
+EXPORT_FORMATS: dict[str, ExportFormat] = {
+    "sbet": ExportFormat("out", True, write_sbet,
+                         "Applanix SBET binary (*.out, as POSPac names it)"),
+    "csv": ExportFormat("csv", True, write_csv, "GPS week/seconds of week, UTC, every column"),
+    "geojson": ExportFormat("geojson", False, write_geojson,
+                            "the track, the legs and the events (RFC 7946)"),
+    "kml": ExportFormat("kml", False, write_kml,
+                        "the same features as KML Placemarks, clamped to the ground"),
+}
+"""The export formats by name (docs/formats.md, "Exports"): a new one is a row here, its
+writer, its test and its doc line."""
+
+FORMATS = tuple(EXPORT_FORMATS)
+DEFAULT_NAMES = frozenset(f"{data}.{f.extension}" for f in EXPORT_FORMATS.values()
+                          for data in ("trajectory", "events"))
+"""The files ``export_run`` writes into a run folder when no output is given."""
+
+
 def _thin(table: pd.DataFrame, rate_hz: float | None) -> pd.DataFrame:
     """Every k-th row, k = round(1 / (rate_hz * median interval)) (all when None)."""
     if rate_hz is None or len(table) < 2:
@@ -234,7 +264,8 @@ def export_run(run_dir: str | Path, fmt: str, *, rate_hz: float | None = None,
     ----------
     run_dir : path-like
         A finished pospp run folder.
-    fmt : {"sbet", "csv", "geojson", "kml"}
+    fmt : str
+        A key of :data:`EXPORT_FORMATS`.
     rate_hz : float, optional
         Thin the trajectory to about this rate (every k-th epoch); events are never thinned.
     out : path-like, optional
@@ -268,20 +299,16 @@ def export_run(run_dir: str | Path, fmt: str, *, rate_hz: float | None = None,
             return None
         return parquet_tables.read_table(p)
 
-    name = data
+    form = EXPORT_FORMATS[fmt]
     target = run_folder.check_output_file(
-        out if out is not None else run / f"{name}.{EXTENSIONS[fmt]}", run=run,
+        out if out is not None else run / f"{data}.{form.extension}", run=run,
         own_names=DEFAULT_NAMES, force=force)
-    if fmt in ("sbet", "csv"):
-        if data == "events":
-            rows = table("events", required=True)
-        else:
-            rows = _thin(select_solution(table("trajectory", required=True), solution),
-                         rate_hz)
-        return (write_sbet if fmt == "sbet" else write_csv)(target, rows)
-    writer = write_geojson if fmt == "geojson" else write_kml
     if data == "events":
-        return writer(target, None, None, table("events", required=True))
+        events = table("events", required=True)
+        return form.write(target, events) if form.records else \
+            form.write(target, None, None, events)
     track = _thin(select_solution(table("trajectory", required=True), solution), rate_hz)
-    return writer(target, track, table("legs", required=False),
-                  table("events", required=False))
+    if form.records:
+        return form.write(target, track)
+    return form.write(target, track, table("legs", required=False),
+                      table("events", required=False))

@@ -159,11 +159,15 @@ def _run_folder(tmp_path):
 
 def test_cli_export_every_format_into_the_run_folder(tmp_path):
     run = _run_folder(tmp_path)
-    for fmt, name in (("sbet", "trajectory.out"), ("csv", "trajectory.csv"),
-                      ("geojson", "trajectory.geojson"), ("kml", "trajectory.kml")):
+    export_cmd = main.commands["export"]
+    choices = next(p.type.choices for p in export_cmd.params if p.name == "fmt")
+    assert tuple(choices) == exports.FORMATS  # the registry's rows, every one on the CLI
+    for fmt, form in exports.EXPORT_FORMATS.items():
+        name = f"trajectory.{form.extension}"
         res = CliRunner().invoke(main, ["export", str(run), "--format", fmt, "--rate", "2"])
         assert res.exit_code == 0, res.output
         assert (run / name).is_file() and run_folder.is_pospp_file(name)
+    assert {f"trajectory.{e}" for e in ("out", "csv", "geojson", "kml")} <= exports.DEFAULT_NAMES
     rec = _read_sbet(run / "trajectory.out")
     assert rec.shape[0] == 40  # 10 Hz thinned to 2 Hz
     np.testing.assert_allclose(np.diff(rec[:, 0]), 0.5)
