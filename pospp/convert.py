@@ -1,6 +1,6 @@
 """The convert command: parse a measured log, estimate its IMU mounting, write the contract.
 
-Three steps, each in its own layer (issue 17: converters only parse):
+Three steps, each in its own layer (converters only parse):
 
 1. ``pospp.io.converters.parse``: the source format -> :class:`~pospp.io.converters.ParsedLog`
    (IMU in sensor axes where the mounting is unknown, with the inputs of its estimate);

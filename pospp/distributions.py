@@ -1,4 +1,4 @@
-"""The few distribution functions a run needs, from :mod:`scipy.special` (issue 18).
+"""The few distribution functions a run needs, from :mod:`scipy.special`.
 
 Each is the function :mod:`scipy.stats` evaluates for it (scipy 1.17's ``chi2._ppf``,
 ``chi2._isf``, ``f._sf``, ``t._sf``; the Poisson upper quantile by the same definition as

@@ -1,4 +1,4 @@
-"""Independent runs of the compiled kernels on several threads (issue 18).
+"""Independent runs of the compiled kernels on several threads.
 
 A's and B's compiled kernels (:mod:`pospp.nav._filter_kernel`, :mod:`pospp.nav.smoother`,
 :mod:`pospp.nav._kernels`, :mod:`pospp.nav.error_model`) release the GIL (``nogil``), so

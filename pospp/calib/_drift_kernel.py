@@ -4,7 +4,7 @@ One call per evaluation of the restricted likelihood: per leg a covariance of a 
 is formed, factored (Cholesky) and used to whiten the leg's [H z] rows, then the 3-state
 drift is updated. In numpy the ~20 small operations per leg cost more in call overhead than in
 arithmetic (0.95 ms an evaluation on the 1.5 h flight's 10 legs, against 1.16 ms for the dense
-factor of all 356 rows); compiled, they cost their arithmetic (issue 18). The equations are in
+factor of all 356 rows); compiled, they cost their arithmetic. The equations are in
 :class:`pospp.calib.reml.DriftLegs`; scaled units as there.
 """
 

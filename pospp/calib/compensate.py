@@ -252,7 +252,7 @@ CAUSAL_PRIOR_SCALE = 3.0
 weakened; inf: dropped, A's forward estimate alone). Weakened three times: on held-out legs
 it ties with dropping the prior (within 5 %) and beats keeping it by 10-30 % at tau <= 300 s,
 while the calibration still steadies A's estimate where that is loose (docs/calibration.md
-section 9, issue 16 item 4)."""
+section 9)."""
 
 
 @dataclass(frozen=True)

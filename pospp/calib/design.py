@@ -3,7 +3,7 @@ horizontal velocity error to the initial misalignment and the gyro bias, stacked
 (paper Eq. 17, ``Z = H X``), and its condition numbers.
 
 Frames and units as :mod:`pospp.calib.solve` (NED n, FRD b, SI), whose module docstring
-describes the formulations and transitions. Moved out of :mod:`pospp.calib.solve` (issue 17).
+describes the formulations and transitions.
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ The covariance of B's horizontal velocity error driven by white gyro noise (angl
 kernels), the first-order Gauss-Markov body drift (:func:`gm_noise_operator`,
 :class:`DriftSmoother`), and the composed :class:`NoiseModel`. Frames and units as
 :mod:`pospp.calib.solve` (NED n, FRD b, SI); the equations are in its module docstring
-("Noise"). Moved out of :mod:`pospp.calib.solve` (issue 17).
+("Noise").
 """
 
 from __future__ import annotations
@@ -82,7 +82,7 @@ def forcing_increments(rep: LegReplay, cols: slice = PHI) -> tuple[NDArray, NDAr
 def _white_forcing_covariance(rep: LegReplay, cols: slice, rows: NDArray | None) -> NDArray:
     # Cov(dv_i, dv_j) = g_i S(min(t_i, t_j)) g_j^T (forcing_increments): one cumulative
     # 15 x 15 sum and one (2R x 15) (15 x 2R) product, where the integrand written out per
-    # row and interval cost R M products (issue 18)
+    # row and interval cost R M products
     idx = np.arange(1, rep.t_s.size) if rows is None else np.asarray(rows)
     g_all, ds = forcing_increments(rep, cols)
     g = g_all[idx - 1]  # (R, 2, 15)

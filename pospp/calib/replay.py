@@ -61,7 +61,7 @@ class ImuIncrements:
 class ImuRates:
     """A log's IMU as mean rates (the data contract, body FRD), whose increments are made per
     window: B reads a leg at a time, so the whole flight's increments (52 MiB on a 1.5 h,
-    200 Hz flight, the same samples as the rates) are never held (issue 18).
+    200 Hz flight, the same samples as the rates) are never held.
 
     ``w_ib_b_radps[k]``, ``f_ib_b_mps2[k]`` are the mean rates over (time_ns[k-1],
     time_ns[k]]; ``t_s`` [s] from the run's epoch. A window's increments are

@@ -1,4 +1,4 @@
-"""Model-discrepancy workflow (issue 7, docs/diagnose.md): predict, compare, name, add, iterate.
+"""Model-discrepancy workflow (docs/diagnose.md): predict, compare, name, add, iterate.
 
 Modules: ``effects`` (library of candidate effects and their signatures on algorithm B's
 velocity error), ``workflow`` (``diagnose`` -> ``Diagnosis``; ``diagnosis_columns``,

@@ -10,7 +10,7 @@ L the Cholesky factor of Sigma in the rows' order (conditioning one row at a tim
 earlier ones is what Cholesky does). Its gains depend on (a, q) only: a problem holds
 (M, 15, 2) gains per leg, not an (2M)^2 factor, and the null realisations' problems (the same
 legs, another a and q) make their own in milliseconds (the eigenbasis this replaced cost
-0.13 s per leg and 8 MiB per leg on the 1.5 h flight; issue 18). Columns come in named blocks
+0.13 s per leg and 8 MiB per leg on the 1.5 h flight). Columns come in named blocks
 (:class:`Term`); fits solve the column-scaled normal equations (minimum norm on rank
 deficiency). SI units.
 """
@@ -173,7 +173,7 @@ class Problem:
         """Whitened fit of ``terms`` over ``legs`` (default all). Each leg adds the normal
         equations of its own columns only: a per-leg term is zero on the other legs (the ten
         lack-of-fit terms of a 1.5 h flight's legs are 240 of its 263 columns, and their
-        zeros were most of a fit's time; issue 18)."""
+        zeros were most of a fit's time)."""
         legs = range(len(self.reps)) if legs is None else legs
         widths = [t.blocks[0].shape[1] for t in terms]
         starts = np.cumsum([0] + widths)

@@ -1,4 +1,4 @@
-"""Where a structured gap sits, and what a gap is worth at the horizon (issue 12, items 4-5).
+"""Where a structured gap sits, and what a gap is worth at the horizon.
 
 Frames and units: NED (n), SI inside: curves are per leg (M - 1, 2) [dv_N, dv_E] in m/s at the
 samples t > 0 of the leg (seconds since the leg start); the diagnosis uses the horizontal

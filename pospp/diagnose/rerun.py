@@ -1,4 +1,4 @@
-"""Signatures of the GNSS-side effects by re-running algorithm A (issue 12, item 3).
+"""Signatures of the GNSS-side effects by re-running algorithm A.
 
 Frames and units: body FRD (b), NED (n), SI inside; the signatures are per leg (M, 2, P):
 d [dv_N, dv_E] / d p at the replay samples, p in SI (m for the lever arm, s for the offset).

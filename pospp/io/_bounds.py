@@ -1,7 +1,7 @@
 """Physical limits of every decoded value of a flight log (private to :mod:`pospp.io.mcap_reader`).
 
 A value may be finite and still impossible: a flipped bit in an exponent turns 9.8 m/s^2 into
-3e206 m/s^2 (issue 38 item 4), which a chunk without a CRC cannot reveal and which no later
+3e206 m/s^2, which a chunk without a CRC cannot reveal and which no later
 check catches before it reaches algorithm A. Every field the reader keeps is bounded here by a
 limit beyond any sensor or vehicle pospp serves (docs/formats.md, "Physical limits"); a value
 outside it stops ingestion with an :class:`~pospp.io.errors.IngestError` naming the file, the

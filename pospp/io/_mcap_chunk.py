@@ -5,7 +5,7 @@ Private module of :mod:`pospp.io._mcap_scan` (the streaming pass). A Chunk body 
 compression string, records_length u64, records`` (MCAP specification,
 https://mcap.dev/spec). Decompression is bounded by the chunk header's size and by
 ``max_chunk_bytes``; a chunk's records are checked by size and CRC whenever the file holds
-them whole, whatever its ``records_length`` claims (issue 38 item 4).
+them whole, whatever its ``records_length`` claims.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import struct
 import zlib
 from dataclasses import dataclass
 
-from isal.isal_zlib import crc32  # zlib's CRC-32, 10x faster (issue 18; README)
+from isal.isal_zlib import crc32  # zlib's CRC-32, 10x faster (README)
 from mcap.exceptions import McapError
 
 _CHUNK_HEAD = struct.Struct("<QQQII")  # start, end, uncompressed size, crc, compression len

@@ -24,7 +24,7 @@ from io import BytesIO
 from typing import Any
 
 import numpy as np
-from isal.isal_zlib import crc32  # zlib's CRC-32, 10x faster (issue 18; README)
+from isal.isal_zlib import crc32  # zlib's CRC-32, 10x faster (README)
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.records import Channel, Schema
@@ -60,8 +60,8 @@ DECODED_PER_FILE_BYTE = 64
 """Largest decoded size per byte of the file: the decoded arrays of a log may take at most
 this many times its size (and at least :data:`MIN_DECODED_BYTES`). Measured: a log of pospp's
 simulator decodes to 1.0 x its size (the sample flight, zstd), messages that differ only in
-their stamps to about 6 x; a decompression bomb of repeated messages to 2000 x (issue 38 item
-11: a 2 MB file to 4.1 GB)."""
+their stamps to about 6 x; a decompression bomb of repeated messages to 2000 x (a 2 MB
+file to 4.1 GB)."""
 MIN_DECODED_BYTES = 64 * 1024 * 1024
 _READ_PIECE = 1 << 20  # bytes read at a time when a byte range is only checksummed
 

@@ -4,7 +4,7 @@ Every file pospp writes goes through :func:`atomic_path` (temporary name, fsync,
 crash never leaves a half-written output under the final name. Every input pospp reads (MCAP
 log, pipeline file, reference trajectory) is opened by :func:`open_regular`, which refuses
 what is not a regular file: a named pipe (FIFO) or a device would block the reader forever or
-never end (issue 38 item 12).
+never end.
 """
 
 from __future__ import annotations

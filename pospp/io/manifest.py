@@ -2,7 +2,7 @@
 
 ``ROOT/manifest.parquet`` (table ``manifest`` of :mod:`pospp.io.parquet_tables`) lists every
 flight a batch has seen, with the result status of the run in its folder. Three rules keep a
-batch from destroying what it does not own (issue 38 item 9):
+batch from destroying what it does not own:
 
 - The file is pospp's only when its Parquet metadata says so (``pospp.schema_name`` =
   ``manifest``, written by :func:`pospp.io.parquet_tables.write_table`); another tool's

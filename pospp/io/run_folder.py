@@ -1,6 +1,6 @@
 """Run folders on disk: the marker, the staging folder and its swap, the batch lock.
 
-Nothing of the user's is lost (issue 13 item 3):
+Nothing of the user's is lost:
 
 - A run folder holds a marker file ``.pospp-run.json`` with the run's identity (pospp version,
   input path and SHA-256, configuration SHA-256, status, creation time in UTC).

@@ -4,7 +4,7 @@
 of the folder to the swap that puts the new run in place; ``diagnose``, ``evaluate``,
 ``report``, ``export`` and ``compare-sim`` hold the run folder's lock while they read it and
 add their files. A second command on the same folder is refused at once with a one-line error
-naming the holder's pid (issue 38 items 6 and 10: two runs into one new folder replaced each
+naming the holder's pid (two runs into one new folder replaced each
 other without ``--force``; ``diagnose`` during ``run --force`` left the old flight's diagnosis
 in the new run).
 

@@ -1,4 +1,4 @@
-"""Where algorithm A was aided by GNSS (issue 38 item 1): arrays of A's result in, a frozen
+"""Where algorithm A was aided by GNSS: arrays of A's result in, a frozen
 :class:`GnssAiding` out (no I/O).
 
 A without GNSS is a free inertial solution: its trajectory is not GNSS-controlled, and over a

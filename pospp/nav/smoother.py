@@ -28,7 +28,7 @@ interpolated the same way (an approximation documented in docs/method.md).
 
 Memory: per node the two covariances packed (their upper triangles, n (n + 1) / 2 numbers
 each: :func:`pack_symmetric`; A's P is exactly symmetric wherever a node stores it, so the
-packing is exact: 35 MiB less on a 1.5 h flight's nodes, issue 18) and Phi (n x n); never per
+packing is exact: 35 MiB less on a 1.5 h flight's nodes) and Phi (n x n); never per
 IMU epoch.
 """
 
@@ -191,7 +191,7 @@ def rts_smooth(
     ``overwrite_p_upd``: the smoothed covariances are written over ``p_upd`` (C-contiguous
     float64) and it is returned as p_smooth: node k's updated covariance is last read by step
     k, which then writes node k's smoothed one (the same values, one array of the nodes'
-    covariances fewer: 19 MiB on a 1.5 h flight; issue 18). ``covariance`` False: the errors
+    covariances fewer: 19 MiB on a 1.5 h flight). ``covariance`` False: the errors
     alone (:func:`rts_backward_states`; A's re-runs, ``FilterOptions.covariance_outputs``
     False), p_smooth with no rows.
     """

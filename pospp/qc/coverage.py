@@ -1,4 +1,4 @@
-"""QC check of the GNSS coverage of algorithm A (issue 38 item 1): arrays in, a frozen
+"""QC check of the GNSS coverage of algorithm A: arrays in, a frozen
 :class:`pospp.qc.checks.Check` out (no I/O).
 
 GNSS lost 300-400 s into the sample flight left every other check passing (a NIS band and a

@@ -1,4 +1,4 @@
-"""QC check of the IMU's mounting yaw: A's heading against the GNSS course (issue 38 item 2).
+"""QC check of the IMU's mounting yaw: A's heading against the GNSS course.
 
 Arrays in, a frozen :class:`pospp.qc.checks.Check` out (no I/O). Frames: NED, body FRD as
 declared (the configured ``[input] mounting_rpy_deg`` applied); angles rad inside, deg in the

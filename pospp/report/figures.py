@@ -8,7 +8,7 @@ Every figure function takes ``backend``: "mpl" (default) returns a matplotlib Fi
 matplotlib is imported at the first such call), "svg" a :class:`pospp.report.svg.Figure`
 drawn by pospp's own SVG writer through the same calls. The HTML report uses "svg": drawn
 in milliseconds instead of 0.1-0.6 s per figure, and no matplotlib import in a run
-(docs/benchmarks.md, issue 18).
+(docs/history/speed_rounds.md).
 """
 
 from __future__ import annotations

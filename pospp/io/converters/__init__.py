@@ -171,7 +171,7 @@ def parse(source_dir_or_file: str | Path, *, fmt: str | None = None,
         raise ConversionError(f"unknown format {name!r}; known: {sorted(FORMATS)}")
     known = format_options(name)
     unknown = sorted(set(options) - set(known))
-    if unknown:  # a TypeError of the parser's call was an "internal error" (issue 38 item 13)
+    if unknown:  # a TypeError of the parser's call was an "internal error"
         raise UnknownOptionError(f"format {name!r} has no option {', '.join(map(repr, unknown))}; "
                               f"its options: {', '.join(known) or 'none'}")
     return FORMATS[name](src, **options)

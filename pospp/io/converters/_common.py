@@ -81,8 +81,8 @@ class MountingLike(Protocol):
 
 @dataclass(frozen=True)
 class MountingInput:
-    """The parsed data a mounting estimate needs; the converter makes no estimate (issue 17:
-    converters only parse). ``pospp.convert`` passes these to
+    """The parsed data a mounting estimate needs; the converter makes no estimate (converters
+    only parse). ``pospp.convert`` passes these to
     ``pospp.nav.mounting.estimate_mounting`` (same argument names).
 
     Attributes
