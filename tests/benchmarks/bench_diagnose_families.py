@@ -200,7 +200,11 @@ def main() -> None:
         rows = []
         for s in range(1, a.seeds + 1):
             t0 = time.time()
-            rows.append(one(case, s, a.crossing, a.n_legs))
+            try:
+                rows.append(one(case, s, a.crossing, a.n_legs))
+            except ValueError as exc:  # A or the calibration failed on the flight
+                print(f"  {case} seed {s}: failed: {exc}", file=sys.stderr, flush=True)
+                continue
             r = rows[-1]
             print(f"  {case} seed {s}: {r} ({time.time() - t0:.0f} s)", file=sys.stderr,
                   flush=True)
