@@ -21,9 +21,11 @@ from typing import Any
 
 import numpy as np
 
+from pospp import earth, rotation
+from pospp.calib.replay import SolutionA
 from pospp.config import PipelineConfig
 from pospp.diagnose import null_model
-from pospp.diagnose.effects import ACCEL_SETTLING_S
+from pospp.diagnose.effects import ACCEL_SETTLING_S, field_gradient, signature
 from pospp.diagnose.locate import horizon_worth
 from pospp.diagnose.rerun import _gnss_earlier, _with_rates, warmed
 from pospp.diagnose.results import CandidateTest, Diagnosis, DiagnosisStep, EffectResponse
@@ -95,19 +97,52 @@ def imu_noise_holds(log: Any, config: PipelineConfig) -> bool:
 
 
 def _perturbed(log: Any, sensor: str, axis: int, column: np.ndarray) -> Any:
-    """The log with ``column`` (N,) [SI] added to one axis of the rates or specific force."""
+    """The log with ``column`` [SI] added to the rates or the specific force: on one ``axis``
+    ((N,)), or on all three (``axis`` -1, (N, 3))."""
     imu = log.imu
     name = "f_ib_b_mps2" if sensor == "accel" else "w_ib_b_radps"
     arr = getattr(imu, name).copy()
-    arr[:, axis] += column
+    if axis < 0:
+        arr += column
+    else:
+        arr[:, axis] += column
     return replace(log, imu=replace(imu, **{name: arr}))
+
+
+def _field_columns(nav_b: Any, t_run: np.ndarray, reference: tuple[float, float],
+                   extent_m: float) -> np.ndarray:
+    """The specific-force change (N, 3, P) [m/s^2 per SI coefficient] of each term of the
+    gravity field's potential along A's track (``nav_b``'s forward solution, interpolated to
+    the IMU times): ``-C_bn dg_n``, dg_h the term's gradient at A's position north and east
+    of ``reference`` (lat, lon [rad]) in units of ``extent_m`` (:mod:`pospp.diagnose.effects`,
+    the ``field`` shape)."""
+    sol = nav_b.forward
+    lat = np.interp(t_run, sol.t_s, sol.lat_rad)
+    lon = np.interp(t_run, sol.t_s, sol.lon_rad)
+    ne = north_east_m(lat, lon, *reference, 0.0)
+    grad = field_gradient(ne[:, 0] / extent_m, ne[:, 1] / extent_m)  # (N, 2, P)
+    k = np.clip(np.searchsorted(sol.t_s, t_run), 0, sol.t_s.size - 1)
+    c_nb = rotation.dcm_from_quat(sol.q_nb[k])
+    return -np.einsum("kji,kjp->kip", c_nb[:, 0:2, :], grad)
+
+
+def north_east_m(lat_rad: Any, lon_rad: Any, lat0_rad: float, lon0_rad: float,
+                 height_m: float) -> np.ndarray:
+    """North and east of (lat0, lon0) [m] (WGS-84 radii there), (N, 2)."""
+    r_m, r_n = earth.principal_radii_m(lat0_rad)
+    lat, lon = np.atleast_1d(lat_rad), np.atleast_1d(lon_rad)
+    return np.stack([(lat - lat0_rad) * (r_m + height_m),
+                     (lon - lon0_rad) * (r_n + height_m) * np.cos(lat0_rad)], axis=1)
 
 
 def innovation_design(log: mcap_reader.FlightLog, config: PipelineConfig,
                       families: Sequence[str], *, lever_b_m: Any = None,
+                      reference: tuple[float, float] | None = None,
                       threads: Threads = 1) -> InnovationDesign:
-    """A's whitened innovations on ``log`` and their responses to each family's hinge
-    coefficients (module docstring). Raises ValueError when A fails."""
+    """A's whitened innovations on ``log`` and their responses to each family's coefficients
+    (module docstring); the gravity family's only with ``reference`` (lat, lon [rad]: the
+    field's origin, the legs' mean start), its extent the farthest point of A's track after
+    its alignment (at least 1 km). Raises ValueError when A fails."""
     factor = rerun_decimation(log, config.pairs.rerun_imu_rate_hz)
     log_r = null_model.decimate_imu(log, factor)
     opts = replace(config.filter_options(), smoother=False, covariance_outputs=False)
@@ -133,19 +168,32 @@ def innovation_design(log: mcap_reader.FlightLog, config: PipelineConfig,
     t_run = t_s_from_time_ns(log_r.imu.time_ns, int(log_r.imu.time_ns[0]))
     knots = knots_s(float(base.alignment.t_s), float(t_run[-1]))
     hinges = hinge_basis(t_run, knots)
-    runs = []
-    for fam in families:
+    extent = float("nan")
+    fams = [f for f in families if reference is not None or sensor_family(f).sensor != "gravity"]
+    runs = []  # (family, sensor, (N, 3) specific force or (N,) on an axis, axis, step)
+    for fam in fams:
         fs = sensor_family(fam)
         step = catalog_entry(fam).plausible_si
-        runs += [(fam, fs.sensor, a, k, step) for a in range(2) for k in range(knots.size)]
+        if fs.sensor == "gravity":
+            assert reference is not None
+            sol = base.forward
+            after = sol.t_s >= base.alignment.t_s
+            ne = north_east_m(sol.lat_rad[after], sol.lon_rad[after], *reference, 0.0)
+            extent = max(1000.0, float(np.max(np.hypot(ne[:, 0], ne[:, 1]))))
+            cols = _field_columns(base, t_run, reference, extent)
+            runs += [(fam, "accel", cols[:, :, j], -1, step) for j in range(cols.shape[2])]
+        else:
+            runs += [(fam, fs.sensor, hinges[:, k], a, step) for a in range(2)
+                     for k in range(knots.size)]
     out = map_in_threads(lambda r: white(innovations(_perturbed(
-        log_r, r[1], r[2], r[4] * hinges[:, r[3]])) - nu0) / r[4], runs, threads)
+        log_r, r[1], r[3], r[4] * r[2])) - nu0) / r[4], runs, threads)
     responses = {}
-    for fam in families:
-        cols = [c for r, c in zip(runs, out, strict=True) if r[0] == fam]
-        responses[fam] = np.stack(cols, axis=1).reshape(-1, 2, knots.size).transpose(0, 2, 1)
+    for fam in fams:
+        stacked = np.stack([c for r, c in zip(runs, out, strict=True) if r[0] == fam], axis=1)
+        responses[fam] = (stacked[:, :, None] if sensor_family(fam).sensor == "gravity" else
+                          stacked.reshape(-1, 2, knots.size).transpose(0, 2, 1))
     return InnovationDesign(white(nu0), responses, knots, float(t_run[-1]),
-                            base.innovations.t_s[used])
+                            base.innovations.t_s[used], extent)
 
 
 @dataclass(frozen=True)
@@ -174,39 +222,68 @@ class SensorFamilies:
 
 
 def sensor_families(d: Diagnosis, replays: list, log: mcap_reader.FlightLog,
-                    config: PipelineConfig, threads: Threads = 1) -> SensorFamilies | None:
-    """Fit the sensor families on A's innovations of ``log`` with ``d``'s named GNSS-side
-    effects removed; families ``d`` named on the legs are not fitted again. None when A fails
-    on the log, no family is left, or the log's IMU noise is beyond A's model
-    (:func:`imu_noise_holds`)."""
-    families = [f.effect_id for f in SENSOR_FAMILIES if f.effect_id not in d.named]
+                    config: PipelineConfig, threads: Threads = 1,
+                    solution_a: SolutionA | None = None) -> SensorFamilies | None:
+    """Fit the families on A's innovations of ``log`` with ``d``'s named GNSS-side effects
+    removed; families ``d`` named on the legs are not fitted again, the gravity field only
+    with A's solution (its origin: the legs' mean start). None when A fails on the log or no
+    family is left; nothing named where A's model does not hold (:func:`imu_noise_holds`,
+    the innovations' scale)."""
+    families = [f.effect_id for f in SENSOR_FAMILIES if f.effect_id not in d.named
+                and (solution_a is not None or sensor_family(f.effect_id).sensor != "gravity")]
     if not families:
         return None
     if not imu_noise_holds(log, config):
         return SensorFamilies(tuple(families), (), (), np.zeros(0), {}, (), float("nan"),
                               False)
     log_s, lever, removed = _removed(log, config, d)
+    ref = _legs_reference(replays, solution_a)
     try:
-        design = innovation_design(log_s, config, families, lever_b_m=lever, threads=threads)
+        design = innovation_design(log_s, config, families, lever_b_m=lever, reference=ref,
+                                   threads=threads)
     except (ValueError, np.linalg.LinAlgError):
         return None
     named, tested, ratio, holds = fit_sensor_families(
         design, families, {f: catalog_entry(f).shapes for f in families},
         config.pairs.diagnose_alpha)
-    resp = {f.effect: family_response(f, design.knots, replays) for f in named}
+    resp = {f.effect: family_response(f, design, replays, solution_a, ref) for f in named}
     return SensorFamilies(tuple(families), tuple(named), tuple(tested), design.knots, resp,
                           removed, ratio, holds)
 
 
-def family_response(f: FamilyFinding, knots: np.ndarray, replays: list) -> EffectResponse:
-    """A named family's response on B minus A per hinge coefficient (axis-major: x's K, then
-    y's), its fitted coefficients and their covariance."""
-    k = knots.size
+def _legs_reference(replays: list, solution_a: SolutionA | None
+                    ) -> tuple[float, float] | None:
+    """(lat, lon) [rad] of the legs' mean start on A's solution (the gravity field's origin,
+    as :func:`pospp.diagnose._candidates.leg_origins` takes it), or None."""
+    if solution_a is None:
+        return None
+    tr = solution_a.trajectory
+    return (float(np.mean([np.interp(r.t0_s, tr.t_s, tr.lat_rad) for r in replays])),
+            float(np.mean([np.interp(r.t0_s, tr.t_s, tr.lon_rad) for r in replays])))
+
+
+def family_response(f: FamilyFinding, design: InnovationDesign, replays: list,
+                    solution_a: SolutionA | None = None,
+                    reference: tuple[float, float] | None = None) -> EffectResponse:
+    """A named family's response on B minus A per coefficient, its fitted coefficients and
+    their covariance: a sensor change's per hinge coefficient (axis-major: x's K, then y's);
+    the gravity field's per potential term (the legs' starts on A's solution, north and east
+    of ``reference``, over the design's extent)."""
+    if sensor_family(f.effect).sensor == "gravity":
+        assert solution_a is not None and reference is not None
+        tr = solution_a.trajectory
+        columns = tuple(signature(
+            "gravity_disturbance", r, shape="field", extent_m=design.field_extent_m,
+            origin_n_m=north_east_m(np.interp(r.t0_s, tr.t_s, tr.lat_rad),
+                                    np.interp(r.t0_s, tr.t_s, tr.lon_rad), *reference, 0.0)[0])
+            for r in replays)
+        return EffectResponse(f.effect, columns, f.hinge_si[:, 0], f.hinge_cov_si)
+    k = design.knots.size
     cols = []
     for j in range(2 * k):
         unit = np.zeros(2 * k)
         unit[j] = 1.0
-        cols.append(response_along_b(f, knots, replays, hinge_si=unit.reshape(2, k).T))
+        cols.append(response_along_b(f, design.knots, replays, hinge_si=unit.reshape(2, k).T))
     columns = tuple(np.stack([c[i] for c in cols], axis=-1) for i in range(len(replays)))
     return EffectResponse(f.effect, columns, f.hinge_si.T.reshape(-1), f.hinge_cov_si)
 

@@ -44,6 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from pospp.diagnose._candidates import FIELD_PARAMETERS
 from pospp.diagnose._linear import f_test
 from pospp.diagnose.shapes import Variant, all_variants, change_at, shape_values
 from pospp.distributions import f_sf
@@ -71,6 +72,9 @@ class InnovationDesign:
         The end of the span the shapes are written over [s].
     record_t_s : ndarray (n / 3,)
         Each record's time [s run time] (the whitened innovation of a record is 3 rows of y).
+    field_extent_m : float
+        The half-size of the flown area the gravity field's potential is written over [m]
+        (:func:`pospp.diagnose.effects.field_gradient`; NaN without the gravity family).
     """
 
     y: NDArray
@@ -78,6 +82,7 @@ class InnovationDesign:
     knots: NDArray
     t_end_s: float
     record_t_s: NDArray
+    field_extent_m: float = float("nan")
 
 
 @dataclass(frozen=True)
@@ -99,9 +104,10 @@ class FamilyFinding:
     explained_fraction: float
     significant: bool
     hinge_si: NDArray
-    """(K, 2): the fitted change's hinge coefficients, SI per hour, axes x and y."""
+    """(K, A): the fitted coefficients, SI: a sensor change's hinge coefficients (per hour)
+    on body x and y (A = 2), the gravity field's potential terms (A = 1)."""
     hinge_cov_si: NDArray
-    """(2K, 2K): their covariance (axis-major: x's K, then y's)."""
+    """(A K, A K): their covariance (axis-major: x's K, then y's)."""
     n_variants: int
 
 
@@ -145,20 +151,16 @@ def _finding(design: InnovationDesign, fam: str, best: dict, walk: dict, rss0: f
     entry = catalog_entry(fam)
     unit_name, unit_si = shape_unit(fam, v.shape)
     q = v.weights.shape[1]
-    c = best["c"].reshape(len(AXES), q)  # axis-major
+    n_ax = design.responses[fam].shape[2]
+    c = best["c"].reshape(n_ax, q)  # axis-major
     cov = best["inv"] * s2
-    vals = np.concatenate([shape_values(v, c[a], design.knots, design.t_end_s)
-                           for a in range(len(AXES))])
-    # the reported values are linear in c: their covariance through the same map
-    maps = [np.eye(q) if v.shape != "walk" else
-            shape_values(v, np.eye(q), design.knots, design.t_end_s) for _ in AXES]
-    m = np.zeros((vals.size, cov.shape[0]))
-    r0 = 0
-    for a, mp in enumerate(maps):
-        m[r0:r0 + mp.shape[0], a * q:(a + 1) * q] = mp
-        r0 += mp.shape[0]
+    # the reported values are linear in c: their covariance through the same map (a walk's
+    # are its change at each knot's end; every other shape's, c)
+    mp = (shape_values(v, np.eye(q), design.knots, design.t_end_s) if v.shape == "walk"
+          else np.eye(q))
+    m = np.kron(np.eye(n_ax), mp)
+    vals = m @ best["c"] / unit_si
     cv = m @ cov @ m.T / unit_si**2
-    vals = vals / unit_si
     sig = np.sqrt(np.clip(np.diag(cv), 0.0, None))
     if v.shape == "walk":  # the size: the RMS change over the knots' ends, both axes
         size = float(np.sqrt(np.mean(vals**2)))
@@ -170,11 +172,13 @@ def _finding(design: InnovationDesign, fam: str, best: dict, walk: dict, rss0: f
     excess = rss0 - best["rss"] - (best["k"] - k0) * s2
     total = rss0 - walk["rss"] - (walk["k"] - k0) * s2
     frac = float(np.clip(excess / total, 0.0, None)) if total > 0 else float("nan")
-    names = tuple(f"{p}_{i}" if v.shape == "walk" else p
-                  for p in entry.parameters for i in range(len(vals) // len(AXES)))
-    hinge = np.stack([v.weights @ c[a] for a in range(len(AXES))], axis=1)
-    wcov = np.kron(np.eye(len(AXES)), v.weights) @ cov @ np.kron(np.eye(len(AXES)),
-                                                                 v.weights).T
+    if v.shape == "field":
+        names: tuple[str, ...] = FIELD_PARAMETERS
+    else:
+        names = tuple(f"{p}_{i}" if v.shape == "walk" else p
+                      for p in entry.parameters for i in range(len(vals) // n_ax))
+    hinge = np.stack([v.weights @ c[a] for a in range(n_ax)], axis=1)
+    wcov = np.kron(np.eye(n_ax), v.weights) @ cov @ np.kron(np.eye(n_ax), v.weights).T
     return FamilyFinding(fam, v.shape, v.parameter_text, names, vals, sig, size, size_sig,
                          unit_name, best["f"], p_adj, best["bic"] - _bic(rss0, n, k0), frac,
                          significant, hinge, wcov, n_var)
@@ -245,7 +249,8 @@ def fit_sensor_families(design: InnovationDesign, families: Sequence[str],
     named: list[FamilyFinding] = []
     tested: list[FamilyFinding] = []
     left = [f for f in families if f in design.responses]
-    flexible = [_columns(design.responses[f], np.eye(design.knots.size)) for f in left]
+    flexible = [_columns(design.responses[f], np.eye(design.responses[f].shape[1]))
+                for f in left]
     full = np.concatenate([base_x, *flexible], axis=1)
     resid = design.y - full @ _fit(full, design.y)[0]
     spacing = (design.t_end_s - float(design.knots[0])) / design.knots.size
@@ -255,7 +260,7 @@ def fit_sensor_families(design: InnovationDesign, families: Sequence[str],
     while left:
         trials = {}
         for fam in left:
-            variants = all_variants(shapes[fam], design.knots, design.t_end_s)
+            variants = family_variants(fam, shapes[fam], design)
             cands = [_candidate(design, fam, v, base_x, rss0, k0, ratio) for v in variants]
             best = min(cands, key=lambda c: c["bic"])
             walk = next((c for c in cands if c["v"].shape == "walk"), best)
@@ -306,13 +311,24 @@ def gyro_response_along_b(rep, change_b: NDArray, change_b0: NDArray) -> NDArray
     return _forced(rep, g)[:, :, 0]
 
 
+def gravity_response_along_b(rep, field_change: NDArray, field_change0: NDArray) -> NDArray:
+    """B's horizontal velocity error (M, 2) [m/s] from a gravity disturbance ``dg_h`` (M, 2)
+    [m/s^2] along the leg: B (normal gravity) errs by ``dv' = -(dg_h(r) - dg_h(r0))``
+    (:mod:`pospp.diagnose.effects`, the ``field`` shape)."""
+    g = np.zeros((rep.t_s.size, 15, 1))
+    g[:, 3:5, 0] = -(field_change - field_change0)
+    return _forced(rep, g)[:, :, 0]
+
+
 @dataclass(frozen=True)
 class SensorFamily:
-    """A sensor family: which IMU array its change perturbs and what it does to B."""
+    """A family fitted on A's innovations: what its change perturbs and what it does to B."""
 
     effect_id: str
     sensor: str
-    """"accel" (the specific force) or "gyro" (the rates)."""
+    """"accel" (a specific-force bias), "gyro" (a rate bias): a change over flight time on
+    the hinge basis; "gravity": a deflection field over position (the potential's terms of
+    :func:`pospp.diagnose.effects.field_monomials`), the specific force's ``-C_bn dg_n``."""
     response_along_b: Callable[..., NDArray]
     """(replay, change (M, 2) SI, change at the leg start (2,)) -> B's error (M, 2) [m/s]."""
 
@@ -320,8 +336,24 @@ class SensorFamily:
 SENSOR_FAMILIES: tuple[SensorFamily, ...] = (
     SensorFamily("accel_bias_change", "accel", accel_response_along_b),
     SensorFamily("gyro_bias_change", "gyro", gyro_response_along_b),
+    SensorFamily("gravity_disturbance", "gravity", gravity_response_along_b),
 )
-"""The families fitted on A's innovations, in the order they are tested."""
+"""The families fitted on A's innovations, in the order they are tested. The gravity field
+competes with the sensor changes: a deflection wave along the track reads, alone, as an
+accelerometer and a gyro change (docs/diagnose.md, "Power on shapes")."""
+
+
+def family_variants(effect_id: str, shapes: Sequence[str], design: InnovationDesign
+                    ) -> list[Variant]:
+    """The variants a family is fitted in: a sensor change's every shape and grid value on the
+    hinge basis (:func:`pospp.diagnose.shapes.all_variants`), the gravity field's one (all
+    its potential's terms)."""
+    if sensor_family(effect_id).sensor == "gravity":
+        p = design.responses[effect_id].shape[1]
+        return [Variant("field", np.eye(p),
+                        parameter_text=f"over {design.field_extent_m / 1000.0:.0f} km")]
+    return all_variants([s for s in shapes if s not in ("gradient", "field", "deflection")],
+                        design.knots, design.t_end_s)
 
 
 def sensor_family(effect_id: str) -> SensorFamily:
