@@ -158,15 +158,16 @@ def innovation_design(log: mcap_reader.FlightLog, config: PipelineConfig,
         return rec.dz_ned
 
     nu0 = innovations(log_r)
+    t_from = float(base.alignment.t_s)  # before it the horizontal bias is A's tilt
     used = (gains.status == STATUS_USED) & (base.innovations.status == STATUS_USED) & \
-        np.all(np.isfinite(nu0), axis=1)
+        np.all(np.isfinite(nu0), axis=1) & (base.innovations.t_s >= t_from)
     chol = np.linalg.cholesky(gains.s_inv[used])  # S^-1 = L L^T: L^T nu is white
 
     def white(nu: np.ndarray) -> np.ndarray:
         return np.einsum("kji,kj->ki", chol, nu[used]).reshape(-1)
 
     t_run = t_s_from_time_ns(log_r.imu.time_ns, int(log_r.imu.time_ns[0]))
-    knots = knots_s(float(base.alignment.t_s), float(t_run[-1]))
+    knots = knots_s(t_from, float(t_run[-1]))
     hinges = hinge_basis(t_run, knots)
     extent = float("nan")
     fams = [f for f in families if reference is not None or sensor_family(f).sensor != "gravity"]

@@ -48,7 +48,7 @@ from pospp.diagnose._candidates import FIELD_PARAMETERS
 from pospp.diagnose._linear import f_test
 from pospp.diagnose.shapes import Variant, all_variants, change_at, shape_values
 from pospp.distributions import f_sf
-from pospp.effects_catalog import catalog_entry, row_named, shape_unit
+from pospp.effects_catalog import catalog_entry, row_named, shape_entry, shape_unit
 
 AXES = ("x", "y")
 """The body axes a sensor family is fitted on (the horizontal ones the calibration's gyro
@@ -127,9 +127,37 @@ def _bic(rss: float, n: int, k: int) -> float:
     return n * np.log(rss / n) + k * np.log(n)
 
 
+RATE_PLAUSIBLE_PER_H = 10.0
+"""A plausible rate of change (a ramp's, a walk's slopes at its knots) is this many of the
+family's plausible sizes per hour (1000 ug/h, 0.5 deg/h per hour; the catalogue's
+``accel_bias_ramp`` says 1000 ug/h)."""
+
+
+def _plausible(fam: str, v: Variant) -> float:
+    """A large but plausible coefficient (SI) of a family's variant: its shape's own (the
+    gravity field's 3 arcsec); a rate's (ramp, walk: slopes per hour)
+    :data:`RATE_PLAUSIBLE_PER_H` times the family's; else the family's (a step's, a
+    settling's: 100 ug, 0.05 deg/h)."""
+    own = shape_entry(v.shape).plausible_si
+    if np.isfinite(own):
+        return own
+    scale = RATE_PLAUSIBLE_PER_H if v.per_hour or v.shape == "walk" else 1.0
+    return scale * float(catalog_entry(fam).plausible_si)
+
+
 def _candidate(design: InnovationDesign, fam: str, v: Variant, base_x: NDArray,
-               rss0: float, k0: int, ratio: float = 1.0) -> dict:
-    x1 = np.concatenate([base_x, _columns(design.responses[fam], v.weights)], axis=1)
+               rss0: float, k0: int, ratio: float = 1.0) -> dict | None:
+    """One variant fitted: its observable directions (those in which a plausible
+    coefficient stands 2 noise sigmas above what the model before it fits, the workflow's
+    screen; None when it has none), the nested F-test and the BIC."""
+    cols = _columns(design.responses[fam], v.weights)
+    proj = cols - base_x @ np.linalg.lstsq(base_x, cols, rcond=None)[0] if base_x.shape[1] \
+        else cols
+    lam, vec = np.linalg.eigh(proj.T @ proj * _plausible(fam, v) ** 2)
+    keep = vec[:, lam >= 4.0]
+    if not keep.shape[1]:
+        return None
+    x1 = np.concatenate([base_x, cols @ keep], axis=1)
     c, rss1, k1, inv = _fit(x1, design.y)
     n = design.y.size
     f, _ = f_test(rss0, rss1, k1 - k0, n - k1)
@@ -138,9 +166,9 @@ def _candidate(design: InnovationDesign, fam: str, v: Variant, base_x: NDArray,
     # a shape's non-linear parameter (the step's time, the settling's T: searched on a grid)
     # counts in its BIC: a settling of T well beyond the span is a ramp, and the ramp wins
     nonlinear = int(np.isfinite(v.parameter))
-    return dict(v=v, c=c[base_x.shape[1]:], inv=inv[base_x.shape[1]:, base_x.shape[1]:],
-                rss=rss1, k=k1, f=f, p=p, bic=_bic(rss1, n, k1 + nonlinear),
-                cols=x1[:, base_x.shape[1]:])
+    b = base_x.shape[1]
+    return dict(v=v, c=keep @ c[b:], inv=keep @ inv[b:, b:] @ keep.T, rss=rss1, k=k1, f=f,
+                p=p, bic=_bic(rss1, n, k1 + nonlinear), cols=x1[:, b:])
 
 
 def _finding(design: InnovationDesign, fam: str, best: dict, walk: dict, rss0: float,
@@ -261,7 +289,10 @@ def fit_sensor_families(design: InnovationDesign, families: Sequence[str],
         trials = {}
         for fam in left:
             variants = family_variants(fam, shapes[fam], design)
-            cands = [_candidate(design, fam, v, base_x, rss0, k0, ratio) for v in variants]
+            cands = [c for v in variants
+                     if (c := _candidate(design, fam, v, base_x, rss0, k0, ratio)) is not None]
+            if not cands:  # these data cannot reveal the family
+                continue
             best = min(cands, key=lambda c: c["bic"])
             walk = next((c for c in cands if c["v"].shape == "walk"), best)
             p_adj = min(1.0, best["p"] * len(cands))

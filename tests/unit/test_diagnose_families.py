@@ -65,16 +65,22 @@ def test_shapes_on_the_hinge_basis_are_their_closed_forms():
     assert walk.weights.shape == (7, 7)
 
 
+SCALE = {"accel_bias_change": 1e-3, "gyro_bias_change": 2.4e-7}
+"""SI size of a coefficient whose synthetic response is of order one (about the families'
+plausible sizes, 100 ug and 0.05 deg/h: the observability screen keeps them)."""
+
+
 def _design(rng, a_true: np.ndarray, knots, n: int = 3000) -> InnovationDesign:
-    """Whitened 'innovations' y = J a + N(0, 1) with smooth random responses J."""
+    """Whitened 'innovations' y = J a + N(0, 1) with smooth random responses J; ``a_true``
+    (K, 2) the accelerometer's hinge coefficients in units of SCALE."""
     k = knots.size
     tt = np.linspace(0.0, 1.0, n)
     base = np.stack([np.sin(2 * np.pi * (j + 1) * tt + rng.uniform(0, 6)) for j in range(4 * k)],
                     axis=1)
     mix = rng.normal(size=(4 * k, 2 * k * 2))
     j = (base @ mix).reshape(n, k, 2, 2)  # (n, K, axes, families)
-    resp = {"accel_bias_change": j[..., 0], "gyro_bias_change": j[..., 1]}
-    y = np.einsum("nka,ka->n", resp["accel_bias_change"], a_true) + rng.normal(size=n)
+    resp = {f: j[..., i] / SCALE[f] for i, f in enumerate(SCALE)}
+    y = np.einsum("nka,ka->n", j[..., 0], a_true) + rng.normal(size=n)
     return InnovationDesign(y, resp, knots, 2700.0, np.linspace(600.0, 2700.0, n // 3))
 
 
@@ -96,9 +102,11 @@ def test_the_family_fit_names_the_shape_it_was_made_of(shape, index):
     f = named[0]
     assert f.shape == shape and f.shape_parameters == v.parameter_text
     unit = shape_unit("accel_bias_change", shape)[1]
-    np.testing.assert_allclose(f.values, c[0] / unit, atol=4 * f.sigmas.max())
+    np.testing.assert_allclose(f.values, c[0] * SCALE["accel_bias_change"] / unit,
+                               atol=4 * f.sigmas.max())
     assert f.p_value < 1e-6 and f.delta_bic < 0
-    np.testing.assert_allclose(f.hinge_si, a_true, atol=5 * np.sqrt(f.hinge_cov_si.max()))
+    np.testing.assert_allclose(f.hinge_si, a_true * SCALE["accel_bias_change"],
+                               atol=5 * np.sqrt(f.hinge_cov_si.max()))
 
 
 def test_the_family_fit_names_nothing_on_noise_at_its_level():
@@ -207,9 +215,9 @@ def test_correlated_innovations_are_corrected_and_a_wrong_scale_names_nothing():
     a = v.weights @ np.array([[0.06, -0.04]])
     strong = _design(np.random.default_rng(7), a, knots)
     assert fit_sensor_families(strong, FAMS, SHAPE_NAMES, 0.05)[0]
-    y = strong.y - np.einsum("nka,ka->n", strong.responses["accel_bias_change"], a)
-    quiet = dataclasses.replace(strong, y=0.3 * y + np.einsum(
-        "nka,ka->n", strong.responses["accel_bias_change"], a))
+    resp = strong.responses["accel_bias_change"] * SCALE["accel_bias_change"]
+    y = strong.y - np.einsum("nka,ka->n", resp, a)
+    quiet = dataclasses.replace(strong, y=0.3 * y + np.einsum("nka,ka->n", resp, a))
     named, _, _, holds = fit_sensor_families(quiet, FAMS, SHAPE_NAMES, 0.05)
     assert not holds and not named
 
@@ -238,3 +246,15 @@ def test_the_families_need_imu_noise_within_a_model_band():
 
     assert imu_noise_holds(log(1.0), cfg)
     assert not imu_noise_holds(log(2.0 * NOISE_BAND), cfg)
+
+
+def test_a_family_the_innovations_cannot_reveal_is_not_tested():
+    # the workflow's observability screen: directions in which a plausible coefficient does
+    # not stand 2 noise sigmas out are dropped (a gravity field over a flight along one line
+    # read 3900 +- 2900 arcsec and moved the refit by 4.3 sigma before it)
+    knots = knots_s(600.0, 2700.0)
+    d = _design(np.random.default_rng(3), np.zeros((knots.size, 2)), knots)
+    weak = {**d.responses, "accel_bias_change": d.responses["accel_bias_change"] * 1e-6}
+    named, tested, *_ = fit_sensor_families(dataclasses.replace(d, responses=weak), FAMS,
+                                            SHAPE_NAMES, 0.05)
+    assert {f.effect for f in tested} == {"gyro_bias_change"}
