@@ -19,7 +19,13 @@ from typing import Any
 
 import numpy as np
 
-from pospp.calib.compensate import compensate_legs, joint_calibration
+from pospp.calib.compensate import (
+    COMPENSATION_MODES,
+    ModeChoice,
+    ModeInputs,
+    compensate_legs,
+    joint_calibration,
+)
 from pospp.calib.replay import ImuSource, LegReplay, SolutionA
 from pospp.calib.solve import DriftPrior
 from pospp.calib.stage import CalibrationRun
@@ -54,6 +60,7 @@ from pospp.flight_stages import (
     _lever_arm_and_start,
     _scale_factor_start,
     _warmup_start,
+    forward_bias_record,
     imu_tuning,
     leg_epochs_ns,
     navigate,
@@ -439,25 +446,37 @@ def named_responses(d: Diagnosis, replays: list, sigs: dict[str, list[np.ndarray
 
 
 def refit_stage(calib_run: CalibrationRun, diagnosis: Diagnosis | None, imu: ImuSource,
-                solution_a: SolutionA, config: PipelineConfig, threads: Threads = 1
-                ) -> Refit | None:
+                solution_a: SolutionA, config: PipelineConfig, threads: Threads = 1,
+                nav: nav_filter.FilterResult | None = None) -> Refit | None:
     """The calibration refitted with the effects the diagnosis named
     (:func:`pospp.diagnose.refit.refit_calibration`) and B re-run with it on every leg (the
-    compensation's replays and improvements, as the calibration stage makes them): what the
-    run compensates with when an effect outside the calibration's model was named. None when
-    nothing was named or the refit fails."""
+    compensation's replays and improvements, as the calibration stage makes them, in
+    ``[compensation] mode`` with the refit's fit; the modes reading A's forward bias
+    estimates need ``nav``, else the refit's constant): what the run compensates with when an
+    effect outside the calibration's model was named. None when nothing was named or the
+    refit fails."""
     if diagnosis is None or not diagnosis.responses or not calib_run.calibrated:
         return None
     refit = refit_calibration(calib_run, diagnosis.responses)
     if refit is None or refit.run.chosen is None:
         return None
     rc = config.replay
+    replays = dict(calib_run.replays)
+    mode = ModeChoice({}, "constant")
+    if nav is not None and calib_run.compensation_source != "constant":
+        tuning = imu_tuning(config)
+        gm = bool(np.isfinite(tuning.gyro_gm_tau_s) and tuning.gyro_gm_sigma_dph > 0)
+        name = str(config.compensation.mode)
+        mode = COMPENSATION_MODES[name if gm or name != "per_leg" else "constant"](ModeInputs(
+            imu, solution_a, replays, refit.run.chosen, refit.sigma_b_radps, rc.options(),
+            forward_bias_record(nav, tuning), threads=threads))
     after, improvements = compensate_legs(
-        imu, solution_a, dict(calib_run.replays), refit.run.chosen,
+        imu, solution_a, replays, refit.run.chosen,
         accel_compensation=rc.accel_compensation, horizon_s=rc.horizon_s,
         transition_step=int(rc.transition_step), sample_rate_hz=rc.sample_rate_hz,
-        sigma_floor_mps=rc.sigma_floor_mps, threads=threads)
-    return replace(refit, run=replace(refit.run, replays_after=after, improvements=improvements))
+        sigma_floor_mps=rc.sigma_floor_mps, threads=threads, **mode.kwargs)
+    return replace(refit, run=replace(refit.run, replays_after=after, improvements=improvements,
+                                      compensation_source=mode.source))
 
 
 def _bias_text(b_radps: np.ndarray, sigma_radps: np.ndarray | None = None) -> str:
@@ -529,15 +548,16 @@ class RefitOutcome:
 
 def refit_and_check(log: mcap_reader.FlightLog, calib_run: CalibrationRun,
                     diagnosis: Diagnosis | None, imu: ImuSource, solution_a: SolutionA,
-                    config: PipelineConfig, threads: Threads = 1, *, compensate: bool = True
-                    ) -> RefitOutcome:
+                    config: PipelineConfig, threads: Threads = 1, *, compensate: bool = True,
+                    nav: nav_filter.FilterResult | None = None) -> RefitOutcome:
     """The run's refit stage after its diagnosis: the calibration refitted with the named
     effects (:func:`refit_stage`), A re-run with the refit's gyro bias removed when
     ``compensate`` (the compensated solution then uses the refit), and the ``model_fit``
-    check (:func:`model_fit_check`)."""
+    check (:func:`model_fit_check`); ``nav``: A's result, for the legs' compensation in the
+    configured mode (:func:`refit_stage`)."""
     if diagnosis is None:
         return RefitOutcome(None, {}, ())
-    refit = refit_stage(calib_run, diagnosis, imu, solution_a, config, threads)
+    refit = refit_stage(calib_run, diagnosis, imu, solution_a, config, threads, nav)
     sols: dict[str, Any] = {}
     if refit is not None and compensate:
         comp = navigate(log, config, gyro_bias_correction_b_radps=refit.bias_b_radps)

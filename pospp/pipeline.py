@@ -378,7 +378,7 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
 
     # --- refit with the named effects (the compensation uses it) and the model_fit check ------
     fit = refit_and_check(log, calib_run, diagnosis, imu, solution_a, config, threads,
-                          compensate="compensated" in solutions)
+                          compensate="compensated" in solutions, nav=nav)
     solutions.update(fit.solutions)
     # the trajectory MCAP's messages on the lane while the QC stage runs (one thread: in the
     # write stage); its metadata record, with the run's status, is written there
