@@ -1,7 +1,7 @@
 """Power of the effect families on shapes the library was not first built from (issue 34).
 
     PYTHONPATH=. python tests/benchmarks/bench_diagnose_families.py \
-        --cases accel:ramp:1000,accel:walk:300 --seeds 10 [--crossing --n-legs 4]
+        --cases accel:ramp:1000,accel:walk:300 --seeds 10 [--first-seed 1] [--crossing --n-legs 4]
 
 Flights: tests/unit/test_diagnose_power.py's (pospp's simulator, paper_vehicle grade, three
 wandering 180 s legs at 60 m/s after an S-turn, 1 Hz GNSS at 0.05 m / 0.025 m/s, the grade's
@@ -189,6 +189,7 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--cases", required=True, help="kind:shape:size,...")
     ap.add_argument("--seeds", type=int, default=10)
+    ap.add_argument("--first-seed", type=int, default=1, help="seeds first..first+N-1")
     ap.add_argument("--crossing", action="store_true")
     ap.add_argument("--n-legs", type=int, default=3)
     a = ap.parse_args()
@@ -198,7 +199,7 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|---|")
     for case in cases:
         rows = []
-        for s in range(1, a.seeds + 1):
+        for s in range(a.first_seed, a.first_seed + a.seeds):
             t0 = time.time()
             try:
                 rows.append(one(case, s, a.crossing, a.n_legs))
