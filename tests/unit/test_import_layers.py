@@ -30,6 +30,7 @@ LAYERS: tuple[frozenset[str], ...] = (
     frozenset({"diagnose", "simcompare", "report"}),
     frozenset({"config"}),
     frozenset({"flight_stages"}),
+    frozenset({"sensor_stage"}),
     frozenset({"diagnosis_stage"}),
     frozenset({"pipeline", "convert", "api"}),
     frozenset({"batch", "compare_sim"}),
