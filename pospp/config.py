@@ -370,24 +370,22 @@ class PairsConfig:
     transition: Transition = Transition.NUMERICAL
     """"numerical" (F(t) along B) or "closed_form" (paper Eq. 10/13 with corrected signs)."""
     noise: NoiseModel = NoiseModel.GYRO_RW
-    """Residual model of the least squares: "gyro_rw" (B's error driven by the gyro random
-    walk and the grade's Gauss-Markov drift; docs/calibration.md) or "white"."""
+    """Least squares' noise: "gyro_rw" (random walk, drift; docs/calibration.md) or "white"."""
     noise_step_s: float = _key(10.0, gt=0.0)
     """Spacing of the samples the correlated-noise least squares uses [s]."""
     estimate_gyro_z: bool = False
     """Also estimate the vertical body gyro bias (weakly observable on level legs)."""
     null_realisations: int = _key(10, ge=0, le=1000)
-    """Null realisations of B minus A (docs/diagnose.md): the calibration's covariance and the
-    diagnosis's null. 0: the formal covariance and nominal F (cries wolf on GNSS noise)."""
+    """Null draws of B minus A, the diagnosis's null (docs/diagnose.md); 0: none, nominal F."""
+    null_reruns: bool = False
+    """The null from A re-run on noisy logs, not from A's gains (docs/diagnose.md: slower)."""
     diagnose_alpha: float = _key(0.05, gt=0.0, lt=0.5)
     """Significance level of the diagnosis's tests (candidates Bonferroni-corrected per step;
     on null flights "none" in at least 1 - alpha of runs: docs/diagnose.md)."""
     null_imu_noise: NullImuNoise = NullImuNoise.MEASURED
     """Null's white IMU noise: "measured" (second differences) or "grade"; [imu] drifts both."""
     rerun_imu_rate_hz: float = _key(50.0, ge=0.0)
-    """IMU rate [Hz] A and B re-run at for the null realisations and the diagnosis's re-run
-    signatures: the flight's increments summed (docs/diagnose.md, "The null at a lower IMU
-    rate"). 0, or above half the flight's rate: the flight's rate."""
+    """IMU rate [Hz] of A and B's re-runs (increments summed; 0: the flight's; diagnose.md)."""
 
     def policy(self) -> PairPolicy:
         """The calibration stage's pairing policy (:class:`pospp.calib.pairs.PairPolicy`)."""

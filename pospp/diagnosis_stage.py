@@ -2,7 +2,7 @@
 
 :func:`diagnose_calibration` runs :func:`pospp.diagnose.workflow.diagnose_replays` on the run's
 B-minus-A replays with every test calibrated on B minus A's null realisations
-(:func:`pospp.flight_stages.null_realisations`), the A re-run signatures
+(:func:`pospp.null_stage.null_realisations`), the A re-run signatures
 (:mod:`pospp.diagnose.rerun`) made by Gauss-Newton from A's own estimates where the pipeline has
 them, the secant refinements, and the drift under the alternative
 (:func:`drift_under_alternative`). Moved out of :mod:`pospp.flight_stages` (issue 18: that
@@ -52,16 +52,19 @@ from pospp.flight_stages import (
     _scale_factor_start,
     _warmup_start,
     imu_tuning,
-    leg_epochs_ns,
     navigate,
-    null_drift,
-    null_realisations,
-    rerun_b_minus_a,
-    rerun_decimation,
     rerun_options,
 )
 from pospp.io import mcap_reader
 from pospp.nav import filter as nav_filter
+from pospp.null_stage import (
+    leg_epochs_ns,
+    null_drift,
+    null_needs_gains,
+    null_realisations,
+    rerun_b_minus_a,
+    rerun_decimation,
+)
 from pospp.threads import Later, Threads
 from pospp.units import DEG_PER_H_RADPS
 
@@ -85,7 +88,7 @@ def rerun_base(log: mcap_reader.FlightLog | None, nav: nav_filter.FilterResult |
     moved by 8-95 % between the rates). The log and run themselves when nothing is summed,
     A gated in excess, A or B fails on the summed-down log, or B there is not on the flight's
     samples (or without a log); A and B as the null realisations run them
-    (:func:`pospp.flight_stages.rerun_b_minus_a`). The third element: A's gains on the
+    (:func:`pospp.null_stage.rerun_b_minus_a`). The third element: A's gains on the
     summed-down log, which the re-runs replay (:class:`pospp.nav.filter.GainReplay`, as the
     null realisations do; a re-run whose records differ, the time offset's, runs in full);
     None with the flight's own log."""
@@ -240,7 +243,7 @@ def _null_without_warmup(log: mcap_reader.FlightLog | None, nav: nav_filter.Filt
     if not null_dv or log is None or db is None:
         return log, nav, null_dv, ""
     log_w = warmed(log, -db, ACCEL_SETTLING_S)
-    nav_w = navigate(log_w, config)
+    nav_w = navigate(log_w, config, record_gains=null_needs_gains(config))
     return (log_w, nav_w, null_realisations(log_w, nav_w, calib_run, config, len(null_dv),
                                             threads=threads),
             "; made on the log with A's warm-up estimate removed")

@@ -11,7 +11,7 @@ the compensated A and the diagnosis's first re-runs (:func:`passes_ahead`: they 
 calibration, not the null, so they run alongside the null realisations), then the QC checks
 (:func:`checks_ahead`: they need the calibration with its null covariance and the lever-arm
 estimate, not the diagnosis, so they run alongside the diagnosis's tests). The pipeline puts
-two more there itself: the null's base (:func:`pospp.flight_stages.null_base`, which needs
+two more there itself: the null's base (:func:`pospp.null_stage.null_base`, which needs
 the legs and B's replays, not the fit, so it runs alongside the fit) and the trajectory MCAP's
 messages (:func:`pospp.io.trajectory_mcap.trajectory_messages`, alongside the diagnosis; the
 metadata record with the run's status is written at the end). Measured before

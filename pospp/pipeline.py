@@ -35,7 +35,7 @@ import pandas as pd
 
 from pospp import outputs, rotation
 from pospp.calib.observability import observability_table
-from pospp.calib.stage import CalibrationRun, with_null_covariance
+from pospp.calib.stage import CalibrationRun
 from pospp.config import PipelineConfig, config_from_dict
 from pospp.diagnose.workflow import Diagnosis, diagnosis_columns, residual_curve_columns
 from pospp.diagnosis_stage import diagnose_calibration
@@ -49,9 +49,6 @@ from pospp.flight_stages import (  # the stage functions, importable from here a
     lever_arm_estimate,  # noqa: F401  (re-exported: the power benchmark calls it)
     lever_arm_seen,
     navigate,
-    null_base,
-    null_realisations,
-    null_white_noise,
     sensor_to_body_dcm,
 )
 from pospp.io import mcap_reader, parquet_tables, report_files, run_folder, trajectory_mcap
@@ -60,6 +57,13 @@ from pospp.io.files import sha256_file
 from pospp.memory import release_free_heap, share_one_heap
 from pospp.nav import events as sensor_events
 from pospp.nav import filter as nav_filter
+from pospp.null_stage import (  # the null stage's functions, importable from here as before
+    null_base,
+    null_needs_gains,
+    null_realisations,
+    null_stage,
+    null_white_noise,
+)
 from pospp.passes_ahead import (
     checks_ahead,
     lever_re_estimate,
@@ -319,7 +323,7 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
     book.stage("navigate")
     epoch_ns = int(log.imu.time_ns[0])
     try:
-        nav = navigate(log, config)
+        nav = navigate(log, config, record_gains=null_needs_gains(config))
     except ValueError as exc:
         book.note("error", "navigate", f"algorithm A failed: {exc}")
         finish("failed")
@@ -336,9 +340,9 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
     book.stage("calibrate")
     imu = imu_increments(log)
     made = calibration_replays(imu, nav, config, threads)
-    # the null's base needs the legs and B's replays, not the fit: on the lane while it runs
+    # the re-run null's base needs the legs and B's replays, not the fit: on the lane meanwhile
     base = Later(lane, null_base, log, nav, made.legs, made.replays, config) \
-        if config.pairs.null_realisations > 0 and made.replays else None
+        if config.pairs.null_reruns and made.replays else None
     calib_run, solution_a = calibrate_from_a(imu, nav, config, made, threads)
     del made
     for text in calib_run.messages:
@@ -351,13 +355,11 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
 
     # --- null realisations of B minus A: the calibration's sigmas and the diagnosis's null ----
     null_dv = None
-    if calib_run.calibrated and base is not None:
+    if calib_run.calibrated and config.pairs.null_realisations > 0 and calib_run.replays:
         book.stage("null_realisations")
-        null_dv = null_realisations(log, nav, calib_run, config, config.pairs.null_realisations,
-                                    threads=threads,
-                                    white_noise=white.take() if white is not None else None,
-                                    base=base.take())
-        calib_run = with_null_covariance(calib_run, null_dv)
+        null_dv, calib_run = null_stage(log, nav, calib_run, config, threads=threads,
+                                        base=base.take() if base else None,
+                                        white_noise=white.take() if white else None)
     else:  # no null: the lane's base and white noise for it are not wanted
         for later in filter(None, (base, white)):
             later.cancel()
@@ -570,7 +572,7 @@ def diagnose_run(run_dir: str | Path, *, progress: ProgressFn | None = None) -> 
     book.stage("ingest")
     log = ingest(path, config)
     book.stage("navigate")
-    nav = navigate(log, config)
+    nav = navigate(log, config, record_gains=null_needs_gains(config))
     book.stage("calibrate")
     imu = imu_increments(log)
     calib_run, solution_a = calibrate_from_a(imu, nav, config)

@@ -162,9 +162,8 @@ TABLES: dict[str, list[Column]] = {
           for name, extra in (("ingest", " (with checking the run folder and hashing the "
                                          "input)"),
                               ("navigate", " (algorithm A)"), ("calibrate", ""),
-                              ("null_realisations", " (A re-run on the noise draws that "
-                                                    "give the calibration its sigmas and the "
-                                                    "diagnosis its null)"),
+                              ("null_realisations", " (B minus A's null: the calibration's "
+                                                    "sigmas, the diagnosis's realisations)"),
                               ("compensate", " (on 2+ threads: the wait for its A pass, "
                                              "made alongside the null)"),
                               ("diagnose", " (on 2+ threads: likewise its first A passes)"),
@@ -176,8 +175,9 @@ TABLES: dict[str, list[Column]] = {
         _opt(Column("qc_suggestions", _S, "", "'; '-joined 'check: what the data suggest' of "
                     "the failed QC checks")),
         _opt(Column("calibration_sigma_source", _S, "", "where the calibration's sigmas come "
-                    "from: 'null_realisations' (the least squares re-run on B minus A's null "
-                    "realisations, [pairs] null_realisations) or 'least_squares' (its formal "
+                    "from: 'linear_null' (the least squares' exact covariance under B minus A's "
+                    "linear null), 'null_realisations' (refits on the re-run null's "
+                    "realisations, [pairs] null_reruns) or 'least_squares' (its formal "
                     "covariance)")),
         _opt(Column("calibration_formulation", _S, "", "formulation of the calibration applied "
                     "('body' or 'paper')")),

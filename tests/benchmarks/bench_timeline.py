@@ -63,7 +63,7 @@ def main() -> None:
         setattr(module, name, wrapper)
 
     timed(nav_filter, "run_integrated_navigation", "A")
-    timed(pipeline, "with_null_covariance")
+    timed(pipeline, "null_stage")
     timed(diagnosis_stage, "diagnose_replays")
     timed(passes_ahead, "quality_checks")
     config = load_config(args.pipeline)

@@ -10,7 +10,7 @@ ARW: pospp/presets/imu.toml), GNSS at 1-10 Hz with horizontal noise log-uniform 
 realisations (pospp.diagnose.null_model), with the log and A's result as ``pospp run`` gives
 them (so the A re-run candidates, lever arm and GNSS time offset, are tested too), which also
 give the calibration its covariance
-(pospp.calib.stage.with_null_covariance). Nothing outside the base model is present, so the
+(pospp.null_stage.null_stage). Nothing outside the base model is present, so the
 closing row should be ``none`` at alpha = 0.05 (body bias, vertical drift and Earth-rate
 coupling may be named), and the calibrated body gyro bias should sit within its sigma of the
 simulated constant bias as often as a normal error would.
@@ -26,7 +26,6 @@ import pytest
 from _missions import SimLog, three_leg_survey
 
 from pospp import pipeline
-from pospp.calib.stage import with_null_covariance
 from pospp.config import config_from_dict
 from pospp.sim.api import simulate
 from pospp.sim.gnss import GnssModel
@@ -46,8 +45,9 @@ PROFILE = three_leg_survey("null_mc", 180.0, lat_deg=40.0, lon_deg=116.0, height
                            heading_deg=30.0)
 
 
-def null_flight(seed: int):
-    """(simulation, log, config) of one seeded null flight."""
+def null_flight(seed: int, reruns: bool = False):
+    """(simulation, log, config) of one seeded null flight (``reruns``: ``[pairs]
+    null_reruns``, the null from A re-runs)."""
     grade = GRADES[seed % len(GRADES)]
     rng = np.random.default_rng(1000 + seed)
     lvl = float(np.exp(rng.uniform(np.log(0.02), np.log(1.0))))
@@ -61,21 +61,22 @@ def null_flight(seed: int):
         "filter": {"output_rate_hz": 10.0, "smoother": True},
         "legs": {"min_duration_s": 120.0, "min_speed_mps": 20.0},
         "replay": {"reference": "smoothed", "horizon_s": 180.0},
-        "pairs": {"diagnose_alpha": 0.05}})
+        "pairs": {"diagnose_alpha": 0.05, "null_reruns": reruns}})
     return sim, SimLog(sim.imu, sim.fix, sim.vel), cfg
 
 
-def null_flight_diagnosis(seed: int, n_null: int = N_NULL):
+def null_flight_diagnosis(seed: int, n_null: int = N_NULL, reruns: bool = False):
     """(calibrated Diagnosis, nominal Diagnosis, bias error / sigma (x, y)) of one seeded null
     flight."""
-    sim, log, cfg = null_flight(seed)
-    nav = pipeline.navigate(log, cfg)
+    sim, log, cfg = null_flight(seed, reruns)
+    nav = pipeline.navigate(log, cfg, record_gains=not reruns)
     imu = pipeline.imu_increments(log)
     run, ref = pipeline.calibrate_from_a(imu, nav, cfg)
     assert run.calibrated and len(run.replays) >= 2, run.reason
-    null = pipeline.null_realisations(log, nav, run, cfg, n_null, seed=seed)
-    honest = with_null_covariance(run, null)
-    assert honest.sigma_source == "null_realisations"
+    stage = pipeline.null_stage(log, nav, run, cfg, n=n_null, seed=seed)
+    null, honest = stage.realisations, stage.calibration
+    assert honest.sigma_source == ("null_realisations" if cfg.pairs.null_reruns
+                                   else "linear_null")
     true_b = np.radians(np.asarray(sim.params["imu_errors"]["gyro_bias_dph"], float)) / 3600.0
     z = ((honest.gyro_bias_b_radps - true_b) / honest.gyro_bias_sigma_b_radps)[:2]
     # the pipeline's whole path: with the log and A's result, the lever arm and the GNSS time

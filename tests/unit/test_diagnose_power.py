@@ -183,7 +183,7 @@ def power_run(effect: str | None, size: float, seed: int, *, n_null: int = N_NUL
               **kwargs) -> PowerRun:
     """Simulate, run A, calibrate, make the null, diagnose: did it name ``effect``?"""
     log, cfg = simulate_flight(effect, size, seed, **kwargs)
-    nav = pipeline.navigate(log, cfg)
+    nav = pipeline.navigate(log, cfg, record_gains=pipeline.null_needs_gains(cfg))
     imu = pipeline.imu_increments(log)
     run, ref = pipeline.calibrate_from_a(imu, nav, cfg)
     assert run.calibrated and len(run.replays) >= 2, run.reason

@@ -30,6 +30,7 @@ LAYERS: tuple[frozenset[str], ...] = (
     frozenset({"diagnose", "simcompare", "report"}),
     frozenset({"config"}),
     frozenset({"flight_stages"}),
+    frozenset({"null_stage"}),
     frozenset({"diagnosis_stage"}),
     frozenset({"passes_ahead"}),
     frozenset({"pipeline", "convert", "api"}),
