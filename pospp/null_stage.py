@@ -12,7 +12,7 @@ of a re-run) the diagnosis's re-run signatures share (:mod:`pospp.diagnosis_stag
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -108,7 +108,15 @@ def linear_null_model(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     :func:`pospp.diagnose.rerun.gate_excess`); otherwise those of A re-run recording them on
     the log with its GNSS on A's solution (the "rerun" null's base, of which A gates nothing:
     the A of a flight without the effect that made it gate); A re-run on the log itself when
-    ``nav`` recorded none. Raises ValueError when A fails or the legs overlap in time."""
+    ``nav`` recorded none.
+
+    Raises ValueError (its message: why) when A fails, the legs overlap in time, or a leg
+    starts before A's heading has converged (its sigma within twice its median: the gain
+    replay's switch epoch, :func:`pospp.nav.filter_state.switch_epoch`): there A's error is
+    not small and its response not linear (measured on the null Monte Carlo's flights that
+    align in motion: A re-runs with leg-0 tilts 90-250 times the linear sigma in 4 of 40, a
+    closing lack of fit at p 0.002-0.02 with the linear null where the re-runs' read 0.39;
+    docs/diagnose.md, "The linear null"); the null is then made by A re-runs."""
     gains = nav.gain_replay
     if nav.resets or gate_excess(nav, config.filter_options().gate_probability):
         gains = navigate(_gnss_on_a(log, nav, config), config, options=rerun_options(config),
@@ -117,6 +125,11 @@ def linear_null_model(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
         gains = navigate(log, config, options=rerun_options(config),
                          record_gains=True).gain_replay
     assert gains is not None  # recorded
+    t_conv = float(gains.t_s[gains.k_from])
+    early = [(i, r.t0_s) for i, r in sorted(calib_run.replays.items()) if r.t0_s < t_conv]
+    if early:
+        raise ValueError(f"leg {early[0][0]} starts at {early[0][1]:.0f} s, before A's heading "
+                         f"has converged ({t_conv:.0f} s)")
     which = nav_filter.reference_name(nav, config.replay.reference)
     sol = nav.smoothed if which == "smoothed" and nav.smoothed is not None else nav.forward
     imu = imu_increments(log)
@@ -157,26 +170,31 @@ def null_stage(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     the same null; ``nav`` is A as the run made it (recording its gains: :func:`navigate`
     with ``record_gains=null_needs_gains(config)``, else A is run again here to record them).
     The other arguments as :func:`null_realisations`'."""
-    made: list[LinearNull] = []
+    made: list[LinearNull | str] = []
     dv = null_realisations(log, nav, calib_run, config,
                            config.pairs.null_realisations if n is None else n, seed=seed,
                            threads=threads, white_noise=white_noise, base=base, model_out=made)
-    return NullResult(dv, with_null_sigmas(calib_run, dv, made[0] if made else None))
+    model = next((m for m in made if isinstance(m, LinearNull)), None)
+    run = calib_run if model or not made else replace(
+        calib_run, messages=calib_run.messages + (str(made[0]),))
+    return NullResult(dv, with_null_sigmas(run, dv, model))
 
 
 def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                       calib_run: CalibrationRun, config: PipelineConfig, n: int, *,
                       seed: int = 0, drift: tuple[float, float] | None = None,
                       threads: int = 1, white_noise: tuple[float, float] | None = None,
-                      base: NullBase | None = None, model_out: list[LinearNull] | None = None
+                      base: NullBase | None = None,
+                      model_out: list[LinearNull | str] | None = None
                       ) -> list[list[np.ndarray]]:
     """B minus A's null realisations along this flight: ``n`` lists of (M, 3) NED arrays
     [m/s], legs in id order, each B minus A's response to one draw of :func:`null_noise`
     (``drift``, ``white_noise``: as there).
 
     By default (``[pairs] null_reruns`` false) exact draws of the linear null
-    (:func:`linear_null_model`, appended to ``model_out`` when it is a list; ``seed`` seeds
-    them). With ``null_reruns``, or when the linear null cannot be made (legs that overlap),
+    (:func:`linear_null_model`, appended to ``model_out`` when it is a list, else why it was
+    not made; ``seed`` seeds them). With ``null_reruns``, or without a linear null (a leg
+    before A's heading converged, legs that overlap),
     A re-run as configured on the log with its GNSS on A's solution at the antenna (the base,
     :func:`null_base`: made here when ``base`` is None) plus the noise drawn from ``seed``
     from A's alignment point on, B replayed on the same legs, minus the base's own B minus A
@@ -187,13 +205,13 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     """
     if not config.pairs.null_reruns:
         try:
-            model = linear_null_model(log, nav, calib_run, config, null_noise(
+            model: LinearNull | str = linear_null_model(log, nav, calib_run, config, null_noise(
                 log, nav, calib_run, config, drift=drift, white_noise=white_noise))
-        except ValueError:
-            model = None
-        if model is not None:
-            if model_out is not None:
-                model_out.append(model)
+        except ValueError as exc:
+            model = f"the null from A re-runs: no linear null ({exc})"
+        if model_out is not None:
+            model_out.append(model)
+        if isinstance(model, LinearNull):
             return model.draws(n, seed)
     b = null_base(log, nav, calib_run.legs, calib_run.replays, config) if base is None \
         else base

@@ -294,40 +294,57 @@ def psi_blocks(grid, lay, inv_tau_a, inj, g_leg, g_sample, leg_end, psi):
 
 
 @njit(cache=True)
-def smoother_adjoint(a_gains, g_plus, g_minus, mu_dx):
-    """The adjoint of :func:`smooth_draws`, forward over the nodes: given the sources on
-    ``e_k^+`` and ``e_k^-`` (K, p, n_a) (row vectors: output = sum_k g_k e_k), the
-    sensitivity to each node's feedback ``mu_dx`` (K, p, n_a): ``mu_k^- = g_k^- + mu_k-1^+
-    A_k-1``, ``mu_k^+ = g_k^+ + mu_k^-``, ``mu_dx_k = mu_k^-`` (``e_K-1^+`` is 0)."""
-    n_k = g_plus.shape[0]
-    mu_plus = np.zeros(g_plus.shape[1:])
+def smoother_adjoint(a_gains, sources, wj, u_a, mu_dx):
+    """The adjoint of :func:`smooth_draws`, forward over the nodes: the sensitivity of the
+    p functionals to each node's feedback, ``mu_dx`` (K, p, n_a), from their sources on the
+    interpolated estimate: ``mu_k^- = g_k^- + mu_k-1^+ A_k-1``, ``mu_k^+ = g_k^+ + mu_k^-``,
+    ``mu_dx_k = mu_k^-`` (row vectors; ``e_K-1^+`` is 0). ``sources = (node, plus, weight,
+    kind, index)`` sorted by node: each adds ``weight`` times a source to ``g^+`` (plus) or
+    ``g^-`` of its node, the source ``wj[index]`` (p, 3) on the velocity rows (kind 0, a
+    sample) or ``-u_a[index]`` (p, n_a) on all (kind 1, a leg start)."""
+    node, plus, weight, kind, index = sources
+    n_k, p, n_a = mu_dx.shape
+    mu_plus = np.zeros((p, n_a))
+    e = 0
     for k in range(n_k):
-        mu_minus = g_minus[k].copy()
-        if k > 0:
-            mu_minus += np.dot(mu_plus, a_gains[k - 1])
+        mu_minus = np.dot(mu_plus, a_gains[k - 1]) if k > 0 else np.zeros((p, n_a))
+        g_plus = np.zeros((p, n_a))
+        while e < node.shape[0] and node[e] == k:
+            tgt = g_plus if plus[e] else mu_minus
+            if kind[e] == 0:
+                tgt[:, 3:6] += weight[e] * wj[index[e]]
+            else:
+                tgt -= weight[e] * u_a[index[e]]
+            e += 1
         mu_dx[k] = mu_minus
-        mu_plus = g_plus[k] + mu_minus
+        mu_plus = g_plus + mu_minus
 
 
 @njit(cache=True)
-def filter_adjoint(grid, lay, inv_tau_a, inj, events, records, src, mu_dx, meat):
+def filter_adjoint(grid, lay, inv_tau_a, inj, events, records, wj, u_a, mu_dx, meat):
     """The adjoint of :func:`forward_draws`, backward over the grid, accumulating the
     covariance of p linear functionals of the realisation: ``meat += (lam Gamma)(lam
     Gamma)^T`` per interval, ``(lam - mu) K R^1/2`` per record, ``lam G0`` at the start
-    (lam: (p, n_z), the functionals' sensitivity to z). ``src`` (G, p, n_z): the sources at
-    each grid point (on the state after its updates and B's reset), ``mu_dx`` (K, p, n_a):
-    :func:`smoother_adjoint`'s. ``meat`` (p, p) is added to."""
+    (lam: (p, n_z), the functionals' sensitivity to z). The sources, on the state after a
+    point's updates and B's reset: each sample's weights ``wj`` (J, p, 3) on B's velocity
+    error less A's, each leg start's ``u_a`` (L, p, n_a) on A's error; ``mu_dx`` (K, p,
+    n_a): :func:`smoother_adjoint`'s. ``meat`` (p, p) is added to."""
     xs, fms, wms, dts = grid
-    g_node, g_leg, _ = events
+    g_node, g_leg, g_sample = events
     rec_start, rec_k, rec_h, rec_sig = records
     n_a = lay[0]
     nz, jb = n_a + 18, n_a + 6
     phi_z, gam = np.empty((nz, nz)), np.empty((nz, N_NOISE))
     work, work_b = np.empty((5, n_a + 6, n_a + 6)), np.empty((4, 15, 15))
     g_in, g0 = np.empty((nz, N_IN)), np.empty((nz, 6))
-    lam = np.zeros((src.shape[1], nz))
+    lam = np.zeros((wj.shape[1], nz))
     for g in range(xs.shape[0] - 1, -1, -1):
-        lam += src[g]
+        j = g_sample[g]
+        if j >= 0:
+            lam[:, jb + 3:jb + 6] += wj[j]
+            lam[:, 3:6] -= wj[j]
+        if g_leg[g] >= 0:
+            lam[:, :n_a] += u_a[g_leg[g]]
         if g_leg[g] >= 0:  # z_B = 0, c_B = -beta_a
             for k in range(3):
                 lam[:, n_a + 3 + k] -= lam[:, jb + 9 + k]

@@ -206,6 +206,25 @@ class LinearNull:
             raise ValueError("calibration_covariance: the calibration has no gain")
         return self.covariance(self.fit_weights(cal.leg_ids, cal.gain))
 
+    def _smoother_sources(self) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
+        """Where the functionals' sources on the smoother's interpolated estimate land
+        (:func:`pospp.calib._null_kernel.smoother_adjoint`'s ``sources``): each sample's and
+        leg start's weight ``1 - alpha`` on e^_i^+ and ``alpha`` on e^_i+1^- (as A
+        interpolates), sorted by node."""
+        s_node, s_alpha, l_node, l_alpha = self.interp
+        parts = []
+        for kind, node, alpha in ((0, s_node, s_alpha), (1, l_node, l_alpha)):
+            idx = np.arange(node.size)
+            nxt = alpha > 0.0
+            parts.append((node, np.ones(node.size, bool), 1.0 - alpha, kind, idx))
+            parts.append((node[nxt] + 1, np.zeros(nxt.sum(), bool), alpha[nxt], kind, idx[nxt]))
+        node = np.concatenate([q[0] for q in parts])
+        order = np.argsort(node, kind="stable")
+        return (node[order].astype(np.int64), np.concatenate([q[1] for q in parts])[order],
+                np.concatenate([q[2] for q in parts])[order],
+                np.concatenate([np.full(q[0].size, q[3], np.int64) for q in parts])[order],
+                np.concatenate([q[4] for q in parts])[order].astype(np.int64))
+
     def covariance(self, weights: NDArray) -> NDArray:
         """Covariance (p, p) of the p functionals ``sum_j W[:, j, :] d_j`` of a realisation
         (``weights`` (p, J, 3), samples in :meth:`draws`' order, NED velocity), exactly:
@@ -215,46 +234,23 @@ class LinearNull:
         if w.shape[1:] != (n_j, 3):
             raise ValueError(f"weights: expected shape (p, {n_j}, 3), got {w.shape}")
         n_a, i_gm = self.lay[0], self.lay[1]
-        n_g = self.grid[0].shape[0]
         n_k = self.records[0].shape[0] - 1
-        jb = n_a + 6
-        g_sample = self.events[2]
-        g_of_j = np.empty(n_j, dtype=np.int64)
-        g_of_j[g_sample[g_sample >= 0]] = np.flatnonzero(g_sample >= 0)
-        wj = np.transpose(w, (1, 0, 2))  # (J, p, 3)
-        src = np.zeros((n_g, p, n_a + 18))
-        src[g_of_j, :, jb + 3:jb + 6] += wj  # one sample per grid point
-        src[g_of_j, :, 3:6] -= wj
+        wj = np.ascontiguousarray(np.transpose(w, (1, 0, 2)))  # (J, p, 3)
         u = np.zeros((len(self.leg_ids), p, 12))
         np.add.at(u, self.sample_leg, np.einsum("jpa,jab->jpb", wj, self.psi))
-        u_a = np.zeros((u.shape[0], p, n_a))
+        u_a = np.zeros((u.shape[0], p, n_a))  # B's start on A's smoothed navigation error
         u_a[:, :, :9] = u[:, :, :9]
         u_a[:, :, I_BA:I_BA + 3] = u[:, :, 9:]
         if i_gm >= 0:
             u_a[:, :, i_gm + 3:i_gm + 6] = u[:, :, 9:]
-        src[self.leg_start_grid, :, :n_a] += u_a
         mu_dx = np.zeros((n_k, p, n_a))
         if self.smoother_gains is not None:
-            g_plus, g_minus = np.zeros((n_k, p, n_a)), np.zeros((n_k, p, n_a))
-            s_node, s_alpha, l_node, l_alpha = self.interp
-            e_v = np.zeros((n_j, p, n_a))
-            e_v[:, :, 3:6] = wj
-            _spread(g_plus, g_minus, s_node, s_alpha, e_v)
-            _spread(g_plus, g_minus, l_node, l_alpha, -u_a)
-            kernel.smoother_adjoint(self.smoother_gains, g_plus, g_minus, mu_dx)
+            kernel.smoother_adjoint(self.smoother_gains, self._smoother_sources(), wj, u_a,
+                                    mu_dx)
         meat = np.zeros((p, p))
         kernel.filter_adjoint(self.grid, self.lay, self.inv_tau_a, self.inj, self.events,
-                              self.records, src, mu_dx, meat)
+                              self.records, wj, u_a, mu_dx, meat)
         return 0.5 * (meat + meat.T)
-
-
-def _spread(g_plus: NDArray, g_minus: NDArray, node: NDArray, alpha: NDArray, v: NDArray
-            ) -> None:
-    """Add ``v`` (n, p, n_a), a source on the interpolated smoother estimate at ``n`` times,
-    to its nodes: ``(1 - alpha) v`` on e^_i^+, ``alpha v`` on e^_i+1^-."""
-    np.add.at(g_plus, node, (1.0 - alpha)[:, None, None] * v)
-    nxt = alpha > 0.0
-    np.add.at(g_minus, node[nxt] + 1, alpha[nxt, None, None] * v[nxt])
 
 
 def linear_null(gains: GainReplay, trajectory: Trajectory, imu_t_s: NDArray, imu_w_b_radps: NDArray,
@@ -374,9 +370,12 @@ def _interval_means(grid_t: NDArray, trajectory: Trajectory, t_s: NDArray, w: ND
     dt_imu = np.diff(t_s)
     means = []
     for rate in (f, w):
-        cum = np.concatenate([np.zeros((1, 3)),
-                              np.cumsum(np.asarray(rate)[1:] * dt_imu[:, None], axis=0)])
+        cum = np.empty((t_s.size, 3))  # the increments' running sum, in place (one array)
+        cum[0] = 0.0
+        np.multiply(np.asarray(rate)[1:], dt_imu[:, None], out=cum[1:])
+        np.cumsum(cum, axis=0, out=cum)
         at = np.column_stack([np.interp(grid_t, t_s, cum[:, a]) for a in range(3)])
+        del cum
         dt = np.diff(grid_t)
         m = np.empty((grid_t.size, 3))
         m[1:] = np.diff(at, axis=0) / dt[:, None]

@@ -59,8 +59,9 @@ def drift_flight_z(seed: int, tau_s: float, sigma_dph: float, *, n_null: int = 6
     run, _ = pipeline.calibrate_from_a(imu, nav, cfg)
     assert run.calibrated and len(run.replays) >= 2, run.reason
     honest = pipeline.null_stage(log, nav, run, cfg, n=n_null, seed=seed).calibration
-    assert honest.sigma_source == ("null_realisations" if cfg.pairs.null_reruns
-                                   else "linear_null")
+    # the linear null, or A re-runs where it refuses (a leg before A's heading converged)
+    assert honest.sigma_source == "linear_null" or honest.sigma_source == "null_realisations" \
+        and (reruns or any("no linear null" in m for m in honest.messages))
     true_b = np.radians(np.asarray(sim.params["imu_errors"]["gyro_bias_dph"], float)) / 3600.0
     err = (honest.gyro_bias_b_radps - true_b)[:2]
     sig = honest.gyro_bias_sigma_b_radps[:2]

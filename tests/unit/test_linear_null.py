@@ -340,7 +340,16 @@ def test_null_stage_linear_by_default_reruns_on_request_and_its_fallbacks(flight
     sig = np.sqrt(np.diag(cov))
     assert np.max(np.abs(np.sqrt(np.diag(reset.calibration_covariance(run.chosen))) / sig - 1)
                   ) < 0.02
-    cfg_r = dataclasses.replace(cfg, pairs=dataclasses.replace(cfg.pairs, null_reruns=True))
-    rerun = null_stage.null_stage(log, nav, run, cfg_r, n=3, seed=1)
+    # a leg before A's heading converged (the gain replay's switch epoch): the A re-runs
+    t0 = min(r.t0_s for r in run.replays.values())
+    late = dataclasses.replace(nav.gain_replay, k_from=int(np.searchsorted(
+        nav.gain_replay.t_s, t0 + 1.0)))
+    rerun = null_stage.null_stage(log, dataclasses.replace(nav, gain_replay=late), run, cfg,
+                                  n=3, seed=1)
     assert rerun.calibration.sigma_source == "null_realisations"
+    assert any("before A's heading has converged" in m for m in rerun.calibration.messages)
     assert [d.shape for d in rerun.realisations[0]] == sizes
+    # and on request
+    cfg_r = dataclasses.replace(cfg, pairs=dataclasses.replace(cfg.pairs, null_reruns=True))
+    assert null_stage.null_stage(log, nav, run, cfg_r, n=3).calibration.sigma_source \
+        == "null_realisations"
