@@ -18,7 +18,8 @@ import numpy as np
 
 from pospp import pipeline
 from pospp.config import PipelineConfig
-from pospp.io import mcap_reader, parquet_tables, report_files
+from pospp.io import mcap_reader, parquet_tables, report_files, run_folder
+from pospp.io.run_lock import locked
 from pospp.nav import filter as nav_filter
 from pospp.nav.alignment import AlignmentOptions, gnss_moving_windows
 from pospp.sim.api import simulate_along
@@ -310,13 +311,21 @@ def compare_log(log: mcap_reader.FlightLog, config: PipelineConfig, *,
                            max_steps=max_steps, library=library), tpl
 
 
+@locked("pospp compare-sim")
 def compare_sim_run(run_dir: str | Path, *, out: str | Path | None = None,
-                    max_steps: int = 4, library: tuple[SimEffect, ...] = LIBRARY) -> Comparison:
+                    max_steps: int = 4, library: tuple[SimEffect, ...] = LIBRARY,
+                    force: bool = False) -> Comparison:
     """``pospp compare-sim RUN_DIR``: write sim_comparison.parquet and sim_model.toml.
 
-    ``out`` is the model file (default RUN_DIR/sim_model.toml). The report is re-rendered.
+    ``out`` is the model file (default RUN_DIR/sim_model.toml; never the run's input or
+    another file of a run folder, an existing one only with ``force``:
+    :func:`pospp.io.run_folder.check_output_file`). The report is re-rendered. The run
+    folder's lock is held throughout.
     """
     run, meta, path, config = pipeline.reopen_run(run_dir)
+    model_file = run_folder.check_output_file(out or run / "sim_model.toml", run=run,
+                                              own_names=frozenset({"sim_model.toml"}),
+                                              force=force)
     log = pipeline.ingest(path, config)
     try:
         comp, tpl = compare_log(log, config, max_steps=max_steps, library=library)
@@ -330,7 +339,7 @@ def compare_sim_run(run_dir: str | Path, *, out: str | Path | None = None,
     header = (f"pospp compare-sim of {path.name}: effects added: {named}.\n"
               f"Simulate with: pospp simulate --model THIS_FILE.toml ... ([imu]: "
               f"pospp.sim.sensors.ImuErrorModel fields, [gnss]: pospp.sim.gnss.GnssModel).")
-    report_files.write_text(Path(out) if out else run / "sim_model.toml",
-                            model_toml(comp.imu_model, comp.gnss_model, header=header))
+    report_files.write_text(model_file, model_toml(comp.imu_model, comp.gnss_model,
+                                                   header=header))
     pipeline._render_report(run)
     return comp

@@ -10,13 +10,14 @@ Nothing here touches files but through :mod:`pospp.io`'s reader.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from pospp import rotation
+from pospp.calib.bias_smoother import ForwardBiases
 from pospp.calib.replay import (
     ImuRates,
     ImuSource,
@@ -28,15 +29,11 @@ from pospp.calib.segment import Leg, find_legs
 from pospp.calib.stage import CalibrationRun, calibrate_flight
 from pospp.config import PipelineConfig
 from pospp.diagnose.effects import ACCEL_SETTLING_S, effect_by_id
-from pospp.diagnose.rerun import (
-    REFINE_FRACTION,
-    gate_excess,
-    warmed,
-    warmup_fit,
-)
+from pospp.diagnose.rerun import REFINE_FRACTION, gate_excess, warmed, warmup_fit
 from pospp.io import mcap_reader
 from pospp.nav import filter as nav_filter
 from pospp.nav import tuning as nav_tuning
+from pospp.nav.aiding import aiding_of, leg_aiding_problem
 from pospp.threads import Threads
 from pospp.types import FLU_TO_FRD
 from pospp.units import UG_MPS2
@@ -264,21 +261,33 @@ class LegReplays:
     replays: dict[int, LegReplay]
     """By leg id, the legs whose replay did not fail."""
     failed: tuple[str, ...]
-    """A message per leg whose replay failed."""
+    """A message per leg whose replay failed or that was refused."""
+    refused: dict[int, str] = field(default_factory=dict)
+    """By leg id, the legs not replayed because A is not GNSS-aided over them, with why
+    (:func:`pospp.nav.aiding.leg_aiding_problem`)."""
 
 
 def calibration_replays(imu: ImuSource, nav: nav_filter.FilterResult, config: PipelineConfig,
                         threads: Threads = 1) -> LegReplays:
     """The calibration's legs (:func:`pospp.calib.segment.find_legs` on A's ``[replay]
     reference`` solution) and B's replays over them
-    (:func:`pospp.calib.replay.replay_legs`, ``threads`` legs at once)."""
+    (:func:`pospp.calib.replay.replay_legs`, ``threads`` legs at once). A leg over which A is
+    not GNSS-aided (:func:`pospp.nav.aiding.leg_aiding_problem`) is refused, not replayed:
+    B minus a free-inertial A is not B's error (issue 38 item 1)."""
     which = nav_filter.reference_name(nav, config.replay.reference)
     solution_a = SolutionA(*nav_filter.solution_a_fields(nav, which=which))
     traj = solution_a.trajectory
     legs = tuple(find_legs(traj.t_s, traj.v_n_mps, traj.height_m,
                            thresholds=config.legs.thresholds()))
-    replays, failed = replay_legs(imu, solution_a, legs, config.replay.options(), threads)
-    return LegReplays(solution_a, legs, replays, failed)
+    aid = aiding_of(nav)
+    refused = {g.leg_id: why for g in legs if (why := leg_aiding_problem(
+        aid, g.start_s, g.end_s, traj.t_s, solution_a.v_sigma_n_mps)) is not None}
+    replays, failed = replay_legs(imu, solution_a, tuple(g for g in legs
+                                                         if g.leg_id not in refused),
+                                  config.replay.options(), threads)
+    return LegReplays(solution_a, legs, replays,
+                      tuple(f"leg {i} refused: {why}" for i, why in refused.items()) + failed,
+                      refused)
 
 
 def calibrate_from_a(imu: ImuSource, nav: nav_filter.FilterResult,
@@ -291,16 +300,16 @@ def calibrate_from_a(imu: ImuSource, nav: nav_filter.FilterResult,
     solution_a = made.solution_a
     tuning = imu_tuning(config)
     gm = bool(np.isfinite(tuning.gyro_gm_tau_s) and tuning.gyro_gm_sigma_dph > 0)
+    mode = config.compensation.mode
     return calibrate_flight(
         imu, solution_a, legs=made.legs, made_replays=(made.replays, made.failed),
-        threads=threads,
+        threads=threads, leg_refusals=made.refused,
         legs_cfg=config.legs.thresholds(), replay_cfg=config.replay.options(),
         pairs_cfg=config.pairs.policy(), gyro_arw_dpsh=tuning.gyro_arw_dpsh,
         noise=config.pairs.noise, noise_step_s=config.pairs.noise_step_s,
         estimate_gyro_z=config.pairs.estimate_gyro_z,
-        compensation=config.compensation.mode if gm or config.compensation.mode == "causal"
-        else "constant",
-        forward_biases=nav.forward_biases,
+        compensation=mode if gm or mode != "per_leg" else "constant",
+        forward_biases=forward_bias_record(nav, tuning),
         # the grade's Gauss-Markov ("random") drift enters the least squares' noise model;
         # its level and correlation time are the flight's own (REML on the joint fit, tau
         # profiled), the grade's a weak prior (solve.DriftPrior; issue 16, item 3)
@@ -310,6 +319,10 @@ def calibrate_from_a(imu: ImuSource, nav: nav_filter.FilterResult,
     ), solution_a
 
 
+def forward_bias_record(nav: nav_filter.FilterResult, tuning: nav_tuning.ImuTuning
+                        ) -> ForwardBiases:
+    """What the smoothed compensation reads of A (:meth:`ForwardBiases.of_filter`)."""
+    return ForwardBiases.of_filter(nav, tuning.noise().gyro_bias_psd_radps2ps)
 def _lever_arm_and_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                          config: PipelineConfig,
                          est: nav_filter.LeverArmEstimate | None = None

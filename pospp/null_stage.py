@@ -17,6 +17,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from pospp.calib.bias_smoother import span_means
 from pospp.calib.linear_null import LinearNull, NullNoise, linear_null
 from pospp.calib.replay import LegReplay, SolutionA, replay_velocity_error
 from pospp.calib.segment import Leg
@@ -139,13 +140,16 @@ def linear_null_model(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
 
 
 def with_null_sigmas(calib_run: CalibrationRun, null_dv: list[list[np.ndarray]],
-                     model: LinearNull | None) -> CalibrationRun:
+                     model: LinearNull | None,
+                     injected: Sequence[np.ndarray] | None = None) -> CalibrationRun:
     """The calibration with its covariance from the null: exactly from the linear null's
-    ``model`` (:meth:`pospp.calib.linear_null.LinearNull.calibration_covariance`), else from
-    refits on the realisations ``null_dv`` (:func:`pospp.calib.stage.with_null_covariance`)."""
+    ``model`` (:meth:`pospp.calib.linear_null.LinearNull.calibration_covariance`; the flight's
+    gyro bias sigma then the turn-on constant's: :func:`pospp.calib.stage.with_covariance`),
+    else from refits on the realisations ``null_dv`` and their injected truths ``injected``
+    (:func:`pospp.calib.stage.with_null_covariance`)."""
     chosen = calib_run.chosen
     if model is None or chosen is None or chosen.gain is None:
-        return with_null_covariance(calib_run, null_dv)
+        return with_null_covariance(calib_run, null_dv, injected or None)
     return with_covariance(calib_run, model.calibration_covariance(chosen), "linear_null",
                            "calibration sigmas from the linear null of B minus A (A's gains: "
                            "the least squares' exact covariance)")
@@ -171,13 +175,15 @@ def null_stage(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     with ``record_gains=null_needs_gains(config)``, else A is run again here to record them).
     The other arguments as :func:`null_realisations`'."""
     made: list[LinearNull | str] = []
+    injected: list[np.ndarray] = []  # the re-runs' truths of the flight's gyro bias
     dv = null_realisations(log, nav, calib_run, config,
                            config.pairs.null_realisations if n is None else n, seed=seed,
-                           threads=threads, white_noise=white_noise, base=base, model_out=made)
+                           threads=threads, white_noise=white_noise, base=base, model_out=made,
+                           injected_out=injected)
     model = next((m for m in made if isinstance(m, LinearNull)), None)
     run = calib_run if model or not made else replace(
         calib_run, messages=calib_run.messages + (str(made[0]),))
-    return NullResult(dv, with_null_sigmas(run, dv, model))
+    return NullResult(dv, with_null_sigmas(run, dv, model, injected))
 
 
 def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
@@ -185,7 +191,8 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                       seed: int = 0, drift: tuple[float, float] | None = None,
                       threads: int = 1, white_noise: tuple[float, float] | None = None,
                       base: NullBase | None = None,
-                      model_out: list[LinearNull | str] | None = None
+                      model_out: list[LinearNull | str] | None = None,
+                      injected_out: list[np.ndarray] | None = None
                       ) -> list[list[np.ndarray]]:
     """B minus A's null realisations along this flight: ``n`` lists of (M, 3) NED arrays
     [m/s], legs in id order, each B minus A's response to one draw of :func:`null_noise`
@@ -201,7 +208,11 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     (pospp.diagnose.null_model; docs/diagnose.md, "The null, third version"); A and B at
     ``[pairs] rerun_imu_rate_hz`` (:func:`rerun_decimation`), A with the base's gains; fewer
     than ``n`` when A fails on more than ``n`` of ``2 n`` perturbed logs; ``threads``:
-    realisations made at once (the result does not depend on it).
+    realisations made at once (the result does not depend on it). ``injected_out``: when a
+    list, each kept re-run realisation appends the mean over each leg (id order, the replays'
+    span; (L, 3), body FRD [rad/s]) of the gyro error it injected (white noise and drift): the
+    truth its flight bias is measured against (:func:`pospp.calib.stage.with_null_covariance`;
+    the linear null appends none).
     """
     if not config.pairs.null_reruns:
         try:
@@ -218,13 +229,20 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     noise = null_noise(log, nav, calib_run, config, drift=drift, white_noise=white_noise,
                        gnss_sigmas=(b.pos_sigma_ned_m, b.vel_sigma_ned_mps))
     rng = np.random.default_rng(seed)
+    epoch_ns = int(log.imu.time_ns[0])
+    spans = [(epoch_ns + round(r.t0_s * 1e9), epoch_ns + round((r.t0_s + r.t_s[-1]) * 1e9))
+             for _, r in sorted(calib_run.replays.items())]
 
-    def attempt(log_r: mcap_reader.FlightLog) -> list[np.ndarray] | None:
+    def attempt(log_r: mcap_reader.FlightLog
+                ) -> tuple[list[np.ndarray], np.ndarray | None] | None:
         try:  # A with the base's gains (nav_filter.GainReplay): first order in the noise
-            return rerun_b_minus_a(log_r, nav, calib_run.legs, calib_run.replays, config,
-                                   replay=b.gains)[0]
+            dv = rerun_b_minus_a(log_r, nav, calib_run.legs, calib_run.replays, config,
+                                 replay=b.gains)[0]
         except ValueError:  # a realisation whose A fails (alignment) is skipped
             return None
+        return dv, (span_means(b.log.imu.time_ns, log_r.imu.w_ib_b_radps
+                               - b.log.imu.w_ib_b_radps, spans) if injected_out is not None
+                    else None)
 
     # drawn on the summed-down samples (a quarter of the flight-rate draws at 200 -> 50 Hz);
     # in this thread (drawing and scaling them in the workers held a draw per thread, +230
@@ -233,8 +251,10 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                  for _ in range(2 * n))
     # never more logs drawn than realisations still missing: the draws, and so the
     # realisations, are those of one log at a time; the next drawn while A runs on the others
-    return [[d - d0 for d, d0 in zip(dv, b.dv_n_mps, strict=True)]
-            for dv in first_kept(attempt, perturbed, n, threads)]
+    kept = first_kept(attempt, perturbed, n, threads)
+    if injected_out is not None:
+        injected_out.extend(k[1] for k in kept if k[1] is not None)
+    return [[d - d0 for d, d0 in zip(k[0], b.dv_n_mps, strict=True)] for k in kept]
 
 
 @dataclass(frozen=True)

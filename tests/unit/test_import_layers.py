@@ -20,7 +20,7 @@ ARCHITECTURE_DOC = PACKAGE.parent / "docs" / "architecture.md"
 LAYERS: tuple[frozenset[str], ...] = (
     # the data contract and the small facts
     frozenset({"pospp", "types", "units", "earth", "rotation", "threads", "memory",
-               "distributions"}),
+               "distributions", "config_schema"}),
     # files <-> contract; the navigation core
     frozenset({"io", "nav"}),
     # stage results -> table columns (names the result types of io and nav)
