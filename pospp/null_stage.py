@@ -143,16 +143,19 @@ def with_null_sigmas(calib_run: CalibrationRun, null_dv: list[list[np.ndarray]],
                      model: LinearNull | None,
                      injected: Sequence[np.ndarray] | None = None) -> CalibrationRun:
     """The calibration with its covariance from the null: exactly from the linear null's
-    ``model`` (:meth:`pospp.calib.linear_null.LinearNull.calibration_covariance`; the flight's
-    gyro bias sigma then the turn-on constant's: :func:`pospp.calib.stage.with_covariance`),
-    else from refits on the realisations ``null_dv`` and their injected truths ``injected``
-    (:func:`pospp.calib.stage.with_null_covariance`)."""
+    ``model`` (:meth:`pospp.calib.linear_null.LinearNull.calibration_covariance`), else from
+    refits on the realisations ``null_dv`` (:func:`pospp.calib.stage.with_null_covariance`).
+    The flight's gyro bias sigma from refits on ``null_dv`` against their injected truths
+    ``injected`` either way (the turn-on constant's without them)."""
     chosen = calib_run.chosen
+    refits = with_null_covariance(calib_run, null_dv, injected or None)
     if model is None or chosen is None or chosen.gain is None:
-        return with_null_covariance(calib_run, null_dv, injected or None)
+        return refits
+    flight = (refits.flight_gyro_bias_sigma_b_radps if injected
+              and refits.sigma_source == "null_realisations" else None)
     return with_covariance(calib_run, model.calibration_covariance(chosen), "linear_null",
                            "calibration sigmas from the linear null of B minus A (A's gains: "
-                           "the least squares' exact covariance)")
+                           "the least squares' exact covariance)", flight)
 
 
 class NullResult(NamedTuple):
@@ -209,10 +212,9 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     ``[pairs] rerun_imu_rate_hz`` (:func:`rerun_decimation`), A with the base's gains; fewer
     than ``n`` when A fails on more than ``n`` of ``2 n`` perturbed logs; ``threads``:
     realisations made at once (the result does not depend on it). ``injected_out``: when a
-    list, each kept re-run realisation appends the mean over each leg (id order, the replays'
-    span; (L, 3), body FRD [rad/s]) of the gyro error it injected (white noise and drift): the
-    truth its flight bias is measured against (:func:`pospp.calib.stage.with_null_covariance`;
-    the linear null appends none).
+    list, each realisation appends the mean over each leg (id order, the replays' span; (L,
+    3), body FRD [rad/s]) of the gyro error it injected (white noise and drift): the truth its
+    flight bias is measured against (:func:`pospp.calib.stage.with_null_covariance`).
     """
     if not config.pairs.null_reruns:
         try:
@@ -223,7 +225,7 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
         if model_out is not None:
             model_out.append(model)
         if isinstance(model, LinearNull):
-            return model.draws(n, seed)
+            return model.draws(n, seed, injected_out=injected_out)
     b = null_base(log, nav, calib_run.legs, calib_run.replays, config) if base is None \
         else base
     noise = null_noise(log, nav, calib_run, config, drift=drift, white_noise=white_noise,

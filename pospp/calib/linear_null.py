@@ -148,17 +148,69 @@ class LinearNull:
             cols.append(self._draw_chunk(xi.shape[1], np.random.default_rng(0), xi))
         return np.concatenate(cols, axis=2).reshape(3 * self.n_samples, n)
 
-    def draws(self, n: int, seed: int) -> list[list[NDArray]]:
+    def draws(self, n: int, seed: int, injected_out: list[NDArray] | None = None
+              ) -> list[list[NDArray]]:
         """``n`` realisations of B minus A's null, each one (M, 3) NED array per leg (id
         order) [m/s]: exact draws from N(0, Sigma) of the linear system
-        (``numpy.random.default_rng(seed)``: the same draws for the same seed and flight)."""
+        (``numpy.random.default_rng(seed)``: the same draws for the same seed and flight).
+        ``injected_out``: when a list, each realisation appends the gyro error it injected,
+        averaged over each leg (:meth:`injected_leg_means`; (L, 3), body FRD [rad/s])."""
         n_k, n_a = self.records[0].shape[0] - 1, self.lay[0]
         chunk = max(1, min(n, _CHUNK, _DX_BYTES // max(1, 8 * n_k * n_a)))
         rng = np.random.default_rng(seed)
-        parts = [self._draw_chunk(min(chunk, n - c), rng) for c in range(0, n, chunk)]
+        parts = []
+        for c in range(0, n, chunk):
+            if injected_out is None:
+                parts.append(self._draw_chunk(min(chunk, n - c), rng))
+                continue
+            xi = rng.standard_normal((self.n_noise, min(chunk, n - c)))
+            parts.append(self._draw_chunk(xi.shape[1], rng, xi))
+            means = self.injected_leg_means(xi)
+            injected_out.extend(means[:, :, r] for r in range(xi.shape[1]))
         d = np.concatenate(parts, axis=2) if parts else np.zeros((self.n_samples, 3, 0))
         cuts = np.cumsum(self.leg_sizes)[:-1]
         return [np.split(np.ascontiguousarray(d[:, :, r]), cuts) for r in range(n)]
+
+    def injected_leg_means(self, xi: NDArray) -> NDArray:
+        """(L, 3, R): the gyro error ``beta_g + n_g`` (body FRD [rad/s]) that the realisations
+        made of the standard normals ``xi`` (:meth:`_draw_chunk`'s, in the kernel's order)
+        inject, averaged over each leg from its start to its last sample: the truth a
+        realisation's flight gyro bias is measured against. As the kernel discretises it
+        (:func:`pospp.calib._null_kernel.interval_matrices`: the trapezoid puts an interval's
+        driving noise at its two ends, the normals a and b), over an interval of length dt
+
+            int beta_g = c (beta_g(t) + s q_g a_d),  c = tau (1 - exp(-dt / tau)) (dt: no tau),
+            int n_g = s ARW (a_w + b_w),  s = sqrt(dt / 2),
+            beta_g(t + dt) = exp(-dt / tau) (beta_g(t) + s q_g a_d) + s q_g b_d
+
+        (q_g = sqrt(2 sigma^2 / tau); a_w, a_d the gyro's white and drift rows of a)."""
+        dt = np.asarray(self.grid[3], dtype=float)
+        g_node, _, g_sample = self.events
+        rec_start, rec_sig = self.records[0], self.records[3]
+        cnt = np.concatenate([[0], np.cumsum(np.count_nonzero(rec_sig > 0.0, axis=1))])
+        per_node = cnt[rec_start[1:]] - cnt[rec_start[:-1]]
+        rows = np.where(g_node >= 0, per_node[np.maximum(g_node, 0)], 0)
+        rows[1:] += kernel.N_NOISE
+        off = 6 + np.concatenate([[0], np.cumsum(rows)[:-1]])
+        if 6 + rows.sum() != xi.shape[0]:
+            raise ValueError(f"xi: expected {6 + rows.sum()} rows, got {xi.shape[0]}")
+        inv, arw, qg = float(self.inj[0]), float(self.inj[4]), float(self.inj[6])
+        beta = self.inj[8] * xi[0:3]
+        cum = np.zeros((dt.size, 3, xi.shape[1]))
+        for g in range(1, dt.size):
+            a = xi[off[g]:off[g] + kernel.N_IN]
+            b = xi[off[g] + kernel.N_IN:off[g] + kernel.N_NOISE]
+            s, phi = np.sqrt(0.5 * dt[g]), np.exp(-inv * dt[g])
+            c = dt[g] if inv == 0.0 else (1.0 - phi) / inv
+            start = beta + s * qg * a[6:9]
+            cum[g] = cum[g - 1] + c * start + s * arw * (a[0:3] + b[0:3])
+            beta = phi * start + s * qg * b[6:9]
+        t_cum = np.concatenate([[0.0], np.cumsum(dt[1:])])
+        g_of_j = np.empty(self.n_samples, dtype=np.int64)
+        g_of_j[g_sample[g_sample >= 0]] = np.flatnonzero(g_sample >= 0)
+        g0 = np.asarray(self.leg_start_grid)
+        g1 = g_of_j[np.cumsum(self.leg_sizes) - 1]
+        return (cum[g1] - cum[g0]) / (t_cum[g1] - t_cum[g0])[:, None, None]
 
     def _draw_chunk(self, n: int, rng: np.random.Generator, xi: NDArray | None = None
                     ) -> NDArray:

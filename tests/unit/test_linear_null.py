@@ -116,9 +116,31 @@ def test_interval_transition_is_expm_of_the_augmented_f(flight):
             assert err <= bound, (t, name, err)
 
 
-def test_adjoint_covariance_is_the_forward_matrix_squared(flight):
+@pytest.fixture(scope="module")
+def ell(flight):
+    """The system's matrix L (3 J, n_noise): a realisation is L xi."""
+    return flight[3].matrix()
+
+
+def _injected_matrix(model) -> np.ndarray:
+    """(3 L, n_noise): the injected gyro error's leg means as a matrix of the normals
+    (:meth:`LinearNull.injected_leg_means` on unit vectors)."""
+    n = model.n_noise
+    cols = [model.injected_leg_means(np.eye(n)[:, c:c + 2000]) for c in range(0, n, 2000)]
+    return np.concatenate(cols, axis=2).reshape(-1, n)
+
+
+def _lr_p(exact: np.ndarray, f: np.ndarray) -> float:
+    """p-value of the likelihood-ratio test that zero-mean samples ``f`` (n, p) have the
+    covariance ``exact`` (chi-square, p (p + 1) / 2 degrees of freedom)."""
+    n, p = f.shape
+    m = np.linalg.solve(exact, f.T @ f / n)
+    return float(stats.chi2.sf(n * (np.trace(m) - np.linalg.slogdet(m)[1] - p),
+                               p * (p + 1) / 2))
+
+
+def test_adjoint_covariance_is_the_forward_matrix_squared(flight, ell):
     model = flight[3]
-    ell = model.matrix()
     assert ell.shape[1] == model.n_noise
     dense = ell @ ell.T
     eye = np.eye(3 * model.n_samples).reshape(-1, model.n_samples, 3)
@@ -132,11 +154,12 @@ def test_adjoint_covariance_is_the_forward_matrix_squared(flight):
 
 
 def _brute_force(nav, imu, reps, n_draws: int, rng: np.random.Generator, h_s: float = 0.1
-                 ) -> np.ndarray:
+                 ) -> tuple[np.ndarray, np.ndarray]:
     """B minus A at the replays' samples (n_draws, J, 3), by Monte Carlo of the linear system
     in state coordinates (module docstring): y = [A's navigation error (9), A's bias estimates
     (constant gyro, accel, Gauss-Markov gyro, accel: 12), the true drifts (6)], over A's whole
-    pass (its smoother reads every node), in batches of 50 draws."""
+    pass (its smoother reads every node), in batches of 50 draws; and the gyro error injected
+    (drift plus white rate noise), averaged over each leg (n_draws, L, 3)."""
     gains = nav.gain_replay
     assert (gains.layout.n, gains.layout.i_gm, gains.layout.i_sf) == (21, 15, -1)
     t_nodes = gains.t_s[gains.node_k]
@@ -181,10 +204,10 @@ def _brute_force(nav, imu, reps, n_draws: int, rng: np.random.Generator, h_s: fl
             fu[:9, 15:18] = -fa[:9, 12:15]
             fu[9:15, 9:15] = -decay
             e_u[i] = linalg.expm(fu * (ends[i] - starts[i]))
-    return np.concatenate([_brute_force_batch(gains, reps, t_nodes, t_samp, events, starts,
-                                              ends, fas, e_y, e_u, leg_steps,
-                                              min(50, n_draws - c), rng)
-                           for c in range(0, n_draws, 50)])
+    parts = [_brute_force_batch(gains, reps, t_nodes, t_samp, events, starts, ends, fas, e_y,
+                                e_u, leg_steps, min(50, n_draws - c), rng)
+             for c in range(0, n_draws, 50)]
+    return np.concatenate([q[0] for q in parts]), np.concatenate([q[1] for q in parts])
 
 
 def _brute_force_batch(gains, reps, t_nodes, t_samp, events, starts, ends, fas, e_y, e_u,
@@ -247,12 +270,17 @@ def _brute_force_batch(gains, reps, t_nodes, t_samp, events, starts, ends, fas, 
         al = float(np.clip((t - t_nodes[i]) / (t_nodes[i + 1] - t_nodes[i]), 0, 1))
         s[j] = e_samp[j] - ((1 - al) * e_plus[i] + al * e_minus[i + 1])
     out = np.zeros((n, t_samp.size, 3))
+    inj = np.zeros((n, len(reps), 3))
+    inv_tau = 1.0 / NOISE.gyro_gm_tau_s
     j0 = 0
-    for r, steps in zip(reps, leg_steps, strict=True):  # B from A's smoothed state
+    for leg, (r, steps) in enumerate(zip(reps, leg_steps, strict=True)):  # B from A's smoothed
         est = e_samp[j0] - s[j0]  # the smoother's estimate of A's error at t0
         bhat_a = beta0[j0][3:6] - e_samp[j0][12:15] - e_samp[j0][18:21]  # b_a + b_am
         u = np.vstack([s[j0][:9], beta0[j0], bhat_a + est[12:15] + est[18:21]])
-        for i in steps:
+        for i in steps:  # the injected gyro error: the drift's path inside the step, and
+            h = ends[i] - starts[i]  # the white rate noise's integral over it
+            inj[:, leg] += ((1.0 - np.exp(-h * inv_tau)) / inv_tau * u[9:12]
+                            + NOISE.gyro_arw_radpsqrts * np.sqrt(h) * xis[i][:3]).T
             u = e_u[i] @ u
             sq, fa, xi = np.sqrt(ends[i] - starts[i]), fas[i], xis[i]
             u[:3] += NOISE.gyro_arw_radpsqrts * sq * fa[:3, 9:12] @ xi[:3]
@@ -261,8 +289,9 @@ def _brute_force_batch(gains, reps, t_nodes, t_samp, events, starts, ends, fas, 
             u[12:15] += qa * sq * xi[9:12]
             for j in np.flatnonzero(np.abs(t_samp - ends[i]) < 1e-6):
                 out[:, j] = (u[3:6] - s[j][3:6]).T
+        inj[:, leg] /= sum(ends[i] - starts[i] for i in steps)
         j0 += r.t_s.size
-    return out
+    return out, inj
 
 
 def _legendre_weights(model) -> np.ndarray:
@@ -280,13 +309,13 @@ def _legendre_weights(model) -> np.ndarray:
     return w
 
 
-def test_exact_covariance_against_a_brute_force_monte_carlo(flight):
+def test_exact_covariance_against_a_brute_force_monte_carlo(flight, ell):
     nav, imu, reps, model, _ = flight
     w = _legendre_weights(model)
     exact = model.covariance(w)
     rng = np.random.default_rng(11)
     n = 1500
-    d = _brute_force(nav, imu, reps, n, rng)
+    d, inj = _brute_force(nav, imu, reps, n, rng)
     f = np.einsum("pja,rja->rp", w, d)
     s = f.T @ f / n
     p = w.shape[0]
@@ -299,6 +328,20 @@ def test_exact_covariance_against_a_brute_force_monte_carlo(flight):
     mm = np.linalg.solve(exact, fm.T @ fm / n)
     stat_m = n * (np.trace(mm) - np.linalg.slogdet(mm)[1] - p)
     assert stats.chi2.sf(stat_m, p * (p + 1) / 2) > 1e-3, stat_m
+    # the gyro error each draw injected, averaged over each leg (the truth the flight's bias
+    # is measured against: pospp.calib.stage.with_null_covariance), jointly with B minus A
+    m_inj = _injected_matrix(model)
+    big = np.vstack([np.einsum("pja,jan->pn", w, ell.reshape(model.n_samples, 3, -1)), m_inj])
+    g = np.hstack([f, inj.reshape(n, -1)])
+    assert _lr_p(big @ big.T, g) > 1e-3
+    # ... which rejects the truths with their sign flipped (uncorrelated: the same)
+    assert _lr_p(big @ big.T, np.hstack([f, -inj.reshape(n, -1)])) < 1e-6
+    # and their variance: white noise q / T plus the stationary drift's mean over T
+    t_leg = np.array([r.t_s[-1] for r in reps])
+    s2, tau = NOISE.gyro_gm_sigma_radps**2, NOISE.gyro_gm_tau_s
+    var = (NOISE.gyro_arw_radpsqrts**2 / t_leg
+           + 2 * s2 * tau**2 / t_leg**2 * (t_leg / tau - 1 + np.exp(-t_leg / tau)))
+    assert np.allclose(np.sum(m_inj**2, axis=1), np.repeat(var, 3), rtol=2e-3)
 
 
 @pytest.mark.parametrize("noise", ["gyro_rw", "gm", "white"])
