@@ -39,10 +39,10 @@ LAYERS: tuple[frozenset[str], ...] = (
 )
 
 
-FACADE = {"api"}
+FACADE = {"api", "pipeline", "config"}
 """What the package module ``pospp/__init__.py`` may name above its layer: the public API it
-re-exports, imported at first access (``pospp.__getattr__``) or for type checkers only
-(docs/architecture.md)."""
+re-exports (the readers, ``process_flight`` and its configuration), imported at first access
+(``pospp.__getattr__``) or for type checkers only (docs/architecture.md)."""
 
 
 def _layer_of(top: str) -> int:
