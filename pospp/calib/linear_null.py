@@ -35,7 +35,7 @@ What it leaves out, and so where the A re-runs are the reference: A's gate (a re
 flight's A used is used, one it gated is not), its covariance resets and alignment (the noise
 starts at A's first epoch, its initial state is the flight's), and second-order effects of the
 noise on the trajectory the gains were made along. Measured against them: docs/diagnose.md,
-"The null from A's own gains".
+"The linear null".
 """
 
 from __future__ import annotations
