@@ -31,7 +31,7 @@ import test_diagnose_null_mc as mc  # noqa: E402
 def one(args: tuple[int, bool, int]) -> tuple:
     seed, reruns, n_null = args
     t0 = time.process_time()
-    d, _, z, source = mc.null_flight_diagnosis(seed, n_null=n_null, reruns=reruns)
+    d, _, z, _, source = mc.null_flight_diagnosis(seed, n_null=n_null, reruns=reruns)
     return (seed, mc.GRADES[seed % 3], d.conclusion, d.named, [float(v) for v in z],
             float(d.steps[-1].p_value), source, time.process_time() - t0)
 

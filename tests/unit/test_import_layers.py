@@ -31,6 +31,7 @@ LAYERS: tuple[frozenset[str], ...] = (
     frozenset({"config"}),
     frozenset({"flight_stages"}),
     frozenset({"null_stage"}),
+    frozenset({"sensor_stage"}),
     frozenset({"diagnosis_stage"}),
     frozenset({"passes_ahead"}),
     frozenset({"pipeline", "convert", "api"}),
