@@ -39,12 +39,16 @@ __all__ = [
     "GnssModel",
     "GravityDisturbance",
     "ImuErrorModel",
+    "Kinematics",
     "Simulation",
     "TrueLeg",
+    "along_motion",
     "gnss_model_from_params",
     "imu_error_model_from_params",
     "imu_grade",
     "load_profile",
+    "kinematics",
+    "sensors",
     "simulate",
     "simulate_along",
 ]
@@ -302,6 +306,74 @@ def _params(*, grade_name: str, model: ImuErrorModel, realised: RealisedImuError
     }
 
 
+@dataclass(frozen=True)
+class Kinematics:
+    """The error-free part of a simulation, made once and corrupted many times
+    (:func:`sensors`): the motion, the IMU epochs and the exact IMU increments.
+
+    Attributes
+    ----------
+    motion : object with ``evaluate(t_s) -> MotionSample`` (time from the mission start)
+    t_s : (N + 1,) IMU epochs [s from the mission start], ``k dt``
+    dtheta_b_rad, dv_b_mps : (N, 3) exact increments over (t_k, t_k+1], body FRD
+    start_time_ns : int
+        UTC stamp of the mission start (epoch 0).
+    dt_ns : int
+        IMU interval [ns].
+    """
+
+    motion: Motion
+    t_s: np.ndarray
+    dtheta_b_rad: np.ndarray
+    dv_b_mps: np.ndarray
+    start_time_ns: int
+    dt_ns: int
+
+    @property
+    def duration_s(self) -> float:
+        return (self.t_s.shape[0] - 1) * self.dt_ns * 1e-9
+
+
+def kinematics(motion: Motion, duration_s: float, *, imu_rate_hz: float, start_time_ns: int,
+               n_sub: int = 2, n_gl: int = 4, progress: ProgressFn | None = None,
+               gravity: GravityDisturbance | None = None) -> Kinematics:
+    """The exact increments of ``motion`` over [0, duration_s] at ``imu_rate_hz``
+    (:func:`pospp.sim.imu.exact_increments`; ``n_sub``, ``n_gl`` its quadrature)."""
+    dt_ns = _rate_dt_ns(imu_rate_hz)
+    n = int(math.floor(duration_s * 1e9 / dt_ns))
+    if n < 2:
+        raise ValueError(f"mission of {duration_s} s is shorter than two IMU intervals")
+    t_s = (np.arange(n + 1, dtype=np.int64) * dt_ns).astype(float) * 1e-9
+    prog_imu = None if progress is None else (lambda f: progress("imu", f))
+    dth, dv = exact_increments(motion, t_s, n_sub=n_sub, n_gl=n_gl, progress=prog_imu,
+                               gravity=gravity)
+    return Kinematics(motion, t_s, dth, dv, int(start_time_ns), dt_ns)
+
+
+def sensors(kin: Kinematics, model: ImuErrorModel, gnss: GnssModel, seed: int,
+            progress: ProgressFn | None = None
+            ) -> tuple[ImuSamples, GnssFixes, GnssVelocities, RealisedImuErrors]:
+    """The IMU samples (mean rates and specific forces, stamped at the interval ends) and the
+    GNSS records of ``kin`` with the sensor errors of ``model`` and ``gnss``: the IMU from the
+    first child of ``SeedSequence(seed)``, the GNSS from the second (so a change of the GNSS
+    model leaves the IMU's draws alone, and the reverse)."""
+    ss_imu, ss_gnss = np.random.SeedSequence(seed).spawn(2)
+    dth_m, dv_m, realised = apply_imu_errors(kin.t_s, kin.dtheta_b_rad, kin.dv_b_mps, model,
+                                             ss_imu)
+    if progress is not None:
+        progress("errors", 1.0)
+    dt = np.diff(kin.t_s)[:, None]
+    dth_m /= dt  # mean rates, in place (apply_imu_errors returns new arrays)
+    dv_m /= dt
+    k = np.arange(1, kin.t_s.shape[0], dtype=np.int64)
+    imu = ImuSamples(np.int64(kin.start_time_ns) + k * kin.dt_ns, dth_m, dv_m, "imu_link")
+    fix, vel = simulate_gnss(kin.motion, kin.duration_s, gnss,
+                             start_time_ns=kin.start_time_ns, seed=ss_gnss)
+    if progress is not None:
+        progress("gnss", 1.0)
+    return imu, fix, vel, realised
+
+
 def _generate(
     name: str,
     motion: Motion,
@@ -329,38 +401,20 @@ def _generate(
         timings[key] = now - clock
         clock = now
 
-    dt_ns = _rate_dt_ns(imu_rate_hz)
-    n = int(math.floor(duration_s * 1e9 / dt_ns))
-    if n < 2:
-        raise ValueError(f"mission of {duration_s} s is shorter than two IMU intervals")
-    k = np.arange(n + 1, dtype=np.int64)
-    t_s = (k * dt_ns).astype(float) * 1e-9
-    ss_imu, ss_gnss = np.random.SeedSequence(seed).spawn(2)
-    prog_imu = None if progress is None else (lambda f: progress("imu", f))
-    dth, dv = exact_increments(motion, t_s, n_sub=n_sub, n_gl=n_gl, progress=prog_imu,
-                               gravity=gravity)
+    kin = kinematics(motion, duration_s, imu_rate_hz=imu_rate_hz, start_time_ns=start_time_ns,
+                     n_sub=n_sub, n_gl=n_gl, progress=progress, gravity=gravity)
     tick("increments_s")
-    dth_m, dv_m, realised = apply_imu_errors(t_s, dth, dv, model, ss_imu)
-    del dth, dv
-    if progress is not None:
-        progress("errors", 1.0)
+    imu, fix, vel, realised = sensors(kin, model, gnss, seed, progress)
     tick("imu_errors_s")
-    dt = np.diff(t_s)[:, None]
-    dth_m /= dt  # mean rates, in place
-    dv_m /= dt
-    imu = ImuSamples(np.int64(start_time_ns) + k[1:] * dt_ns, dth_m, dv_m, "imu_link")
-    fix, vel = simulate_gnss(motion, n * dt_ns * 1e-9, gnss, start_time_ns=start_time_ns,
-                             seed=ss_gnss)
-    if progress is not None:
-        progress("gnss", 1.0)
-    tick("gnss_s")
-    truth = _truth(motion, t_s, progress)
+    truth = _truth(motion, kin.t_s, progress)
     tick("truth_s")
     legs = legs_fn(truth)
+    n = kin.t_s.shape[0] - 1
     params = _params(grade_name=grade_name, model=model, realised=realised, gnss=gnss,
                      n_fix=len(fix), seed=seed, imu_rate_hz=imu_rate_hz,
-                     start_time_ns=start_time_ns, dt_ns=dt_ns, n=n, n_sub=n_sub, n_gl=n_gl,
-                     extra_params=extra_params, legs=legs, timings=timings, gravity=gravity)
+                     start_time_ns=start_time_ns, dt_ns=kin.dt_ns, n=n, n_sub=n_sub,
+                     n_gl=n_gl, extra_params=extra_params, legs=legs, timings=timings,
+                     gravity=gravity)
     return Simulation(name, imu, fix, vel, truth, int(start_time_ns), legs, realised, params)
 
 
@@ -479,6 +533,19 @@ class _ShiftedMotion:
             "rpy_rate_radps")))
 
 
+def along_motion(time_s: ArrayLike, lat_rad: ArrayLike, lon_rad: ArrayLike,
+                 height_m: ArrayLike, *, vehicle: str = "car", position_sigma_m: float = 0.02,
+                 heading_sigma_rad: float = 0.01, heading_min_speed_mps: float = 1.0
+                 ) -> Motion:
+    """The smooth motion :func:`simulate_along` follows (its parameters), with time from
+    ``time_s[0]``: :class:`pospp.sim.trajectory.SplineMotion` shifted to start at 0."""
+    t = np.asarray(time_s, dtype=float)
+    sm = SplineMotion(t, lat_rad, lon_rad, height_m, vehicle=vehicle,
+                      position_sigma_m=position_sigma_m, heading_sigma_rad=heading_sigma_rad,
+                      heading_min_speed_mps=heading_min_speed_mps)
+    return _ShiftedMotion(sm, float(t[0]))
+
+
 def simulate_along(
     time_s: ArrayLike,
     lat_rad: ArrayLike,
@@ -523,10 +590,10 @@ def simulate_along(
     grade_name, model = _resolve_grade(imu_grade)
     gnss = gnss if gnss is not None else GnssModel()
     t0 = time.perf_counter()
-    sm = SplineMotion(t, lat_rad, lon_rad, height_m, vehicle=vehicle,
-                      position_sigma_m=position_sigma_m, heading_sigma_rad=heading_sigma_rad,
-                      heading_min_speed_mps=heading_min_speed_mps)
-    motion = _ShiftedMotion(sm, float(t[0]))
+    motion = along_motion(t, lat_rad, lon_rad, height_m, vehicle=vehicle,
+                          position_sigma_m=position_sigma_m,
+                          heading_sigma_rad=heading_sigma_rad,
+                          heading_min_speed_mps=heading_min_speed_mps)
     if progress is not None:
         progress("trajectory", 1.0)
     t_traj = time.perf_counter() - t0
