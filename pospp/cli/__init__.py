@@ -13,6 +13,7 @@ from __future__ import annotations
 import gc
 import os
 import sys
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -494,6 +495,62 @@ def diagnose(run_dir: str) -> None:
     status_line("diagnose", "ok", str(Path(run_dir) / "diagnosis.parquet"))
 
 
+class _StepLines:
+    """compare-sim's progress on stderr: a line per step with the seconds since the start;
+    on a terminal also a transient line per simulated flight (overwritten)."""
+
+    def __init__(self) -> None:
+        self._t0 = time.perf_counter()
+        self._tty = sys.stderr.isatty()
+        self._open = False
+
+    def __call__(self, line: str, transient: bool = False) -> None:
+        text = f"  [{time.perf_counter() - self._t0:6.1f} s] {line}"
+        if transient:
+            if self._tty:
+                sys.stderr.write("\r\x1b[K" + text)
+                sys.stderr.flush()
+                self._open = True
+            return
+        if self._open:
+            sys.stderr.write("\r\x1b[K")
+            self._open = False
+        click.echo(text, err=True)
+
+    def close(self) -> None:
+        if self._open:
+            sys.stderr.write("\r\x1b[K")
+            sys.stderr.flush()
+
+
+def _compare_sim_lines(comp: Any) -> list[str]:
+    """compare-sim's result as printed: the base model's levels that differ from the prior,
+    the gaps, each step (size in the table's units and signs) with its reading."""
+    out = []
+    fitted = [b for b in comp.base_fit if b.fitted]
+    differ = [b for b in fitted if b.differs]
+    if fitted:
+        out.append(f"base model fitted to the log (step 0): {len(fitted)} levels, "
+                   f"{len(differ)} differ from the prior")
+        out += [f"  {b.text()}" for b in differ]
+    n_sig = sum(g.significant for g in comp.base.values())
+    out.append(f"base model: {n_sig} of {len(comp.base)} statistics differ significantly")
+    for s in comp.steps:
+        b, a = s.before[s.target], s.after.get(s.target, s.before[s.target])
+        size = ", ".join(f"{p} {v:+.4g} +- {e:.2g} {u}" for p, v, e, u in
+                         zip(s.params, s.size, s.sigma, s.param_units(), strict=True))
+        if s.candidate:
+            size = f"(best candidate {s.candidate}: {size}, did not shrink it)"
+        out.append(f"step {s.step}: {s.target}: {s.effect} {size}; z {b.z:+.2f} -> "
+                   f"{a.z:+.2f}")
+        out += [f"  {p} {v:+.4g} +- {e:.2g} {u}" for p, v, e, u in s.extra
+                if not p.startswith("correlation")]
+        if s.note:
+            out.append(f"  {s.note}")
+    out.append(f"left significant: {sum(g.significant for g in comp.final.values())}")
+    return out
+
+
 @main.command("compare-sim")
 @click.argument("run_dir", type=click.Path(exists=True, file_okay=False))
 @click.option("-o", "--out", "out_model", default=None, type=click.Path(dir_okay=False),
@@ -503,27 +560,24 @@ def diagnose(run_dir: str) -> None:
 def compare_sim(run_dir: str, out_model: str | None, max_steps: int) -> None:
     """Measured flight versus its simulation: RUN_DIR/sim_comparison.parquet.
 
-    Simulates the run's flight along A's trajectory with the configured IMU grade, compares
-    statistics every flight has, names the library effect that explains the largest
-    significant gap, adds it and repeats (pospp.compare_sim, docs/compare_sim.md). Writes the
-    fitted model as a TOML file that pospp simulate --model accepts.
+    Fits the base model to the log (white noise, bias instability, biases, GNSS noise; the
+    configured IMU grade as prior), simulates the run's flight along A's trajectory with it,
+    compares statistics every flight has, names the library effect that explains the
+    largest significant gap (the lever arm and the GNSS time offset jointly, or the
+    combination when the flight cannot separate them), adds it and repeats
+    (pospp.compare_sim, docs/compare_sim.md). Writes the fitted model as a TOML file that
+    pospp simulate --model accepts. Progress: a line per step on stderr.
     """
     from pospp.compare_sim import compare_sim_run
 
-    comp = compare_sim_run(run_dir, out=out_model, max_steps=max_steps)
-    n_sig = sum(g.significant for g in comp.base.values())
-    click.echo(f"configured model: {n_sig} of {len(comp.base)} statistics differ "
-               "significantly")
-    for s in comp.steps:
-        b, a = s.before[s.target], s.after.get(s.target, s.before[s.target])
-        size = ", ".join(f"{p} {v:+.4g} +- {e:.2g}" for p, v, e in
-                         zip(s.params, s.size, s.sigma, strict=True))
-        size = f"{size} {s.unit}".strip()
-        if s.candidate:
-            size = f"(best candidate {s.candidate}: {size}, did not shrink it)"
-        click.echo(f"step {s.step}: {s.target}: {s.effect} {size}; z {b.z:+.2f} -> {a.z:+.2f}")
+    lines = _StepLines()
+    try:
+        comp = compare_sim_run(run_dir, out=out_model, max_steps=max_steps, progress=lines)
+    finally:
+        lines.close()
+    for line in _compare_sim_lines(comp):
+        click.echo(line)
     n_left = sum(g.significant for g in comp.final.values())
-    click.echo(f"left significant: {n_left}")
     status_line("compare-sim", "ok", f"{n_left} statistic(s) left significant")
 
 

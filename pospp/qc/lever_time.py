@@ -53,6 +53,11 @@ LEVER_TIME_STEP_S = 0.01
 """Step of the trial offsets [s] (rounded to whole IMU intervals): 0.6 m along the track at
 60 m/s, which moves J by about 100 near its minimum on a 45 min flight (flight_time_offset_200hz),
 far above the passes' rounding."""
+LEVER_TIME_START_PASSES = 2
+LEVER_TIME_START_STEP_M = 0.1
+"""The pass at offset 0 is made again from its own estimate, at most
+``LEVER_TIME_START_PASSES`` times, while that moves more than this from where it started
+(a 3 m lever-arm error read 1.78 m after one pass: docs/diagnose.md, "Power")."""
 LEVER_TIME_MAX_PASSES = 12
 """Passes of A the joint estimate makes at most (each about a third of A's time)."""
 SEPARATION_SIGMAS = 3.0
@@ -227,7 +232,14 @@ def lever_time_joint(run_pass: RunPass, configured_b_m: NDArray, start_b_m: NDAr
     cfg = np.asarray(configured_b_m, dtype=float)
     h = max(round(step_s / grid_s), 1) * grid_s if grid_s > 0 else step_s
     try:
-        prof = _Profile(run_pass, h, run_pass(0.0, np.asarray(start_b_m, dtype=float)))
+        start = np.asarray(start_b_m, dtype=float)
+        p0 = run_pass(0.0, start)
+        for _ in range(LEVER_TIME_START_PASSES):  # A is not linear in a lever-arm error
+            if not np.max(np.abs(p0.lever_b_m - start)) > LEVER_TIME_START_STEP_M:
+                break
+            start = p0.lever_b_m
+            p0 = run_pass(0.0, start)
+        prof = _Profile(run_pass, h, p0)
         stride, best, way = 1, 0, 0
         for _ in range(2 * max_passes):
             if len(prof.made) > max_passes:

@@ -99,7 +99,8 @@ from pospp.nav.filter import BiasHistory, FilterResult, NavSolution
 from pospp.units import G0_MPS2
 
 __all__ = ["FlightStats", "Stat", "STAT_UNITS", "flight_stats", "dominant_frequency_hz",
-           "ljung_box", "lowband_share", "allan_products", "steady_mask", "leg_stats"]
+           "ljung_box", "lowband_share", "allan_products", "steady_mask", "leg_stats",
+           "static_and_steady"]
 
 N_BLOCKS = 10
 """Blocks of the batch-means sigma for fast statistics."""
@@ -256,6 +257,21 @@ def steady_mask(sol_t_s: NDArray, v_n_mps: NDArray, yaw_rad: NDArray, t_s: NDArr
     rate = np.abs(np.gradient(np.unwrap(yaw_rad), sol_t_s))
     ok = ((acc < max_accel_mps2) & (rate < max_rate_radps)).astype(float)
     return np.interp(t_s, sol_t_s, ok, left=0.0, right=0.0) > 0.999
+
+
+def static_and_steady(t_s: NDArray, sol: NavSolution, static_end_s: float | None
+                      ) -> tuple[NDArray, NDArray]:
+    """(static, steady) at the times ``t_s`` [s]: steady where A's smoothed acceleration and
+    yaw rate are low (:func:`steady_mask`); static where steady and A's speed is below
+    ``STATIC_SPEED_MPS``, or before A's initial static period ends (``static_end_s``, its
+    last ``STATIC_END_MARGIN_S`` left out; also before A's span)."""
+    rpy = rotation.euler_from_quat(sol.q_nb)
+    steady = steady_mask(sol.t_s, sol.v_n_mps, rpy[:, 2], t_s)
+    speed = np.linalg.norm(sol.v_n_mps, axis=1)
+    still = steady & (np.interp(t_s, sol.t_s, speed) < STATIC_SPEED_MPS)
+    if static_end_s is not None:
+        still |= t_s < static_end_s - STATIC_END_MARGIN_S
+    return still, steady
 
 
 def allan_products(t_s: NDArray, x: NDArray, mask: NDArray, tau_s: float
@@ -423,10 +439,9 @@ def _imu_stats(imu_time_s: NDArray, w_ib_b_radps: NDArray, f_ib_b_mps2: NDArray,
     """The IMU's high-frequency content, band powers and Allan variance on steady parts, and
     the dominant vibration frequency [Hz]."""
     out: dict[str, Stat] = {}
-    rpy = rotation.euler_from_quat(sol.q_nb)
     dt = float(np.median(np.diff(imu_time_s)))
     win = max(3, round(1.0 / dt) | 1)
-    steady = steady_mask(sol.t_s, sol.v_n_mps, rpy[:, 2], imu_time_s)
+    still, steady = static_and_steady(imu_time_s, sol, static_end_s)
     for name, x in (("accel", f_ib_b_mps2), ("gyro", w_ib_b_radps)):
         hp = x - uniform_filter1d(x, win, axis=0, mode="nearest")
         out[f"imu_hf_{name}_var"] = _batch(imu_time_s, np.mean(hp ** 2, axis=1), t0, t1,
@@ -438,10 +453,6 @@ def _imu_stats(imu_time_s: NDArray, w_ib_b_radps: NDArray, f_ib_b_mps2: NDArray,
             ta, da = allan_products(imu_time_s, x, steady, tau)
             out[f"imu_avar_{name}_{tau:.0f}s"] = _batch(
                 ta, da, t0, t1, n_blocks if tau < 5.0 else N_BLOCKS_SLOW)
-    speed = np.linalg.norm(sol.v_n_mps, axis=1)
-    still = steady & (np.interp(imu_time_s, sol.t_s, speed) < STATIC_SPEED_MPS)
-    if static_end_s is not None:  # A's initial static period (also before A's span)
-        still |= imu_time_s < static_end_s - STATIC_END_MARGIN_S
     _, ds = allan_products(imu_time_s, w_ib_b_radps, still, STATIC_AVAR_TAU_S)
     if ds.size >= STATIC_MIN_PRODUCTS:
         out["imu_avar_gyro_static"] = Stat(float(ds.mean()), float(

@@ -1,0 +1,367 @@
+"""Step 0 of the comparison: the base model fitted to the log (docs/compare_sim.md).
+
+The configured grade is only the prior. Before any effect is looked for, the levels a
+simulation must have to be the same kind of flight are measured on the log itself, each with
+a 1-sigma, and the flight is simulated with them:
+
+* **IMU white noise** (gyro ARW, accelerometer VRW, per axis): the level of the Welch power
+  spectrum of the samples (4 s segments, linear detrend) over [``WHITE_F_LO_HZ``,
+  0.8 f_Nyquist], its lines (bins above ``LINE_FACTOR`` x the median) left out, on the static
+  parts when they last ``STATIC_MIN_S`` (else the steady ones): a white rate noise of
+  variance s^2 per sample at f_s has the one-sided spectrum 2 s^2 / f_s, and ARW =
+  s sqrt(dt). The trajectory's own power there (the error-free simulated IMU on the same
+  parts, :class:`pospp.sim.api.Kinematics`) is subtracted. Sigma: batch means over up to
+  ``N_PIECES`` pieces of the parts used.
+* **Gyro bias instability** (Gauss-Markov sigma at the grade's correlation time T, per
+  axis): the Allan variance at ``GM_TAU_S`` on the static parts, less the white noise's
+  N^2 / tau and the trajectory's (the error-free simulation's, same parts), divided by the
+  Gauss-Markov Allan variance per unit variance (:func:`gm_allan_per_variance`). Fitted as
+  a variance q >= 0 (its sigma from the Allan products), reported as sqrt(q) with the upper
+  1-sigma distance sqrt(q + sigma_q) - sqrt(q): never negative. Without ``STATIC_MIN_S`` of
+  static data the grade's value is kept and said so.
+* **Constant biases** (gyro, accelerometer): the mean of A's smoothed bias.
+* **GNSS white noise** (position and velocity, horizontal and vertical): half the mean
+  square of the differences of consecutive residuals about A's smoothed solution (antenna
+  lever arm included). A's smoothed error changes little in a record interval, so the
+  differences hold the noise (twice its variance) and not A's slow error, nor a slow coloured
+  GNSS error. Sigma: batch means. The whiteness is the residuals' lag-1 autocorrelation
+  (sigma 1 / sqrt(n)), reported only: a coloured error is the library's ``coloured_gnss``.
+
+The accelerometer's Gauss-Markov part, the correlation times and the vibration stay the
+grade's. A parameter whose fit differs from the prior by more than ``DIFFERS_SIGMAS`` sigma
+and ``DIFFERS_FRACTION`` of the prior is reported as such ("gyro ARW x 0.0020 +- 0.0001
+deg/sqrt(h) fitted, grade 0.01"), never as an effect.
+
+Frames and units: body FRD, NED, SI inside; the parameters are reported in the units of the
+sensor model's fields (:class:`pospp.sim.sensors.ImuErrorModel`,
+:class:`pospp.sim.gnss.GnssModel`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pospp.sim.gnss import GnssModel
+from pospp.sim.sensors import ImuErrorModel
+from pospp.simcompare.stats import allan_products
+from pospp.units import (
+    DEG_PER_H_RADPS,
+    DEG_PER_SQRT_H_RAD_PER_SQRT_S,
+    MPS_PER_SQRT_H_MPS_PER_SQRT_S,
+    UG_MPS2,
+)
+
+__all__ = ["BaseFit", "BaseParameter", "ImuParts", "fit_base_model", "gm_allan_per_variance",
+           "gnss_white_noise", "imu_white_noise"]
+
+WHITE_F_LO_HZ = 2.0
+"""Lowest frequency of the white-noise band [Hz] (the trajectory's power is below it)."""
+SEGMENT_S = 4.0
+"""Welch segment [s]."""
+LINE_FACTOR = 5.0
+"""Spectrum bins above this times the band's median are lines (vibration), left out."""
+N_PIECES = 10
+"""Pieces of the parts used, for the batch-means sigma of a level."""
+STATIC_MIN_S = 60.0
+"""Static parts shorter than this in all: the steady parts give the white noise, and the bias
+instability is not fitted (the grade's kept)."""
+GM_TAU_S = 10.0
+"""Allan cluster time of the bias-instability fit [s]."""
+DIFFERS_SIGMAS = 3.0
+DIFFERS_FRACTION = 0.1
+"""A fitted level is reported as differing from its prior beyond both."""
+
+
+@dataclass(frozen=True)
+class BaseParameter:
+    """One fitted level of the base model.
+
+    Attributes
+    ----------
+    name : str
+        ``gyro_arw_x``, ``gnss_pos_noise_h``, ... (axis or channel in the suffix).
+    value, sigma : float
+        Fitted value and 1-sigma (for a level at its bound 0: the upper 1-sigma distance),
+        in ``unit``.
+    prior : float
+        The grade's (or the receiver's reported) value, in ``unit``; NaN when none.
+    unit : str
+    source : str
+        What it was measured on (or why the prior is kept).
+    fitted : bool
+        False: the flight does not determine it and the prior is kept.
+    """
+
+    name: str
+    value: float
+    sigma: float
+    prior: float
+    unit: str
+    source: str
+    fitted: bool = True
+
+    @property
+    def differs(self) -> bool:
+        """The fit differs from the prior beyond DIFFERS_SIGMAS sigma and DIFFERS_FRACTION."""
+        d = abs(self.value - self.prior)
+        return bool(self.fitted and math.isfinite(self.prior) and self.sigma >= 0
+                    and d > DIFFERS_SIGMAS * self.sigma and d > DIFFERS_FRACTION
+                    * abs(self.prior))
+
+    def text(self) -> str:
+        """"gyro_arw_x 0.00201 +- 0.00007 deg_per_sqrt_h fitted, grade 0.01"."""
+        if not self.fitted:
+            return f"{self.name} {self.prior:.4g} {self.unit} kept ({self.source})"
+        prior = f", prior {self.prior:.4g}" if math.isfinite(self.prior) else ""
+        return (f"{self.name} {self.value:.4g} +- {self.sigma:.2g} {self.unit} fitted"
+                f"{prior}{' (differs)' if self.differs else ''}")
+
+
+@dataclass(frozen=True)
+class BaseFit:
+    """The base model: its parameters and the simulation models made from them."""
+
+    parameters: tuple[BaseParameter, ...]
+    imu: ImuErrorModel
+    gnss: GnssModel
+
+
+@dataclass(frozen=True)
+class ImuParts:
+    """An IMU series and the parts of it to fit on.
+
+    ``t_s`` (N,) stamps [s]; ``w_radps``, ``f_mps2`` (N, 3) body FRD; ``static``, ``steady``
+    (N,) bool: at rest; steady (static included)."""
+
+    t_s: NDArray
+    w_radps: NDArray
+    f_mps2: NDArray
+    static: NDArray
+    steady: NDArray
+
+
+def _pieces(t: NDArray, mask: NDArray, dt: float) -> list[NDArray]:
+    """Index arrays of the pieces of the stretches where ``mask`` holds (no gap above 1.5
+    intervals), each at least one Welch segment, about a ``N_PIECES``-th of the total."""
+    brk = np.flatnonzero(~mask[1:] | ~mask[:-1] | (np.diff(t) > 1.5 * dt)) + 1
+    starts, ends = np.concatenate([[0], brk]), np.concatenate([brk, [t.size]])
+    seg = round(SEGMENT_S / dt)
+    runs = [(a, b) for a, b in zip(starts, ends, strict=True) if mask[a] and b - a >= seg]
+    total = sum(b - a for a, b in runs)
+    size = max(seg, total // N_PIECES)
+    out = []
+    for a, b in runs:
+        k = max((b - a) // size, 1)
+        edges = np.linspace(a, b, k + 1).astype(int)
+        out += [np.arange(edges[i], edges[i + 1]) for i in range(k)]
+    return out
+
+
+def _spectrum(x: NDArray, dt: float) -> tuple[NDArray, NDArray]:
+    """One piece's Welch spectrum (frequencies [Hz], (F, 3) one-sided PSD), segments of
+    ``SEGMENT_S``, linear detrend."""
+    from scipy.signal import welch
+
+    return welch(x, fs=1.0 / dt, nperseg=round(SEGMENT_S / dt), detrend="linear", axis=0)
+
+
+def imu_white_noise(t_s: NDArray, x: NDArray, mask: NDArray
+                    ) -> tuple[NDArray, NDArray, float]:
+    """Per-axis white variance per sample [unit^2] of ``x`` (N, 3) on ``mask``, its sigma
+    (batch means over the pieces) and the seconds used; NaN with no piece.
+
+    Each piece's level is the mean of its spectrum over the band's bins that are not lines;
+    the lines are found on the spectrum averaged over all pieces (many segments, so a bin of
+    noise is never 5 x the median there; on one piece of one or two segments 3 % of the bins
+    are, and leaving them out read a white level 20 % low on 34 s of steady parts)."""
+    dt = float(np.median(np.diff(t_s)))
+    pieces = _pieces(t_s, mask, dt)
+    if not pieces:
+        return np.full(3, np.nan), np.full(3, np.nan), 0.0
+    specs = [_spectrum(x[i], dt) for i in pieces]
+    f = specs[0][0]
+    n = np.array([i.size for i in pieces], dtype=float)
+    band = (f >= WHITE_F_LO_HZ) & (f <= 0.8 / (2.0 * dt))
+    if not band.any():
+        return np.full(3, np.nan), np.full(3, np.nan), 0.0
+    p = np.array([sp[1][band] for sp in specs])  # (pieces, bins, 3)
+    avg = np.average(p, axis=0, weights=n)
+    noise = avg <= LINE_FACTOR * np.median(avg, axis=0)
+    lv = np.array([[pk[noise[:, i], i].mean() for i in range(p.shape[2])] for pk in p])
+    lv = lv / (2.0 * dt)  # one-sided PSD 2 s^2 dt of a white series -> s^2
+    mean = np.average(lv, axis=0, weights=n)
+    sig = (np.sqrt(np.average((lv - mean) ** 2, axis=0, weights=n) / (len(pieces) - 1))
+           if len(pieces) > 1 else np.abs(mean))
+    return mean, sig, float(n.sum() * dt)
+
+
+def gm_allan_per_variance(tau_s: float, corr_time_s: float) -> float:
+    """Allan variance at ``tau_s`` of a first-order Gauss-Markov process of unit variance and
+    correlation time T: (T / tau)^2 [2 (tau / T - 1 + e^(-tau/T)) - (1 - e^(-tau/T))^2]
+    (from Var of the cluster integral 2 q T^2 (tau/T - 1 + e^(-tau/T)) and the neighbouring
+    clusters' covariance q T^2 (1 - e^(-tau/T))^2; about 2 tau / (3 T) for tau << T)."""
+    r = tau_s / corr_time_s
+    e = math.exp(-r)
+    return (2.0 * (r - 1.0 + e) - (1.0 - e) ** 2) / (r * r)
+
+
+def _allan_per_axis(t: NDArray, x: NDArray, mask: NDArray, tau: float
+                    ) -> tuple[NDArray, NDArray, int]:
+    """Per-axis Allan variance at ``tau`` on ``mask`` with its sigma (std of the products /
+    sqrt(n) x sqrt(1.5), as ``imu_avar_gyro_static``) and the number of products."""
+    vals, sigs, n = np.full(3, np.nan), np.full(3, np.nan), 0
+    for i in range(3):
+        _, d = allan_products(t, x[:, i:i + 1], mask, tau)
+        n = d.size
+        if n >= 2:
+            vals[i] = d.mean()
+            sigs[i] = np.std(d, ddof=1) / math.sqrt(n) * math.sqrt(1.5)
+    return vals, sigs, n
+
+
+def _level_rows(name: str, unit: str, var: NDArray, sig_var: NDArray, per_unit: float,
+                prior: NDArray, source: str) -> list[BaseParameter]:
+    """Rows of a variance-type level fitted per axis: sqrt of max(var, 0) in ``unit``
+    (SI / ``per_unit``), the sigma on that scale (delta method, or the upper 1-sigma
+    distance at the bound)."""
+    out = []
+    for i, a in enumerate("xyz"):
+        v = max(float(var[i]), 0.0)
+        s = math.sqrt(v + float(sig_var[i])) - math.sqrt(v)
+        out.append(BaseParameter(f"{name}_{a}", math.sqrt(v) / per_unit, s / per_unit,
+                                 float(prior[i]), unit, source))
+    return out
+
+
+def _imu_rows(meas: ImuParts, kin: ImuParts, grade: ImuErrorModel) -> list[BaseParameter]:
+    """White noise and bias instability rows (module docstring)."""
+    dt = float(np.median(np.diff(meas.t_s)))
+    static_s = float(np.count_nonzero(meas.static)) * dt
+    use_static = static_s >= STATIC_MIN_S
+    where = "static parts" if use_static else "steady parts (no static part of 60 s)"
+    rows: list[BaseParameter] = []
+    white = {}
+    for kind, xm, xk, per, unit, prior in (
+            ("gyro_arw", meas.w_radps, kin.w_radps, DEG_PER_SQRT_H_RAD_PER_SQRT_S,
+             "deg_per_sqrt_h", grade.gyro_arw_dpsh),
+            ("accel_vrw", meas.f_mps2, kin.f_mps2, MPS_PER_SQRT_H_MPS_PER_SQRT_S,
+             "m_per_s_per_sqrt_h", grade.accel_vrw_mpsph)):
+        mask_m, mask_k = (meas.static, kin.static) if use_static else (meas.steady, kin.steady)
+        vm, sm, used = imu_white_noise(meas.t_s, xm, mask_m)
+        vk = imu_white_noise(kin.t_s, xk, mask_k)[0] if mask_k.any() else np.zeros(3)
+        var = (vm - np.nan_to_num(vk)) * dt  # N^2 = s^2 dt [unit^2 s]
+        src = f"Welch spectrum >= {WHITE_F_LO_HZ:.0f} Hz on {used:.0f} s of {where}"
+        if not np.all(np.isfinite(var)):
+            rows += [BaseParameter(f"{kind}_{a}", float(prior[i]), math.nan, float(prior[i]),
+                                   unit, "no steady part of 4 s: the grade's", False)
+                     for i, a in enumerate("xyz")]
+            continue
+        white[kind] = np.maximum(var, 0.0)
+        rows += _level_rows(kind, unit, var, sm * dt, per, np.asarray(prior), src)
+    rows += _gm_rows(meas, kin, grade, white.get("gyro_arw"), use_static)
+    return rows
+
+
+def _gm_rows(meas: ImuParts, kin: ImuParts, grade: ImuErrorModel, n2: NDArray | None,
+             use_static: bool) -> list[BaseParameter]:
+    """The gyro Gauss-Markov sigma from the static Allan variance (module docstring)."""
+    prior = np.asarray(grade.gyro_gm_sigma_dph, dtype=float)
+    if not use_static or n2 is None:
+        return [BaseParameter(f"gyro_gm_sigma_{a}", float(prior[i]), math.nan,
+                              float(prior[i]), "deg_per_h", "no static part of 60 s: the "
+                              "grade's", False) for i, a in enumerate("xyz")]
+    am, sm, n = _allan_per_axis(meas.t_s, meas.w_radps, meas.static, GM_TAU_S)
+    ak = (_allan_per_axis(kin.t_s, kin.w_radps, kin.static, GM_TAU_S)[0]
+          if kin.static.any() else np.zeros(3))
+    g = gm_allan_per_variance(GM_TAU_S, grade.gyro_gm_tau_s)
+    q = (am - np.nan_to_num(ak) - n2 / GM_TAU_S) / g
+    return _level_rows("gyro_gm_sigma", "deg_per_h", q, sm / g, DEG_PER_H_RADPS, prior,
+                       f"Allan variance at {GM_TAU_S:.0f} s on the static parts ({n} "
+                       f"products), at the grade's {grade.gyro_gm_tau_s:.0f} s")
+
+
+def gnss_white_noise(t_s: NDArray, resid: NDArray) -> tuple[NDArray, NDArray, NDArray, int]:
+    """GNSS white noise from the residuals ``resid`` (M, 3) NED about A's smoothed solution
+    at the record times ``t_s``: (sigma horizontal and vertical (2,), their 1-sigma (2,),
+    the residuals' lag-1 autocorrelation and its sigma (2,), records used). Differences of
+    consecutive records (no gap), each channel's beyond 5 MAD left out (turns, jumps)."""
+    if t_s.size < 20:
+        return np.full(2, np.nan), np.full(2, np.nan), np.full(2, np.nan), 0
+    dt = np.diff(t_s)
+    d = np.diff(resid, axis=0)[dt < 1.5 * np.median(dt)]
+    mad = 1.4826 * np.median(np.abs(d - np.median(d, axis=0)), axis=0)
+    d = d[np.all(np.abs(d) <= 5.0 * np.maximum(mad, 1e-12), axis=1)]
+    h, v = 0.5 * np.mean(d[:, :2] ** 2, axis=1), 0.5 * d[:, 2] ** 2
+    blocks = np.array_split(np.arange(h.size), min(N_PIECES, max(h.size // 10, 2)))
+    val, sig = np.empty(2), np.empty(2)
+    for k, x in enumerate((h, v)):
+        bm = np.array([x[b].mean() for b in blocks])
+        var = float(x.mean())
+        sv = float(np.std(bm, ddof=1) / math.sqrt(len(blocks)))
+        val[k] = math.sqrt(var)
+        sig[k] = sv / (2.0 * val[k]) if val[k] > 0 else math.sqrt(sv)
+    e = resid - resid.mean(axis=0)
+    lag1 = float(np.mean(e[1:, :2] * e[:-1, :2]) / np.mean(e[:, :2] ** 2))
+    return val, sig, np.array([lag1, 1.0 / math.sqrt(t_s.size)]), int(d.shape[0])
+
+
+def _gnss_rows(kind: str, unit: str, t_s: NDArray, resid: NDArray, reported: tuple[float, float]
+               ) -> tuple[list[BaseParameter], tuple[float, float] | None]:
+    val, sig, lag, n = gnss_white_noise(t_s, resid)
+    if not n:
+        return [BaseParameter(f"gnss_{kind}_noise_{c}", reported[i], math.nan, reported[i],
+                              unit, "fewer than 20 records: the reported sigma", False)
+                for i, c in enumerate("hv")], None
+    src = f"differences of consecutive residuals about A's smoothed solution ({n} records)"
+    rows = [BaseParameter(f"gnss_{kind}_noise_{c}", float(val[i]), float(sig[i]),
+                          float(reported[i]), unit, src) for i, c in enumerate("hv")]
+    rows.append(BaseParameter(f"gnss_{kind}_lag1", lag[0], lag[1], 0.0, "-",
+                              "lag-1 autocorrelation of the horizontal residuals (reported "
+                              "only)"))
+    return rows, (float(val[0]), float(val[1]))
+
+
+def fit_base_model(meas: ImuParts, kin: ImuParts, grade: ImuErrorModel, gnss: GnssModel, *,
+                   gyro_bias_b_radps: NDArray, accel_bias_b_mps2: NDArray,
+                   bias_sigma: tuple[NDArray, NDArray],
+                   fix: tuple[NDArray, NDArray], vel: tuple[NDArray, NDArray]) -> BaseFit:
+    """Step 0 (module docstring).
+
+    Parameters
+    ----------
+    meas, kin : the log's IMU and the error-free simulation's, with their static and steady
+        parts (the same parts of the same trajectory).
+    grade : the configured grade's simulation model (the priors)
+    gnss : the simulation's GNSS model from the log (rates, outages, reported sigmas, lever
+        arm); its noise is replaced by the fit.
+    gyro_bias_b_radps, accel_bias_b_mps2 : (3,) A's mean smoothed biases; ``bias_sigma``
+        their 1-sigma (A's at the end).
+    fix, vel : (record times [s], (M, 3) residuals NED [m], [m/s]) about A's smoothed solution.
+    """
+    rows = _imu_rows(meas, kin, grade)
+    for kind, mean, sig, per, unit, prior in (
+            ("gyro_bias", gyro_bias_b_radps, bias_sigma[0], DEG_PER_H_RADPS, "deg_per_h",
+             grade.gyro_bias_dph),
+            ("accel_bias", accel_bias_b_mps2, bias_sigma[1], UG_MPS2, "ug", grade.accel_bias_ug)):
+        rows += [BaseParameter(f"{kind}_{a}", float(mean[i]) / per, float(sig[i]) / per,
+                               float(prior[i]), unit, "mean of A's smoothed bias")
+                 for i, a in enumerate("xyz")]
+    pos_rows, pos = _gnss_rows("pos", "m", *fix, gnss.reported_pos_sigma_m or gnss.pos_noise_m)
+    vel_rows, vel_n = _gnss_rows("vel", "m_per_s", *vel,
+                                 gnss.reported_vel_sigma_mps or gnss.vel_noise_mps)
+    rows += pos_rows + vel_rows
+    by = {r.name: r for r in rows}
+
+    def axes(name: str) -> tuple[float, float, float]:
+        return tuple(float(by[f"{name}_{a}"].value) for a in "xyz")  # type: ignore[return-value]
+
+    imu = replace(grade, gyro_arw_dpsh=axes("gyro_arw"), accel_vrw_mpsph=axes("accel_vrw"),
+                  gyro_gm_sigma_dph=axes("gyro_gm_sigma"), gyro_bias_dph=axes("gyro_bias"),
+                  accel_bias_ug=axes("accel_bias"))
+    g = replace(gnss, pos_noise_m=pos or gnss.pos_noise_m,
+                vel_noise_mps=vel_n or gnss.vel_noise_mps)
+    return BaseFit(tuple(rows), imu, g)
