@@ -317,17 +317,16 @@ def reported_sigmas(log: mcap_reader.FlightLog, epoch_ns: int
 
 
 def simulate_stats(tpl: FlightTemplate, config: PipelineConfig,
-                   progress: Callable[..., None] | None = None) -> SimulateFn:
+                   on_flight: Callable[[int], None] | None = None) -> SimulateFn:
     """simulate(imu, gnss, draw=0) -> statistics of A on the simulated flight (for
-    compare_flights): draw 0 with ``SIM_SEED``, draw k with ``SIM_SEED + k``; each told to
-    ``progress(line, transient=True)``."""
+    compare_flights): draw 0 with ``SIM_SEED``, draw k with ``SIM_SEED + k``; each counted
+    to ``on_flight(k)`` (k = 1, 2, ...)."""
     count = [0]
 
     def run(imu: ImuErrorModel, gnss: GnssModel, draw: int = 0) -> FlightStats:
         count[0] += 1
-        if progress is not None:
-            progress(f"simulated flight {count[0]}" + (f" (draw {draw})" if draw else ""),
-                     transient=True)
+        if on_flight is not None:
+            on_flight(count[0])
         return log_stats(simulate_log(tpl, imu, gnss, seed=SIM_SEED + draw), config,
                          vehicle=tpl.vehicle)[0]
 
@@ -344,10 +343,9 @@ def base_fit(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult, tpl: Flig
     """Step 0: the base model fitted to the log (:func:`pospp.simcompare.base_model.
     fit_base_model`), the configured grade as its prior: the IMU's white noise and bias
     instability on its static (else steady) parts, against the error-free simulation's on
-    the same parts; A's mean smoothed biases; the GNSS noise from the residuals about A's
+    the same parts; the GNSS noise from the residuals about A's
     smoothed solution (the configured lever arm)."""
     sol = nav.smoothed if nav.smoothed is not None else nav.forward
-    bias = nav.smoothed_biases if nav.smoothed_biases is not None else nav.forward_biases
     end = nav.alignment.static_end_s
     t_imu = (log.imu.time_ns - tpl.epoch_ns) * 1e-9
     meas = ImuParts(t_imu, log.imu.w_ib_b_radps, log.imu.f_ib_b_mps2,
@@ -355,11 +353,7 @@ def base_fit(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult, tpl: Flig
     tk, wk, fk = tpl.kinematic_imu()
     kin = ImuParts(tk, wk, fk, *static_and_steady(tk, sol, end))
     fix, vel = gnss_residuals(log, sol, tpl.epoch_ns, config.gnss.lever_arm_m)
-    return fit_base_model(meas, kin, base_imu_model(config), tpl.gnss,
-                          gyro_bias_b_radps=bias.gyro_b_radps.mean(axis=0),
-                          accel_bias_b_mps2=bias.accel_b_mps2.mean(axis=0),
-                          bias_sigma=(bias.gyro_sigma_b_radps[-1], bias.accel_sigma_b_mps2[-1]),
-                          fix=fix, vel=vel)
+    return fit_base_model(meas, kin, base_imu_model(config), tpl.gnss, fix=fix, vel=vel)
 
 
 def _once(make: Callable[[], Any]) -> Callable[[], Any]:
@@ -377,14 +371,15 @@ def compare_log(log: mcap_reader.FlightLog, config: PipelineConfig, *,
                 nav: nav_filter.FilterResult | None = None, vehicle: str | None = None,
                 imu: ImuErrorModel | None = None, gnss: GnssModel | None = None,
                 max_steps: int = 4, library: tuple[SimEffect, ...] = LIBRARY,
-                progress: Callable[..., None] | None = None
+                progress: Callable[[str], None] | None = None,
+                on_flight: Callable[[int], None] | None = None
                 ) -> tuple[Comparison, FlightTemplate]:
     """The whole comparison for one log (numeric; no files); ``library``: the effects
     (default :data:`pospp.simcompare.effects.LIBRARY`). The base model is step 0's fit
     (:func:`base_fit`) unless ``imu`` or ``gnss`` is given (then those, the configured
-    grade's or the template's for the other). ``progress(line, transient=False)`` is told
-    each step (transient: each simulated flight)."""
-    say = progress or (lambda line, transient=False: None)
+    grade's or the template's for the other). ``progress(line)`` is told each step,
+    ``on_flight(k)`` each simulated flight."""
+    say = progress or (lambda line: None)
     if nav is None:
         nav = pipeline.navigate(log, config)
     say("simulating the trajectory (kinematics)")
@@ -404,27 +399,29 @@ def compare_log(log: mcap_reader.FlightLog, config: PipelineConfig, *,
     lever = None if est is None else est.lever_arm
     ctx = EffectContext(hf_peak_hz=measured.hf_peak_hz, lever_time=_once(
         lambda: pipeline.lever_time_estimate(log, nav, config, lever)))
-    comp = compare_flights(measured, simulate_stats(tpl, config, say), imu, gnss,
+    comp = compare_flights(measured, simulate_stats(tpl, config, on_flight), imu, gnss,
                            max_steps=max_steps, library=library, context=ctx, progress=say)
     return replace(comp, base_fit=fit.parameters if fit else ()), tpl
 
 
 def compare_sim_run(run_dir: str | Path, *, out: str | Path | None = None,
                     max_steps: int = 4, library: tuple[SimEffect, ...] = LIBRARY,
-                    progress: Callable[..., None] | None = None) -> Comparison:
+                    progress: Callable[[str], None] | None = None,
+                    on_flight: Callable[[int], None] | None = None) -> Comparison:
     """``pospp compare-sim RUN_DIR``: write sim_comparison.parquet and sim_model.toml.
 
     ``out`` is the model file (default RUN_DIR/sim_model.toml). The report is re-rendered.
-    ``progress(line, transient=False)`` is told each step (:func:`compare_log`).
+    ``progress(line)`` is told each step, ``on_flight(k)`` each simulated flight
+    (:func:`compare_log`).
     """
     run, meta, path, config = pipeline.reopen_run(run_dir)
-    say = progress or (lambda line, transient=False: None)
+    say = progress or (lambda line: None)
     say(f"reading {path.name}")
     log = pipeline.ingest(path, config)
     say("algorithm A on the log")
     try:
         comp, tpl = compare_log(log, config, max_steps=max_steps, library=library,
-                                progress=say)
+                                progress=say, on_flight=on_flight)
     except ValueError as exc:  # e.g. a flight too short or too slow to simulate along
         raise ValueError(f"{run}: cannot compare {path.name} with its simulation: {exc}") from exc
     out_meta = {k: meta[k] for k in ("input_file", "input_sha256", "config")}

@@ -496,31 +496,33 @@ def diagnose(run_dir: str) -> None:
 
 
 class _StepLines:
-    """compare-sim's progress on stderr: a line per step with the seconds since the start;
-    on a terminal also a transient line per simulated flight (overwritten)."""
+    """compare-sim's progress on stderr: a line per step with the seconds since the start
+    (:meth:`step`); on a terminal also a transient line per simulated flight
+    (:meth:`flight`, overwritten)."""
 
     def __init__(self) -> None:
         self._t0 = time.perf_counter()
         self._tty = sys.stderr.isatty()
         self._open = False
 
-    def __call__(self, line: str, transient: bool = False) -> None:
-        text = f"  [{time.perf_counter() - self._t0:6.1f} s] {line}"
-        if transient:
-            if self._tty:
-                sys.stderr.write("\r\x1b[K" + text)
-                sys.stderr.flush()
-                self._open = True
-            return
-        if self._open:
-            sys.stderr.write("\r\x1b[K")
-            self._open = False
-        click.echo(text, err=True)
+    def _text(self, line: str) -> str:
+        return f"  [{time.perf_counter() - self._t0:6.1f} s] {line}"
+
+    def flight(self, k: int) -> None:
+        if self._tty:
+            sys.stderr.write("\r\x1b[K" + self._text(f"simulated flight {k}"))
+            sys.stderr.flush()
+            self._open = True
+
+    def step(self, line: str) -> None:
+        self.close()
+        click.echo(self._text(line), err=True)
 
     def close(self) -> None:
         if self._open:
             sys.stderr.write("\r\x1b[K")
             sys.stderr.flush()
+            self._open = False
 
 
 def _compare_sim_lines(comp: Any) -> list[str]:
@@ -572,7 +574,8 @@ def compare_sim(run_dir: str, out_model: str | None, max_steps: int) -> None:
 
     lines = _StepLines()
     try:
-        comp = compare_sim_run(run_dir, out=out_model, max_steps=max_steps, progress=lines)
+        comp = compare_sim_run(run_dir, out=out_model, max_steps=max_steps,
+                               progress=lines.step, on_flight=lines.flight)
     finally:
         lines.close()
     for line in _compare_sim_lines(comp):

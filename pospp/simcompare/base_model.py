@@ -19,18 +19,20 @@ a 1-sigma, and the flight is simulated with them:
   a variance q >= 0 (its sigma from the Allan products), reported as sqrt(q) with the upper
   1-sigma distance sqrt(q + sigma_q) - sqrt(q): never negative. Without ``STATIC_MIN_S`` of
   static data the grade's value is kept and said so.
-* **Constant biases** (gyro, accelerometer): the mean of A's smoothed bias.
-* **GNSS white noise** (position and velocity, horizontal and vertical): half the mean
-  square of the differences of consecutive residuals about A's smoothed solution (antenna
-  lever arm included). A's smoothed error changes little in a record interval, so the
-  differences hold the noise (twice its variance) and not A's slow error, nor a slow coloured
-  GNSS error. Sigma: batch means. The whiteness is the residuals' lag-1 autocorrelation
-  (sigma 1 / sqrt(n)), reported only: a coloured error is the library's ``coloured_gnss``.
+* **GNSS white noise** (position and velocity, horizontal and vertical): from the residuals
+  about A's smoothed solution (antenna lever arm included), half the mean square of their
+  differences L = 1, 2, 3 records apart, extrapolated along a straight line to L = 0
+  (:func:`gnss_white_noise`): the white variance without what A's slow error or a slow
+  coloured GNSS error change in a few records. Sigma: batch means. The whiteness is the
+  residuals' lag-1 autocorrelation (sigma 1 / sqrt(n)), reported only: a coloured error is
+  the library's ``coloured_gnss``.
 
-The accelerometer's Gauss-Markov part, the correlation times and the vibration stay the
-grade's. A parameter whose fit differs from the prior by more than ``DIFFERS_SIGMAS`` sigma
-and ``DIFFERS_FRACTION`` of the prior is reported as such ("gyro ARW x 0.0020 +- 0.0001
-deg/sqrt(h) fitted, grade 0.01"), never as an effect.
+The constant biases, the accelerometer's Gauss-Markov part, the correlation times and the
+vibration stay the grade's (A estimates the biases on both flights; A's own estimate would
+carry the effects into the base model: on circles turned one way, A reads a 2000 ppm z scale
+factor as a 75 deg/h z bias). A parameter whose fit differs from the prior by more than
+``DIFFERS_SIGMAS`` sigma and ``DIFFERS_FRACTION`` of the prior is reported as such ("gyro
+ARW x 0.0020 +- 0.0001 deg/sqrt(h) fitted, grade 0.01"), never as an effect.
 
 Frames and units: body FRD, NED, SI inside; the parameters are reported in the units of the
 sensor model's fields (:class:`pospp.sim.sensors.ImuErrorModel`,
@@ -52,7 +54,6 @@ from pospp.units import (
     DEG_PER_H_RADPS,
     DEG_PER_SQRT_H_RAD_PER_SQRT_S,
     MPS_PER_SQRT_H_MPS_PER_SQRT_S,
-    UG_MPS2,
 )
 
 __all__ = ["BaseFit", "BaseParameter", "ImuParts", "fit_base_model", "gm_allan_per_variance",
@@ -284,29 +285,50 @@ def _gm_rows(meas: ImuParts, kin: ImuParts, grade: ImuErrorModel, n2: NDArray | 
                        f"products), at the grade's {grade.gyro_gm_tau_s:.0f} s")
 
 
+GNSS_LAGS = (1, 2, 3)
+"""Record lags of the GNSS residuals' structure function (:func:`gnss_white_noise`)."""
+
+
+def _structure(t_s: NDArray, resid: NDArray, lag: int) -> tuple[NDArray, NDArray]:
+    """Half the squared differences of the residuals ``lag`` records apart (consecutive in
+    time: no gap), horizontal (mean of N and E) and vertical, each beyond 5 MAD of its
+    differences left out (turns, jumps)."""
+    dt = t_s[lag:] - t_s[:-lag]
+    d = (resid[lag:] - resid[:-lag])[dt < (lag + 0.5) * np.median(np.diff(t_s))]
+    mad = 1.4826 * np.median(np.abs(d - np.median(d, axis=0)), axis=0)
+    d = d[np.all(np.abs(d) <= 5.0 * np.maximum(mad, 1e-12), axis=1)]
+    return 0.5 * np.mean(d[:, :2] ** 2, axis=1), 0.5 * d[:, 2] ** 2
+
+
 def gnss_white_noise(t_s: NDArray, resid: NDArray) -> tuple[NDArray, NDArray, NDArray, int]:
     """GNSS white noise from the residuals ``resid`` (M, 3) NED about A's smoothed solution
     at the record times ``t_s``: (sigma horizontal and vertical (2,), their 1-sigma (2,),
-    the residuals' lag-1 autocorrelation and its sigma (2,), records used). Differences of
-    consecutive records (no gap), each channel's beyond 5 MAD left out (turns, jumps)."""
-    if t_s.size < 20:
+    the residuals' lag-1 autocorrelation and its sigma (2,), records used).
+
+    Half the mean square difference of residuals L records apart is the white variance plus
+    what the slow errors (a coloured GNSS error, A's own) change in L records, which grows
+    with L (for a Gauss-Markov error of sigma s and time T, s^2 (1 - exp(-L dt / T)), about
+    s^2 L dt / T): the white variance is its straight line through L = 1, 2, 3 taken at
+    L = 0 (a 0.3 m error of 60 s on 0.05 m white noise: 0.063 m from L = 1 alone, 0.05 m
+    so). Sigma: the same on 10 blocks of the records (batch means)."""
+    if t_s.size < 40:
         return np.full(2, np.nan), np.full(2, np.nan), np.full(2, np.nan), 0
-    dt = np.diff(t_s)
-    d = np.diff(resid, axis=0)[dt < 1.5 * np.median(dt)]
-    mad = 1.4826 * np.median(np.abs(d - np.median(d, axis=0)), axis=0)
-    d = d[np.all(np.abs(d) <= 5.0 * np.maximum(mad, 1e-12), axis=1)]
-    h, v = 0.5 * np.mean(d[:, :2] ** 2, axis=1), 0.5 * d[:, 2] ** 2
-    blocks = np.array_split(np.arange(h.size), min(N_PIECES, max(h.size // 10, 2)))
-    val, sig = np.empty(2), np.empty(2)
-    for k, x in enumerate((h, v)):
-        bm = np.array([x[b].mean() for b in blocks])
-        var = float(x.mean())
-        sv = float(np.std(bm, ddof=1) / math.sqrt(len(blocks)))
-        val[k] = math.sqrt(var)
-        sig[k] = sv / (2.0 * val[k]) if val[k] > 0 else math.sqrt(sv)
+    lags = np.asarray(GNSS_LAGS, dtype=float)
+    design = np.column_stack([np.ones_like(lags), lags])
+
+    def intercept(t: NDArray, r: NDArray) -> NDArray:
+        v = np.array([[x.mean() for x in _structure(t, r, int(lag))] for lag in lags])
+        return np.linalg.lstsq(design, v, rcond=None)[0][0]  # (2,): h, v at L = 0
+
+    var = intercept(t_s, resid)
+    blocks = np.array_split(np.arange(t_s.size), N_PIECES)
+    per = np.array([intercept(t_s[b], resid[b]) for b in blocks])
+    sv = np.std(per, axis=0, ddof=1) / math.sqrt(len(blocks))
+    val = np.sqrt(np.clip(var, 0.0, None))
+    sig = np.sqrt(np.clip(var, 0.0, None) + sv) - val
     e = resid - resid.mean(axis=0)
     lag1 = float(np.mean(e[1:, :2] * e[:-1, :2]) / np.mean(e[:, :2] ** 2))
-    return val, sig, np.array([lag1, 1.0 / math.sqrt(t_s.size)]), int(d.shape[0])
+    return val, sig, np.array([lag1, 1.0 / math.sqrt(t_s.size)]), int(t_s.size)
 
 
 def _gnss_rows(kind: str, unit: str, t_s: NDArray, resid: NDArray, reported: tuple[float, float]
@@ -326,8 +348,6 @@ def _gnss_rows(kind: str, unit: str, t_s: NDArray, resid: NDArray, reported: tup
 
 
 def fit_base_model(meas: ImuParts, kin: ImuParts, grade: ImuErrorModel, gnss: GnssModel, *,
-                   gyro_bias_b_radps: NDArray, accel_bias_b_mps2: NDArray,
-                   bias_sigma: tuple[NDArray, NDArray],
                    fix: tuple[NDArray, NDArray], vel: tuple[NDArray, NDArray]) -> BaseFit:
     """Step 0 (module docstring).
 
@@ -338,18 +358,9 @@ def fit_base_model(meas: ImuParts, kin: ImuParts, grade: ImuErrorModel, gnss: Gn
     grade : the configured grade's simulation model (the priors)
     gnss : the simulation's GNSS model from the log (rates, outages, reported sigmas, lever
         arm); its noise is replaced by the fit.
-    gyro_bias_b_radps, accel_bias_b_mps2 : (3,) A's mean smoothed biases; ``bias_sigma``
-        their 1-sigma (A's at the end).
     fix, vel : (record times [s], (M, 3) residuals NED [m], [m/s]) about A's smoothed solution.
     """
     rows = _imu_rows(meas, kin, grade)
-    for kind, mean, sig, per, unit, prior in (
-            ("gyro_bias", gyro_bias_b_radps, bias_sigma[0], DEG_PER_H_RADPS, "deg_per_h",
-             grade.gyro_bias_dph),
-            ("accel_bias", accel_bias_b_mps2, bias_sigma[1], UG_MPS2, "ug", grade.accel_bias_ug)):
-        rows += [BaseParameter(f"{kind}_{a}", float(mean[i]) / per, float(sig[i]) / per,
-                               float(prior[i]), unit, "mean of A's smoothed bias")
-                 for i, a in enumerate("xyz")]
     pos_rows, pos = _gnss_rows("pos", "m", *fix, gnss.reported_pos_sigma_m or gnss.pos_noise_m)
     vel_rows, vel_n = _gnss_rows("vel", "m_per_s", *vel,
                                  gnss.reported_vel_sigma_mps or gnss.vel_noise_mps)
@@ -360,8 +371,7 @@ def fit_base_model(meas: ImuParts, kin: ImuParts, grade: ImuErrorModel, gnss: Gn
         return tuple(float(by[f"{name}_{a}"].value) for a in "xyz")  # type: ignore[return-value]
 
     imu = replace(grade, gyro_arw_dpsh=axes("gyro_arw"), accel_vrw_mpsph=axes("accel_vrw"),
-                  gyro_gm_sigma_dph=axes("gyro_gm_sigma"), gyro_bias_dph=axes("gyro_bias"),
-                  accel_bias_ug=axes("accel_bias"))
+                  gyro_gm_sigma_dph=axes("gyro_gm_sigma"))
     g = replace(gnss, pos_noise_m=pos or gnss.pos_noise_m,
                 vel_noise_mps=vel_n or gnss.vel_noise_mps)
     return BaseFit(tuple(rows), imu, g)
