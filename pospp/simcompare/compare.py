@@ -341,7 +341,8 @@ def _fit(effect: SimEffect, gap: dict[str, Gap], base: FlightStats, simulate: Si
     value of an effect with a ``grid``: :func:`_grid_fit`), or, for an
     effect with ``screen``, the identity to choose the parameters at least
     ``MIN_COMPONENT_Z`` sigma from zero and a trial simulation for those only (the others
-    keep the identity fit's sigma and a value of 0).
+    keep the identity fit's sigma and a value of 0); with ``trial_at_fit``, each trial at
+    the size the identity fit reads (the statistics need not be linear far from it).
     """
     names = _fit_names(effect, gap)
     if not names:
@@ -353,7 +354,7 @@ def _fit(effect: SimEffect, gap: dict[str, Gap], base: FlightStats, simulate: Si
     if effect.trial is None:
         return _wls(eye, g, w)
     cols = list(range(p))
-    cov0 = None
+    cov0 = u0 = None
     if effect.screen:
         fit0 = _wls(eye, g, w)
         if fit0 is None:
@@ -367,9 +368,10 @@ def _fit(effect: SimEffect, gap: dict[str, Gap], base: FlightStats, simulate: Si
     h = np.zeros((len(names), len(cols)))
     for k, j in enumerate(cols):
         u = np.zeros(p)
-        u[j] = effect.trial[j]
+        # the trial at the size the identity fit reads (effect.trial_at_fit), else fixed
+        u[j] = u0[j] if effect.trial_at_fit and u0 is not None else effect.trial[j]
         sim = simulate(*effect.apply(imu, gnss, u, ctx))
-        h[:, k] = [(sim.stats[s].value - base.stats[s].value) / effect.trial[j] for s in names]
+        h[:, k] = [(sim.stats[s].value - base.stats[s].value) / u[j] for s in names]
     fit = _wls(h, g, w)
     if fit is not None and effect.refine:
         fit = _refine(effect, names, cols, h, g, w, fit, base, simulate, imu, gnss, ctx)

@@ -189,6 +189,10 @@ class SimEffect:
     between the draws (:func:`pospp.simcompare.compare.ensemble_spread`). Mean-square
     statistics (NIS, Allan variance, bias wander), whose expectation the effect moves, are
     not among them."""
+    trial_at_fit: bool = False
+    """With ``screen``: each trial simulation at the size the identity fit reads, not at
+    ``trial`` (``accel_bias_ramp``: a fixed 1e-4 m/s^3 made A diverge on a 45 min flight, 27
+    mg by its end)."""
     joint: Callable[[EffectContext], JointFit | None] | None = None
     """For a group of confounded effects estimated jointly on the measured log (not from the
     statistics): the fit and what it names (:class:`JointFit`; None: nothing to add)."""
@@ -380,7 +384,8 @@ LIBRARY: tuple[SimEffect, ...] = (
             fit_first=("imu_avar_gyro_static",), ensemble=_BI_DRAW),
     _effect("accel_bias_ramp", tuple(f"a_accel_trend_{a}" for a in _XYZ),
             (*(f"a_accel_trend_{a}" for a in _XYZ), "a_accel_bias_wander", *_LEGS),
-            (ACCEL_RAMP_TRIAL_MPS3,) * 3, False, _accel_change),
+            (ACCEL_RAMP_TRIAL_MPS3,) * 3, False, _accel_change, screen=True,
+            trial_at_fit=True),
 )
 """The library, in a fixed order."""
 
