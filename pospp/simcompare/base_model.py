@@ -317,13 +317,19 @@ def gnss_white_noise(t_s: NDArray, resid: NDArray) -> tuple[NDArray, NDArray, ND
     design = np.column_stack([np.ones_like(lags), lags])
 
     def intercept(t: NDArray, r: NDArray) -> NDArray:
-        v = np.array([[x.mean() for x in _structure(t, r, int(lag))] for lag in lags])
+        parts = [_structure(t, r, int(lag)) for lag in lags]
+        if any(x[0].size == 0 for x in parts):  # no records that far apart without a gap
+            return np.full(2, np.nan)
+        v = np.array([[x.mean() for x in part] for part in parts])
         return np.linalg.lstsq(design, v, rcond=None)[0][0]  # (2,): h, v at L = 0
 
     var = intercept(t_s, resid)
     blocks = np.array_split(np.arange(t_s.size), N_PIECES)
     per = np.array([intercept(t_s[b], resid[b]) for b in blocks])
-    sv = np.std(per, axis=0, ddof=1) / math.sqrt(len(blocks))
+    per = per[np.all(np.isfinite(per), axis=1)]
+    if not np.all(np.isfinite(var)) or per.shape[0] < 2:
+        return np.full(2, np.nan), np.full(2, np.nan), np.full(2, np.nan), 0
+    sv = np.std(per, axis=0, ddof=1) / math.sqrt(per.shape[0])
     val = np.sqrt(np.clip(var, 0.0, None))
     sig = np.sqrt(np.clip(var, 0.0, None) + sv) - val
     e = resid - resid.mean(axis=0)
