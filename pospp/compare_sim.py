@@ -25,9 +25,9 @@ from pospp.nav.alignment import AlignmentOptions, gnss_moving_windows
 from pospp.sim.api import Kinematics, along_motion, kinematics, sensors
 from pospp.sim.gnss import GnssModel
 from pospp.sim.sensors import ImuErrorModel, imu_grade
-from pospp.simcompare.base_model import BaseFit, ImuParts, fit_base_model
+from pospp.simcompare.base_model import BaseFit, ImuParts, fit_base_model, has_drift
 from pospp.simcompare.compare import Comparison, SimulateFn, compare_flights
-from pospp.simcompare.effects import LIBRARY, EffectContext, SimEffect
+from pospp.simcompare.effects import BI_DRAW, LIBRARY, EffectContext, SimEffect
 from pospp.simcompare.stats import FlightStats, Stat, flight_stats, leg_stats, static_and_steady
 from pospp.simcompare.tables import comparison_columns, model_toml
 
@@ -299,12 +299,13 @@ def bma_leg_stats(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
 
 
 def log_stats(log: mcap_reader.FlightLog, config: PipelineConfig, *, vehicle: str,
-              nav: nav_filter.FilterResult | None = None
+              nav: nav_filter.FilterResult | None = None, legs: bool = True
               ) -> tuple[FlightStats, nav_filter.FilterResult, nav_filter.FilterResult | None]:
     """Run A as configured (unless ``nav`` is given) and once more forward with lever-arm,
     scale-factor and loose accelerometer Gauss-Markov states (:data:`EST_ACCEL_GM_UG`), and
     return the flight's statistics (A's time axis: from the log's
-    first IMU stamp), with B minus A on its legs where it has legs, A, and that pass (None
+    first IMU stamp), with B minus A on its legs where it has legs (``legs``; the draws of
+    the ensemble spread go without: no leg statistic is a draw's), A, and that pass (None
     when it failed)."""
     if nav is None:
         nav = pipeline.navigate(log, config)
@@ -322,7 +323,8 @@ def log_stats(log: mcap_reader.FlightLog, config: PipelineConfig, *, vehicle: st
     t_imu = (log.imu.time_ns - epoch) * 1e-9
     fs = flight_stats(t_imu, log.imu.w_ib_b_radps, log.imu.f_ib_b_mps2, nav, est,
                       vehicle=vehicle, gnss_sigma=reported_sigmas(log, epoch))
-    return FlightStats({**fs.stats, **bma_leg_stats(log, nav, config)}, fs.hf_peak_hz), nav, est
+    leg = bma_leg_stats(log, nav, config) if legs else {}
+    return FlightStats({**fs.stats, **leg}, fs.hf_peak_hz), nav, est
 
 
 def reported_sigmas(log: mcap_reader.FlightLog, epoch_ns: int
@@ -350,7 +352,7 @@ def simulate_stats(tpl: FlightTemplate, config: PipelineConfig,
         if on_flight is not None:
             on_flight(count[0])
         return log_stats(simulate_log(tpl, imu, gnss, seed=SIM_SEED + draw), config,
-                         vehicle=tpl.vehicle)[0]
+                         vehicle=tpl.vehicle, legs=draw == 0)[0]
 
     return run
 
@@ -421,8 +423,10 @@ def compare_log(log: mcap_reader.FlightLog, config: PipelineConfig, *,
     lever = None if est is None else est.lever_arm
     ctx = EffectContext(hf_peak_hz=measured.hf_peak_hz, lever_time=_once(
         lambda: pipeline.lever_time_estimate(log, nav, config, lever)))
+    drift = fit is not None and has_drift(fit)
     comp = compare_flights(measured, simulate_stats(tpl, config, on_flight), imu, gnss,
-                           max_steps=max_steps, library=library, context=ctx, progress=say)
+                           max_steps=max_steps, library=library, context=ctx, progress=say,
+                           base_ensemble=BI_DRAW if drift else ())
     return replace(comp, base_fit=fit.parameters if fit else ()), tpl
 
 

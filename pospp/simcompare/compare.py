@@ -451,7 +451,8 @@ def compare_flights(measured: FlightStats, simulate: SimulateFn, imu: ImuErrorMo
                     gnss: GnssModel, *, library: tuple[SimEffect, ...] = LIBRARY,
                     alpha: float = ALPHA, max_steps: int = 4,
                     context: EffectContext | None = None,
-                    progress: Progress | None = None) -> Comparison:
+                    progress: Progress | None = None,
+                    base_ensemble: tuple[str, ...] = ()) -> Comparison:
     """The step-wise comparison (module docstring).
 
     Parameters
@@ -466,15 +467,21 @@ def compare_flights(measured: FlightStats, simulate: SimulateFn, imu: ImuErrorMo
         only; no joint estimate of the lever arm and the time offset).
     progress : callable(line), optional
         Told what each step does.
+    base_ensemble : tuple of str
+        Statistics that are one draw of a random effect already in the base model (step
+        0's gyro drift): their spread between draws of the base model floors their sigmas
+        from the start (:func:`ensemble_spread`).
     """
     say = progress or (lambda line: None)
     ctx = context or EffectContext(hf_peak_hz=measured.hf_peak_hz)
     sim = simulate(imu, gnss)
-    cur = gaps(measured, sim, alpha=alpha)
+    # the base model: batch means and A's sigmas, and the draws' spread of its drift
+    spread = ensemble_spread(simulate, imu, gnss, sim, base_ensemble) if base_ensemble \
+        else None
+    cur = gaps(measured, sim, alpha=alpha, spread=spread)
     base = cur
     say(f"base model simulated: {sum(g.significant for g in cur.values())} of {len(cur)} "
         "statistics differ significantly")
-    spread: dict[str, Stat] | None = None  # the configured model: batch means and A's sigmas
     steps: list[Step] = []
     added: list[str] = []  # the library's effects in the model
     named: list[str] = []  # what their steps named (a joint effect names what it found)

@@ -61,8 +61,8 @@ from pospp.sim.gnss import GnssModel
 from pospp.sim.sensors import ImuErrorModel
 from pospp.units import ARCSEC_RAD, DEG_PER_H_RADPS, UG_MPS2
 
-__all__ = ["SimEffect", "LIBRARY", "EffectContext", "JointFit", "coloured_tau_library",
-           "library_by_name", "lever_time_fit"]
+__all__ = ["BI_DRAW", "SimEffect", "LIBRARY", "EffectContext", "JointFit",
+           "coloured_tau_library", "library_by_name", "lever_time_fit"]
 
 ACCEL_RAMP_TRIAL_MPS3 = 1e-4
 """Trial ramp of ``accel_bias_ramp`` [m/s^3] (about 37 000 ug/h): A's smoothed bias follows
@@ -327,7 +327,7 @@ def _accel_change(imu, gnss, u, ctx):
 
 _XYZ = ("x", "y", "z")
 _LEGS = ("legs_bma_ms", "legs_bma_heldout_ms")
-_BI_DRAW = ("att_offset_roll", "att_offset_pitch", "att_offset_yaw",
+BI_DRAW = ("att_offset_roll", "att_offset_pitch", "att_offset_yaw",
             *(f"a_lever_{a}" for a in _XYZ), *(f"a_{k}_trend_{a}" for k in ("gyro", "accel")
                                               for a in _XYZ))
 """The statistics that are a signed mean of one draw of the gyro random drift
@@ -379,9 +379,9 @@ LIBRARY: tuple[SimEffect, ...] = (
     _effect("bias_instability", ("imu_avar_gyro_static", "a_gyro_bias_wander",
                                  "imu_avar_gyro_10s", *_LEGS),
             ("imu_avar_gyro_static", "a_gyro_bias_wander", "imu_avar_gyro_10s",
-             "gnss_vel_nis", *_norm("vel"), *_BI_DRAW, *_LEGS),
+             "gnss_vel_nis", *_norm("vel"), *BI_DRAW, *_LEGS),
             ((BI_TRIAL_DPH * DEG_PER_H_RADPS) ** 2,), True, _instability,
-            fit_first=("imu_avar_gyro_static",), ensemble=_BI_DRAW),
+            fit_first=("imu_avar_gyro_static",), ensemble=BI_DRAW),
     _effect("accel_bias_ramp", tuple(f"a_accel_trend_{a}" for a in _XYZ),
             (*(f"a_accel_trend_{a}" for a in _XYZ), "a_accel_bias_wander", *_LEGS),
             (ACCEL_RAMP_TRIAL_MPS3,) * 3, False, _accel_change, screen=True,
