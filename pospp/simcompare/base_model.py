@@ -72,6 +72,9 @@ STATIC_MIN_S = 60.0
 instability is not fitted (the grade's kept)."""
 GM_TAU_S = 10.0
 """Allan cluster time of the bias-instability fit [s]."""
+KEEP_PRIOR_SIGMAS = 2.0
+"""A variance-type level whose fit lies within this many sigmas of the prior (on the variance)
+is simulated at the prior: the grade is the prior, the log overrides it where it differs."""
 DIFFERS_SIGMAS = 3.0
 DIFFERS_FRACTION = 0.1
 """A fitted level is reported as differing from its prior beyond both."""
@@ -106,6 +109,14 @@ class BaseParameter:
     fitted: bool = True
     z_zero: float = float("nan")
     """For a variance-type level: how many of its sigmas the fitted variance lies above 0."""
+    model: float = float("nan")
+    """The level simulated, in ``unit``: the fit, or the prior where the fit does not differ
+    from it (``KEEP_PRIOR_SIGMAS``); NaN: ``value``."""
+
+    @property
+    def simulated(self) -> float:
+        """The level the base model simulates (``model``, else ``value``)."""
+        return self.value if math.isnan(self.model) else self.model
 
     @property
     def differs(self) -> bool:
@@ -116,12 +127,14 @@ class BaseParameter:
                     * abs(self.prior))
 
     def text(self) -> str:
-        """"gyro_arw_x 0.00201 +- 0.00007 deg_per_sqrt_h fitted, grade 0.01"."""
+        """"gyro_arw_x 0.00201 +- 0.00007 deg_per_sqrt_h fitted, prior 0.01 (differs)"."""
         if not self.fitted:
             return f"{self.name} {self.prior:.4g} {self.unit} kept ({self.source})"
         prior = f", prior {self.prior:.4g}" if math.isfinite(self.prior) else ""
+        kept = (" (consistent with the prior: simulated at it)"
+                if self.simulated != self.value else "")
         return (f"{self.name} {self.value:.4g} +- {self.sigma:.2g} {self.unit} fitted"
-                f"{prior}{' (differs)' if self.differs else ''}")
+                f"{prior}{' (differs)' if self.differs else kept}")
 
 
 @dataclass(frozen=True)
@@ -230,14 +243,20 @@ def _level_rows(name: str, unit: str, var: NDArray, sig_var: NDArray, per_unit: 
                 prior: NDArray, source: str) -> list[BaseParameter]:
     """Rows of a variance-type level fitted per axis (``name_x``, ...): sqrt of max(var, 0)
     in ``unit`` (SI / ``per_unit``), the upper 1-sigma distance sqrt(var + sigma_var) -
-    sqrt(var) as its sigma (never negative, also at the bound 0)."""
+    sqrt(var) as its sigma (never negative, also at the bound 0). The grade is the prior: a
+    fit within ``KEEP_PRIOR_SIGMAS`` of it (on the variance) keeps it (``model`` = prior):
+    a 1.5 deg/h drift that 300 s at rest could not tell from 0 over 0.03 deg/sqrt(h) of
+    noise was fitted 0, and the simulation then drew none."""
     out = []
     for i, a in zip(range(len(var)), "xyz", strict=False):
         v = max(float(var[i]), 0.0)
         s = math.sqrt(v + float(sig_var[i])) - math.sqrt(v)
         z = float(var[i]) / float(sig_var[i]) if sig_var[i] > 0 else math.inf
+        q0 = (float(prior[i]) * per_unit) ** 2
+        keep = abs(float(var[i]) - q0) <= KEEP_PRIOR_SIGMAS * float(sig_var[i])
         out.append(BaseParameter(f"{name}_{a}", math.sqrt(v) / per_unit, s / per_unit,
-                                 float(prior[i]), unit, source, z_zero=z))
+                                 float(prior[i]), unit, source, z_zero=z,
+                                 model=float(prior[i]) if keep else math.sqrt(v) / per_unit))
     return out
 
 
@@ -383,9 +402,10 @@ def fit_base_model(meas: ImuParts, kin: ImuParts, grade: ImuErrorModel, gnss: Gn
     by = {r.name: r for r in rows}
 
     def axes(name: str) -> tuple[float, float, float]:
-        return tuple(float(by[f"{name}_{a}"].value) for a in "xyz")  # type: ignore[return-value]
+        return tuple(float(by[f"{name}_{a}"].simulated)  # type: ignore[return-value]
+                     for a in "xyz")
 
-    gm = float(by["gyro_gm_sigma"].value)
+    gm = float(by["gyro_gm_sigma"].simulated)
     imu = replace(grade, gyro_arw_dpsh=axes("gyro_arw"), accel_vrw_mpsph=axes("accel_vrw"),
                   gyro_gm_sigma_dph=(gm, gm, gm))
     g = replace(gnss, pos_noise_m=pos or gnss.pos_noise_m,
@@ -401,4 +421,4 @@ def has_drift(fit: BaseFit) -> bool:
     the fit was significant, a 1.5 deg/h drift that 300 s at rest could not establish over
     0.03 deg/sqrt(h) of noise left A's gyro bias trends 4-7 of A's sigmas from the
     simulation's one draw: `unexplained` on a null flight.)"""
-    return any(p.name == "gyro_gm_sigma" and p.value > 0.0 for p in fit.parameters)
+    return any(p.name == "gyro_gm_sigma" and p.simulated > 0.0 for p in fit.parameters)

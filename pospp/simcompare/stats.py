@@ -81,6 +81,13 @@ Statistics (name: series, unit)
 ``a_accel_bias_wander``
     Mean over axes of (b_a(t) - mean b_a)^2 of A's smoothed accelerometer bias [m^2/s^4]
     (as ``a_gyro_bias_wander``, 4 blocks).
+``lt_time_offset``
+    The GNSS stamp minus true time [s] of the joint estimate with the lever arm
+    (:mod:`pospp.qc.lever_time`) on the measured flight, with its sigma; on a simulated
+    flight the model's own offset (the estimate's expectation) with sigma 0. Only when the
+    joint estimate determines the offset (a finite sigma). The GNSS time offset's most
+    sensitive reading: A's lever-arm estimate sees it only as much as its forward pass
+    converges (a 10 ms offset moved it by 0.1 of its 0.5 m on a 14 min flight).
 ``legs_bma_ms`` / ``legs_bma_heldout_ms``
     Only on flights with straight legs: B minus A on the legs, the leg-based workflow's own
     statistics (:class:`pospp.diagnose.workflow.LegGap`): per leg, the mean square of the
@@ -150,6 +157,7 @@ STAT_UNITS = {
     **{f"a_gyro_trend_{a}": "rad/s2" for a in "xyz"},
     "a_accel_bias_wander": "m2/s4",
     "legs_bma_ms": "m2/s2", "legs_bma_heldout_ms": "m2/s2",
+    "lt_time_offset": "s",
 }
 """Every statistic and its unit (SI)."""
 

@@ -85,12 +85,12 @@ def _vib(imu, gnss, a):
 
 EFFECTS = {
     "vibration": (_vib, 0.05, "vibration", ("accel_vibration_rms",), lambda s: (s,)),
-    "time_offset": (lambda i, g, s: (i, replace(g, time_offset_s=s)), 0.01, "time_offset",
+    "time_offset": (lambda i, g, s: (i, replace(g, time_offset_s=s)), 0.03, "time_offset",
                     ("time_offset",), lambda s: (-1e3 * s,)),
     "lever_arm": (lambda i, g, s: (i, replace(g, lever_arm_b_m=tuple(
-        np.add(LEVER_B_M, (s, 0.5 * s, 0.0))))), 0.3, "lever_arm",
+        np.add(LEVER_B_M, (s, 0.5 * s, 0.0))))), 0.8, "lever_arm",
         ("lever_arm_x", "lever_arm_y"), lambda s: (-s, -0.5 * s)),
-    "scale_factor": (lambda i, g, s: (replace(i, gyro_sf_ppm=(0.0, 0.0, s)), g), 500.0,
+    "scale_factor": (lambda i, g, s: (replace(i, gyro_sf_ppm=(0.0, 0.0, s)), g), 1500.0,
                      "scale_factor", ("gyro_sf_z",), lambda s: (s,)),
     "mounting_misalignment": (lambda i, g, s: (_mount(i, s), g), 300.0,
                               "mounting_misalignment", ("rho_x", "rho_y", "rho_z"),
