@@ -40,7 +40,6 @@ from pospp.diagnose.rerun import (
 from pospp.io import mcap_reader
 from pospp.nav import filter as nav_filter
 from pospp.nav import tuning as nav_tuning
-from pospp.qc.lever_time import LeverPass, LeverTime, lever_time_joint
 from pospp.threads import Threads, first_kept
 from pospp.types import FLU_TO_FRD
 from pospp.units import UG_MPS2, t_s_from_time_ns
@@ -195,69 +194,6 @@ def lever_arm_passes(log: mcap_reader.FlightLog, seen: np.ndarray,
         start = nxt
         est = navigate(log, rerun, lever_arm_b_m=start, options=opts).lever_arm
     return est
-
-
-def restamped(log: mcap_reader.FlightLog, shift_s: float) -> mcap_reader.FlightLog:
-    """The log with its GNSS records re-stamped ``t - shift_s`` (``shift_s``: the GNSS
-    stamp minus the true time the records are taken to have)."""
-    d = np.int64(round(shift_s * 1e9))
-    return replace(log, fix=replace(log.fix, time_ns=log.fix.time_ns - d),
-                   vel=replace(log.vel, time_ns=log.vel.time_ns - d))
-
-
-LEVER_TIME_GATE_PROBABILITY = 1.0 - 1e-9
-"""The innovation gate of :func:`lever_time_pass` (NIS 47 at 3 dof): the joint estimate's
-profile sums the records' NIS, which a gate that drops some records at one trial offset and
-keeps them at the next makes jump (flight_time_offset_200hz: 62 records gated at 0)."""
-
-
-def lever_time_pass(log: mcap_reader.FlightLog, seen: np.ndarray, config: PipelineConfig,
-                    shift_s: float, start_b_m: Any) -> LeverPass:
-    """One forward pass of A with lever-arm states (as :func:`lever_arm_passes`, one pass,
-    the revealed axes ``seen`` from ``start_b_m``, the others at the configured value, the
-    gate at :data:`LEVER_TIME_GATE_PROBABILITY`) on the log re-stamped by ``shift_s``
-    (:func:`restamped`), with each processed GNSS record's NIS capped at the gate
-    (:class:`pospp.qc.lever_time.LeverPass`). Raises ValueError when A fails."""
-    rerun = replace(config, gnss=replace(config.gnss, estimate_lever_arm=True))
-    opts = replace(config.filter_options(), smoother=False,
-                   lever_arm_sigma_m=QC_LEVER_ARM_SIGMA_M,
-                   gate_probability=LEVER_TIME_GATE_PROBABILITY)
-    configured = np.asarray(config.gnss.lever_arm_m, dtype=float)
-    start = np.where(np.asarray(seen, dtype=bool), np.asarray(start_b_m, dtype=float),
-                     configured)
-    nav = navigate(restamped(log, shift_s), rerun, lever_arm_b_m=start, options=opts)
-    rec = nav.innovations
-    if rec is None:
-        raise ValueError("the lever-arm pass recorded no GNSS innovations")
-    m = (rec.kind <= 1) & np.isin(rec.status, (nav_filter.STATUS_USED, nav_filter.STATUS_GATED,
-                                               nav_filter.STATUS_RESET)) & np.isfinite(rec.nis)
-    key = rec.kind[m].astype(np.int64) * 2 ** 62 + np.round(
-        (rec.t_s[m] + shift_s) * 1e3).astype(np.int64)
-    return LeverPass(float(shift_s), np.asarray(nav.lever_arm.lever_b_m, dtype=float),
-                     np.asarray(nav.lever_arm.sigma_b_m, dtype=float), key,
-                     np.minimum(rec.nis[m], nav.gate_nis))
-
-
-def lever_time_estimate(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
-                        config: PipelineConfig,
-                        lever: nav_filter.LeverArmEstimate | None = None) -> LeverTime | None:
-    """The lever arm and the GNSS time offset estimated jointly
-    (:func:`pospp.qc.lever_time.lever_time_joint`: three to seven passes of
-    :func:`lever_time_pass`, the revealed axes of the first started from ``lever``, A's
-    lever-arm estimate, made here when None); None when A fails or estimates the lever arm
-    itself."""
-    if config.gnss.estimate_lever_arm:
-        return None
-    seen = lever_arm_seen(nav)
-    try:
-        if lever is None:
-            lever = lever_arm_passes(log, seen, config)
-    except ValueError:
-        return None
-    dt_s = float(np.median(np.diff(log.imu.time_ns))) * 1e-9
-    return lever_time_joint(lambda s, start: lever_time_pass(log, seen, config, s, start),
-                            np.asarray(config.gnss.lever_arm_m, dtype=float),
-                            np.asarray(lever.lever_b_m, dtype=float), grid_s=dt_s)
 
 
 GYRO_SF_PRIOR_PPM = 2000.0

@@ -34,15 +34,9 @@ import numpy as np
 from pospp.calib.stage import CalibrationRun
 from pospp.config import PipelineConfig
 from pospp.diagnosis_stage import diagnosis_reruns, scale_factor_start, signature_starts
-from pospp.flight_stages import (
-    lever_arm_passes,
-    lever_arm_seen,
-    lever_time_estimate,
-    navigate,
-    restamped,
-    sensor_to_body_dcm,
-)
+from pospp.flight_stages import lever_arm_passes, lever_arm_seen, navigate, sensor_to_body_dcm
 from pospp.io import mcap_reader
+from pospp.lever_time_stage import qc_passes
 from pospp.nav import filter as nav_filter
 from pospp.qc.checks import lever_arm_observable_from_track
 from pospp.qc.stage import quality_checks
@@ -172,7 +166,5 @@ def checks_ahead(ahead: Ahead, log: mcap_reader.FlightLog, nav: nav_filter.Filte
                                      lever_estimate=ahead.lever.result()[0],
                                      c_bs=sensor_to_body_dcm(cin.sensor_frame,
                                                              cin.mounting_rpy_deg),
-                                     joint=lambda: lever_time_estimate(
-                                         log, nav, config, ahead.lever.result()[0]),
-                                     renavigate=lambda shift: navigate(
-                                         restamped(log, shift), config))))
+                                     **qc_passes(log, nav, config,
+                                                 ahead.lever.result()[0]))))

@@ -48,17 +48,16 @@ from pospp.flight_stages import (  # the stage functions, importable from here a
     ingest,
     lever_arm_estimate,  # noqa: F401  (re-exported: the power benchmark calls it)
     lever_arm_seen,
-    lever_time_estimate,
     navigate,
     null_base,
     null_realisations,
     null_white_noise,
-    restamped,
     sensor_to_body_dcm,
 )
 from pospp.io import mcap_reader, parquet_tables, report_files, run_folder, trajectory_mcap
 from pospp.io.errors import IngestError
 from pospp.io.files import sha256_file
+from pospp.lever_time_stage import lever_time_estimate, qc_passes  # noqa: F401 (compare_sim)
 from pospp.memory import release_free_heap, share_one_heap
 from pospp.nav import events as sensor_events
 from pospp.nav import filter as nav_filter
@@ -471,8 +470,7 @@ def quality_control(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     report = checks if checks is not None else quality_checks(
         log, nav, calib_run, config, lever_estimate=estimate,
         c_bs=sensor_to_body_dcm(cin.sensor_frame, cin.mounting_rpy_deg),
-        joint=lambda: lever_time_estimate(log, nav, config, estimate),
-        renavigate=lambda shift: navigate(restamped(log, shift), config))
+        **qc_passes(log, nav, config, estimate))
     if book is not None:
         for c in report.failed:
             book.note("error" if c.severity == "failed" else "warning", "qc",

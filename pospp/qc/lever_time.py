@@ -46,7 +46,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["LEVER_TIME_STEP_S", "LeverPass", "LeverTime", "lever_time_joint",
+from pospp.nav.filter import STATUS_GATED, STATUS_RESET, STATUS_USED, FilterResult
+
+__all__ = ["LEVER_TIME_STEP_S", "LeverPass", "LeverTime", "lever_pass", "lever_time_joint",
            "lever_time_verdict"]
 
 LEVER_TIME_STEP_S = 0.01
@@ -146,6 +148,23 @@ class LeverTime:
             return math.inf
         return (abs(self.tau_lever_only_s - self.tau_s) / self.sigma_tau_s
                 if self.sigma_tau_s > 0 else math.inf)
+
+
+def lever_pass(nav: FilterResult, shift_s: float) -> LeverPass:
+    """The :class:`LeverPass` of A's pass ``nav`` with lever-arm states on the log re-stamped
+    by ``shift_s``: its lever-arm estimate and each GNSS position and velocity record it
+    processed (used, gated or used after a reset) with its NIS capped at the gate, keyed by
+    its unshifted stamp. ValueError when the pass recorded no innovations."""
+    rec = nav.innovations
+    if rec is None:
+        raise ValueError("the lever-arm pass recorded no GNSS innovations")
+    m = (rec.kind <= 1) & np.isin(rec.status, (STATUS_USED, STATUS_GATED, STATUS_RESET)) \
+        & np.isfinite(rec.nis)
+    key = rec.kind[m].astype(np.int64) * 2 ** 62 + np.round(
+        (rec.t_s[m] + shift_s) * 1e3).astype(np.int64)
+    return LeverPass(float(shift_s), np.asarray(nav.lever_arm.lever_b_m, dtype=float),
+                     np.asarray(nav.lever_arm.sigma_b_m, dtype=float), key,
+                     np.minimum(rec.nis[m], nav.gate_nis))
 
 
 def _common(passes: list[LeverPass]) -> list[NDArray]:

@@ -132,6 +132,48 @@ def _lever_velocity(t: NDArray, w: NDArray, sol: NavSolution, vel_t: NDArray,
     return np.einsum("ijn,nj->ni", c_at, wl)
 
 
+def _offset_and_lever(t: NDArray, w: NDArray, sol: NavSolution, v_t: NDArray, v_n: NDArray,
+                      nav: FilterResult, config: Any,
+                      lever_estimate: LeverArmEstimate | None,
+                      joint: Callable[[], LeverTime | None] | None,
+                      renavigate: Callable[[float], FilterResult] | None) -> list[Check]:
+    """The ``gnss_time_offset`` and ``lever_arm`` checks (:func:`quality_checks`): the turns'
+    offset (seconds measured again, :func:`_offset_again`) and A's lever-arm estimate, each
+    alone; when either fails below ``TIME_OFFSET_MAX_S``, both from the joint estimate."""
+    out: list[Check] = []
+    v_imu = v_n - _lever_velocity(t, w, sol, v_t, config.gnss.lever_arm_m)
+    est = time_offset.estimate_time_offset(t, _down_rate(t, w, sol), v_t, v_imu)
+    if est is not None and abs(est.offset_s) >= time_offset.TIME_OFFSET_MAX_S and renavigate:
+        est = _offset_again(t, w, v_t, v_n, config.gnss.lever_arm_m, est, renavigate)
+    lev = lever_estimate if lever_estimate is not None else (
+        nav.lever_arm if nav.lever_arm.estimated else None)
+    speed = np.hypot(sol.v_n_mps[:, 0], sol.v_n_mps[:, 1])
+    moving = speed > time_offset.TIME_OFFSET_MIN_SPEED_MPS
+    obs = qc.lever_arm_observable(sol.rpy_rad)
+    mean_speed = float(speed[moving].mean()) if moving.any() else math.nan
+    first = [time_offset.gnss_time_offset(est)]
+    if lev is not None:
+        first.append(qc.lever_arm(config.gnss.lever_arm_m, lev.lever_b_m, lev.sigma_b_m,
+                                  observable=obs, mean_speed_mps=mean_speed))
+    small = est is None or abs(est.offset_s) < time_offset.TIME_OFFSET_MAX_S
+    need = small and joint is not None and not all(c.passed for c in first)
+    lt = joint() if need and joint is not None else None
+    out.append(time_offset.gnss_time_offset(est, lt) if lt is not None else first[0])
+    if lev is None:
+        out.append(qc.skip("lever_arm", "navigate", "no lever-arm estimate", "m",
+                           qc.LEVER_ARM_MAX_M))
+    else:
+        out.append(first[1] if lt is None else qc.lever_arm(
+            config.gnss.lever_arm_m, lev.lever_b_m, lev.sigma_b_m, observable=obs,
+            mean_speed_mps=mean_speed, joint=lt))
+    toff, lev_check = out[-2], out[-1]
+    if lt is None and not toff.passed and not lev_check.passed:
+        # a late GNSS bends the lever-arm estimate
+        out[-1] = replace(lev_check, suggestion="fix the GNSS time offset first, the lever-arm "
+                          "estimate is not reliable until then; " + lev_check.suggestion)
+    return out
+
+
 def _offset_again(t: NDArray, w: NDArray, v_t: NDArray, v_n: NDArray, lever_b_m: Any,
                   est: time_offset.TimeOffsetEstimate,
                   renavigate: Callable[[float], FilterResult]
@@ -270,36 +312,8 @@ def quality_checks(log: FlightLog, nav: FilterResult, calib_run: Any, config: An
     rec = getattr(nav, "innovations", None)
     if rec is not None:
         out += _innovation_checks(rec, config.filter_options().gate_probability)
-    v_imu = v_n - _lever_velocity(t, w, sol, v_t, config.gnss.lever_arm_m)
-    est = time_offset.estimate_time_offset(t, _down_rate(t, w, sol), v_t, v_imu)
-    if est is not None and abs(est.offset_s) >= time_offset.TIME_OFFSET_MAX_S and renavigate:
-        est = _offset_again(t, w, v_t, v_n, config.gnss.lever_arm_m, est, renavigate)
-    lev = lever_estimate if lever_estimate is not None else (
-        nav.lever_arm if nav.lever_arm.estimated else None)
-    speed = np.hypot(sol.v_n_mps[:, 0], sol.v_n_mps[:, 1])
-    moving = speed > time_offset.TIME_OFFSET_MIN_SPEED_MPS
-    obs = qc.lever_arm_observable(sol.rpy_rad)
-    mean_speed = float(speed[moving].mean()) if moving.any() else math.nan
-    first = [time_offset.gnss_time_offset(est)]
-    if lev is not None:
-        first.append(qc.lever_arm(config.gnss.lever_arm_m, lev.lever_b_m, lev.sigma_b_m,
-                                  observable=obs, mean_speed_mps=mean_speed))
-    small = est is None or abs(est.offset_s) < time_offset.TIME_OFFSET_MAX_S
-    need = small and joint is not None and not all(c.passed for c in first)
-    lt = joint() if need and joint is not None else None
-    out.append(time_offset.gnss_time_offset(est, lt) if lt is not None else first[0])
-    if lev is None:
-        out.append(qc.skip("lever_arm", "navigate", "no lever-arm estimate", "m",
-                           qc.LEVER_ARM_MAX_M))
-    else:
-        out.append(first[1] if lt is None else qc.lever_arm(
-            config.gnss.lever_arm_m, lev.lever_b_m, lev.sigma_b_m, observable=obs,
-            mean_speed_mps=mean_speed, joint=lt))
-    toff, lev_check = out[-2], out[-1]
-    if lt is None and not toff.passed and not lev_check.passed:
-        # a late GNSS bends the lever-arm estimate
-        out[-1] = replace(lev_check, suggestion="fix the GNSS time offset first, the lever-arm "
-                          "estimate is not reliable until then; " + lev_check.suggestion)
+    out += _offset_and_lever(t, w, sol, v_t, v_n, nav, config, lever_estimate, joint,
+                             renavigate)
 
     # --- calibration and compensation --------------------------------------------------------
     if calib_run is not None:

@@ -25,11 +25,12 @@ from numpy.typing import ArrayLike
 
 from pospp import __version__, rotation
 from pospp.nav.strapdown import Trajectory
-from pospp.sim.gnss import GnssModel, simulate_gnss
+from pospp.sim.gnss import GnssModel
 from pospp.sim.gravity import GravityDisturbance
-from pospp.sim.imu import Motion, exact_increments, quat_nb_from_euler
+from pospp.sim.imu import Motion, quat_nb_from_euler
+from pospp.sim.kinematics import Kinematics, ProgressFn, kinematics, sensors
 from pospp.sim.profile import MissionProfile, load_profile, plan_mission
-from pospp.sim.sensors import ImuErrorModel, RealisedImuErrors, apply_imu_errors, imu_grade
+from pospp.sim.sensors import ImuErrorModel, RealisedImuErrors, imu_grade
 from pospp.sim.trajectory import MotionSample, ProfileMotion, SplineMotion
 from pospp.types import GnssFixes, GnssVelocities, ImuSamples, ReferenceTrajectory
 from pospp.units import DEG_PER_H_RADPS, UG_MPS2, time_ns_from_t_s
@@ -56,8 +57,6 @@ __all__ = [
 DEFAULT_START_TIME_NS = 1_717_200_000_000_000_000
 """2024-06-01T00:00:00 UTC, the default mission start (same epoch as the reference cases)."""
 
-ProgressFn = Callable[[str, float], None]
-"""progress(stage, fraction): stage in {"trajectory", "imu", "errors", "gnss", "truth"}."""
 
 CONVENTIONS = {
     "nav_frame": "NED (local geodetic, WGS-84)",
@@ -224,16 +223,6 @@ def _resolve_grade(g: str | ImuErrorModel) -> tuple[str, ImuErrorModel]:
     return str(g), imu_grade(str(g))
 
 
-def _rate_dt_ns(imu_rate_hz: float) -> int:
-    if not imu_rate_hz > 0:
-        raise ValueError(f"imu_rate_hz must be > 0, got {imu_rate_hz!r}")
-    dt_ns = round(1e9 / imu_rate_hz)
-    if abs(dt_ns - 1e9 / imu_rate_hz) > 1e-3:
-        raise ValueError(f"imu_rate_hz {imu_rate_hz} does not give a whole number of "
-                         "nanoseconds per interval")
-    return dt_ns
-
-
 def _truth(motion: Motion, t_s: np.ndarray, progress: ProgressFn | None) -> Trajectory:
     """The true IMU state at the epochs ``t_s``, in blocks of 200 000 epochs."""
     n1 = t_s.shape[0]
@@ -304,74 +293,6 @@ def _params(*, grade_name: str, model: ImuErrorModel, realised: RealisedImuError
             "timings_s": timings,
         },
     }
-
-
-@dataclass(frozen=True)
-class Kinematics:
-    """The error-free part of a simulation, made once and corrupted many times
-    (:func:`sensors`): the motion, the IMU epochs and the exact IMU increments.
-
-    Attributes
-    ----------
-    motion : object with ``evaluate(t_s) -> MotionSample`` (time from the mission start)
-    t_s : (N + 1,) IMU epochs [s from the mission start], ``k dt``
-    dtheta_b_rad, dv_b_mps : (N, 3) exact increments over (t_k, t_k+1], body FRD
-    start_time_ns : int
-        UTC stamp of the mission start (epoch 0).
-    dt_ns : int
-        IMU interval [ns].
-    """
-
-    motion: Motion
-    t_s: np.ndarray
-    dtheta_b_rad: np.ndarray
-    dv_b_mps: np.ndarray
-    start_time_ns: int
-    dt_ns: int
-
-    @property
-    def duration_s(self) -> float:
-        return (self.t_s.shape[0] - 1) * self.dt_ns * 1e-9
-
-
-def kinematics(motion: Motion, duration_s: float, *, imu_rate_hz: float, start_time_ns: int,
-               n_sub: int = 2, n_gl: int = 4, progress: ProgressFn | None = None,
-               gravity: GravityDisturbance | None = None) -> Kinematics:
-    """The exact increments of ``motion`` over [0, duration_s] at ``imu_rate_hz``
-    (:func:`pospp.sim.imu.exact_increments`; ``n_sub``, ``n_gl`` its quadrature)."""
-    dt_ns = _rate_dt_ns(imu_rate_hz)
-    n = int(math.floor(duration_s * 1e9 / dt_ns))
-    if n < 2:
-        raise ValueError(f"mission of {duration_s} s is shorter than two IMU intervals")
-    t_s = (np.arange(n + 1, dtype=np.int64) * dt_ns).astype(float) * 1e-9
-    prog_imu = None if progress is None else (lambda f: progress("imu", f))
-    dth, dv = exact_increments(motion, t_s, n_sub=n_sub, n_gl=n_gl, progress=prog_imu,
-                               gravity=gravity)
-    return Kinematics(motion, t_s, dth, dv, int(start_time_ns), dt_ns)
-
-
-def sensors(kin: Kinematics, model: ImuErrorModel, gnss: GnssModel, seed: int,
-            progress: ProgressFn | None = None
-            ) -> tuple[ImuSamples, GnssFixes, GnssVelocities, RealisedImuErrors]:
-    """The IMU samples (mean rates and specific forces, stamped at the interval ends) and the
-    GNSS records of ``kin`` with the sensor errors of ``model`` and ``gnss``: the IMU from the
-    first child of ``SeedSequence(seed)``, the GNSS from the second (so a change of the GNSS
-    model leaves the IMU's draws alone, and the reverse)."""
-    ss_imu, ss_gnss = np.random.SeedSequence(seed).spawn(2)
-    dth_m, dv_m, realised = apply_imu_errors(kin.t_s, kin.dtheta_b_rad, kin.dv_b_mps, model,
-                                             ss_imu)
-    if progress is not None:
-        progress("errors", 1.0)
-    dt = np.diff(kin.t_s)[:, None]
-    dth_m /= dt  # mean rates, in place (apply_imu_errors returns new arrays)
-    dv_m /= dt
-    k = np.arange(1, kin.t_s.shape[0], dtype=np.int64)
-    imu = ImuSamples(np.int64(kin.start_time_ns) + k * kin.dt_ns, dth_m, dv_m, "imu_link")
-    fix, vel = simulate_gnss(kin.motion, kin.duration_s, gnss,
-                             start_time_ns=kin.start_time_ns, seed=ss_gnss)
-    if progress is not None:
-        progress("gnss", 1.0)
-    return imu, fix, vel, realised
 
 
 def _generate(
