@@ -369,7 +369,8 @@ TABLES: dict[str, list[Column]] = {
         Column("significant_before", _B, "", "gap significant before (family-wise level)"),
         Column("significant_after", _B, "", "gap significant after"),
         Column("measured", _F, "see unit", "the measured flight's value"),
-        Column("simulated_before", _F, "see unit", "the simulation's value before"),
+        Column("simulated_before", _F, "see unit", "the simulation's value before (base "
+               "rows: the level simulated, the fit or, within 2 sigma of it, the prior)"),
         Column("simulated_after", _F, "see unit", "the simulation's value after"),
         Column("prior", _F, "see unit", "base rows: the grade's (or the receiver's reported) "
                "value of the fitted level; NaN otherwise"),

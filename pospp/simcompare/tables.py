@@ -38,7 +38,7 @@ def _base_row(b: BaseParameter) -> dict[str, Any]:
             "parameter": b.name, "value": b.value, "sigma": b.sigma, "unit": b.unit,
             "gap_before": nan, "gap_after": nan, "sigma_gap": nan, "z_before": nan,
             "z_after": nan, "p_before": nan, "significant_before": bool(b.differs),
-            "significant_after": False, "measured": nan, "simulated_before": nan,
+            "significant_after": False, "measured": nan, "simulated_before": b.simulated,
             "simulated_after": nan, "prior": b.prior,
             "note": b.text() if b.fitted else f"not fitted: {b.source}"}
 
@@ -46,7 +46,7 @@ def _base_row(b: BaseParameter) -> dict[str, Any]:
 def comparison_columns(c: Comparison) -> dict[str, list]:
     """Long-form rows of sim_comparison.parquet (schema in pospp.io.parquet_tables): the
     base model's fitted levels (kind "base", step 0; ``significant_before``: the fit differs
-    from its prior), every statistic at step 0 and at each step (kind "statistic"), and each
+    from its prior; ``simulated_before``: the level simulated, the fit or the prior), every statistic at step 0 and at each step (kind "statistic"), and each
     step's effect parameters (kind "effect", in the catalogue's units and signs, the reading
     in ``note``) and what else the reading determines (kind "reading": the combination of
     confounded effects, their correlations)."""
