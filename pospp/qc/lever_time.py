@@ -360,9 +360,10 @@ def lever_time_verdict(est: LeverTime, *, sigmas: float = 5.0) -> Verdict:
             f"clock); the lever arm at that offset is {_vec(est.lever_b_m)} m, as configured "
             f"within its sigma. Read as {lever_reading}, the flight's speed changes reject it "
             f"({z_l:.0f} sigma)"))
-    if lev_seen and not tau_seen and z_t > SEPARATION_SIGMAS:
+    # a difference off the forward axis is no offset's (v tau lies along the track)
+    if lev_seen and not tau_seen and (z_t > SEPARATION_SIGMAS or not app_seen[0]):
         alt = (f"; read as a GNSS time offset ({time_reading}), the flight's speed changes "
-               f"reject it ({z_t:.0f} sigma)") if time_reading else ""
+               f"reject it ({z_t:.0f} sigma)") if time_reading and app_seen[0] else ""
         return Verdict("lever_arm", (
             f"the data suggest a lever arm of {_vec(est.lever_b_m)} m (body FRD, sigma "
             f"{', '.join(f'{x:.2f}' for x in est.sigma_lever_b_m)}) where {_vec(cfg)} m is "

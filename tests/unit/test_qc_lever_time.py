@@ -80,6 +80,17 @@ def test_lever_arm_named_and_the_offset_reading_rejected():
     assert "GNSS leads the IMU by 8.3" in v.text and "reject it (8 sigma)" in v.text
 
 
+def test_a_vertical_lever_arm_is_no_offset_even_where_the_offset_is_undetermined():
+    """The antenna 0.35 m higher than configured on a flight whose speed never changes (the
+    offset not determined, as on the quadrotor of docs/qc.md): a time offset moves the
+    antenna along the track only, so the lever arm is named, with no offset reading."""
+    cfg = np.zeros(3)
+    run, _ = closed_form(0.0, 1.0, [0.0, 0.0, -0.35])
+    v = lever_time_verdict(lever_time_joint(run, cfg, cfg, grid_s=0.005))
+    assert v.kind == "lever_arm" and "[0.00, 0.00, -0.35]" in v.text
+    assert "time offset" not in v.text
+
+
 def test_both_named_when_both_are_there():
     cfg = np.zeros(3)
     run, _ = closed_form(0.03, 0.001, [0.5, 0.0, 0.0])
