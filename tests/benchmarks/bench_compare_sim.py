@@ -93,8 +93,8 @@ EFFECTS = {
     "scale_factor": (lambda i, g, s: (replace(i, gyro_sf_ppm=(0.0, 0.0, s)), g), 1500.0,
                      "scale_factor", ("gyro_sf_z",), lambda s: (s,)),
     "mounting_misalignment": (lambda i, g, s: (_mount(i, s), g), 300.0,
-                              "mounting_misalignment", ("rho_x", "rho_y", "rho_z"),
-                              lambda s: (s, -s, 2 * s)),
+                              "mounting_misalignment", ("rho_x", "rho_z"),
+                              lambda s: (s, 2 * s)),
     "coloured_gnss": (lambda i, g, s: (i, replace(g, pos_gm_sigma_m=(s, 1.5 * s),
                                                   pos_gm_tau_s=60.0)), 0.2, "coloured_gnss",
                       ("pos_gm_sigma_h",), lambda s: (s,)),
@@ -109,8 +109,9 @@ def _mount(imu, s_arcsec):
     from pospp.simcompare.effects import mounting_misalignment_arcsec
     from pospp.units import ARCSEC_RAD
 
-    m = mounting_misalignment_arcsec(np.array([s_arcsec, -s_arcsec, 2 * s_arcsec])
-                                     * ARCSEC_RAD)
+    # roll and yaw: the pitch of the attitude model is the flight-path angle, and a pitch
+    # mounting reads as an angle of attack (att_offset_pitch's sigma 1140 arcsec here)
+    m = mounting_misalignment_arcsec(np.array([s_arcsec, 0.0, 2 * s_arcsec]) * ARCSEC_RAD)
     return replace(imu, gyro_misalign_arcsec=tuple(m), accel_misalign_arcsec=tuple(m))
 
 
@@ -180,8 +181,18 @@ def mode_limits(seeds: int, names: list[str]) -> None:
                   flush=True)
 
 
-LIMITS: dict[str, float] = {}
-"""Effect -> detection limit (the injected size's unit), from ``limits`` (docs/compare_sim.md)."""
+LIMITS: dict[str, float] = {
+    "vibration": 6.4e-4,  # sigma 1.0e-6 m/s^2 at 0.05 m/s^2: sigma_var 1.0e-7 m^2/s^4
+    "time_offset": 4.2e-3,  # 4 x 1.05 ms
+    "lever_arm": 0.18,  # 4 x 0.046 m (x)
+    "scale_factor": 826.0,  # 4 x 206 ppm
+    "mounting_misalignment": 74.0,  # rho_z = 2 s: 4 x 37 arcsec (rho_x 6.3)
+    "coloured_gnss": 0.114,  # sigma 0.0081 m at 0.2 m: sigma_var 0.0032 m^2
+    "bias_instability": 3.7,  # sigma 0.66 deg/h at 2.6 deg/h (3 x noise): sigma_var 3.5
+    "accel_bias_ramp": 8400.0,  # 4 x 2100 ug/h (x, at 10 000 ug/h)
+}
+"""Effect -> detection limit (the injected size's unit), from ``limits`` (docs/compare_sim.md):
+the larger of the two noise scales'; 3 seeds."""
 
 
 def mode_effects(n: int, names: list[str]) -> None:
