@@ -4,6 +4,7 @@
     python tests/benchmarks/bench_compare_sim.py limits [SEEDS]    # each effect's sigma -> limit
     python tests/benchmarks/bench_compare_sim.py effects N [NAMES] # each effect at 3 x its limit
     python tests/benchmarks/bench_compare_sim.py outsider N
+    python tests/benchmarks/bench_compare_sim.py time MCAP PIPELINE [ROUNDS]  # vs pospp run
 
 The flight (about 14 min; short, so that the Monte Carlo is affordable: every statistic the
 effects move is there, at sigmas about 1.8 times a 45 min flight's): 300 s at rest (the bias
@@ -228,8 +229,31 @@ def mode_outsider(n: int) -> None:
         print(f"| outsider | {scale:.2f} | {ok}/{n} unexplained, nothing named |", flush=True)
 
 
+def mode_time(mcap: str, pipe: str, rounds: int) -> None:
+    """``pospp run`` and ``pospp compare-sim`` of one flight, interleaved (the machine's load
+    moves both alike), wall-clock per round and their ratio (issue 33 item 5: at most 2)."""
+    import subprocess
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as d:
+        run_dir = Path(d) / "run"
+        for k in range(rounds):
+            t0 = time.perf_counter()
+            subprocess.run([sys.executable, "-m", "pospp.cli", "run", mcap, "-p", pipe, "-o",
+                            str(run_dir), "--force"], check=False, capture_output=True)
+            t_run = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            subprocess.run([sys.executable, "-m", "pospp.cli", "compare-sim", str(run_dir),
+                            "-o", str(Path(d) / "model.toml")], check=True, capture_output=True)
+            t_cs = time.perf_counter() - t0
+            print(f"| {k + 1} | {t_run:.1f} | {t_cs:.1f} | {t_cs / t_run:.2f} |", flush=True)
+
+
 if __name__ == "__main__":
     mode = sys.argv[1]
+    if mode == "time":
+        mode_time(sys.argv[2], sys.argv[3], int(sys.argv[4]) if len(sys.argv) > 4 else 3)
+        sys.exit(0)
     arg = int(sys.argv[2]) if len(sys.argv) > 2 else 3
     names = sys.argv[3:] or list(EFFECTS)
     {"null": lambda: mode_null(arg), "limits": lambda: mode_limits(arg, names),
