@@ -180,17 +180,29 @@ def _common(passes: list[LeverPass]) -> list[NDArray]:
     return out
 
 
-def _profile(passes: list[LeverPass]) -> tuple[float, float, float, int] | None:
-    """(tau, curvature c of J = c (s - tau)^2 + J_min, J_min, n) of the parabola through the
-    passes' J (None when J is not convex there)."""
+def _profile(passes: list[LeverPass]) -> tuple[float, float, float, int, float] | None:
+    """(tau, curvature c of J = c (s - tau)^2 + J_min, J_min, n, sigma of tau from the fit)
+    of the least-squares parabola through the passes' J (None when it is not convex). With
+    more than three passes, J's scatter about the parabola (A's passes do not lie on one:
+    its lever-arm states jump by tens of cm on a short flight whose antenna height it cannot
+    see, and J with them) gives tau a second sigma, by the delta method on the fit's
+    covariance."""
     nis = _common(passes)
     s = np.array([p.shift_s for p in passes])
     j = np.array([float(np.sum(x)) for x in nis])
-    c2, c1, c0 = np.polyfit(s, j, 2)
+    x = np.column_stack([s * s, s, np.ones_like(s)])
+    coef, *_ = np.linalg.lstsq(x, j, rcond=None)
+    c2, c1, c0 = coef
     if not c2 > 0:
         return None
     tau = -c1 / (2.0 * c2)
-    return float(tau), float(c2), float(c0 - c1 * c1 / (4.0 * c2)), int(nis[0].size)
+    sig_fit = 0.0
+    if s.size > 3:
+        rss = float(np.sum((j - x @ coef) ** 2))
+        cov = rss / (s.size - 3) * np.linalg.inv(x.T @ x)
+        grad = np.array([c1 / (2.0 * c2 * c2), -1.0 / (2.0 * c2), 0.0])  # d tau / d coef
+        sig_fit = float(np.sqrt(max(grad @ cov @ grad, 0.0)))
+    return float(tau), float(c2), float(c0 - c1 * c1 / (4.0 * c2)), int(nis[0].size), sig_fit
 
 
 RunPass = Callable[[float, NDArray], LeverPass]
@@ -245,8 +257,8 @@ def lever_time_joint(run_pass: RunPass, configured_b_m: NDArray, start_b_m: NDAr
 
     The minimum of J is walked to in steps (``step_s`` on the grid): from 0 and +-1 step,
     the profile moves towards the lower end, doubling its stride, until the lowest J is
-    inside; then the parabola through the lowest and its two neighbours gives tau, while it
-    lies within a step of the lowest (``max_passes`` passes at most; else None).
+    inside (``max_passes`` passes at most; else None); then the least-squares parabola
+    through the lowest and two steps either side gives tau (:func:`_profile`).
     """
     cfg = np.asarray(configured_b_m, dtype=float)
     h = max(round(step_s / grid_s), 1) * grid_s if grid_s > 0 else step_s
@@ -274,11 +286,14 @@ def lever_time_joint(run_pass: RunPass, configured_b_m: NDArray, start_b_m: NDAr
             return None
     except ValueError:
         return None
-    passes = [prof.at(best - 1), prof.at(best), prof.at(best + 1)]
+    try:  # five passes about the lowest: J's scatter about the parabola is seen
+        passes = [prof.at(best + k) for k in (-2, -1, 0, 1, 2)]
+    except ValueError:
+        return None
     return _joint(passes, _profile(passes), cfg, prof.at(0))
 
 
-def _joint(passes: list[LeverPass], prof: tuple[float, float, float, int] | None,
+def _joint(passes: list[LeverPass], prof: tuple[float, float, float, int, float] | None,
            cfg: NDArray, p0: LeverPass) -> LeverTime:
     """:class:`LeverTime` of the passes about the profile's minimum; ``p0``: the pass at 0."""
     s = np.array([p.shift_s for p in passes])
@@ -289,9 +304,9 @@ def _joint(passes: list[LeverPass], prof: tuple[float, float, float, int] | None
     if prof is None:  # J flat or concave: the offset is not determined
         tau, sig_tau, red, n = 0.0, math.inf, math.nan, int(_common(passes)[0].size)
     else:
-        tau, c2, j_min, n = prof
+        tau, c2, j_min, n, sig_fit = prof
         red = j_min / (3.0 * n) if n else math.nan
-        sig_tau = math.sqrt(max(1.0, red if math.isfinite(red) else 1.0) / c2)
+        sig_tau = math.sqrt(max(1.0, red if math.isfinite(red) else 1.0) / c2 + sig_fit ** 2)
     fit2 = [np.polyfit(s, lev[:, i], 2) for i in range(3)]
     lever_tau = np.array([np.polyval(f, tau) for f in fit2])
     # the apparent lever arm: the pass at 0 (its own sigma), else the profile's at 0

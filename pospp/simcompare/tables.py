@@ -44,11 +44,12 @@ def _base_row(b: BaseParameter) -> dict[str, Any]:
 
 
 def comparison_columns(c: Comparison) -> dict[str, list]:
-    """Long-form rows of sim_comparison.parquet (schema in pospp.io.parquet_tables): the
-    base model's fitted levels (kind "base", step 0; ``significant_before``: the fit differs
-    from its prior; ``simulated_before``: the level simulated, the fit or the prior), every statistic at step 0 and at each step (kind "statistic"), and each
-    step's effect parameters (kind "effect", in the catalogue's units and signs, the reading
-    in ``note``) and what else the reading determines (kind "reading": the combination of
+    """Long-form rows of sim_comparison.parquet (schema in pospp.io.parquet_tables): the base
+    model's fitted levels (kind "base", step 0; ``significant_before``: the fit differs
+    from its prior; ``simulated_before``: the level simulated, the fit or the prior),
+    every statistic at step 0 and at each step (kind "statistic"), and each step's
+    effect parameters (kind "effect", in the catalogue's units and signs, the reading in
+    ``note``) and what else the reading determines (kind "reading": the combination of
     confounded effects, their correlations)."""
     rows = [_base_row(b) for b in c.base_fit]
     rows += [_stat_row(0, "", n, g, None) for n, g in c.base.items()]
