@@ -336,7 +336,7 @@ class Verdict:
 
 
 def _vec(x: NDArray) -> str:
-    return "[" + ", ".join(f"{v:.2f}" for v in x) + "]"
+    return "[" + ", ".join(f"{v if abs(v) >= 0.005 else 0.0:.2f}" for v in x) + "]"
 
 
 def _late(tau_s: float, sigma_s: float) -> str:
