@@ -420,6 +420,8 @@ def _candidate(e: SimEffect, measured: FlightStats, cur: dict[str, Gap], sim: Fl
             if e.grid is not None:  # a grid parameter (a correlation time) is a choice
                 keep[e.grid[0]] = True
             u = np.where(keep, u, 0.0)
+        if not e.plausible(u, cov):
+            return None
     imu2, gnss2 = e.apply(imu, gnss, u, ctx)
     try:
         sim2 = simulate(imu2, gnss2)

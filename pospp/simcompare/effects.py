@@ -64,6 +64,9 @@ from pospp.units import ARCSEC_RAD, DEG_PER_H_RADPS, UG_MPS2
 __all__ = ["BI_DRAW", "SimEffect", "LIBRARY", "EffectContext", "JointFit",
            "coloured_tau_library", "library_by_name", "lever_time_fit"]
 
+IMPLAUSIBLE_FACTOR = 50.0
+"""A fitted effect more than this many times its catalogue's plausible size is not admissible
+(:meth:`SimEffect.plausible`)."""
 ACCEL_RAMP_TRIAL_MPS3 = 1e-4
 """Trial ramp of ``accel_bias_ramp`` [m/s^3] (about 37 000 ug/h): A's smoothed bias follows
 only part of a ramp (its bias random walk lags), so the slope is measured, not the identity."""
@@ -196,6 +199,20 @@ class SimEffect:
     joint: Callable[[EffectContext], JointFit | None] | None = None
     """For a group of confounded effects estimated jointly on the measured log (not from the
     statistics): the fit and what it names (:class:`JointFit`; None: nothing to add)."""
+
+    def plausible(self, u: NDArray, cov: NDArray) -> bool:
+        """Every fitted size in the first parameter's unit within ``IMPLAUSIBLE_FACTOR`` x the
+        catalogue's plausible size (:attr:`pospp.effects_catalog.CatalogEffect.plausible_si`):
+        a fit beyond it is no sensor's error but another model's misfit (the quadrotor's
+        DJI RTK/INS "GNSS" fitted an 8 348 000 ppm gyro scale factor and an 86 deg yaw
+        mounting, docs/results.md)."""
+        size, _ = self.size(u, cov)
+        k = np.broadcast_to(np.asarray(self.si_per_unit, dtype=float), size.shape)
+        units = [x.strip() for x in self.unit.split("|")]
+        same = (np.array([x == units[0] for x in units]) if len(units) == size.size
+                else np.ones(size.shape, bool))
+        limit = IMPLAUSIBLE_FACTOR * catalog_entry(self.name).plausible_si / k[0]
+        return bool(np.all(np.abs(size[same]) <= limit))
 
     def size(self, u: NDArray, cov: NDArray) -> tuple[NDArray, NDArray]:
         """Reported size and 1-sigma [unit] of the fitted u (SI) and its covariance."""
