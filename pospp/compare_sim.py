@@ -22,6 +22,7 @@ from pospp.config import PipelineConfig
 from pospp.io import mcap_reader, parquet_tables, report_files
 from pospp.nav import filter as nav_filter
 from pospp.nav.alignment import AlignmentOptions, gnss_moving_windows
+from pospp.qc.lever_time import LeverTime
 from pospp.sim.api import Kinematics, along_motion, kinematics, sensors
 from pospp.sim.gnss import GnssModel
 from pospp.sim.sensors import ImuErrorModel, imu_grade
@@ -361,8 +362,10 @@ def simulate_stats(tpl: FlightTemplate, config: PipelineConfig,
             on_flight(count[0])
         fs = log_stats(simulate_log(tpl, imu, gnss, seed=SIM_SEED + draw), config,
                        vehicle=tpl.vehicle, legs=draw == 0)[0]
-        # the joint estimate's expectation on a flight simulated with this offset
-        own = {"lt_time_offset": Stat(float(gnss.time_offset_s), 0.0, np.inf)}
+        # the joint estimate's expectation on a flight simulated with this offset and lever
+        dl = np.subtract(gnss.lever_arm_b_m, config.gnss.lever_arm_m)
+        own = {"lt_time_offset": Stat(float(gnss.time_offset_s), 0.0, np.inf),
+               **{f"lt_lever_{a}": Stat(float(dl[i]), 0.0, np.inf) for i, a in enumerate("xyz")}}
         return FlightStats({**fs.stats, **own}, fs.hf_peak_hz)
 
     return run
@@ -389,6 +392,24 @@ def base_fit(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult, tpl: Flig
     kin = ImuParts(tk, wk, fk, *static_and_steady(tk, sol, end))
     fix, vel = gnss_residuals(log, sol, tpl.epoch_ns, config.gnss.lever_arm_m)
     return fit_base_model(meas, kin, base_imu_model(config), tpl.gnss, fix=fix, vel=vel)
+
+
+def joint_stats(lt: LeverTime, seen: np.ndarray) -> dict[str, Stat]:
+    """The joint estimate's statistics on the measured flight (:mod:`pospp.simcompare.stats`:
+    ``lt_time_offset`` where the offset is determined, ``lt_lever_*`` on the axes ``seen``):
+    the offset, and the lever arm minus the configured one at it (the apparent one where the
+    offset is not determined), with their sigmas."""
+    out = {}
+    if np.isfinite(lt.sigma_tau_s):
+        out["lt_time_offset"] = Stat(lt.tau_s, lt.sigma_tau_s, np.inf)
+        lev, sig = lt.lever_b_m, lt.sigma_lever_b_m
+    else:
+        lev, sig = lt.apparent_lever_b_m, lt.sigma_apparent_b_m
+    for i, a in enumerate("xyz"):
+        if seen[i]:
+            out[f"lt_lever_{a}"] = Stat(float(lev[i] - lt.configured_b_m[i]), float(sig[i]),
+                                        np.inf)
+    return out
 
 
 def compare_log(log: mcap_reader.FlightLog, config: PipelineConfig, *,
@@ -424,9 +445,9 @@ def compare_log(log: mcap_reader.FlightLog, config: PipelineConfig, *,
     # statistic (lt_time_offset), its reading the fit of lever_arm_time_offset
     say("joint estimate of the lever arm and the GNSS time offset")
     lt = pipeline.lever_time_estimate(log, nav, config, None if est is None else est.lever_arm)
-    if lt is not None and np.isfinite(lt.sigma_tau_s):
-        measured = FlightStats({**measured.stats, "lt_time_offset": Stat(
-            lt.tau_s, lt.sigma_tau_s, np.inf)}, measured.hf_peak_hz)
+    if lt is not None:
+        seen = pipeline.lever_arm_seen(nav)
+        measured = FlightStats({**measured.stats, **joint_stats(lt, seen)}, measured.hf_peak_hz)
     ctx = EffectContext(hf_peak_hz=measured.hf_peak_hz, lever_time=lambda: lt)
     drift = fit is not None and has_drift(fit)
     comp = compare_flights(measured, simulate_stats(tpl, config, on_flight), imu, gnss,

@@ -6,8 +6,10 @@ a 1-sigma, and the flight is simulated with them:
 
 * **IMU white noise** (gyro ARW, accelerometer VRW, per axis): the level of the Welch power
   spectrum of the samples (4 s segments, linear detrend) over [``WHITE_F_LO_HZ``,
-  0.8 f_Nyquist], its lines (bins above ``LINE_FACTOR`` x the median) left out, on the static
-  parts when they last ``STATIC_MIN_S`` (else the steady ones): a white rate noise of
+  f_Nyquist], its lines (bins above ``LINE_FACTOR`` x the median) left out, on the static
+  parts when they last ``STATIC_MIN_S`` (else the whole flight: the statistics it must
+  match, ``imu_hf_*``, ``imu_band_*``, are the whole flight's, and the steady parts of a car
+  or a drone shake less than the rest): a white rate noise of
   variance s^2 per sample at f_s has the one-sided spectrum 2 s^2 / f_s, and ARW =
   s sqrt(dt). The trajectory's own power there (the error-free simulated IMU on the same
   parts, :class:`pospp.sim.api.Kinematics`) is subtracted. Sigma: batch means over up to
@@ -27,12 +29,16 @@ a 1-sigma, and the flight is simulated with them:
   residuals' lag-1 autocorrelation (sigma 1 / sqrt(n)), reported only: a coloured error is
   the library's ``coloured_gnss``.
 
-The constant biases, the accelerometer's Gauss-Markov part, the correlation times and the
-vibration stay the grade's (A estimates the biases on both flights; A's own estimate would
-carry the effects into the base model: on circles turned one way, A reads a 2000 ppm z scale
-factor as a 75 deg/h z bias). A parameter whose fit differs from the prior by more than
-``DIFFERS_SIGMAS`` sigma and ``DIFFERS_FRACTION`` of the prior is reported as such ("gyro
-ARW x 0.0020 +- 0.0001 deg/sqrt(h) fitted, grade 0.01"), never as an effect.
+The vibration is none: a platform's, not the sensor's (the ``mems`` preset's 6 m/s^2 at 50
+Hz is the ArduPilot plane's propeller; simulated for a phone in a car, comma2k19, it put the
+high-frequency accelerometer variance 25 sigma above the measured, which no effect could
+take back): it is the library's ``vibration``. The constant biases, the accelerometer's
+Gauss-Markov part and the correlation times stay the grade's (A estimates the biases on both
+flights; A's own estimate would carry the effects into the base model: on circles turned one
+way, A reads a 2000 ppm z scale factor as a 75 deg/h z bias). A parameter whose fit differs
+from the prior by more than ``DIFFERS_SIGMAS`` sigma and ``DIFFERS_FRACTION`` of the prior
+is reported as such ("gyro ARW x 0.0020 +- 0.0001 deg/sqrt(h) fitted, grade 0.01"), never as
+an effect.
 
 Frames and units: body FRD, NED, SI inside; the parameters are reported in the units of the
 sensor model's fields (:class:`pospp.sim.sensors.ImuErrorModel`,
@@ -201,7 +207,7 @@ def imu_white_noise(t_s: NDArray, x: NDArray, mask: NDArray
     specs = [_spectrum(x[i], dt) for i in pieces]
     f = specs[0][0]
     n = np.array([i.size for i in pieces], dtype=float)
-    band = (f >= WHITE_F_LO_HZ) & (f <= 0.8 / (2.0 * dt))
+    band = f >= WHITE_F_LO_HZ
     if not band.any():
         return np.full(3, np.nan), np.full(3, np.nan), 0.0
     p = np.array([sp[1][band] for sp in specs])  # (pieces, bins, 3)
@@ -265,7 +271,7 @@ def _imu_rows(meas: ImuParts, kin: ImuParts, grade: ImuErrorModel) -> list[BaseP
     dt = float(np.median(np.diff(meas.t_s)))
     static_s = float(np.count_nonzero(meas.static)) * dt
     use_static = static_s >= STATIC_MIN_S
-    where = "static parts" if use_static else "steady parts (no static part of 60 s)"
+    where = "static parts" if use_static else "the whole flight (no static part of 60 s)"
     rows: list[BaseParameter] = []
     white = {}
     for kind, xm, xk, per, unit, prior in (
@@ -273,7 +279,8 @@ def _imu_rows(meas: ImuParts, kin: ImuParts, grade: ImuErrorModel) -> list[BaseP
              "deg_per_sqrt_h", grade.gyro_arw_dpsh),
             ("accel_vrw", meas.f_mps2, kin.f_mps2, MPS_PER_SQRT_H_MPS_PER_SQRT_S,
              "m_per_s_per_sqrt_h", grade.accel_vrw_mpsph)):
-        mask_m, mask_k = (meas.static, kin.static) if use_static else (meas.steady, kin.steady)
+        mask_m, mask_k = ((meas.static, kin.static) if use_static else
+                          (np.ones_like(meas.static), np.ones_like(kin.static)))
         vm, sm, used = imu_white_noise(meas.t_s, xm, mask_m)
         vk = imu_white_noise(kin.t_s, xk, mask_k)[0] if mask_k.any() else np.zeros(3)
         var = (vm - np.nan_to_num(vk)) * dt  # N^2 = s^2 dt [unit^2 s]
@@ -407,7 +414,8 @@ def fit_base_model(meas: ImuParts, kin: ImuParts, grade: ImuErrorModel, gnss: Gn
 
     gm = float(by["gyro_gm_sigma"].simulated)
     imu = replace(grade, gyro_arw_dpsh=axes("gyro_arw"), accel_vrw_mpsph=axes("accel_vrw"),
-                  gyro_gm_sigma_dph=(gm, gm, gm))
+                  gyro_gm_sigma_dph=(gm, gm, gm), accel_vibration_rms_mps2=(0.0, 0.0, 0.0),
+                  gyro_vibration_rms_dps=(0.0, 0.0, 0.0))
     g = replace(gnss, pos_noise_m=pos or gnss.pos_noise_m,
                 vel_noise_mps=vel_n or gnss.vel_noise_mps)
     return BaseFit(tuple(rows), imu, g)

@@ -374,7 +374,8 @@ LIBRARY: tuple[SimEffect, ...] = (
     # the lever arm and the GNSS time offset, jointly (pospp.qc.lever_time): u = true minus
     # configured lever arm (3), GNSS stamp minus true time; named by the joint reading
     _effect("lever_arm_time_offset", (),
-            ("lt_time_offset", "gnss_vel_dot_accel", *(f"a_lever_{a}" for a in _XYZ),
+            ("lt_time_offset", *(f"lt_lever_{a}" for a in _XYZ), "gnss_vel_dot_accel",
+             *(f"a_lever_{a}" for a in _XYZ),
              "att_offset_pitch",
              "gnss_pos_nis", "gnss_vel_nis", *_norm("pos"), *_norm("vel"),
              "gnss_vel_lb_n", "gnss_vel_lb_e", "gnss_vel_lowband", *_LEGS), None, False,
