@@ -63,12 +63,6 @@ at least the grade's (twice and five times the catalogue's plausible 1000 ppm; t
 scale-factor pass takes 2000 ppm for the gyros): at the flight grade's 10 / 50 ppm the
 states could not move, and a 500 ppm z gyro scale factor over two 180 deg turns read 0.8
 +- 14 ppm (issue 33: a few hundred ppm on a flight of many 180 deg turns not named)."""
-HEADING_SIGMA_RAD = 1e-4
-"""Smoothing of the simulated heading (:func:`pospp.sim.api.along_motion`; its default 0.01
-rad is for a noisy RTK track): A's smoothed solution is precise, and at 0.01 rad the held
-heading of a static start wandered 0.21 deg at up to 8.8 deg/h over 10 min
-(flight_survey_errors), an Allan variance at 10 s above that of the real gyros, which
-``imu_avar_gyro_static`` then called unexplained; at 1e-4 rad: 0.0004 deg, 0.16 deg/h."""
 QUADRATURE = (1, 2)
 """Sub-intervals and Gauss-Legendre nodes per IMU interval of the comparison's kinematics
 (the simulator's default is 2 x 4): on flight_time_offset_200hz's trajectory the increments
@@ -159,8 +153,7 @@ def flight_template(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
         hspan = float(np.ptp(sol.height_m))
         vehicle = "aircraft" if hspan > 30.0 else "car"
     start = epoch + int(round(t_s[0] * 1e9)) - dt_ns
-    kin = kinematics(along_motion(t_s, lat, lon, hgt, vehicle=vehicle,
-                                  heading_sigma_rad=HEADING_SIGMA_RAD),
+    kin = kinematics(along_motion(t_s, lat, lon, hgt, vehicle=vehicle),
                      float(t_s[-1] - t_s[0]), imu_rate_hz=1e9 / dt_ns, start_time_ns=start,
                      n_sub=QUADRATURE[0], n_gl=QUADRATURE[1])
     return FlightTemplate(t_s, lat, lon, hgt, epoch, dt_ns, _gaps(t_imu, 1.5), gnss,

@@ -196,7 +196,7 @@ def _fit_quintic(t: NDArray, y: NDArray, sigma: float | NDArray) -> UnivariateSp
     return sp
 
 
-HELD_HEADING_WEIGHT = 100.0
+HELD_HEADING_WEIGHT = 1e4
 """Weight of a held heading sample (below ``heading_min_speed_mps``) in the heading spline,
 against 1 for a moving one (:class:`SplineMotion`)."""
 
@@ -258,8 +258,9 @@ class SplineMotion:
         track = np.unwrap(track[idx])
         # held values (slow samples) are held: HELD_HEADING_WEIGHT times the weight of a
         # moving sample (at weight 1 the spline may leave a held heading by the moving
-        # samples' sigma, and a 10 min static start then turned 0.21 deg at up to 8.8 deg/h:
-        # a gyro signal of a vehicle at rest); the track of slow moving samples less so
+        # samples' sigma, and a 10 min static start then turned 0.21 deg at up to 8.8 deg/h,
+        # at 100 0.004 deg at 0.5 deg/h: a gyro signal of a vehicle at rest, above a
+        # navigation-grade gyro's noise); the track of slow moving samples less so
         wts = np.where(good, np.clip(vh / (3.0 * heading_min_speed_mps), 0.3, 1.0),
                        HELD_HEADING_WEIGHT)
         self._psi = _fit_quintic(t, track, heading_sigma_rad / wts)
