@@ -210,13 +210,22 @@ def gnss_time_offset(est: TimeOffsetEstimate | None, joint: LeverTime | None = N
     verdict = lever_time_verdict(joint, sigmas=TIME_OFFSET_SIGMAS) if joint else None
     text = (verdict.text if verdict is not None and small
             and verdict.kind in ("time_offset", "both", "confounded") else "")
+    turns = f"; the turns alone: {est.offset_s:+.4f} +- {est.sigma_s:.4f} s" if est else ""
     if joint is not None and small and math.isfinite(joint.sigma_tau_s):
         tau, sig = joint.tau_s, joint.sigma_tau_s
         what = ("GNSS stamp minus true time, jointly with the lever arm (A's lever-arm pass "
-                f"at trial offsets, {joint.n_records} records"
-                + (f"; the turns alone: {est.offset_s:+.4f} +- {est.sigma_s:.4f} s" if est
-                   else "") + ")")
+                f"at trial offsets, {joint.n_records} records{turns})")
         how = "jointly with the lever arm"
+    elif joint is not None and small and math.isfinite(joint.tau_lever_only_s):
+        # the flight does not separate them: the offset that alone explains A's apparent
+        # forward lever arm (the turns read the same combination, and read a turn's
+        # sideslip as an offset too: 87 +- 6 ms on a clean simulated flight, bench_qc)
+        tau = joint.tau_lever_only_s
+        sig = float(joint.sigma_apparent_b_m[0] / max(abs(joint.speed_mps), 1e-9))
+        what = ("GNSS stamp minus true time that alone explains A's apparent forward lever "
+                "arm (the flight does not separate the two; A's lever-arm pass, "
+                f"{joint.n_records} records{turns})")
+        how = "as the apparent lever arm's"
     elif est is not None:
         tau, sig = est.offset_s, est.sigma_s
         what = ("|GNSS stamp minus IMU time| from course changes against the integrated yaw "

@@ -195,3 +195,33 @@ def test_the_check_takes_the_joint_reading_below_a_tenth_of_a_second():
     assert "jointly with the lever arm" in chk.statistic
     assert "GNSS lags the IMU by 15.0 +- 1.0 ms" in chk.suggestion and "reject" in \
         chk.suggestion
+
+
+def _flat(apparent_x_m: float):
+    """run_pass of a flight that cannot separate them: J the same at every offset, the lever
+    arm l(s) = apparent + 60 m/s x s along x."""
+    def run(s: float, start) -> LeverPass:
+        lev = np.array([apparent_x_m + 60.0 * s, 0.0, 0.0])
+        return LeverPass(s, lev, np.full(3, 0.02), np.arange(N_RECORDS),
+                         np.full(N_RECORDS, 3.0))
+    return run
+
+
+def test_where_the_flight_cannot_separate_them_the_offset_is_the_apparent_lever_arms():
+    """The joint estimate does not determine the offset (J flat). The check's offset is then
+    the one that alone explains A's apparent forward lever arm: 0 when that is as configured,
+    though the turns read 87 +- 6 ms (a turn's sideslip: bench_qc's clean MEMS flight, seed
+    1023, failed so); 30 ms (and the reading states the combination) when the antenna
+    appears 1.8 m behind at 60 m/s."""
+    est = time_offset.estimate_time_offset(*_track(0.087, noise_rad=0.0005))
+    cfg = np.zeros(3)
+    joint = lever_time_joint(_flat(0.0), cfg, cfg, grid_s=0.005)
+    assert joint is not None and joint.sigma_tau_s == math.inf
+    ok = time_offset.gnss_time_offset(est, joint)
+    assert ok.passed and ok.value == pytest.approx(0.0, abs=1e-9)
+    assert "alone explains A's apparent forward lever arm" in ok.statistic
+    joint = lever_time_joint(_flat(-1.8), cfg, cfg, grid_s=0.005)
+    bad = time_offset.gnss_time_offset(est, joint)
+    assert not bad.passed and bad.value == pytest.approx(0.03)
+    assert "forward lever arm + v x time offset = -1.80 +- 0.02 m at 60 m/s" in bad.suggestion
+    assert "cannot tell them apart" in bad.suggestion

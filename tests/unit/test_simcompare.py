@@ -379,19 +379,16 @@ def test_template_holds_the_static_start_while_the_receiver_is_at_rest():
 @pytest.mark.parametrize(("static_s", "seed"),
                          [(600.0, 1), (600.0, 2), (600.0, 4), (600.0, 5), (600.0, 6),
                           (300.0, 1)])
-def test_hidden_bias_instability_named_and_sized(static_s, seed):
+def test_hidden_bias_instability_is_a_base_model_level(static_s, seed):
     """A 100 deg/h Gauss-Markov gyro drift (600 s) on a tactical IMU whose configured drift
     is 0.5 deg/h, on a flight that starts static (10 or 5 minutes: a survey IMU's static
-    initialisation; seeds 2, 4, 5, 6 at 10 minutes had A's static period cut by one noisy
-    GNSS velocity before the alignment allowed the receiver's noise) and then drives the 180 s
-    car track: `bias_instability` is named at the
-    first step (no wrong name before it), its sigma within 25 % (fitted on the static gyro
-    Allan variance at 10 s: about (2 s^2 / T) tau / 3 = 111 (deg/h)^2 of random walk over
-    1.9 (deg/h)^2 of white noise), the target's gap and the static Allan variance's gap
-    shrink, and nothing else is named. The drift's realization also leaves a heading offset
-    and a lever-arm error in A, which a mounting misalignment or a lever arm would match
-    (named before this fix); under a model with the drift they are one draw of its spread
-    between seeds (docs/compare_sim.md, limits)."""
+    initialisation) and then drives the 180 s car track. Step 0 fits it from the static gyro
+    Allan variance at 10 s (about (2 s^2 / T) tau / 3 = 111 (deg/h)^2 of random walk over
+    1.9 (deg/h)^2 of white noise): within 25 %, reported as differing from the grade, and
+    simulated with its spread between draws, so that the heading offset, lever-arm error and
+    bias trends its realization leaves in A are one draw of it, not a mounting misalignment
+    or a lever arm (named before issue 14's fix); nothing is named. (Before step 0 the same
+    flights named `bias_instability` at the first step, 94-118 deg/h.)"""
     t, lat, lon, h = track()
     ts = np.arange(0.0, static_s, 0.5)
     t = np.concatenate([ts, t + static_s])
@@ -401,13 +398,10 @@ def test_hidden_bias_instability_named_and_sized(static_s, seed):
                          imu_rate_hz=50.0)
     comp, _ = compare_log(FlightLog(sim.imu, sim.fix, sim.vel, "static start"), CONFIG,
                           max_steps=2)
-    s = comp.steps[0]
-    assert s.effect == "bias_instability", [(x.target, x.effect) for x in comp.steps]
-    assert s.size[0] == pytest.approx(100.0, rel=0.25)  # deg/h
-    assert abs(s.after[s.target].z) < abs(s.before[s.target].z)
-    st = "imu_avar_gyro_static"
-    assert abs(s.after[st].z) < abs(s.before[st].z) / 4
-    assert comp.effects_added == ("bias_instability",)
+    gm = {b.name: b for b in comp.base_fit}["gyro_gm_sigma"]
+    assert gm.value == pytest.approx(100.0, rel=0.25) and gm.differs and gm.prior == 0.5
+    assert gm.simulated == gm.value
+    assert comp.effects_added == (), [(x.target, x.effect) for x in comp.steps]
 
 
 def test_ensemble_spread_floors_the_sigmas():
