@@ -93,7 +93,7 @@ EFFECTS = {
         ("lever_arm_x", "lever_arm_y"), lambda s: (-s, -0.5 * s)),
     "scale_factor": (lambda i, g, s: (replace(i, gyro_sf_ppm=(0.0, 0.0, s)), g), 1500.0,
                      "scale_factor", ("gyro_sf_z",), lambda s: (s,)),
-    "mounting_misalignment": (lambda i, g, s: (_mount(i, s), g), 300.0,
+    "mounting_misalignment": (lambda i, g, s: (_mount(i, s), g), 2000.0,
                               "mounting_misalignment", ("rho_x", "rho_z"),
                               lambda s: (s, 2 * s)),
     "coloured_gnss": (lambda i, g, s: (i, replace(g, pos_gm_sigma_m=(s, 1.5 * s),
@@ -102,7 +102,7 @@ EFFECTS = {
     "bias_instability": (lambda i, g, s: (replace(i, gyro_gm_sigma_dph=(s,) * 3), g), 3.0,
                          "bias_instability", ("gyro_gm_sigma",), lambda s: (s,)),
     "accel_bias_ramp": (lambda i, g, s: (replace(i, accel_bias_drift_ugph=(s, 0.0, 0.0)), g),
-                        3000.0, "accel_bias_ramp", ("accel_ramp_x",), lambda s: (s,)),
+                        10000.0, "accel_bias_ramp", ("accel_ramp_x",), lambda s: (s,)),
 }
 
 
@@ -184,13 +184,13 @@ def mode_limits(seeds: int, names: list[str]) -> None:
 
 LIMITS: dict[str, float] = {
     "vibration": 6.4e-4,  # sigma 1.0e-6 m/s^2 at 0.05 m/s^2: sigma_var 1.0e-7 m^2/s^4
-    "time_offset": 4.2e-3,  # 4 x 1.05 ms
-    "lever_arm": 0.18,  # 4 x 0.046 m (x)
-    "scale_factor": 826.0,  # 4 x 206 ppm
-    "mounting_misalignment": 74.0,  # rho_z = 2 s: 4 x 37 arcsec (rho_x 6.3)
+    "time_offset": 6.1e-3,  # 4 x 1.53 ms (0.94 ms at 1/3 the noise)
+    "lever_arm": 0.35,  # 4 x 0.088 m (x, its sigma with the offset's; 0.056 at 1/3)
+    "scale_factor": 832.0,  # 4 x 208 ppm
+    "mounting_misalignment": 860.0,  # rho_z = 2 s: 4 x 430 arcsec / 2 (the drift's spread)
     "coloured_gnss": 0.114,  # sigma 0.0081 m at 0.2 m: sigma_var 0.0032 m^2
-    "bias_instability": 3.7,  # sigma 0.66 deg/h at 2.6 deg/h (3 x noise): sigma_var 3.5
-    "accel_bias_ramp": 8400.0,  # 4 x 2100 ug/h (x, at 10 000 ug/h)
+    "bias_instability": 3.7,  # sigma 0.65 deg/h at 2.65 deg/h (3 x noise): sigma_var 3.5
+    "accel_bias_ramp": 7300.0,  # 4 x 1830 ug/h (x, at 10 000 ug/h; 1300 at 1/3)
 }
 """Effect -> detection limit (the injected size's unit), from ``limits`` (docs/compare_sim.md):
 the larger of the two noise scales'; 3 seeds."""
