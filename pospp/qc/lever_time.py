@@ -17,14 +17,16 @@ the landing, legs flown at other speeds, static periods (a lever arm stays, a ti
 vanishes at rest).
 
 How. Algorithm A's forward pass with lever-arm states (the QC stage's,
-:func:`pospp.flight_stages.lever_arm_passes`) is run on the log with the GNSS records
-re-stamped by ``t - s`` for three trial offsets s (0 and +-``LEVER_TIME_STEP_S``); each
-pass's lever arm is l(s), its fit to the GNSS records J(s) = sum of their NIS (each
-record's innovation against the pass's own covariance, gated records included at their NIS up
-to the gate; the records all passes processed). J is -2 log L of the offset with the lever
-arm profiled out, so the parabola through the three J gives tau (its minimum) and its sigma
-(Delta J = 1), scaled by the reduced chi-square at the minimum when above 1 (a receiver
-noisier than it reports). The lever arm at tau is l interpolated at tau; its sigma at a known
+:func:`pospp.flight_stages.lever_arm_passes`, a wide gate) is run on the log with the GNSS
+records re-stamped by ``t - s`` for trial offsets s on the IMU grid, each pass started where
+the lever arm is expected at s (:func:`pospp.lever_time_stage.lever_time_pass`); each pass's
+lever arm is l(s), its fit to the GNSS records J(s) = sum of their NIS (each record's
+innovation against the pass's own covariance, capped at the gate; the records all passes
+processed). J is -2 log L of the offset with the lever arm profiled out: its minimum is
+walked to in steps of ``LEVER_TIME_STEP_S``, and the least-squares parabola through the
+lowest and two steps either side gives tau and its sigma (Delta J = 1, scaled by the reduced
+chi-square at the minimum when above 1: a receiver noisier than it reports; the parabola's
+own fit error added). The lever arm at tau is l interpolated at tau; its sigma at a known
 offset is the pass's own, and with tau's uncertainty
 ``var l_i = sigma_l,i^2 + (dl_i / d tau)^2 sigma_tau^2``,
 ``corr(l_i, tau) = (dl_i / d tau) sigma_tau / sd(l_i)``.
