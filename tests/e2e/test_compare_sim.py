@@ -43,6 +43,11 @@ def test_compare_sim_cli(tmp_path):
     r = CliRunner().invoke(main, ["compare-sim", str(run_dir)])
     assert r.exit_code == 0, r.output
     assert "time_offset" in r.output
+    # not a terminal: a line per step on stderr with the seconds since the start, no
+    # transient flight counter (issue 33 item 5)
+    steps = re.findall(r"^  \[ *[\d.]+ s\] (.+)$", r.stderr, flags=re.M)
+    assert "simulating the trajectory (kinematics)" in steps, r.stderr
+    assert len(steps) >= 4 and "simulated flight" not in r.stderr
     tab = read_table(run_dir / "sim_comparison.parquet")
     eff = tab[(tab.kind == "effect") & (tab.effect == "time_offset")]
     # ms, 25 %; the catalogue's sign: IMU minus GNSS time (GNSS 80 ms late: -80)
