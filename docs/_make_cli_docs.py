@@ -38,13 +38,15 @@ maps a run's status to it):
 
 - 0 ok: the run completed and every quality check passed; a batch where every flight did;
   `pospp diff`: everything within tolerance.
-- 1 failed: the run failed (its folder holds the messages and a `failed` summary), a batch had
-  a failed flight, or any other error.
+- 1 failed: the run failed (its folder holds the messages and a `failed` summary, or, when the
+  failure was not about the input, such as a full disk, the previous run, and the error line
+  says so), a batch had a failed flight, or any other error.
 - 2 usage or configuration error: a bad option or choice (an unknown `--format`, `--preset`,
-  `--imu-grade`), a pipeline file with a bad key or value, a topic the log does not have, a
-  reference that is not of this flight, an output folder pospp must not write into, a batch
-  root another batch holds or whose manifest another tool wrote; `pospp` alone prints its
-  help.
+  `--imu-grade`), a pipeline file with a bad key or value, an input that is not a regular file
+  (a named pipe, a device), a topic the log does not have, a reference that is not of this
+  flight, an output folder or file pospp must not write into, a run folder another command is
+  writing, a batch root another batch holds or whose manifest another tool wrote; `pospp`
+  alone prints its help.
 - 3 degraded: the run completed but a quality check failed (named in the console, summary and
   manifest); `pospp diff` and `pospp batch --baseline`: a change beyond tolerance.
 - 4 partial: the run completed but a stage produced nothing (no calibration: the summary says
@@ -66,9 +68,17 @@ instead.
 - The run is written into `.OUT.pospp-staging-PID-HEX` beside OUT and swapped in whole when
   done, so OUT always holds one complete run, or one failed run (messages and a `failed`
   summary, no table of an earlier run), never a mix; a run killed at any moment leaves the
-  previous run, and the next run into OUT removes the leftover staging folder.
+  previous run, and the next run into OUT removes the leftover staging folder. A run that
+  fails for a reason that is not about its input (a full disk, a lost file) keeps the previous
+  run: only a verdict on the input replaces it.
+- Every command that writes a run folder (`run`, `report`, `evaluate`, `diagnose`, `export`,
+  `compare-sim`) holds the folder's lock (`flock` on the folder) for its whole work: a second
+  one is refused at once, naming the holder's pid. `run` checks OUT again at the swap: files
+  put into it during the run stop the swap (named in the error; nothing is replaced).
 - `pospp report`, `pospp evaluate` and `pospp diagnose` write into a run folder only (one with
-  the marker), each file atomically.
+  the marker), each file atomically. `pospp export -o FILE` and `pospp compare-sim -o FILE`
+  never write the run's input log or any file of a run folder but their own default outputs,
+  and replace an existing FILE only with `--force`.
 - `pospp batch -o ROOT`: each flight's folder name comes from its path relative to the inputs'
   common folder (sub-folders joined by `__`, other characters than letters, digits, `-`, `_`
   and inner dots escaped as `%XX`, so no `..`, separator or undecodable byte; `*.mcap` in any

@@ -67,9 +67,8 @@ QUOTES: tuple[Quote, ...] = (
                        r"([\d.]+ -> [\d.]+)\s+m\s+\(", ("dv", "dp")),
     Quote("README.md", r"errors:\s+([\d.]+)\s+arcsec\s+tilt,\s+([\d.]+)\s+arcsec\s+heading,"
                        r"\s+([\d.]+)\s+cm\s+horizontal", ("tilt", "heading", "horizontal_cm")),
-    Quote("README.md", r"as\s+it\s+changes\s+inside\s+each\s+leg,\s+fused\s+with\s+the\s+"
-                       r"calibrated\s+bias:\s+([\d.]+)\s+m/s\s+and\s+([\d.]+)\s+m\s+here",
-          ("dv_after", "dp_after")),
+    Quote("README.md", r"leaves\s+B's\s+300\s+s\s+error\s+at\s+([\d.]+)\s+m/s\s+and\s+"
+                       r"([\d.]+)\s+m\s+here", ("dv_after", "dp_after")),
     Quote("docs/report.md", r"B-minus-A\s+drops\s+from\s+([\d.]+)\s+m/s\s+RMS\s+to\s+([\d.]+)\s+"
                             r"m/s\s+when\s+each\s+leg\s+is\s+predicted\s+from\s+the\s+others,\s+"
                             r"against\s+([\d.]+)\s+m/s\s+in-sample",

@@ -19,7 +19,8 @@ import numpy as np
 
 from pospp import pipeline
 from pospp.config import PipelineConfig
-from pospp.io import mcap_reader, parquet_tables, report_files
+from pospp.io import mcap_reader, parquet_tables, report_files, run_folder
+from pospp.io.run_lock import locked
 from pospp.nav import filter as nav_filter
 from pospp.nav.alignment import AlignmentOptions, gnss_moving_windows
 from pospp.qc.lever_time import LeverTime
@@ -469,17 +470,24 @@ def compare_log(log: mcap_reader.FlightLog, config: PipelineConfig, *,
     return replace(comp, base_fit=fit.parameters if fit else ()), tpl
 
 
+@locked("pospp compare-sim")
 def compare_sim_run(run_dir: str | Path, *, out: str | Path | None = None,
                     max_steps: int = 4, library: tuple[SimEffect, ...] = LIBRARY,
+                    force: bool = False,
                     progress: Callable[[str], None] | None = None,
                     on_flight: Callable[[int], None] | None = None) -> Comparison:
     """``pospp compare-sim RUN_DIR``: write sim_comparison.parquet and sim_model.toml.
 
-    ``out`` is the model file (default RUN_DIR/sim_model.toml). The report is re-rendered.
-    ``progress(line)`` is told each step, ``on_flight(k)`` each simulated flight
-    (:func:`compare_log`).
+    ``out`` is the model file (default RUN_DIR/sim_model.toml; never the run's input or
+    another file of a run folder, an existing one only with ``force``:
+    :func:`pospp.io.run_folder.check_output_file`). The report is re-rendered. The run
+    folder's lock is held throughout. ``progress(line)`` is told each step, ``on_flight(k)``
+    each simulated flight (:func:`compare_log`).
     """
     run, meta, path, config = pipeline.reopen_run(run_dir)
+    model_file = run_folder.check_output_file(out or run / "sim_model.toml", run=run,
+                                              own_names=frozenset({"sim_model.toml"}),
+                                              force=force)
     say = progress or (lambda line: None)
     say(f"reading {path.name}")
     log = pipeline.ingest(path, config)
@@ -493,9 +501,8 @@ def compare_sim_run(run_dir: str | Path, *, out: str | Path | None = None,
     out_meta["vehicle"] = tpl.vehicle
     parquet_tables.write_table(run / "sim_comparison.parquet", comparison_columns(comp),
                                "sim_comparison", metadata=out_meta)
-    report_files.write_text(Path(out) if out else run / "sim_model.toml",
-                            model_toml(comp.imu_model, comp.gnss_model,
-                                       header=model_header(comp, path.name, config)))
+    report_files.write_text(model_file, model_toml(comp.imu_model, comp.gnss_model,
+                                                   header=model_header(comp, path.name, config)))
     say("writing the report")
     pipeline._render_report(run)
     return comp

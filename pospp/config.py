@@ -14,17 +14,28 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 import os
 import tomllib
-import types
 import typing
 from dataclasses import dataclass, field
-from enum import Enum, StrEnum
+from enum import StrEnum
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from pospp.calib.segment import LegThresholds
+from pospp.config_schema import (  # re-exported: the public names of pospp.config
+    MAX_CONFIG_BYTES,
+    MAX_STRING_LEN,  # noqa: F401
+    ConfigError,
+    Limits,
+    check_value,
+    convert_value,
+    limits_of,  # noqa: F401
+    out_of_range,
+    short_repr,
+)
+from pospp.config_schema import key as _key
+from pospp.io.files import NotRegularFileError, open_regular
 
 if TYPE_CHECKING:  # the stages' option types (imported where used: `pospp --help` stays light)
     from pospp.calib.pairs import PairPolicy
@@ -33,64 +44,14 @@ if TYPE_CHECKING:  # the stages' option types (imported where used: `pospp --hel
     from pospp.nav.tuning import ImuTuning
 
 
-class ConfigError(ValueError):
-    """A pipeline configuration problem (names the file and key)."""
-
-
-MAX_CONFIG_BYTES = 1 << 20
-"""Largest pipeline file read [bytes] (a real one is a few kB)."""
-MAX_STRING_LEN = 256
-"""Longest string value of any key (a key may set a smaller limit)."""
-
-
-@dataclass(frozen=True)
-class Limits:
-    """Range of one key: bounds for numbers (each element of a list), lengths for strings.
-
-    Every number must also be finite; every string at most ``MAX_STRING_LEN`` characters.
-    """
-
-    gt: float | None = None
-    ge: float | None = None
-    lt: float | None = None
-    le: float | None = None
-    min_len: int = 0
-    max_len: int = MAX_STRING_LEN
-
-    def describe(self) -> str:
-        """The limits as text: "> 0, <= 1000"."""
-        parts = [f"{op} {v:g}" for op, v in ((">", self.gt), (">=", self.ge), ("<", self.lt),
-                                             ("<=", self.le)) if v is not None]
-        return ", ".join(parts)
-
-    def check(self, value: Any, where: str) -> None:
-        """Raise :class:`ConfigError` naming ``where`` when ``value`` is out of range."""
-        if isinstance(value, str):
-            if not self.min_len <= len(value) <= self.max_len:
-                raise ConfigError(f"{where}: expected a string of {self.min_len} to "
-                                  f"{self.max_len} characters, got {len(value)}")
-            return
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            return
-        if not math.isfinite(value):
-            raise ConfigError(f"{where}: expected a finite number, got {value!r}")
-        bad = ((self.gt is not None and not value > self.gt)
-               or (self.ge is not None and not value >= self.ge)
-               or (self.lt is not None and not value < self.lt)
-               or (self.le is not None and not value <= self.le))
-        if bad:
-            raise ConfigError(f"{where}: expected a value {self.describe()}, got {value!r}")
-
-
-def _key(default: Any, **limits: Any) -> Any:
-    """A config field with its limits (kept next to the field, read by the validation)."""
-    return field(default=default, metadata={"limits": Limits(**limits)})
-
-
-def limits_of(cls: type, name: str) -> Limits:
-    """The limits of key ``name`` of config section ``cls`` (defaults when it sets none)."""
-    f = {f.name: f for f in dataclasses.fields(cls)}[name]
-    return f.metadata.get("limits", Limits())
+MAX_LOG_S = 1.0e7
+"""Longest log time any key may name [s] (116 days): ``[input] start_s / end_s`` beyond it
+overflowed the int64 nanosecond stamps (9.2e9 s) and were silently ignored (issue 38)."""
+MAX_LEG_S = 86400.0
+"""Longest leg, replay horizon or leg tolerance [s] (a day)."""
+MAX_REPLAY_RATE_HZ = 10.0
+"""Highest ``[replay] sample_rate_hz`` [Hz]: B minus A is smooth on the Schuler period and on
+the least squares' ``noise_step_s``; 1000 Hz took 5.5 GB on the sample (issue 38 item 11)."""
 
 
 class SensorFrame(StrEnum):
@@ -150,6 +111,7 @@ class NullImuNoise(StrEnum):
 
 
 class CompensationMode(StrEnum):
+    SMOOTHED = "smoothed"
     CAUSAL = "causal"
     PER_LEG = "per_leg"
     CONSTANT = "constant"
@@ -166,9 +128,9 @@ class InputConfig:
     """Axes of the logged IMU: "flu" (ROS REP-103) or "frd"."""
     mounting_rpy_deg: tuple[float, float, float] = _key((0.0, 0.0, 0.0), ge=-360.0, le=360.0)
     """Extra rotation of the IMU case w.r.t. the body (roll, pitch, yaw of sensor in body)."""
-    start_s: float | None = _key(None, ge=0.0)
+    start_s: float | None = _key(None, ge=0.0, le=MAX_LOG_S)
     """Process from this many seconds after the first IMU sample (None: from the start)."""
-    end_s: float | None = _key(None, gt=0.0)
+    end_s: float | None = _key(None, gt=0.0, le=MAX_LOG_S)
     max_chunk_mib: float = _key(256.0, ge=1.0, le=65536.0)
     """Largest decompressed MCAP chunk the reader accepts [MiB] (bounds its memory)."""
     events_topic: str = _key("/events", max_len=256)
@@ -198,14 +160,14 @@ class ImuConfig:
 
     grade: Grade = Grade.FLIGHT
     """Preset: "flight", "vehicle", "tactical", "mems" or "consumer"."""
-    gyro_bias_sigma_dph: float | None = _key(None, ge=0.0)
-    gyro_arw_dpsh: float | None = _key(None, ge=0.0)
-    gyro_gm_sigma_dph: float | None = _key(None, ge=0.0)
-    gyro_gm_tau_s: float | None = _key(None, gt=0.0)
-    accel_bias_sigma_ug: float | None = _key(None, ge=0.0)
-    accel_vrw_mpsph: float | None = _key(None, ge=0.0)
-    accel_gm_sigma_ug: float | None = _key(None, ge=0.0)
-    accel_gm_tau_s: float | None = _key(None, gt=0.0)
+    gyro_bias_sigma_dph: float | None = _key(None, ge=0.0, le=36000.0)
+    gyro_arw_dpsh: float | None = _key(None, ge=0.0, le=100.0)
+    gyro_gm_sigma_dph: float | None = _key(None, ge=0.0, le=36000.0)
+    gyro_gm_tau_s: float | None = _key(None, ge=1.0, le=1.0e7)
+    accel_bias_sigma_ug: float | None = _key(None, ge=0.0, le=1.0e6)
+    accel_vrw_mpsph: float | None = _key(None, ge=0.0, le=100.0)
+    accel_gm_sigma_ug: float | None = _key(None, ge=0.0, le=1.0e6)
+    accel_gm_tau_s: float | None = _key(None, ge=1.0, le=1.0e7)
 
     def tuning(self) -> ImuTuning:
         """The filter tuning of this section: the ``grade`` preset
@@ -225,26 +187,26 @@ class GnssConfig:
     lever_arm_m: tuple[float, float, float] = _key((0.0, 0.0, 0.0), ge=-100.0, le=100.0)
     """Antenna position in the body frame FRD [m]."""
     estimate_lever_arm: bool = False
-    pos_sigma_floor_m: float | None = _key(None, gt=0.0)
+    pos_sigma_floor_m: float | None = _key(None, ge=1.0e-4, le=1000.0)
     """Least GNSS position sigma the filter uses [m]; omitted: the [imu] grade's default
     (``GNSS_SIGMA_FLOORS_BY_GRADE``)."""
-    vel_sigma_floor_mps: float | None = _key(None, gt=0.0)
+    vel_sigma_floor_mps: float | None = _key(None, ge=1.0e-5, le=100.0)
     """Least GNSS velocity sigma the filter uses [m/s]; omitted: the grade's default."""
     use_velocity: bool = True
-    gate_probability: float = _key(0.9999, gt=0.0, lt=1.0)
+    gate_probability: float = _key(0.9999, ge=0.5, le=0.999999)
 
 
 @dataclass(frozen=True)
 class FilterConfig:
     """[filter]: algorithm A."""
 
-    output_rate_hz: float = _key(10.0, gt=0.0, le=1000.0)
+    output_rate_hz: float = _key(10.0, ge=0.01, le=1000.0)
     smoother: bool = True
-    static_alignment_s: float = _key(120.0, ge=0.0)
+    static_alignment_s: float = _key(120.0, ge=0.0, le=3600.0)
     """Longest static period used for coarse alignment at the start [s]."""
-    max_imu_gap_s: float = _key(0.5, gt=0.0)
+    max_imu_gap_s: float = _key(0.5, ge=1.0e-3, le=600.0)
     """Longest IMU gap bridged (and logged); a longer one is an error naming its time [s]."""
-    gate_reset_s: float = _key(30.0, gt=0.0)
+    gate_reset_s: float = _key(30.0, ge=1.0, le=3600.0)
     """After this long of gated GNSS records, the next one resets the covariance block [s]."""
     estimate_scale_factors: bool = False
     """Add gyro and accelerometer scale-factor states to algorithm A."""
@@ -308,18 +270,20 @@ class LegsConfig:
     5 s (:data:`GRADE_DEFAULTS`); explicit values win.
     """
 
-    min_duration_s: float | None = _key(None, gt=0.0)
-    duration_tolerance_s: float | None = _key(None, ge=0.0)
-    max_duration_s: float = _key(_LEG.max_duration_s, gt=0.0)
-    max_heading_rate_dps: float = _key(_LEG.max_heading_rate_dps, gt=0.0)
-    max_heading_spread_deg: float = _key(_LEG.max_heading_spread_deg, gt=0.0, le=180.0)
-    max_speed_std_mps: float = _key(_LEG.max_speed_std_mps, gt=0.0)
-    max_acceleration_mps2: float = _key(_LEG.max_acceleration_mps2, gt=0.0)
-    max_vertical_speed_mps: float = _key(_LEG.max_vertical_speed_mps, gt=0.0)
-    min_speed_mps: float = _key(_LEG.min_speed_mps, ge=0.0)
-    trim_s: float = _key(_LEG.trim_s, ge=0.0)
-    smoothing_s: float = _key(_LEG.smoothing_s, ge=0.0)
-    settle_s: float | None = _key(None, ge=0.0)
+    min_duration_s: float | None = _key(None, ge=1.0, le=MAX_LEG_S)
+    duration_tolerance_s: float | None = _key(None, ge=0.0, le=MAX_LEG_S)
+    max_duration_s: float = _key(_LEG.max_duration_s, ge=1.0, le=MAX_LEG_S)
+    max_heading_rate_dps: float = _key(_LEG.max_heading_rate_dps, ge=1.0e-4, le=360.0)
+    max_heading_spread_deg: float = _key(_LEG.max_heading_spread_deg, ge=1.0e-3,
+                                         le=180.0)
+    max_speed_std_mps: float = _key(_LEG.max_speed_std_mps, ge=1.0e-4, le=100.0)
+    max_acceleration_mps2: float = _key(_LEG.max_acceleration_mps2, ge=1.0e-4, le=100.0)
+    max_vertical_speed_mps: float = _key(_LEG.max_vertical_speed_mps, ge=1.0e-4,
+                                         le=1000.0)
+    min_speed_mps: float = _key(_LEG.min_speed_mps, ge=0.0, le=3000.0)
+    trim_s: float = _key(_LEG.trim_s, ge=0.0, le=3600.0)
+    smoothing_s: float = _key(_LEG.smoothing_s, ge=0.0, le=3600.0)
+    settle_s: float | None = _key(None, ge=0.0, le=MAX_LOG_S)
     """A leg starts at least this long after A's first epoch [s] (A's alignment error is not
     noise: docs/diagnose.md); omitted: the grade's default (:data:`GRADE_DEFAULTS`)."""
 
@@ -344,9 +308,9 @@ class ReplayConfig:
     """A solution B starts from and is compared with: "smoothed" (default) or "forward"."""
     accel_compensation: AccelCompensation = AccelCompensation.FILTER
     """"filter": remove A's accelerometer bias estimate; "none": raw, as the paper."""
-    sample_rate_hz: float = _key(1.0, gt=0.0, le=1000.0)
-    sigma_floor_mps: float = _key(0.005, gt=0.0)
-    horizon_s: float = _key(300.0, gt=0.0)
+    sample_rate_hz: float = _key(1.0, ge=0.01, le=MAX_REPLAY_RATE_HZ)
+    sigma_floor_mps: float = _key(0.005, ge=1.0e-6, le=10.0)
+    horizon_s: float = _key(300.0, ge=1.0, le=MAX_LEG_S)
     transition_step: int = _key(10, ge=1, le=100000)
 
     def options(self) -> ReplayOptions:
@@ -363,7 +327,7 @@ class PairsConfig:
     """[pairs]: pairing policy and calibration."""
 
     mode: PairMode = PairMode.ADJACENT
-    max_cond_scaled: float = _key(1.0e4, gt=1.0)
+    max_cond_scaled: float = _key(1.0e4, gt=1.0, le=1.0e12)
     min_dheading_deg: float = _key(30.0, ge=0.0, le=180.0)
     formulation: Formulation = Formulation.BODY
     """Formulation used for compensation: "body" or "paper" (both are always reported)."""
@@ -372,19 +336,19 @@ class PairsConfig:
     noise: NoiseModel = NoiseModel.GYRO_RW
     """Residual model of the least squares: "gyro_rw" (B's error driven by the gyro random
     walk and the grade's Gauss-Markov drift; docs/calibration.md) or "white"."""
-    noise_step_s: float = _key(10.0, gt=0.0)
+    noise_step_s: float = _key(10.0, ge=0.1, le=3600.0)
     """Spacing of the samples the correlated-noise least squares uses [s]."""
     estimate_gyro_z: bool = False
     """Also estimate the vertical body gyro bias (weakly observable on level legs)."""
     null_realisations: int = _key(10, ge=0, le=1000)
     """Null realisations of B minus A (docs/diagnose.md): the calibration's covariance and the
     diagnosis's null. 0: the formal covariance and nominal F (cries wolf on GNSS noise)."""
-    diagnose_alpha: float = _key(0.05, gt=0.0, lt=0.5)
+    diagnose_alpha: float = _key(0.05, ge=1.0e-6, lt=0.5)
     """Significance level of the diagnosis's tests (candidates Bonferroni-corrected per step;
     on null flights "none" in at least 1 - alpha of runs: docs/diagnose.md)."""
     null_imu_noise: NullImuNoise = NullImuNoise.MEASURED
     """Null's white IMU noise: "measured" (second differences) or "grade"; [imu] drifts both."""
-    rerun_imu_rate_hz: float = _key(50.0, ge=0.0)
+    rerun_imu_rate_hz: float = _key(50.0, ge=0.0, le=10000.0)
     """IMU rate [Hz] A and B re-run at for the null realisations and the diagnosis's re-run
     signatures: the flight's increments summed (docs/diagnose.md, "The null at a lower IMU
     rate"). 0, or above half the flight's rate: the flight's rate."""
@@ -404,11 +368,10 @@ class CompensationConfig:
 
     rerun_filter: bool = True
     """Re-run algorithm A with the calibrated gyro bias removed (the compensated trajectory)."""
-    mode: CompensationMode = CompensationMode.CAUSAL
-    """How B is re-run: "causal" (A's causal gyro-bias estimate inside each leg, fused with
-    the calibrated bias as its prior: best held out, docs/calibration.md section 9),
-    "per_leg" (the constant bias plus the drift's estimated mean over each leg, when the
-    grade has a drift) or "constant" (one bias for all legs)."""
+    mode: CompensationMode = CompensationMode.SMOOTHED
+    """How B is re-run: "smoothed" (the gyro error's history from the fit and A's forward
+    estimates: docs/calibration.md section 5), "causal" (A's forward estimate fused with the
+    constant), "per_leg" (the constant plus the drift's mean over each leg) or "constant"."""
 
 
 @dataclass(frozen=True)
@@ -418,7 +381,7 @@ class OutputsConfig:
     mcap: bool = True
     """Write the best trajectory to trajectory.mcap (ROS 2 NavSatFix, PoseStamped, /tf,
     Odometry, a Path per leg, run metadata; docs/formats.md)."""
-    mcap_rate_hz: float = _key(2.0, gt=0.0, le=1000.0)
+    mcap_rate_hz: float = _key(2.0, ge=0.01, le=1000.0)
     """Rate of trajectory.mcap [Hz] (at most the [filter] output rate; the Parquet table keeps
     the full output rate)."""
     report: bool = True
@@ -481,59 +444,23 @@ class PipelineConfig:
             max_imu_gap_s=f.max_imu_gap_s, gate_reset_s=f.gate_reset_s,
         )
 
+    def problems(self) -> list[str]:
+        """Every key outside its range, one text each ("replay.horizon_s: expected a value >=
+        1, <= 86400, got -300.0"): what the loader refuses, for a configuration made in
+        Python (``dataclasses.replace`` skips the loader; the QC ``config`` check asks)."""
+        out = [text for name in typing.get_type_hints(PipelineConfig) if name != "name"
+               for text in out_of_range(getattr(self, name), name)]
+        s, e = self.input.start_s, self.input.end_s
+        if s is not None and e is not None and not e > s:
+            out.append(f"input.end_s: expected a value > input.start_s = {s:g}, got {e:g}")
+        return out
+
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
 
     def to_json(self) -> str:
         """Canonical JSON (sorted keys): hashed for caching and stored in output metadata."""
         return json.dumps(self.to_dict(), sort_keys=True)
-
-
-def _short(value: Any, n: int = 60) -> str:
-    text = repr(value)
-    return text if len(text) <= n else f"{text[:n]}... ({len(text)} characters)"
-
-
-def _convert(value: Any, tp: Any, where: str) -> Any:
-    origin = typing.get_origin(tp)
-    args = typing.get_args(tp)
-    if origin in (typing.Union, types.UnionType):
-        if value is None and type(None) in args:
-            return None
-        inner = [a for a in args if a is not type(None)]
-        return _convert(value, inner[0], where)
-    if origin is tuple:
-        if not isinstance(value, list | tuple) or len(value) != len(args):
-            raise ConfigError(f"{where}: expected a list of {len(args)} numbers, "
-                              f"got {_short(value)}")
-        pairs = enumerate(zip(value, args, strict=True))
-        return tuple(_convert(v, a, f"{where}[{i}]") for i, (v, a) in pairs)
-    if isinstance(tp, type) and issubclass(tp, Enum):
-        members = [m.value for m in tp]
-        if not isinstance(value, str) or value not in members:
-            raise ConfigError(f"{where}: expected one of {members}, got {_short(value)}")
-        return tp(value)
-    if tp is bool:
-        if not isinstance(value, bool):
-            raise ConfigError(f"{where}: expected true or false, got {_short(value)}")
-        return value
-    if tp is float:
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ConfigError(f"{where}: expected a number, got {_short(value)}")
-        try:
-            return float(value)
-        except OverflowError:
-            raise ConfigError(f"{where}: expected a finite number, "
-                              f"got {_short(value)}") from None
-    if tp is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"{where}: expected an integer, got {_short(value)}")
-        return value
-    if tp is str:
-        if not isinstance(value, str):
-            raise ConfigError(f"{where}: expected a string, got {_short(value)}")
-        return value
-    raise ConfigError(f"{where}: unsupported type {tp!r}")
 
 
 def config_from_dict(data: dict[str, Any], *, source: str = "<dict>") -> PipelineConfig:
@@ -546,23 +473,20 @@ def config_from_dict(data: dict[str, Any], *, source: str = "<dict>") -> Pipelin
                 f"{source}: unknown section or key {key!r}; expected one of {sorted(hints)}"
             )
         if key == "name":
-            kwargs["name"] = _convert(value, str, f"{source}: name")
+            kwargs["name"] = convert_value(value, str, f"{source}: name")
             Limits().check(kwargs["name"], f"{source}: name")
             continue
         cls = hints[key]
         if not isinstance(value, dict):
-            raise ConfigError(f"{source}: [{key}] must be a table, got {_short(value)}")
+            raise ConfigError(f"{source}: [{key}] must be a table, got {short_repr(value)}")
         sub_hints = typing.get_type_hints(cls)
         sub: dict[str, Any] = {}
         for k, v in value.items():
             where = f"{source}: {key}.{k}"
             if k not in sub_hints:
                 raise ConfigError(f"{where}: unknown key; expected one of {sorted(sub_hints)}")
-            sub[k] = _convert(v, sub_hints[k], where)
-            limits = limits_of(cls, k)
-            for i, item in enumerate(sub[k] if isinstance(sub[k], tuple) else (sub[k],)):
-                if item is not None:
-                    limits.check(item, f"{where}[{i}]" if isinstance(sub[k], tuple) else where)
+            sub[k] = convert_value(v, sub_hints[k], where)
+            check_value(cls, k, sub[k], where)
         kwargs[key] = cls(**sub)
     inp = kwargs.get("input")
     if inp is not None and inp.start_s is not None and inp.end_s is not None \
@@ -577,10 +501,12 @@ def load_config(path: str | Path) -> PipelineConfig:
     p = Path(path)
     shown = os.fsencode(p).decode("utf-8", "backslashreplace")
     try:
-        with p.open("rb") as fh:
+        with open_regular(p) as fh:  # a FIFO or a device: refused, never read forever
             raw = fh.read(MAX_CONFIG_BYTES + 1)
     except FileNotFoundError:
         raise ConfigError(f"{shown}: pipeline file not found") from None
+    except NotRegularFileError as exc:
+        raise ConfigError(str(exc)) from None
     except OSError as exc:
         raise ConfigError(f"{shown}: cannot read the pipeline file: {exc.strerror}") from None
     if len(raw) > MAX_CONFIG_BYTES:

@@ -11,13 +11,14 @@ Nothing here touches files but through :mod:`pospp.io`'s reader.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from pospp import rotation
+from pospp.calib.bias_smoother import ForwardBiases, span_means
 from pospp.calib.replay import (
     ImuRates,
     ImuSource,
@@ -31,15 +32,11 @@ from pospp.calib.stage import CalibrationRun, calibrate_flight
 from pospp.config import PipelineConfig
 from pospp.diagnose import null_model
 from pospp.diagnose.effects import ACCEL_SETTLING_S, effect_by_id
-from pospp.diagnose.rerun import (
-    REFINE_FRACTION,
-    gate_excess,
-    warmed,
-    warmup_fit,
-)
+from pospp.diagnose.rerun import REFINE_FRACTION, gate_excess, warmed, warmup_fit
 from pospp.io import mcap_reader
 from pospp.nav import filter as nav_filter
 from pospp.nav import tuning as nav_tuning
+from pospp.nav.aiding import aiding_of, leg_aiding_problem
 from pospp.threads import Threads, first_kept
 from pospp.types import FLU_TO_FRD
 from pospp.units import UG_MPS2, t_s_from_time_ns
@@ -267,21 +264,33 @@ class LegReplays:
     replays: dict[int, LegReplay]
     """By leg id, the legs whose replay did not fail."""
     failed: tuple[str, ...]
-    """A message per leg whose replay failed."""
+    """A message per leg whose replay failed or that was refused."""
+    refused: dict[int, str] = field(default_factory=dict)
+    """By leg id, the legs not replayed because A is not GNSS-aided over them, with why
+    (:func:`pospp.nav.aiding.leg_aiding_problem`)."""
 
 
 def calibration_replays(imu: ImuSource, nav: nav_filter.FilterResult, config: PipelineConfig,
                         threads: Threads = 1) -> LegReplays:
     """The calibration's legs (:func:`pospp.calib.segment.find_legs` on A's ``[replay]
     reference`` solution) and B's replays over them
-    (:func:`pospp.calib.replay.replay_legs`, ``threads`` legs at once)."""
+    (:func:`pospp.calib.replay.replay_legs`, ``threads`` legs at once). A leg over which A is
+    not GNSS-aided (:func:`pospp.nav.aiding.leg_aiding_problem`) is refused, not replayed:
+    B minus a free-inertial A is not B's error (issue 38 item 1)."""
     which = nav_filter.reference_name(nav, config.replay.reference)
     solution_a = SolutionA(*nav_filter.solution_a_fields(nav, which=which))
     traj = solution_a.trajectory
     legs = tuple(find_legs(traj.t_s, traj.v_n_mps, traj.height_m,
                            thresholds=config.legs.thresholds()))
-    replays, failed = replay_legs(imu, solution_a, legs, config.replay.options(), threads)
-    return LegReplays(solution_a, legs, replays, failed)
+    aid = aiding_of(nav)
+    refused = {g.leg_id: why for g in legs if (why := leg_aiding_problem(
+        aid, g.start_s, g.end_s, traj.t_s, solution_a.v_sigma_n_mps)) is not None}
+    replays, failed = replay_legs(imu, solution_a, tuple(g for g in legs
+                                                         if g.leg_id not in refused),
+                                  config.replay.options(), threads)
+    return LegReplays(solution_a, legs, replays,
+                      tuple(f"leg {i} refused: {why}" for i, why in refused.items()) + failed,
+                      refused)
 
 
 def calibrate_from_a(imu: ImuSource, nav: nav_filter.FilterResult,
@@ -294,16 +303,16 @@ def calibrate_from_a(imu: ImuSource, nav: nav_filter.FilterResult,
     solution_a = made.solution_a
     tuning = imu_tuning(config)
     gm = bool(np.isfinite(tuning.gyro_gm_tau_s) and tuning.gyro_gm_sigma_dph > 0)
+    mode = config.compensation.mode
     return calibrate_flight(
         imu, solution_a, legs=made.legs, made_replays=(made.replays, made.failed),
-        threads=threads,
+        threads=threads, leg_refusals=made.refused,
         legs_cfg=config.legs.thresholds(), replay_cfg=config.replay.options(),
         pairs_cfg=config.pairs.policy(), gyro_arw_dpsh=tuning.gyro_arw_dpsh,
         noise=config.pairs.noise, noise_step_s=config.pairs.noise_step_s,
         estimate_gyro_z=config.pairs.estimate_gyro_z,
-        compensation=config.compensation.mode if gm or config.compensation.mode == "causal"
-        else "constant",
-        forward_biases=nav.forward_biases,
+        compensation=mode if gm or mode != "per_leg" else "constant",
+        forward_biases=forward_bias_record(nav, tuning),
         # the grade's Gauss-Markov ("random") drift enters the least squares' noise model;
         # its level and correlation time are the flight's own (REML on the joint fit, tau
         # profiled), the grade's a weak prior (solve.DriftPrior; issue 16, item 3)
@@ -311,6 +320,12 @@ def calibrate_from_a(imu: ImuSource, nav: nav_filter.FilterResult,
         gyro_gm_tau_s=tuning.gyro_gm_tau_s if gm else None,
         gyro_gm_prior_sigma_dph=tuning.gyro_gm_sigma_dph if gm else None,
     ), solution_a
+
+
+def forward_bias_record(nav: nav_filter.FilterResult, tuning: nav_tuning.ImuTuning
+                        ) -> ForwardBiases:
+    """What the smoothed compensation reads of A (:meth:`ForwardBiases.of_filter`)."""
+    return ForwardBiases.of_filter(nav, tuning.noise().gyro_bias_psd_radps2ps)
 
 
 def null_drift(calib_run: CalibrationRun, config: PipelineConfig) -> tuple[float, float, str]:
@@ -346,7 +361,8 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                       calib_run: CalibrationRun, config: PipelineConfig, n: int, *,
                       seed: int = 0, drift: tuple[float, float] | None = None,
                       threads: int = 1, white_noise: tuple[float, float] | None = None,
-                      base: NullBase | None = None) -> list[list[np.ndarray]]:
+                      base: NullBase | None = None, injected_out: list[np.ndarray] | None = None
+                      ) -> list[list[np.ndarray]]:
     """B minus A's null realisations along this flight (pospp.diagnose.null_model).
 
     Each: the log with IMU noise (white: ``[pairs] null_imu_noise`` "measured", the
@@ -370,6 +386,10 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     (:func:`pospp.threads.first_kept`, the next log drawn while A runs); the logs are drawn
     in the same order from the same generator, so the result does not depend on it.
     ``base``: :func:`null_base` on the run's legs and replays, made before (None: made here).
+    ``injected_out``: when a list, each kept realisation appends the mean over each leg (id
+    order, the replays' span; (L, 3), body FRD [rad/s]) of the gyro error it injected (white
+    noise and drift): the truth a realisation's flight bias is measured against
+    (:func:`pospp.calib.stage.with_null_covariance`).
     """
     si = imu_tuning(config).noise()
     gm_sigma, gm_tau, _ = null_drift(calib_run, config) if drift is None else (*drift, "")
@@ -383,12 +403,20 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
         pos_sigma_ned_m=b.pos_sigma_ned_m, vel_sigma_ned_mps=b.vel_sigma_ned_mps)
     rng = np.random.default_rng(seed)
 
-    def attempt(log_r: mcap_reader.FlightLog) -> list[np.ndarray] | None:
+    epoch_ns = int(log.imu.time_ns[0])
+    spans = [(epoch_ns + round(r.t0_s * 1e9), epoch_ns + round((r.t0_s + r.t_s[-1]) * 1e9))
+             for _, r in sorted(calib_run.replays.items())]
+
+    def attempt(log_r: mcap_reader.FlightLog
+                ) -> tuple[list[np.ndarray], np.ndarray | None] | None:
         try:  # A with the base's gains (nav_filter.GainReplay): first order in the noise
-            return rerun_b_minus_a(log_r, nav, calib_run.legs, calib_run.replays, config,
-                                   replay=b.gains)[0]
+            dv = rerun_b_minus_a(log_r, nav, calib_run.legs, calib_run.replays, config,
+                                 replay=b.gains)[0]
         except ValueError:  # a realisation whose A fails (alignment) is skipped
             return None
+        return dv, (span_means(b.log.imu.time_ns, log_r.imu.w_ib_b_radps
+                               - b.log.imu.w_ib_b_radps, spans) if injected_out is not None
+                    else None)
 
     # drawn on the summed-down samples (a quarter of the flight-rate draws at 200 -> 50 Hz);
     # in this thread (drawing and scaling them in the workers held a draw per thread, +230
@@ -397,8 +425,11 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                  for _ in range(2 * n))
     # never more logs drawn than realisations still missing: the draws, and so the
     # realisations, are those of one log at a time; the next drawn while A runs on the others
-    return [[d - d0 for d, d0 in zip(dv, b.dv_n_mps, strict=True)]
-            for dv in first_kept(attempt, perturbed, n, threads)]
+    kept = first_kept(attempt, perturbed, n, threads)
+    if injected_out is not None:
+        injected_out.extend(k[1] for k in kept if k[1] is not None)
+    return [[d - d0 for d, d0 in zip(k[0], b.dv_n_mps, strict=True)] for k in kept]
+
 
 
 @dataclass(frozen=True)

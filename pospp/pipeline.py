@@ -27,6 +27,7 @@ import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -56,7 +57,8 @@ from pospp.flight_stages import (  # the stage functions, importable from here a
 )
 from pospp.io import mcap_reader, parquet_tables, report_files, run_folder, trajectory_mcap
 from pospp.io.errors import IngestError
-from pospp.io.files import sha256_file
+from pospp.io.files import require_regular, sha256_file
+from pospp.io.run_lock import locked
 from pospp.lever_time_stage import lever_time_estimate, qc_passes  # noqa: F401 (compare_sim)
 from pospp.memory import release_free_heap, share_one_heap
 from pospp.nav import events as sensor_events
@@ -170,9 +172,11 @@ def process_flight(
 ) -> RunOutcome:
     """Process one flight log into a run folder (the whole pipeline).
 
-    The run is written into a staging folder beside ``out_dir`` and swapped in whole when done
-    (:mod:`pospp.io.run_folder`): ``out_dir`` holds one complete run or one failed run (its
-    messages and summary, status "failed", and no table of an earlier run), never a mix.
+    The run is written into a staging folder beside ``out_dir`` and swapped in whole when done,
+    ``out_dir``'s lock held throughout (:class:`pospp.io.run_folder.StagedRun`): ``out_dir``
+    holds one complete run or one failed run (its messages and summary, status "failed", and
+    no table of an earlier run), never a mix. A run that fails without a verdict on its input
+    (an ``OSError`` such as a full disk, a bug) leaves an earlier run in place.
 
     Parameters
     ----------
@@ -201,48 +205,35 @@ def process_flight(
     Raises
     ------
     pospp.io.run_folder.RunFolderError
-        ``out_dir`` may not be written (nothing is touched).
-    pospp.io.errors.IngestError, ValueError, ...
+        ``out_dir`` may not be written, or another command holds it (nothing is touched), or
+        files were put into it during the run (nothing replaced).
+    pospp.io.errors.IngestError, ValueError
         Only after the failed run (messages and summary recording the failure) is swapped in.
+    OSError, ...
+        The previous run kept (a note on the exception says so), else a failed run written.
     """
     # the run's clock starts here: wall_time_s is all of process_flight()
     book = _Progress(progress)
-    target = run_folder.check_target(out_dir, input_file=mcap_path, force=force)
-    sha = sha256_file(mcap_path) if Path(mcap_path).is_file() else ""
-    stage = run_folder.new_staging(target)
-    try:
-        outcome = _run_stages(mcap_path, sha, config, stage, book,
-                              available_cores() if threads is None else max(1, threads))
-        status = outcome.status
-    except Exception as exc:
-        # the new run failed: its folder says so and keeps nothing of an earlier run
+    require_regular(mcap_path)  # a FIFO or a device: refused before the folder is touched
+    with run_folder.StagedRun(out_dir, input_file=mcap_path, force=force) as run:
+        sha = sha256_file(mcap_path) if Path(mcap_path).is_file() else ""
         try:
-            if not (stage / "summary.parquet").is_file():
-                book.note("error", "run", f"{type(exc).__name__}: {exc}")
-                _write_failed(mcap_path, sha, config, stage, book)
-            run_folder.write_marker(stage, input_file=mcap_path, input_sha256=sha,
-                                    config_json=config.to_json(), status="failed")
-            run_folder.swap_in(stage, target)
-        except Exception:  # e.g. a full disk: keep the previous run, report the first error
-            run_folder.discard(stage)
-        raise
-    except BaseException:  # interrupted: the previous run stays as it was
-        run_folder.discard(stage)
-        raise
-    try:
-        run_folder.write_marker(stage, input_file=mcap_path, input_sha256=sha,
-                                config_json=config.to_json(), status=status)
-        run_folder.swap_in(stage, target)
-    except BaseException:
-        run_folder.discard(stage)
-        raise
+            outcome = _run_stages(mcap_path, sha, config, run.stage, book,
+                                  available_cores() if threads is None else max(1, threads))
+        except Exception as exc:  # the failed run recorded, or the previous one kept
+            run.fail(exc, partial(_write_failed, mcap_path, sha, config, book=book, exc=exc),
+                     input_sha256=sha, config_json=config.to_json())
+            raise
+        target = run.commit(input_sha256=sha, config_json=config.to_json(),
+                            status=outcome.status)
     book.done()
     return replace(outcome, out_dir=target)
 
 
 def _write_failed(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
-                  book: _Progress) -> None:
-    """Messages and summary of a run that ended with an unexpected error."""
+                  book: _Progress, exc: Exception) -> None:
+    """Messages and summary of a run that ended with an unexpected error ``exc``."""
+    book.note("error", "run", f"{type(exc).__name__}: {exc}")
     meta = {"input_file": run_folder.display_path(mcap_path), "input_sha256": sha,
             "config": config.to_dict()}
     summary = {"input_file": meta["input_file"], "input_sha256": sha, "status": "failed",
@@ -321,10 +312,10 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
     epoch_ns = int(log.imu.time_ns[0])
     try:
         nav = navigate(log, config)
-    except ValueError as exc:
-        book.note("error", "navigate", f"algorithm A failed: {exc}")
+    except ValueError as exc:  # named with the reader's finding that caused it, if any
+        book.note("error", "navigate", text := log.cause_of(f"algorithm A failed: {exc}"))
         finish("failed")
-        raise
+        raise ValueError(text) from exc
     book.messages.extend(outputs.rejection_messages(nav.rejections))
     book.messages.extend(outputs.filter_event_messages(nav.resets, nav.imu_gaps, epoch_ns))
     solutions = {"forward": nav.forward}
@@ -355,10 +346,10 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
     if calib_run.calibrated and base is not None:
         book.stage("null_realisations")
         null_dv = null_realisations(log, nav, calib_run, config, config.pairs.null_realisations,
-                                    threads=threads,
+                                    threads=threads, injected_out=(injected := list[Any]()),
                                     white_noise=white.take() if white is not None else None,
-                                    base=base.take())
-        calib_run = with_null_covariance(calib_run, null_dv)
+                                    base=base.take())  # injected: the flight bias's truths
+        calib_run = with_null_covariance(calib_run, null_dv, injected)
     else:  # no null: the lane's base and white noise for it are not wanted
         for later in filter(None, (base, white)):
             later.cancel()
@@ -480,6 +471,7 @@ def quality_control(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     return report
 
 
+@locked("pospp report")
 def write_report(run_dir: str | Path) -> Path:
     """Render report.html of a run folder from its tables alone (``pospp report``)."""
     return _render_report(run_folder.require_run_folder(run_dir))
@@ -493,6 +485,7 @@ def _render_report(run_dir: Path) -> Path:
                                    render_report(tables, title=title))
 
 
+@locked("pospp evaluate")
 def evaluate_run(run_dir: str | Path, truth_file: str | Path, *, skip_s: float = 0.0
                  ) -> pd.DataFrame:
     """``pospp evaluate``: every solution of a run against a reference trajectory.
@@ -560,6 +553,7 @@ def reopen_run(run_dir: str | Path) -> tuple[Path, dict[str, Any], Path, Pipelin
     return run, meta, path, config_from_dict(meta["config"], source=f"{run}/summary.parquet")
 
 
+@locked("pospp diagnose")
 def diagnose_run(run_dir: str | Path, *, progress: ProgressFn | None = None) -> Diagnosis:
     """``pospp diagnose RUN_DIR``: the discrepancy workflow on a finished run.
 

@@ -12,20 +12,40 @@ Modes of the gyro bias removed (docs/calibration.md sections 5 and 9):
 - causal: a bias that changes inside the leg, built only from data up to each instant:
   algorithm A's forward (filter, not smoother) gyro-bias estimate fused with the calibrated
   bias as its prior (:func:`causal_gyro_bias_b_radps`), held over each IMU interval from the
-  last A epoch at or before its start.
+  last A epoch at or before its start;
+- smoothed: the gyro error's history estimated from the fit and A's forward estimates by a
+  smoother with the fitted drift (:mod:`pospp.calib.bias_smoother`), the scale of A's noise
+  chosen on the fitted legs (:func:`choose_bias_history`).
+
+:data:`COMPENSATION_MODES` maps each mode to what it hands :func:`compensate_legs`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from pospp.calib.bias_smoother import (
+    A_NOISE_SCALES,
+    ForwardBiases,
+    constant_history,
+    smoothed_bias_history,
+)
+from pospp.calib.bias_smoother import fit_bias_history as _fit_history
 from pospp.calib.pairs import Pair
-from pospp.calib.replay import ImuIncrements, ImuSource, LegReplay, SolutionA, replay_leg
+from pospp.calib.replay import (
+    ImuIncrements,
+    ImuSource,
+    LegReplay,
+    ReplayOptions,
+    SolutionA,
+    replay_leg,
+    replay_position_error,
+)
 from pospp.calib.solve import Calibration, fit_calibration
 from pospp.threads import Threads, map_in_threads
 
@@ -163,6 +183,7 @@ def compensate_legs(
     smoothed_drift: bool = False,
     gyro_bias_by_leg: Mapping[int, NDArray] | None = None,
     gyro_bias_history: tuple[NDArray, NDArray] | None = None,
+    history_hold: bool = True,
     threads: Threads = 1,
 ) -> tuple[dict[int, LegReplay], tuple[LegImprovement, ...]]:
     """Re-run B on every leg with the calibration applied; report the improvement.
@@ -189,6 +210,9 @@ def compensate_legs(
         A time-varying body gyro bias [s, rad/s] removed instead of any of the above (the
         causal mode: :func:`causal_gyro_bias_b_radps` of A's forward estimate); each IMU
         interval gets the last value at or before its start, so no later data is used.
+    history_hold : bool
+        False: each IMU interval gets ``gyro_bias_history`` interpolated at its middle
+        instead (a smoothed history, which is not causal anyway).
     threads : int or SharedWork
         Legs replayed at once (B's kernels release the GIL; the same replays at any number).
     """
@@ -204,7 +228,7 @@ def compensate_legs(
         leg_imu = _drift_removed(imu, rep, cal) if smoothed_drift else imu
         if gyro_bias_history is not None:
             hist_t, hist_b = (np.asarray(a, dtype=float) for a in gyro_bias_history)
-            leg_imu = _bias_removed(imu, rep, hist_t, hist_b, hold=True)
+            leg_imu = _bias_removed(imu, rep, hist_t, hist_b, hold=history_hold)
             bg = np.zeros(3)
         new = replay_leg(
             leg_imu, solution_a, rep.leg, gyro_bias_b_radps=bg, attitude_correction_n_rad=phi,
@@ -218,3 +242,153 @@ def compensate_legs(
     made = map_in_threads(one, before.items(), threads)
     return ({leg_id: m[0] for leg_id, m in zip(before, made, strict=True)},
             tuple(m[1] for m in made))
+
+
+# --------------------------------------------------------------------------- the modes
+
+
+CAUSAL_PRIOR_SCALE = 3.0
+"""Default factor on the calibrated prior's sigma in the causal compensation (1: kept; > 1
+weakened; inf: dropped, A's forward estimate alone). Weakened three times: on held-out legs
+it ties with dropping the prior (within 5 %) and beats keeping it by 10-30 % at tau <= 300 s,
+while the calibration still steadies A's estimate where that is loose (docs/calibration.md
+section 9, issue 16 item 4)."""
+
+
+@dataclass(frozen=True)
+class ModeInputs:
+    """What a compensation mode reads (:data:`COMPENSATION_MODES`).
+
+    Attributes
+    ----------
+    imu, solution_a, replays, cal
+        The flight's IMU, A, B's replays before compensation (by leg id) and the chosen fit.
+    constant_sigma_b_radps : ndarray, shape (3,)
+        1-sigma of the fit's constant body gyro bias [rad/s] (inf: not estimated).
+    replay : ReplayOptions
+        B's settings.
+    forward : BiasHistory or ForwardBiases, optional
+        A's forward gyro-bias record (``causal``: ``t_s``, ``gyro_b_radps``,
+        ``gyro_sigma_b_radps``; ``smoothed``: a :class:`ForwardBiases`).
+    causal_prior_scale : float
+        ``causal``: factor on the calibrated prior's sigma.
+    threads : int or SharedWork
+        Replays made at once.
+    """
+
+    imu: ImuSource
+    solution_a: SolutionA
+    replays: Mapping[int, LegReplay]
+    cal: Calibration
+    constant_sigma_b_radps: NDArray
+    replay: ReplayOptions
+    forward: Any = None
+    causal_prior_scale: float = CAUSAL_PRIOR_SCALE
+    threads: Threads = 1
+
+
+@dataclass(frozen=True)
+class ModeChoice:
+    """A mode's answer: the keyword arguments of :func:`compensate_legs` and what they remove
+    (``source``: "constant", "per_leg", "causal", or the smoothed mode's choice:
+    :func:`choose_bias_history`)."""
+
+    kwargs: Mapping[str, Any]
+    source: str
+
+
+def history_score_m(inputs: ModeInputs, history: tuple[NDArray, NDArray] | None) -> float:
+    """RMS of B minus A's horizontal position [m] over the samples of the fitted legs up to
+    the horizon (B's reach), B compensated as :func:`compensate_legs` does it (the leg's
+    calibrated tilt, and the ``history`` interpolated, or the constant bias when None)."""
+    cal, rc = inputs.cal, inputs.replay
+
+    def one(lid: int) -> NDArray:
+        rep = inputs.replays[lid]
+        imu: ImuSource = inputs.imu
+        bg = cal.gyro_bias_b_radps(rep.c_nb0)
+        if history is not None:
+            imu = _bias_removed(inputs.imu, rep, history[0], history[1], hold=False)
+            bg = np.zeros(3)
+        dr = replay_position_error(
+            imu, inputs.solution_a, rep.leg, gyro_bias_b_radps=bg,
+            attitude_correction_n_rad=cal.misalignment_n_rad(lid),
+            accel_compensation=rc.accel_compensation, sample_rate_hz=rc.sample_rate_hz)
+        k = int(np.searchsorted(rep.t_s, rc.horizon_s - 1e-9))
+        return np.sum(np.square(dr[1:k + 1, 0:2]), axis=1)
+
+    sq = map_in_threads(one, [i for i in cal.leg_ids if i in inputs.replays], inputs.threads)
+    return float(np.sqrt(np.mean(np.concatenate(sq))))
+
+
+def choose_bias_history(inputs: ModeInputs,
+                        candidates: Mapping[str, tuple[NDArray, NDArray]],
+                        off_fit: Sequence[str]) -> ModeChoice:
+    """The history under which B, compensated, best matches A over the fitted legs
+    (:func:`history_score_m`, least), spliced: on the fitted legs the best of
+    ``candidates``, elsewhere the best of those named in ``off_fit``.
+
+    The candidates share one time grid. The fitted legs' B minus A is not what the smoother
+    reads (A's estimates and the fit's random effects), so the score weighs what A's
+    estimates add; the constant among the candidates keeps the choice from doing worse than
+    it on those legs. A leg outside the fit has no random effect of its own (the fit's history
+    is the constant and the predicted drift there), so it takes the best of the histories
+    that read A (``off_fit``): a candidate that wins on the fitted legs by their own
+    residuals says nothing about A's weight elsewhere.
+    """
+    scores = {name: history_score_m(inputs, h) for name, h in candidates.items()}
+    best = min(scores, key=lambda n: scores[n])
+    other = min(off_fit, key=lambda n: scores[n])
+    t, b = candidates[other]
+    if best != other:
+        b = b.copy()
+        for lid in inputs.cal.leg_ids:
+            rep = inputs.replays[lid]
+            inside = (t >= rep.t0_s - 2.0) & (t <= rep.t0_s + rep.t_s[-1] + 2.0)
+            b[inside] = candidates[best][1][inside]
+    source = best if best == other else f"{best} on the fitted legs, {other} elsewhere"
+    return ModeChoice({"gyro_bias_history": (t, b), "history_hold": False}, source)
+
+
+def _constant_mode(inputs: ModeInputs) -> ModeChoice:
+    return ModeChoice({}, "constant")
+
+
+def _per_leg_mode(inputs: ModeInputs) -> ModeChoice:
+    return ModeChoice({"per_leg_drift": True}, "per_leg")
+
+
+def _causal_mode(inputs: ModeInputs) -> ModeChoice:
+    fb = inputs.forward
+    if fb is None:
+        raise ValueError("compensation='causal' needs A's forward bias history "
+                         "(forward_biases=FilterResult.forward_biases)")
+    scale = inputs.causal_prior_scale
+    prior = (np.full(3, np.inf) if np.isinf(scale)
+             else scale * prior_sigma_b_radps(inputs.constant_sigma_b_radps, inputs.cal))
+    first = inputs.replays[inputs.cal.leg_ids[0]]
+    hist = causal_gyro_bias_b_radps(fb.gyro_b_radps, fb.gyro_sigma_b_radps,
+                                    inputs.cal.gyro_bias_b_radps(first.c_nb0), prior)
+    return ModeChoice({"gyro_bias_history": (np.asarray(fb.t_s, dtype=float), hist)}, "causal")
+
+
+def _smoothed_mode(inputs: ModeInputs) -> ModeChoice:
+    fb = inputs.forward
+    if not isinstance(fb, ForwardBiases):
+        raise ValueError("compensation='smoothed' needs A's forward bias record "
+                         "(forward_biases=pospp.calib.bias_smoother.ForwardBiases)")
+    grid, made = smoothed_bias_history(inputs.cal, inputs.replays, fb, A_NOISE_SCALES)
+    smoothed = {f"smoothed x{a:g}": (grid, h) for a, h in zip(A_NOISE_SCALES, made,
+                                                                strict=True)}
+    candidates = {"constant": (grid, constant_history(inputs.cal, inputs.replays, grid)),
+                  "fit": (grid, _fit_history(inputs.cal, inputs.replays, grid)), **smoothed}
+    return choose_bias_history(inputs, candidates, tuple(smoothed))
+
+
+COMPENSATION_MODES: dict[str, Callable[[ModeInputs], ModeChoice]] = {
+    "constant": _constant_mode,
+    "per_leg": _per_leg_mode,
+    "causal": _causal_mode,
+    "smoothed": _smoothed_mode,
+}
+"""Compensation mode -> what it removes (module docstring)."""

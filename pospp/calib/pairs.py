@@ -14,6 +14,7 @@ the matrix actually inverted.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -113,6 +114,7 @@ def evaluate_pairs(
     policy: PairPolicy,
     *,
     formulations: tuple[str, ...] = ("paper", "body"),
+    leg_reasons: Mapping[int, str] | None = None,
     **calibrate_kwargs: Any,
 ) -> tuple[Pair, ...]:
     """Screen every candidate pair and calibrate the usable ones with each formulation.
@@ -125,6 +127,9 @@ def evaluate_pairs(
     policy : PairPolicy
     formulations : tuple of str
         Formulations to calibrate each used pair with.
+    leg_reasons : Mapping of int to str, optional
+        Why a leg has no replay (it was refused: its reference A not GNSS-aided), named in
+        the reason of its pairs.
     **calibrate_kwargs
         Passed to :func:`pospp.calib.solve.fit_calibration` (noise model, ARW, ...).
 
@@ -139,8 +144,10 @@ def evaluate_pairs(
         dv = float(b.speed_mps - a.speed_mps)
         missing = [leg.leg_id for leg in (a, b) if leg.leg_id not in replays]
         if missing:
+            why = "; ".join(f"leg {i}: {leg_reasons[i]}" for i in missing
+                            if leg_reasons and i in leg_reasons)
             out.append(Pair(pid, a.leg_id, b.leg_id, dh, dv, np.nan, np.nan, np.nan, False,
-                            f"no B replay for leg(s) {missing}", ()))
+                            why or f"no B replay for leg(s) {missing}", ()))
             continue
         reps = (replays[a.leg_id], replays[b.leg_id])
         c_raw, c_scaled = _cond(reps, "paper", policy.transition)

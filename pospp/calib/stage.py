@@ -18,12 +18,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from pospp.calib.bias_smoother import flight_bias_b_radps
 from pospp.calib.compensate import (
+    CAUSAL_PRIOR_SCALE,
+    COMPENSATION_MODES,
     LegImprovement,
-    causal_gyro_bias_b_radps,
+    ModeInputs,
     compensate_legs,
     joint_calibration,
-    prior_sigma_b_radps,
 )
 from pospp.calib.design import FORMULATIONS
 from pospp.calib.noise_model import gm_noise_operator, noise_basis
@@ -37,19 +39,20 @@ from pospp.calib.replay import (
 )
 from pospp.calib.segment import Leg, LegThresholds, find_legs
 from pospp.calib.solve import Calibration, DriftPrior
-from pospp.nav.closed_form import PAPER_FROM_NED
+from pospp.calib.tables import (
+    Row,
+    calibration_rows,
+    calibration_table,
+    leg_errors_table,
+    legs_table,
+    pairs_table,
+)
 from pospp.threads import Threads
-from pospp.units import ARCSEC_RAD, DEG_PER_H_RADPS
+from pospp.units import DEG_PER_H_RADPS
 from pospp.units import DEG_PER_SQRT_H_RAD_PER_SQRT_S as _DPSH_RADPSQRTS
 
 """One deg/sqrt(h) in rad/sqrt(s)."""
-COMPENSATIONS = ("constant", "per_leg", "causal")
-CAUSAL_PRIOR_SCALE = 3.0
-"""Default factor on the calibrated prior's sigma in the causal compensation (1: kept; > 1
-weakened; inf: dropped, A's forward estimate alone). Weakened three times: on held-out legs
-it ties with dropping the prior (within 5 %) and beats keeping it by 10-30 % at tau <= 300 s,
-while the calibration still steadies A's estimate where that is loose (docs/calibration.md
-section 9, issue 16 item 4)."""
+COMPENSATIONS = tuple(COMPENSATION_MODES)
 _REML_STEP_S = 20.0
 """Sample spacing of the one REML fit of the Gauss-Markov sigma [s] (the GLS uses 10 s)."""
 
@@ -118,6 +121,21 @@ class CalibrationRun:
     drift_sigma_radps: float = 0.0
     drift_tau_s: float = float("inf")
     drift_source: str = "none"
+    leg_refusals: Mapping[int, str] = field(default_factory=dict)
+    """Legs left out before B was replayed, with why (their reference A not GNSS-aided)."""
+    flight_gyro_bias_b_radps: NDArray = field(default_factory=lambda: np.zeros(3))
+    """The gyro bias over this flight's fitted legs (what was used), body FRD [rad/s]: the
+    legs' duration-weighted mean of the fit's estimate of each leg's mean gyro error
+    (:func:`pospp.calib.bias_smoother.flight_bias_b_radps`)."""
+    flight_gyro_bias_sigma_b_radps: NDArray = field(
+        default_factory=lambda: np.full(3, np.inf))
+    """Its 1-sigma against that flight's own bias [rad/s] (null realisations: each one's
+    injected gyro error over the legs removed; least squares: the constant's sigma, an upper
+    bound)."""
+    compensation_source: str = ""
+    """What the compensation removed: "constant", "per_leg", "causal", or for "smoothed" the
+    history chosen on the fitted legs ("constant", "fit", "smoothed x<alpha>";
+    :func:`pospp.calib.compensate.choose_bias_history`)."""
 
     @property
     def calibrated(self) -> bool:
@@ -160,15 +178,27 @@ class CalibrationRun:
         out["gyro_drift_tau_s"] = self.drift_tau_s
         out["gyro_drift_source"] = self.drift_source
         for i, ax in enumerate("xyz"):
-            sig = float(self.gyro_bias_sigma_b_radps[i]) / DEG_PER_H_RADPS
-            known = np.isfinite(sig)
-            out[f"gyro_bias_{ax}_dph"] = (float(self.gyro_bias_b_radps[i]) / DEG_PER_H_RADPS
-                                          if known else float("nan"))
-            out[f"gyro_bias_{ax}_sigma_dph"] = sig if known else float("nan")
+            for tag, b, s in (("", self.gyro_bias_b_radps, self.gyro_bias_sigma_b_radps),
+                              ("_flight", self.flight_gyro_bias_b_radps,
+                               self.flight_gyro_bias_sigma_b_radps)):
+                known = bool(np.isfinite(s[i]))
+                dph = (float(b[i]) / DEG_PER_H_RADPS, float(s[i]) / DEG_PER_H_RADPS)
+                out[f"gyro_bias_{ax}{tag}_dph"] = dph[0] if known else float("nan")
+                out[f"gyro_bias_{ax}{tag}_sigma_dph"] = dph[1] if known else float("nan")
         flags = [f"{name}: {why}" for name, _, s, u in calibration_rows(self.chosen)
                  if (why := not_observable(name, s, u))]
         out["not_observable"] = "; ".join(flags)
         return out
+
+    def _flight_rows(self) -> dict[str, list[Row]]:
+        """The chosen fit's rows of the flight's gyro bias (``gyro_bias_x_flight``, deg/h)."""
+        if self.chosen is None:
+            return {}
+        b, s = self.flight_gyro_bias_b_radps, self.flight_gyro_bias_sigma_b_radps
+        rows = [(f"gyro_bias_{ax}_flight", float(b[i]) / DEG_PER_H_RADPS,
+                 float(s[i]) / DEG_PER_H_RADPS, "deg_per_h") for i, ax in enumerate("xyz")
+                if np.isfinite(self.flight_gyro_bias_sigma_b_radps[i])]
+        return {self.chosen.formulation: rows}
 
     def tables(self, epoch_ns: int) -> dict[str, dict[str, Any]]:
         """Column dicts of the ``legs``, ``pairs``, ``calibration`` and ``leg_errors`` tables.
@@ -179,10 +209,11 @@ class CalibrationRun:
             UTC nanoseconds of t_s = 0 (the run's epoch).
         """
         return {
-            "legs": _legs_table(self.legs, epoch_ns),
-            "pairs": _pairs_table(self.pairs),
-            "calibration": _calibration_table(self.pairs, self.joint),
-            "leg_errors": _leg_errors_table(self.replays, self.replays_after),
+            "legs": {**legs_table(self.legs, epoch_ns),
+                     "reason": [self.leg_refusals.get(g.leg_id, "ok") for g in self.legs]},
+            "pairs": pairs_table(self.pairs),
+            "calibration": calibration_table(self.pairs, self.joint, self._flight_rows()),
+            "leg_errors": leg_errors_table(self.replays, self.replays_after),
         }
 
 
@@ -208,6 +239,7 @@ def calibrate_flight(
     causal_prior_scale: float = CAUSAL_PRIOR_SCALE,
     made_replays: tuple[dict[int, LegReplay], tuple[str, ...]] | None = None,
     threads: Threads = 1,
+    leg_refusals: Mapping[int, str] | None = None,
 ) -> CalibrationRun:
     """Run the double-strapdown calibration on one flight.
 
@@ -251,26 +283,30 @@ def calibrate_flight(
     causal_prior_scale : float
         ``compensation="causal"``: the calibrated prior's sigma is multiplied by this (1: the
         prior kept, > 1 weakened, ``inf``: dropped, A's forward estimate alone).
-    compensation : {"constant", "per_leg"}
-        Re-run B with the constant bias (default), or with the constant plus the smoothed
-        Gauss-Markov drift's mean over each leg (needs the Gauss-Markov model). The constant
-        bias is what ``gyro_bias_b_radps`` feeds back into A either way. ``"causal"``:
-        remove A's forward (causal) gyro-bias estimate as it changes inside each leg, fused
-        with the calibrated bias as its prior
-        (:func:`pospp.calib.compensate.causal_gyro_bias_b_radps`; needs ``forward_biases``).
+    compensation : {"constant", "per_leg", "causal", "smoothed"}
+        What B is re-run with (:data:`pospp.calib.compensate.COMPENSATION_MODES`): the
+        constant bias (this function's default), the constant plus the smoothed drift's mean
+        over each leg (``"per_leg"``, needs the Gauss-Markov model), A's forward estimate
+        fused with the constant (``"causal"``), or the gyro error's history smoothed from the
+        fit and A's forward estimates (``"smoothed"``, :mod:`pospp.calib.bias_smoother`; the
+        pipeline's default). The constant bias is what ``gyro_bias_b_radps`` feeds back into
+        A either way.
     made_replays : (replays, messages), optional
         :func:`pospp.calib.replay.replay_legs` of ``legs`` (given with them) with
         ``replay_cfg``, already made (a run on two threads starts the null's base from them
         while it calibrates); made here when None.
     threads : int or SharedWork
         B's replays before and after the compensation made that many legs at once.
+    leg_refusals : Mapping of int to str, optional
+        Legs not replayed, with why (reference A not GNSS-aided): in their pairs' reasons.
     noise_step_s : float
         Spacing of the samples of the correlated-noise least squares [s] (a leg shorter than
         ten steps is sampled every tenth of its length).
-    forward_biases : pospp.nav.filter.BiasHistory, optional
-        A's forward (filter) sensor-error history on the run's time axis: ``t_s`` (K,),
-        ``gyro_b_radps`` and ``gyro_sigma_b_radps`` (K, 3), body FRD. Used by
-        ``compensation="causal"`` only.
+    forward_biases : ForwardBiases or pospp.nav.filter.BiasHistory, optional
+        A's forward (filter) gyro-bias record on the run's time axis: ``t_s`` (K,),
+        ``gyro_b_radps`` and ``gyro_sigma_b_radps`` (K, 3), body FRD; ``"smoothed"`` needs a
+        :class:`pospp.calib.bias_smoother.ForwardBiases` (with A's update times). Used by
+        ``"causal"`` and ``"smoothed"`` only.
 
     Returns
     -------
@@ -288,9 +324,9 @@ def calibrate_flight(
         raise ValueError(f"compensation: expected one of {COMPENSATIONS}, got {compensation!r}")
     gm_on = noise == "gyro_rw" and gyro_gm_tau_s is not None and (
         gyro_gm_sigma_dph is None or gyro_gm_sigma_dph > 0)
-    if compensation == "causal" and forward_biases is None:
-        raise ValueError("compensation='causal' needs A's forward bias history "
-                         "(forward_biases=FilterResult.forward_biases)")
+    if compensation in ("causal", "smoothed") and forward_biases is None:
+        raise ValueError(f"compensation={compensation!r} needs A's forward bias record "
+                         "(forward_biases=)")
     if compensation == "per_leg" and not gm_on:
         raise ValueError("compensation='per_leg' needs the Gauss-Markov drift model "
                          "(noise='gyro_rw' and gyro_gm_tau_s given)")
@@ -312,11 +348,13 @@ def calibrate_flight(
     replays, failed = (replay_legs(imu, solution_a, legs, rc, threads) if made_replays is None
                        else made_replays)
     messages.extend(failed)
+    refusals = dict(leg_refusals or {})  # in the legs table and their pairs' reasons
 
     def done(reason: str, pairs: tuple[Pair, ...] = (), joint: tuple[Calibration, ...] = ()
              ) -> CalibrationRun:
         return CalibrationRun(legs, replays, pairs, joint, None, {}, (), np.zeros(3),
-                              np.full(3, np.inf), {}, reason, tuple(messages))
+                              np.full(3, np.inf), {}, reason, tuple(messages),
+                              leg_refusals=refusals)
 
     if not legs:
         return done(
@@ -345,7 +383,8 @@ def calibrate_flight(
         # the drift's sigma by REML once, on the joint fit of the compensation formulation
         # over the legs of the usable pairs; the pairs and the other formulations reuse it
         # (a pair alone has too few legs to estimate it, and it saves most of the cost)
-        screened = evaluate_pairs(replays, legs, policy, formulations=(), **cal_kw)
+        screened = evaluate_pairs(replays, legs, policy, formulations=(), leg_reasons=refusals,
+                                  **cal_kw)
         coarse = {i: noise_basis(r, noise_step_s=_REML_STEP_S) for i, r in replays.items()}
         first_fit = joint_calibration(
             replays, screened, policy.formulation, transition=policy.transition,
@@ -371,7 +410,8 @@ def calibrate_flight(
                 messages.append("Gauss-Markov gyro drift sigma by REML on the joint "
                                 f"{policy.formulation} fit: "
                                 f"{first_fit.gyro_gm_sigma_radps / DEG_PER_H_RADPS:.3f} deg/h")
-    pairs = evaluate_pairs(replays, legs, policy, formulations=forms, **cal_kw)
+    pairs = evaluate_pairs(replays, legs, policy, formulations=forms, leg_reasons=refusals,
+                           **cal_kw)
     if not any(p.used for p in pairs):
         why = "; ".join(f"pair {p.pair_id} (legs {p.leg_a}, {p.leg_b}): {p.reason}"
                         for p in pairs)
@@ -388,25 +428,24 @@ def calibrate_flight(
     if chosen.formulation != "body":
         messages.append("paper formulation chosen: its nav-frame drift is rotated into the body "
                         f"with leg {first.leg.leg_id}'s attitude")
-    history = None
-    if compensation == "causal":
-        fb = forward_biases
-        history = (np.asarray(fb.t_s, dtype=float), causal_gyro_bias_b_radps(
-            fb.gyro_b_radps, fb.gyro_sigma_b_radps, bg,
-            np.full(3, np.inf) if np.isinf(causal_prior_scale)
-            else causal_prior_scale * prior_sigma_b_radps(sig, chosen)))
+    mode = COMPENSATION_MODES[compensation](ModeInputs(
+        imu, solution_a, replays, chosen, sig, rc, forward_biases, causal_prior_scale, threads))
     after, improvements = compensate_legs(
         imu, solution_a, replays, chosen, accel_compensation=rc.accel_compensation,
         horizon_s=rc.horizon_s, transition_step=int(rc.transition_step),
-        sample_rate_hz=rc.sample_rate_hz, sigma_floor_mps=rc.sigma_floor_mps,
-        per_leg_drift=compensation == "per_leg", gyro_bias_history=history, threads=threads)
+        sample_rate_hz=rc.sample_rate_hz, sigma_floor_mps=rc.sigma_floor_mps, threads=threads,
+        **mode.kwargs)
     mis = {i: chosen.misalignment_n_rad(i) for i in chosen.leg_ids}
     return CalibrationRun(legs, replays, pairs, joint, chosen, after, improvements, bg, sig, mis,
                           "ok", tuple(messages),
                           solve_kwargs={**cal_kw, "transition": policy.transition},
                           drift_sigma_radps=float(chosen.gyro_gm_sigma_radps),
                           drift_tau_s=float(chosen.gyro_gm_tau_s),
-                          drift_source=drift_source if gm_on else "none")
+                          drift_source=drift_source if gm_on else "none",
+                          leg_refusals=refusals,
+                          flight_gyro_bias_b_radps=flight_bias_b_radps(chosen, replays),
+                          flight_gyro_bias_sigma_b_radps=sig,
+                          compensation_source=mode.source)
 
 
 def _gyro_bias_sigma_b_radps(chosen: Calibration, first: LegReplay) -> NDArray:
@@ -429,8 +468,8 @@ MIN_NULL_REALISATIONS = 3
 """Fewest null realisations :func:`with_null_covariance` turns into a covariance."""
 
 
-def with_null_covariance(run: CalibrationRun, null_dv: Sequence[Sequence[NDArray]]
-                         ) -> CalibrationRun:
+def with_null_covariance(run: CalibrationRun, null_dv: Sequence[Sequence[NDArray]],
+                         injected: Sequence[NDArray] | None = None) -> CalibrationRun:
     """The chosen calibration's covariance from B minus A's null realisations (issue 12).
 
     Each realisation ``d_r`` (one (M, 3) array per leg in id order, the replays' rows:
@@ -446,12 +485,17 @@ def with_null_covariance(run: CalibrationRun, null_dv: Sequence[Sequence[NDArray
     (a parametric bootstrap by perturbation: the estimator's own spread under the flight's
     noise, where the GLS's formal covariance is only as honest as its noise model; the mean
     of dx is zero by construction of the perturbation, so no degree of freedom is spent on
-    it). The chosen calibration (and its entry in ``joint``) gets this covariance; the gyro
-    bias sigma follows. With fewer than :data:`MIN_NULL_REALISATIONS` usable realisations,
-    or no calibration, the run is returned unchanged.
+    it). The chosen calibration (and its entry in ``joint``) gets this covariance; the
+    turn-on constant's sigma follows.
 
-    The compensation already applied is not redone: the causal compensation weighted A's
-    bias estimate against the GLS sigma (docs/calibration.md).
+    ``injected``: per realisation, the mean over each leg (id order) of the gyro error it
+    injected ((L, 3); ``null_realisations(..., injected_out=)``). The flight's gyro bias is
+    then measured against that truth, ``df_r = f(dv + d_r) - f(dv) - (injected mean over the
+    fitted legs)`` with f :func:`pospp.calib.bias_smoother.flight_bias_b_radps`, and its
+    sigma is the RMS of df_r. With fewer than :data:`MIN_NULL_REALISATIONS` usable
+    realisations, or no calibration, the run is returned unchanged.
+
+    The compensation already applied is not redone (it reads the fit, not its sigma).
     """
     chosen = run.chosen
     if chosen is None or len(null_dv) < MIN_NULL_REALISATIONS:
@@ -460,130 +504,33 @@ def with_null_covariance(run: CalibrationRun, null_dv: Sequence[Sequence[NDArray
     kw = dict(run.solve_kwargs)
     transition = kw.pop("transition", chosen.transition)
     kw["noise_cache"] = {}  # the realisations share the fixed noise's eigendecomposition
-    dx = []
-    for real in null_dv:
+    fitted = [ids.index(i) for i in chosen.leg_ids]
+    length = np.array([run.replays[i].t_s[-1] for i in chosen.leg_ids])
+    f0 = flight_bias_b_radps(chosen, run.replays)
+    dx, df = [], []
+    for r, real in enumerate(null_dv):
         reps = {i: replace(run.replays[i], dv_n_mps=run.replays[i].dv_n_mps + np.asarray(d))
                 for i, d in zip(ids, real, strict=True)}
         cal = joint_calibration(reps, run.pairs, chosen.formulation, transition=transition,
                                 **kw)
         if cal is not None and cal.names == chosen.names:
             dx.append(cal.x - chosen.x)
+            if injected is not None:
+                truth = length @ np.asarray(injected[r])[fitted] / length.sum()
+                df.append(flight_bias_b_radps(cal, reps) - f0 - truth)
     if len(dx) < MIN_NULL_REALISATIONS:
         return run
     d = np.asarray(dx)
     honest = replace(chosen, cov=d.T @ d / d.shape[0])
     joint = tuple(honest if c is chosen else c for c in run.joint)
     sig = _gyro_bias_sigma_b_radps(honest, run.replays[chosen.leg_ids[0]])
+    flight_sig = sig
+    if len(df) == len(dx):
+        flight_sig = np.where(np.isfinite(flight_sig),
+                              np.sqrt(np.mean(np.square(df), axis=0)), np.inf)
     return replace(run, joint=joint, chosen=honest, gyro_bias_sigma_b_radps=sig,
+                   flight_gyro_bias_sigma_b_radps=flight_sig,
                    sigma_source="null_realisations",
                    messages=run.messages + (
                        f"calibration sigmas from {d.shape[0]} null realisations of B minus A "
                        "(the least squares re-run on each)",))
-
-
-# --------------------------------------------------------------------------- table columns
-
-
-def _legs_table(legs: tuple[Leg, ...], epoch_ns: int) -> dict[str, Any]:
-    def ns(t: float) -> int:
-        return int(epoch_ns) + int(round(t * 1e9))
-
-    return {
-        "leg_id": np.array([g.leg_id for g in legs], dtype=np.int64),
-        "start_ns": np.array([ns(g.start_s) for g in legs], dtype=np.int64),
-        "end_ns": np.array([ns(g.end_s) for g in legs], dtype=np.int64),
-        "duration_s": np.array([g.duration_s for g in legs], dtype=float),
-        "heading_deg": np.degrees([g.heading_rad for g in legs]).astype(float),
-        "speed_mps": np.array([g.speed_mps for g in legs], dtype=float),
-        "height_m": np.array([g.height_m for g in legs], dtype=float),
-        "heading_spread_deg": np.degrees([g.heading_spread_rad for g in legs]).astype(float),
-        "speed_std_mps": np.array([g.speed_std_mps for g in legs], dtype=float),
-        "vertical_speed_mps": np.array([g.vertical_speed_mps for g in legs], dtype=float),
-        "heading_rate_max_dps": np.degrees([g.heading_rate_max_radps for g in legs]
-                                           ).astype(float),
-    }
-
-
-def _pairs_table(pairs: tuple[Pair, ...]) -> dict[str, Any]:
-    return {
-        "pair_id": np.array([p.pair_id for p in pairs], dtype=np.int64),
-        "leg_a": np.array([p.leg_a for p in pairs], dtype=np.int64),
-        "leg_b": np.array([p.leg_b for p in pairs], dtype=np.int64),
-        "dheading_deg": np.degrees([p.dheading_rad for p in pairs]).astype(float),
-        "dspeed_mps": np.array([p.dspeed_mps for p in pairs], dtype=float),
-        "cond_raw": np.array([p.cond_raw for p in pairs], dtype=float),
-        "cond_scaled": np.array([p.cond_scaled for p in pairs], dtype=float),
-        "used": np.array([p.used for p in pairs], dtype=bool),
-        "reason": [p.reason for p in pairs],
-    }
-
-
-def calibration_rows(cal: Calibration) -> list[tuple[str, float, float, str]]:
-    """(parameter, value, sigma, unit) rows of one calibration in the output convention.
-
-    Misalignments in the paper's axes (phi_x = phi_E, phi_y = phi_N, phi_z = -phi_D, arcsec;
-    per-leg tilts of ``body`` as phi_x_leg<i>, phi_y_leg<i>); nav-frame drifts eps_e, eps_n
-    and body gyro biases gyro_bias_x/y/z (FRD) in deg/h.
-    """
-    rows: list[tuple[str, float, float, str]] = []
-    sig = cal.sigma
-    if cal.formulation == "paper":
-        m = PAPER_FROM_NED
-        x = m @ cal.x
-        s = np.sqrt(np.diag(m @ cal.cov @ m.T))
-        for name, v, e in zip(("phi_x", "phi_y", "phi_z", "eps_e", "eps_n"), x, s, strict=True):
-            k, u = (ARCSEC_RAD, "arcsec") if name.startswith("phi") else (DEG_PER_H_RADPS,
-                                                                           "deg_per_h")
-            rows.append((name, float(v / k), float(e / k), u))
-        return rows
-    out_name = {"phi_n": "phi_y", "phi_e": "phi_x", "phi_d": "phi_z"}
-    for name, v, e in zip(cal.names, cal.x, sig, strict=True):
-        if name.startswith("gyro_bias"):
-            rows.append((name, float(v / DEG_PER_H_RADPS), float(e / DEG_PER_H_RADPS),
-                         "deg_per_h"))
-            continue
-        base, _, leg = name.partition("_leg")
-        sign = -1.0 if base == "phi_d" else 1.0
-        label = out_name[base] + (f"_leg{leg}" if leg else "")
-        rows.append((label, float(sign * v / ARCSEC_RAD), float(e / ARCSEC_RAD), "arcsec"))
-    return rows
-
-
-def _calibration_table(pairs: tuple[Pair, ...], joint: tuple[Calibration, ...]
-                       ) -> dict[str, Any]:
-    cols: dict[str, list] = {k: [] for k in ("pair_id", "formulation", "transition",
-                                             "parameter", "value", "sigma", "unit")}
-    items = [(p.pair_id, c) for p in pairs for c in p.calibrations] + [(-1, c) for c in joint]
-    for pid, cal in items:
-        for name, v, s, u in calibration_rows(cal):
-            cols["pair_id"].append(pid)
-            cols["formulation"].append(cal.formulation)
-            cols["transition"].append(cal.transition)
-            cols["parameter"].append(name)
-            cols["value"].append(v)
-            cols["sigma"].append(s)
-            cols["unit"].append(u)
-    out: dict[str, Any] = dict(cols)
-    out["pair_id"] = np.array(cols["pair_id"], dtype=np.int64)
-    out["value"] = np.array(cols["value"], dtype=float)
-    out["sigma"] = np.array(cols["sigma"], dtype=float)
-    return out
-
-
-def _leg_errors_table(before: Mapping[int, LegReplay], after: Mapping[int, LegReplay]
-                      ) -> dict[str, Any]:
-    parts = [(lid, stage, rep) for stage, reps in (("before", before), ("after", after))
-             for lid, rep in sorted(reps.items())]
-    if not parts:
-        return {"leg_id": np.zeros(0, np.int64), "stage": [], "t_s": np.zeros(0),
-                "dvn_mps": np.zeros(0), "dve_mps": np.zeros(0), "dpn_m": np.zeros(0),
-                "dpe_m": np.zeros(0)}
-    return {
-        "leg_id": np.concatenate([np.full(r.t_s.size, lid, np.int64) for lid, _, r in parts]),
-        "stage": [stage for _, stage, r in parts for _ in range(r.t_s.size)],
-        "t_s": np.concatenate([r.t_s for _, _, r in parts]),
-        "dvn_mps": np.concatenate([r.dv_n_mps[:, 0] for _, _, r in parts]),
-        "dve_mps": np.concatenate([r.dv_n_mps[:, 1] for _, _, r in parts]),
-        "dpn_m": np.concatenate([r.dr_n_m[:, 0] for _, _, r in parts]),
-        "dpe_m": np.concatenate([r.dr_n_m[:, 1] for _, _, r in parts]),
-    }

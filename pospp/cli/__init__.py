@@ -51,18 +51,23 @@ def _printable(text: str) -> str:
 
 
 def _one_line(exc: BaseException) -> str:
-    return _printable(str(exc)) or type(exc).__name__
+    """The error and its notes (``add_note``: what the run kept) on one line."""
+    notes = "; ".join(str(n) for n in getattr(exc, "__notes__", ()))
+    return _printable(f"{exc}; {notes}" if notes else str(exc)) or type(exc).__name__
 
 
 def _usage_errors() -> tuple[type[BaseException], ...]:
     """The errors that are the user's to fix in the command or its configuration (exit 2): a
-    bad pipeline file or tolerance file, an output folder pospp must not write into, a topic
-    the log does not have, a reference that is not of this flight."""
+    bad pipeline file or tolerance file, an input that is not a regular file, an output folder
+    or file pospp must not write into (or another command holds), a topic the log does not
+    have, a reference that is not of this flight."""
     from pospp.evaluate import TruthMismatchError
     from pospp.io.errors import MissingTopicError
+    from pospp.io.files import NotRegularFileError
     from pospp.io.run_folder import RunFolderError
 
-    return (ConfigError, RunFolderError, MissingTopicError, TruthMismatchError)
+    return (ConfigError, RunFolderError, MissingTopicError, TruthMismatchError,
+            NotRegularFileError)
 
 
 def _exit_code_for(exc: BaseException) -> int:
@@ -370,13 +375,15 @@ def _check_choice(option: str, value: str | None, choices: list[str]) -> None:
 @click.option("--events", "events", is_flag=True,
               help="The sensor's pose at each trigger (events.parquet) instead of the "
                    "trajectory: sbet, csv one record each; geojson, kml one point each.")
+@click.option("--force", is_flag=True, help="Replace an existing -o file (never the run's "
+              "input or a run folder's other files).")
 def export(run_dir: str, fmt: str, rate_hz: float | None, out_file: str | None,
-           solution: str, events: bool) -> None:
+           solution: str, events: bool, force: bool) -> None:
     """Export a run's trajectory or trigger poses for other tools (pospp.io.exports)."""
     from pospp.io.exports import export_run
 
     path = export_run(run_dir, fmt, rate_hz=rate_hz, out=out_file, solution=solution,
-                      data="events" if events else "trajectory")
+                      data="events" if events else "trajectory", force=force)
     click.echo(str(path))
     status_line("export", "ok", str(path))
 
@@ -407,7 +414,12 @@ def convert(source: str, out_mcap: str, fmt: str | None, options: tuple[str, ...
                 kw[key] = float(value)
             except ValueError:
                 kw[key] = value
-    rep = run_convert(source, out_mcap, fmt=fmt, **kw)
+    from pospp.io.converters import UnknownOptionError
+
+    try:
+        rep = run_convert(source, out_mcap, fmt=fmt, **kw)
+    except UnknownOptionError as exc:
+        raise click.UsageError(f"--option: {exc}") from None
     click.echo(f"{rep.fmt}: {rep.n_imu} IMU samples ({rep.imu_rate_hz or 0:.1f} Hz), "
                f"{rep.n_fix} GNSS fixes, {rep.n_reference} reference epochs")
     for label, path in (("mcap", rep.mcap_path), ("reference", rep.reference_path)):
@@ -501,7 +513,9 @@ def diagnose(run_dir: str) -> None:
               help="Model file to write (default RUN_DIR/sim_model.toml).")
 @click.option("--max-steps", default=4, show_default=True, type=int,
               help="Effects to add at most.")
-def compare_sim(run_dir: str, out_model: str | None, max_steps: int) -> None:
+@click.option("--force", is_flag=True, help="Replace an existing -o file (never the run's "
+              "input or a run folder's other files).")
+def compare_sim(run_dir: str, out_model: str | None, max_steps: int, force: bool) -> None:
     """Measured flight versus its simulation: RUN_DIR/sim_comparison.parquet.
 
     Fits the base model to the log (white noise, bias instability, biases, GNSS noise; the
@@ -516,7 +530,7 @@ def compare_sim(run_dir: str, out_model: str | None, max_steps: int) -> None:
 
     lines = StepLines()
     try:
-        comp = compare_sim_run(run_dir, out=out_model, max_steps=max_steps,
+        comp = compare_sim_run(run_dir, out=out_model, max_steps=max_steps, force=force,
                                progress=lines.step, on_flight=lines.flight)
     finally:
         lines.close()

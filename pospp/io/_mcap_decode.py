@@ -293,6 +293,15 @@ class Collector:
         self._out: dict[str, np.ndarray] = {}
         self._views: tuple[np.ndarray, ...] = ()
         self._fast: dict[int, tuple] = {}  # channel -> checked (frame_len, size, offsets, frame)
+        self._row_bytes: int | None = None
+
+    @property
+    def row_bytes(self) -> int:
+        """Bytes one decoded message takes in this collector's arrays (stamps, fields)."""
+        if self._row_bytes is None:
+            self._row_bytes = sum(v.itemsize * int(np.prod(v.shape[1:], dtype=np.int64))
+                                  for v in self._empty(0).values())
+        return self._row_bytes
 
     def reserve(self, n: int) -> None:
         """Expect ``n`` more messages (a channel's Statistics count): one allocation."""

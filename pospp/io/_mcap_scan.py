@@ -17,11 +17,10 @@ uncompressed_size u64, uncompressed_crc u32, compression string, records_length 
 
 from __future__ import annotations
 
+import os
 import struct
-import zlib
 from dataclasses import dataclass
 from io import BytesIO
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -31,13 +30,21 @@ from mcap.exceptions import McapError
 from mcap.records import Channel, Schema
 from numba.core.errors import NumbaError
 
+from pospp.io._mcap_chunk import (  # noqa: F401  (MAX_CHUNK_BYTES: re-exported)
+    MAX_CHUNK_BYTES,
+    _decompress,
+    _is_corrupt_data_error,
+    _parse_chunk,
+    _RawChunk,
+    _Truncated,
+)
 from pospp.io._mcap_decode import _REC, Collector, _walk_records
 from pospp.io.errors import IngestError, IngestIssue
+from pospp.io.files import open_regular
 
 # --------------------------------------------------------------------------- streaming pass
 
 _U16 = struct.Struct("<H").unpack_from
-_CHUNK_HEAD = struct.Struct("<QQQII")  # start, end, uncompressed size, crc, compression len
 # Statistics: message_count u64, schema_count u16, channel_count u32, attachment_count u32,
 # metadata_count u32, chunk_count u32, message_start_time u64, message_end_time u64,
 # channel_message_counts byte length u32 (then channel_id u16, count u64 pairs)
@@ -49,28 +56,15 @@ _FOOTER_LEN = 20  # summary_start u64, summary_offset_start u64, summary_crc u32
 _MAX_SUMMARY_BYTES = 64 * 1024 * 1024  # a larger summary section is not read for hints
 _MAX_RATIO = 64  # no hint above 64 x (file bytes / 31-byte minimal Message record) messages
 
-MAX_CHUNK_BYTES = 256 * 1024 * 1024
-"""Default cap on one chunk's decompressed size [bytes] (``max_chunk_bytes``): a chunk whose
-header claims more is corrupt (or written with huge chunks: raise the cap), and no chunk's
-decompression may produce more than the smaller of this and what its header claims."""
-_LZ4_PIECE = 16 * 1024 * 1024  # lz4 output produced at a time beyond the first call
+DECODED_PER_FILE_BYTE = 64
+"""Largest decoded size per byte of the file: the decoded arrays of a log may take at most
+this many times its size (and at least :data:`MIN_DECODED_BYTES`). Measured: a log of pospp's
+simulator decodes to 1.0 x its size (the sample flight, zstd), messages that differ only in
+their stamps to about 6 x; a decompression bomb of repeated messages to 2000 x (issue 38 item
+11: a 2 MB file to 4.1 GB)."""
+MIN_DECODED_BYTES = 64 * 1024 * 1024
 _READ_PIECE = 1 << 20  # bytes read at a time when a byte range is only checksummed
 
-
-
-class _Truncated(Exception):
-    """The file ends inside a record or before the Footer."""
-
-
-@dataclass(frozen=True)
-class _RawChunk:
-    start_ns: int
-    end_ns: int
-    uncompressed_size: int
-    crc: int
-    compression: str
-    data: bytes | memoryview
-    truncated: bool
 
 
 @dataclass(frozen=True)
@@ -82,20 +76,6 @@ class _Stats:
     end_ns: int
     per_channel: dict[int, int]
     offset: int
-
-
-def _parse_chunk(body: bytes, truncated: bool) -> _RawChunk:
-    if len(body) < _CHUNK_HEAD.size:
-        raise _Truncated("chunk header cut off")
-    start, end, usize, crc, clen = _CHUNK_HEAD.unpack_from(body, 0)
-    p = _CHUNK_HEAD.size
-    comp = body[p : p + clen].decode("utf-8")
-    p += clen
-    (dlen,) = struct.unpack_from("<Q", body, p) if len(body) >= p + 8 else (None,)
-    if dlen is None:
-        raise _Truncated("chunk header cut off")
-    data = memoryview(body)[p + 8 : p + 8 + dlen]  # not a copy of the compressed records
-    return _RawChunk(start, end, usize, crc, comp, data, truncated or len(data) < dlen)
 
 
 def _parse_stats(body: bytes, offset: int) -> _Stats:
@@ -145,87 +125,6 @@ def _count_hints(f: Any, size: int) -> dict[int, int]:
         f.seek(len(_MAGIC))
 
 
-def _lz4_bounded(data: bytes | memoryview, limit: int) -> bytes | bytearray:
-    """Decompress an lz4 frame, producing at most ``limit + 1`` bytes (one more than allowed,
-    so that the caller sees an overrun); the readable part of a cut-off frame is returned."""
-    import lz4.frame
-
-    dec = lz4.frame.LZ4FrameDecompressor()
-    first = dec.decompress(data, max_length=min(limit + 1, _LZ4_PIECE))
-    if dec.eof or dec.needs_input or len(first) > limit:
-        return first
-    # the claimed size (+1) allocated once and filled: a growing buffer's realloc may copy,
-    # holding old and new at once (a 64 MiB claim then peaked at 167 MiB, depending on the
-    # allocator's state; now at most the claim plus two pieces)
-    out = bytearray(limit + 1)
-    n = len(first)
-    out[:n] = first
-    del first
-    while n <= limit and not (dec.eof or dec.needs_input):
-        piece = dec.decompress(b"", max_length=min(limit + 1 - n, _LZ4_PIECE))
-        out[n:n + len(piece)] = piece
-        n += len(piece)
-    del out[n:]
-    return out
-
-
-_CORRUPT_DATA_ERRORS = (ValueError, struct.error, IndexError, KeyError, EOFError,
-                        OverflowError, RuntimeError, zlib.error, McapError, MemoryError)
-"""What corrupt chunk bytes raise: the record walk's bounds and struct errors, lz4's
-RuntimeError, zlib, the mcap library's errors, a declared size that cannot be allocated
-(UnicodeDecodeError is a ValueError); zstandard's ZstdError is matched by name (imported
-lazily)."""
-
-
-def _is_corrupt_data_error(exc: BaseException) -> bool:
-    """True when ``exc`` is what corrupt chunk bytes raise (:data:`_CORRUPT_DATA_ERRORS`, or
-    zstandard's ``ZstdError``), False for anything else (a bug in pospp, which propagates)."""
-    return isinstance(exc, _CORRUPT_DATA_ERRORS) or type(exc).__name__ == "ZstdError"
-
-
-def _decompress(chunk: _RawChunk,
-                max_bytes: int = MAX_CHUNK_BYTES) -> bytes | bytearray | memoryview:
-    """Chunk records; for a truncated chunk, as many bytes as can be decompressed.
-
-    Memory is bounded: a header claiming more than ``max_bytes`` is rejected before anything
-    is decompressed, and decompression stops one byte past what the header claims (zstd
-    through a bounded ``stream_reader.read``, lz4 through ``max_length``), so a chunk that
-    would inflate to gigabytes costs at most ``max_bytes`` (lz4: plus 32 MiB of pieces).
-    """
-    usize = chunk.uncompressed_size
-    if usize > max_bytes:
-        raise ValueError(f"chunk claims {usize} uncompressed bytes, over the cap of {max_bytes} "
-                         "(max_chunk_bytes; a corrupt header, or raise the cap)")
-    data: bytes | bytearray | memoryview
-    if chunk.compression == "zstd":
-        import zstandard
-
-        declared = zstandard.frame_content_size(chunk.data) if len(chunk.data) >= 18 else -1
-        if not chunk.truncated and declared not in (-1, usize):
-            raise ValueError(f"zstd frame declares {declared} bytes, chunk header {usize}")
-        if not chunk.truncated and declared == usize and usize > 0:
-            data = zstandard.ZstdDecompressor().decompress(chunk.data)  # allocates usize
-        else:  # no size in the frame, or cut off: read at most usize + 1 bytes
-            reader = zstandard.ZstdDecompressor().stream_reader(chunk.data,
-                                                                 read_across_frames=False)
-            data = reader.read(usize + 1)
-    elif chunk.compression == "lz4":
-        data = _lz4_bounded(chunk.data, usize)
-    elif chunk.compression == "":
-        data = chunk.data
-    else:
-        raise ValueError(f"unsupported chunk compression {chunk.compression!r}")
-    if len(data) > usize:
-        raise ValueError(f"chunk decompresses to more than the {usize} bytes its header claims")
-    if chunk.truncated:
-        return data
-    if len(data) != usize:
-        raise ValueError(f"chunk decompressed to {len(data)} bytes, header says {usize}")
-    if chunk.crc != 0 and crc32(data) != chunk.crc:
-        raise ValueError("chunk CRC mismatch")
-    return data
-
-
 def log_time_text(ns: int | None, first_ns: int | None = None) -> str:
     """``2024-06-01T00:27:14.120Z`` (UTC) for an MCAP log time [ns], with the seconds since
     ``first_ns`` when given."""
@@ -267,6 +166,8 @@ class Scan:
         self._loose: list[bytes] = []
         self._after_data_end_noted = False
         self._hints: dict[int, int] = {}  # channel id -> Statistics message count
+        self.decoded_bytes = 0  # what the collectors' arrays hold so far
+        self.max_decoded_bytes = MIN_DECODED_BYTES  # set from the file size by run()
 
     # -- issues
     def _when(self) -> str:
@@ -357,6 +258,7 @@ class Scan:
             col = self.route[ch]
             if col is None:
                 continue
+            self._budget(col, len(p))
             col.add(ch, arr, p)
             first_t = struct.unpack_from("<Q", buf, int(p[0]) + 15)[0]
             last_t = struct.unpack_from("<Q", buf, int(p[-1]) + 15)[0]
@@ -385,8 +287,9 @@ class Scan:
         return crc
 
     def run(self) -> None:
-        size = Path(self.path).stat().st_size
-        with open(self.path, "rb") as f:
+        with open_regular(self.path) as f:
+            size = os.fstat(f.fileno()).st_size
+            self.max_decoded_bytes = max(MIN_DECODED_BYTES, DECODED_PER_FILE_BYTE * size)
             if f.read(8) != _MAGIC:
                 raise IngestError("not an MCAP file (bad magic bytes)", file=self.path)
             self._hints = _count_hints(f, size)
@@ -559,6 +462,8 @@ class Scan:
         try:
             data = _decompress(chunk, self.max_chunk_bytes)
             self._records(data, partial=chunk.truncated)
+            if chunk.overstated_by:
+                self._overstated(chunk, offset)
         except (IngestError, NumbaError):
             raise  # a compiled pass that fails is pospp's error, not a corrupt chunk
         except Exception as exc:  # noqa: BLE001 - zstd/lz4 errors have their own classes
@@ -573,3 +478,29 @@ class Scan:
                 f"{chunk.start_ns}..{chunk.end_ns} ns): {cause}",
                 offset, log_time_ns=chunk.start_ns, time_ns=chunk.start_ns,
             )
+
+    def _overstated(self, chunk: _RawChunk, offset: int) -> None:
+        """A chunk whose ``records_length`` claims more than its record holds, and whose
+        records passed the size check: kept. With a CRC that matched, the records are intact
+        (a warning); without one (CRC 0), nothing vouches for them (an error issue: the file
+        is damaged, ``complete`` False)."""
+        text = (f"chunk at byte {offset}: its records_length claims {chunk.overstated_by} bytes "
+                f"more than the record holds (a corrupt header); the {len(chunk.data)} bytes "
+                "of records present")
+        if chunk.crc:
+            self._warning(f"MCAP {text} match the chunk's size and CRC: kept", offset)
+        else:
+            self._error(f"MCAP corrupt: {text} match the chunk's size but it has no CRC to "
+                        "check them against: kept, unverified", offset,
+                        log_time_ns=chunk.start_ns, time_ns=chunk.start_ns)
+
+    def _budget(self, col: Collector, n: int) -> None:
+        """Count ``n`` more messages of ``col`` against the decoded-size budget; beyond it, the
+        file is refused (an :class:`IngestError`, one line) before they are decoded."""
+        self.decoded_bytes += n * col.row_bytes
+        if self.decoded_bytes > self.max_decoded_bytes:
+            raise IngestError(
+                f"the messages decode to more than {DECODED_PER_FILE_BYTE} times the file's "
+                f"size ({self.max_decoded_bytes / 2**20:.0f} MiB of samples; stopped in "
+                f"{col.topic!r} at log time {self._when()}): a decompression bomb or a corrupt "
+                "file, refused", file=self.path, topic=col.topic)

@@ -40,6 +40,7 @@ from numpy.typing import ArrayLike
 
 from pospp.io import parquet_tables, run_folder
 from pospp.io.files import atomic_path
+from pospp.io.run_lock import locked
 
 __all__ = ["FORMATS", "LEAP_SECONDS", "SBET_FIELDS", "export_run", "gps_week_seconds",
            "sbet_records", "write_csv", "write_geojson", "write_kml", "write_sbet"]
@@ -223,9 +224,10 @@ def select_solution(traj: pd.DataFrame, solution: str = "best") -> pd.DataFrame:
     return traj[traj["solution"] == name].reset_index(drop=True)
 
 
+@locked("pospp export")
 def export_run(run_dir: str | Path, fmt: str, *, rate_hz: float | None = None,
                out: str | Path | None = None, solution: str = "best",
-               data: str = "trajectory") -> Path:
+               data: str = "trajectory", force: bool = False) -> Path:
     """``pospp export``: a run folder's trajectory (or events) in ``fmt``.
 
     Parameters
@@ -236,12 +238,17 @@ def export_run(run_dir: str | Path, fmt: str, *, rate_hz: float | None = None,
     rate_hz : float, optional
         Thin the trajectory to about this rate (every k-th epoch); events are never thinned.
     out : path-like, optional
-        Output file (default ``RUN_DIR/<data>.<fmt>``, "out" for SBET as POSPac names it).
+        Output file (default ``RUN_DIR/<data>.<fmt>``, "out" for SBET as POSPac names it):
+        never the run's input or another file of a run folder, an existing file only with
+        ``force`` (:func:`pospp.io.run_folder.check_output_file`). The run folder's lock is
+        held throughout.
     solution : {"best", "compensated", "smoothed", "forward"}
     data : {"trajectory", "events"}
         The track, or the sensor's pose at each trigger (events.parquet). For geojson and
         kml, "trajectory" is the track, the legs and the events there are; "events" the
         events alone, one Point each.
+    force : bool
+        Replace an existing ``out`` outside run folders.
     """
     if fmt not in FORMATS:
         raise ValueError(f"format: expected one of {list(FORMATS)}, got {fmt!r}")
@@ -262,7 +269,9 @@ def export_run(run_dir: str | Path, fmt: str, *, rate_hz: float | None = None,
         return parquet_tables.read_table(p)
 
     name = data
-    target = Path(out) if out is not None else run / f"{name}.{EXTENSIONS[fmt]}"
+    target = run_folder.check_output_file(
+        out if out is not None else run / f"{name}.{EXTENSIONS[fmt]}", run=run,
+        own_names=DEFAULT_NAMES, force=force)
     if fmt in ("sbet", "csv"):
         if data == "events":
             rows = table("events", required=True)

@@ -40,7 +40,8 @@ Checks
 Each raises ``IngestError`` or records an ``IngestIssue`` (docs/formats.md lists them): missing
 required topic (the available ones are listed), wrong schema or encoding, IMU stamps not
 strictly increasing (error), GNSS duplicate stamps (dropped, warning) or backwards (error),
-NaN/inf (error naming the first bad message), IMU gaps over 3 nominal intervals and interval
+NaN/inf and values beyond their physical limits (``pospp.io._bounds``: error naming the
+first bad message), IMU gaps over 3 nominal intervals and interval
 changes (warnings), IMU magnitudes that look like g or deg/s (error), IMU turn rates that
 disagree with the GNSS course rate by a factor near 180/pi (error: deg/s logged as rad/s),
 NO_FIX fixes (dropped, warning), truncated or corrupt file (error issue, ``complete=False``,
@@ -52,15 +53,18 @@ bounded by the chunk header's size and by ``max_chunk_bytes``.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from pospp.io._blockwise import rotation_sums, row_norms
+from pospp.io._bounds import check_values
 from pospp.io._mcap_decode import EVENT_SPEC, FIX_SPEC, IMU_SPEC, VEL_SPEC, Collector
 from pospp.io._mcap_scan import MAX_CHUNK_BYTES, Scan
 from pospp.io.errors import IngestError, IngestIssue, MissingTopicError
+from pospp.io.files import require_regular
 from pospp.types import (
     ENU_TO_NED,
     FLU_TO_FRD,
@@ -115,6 +119,17 @@ class FlightLog:
     events_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     """Header stamps of the trigger events (``events_topic``), int64 ns, sorted (empty when
     no events topic was asked for or found)."""
+
+    def cause_of(self, failure: str) -> str:
+        """``failure`` (a later stage's one-line error) led by the damage the reader found,
+        when it found any: a skipped chunk shows downstream as an IMU gap or a failed
+        alignment, and the line must name the corruption, not only that symptom."""
+        broken = [i for i in self.issues if i.severity == "error"]
+        if not broken:
+            return failure
+        at = "" if broken[0].byte_offset is None else f" at byte {broken[0].byte_offset}"
+        more = f" (and {len(broken) - 1} more)" if len(broken) > 1 else ""
+        return f"{Path(self.path).name} is damaged{at}: {broken[0].message}{more}; then {failure}"
 
 
 # --------------------------------------------------------------------------- checks & assembly
@@ -193,24 +208,6 @@ def _check_order(a: dict, topic: str, path: str, *, drop_duplicates: bool,
             log_time_ns=int(a["log_time_ns"][i]),
         )
     return a
-
-
-def _check_finite(a: dict, names: tuple[str, ...], topic: str, path: str) -> None:
-    if all(np.isfinite(a[name]).all() for name in names):  # the usual case, one pass each
-        return
-    bad = np.zeros(len(a["time_ns"]), bool)
-    for name in names:
-        v = a[name]
-        bad |= ~np.isfinite(v).reshape(len(v), -1).all(axis=1)
-    if bad.any():
-        i = int(np.argmax(bad))
-        fields = [n for n in names if not np.isfinite(a[n][i]).all()]
-        raise IngestError(
-            f"non-finite value (NaN or inf) in {', '.join(fields)} = "
-            f"{[a[n][i].tolist() for n in fields]} ({int(bad.sum())} bad message(s) in total)",
-            file=path, topic=topic, index=_index(a, i), time_ns=int(a["time_ns"][i]),
-            log_time_ns=int(a["log_time_ns"][i]),
-        )
 
 
 def _imu_timing_issues(a: dict, topic: str, path: str) -> list[IngestIssue]:
@@ -342,7 +339,7 @@ def _assemble_imu(a: dict, col: Collector, c_bs: np.ndarray, check_units: bool,
     if len(a["time_ns"]) == 0:
         raise IngestError("no IMU messages (in the time window)", file=path, topic=topic)
     a = _check_order(a, topic, path, drop_duplicates=False, issues=issues)
-    _check_finite(a, ("angular_velocity", "linear_acceleration"), topic, path)
+    check_values(a, "imu", ("angular_velocity", "linear_acceleration"), topic, path)
     issues.extend(_imu_timing_issues(a, topic, path))
     if check_units:
         _check_imu_units(a["angular_velocity"], a["linear_acceleration"], topic, path)
@@ -372,7 +369,8 @@ def _assemble_fix(a: dict, col: Collector, issues: list[IngestIssue]) -> GnssFix
     if len(a["time_ns"]) == 0:
         raise IngestError("no usable GNSS fixes (in the time window)", file=path, topic=topic)
     a = _check_order(a, topic, path, drop_duplicates=True, issues=issues)
-    _check_finite(a, ("latitude", "longitude", "altitude", "position_covariance"), topic, path)
+    check_values(a, "fix", ("latitude", "longitude", "altitude", "position_covariance"), topic,
+                 path)
     bad = (np.abs(a["latitude"]) > 90.0) | (np.abs(a["longitude"]) > 180.0)
     if bad.any():
         i = int(np.argmax(bad))
@@ -405,7 +403,7 @@ def _assemble_vel(a: dict, col: Collector, issues: list[IngestIssue]) -> GnssVel
         return empty_velocities()
     a = _check_order(a, topic, path, drop_duplicates=True, issues=issues)
     cov_enu = a["covariance"].reshape(-1, 6, 6)[:, :3, :3]
-    _check_finite({**a, "cov": cov_enu}, ("linear", "cov"), topic, path)
+    check_values({**a, "cov": cov_enu}, "vel", ("linear", "cov"), topic, path)
     return GnssVelocities(
         time_ns=a["time_ns"],
         v_n_mps=apply_rotation(ENU_TO_NED, a["linear"]),
@@ -417,6 +415,7 @@ def _assemble_events(a: dict, col: Collector, issues: list[IngestIssue]) -> np.n
     """Event stamps, checked like GNSS stamps (duplicates dropped with a warning)."""
     if len(a["time_ns"]) == 0:
         return np.zeros(0, np.int64)
+    check_values(a, "events", (), col.topic, col.path)
     return _check_order(a, col.topic, col.path, drop_duplicates=True, issues=issues)["time_ns"]
 
 
@@ -426,8 +425,9 @@ def _check_read_arguments(path: str, max_chunk_bytes: int, imu_topic: str, fix_t
     if isinstance(max_chunk_bytes, bool) or not isinstance(max_chunk_bytes, int | np.integer) \
             or max_chunk_bytes <= 0:
         raise ValueError(f"max_chunk_bytes must be a positive integer, got {max_chunk_bytes!r}")
-    if not Path(path).is_file():
+    if not os.path.exists(path):
         raise FileNotFoundError(f"MCAP file not found: {path}")
+    require_regular(path)  # a FIFO or a device: refused, never read forever
     if len({imu_topic, fix_topic, vel_topic}) != 3 or events_topic in (imu_topic, fix_topic,
                                                                        vel_topic):
         raise ValueError(f"topics must differ: {imu_topic!r}, {fix_topic!r}, {vel_topic!r}"

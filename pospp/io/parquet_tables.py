@@ -104,6 +104,8 @@ TABLES: dict[str, list[Column]] = {
         _opt(Column("vertical_speed_mps", _F, "m/s", "mean vertical speed, down positive",
                     _NED)),
         _opt(Column("heading_rate_max_dps", _F, "deg/s", "max |yaw rate| over the leg")),
+        _opt(Column("reason", _S, "", "'ok', or why the leg was not replayed (its reference A "
+                    "not GNSS-aided: docs/qc.md, gnss_coverage)")),
     ],
     "pairs": [
         Column("pair_id", _I, "", "pair number"),
@@ -122,7 +124,8 @@ TABLES: dict[str, list[Column]] = {
         Column("transition", _S, "", "'closed_form' or 'numerical' transition matrix"),
         Column("parameter", _S, "", "paper axes: phi_x = phi_E, phi_y = phi_N, phi_z = -phi_D "
                "(common misalignment), phi_x_leg<i> / phi_y_leg<i> (tilt at leg i's start); "
-               "eps_e, eps_n (nav-frame drift); gyro_bias_x/y/z (body FRD); docs/method.md"),
+               "eps_e, eps_n (nav-frame drift); gyro_bias_x/y/z (body FRD, the turn-on "
+               "constant), gyro_bias_x/y_flight (pair -1: over the flight's legs); docs/method.md"),
         Column("value", _F, "see unit", "estimate, in the row's unit"),
         Column("sigma", _F, "see unit", "1-sigma of the estimate, in the row's unit"),
         Column("unit", _S, "", "'arcsec' or 'deg_per_h'"),
@@ -201,6 +204,10 @@ TABLES: dict[str, list[Column]] = {
           for ax in "xyz" for kind in ("", "_sigma")],
         _opt(Column("imu_axes", _S, "", "the IMU's logged axes of gyro_bias_sensor_*: 'FLU', "
                     "'FRD' or 'as logged' (another [input] mounting_rpy_deg)")),
+        *[_opt(Column(f"gyro_bias_{ax}_flight{kind}_dph", _F, "deg/h", "gyro bias over the "
+                      f"flight's fitted legs, body {ax} (FRD){' 1-sigma' if kind else ''}; "
+                      f"gyro_bias_{ax}_dph: the turn-on constant; NaN: not estimated",
+                      "b (FRD)")) for ax in "xyz" for kind in ("", "_sigma")],
         _opt(Column("not_observable", _S, "", "'; '-joined 'parameter: sigma > bound: why' of "
                     "the applied fit's parameters not observable on these legs (docs/report.md)"
                     )),
@@ -541,6 +548,9 @@ def read_metadata(path: str | Path) -> dict[str, Any]:
 
 def read_reference_trajectory(path: str | Path) -> ReferenceTrajectory:
     """Read a reference Parquet (columns of ``TABLES["reference"]``; others are ignored)."""
+    from pospp.io.files import require_regular
+
+    require_regular(path)  # a FIFO would block pyarrow's read forever
     names = [c.name for c in TABLES["reference"]]
     have = pq.read_schema(path).names
     missing = [n for n in names if n not in have]

@@ -15,6 +15,14 @@ Nothing of the user's is lost (issue 13 item 3):
   run or the new one, plus leftovers that the next run into the same target removes.
 - A batch root is locked with ``flock`` on ``.pospp-batch.lock`` holding the pid; the kernel
   releases it when the holder dies, even by ``kill -9``.
+
+Issue 38 (items 6-8): a run holds its folder's lock (:mod:`pospp.io.run_lock`) from its first
+check to the swap (:class:`StagedRun`), and checks the folder again at the swap: files put
+into it meanwhile stop the swap, never vanish with the previous run. A run that ends without a
+verdict on its input (a full disk, a missing file: any error but a ``ValueError``) leaves the
+previous run in place. A command that writes a file derived from a run (``export -o``,
+``compare-sim -o``) obeys the same rules (:func:`check_output_file`): never the run's input,
+never a file of a run folder but its own, an existing file only with ``force``.
 """
 
 from __future__ import annotations
@@ -28,6 +36,7 @@ import json
 import os
 import shutil
 import uuid
+from collections.abc import Callable
 from datetime import UTC, datetime
 from pathlib import Path
 from types import TracebackType
@@ -37,9 +46,10 @@ from pospp import __version__
 from pospp.io.files import atomic_path
 from pospp.io.parquet_tables import TABLES
 
-__all__ = ["MARKER", "BatchLock", "RunFolderError", "check_target", "discard",
-           "display_path", "display_text", "new_staging", "read_marker", "refuse_symlink_loop",
-           "require_run_folder", "swap_in", "write_marker"]
+__all__ = ["MARKER", "BatchLock", "RunFolderError", "StagedRun", "check_output_file",
+           "check_target", "discard", "display_path", "display_text", "new_staging",
+           "read_marker", "refuse_symlink_loop", "require_run_folder", "swap_in",
+           "write_marker"]
 
 MARKER = ".pospp-run.json"
 """Marker file of a run folder (JSON, the run's identity)."""
@@ -287,6 +297,148 @@ def swap_in(stage: str | Path, target: str | Path) -> Path:
         shutil.rmtree(trash, ignore_errors=True)
     _fsync_dir(t.parent)
     return t
+
+
+def _contents(folder: Path) -> tuple[frozenset[str], dict[str, Any] | None]:
+    """The names in ``folder`` and its marker (empty and None when it is absent)."""
+    try:
+        return frozenset(p.name for p in folder.iterdir()), read_marker(folder)
+    except FileNotFoundError:
+        return frozenset(), None
+
+
+class StagedRun:
+    """The folder side of one run (context manager): locked, staged, checked again, swapped.
+
+    Entering checks ``out_dir`` (:func:`check_target`: nothing is touched when it is refused),
+    takes its lock (:class:`pospp.io.run_lock.RunLock`, creating it empty when absent) for the
+    whole run, checks it again under the lock, notes what it holds and makes the staging
+    folder :attr:`stage`. :meth:`commit` writes the marker, checks that the folder still holds
+    what it held (files added during the run stop the swap: a :class:`RunFolderError` naming
+    them, nothing replaced) and swaps the staging folder in. Leaving discards a staging folder
+    that was not swapped in, removes the folder the lock created if it is still empty, and
+    lets go of the lock.
+    """
+
+    def __init__(self, out_dir: str | Path, *, input_file: str | Path, force: bool) -> None:
+        self.input_file, self.force = input_file, force
+        self.target = check_target(out_dir, input_file=input_file, force=force)
+        self._stage: Path | None = None
+        self.committed = False
+        self._before: tuple[frozenset[str], dict[str, Any] | None] = (frozenset(), None)
+        self._lock: Any = None
+
+    def __enter__(self) -> StagedRun:
+        from pospp.io.run_lock import RunLock
+
+        self._lock = RunLock(self.target, create=True, what="pospp run").__enter__()
+        try:
+            check_target(self.target, input_file=self.input_file, force=self.force)
+            self._before = _contents(self.target)
+            self._stage = new_staging(self.target)
+        except BaseException:
+            self._leave()
+            raise
+        return self
+
+    @property
+    def stage(self) -> Path:
+        """The staging folder the run writes into (inside the ``with`` block, until the swap)."""
+        if self._stage is None:
+            raise RuntimeError("StagedRun.stage outside its with block or after the swap")
+        return self._stage
+
+    @property
+    def replaces_a_run(self) -> bool:
+        """The folder held an earlier run when this one started."""
+        return self._before[1] is not None
+
+    def commit(self, *, input_sha256: str, config_json: str, status: str) -> Path:
+        """Marker, the folder checked again, the swap; returns the run folder."""
+        write_marker(self.stage, input_file=self.input_file, input_sha256=input_sha256,
+                     config_json=config_json, status=status)
+        names, marker = _contents(self.target)
+        added = sorted(names - self._before[0])
+        if added or marker != self._before[1]:
+            what = f"files were put into it ({_few(added)})" if added else \
+                "another run was written into it"
+            raise RunFolderError(f"{display_path(self.target)}: {what} during this run; "
+                                 "nothing was replaced and this run was not kept: move them "
+                                 "elsewhere and run again")
+        swap_in(self.stage, self.target)
+        self._stage, self.committed = None, True
+        return self.target
+
+    def fail(self, exc: Exception, write_failed: Callable[[Path], None], *,
+             input_sha256: str, config_json: str) -> None:
+        """The run ended with ``exc``. A verdict on its input (a ``ValueError``: the log or
+        the configuration refused, algorithm A failed), or a folder that held no run, gets
+        the failed run (``write_failed(stage)`` writes its messages and summary, unless the run
+        wrote its summary itself) swapped in. Anything else (a full disk, a lost file, a bug)
+        leaves the previous run in place, and a note on ``exc`` says so; so does a failed
+        run that cannot be written."""
+        if isinstance(exc, ValueError) or not self.replaces_a_run:
+            try:
+                if not (self.stage / "summary.parquet").is_file():
+                    write_failed(self.stage)
+                self.commit(input_sha256=input_sha256, config_json=config_json,
+                            status="failed")
+            except Exception:  # noqa: BLE001 - e.g. a full disk: the first error is reported
+                pass
+        if not self.committed and self.replaces_a_run:
+            exc.add_note(f"{display_path(self.target)}: the previous run is kept (this one did "
+                         "not complete)")
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self._leave()
+
+    def _leave(self) -> None:
+        if self._stage is not None:
+            discard(self._stage)
+            self._stage = None
+        if self._lock is not None:
+            if self._lock.created and not self.committed:
+                try:
+                    self.target.rmdir()  # only when still empty
+                except OSError:
+                    pass
+            self._lock.release()
+            self._lock = None
+
+
+def check_output_file(path: str | Path, *, run: str | Path, own_names: frozenset[str],
+                      force: bool) -> Path:
+    """A file a command derived from the run folder ``run`` may write; its absolute path.
+
+    The rules of ``pospp run`` for one file: never the run's input log (its marker names it,
+    symlinks resolved); inside a pospp run folder only the command's own files
+    (``own_names``) of this same run (never a table, the marker, the report or another run's
+    file); elsewhere an existing file only with ``force``; never a folder, FIFO or device.
+
+    Raises
+    ------
+    RunFolderError
+    """
+    p = Path(os.path.abspath(path))
+    real = Path(os.path.realpath(p))
+    shown = display_path(p)
+    marker = read_marker(run) or {}
+    source = marker.get("input_file")
+    if source and real == Path(os.path.realpath(source)):
+        raise RunFolderError(f"{shown}: is the run's input log; choose another output file")
+    if real.exists() and not real.is_file():
+        raise RunFolderError(f"{shown}: exists and is not a regular file")
+    if read_marker(real.parent) is not None:
+        if real.parent != Path(os.path.realpath(run)) or real.name not in own_names:
+            raise RunFolderError(
+                f"{shown}: is in the pospp run folder {display_path(real.parent)}, where this "
+                f"command writes only {', '.join(sorted(own_names))} of its own run; choose "
+                "another path")
+        return real
+    if real.exists() and not force:
+        raise RunFolderError(f"{shown}: exists; use --force to replace it")
+    return real
 
 
 class BatchLock:

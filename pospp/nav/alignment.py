@@ -437,7 +437,10 @@ def align(
     static_end = float(w_end[n_static - 1]) if n_static > 0 else None
     static_len = (static_end - t[0]) if static_end is not None else 0.0
     sigma_gc = math.inf
-    if static_end is not None and static_len >= options.min_static_s and ft[0] <= static_end:
+    # at most max_static_alignment_s of the period is used, and at least min_static_s is
+    # needed: 0 (or less than min_static_s) means "align in motion", never a mean of nothing
+    used_len = min(static_len, options.max_static_alignment_s)
+    if static_end is not None and used_len >= options.min_static_s and ft[0] <= static_end:
         t_stop = min(static_end, t[0] + options.max_static_alignment_s)
         sel = (t > t[0]) & (t <= t_stop)
         rpy, rpy_sig, sigma_gc = coarse_static_alignment(

@@ -20,11 +20,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pospp import earth, rotation
+from pospp.nav.aiding import aiding_of
 from pospp.nav.alignment import static_windows
 from pospp.nav.filter import STATUS_GATED, STATUS_RESET, STATUS_USED
 from pospp.qc import checks as qc
-from pospp.qc import time_offset
+from pospp.qc import mounting, time_offset
 from pospp.qc.checks import Check
+from pospp.qc.coverage import gnss_coverage
 from pospp.units import t_s_from_time_ns
 
 if TYPE_CHECKING:
@@ -65,25 +67,14 @@ def worst_status(*statuses: str) -> str:
 
 
 def config_problems(config: Any) -> list[str]:
-    """Values of a :class:`pospp.config.PipelineConfig` that make no sense (key named)."""
-    out = []
-    positive = (("replay", "horizon_s"), ("replay", "sample_rate_hz"),
-                ("filter", "output_rate_hz"), ("outputs", "mcap_rate_hz"),
-                ("legs", "min_duration_s"), ("legs", "max_duration_s"))
-    for section, key in positive:
-        value = getattr(getattr(config, section), key, None)
-        if value is not None and not (isinstance(value, int | float) and value > 0
-                                      and math.isfinite(value)):
-            out.append(f"[{section}] {key} = {value!r} must be a finite number > 0")
+    """Values of a :class:`pospp.config.PipelineConfig` that make no sense (key named): every
+    key outside its physical range (``PipelineConfig.problems``: what the loader refuses, for
+    a configuration made in Python), and a lever arm longer than 100 m."""
+    out = list(config.problems())
     lever = np.asarray(config.gnss.lever_arm_m, dtype=float)
     if not np.isfinite(lever).all() or float(np.linalg.norm(lever)) > 100.0:
         out.append(f"[gnss] lever_arm_m = {list(config.gnss.lever_arm_m)} m is not an antenna "
                    "lever arm (|l| > 100 m)")
-    s, e = config.input.start_s, config.input.end_s
-    if s is not None and s < 0:
-        out.append(f"[input] start_s = {s!r} must be >= 0")
-    if s is not None and e is not None and not e > s:
-        out.append(f"[input] end_s = {e!r} must be after start_s = {s!r}")
     return out
 
 
@@ -136,10 +127,12 @@ def _offset_and_lever(t: NDArray, w: NDArray, sol: NavSolution, v_t: NDArray, v_
                       nav: FilterResult, config: Any,
                       lever_estimate: LeverArmEstimate | None,
                       joint: Callable[[], LeverTime | None] | None,
-                      renavigate: Callable[[float], FilterResult] | None) -> list[Check]:
+                      renavigate: Callable[[float], FilterResult] | None
+                      ) -> tuple[list[Check], LeverArmEstimate | None]:
     """The ``gnss_time_offset`` and ``lever_arm`` checks (:func:`quality_checks`): the turns'
     offset (seconds measured again, :func:`_offset_again`) and A's lever-arm estimate, each
-    alone; when either fails below ``TIME_OFFSET_MAX_S``, both from the joint estimate."""
+    alone; when either fails below ``TIME_OFFSET_MAX_S``, both from the joint estimate. Also
+    A's lever-arm estimate used (None without one), which the mounting naming reads."""
     out: list[Check] = []
     v_imu = v_n - _lever_velocity(t, w, sol, v_t, config.gnss.lever_arm_m)
     est = time_offset.estimate_time_offset(t, _down_rate(t, w, sol), v_t, v_imu)
@@ -171,7 +164,7 @@ def _offset_and_lever(t: NDArray, w: NDArray, sol: NavSolution, v_t: NDArray, v_
         # a late GNSS bends the lever-arm estimate
         out[-1] = replace(lev_check, suggestion="fix the GNSS time offset first, the lever-arm "
                           "estimate is not reliable until then; " + lev_check.suggestion)
-    return out
+    return out, lev
 
 
 def _offset_again(t: NDArray, w: NDArray, v_t: NDArray, v_n: NDArray, lever_b_m: Any,
@@ -312,8 +305,12 @@ def quality_checks(log: FlightLog, nav: FilterResult, calib_run: Any, config: An
     rec = getattr(nav, "innovations", None)
     if rec is not None:
         out += _innovation_checks(rec, config.filter_options().gate_probability)
-    out += _offset_and_lever(t, w, sol, v_t, v_n, nav, config, lever_estimate, joint,
-                             renavigate)
+    offset_and_lever, lev = _offset_and_lever(t, w, sol, v_t, v_n, nav, config,
+                                              lever_estimate, joint, renavigate)
+    out += offset_and_lever
+
+    # --- A's heading against the GNSS course; where A was GNSS-aided ------------------------
+    _heading_and_aiding_checks(out, config, v_t, v_n, sol, lev, nav, calib_run)
 
     # --- calibration and compensation --------------------------------------------------------
     if calib_run is not None:
@@ -322,6 +319,24 @@ def quality_checks(log: FlightLog, nav: FilterResult, calib_run: Any, config: An
                                           int(s["n_pairs_used"])))
         out.append(qc.compensation_gain(float(s["dv_before_mps"]), float(s["dv_after_mps"])))
     return QualityReport(tuple(out))
+
+
+def _heading_and_aiding_checks(out: list[Check], config: Any, v_t: NDArray, v_n: NDArray,
+                               sol: NavSolution, lev: LeverArmEstimate | None,
+                               nav: FilterResult, calib_run: Any) -> None:
+    """Append ``mounting_yaw`` (A's heading against the GNSS course ``v_n`` at ``v_t``, issue
+    38 item 2; the lever-arm check in ``out`` then names the mounting when its estimate is the
+    configured lever arm rotated) and ``gnss_coverage`` (where A was GNSS-aided, against the
+    calibration's legs and the legs it refused, item 1)."""
+    head = mounting.heading_offset(v_t, v_n, sol.t_s, sol.q_nb)
+    out.append(mount := mounting.mounting_yaw(head, config.input.mounting_rpy_deg))
+    if lev is not None:
+        i = next(i for i, c in enumerate(out) if c.name == "lever_arm")
+        out[i] = mounting.lever_arm_naming_mounting(
+            out[i], config.gnss.lever_arm_m, lev.lever_b_m, lev.sigma_b_m,
+            qc.lever_arm_observable(sol.rpy_rad), mount, None if head is None else head.offset_rad)
+    legs = [] if calib_run is None else [(g.leg_id, g.start_s, g.end_s) for g in calib_run.legs]
+    out.append(gnss_coverage(aiding_of(nav), legs, getattr(calib_run, "leg_refusals", None)))
 
 
 def qc_columns(report: QualityReport, epoch_ns: int) -> dict[str, list[Any]]:

@@ -178,8 +178,12 @@ def _answer_section(h: Headline, tables: Mapping[str, pd.DataFrame]) -> list[str
              f"<span id='qc-verdict'>{html.escape(h.qc_verdict)}</span></p>"]
     rows = []
     for e in h.results:
+        what = ("the gyro bias over this flight's legs, which the compensation used"
+                if e.name.startswith("gyro_bias") and e.name.endswith("_flight") else
+                "the turn-on constant, for a next flight or a lab" if e.name.startswith(
+                    "gyro_bias") else "calibrated")
         rows.append(f"<tr><th class='l'>{html.escape(e.name)}</th><td class='headline'>"
-                    f"{_pm(e.value, e.sigma, e.unit)}</td><td class='l'>calibrated "
+                    f"{_pm(e.value, e.sigma, e.unit)}</td><td class='l'>{what} "
                     f"({html.escape(h.formulation)} formulation, all pairs, 1-sigma; "
                     f"{html.escape(BODY_AXES)})</td></tr>")
     if h.sensor_axes:

@@ -243,6 +243,10 @@ def headline_lines(h: Headline) -> list[str]:
     if h.results:
         lines.append(f"  calibrated ({h.formulation} formulation, all pairs; {BODY_AXES}): "
                      + ", ".join(f"{e.name} {e.text}" for e in h.results))
+        if any(e.name.endswith("_flight") for e in h.results):
+            lines.append("    (gyro_bias_*: the turn-on constant, for a next flight or a lab; "
+                         "gyro_bias_*_flight: the bias over this flight's legs, which the "
+                         "compensation used)")
         if h.sensor_axes:
             lines.append(f"  the same gyro bias in the IMU's axes ({h.sensor_axes_name}): "
                          f"{h.sensor_axes_text}")

@@ -145,7 +145,9 @@ def gnss_model_file(path: str) -> GnssModel | None:
     """
     import tomllib
 
-    with open(path, "rb") as fh:
+    from pospp.io.files import open_regular
+
+    with open_regular(path) as fh:
         data = tomllib.load(fh)
     if "gnss" not in data:
         return None

@@ -232,7 +232,9 @@ def imu_model_file(path: str) -> ImuErrorModel:
     Written by ``pospp compare-sim`` (sim_model.toml, docs/compare_sim.md); its ``[gnss]``
     table holds :class:`pospp.sim.gnss.GnssModel` fields.
     """
-    with open(path, "rb") as fh:
+    from pospp.io.files import open_regular
+
+    with open_regular(path) as fh:
         data = tomllib.load(fh)
     return ImuErrorModel.from_dict(data.get("imu", {}), source=str(path))
 

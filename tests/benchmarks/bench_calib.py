@@ -21,7 +21,8 @@ from pospp import rotation, units
 from pospp.calib.compensate import compensate_legs
 from pospp.calib.replay import ImuIncrements, replay_leg, solution_a_from_trajectory
 from pospp.calib.solve import fit_calibration
-from pospp.calib.stage import calibrate_flight, calibration_rows
+from pospp.calib.stage import calibrate_flight
+from pospp.calib.tables import calibration_rows
 from pospp.io.mcap_reader import read_flight_log
 from pospp.io.parquet_tables import read_reference_trajectory
 from pospp.nav.strapdown import Trajectory, increments_from_rates

@@ -11,9 +11,11 @@ simulator); the run's correctness is not the point here, its files are.
 
 from __future__ import annotations
 
+import fcntl
 import hashlib
 import os
 import signal
+import struct
 import subprocess
 import sys
 import time
@@ -407,7 +409,16 @@ def test_workers_die_with_their_parent():
      ("[outputs]\nmcap_rate_hz = 0\n", "outputs.mcap_rate_hz"),
      ("[replay]\nsample_rate_hz = 0\n", "replay.sample_rate_hz"),
      ("[filter]\noutput_rate_hz = -10\n", "filter.output_rate_hz"),
-     ("[replay]\nhorizon_s = -300\n", "replay.horizon_s")],
+     ("[replay]\nhorizon_s = -300\n", "replay.horizon_s"),
+     # issue 38 item 13: each of these ended in "internal error" or an error naming no key
+     *[(f"[{s}]\n{k} = {v}\n", f"{s}.{k}") for s, k, v in (
+         ("imu", "gyro_bias_sigma_dph", "1e300"), ("imu", "gyro_arw_dpsh", "1e300"),
+         ("imu", "gyro_gm_sigma_dph", "1e300"), ("imu", "gyro_gm_tau_s", "1e-300"),
+         ("imu", "accel_bias_sigma_ug", "1e300"), ("imu", "accel_vrw_mpsph", "1e300"),
+         ("imu", "accel_gm_sigma_ug", "1e300"), ("imu", "accel_gm_tau_s", "1e-300"),
+         ("gnss", "pos_sigma_floor_m", "1e300"), ("gnss", "vel_sigma_floor_mps", "1e300"),
+         ("legs", "trim_s", "1e300"), ("legs", "smoothing_s", "1e300"),
+         ("replay", "sample_rate_hz", "1e-300"))]],
 )
 def test_bad_config_value_is_one_line_and_exit_2(flight, tmp_path, toml, needle):
     p = tmp_path / "bad.toml"
@@ -456,3 +467,193 @@ def test_run_folder_names_are_safe_unique_and_short():
         assert name not in (".", "..") and 0 < len(name) <= MAX_RUN_NAME_LEN
     assert names["/x/../y/z.mcap"] == "y__z"  # relative to the common folder, "/"
     assert names["/x/...mcap"] == "x__%2E%2E" and names["/x/a b%.MCAP"] == "x__a%20b%25"
+
+
+# ----------------------------------------------------------- issue 38: run folder safety
+
+
+def _hold_lock(folder: Path) -> int:
+    """Another process's lock on a run folder, as pospp takes it (``flock`` on the folder):
+    a descriptor of its own, so pospp's lock conflicts with it as with another process's."""
+    fd = os.open(folder, os.O_RDONLY)
+    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    return fd
+
+
+def test_files_put_into_the_folder_during_a_run_stop_the_swap(flight, quick_config,
+                                                              tmp_path):
+    """A file put into OUT while the run works was deleted with the previous run at the swap
+    (issue 38 item 6): the folder is checked again at the swap, nothing is replaced."""
+    out = tmp_path / "run"
+    pipeline.process_flight(flight, quick_config, out)
+    before = _hashes(out)
+
+    def meddle(stage: str, fraction: float) -> None:
+        if stage == "qc":
+            (out / "notes.txt").write_text("the user's notes, written during the run")
+
+    with pytest.raises(run_folder.RunFolderError, match="notes.txt"):
+        pipeline.process_flight(flight, replace(quick_config, name="new"), out, force=True,
+                                progress=meddle)
+    assert (out / "notes.txt").read_text().startswith("the user's notes")
+    after = _hashes(out)
+    del after["notes.txt"]
+    assert after == before  # the previous run, whole
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]  # no staging left
+
+
+def test_a_second_run_into_the_same_new_folder_is_refused_while_the_first_works(
+        flight, quick_config, tmp_path):
+    """Two runs into one new folder replaced each other, both exit 0 (issue 38 item 6): the
+    first holds the folder's lock for the whole run, the second is refused at once."""
+    out = tmp_path / "new"
+    refused: list[str] = []
+
+    def second(stage: str, fraction: float) -> None:
+        if stage == "calibrate":
+            try:
+                pipeline.process_flight(flight, quick_config, out)
+            except run_folder.RunFolderError as exc:
+                refused.append(str(exc))
+
+    first = pipeline.process_flight(flight, replace(quick_config, name="first"), out,
+                                    progress=second)
+    assert refused and f"another pospp command (pid {os.getpid()})" in refused[0]
+    marker = _assert_one_complete_run(out)
+    assert marker["config_sha256"] == run_folder.config_sha256(
+        replace(quick_config, name="first").to_json()) and first.status == "partial"
+
+
+def test_a_full_disk_during_force_keeps_the_previous_run(flight, tmp_path, monkeypatch):
+    """A full disk during ``--force`` replaced a good run with a 3-file failed stub (issue 38
+    item 7): a run that fails without a verdict on its input keeps the previous one."""
+    out = tmp_path / "run"
+    code, _, err = _cli("run", str(flight), "-p", str(PIPELINE), "-o", str(out))
+    assert code == PARTIAL, err
+    before = _hashes(out)
+    real = parquet_tables.write_table
+
+    def full(path, data, schema_name, **kw):
+        if schema_name in ("trajectory", "messages"):  # the run's tables and a failed stub's
+            raise OSError(28, "No space left on device", str(path))
+        return real(path, data, schema_name, **kw)
+
+    monkeypatch.setattr(parquet_tables, "write_table", full)
+    code, _, err = _cli("run", str(flight), "-p", str(PIPELINE), "-o", str(out), "--force")
+    _one_clear_line(code, err, 1, "No space left on device", "the previous run is kept")
+    assert _hashes(out) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["flight.mcap", "run"] or \
+        sorted(p.name for p in tmp_path.iterdir()) == ["run"]
+
+
+@pytest.fixture(scope="module")
+def finished_run(flight, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("finished") / "run"
+    code, _, err = _cli("run", str(flight), "-p", str(PIPELINE), "-o", str(out))
+    assert code == PARTIAL, err
+    return out
+
+
+@pytest.mark.parametrize("command", ["export", "compare-sim"])
+def test_outputs_of_export_and_compare_sim_never_replace_the_run_or_its_input(
+        command, finished_run, flight, tmp_path):
+    """``export -o`` and ``compare-sim -o`` overwrote the run's input log, its
+    trajectory.parquet or its marker, exit 0 (issue 38 item 8): the rules of ``run`` hold."""
+    other = tmp_path / "mine.csv"
+    other.write_text("the user's file")
+    watched = {"input": flight, "other": other,
+               **{p.name: p for p in finished_run.iterdir()}}
+    before = {k: hashlib.sha256(p.read_bytes()).hexdigest() for k, p in watched.items()}
+    args = (["export", str(finished_run), "--format", "csv"] if command == "export"
+            else ["compare-sim", str(finished_run)])
+    for target, needle in ((flight, "is the run's input log"),
+                           (finished_run / "trajectory.parquet", "is in the pospp run folder"),
+                           (finished_run / run_folder.MARKER, "is in the pospp run folder"),
+                           (other, "exists; use --force")):
+        code, _, err = _cli(*args, "-o", str(target))
+        _one_clear_line(code, err, 2, needle)
+    assert before == {k: hashlib.sha256(p.read_bytes()).hexdigest() for k, p in watched.items()}
+    if command == "export":  # an existing file of the user's: with --force only
+        code, _, err = _cli(*args, "-o", str(other), "--force")
+        assert code == 0, err
+        assert other.read_text().startswith("gps_week")
+
+
+@pytest.mark.parametrize("command", ["run", "diagnose", "evaluate", "report", "export",
+                                     "compare-sim"])
+def test_commands_that_write_a_run_wait_for_no_one(command, finished_run, flight, tmp_path):
+    """``diagnose`` or ``evaluate`` while ``run --force`` replaced the folder left the old
+    flight's diagnosis in the new run (issue 38 item 10): every command that writes a run
+    folder holds its lock; a second is refused at once, naming the holder."""
+    truth = tmp_path / "truth.parquet"
+    truth.write_bytes(b"x")
+    args = {"run": ["run", str(flight), "-p", str(PIPELINE), "-o", str(finished_run),
+                    "--force"],
+            "diagnose": ["diagnose", str(finished_run)],
+            "evaluate": ["evaluate", str(finished_run), "--truth", str(truth)],
+            "report": ["report", str(finished_run)],
+            "export": ["export", str(finished_run), "--format", "csv"],
+            "compare-sim": ["compare-sim", str(finished_run)]}[command]
+    before = _hashes(finished_run)
+    fd = _hold_lock(finished_run)
+    try:
+        code, _, err = _cli(*args)
+    finally:
+        os.close(fd)
+    _one_clear_line(code, err, 2, f"another pospp command (pid {os.getpid()}) is writing "
+                    "this run folder")
+    assert _hashes(finished_run) == before
+
+
+def test_a_named_pipe_as_the_log_or_the_pipeline_is_refused(flight, tmp_path, make_fifo):
+    """A FIFO as ``-p`` or as the log blocked forever (issue 38 item 12)."""
+    for name, args in (("pipe.toml", lambda f: ("run", str(flight), "-p", str(f), "-o",
+                                                 str(tmp_path / "o1"))),
+                       ("pipe.mcap", lambda f: ("run", str(f), "-p", str(PIPELINE), "-o",
+                                                 str(tmp_path / "o2")))):
+        code, _, err = _cli(*args(make_fifo(tmp_path / name)))
+        _one_clear_line(code, err, 2, f"{name}: is a named pipe (FIFO), not a regular file")
+    assert not (tmp_path / "o1").exists() and not (tmp_path / "o2").exists()
+
+
+def test_an_error_caused_by_a_corrupt_chunk_names_the_corruption(flight, tmp_path):
+    """A corrupt chunk, skipped, leaves a 29 s hole; algorithm A then stops on the IMU gap,
+    and the one-line error named only that symptom (issue 38 item 13)."""
+    data = bytearray(flight.read_bytes())
+    pos, chunks = 8, []
+    while pos + 9 <= len(data):  # the top-level records (MCAP spec: opcode u8, length u64)
+        op, ln = struct.unpack_from("<BQ", data, pos)
+        chunks += [(pos, ln)] if op == 0x06 else []
+        pos += 9 + ln
+    off, ln = chunks[1]
+    data[off + 9 + ln // 2] ^= 0xFF
+    bad = tmp_path / "damaged.mcap"
+    bad.write_bytes(bytes(data))
+    code, _, err = _cli("run", str(bad), "-p", str(PIPELINE), "-o", str(tmp_path / "o"))
+    _one_clear_line(code, err, 1, f"damaged.mcap is damaged at byte {off}: corrupt chunk at "
+                    f"byte {off} skipped", "; then algorithm A failed: imu: gap of")
+
+
+def test_an_unknown_converter_option_is_a_usage_error(tmp_path):
+    """``convert --option foo=1`` was an internal error (TypeError) (issue 38 item 13)."""
+    code, _, err = _cli("convert", str(tmp_path), "-o", str(tmp_path / "x.mcap"), "--format",
+                        "comma2k19", "--option", "foo=1")
+    _one_clear_line(code, err, 2, "--option: format 'comma2k19' has no option 'foo'; its "
+                    "options: ")
+    assert not (tmp_path / "x.mcap").exists()
+
+
+def test_a_named_pipe_in_an_archive_fails_that_flight_only(flight, tmp_path, make_fifo):
+    """A FIFO named ``*.mcap`` in an archive blocked the batch forever (issue 38 item 12)."""
+    arch = tmp_path / "archive"
+    arch.mkdir()
+    (arch / "good.mcap").write_bytes(flight.read_bytes())
+    make_fifo(arch / "pipe.mcap")
+    code, out, err = _cli("batch", str(arch), "-p", str(PIPELINE), "-o", str(tmp_path / "out"),
+                          "-j", "1")
+    assert code == 1, (out, err)
+    man = _manifest(tmp_path / "out")
+    assert man.loc[str(arch / "pipe.mcap"), "status"] == "failed"
+    assert "is a named pipe (FIFO), not a regular file" in man.loc[str(arch / "pipe.mcap"),
+                                                                   "error"]
+    assert man.loc[str(arch / "good.mcap"), "status"] == "partial"

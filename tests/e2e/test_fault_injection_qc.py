@@ -165,7 +165,7 @@ def test_non_positive_horizon_fails(window, tmp_path):
     out, qc = _run(tmp_path, *window, config=_config(replay={"horizon_s": -300.0}),
                    name="horizon")
     assert out.status == "failed"
-    assert "[replay] horizon_s = -300.0" in _failed(qc)["config"]
+    assert "replay.horizon_s: expected a value >= 1, <= 86400, got -300.0" in _failed(qc)["config"]
 
 
 def test_window_longer_than_the_data_is_not_ok(window, tmp_path):
@@ -173,3 +173,42 @@ def test_window_longer_than_the_data_is_not_ok(window, tmp_path):
                    name="window")
     assert out.status == "degraded"
     assert "of the 900.0 s configured window" in _failed(qc)["data_complete"]
+
+
+def test_gnss_lost_over_the_leg_is_not_ok_and_the_leg_is_refused(window, tmp_path):
+    """GNSS stopping 400 s in (the window's leg starts at 338 s): every check passed, the
+    trajectory drifted free-inertial and the calibration used the leg (issue 38 item 1)."""
+    imu, fix, vel = window
+
+    def before(obj):
+        m = obj.time_ns < imu.time_ns[0] + 400 * 10**9
+        return replace(obj, **{k: v[m] for k, v in vars(obj).items()
+                               if isinstance(v, np.ndarray) and v.shape[:1] == m.shape})
+
+    out, qc = _run(tmp_path, imu, before(fix), before(vel), name="gnss_lost")
+    assert out.status == "degraded"
+    sug = _failed(qc)["gnss_coverage"]
+    assert "no GNSS from t = 400 s to the end of the data (320 s, 44 % of the flight" in sug
+    assert "leg 0 in it" in sug and "leg 0 refused by the calibration" in sug
+    legs = parquet_tables.read_table(out.out_dir / "legs.parquet")
+    assert legs.reason.iloc[0].startswith("reference A not GNSS-aided: no GNSS record "
+                                          "from t = 400 s to the end of the data")
+
+
+@pytest.mark.parametrize("lever", [None, (-0.10, 0.30, -1.52)], ids=["configured", "advised"])
+def test_wrong_mounting_yaw_is_named_not_the_lever_arm(window, tmp_path, lever):
+    """``mounting_rpy_deg = [0, 0, 90]`` on the sample: "degraded" with the advice to rotate the
+    lever arm by 90 deg, and following it gave "ok" with an 89 deg heading error (issue 38
+    item 2). A's heading is compared with the GNSS course; the lever-arm suggestion names the
+    mounting."""
+    cfg = _config(input={"mounting_rpy_deg": (0.0, 0.0, 90.0)},
+                  **({} if lever is None else {"gnss": {"lever_arm_m": lever}}))
+    out, qc = _run(tmp_path, *window, config=cfg, name=f"yaw90_{lever is None}")
+    assert out.status == "failed"
+    failed = _failed(qc)
+    assert "A's heading is -90.0 deg off the GNSS course" in failed["mounting_yaw"]
+    assert "mounting_rpy_deg = [0, 0, 0]" in failed["mounting_yaw"]
+    if lever is None:
+        assert "is the configured lever arm rotated by +90 deg about body z: the IMU mounting " \
+            "is wrong, not the lever arm" in failed["lever_arm"]
+        assert "set [gnss] lever_arm_m" not in failed["lever_arm"]

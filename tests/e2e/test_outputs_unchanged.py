@@ -13,8 +13,9 @@ meant to change the results (a method fix) regenerates the fingerprint on purpos
 What is fingerprinted: per float column, the count of values and of NaNs, the mean, RMS,
 minimum, maximum and an index-weighted mean (which moves when rows are reordered), and the
 values of ``SAMPLED_ROWS`` evenly spaced rows, all compared within ``RTOL`` of the column's
-RMS (the statistics catch a change spread over many rows, the sampled rows one of a few
-rows' size); every other column by a hash of its values, exactly.
+RMS or the absolute floor of the column's unit (``UNIT_FLOORS``), whichever is larger (the
+statistics catch a change spread over many rows, the sampled rows one of a few rows' size);
+every other column by a hash of its values, exactly.
 Left out: the summary's timing columns (``wall_time_s``, ``stage_*_s``) and its
 ``input_file`` (the path the run was given; in messages the path is cut to the file name),
 and the report (a figure is not a table).
@@ -27,6 +28,13 @@ of 1 changed every float table's hash, the largest difference 2e-9 of a column's
 (diagnosis ``gap_horizon_mps``); a fresh install on 2026-11-25 (numpy 2.4.6, numba 0.68.1,
 scipy 1.17.1) changed the trajectory's. A method change moves these statistics by far more
 than ``RTOL``.
+
+Why an absolute floor as well (issue 38 item 15): a column whose values are all near zero
+has a tiny RMS, and ``RTOL`` of it is below the rounding of the operands it comes from.
+``pairs.dspeed_mps`` (the difference of two legs' speeds of 60 m/s, about 5e-5 m/s on the
+sample) failed on another CPU by 5e-11 m/s, ``RTOL`` of its RMS. The floors are about 1e-10
+of the magnitudes a run handles in each unit (speeds of 100 m/s: 1e-8 m/s; positions on the
+Earth: 1e-6 m and 1e-9 deg) and far below any change of method.
 """
 
 from __future__ import annotations
@@ -38,6 +46,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
 import pytest
 
 REPO = Path(__file__).resolve().parents[2]
@@ -48,6 +57,12 @@ TABLES = ("trajectory", "biases", "legs", "pairs", "calibration", "leg_errors", 
           "diagnosis", "diagnosis_curves", "messages", "summary")
 RTOL = 1e-6
 """Tolerance of a float column's statistics and sampled values, relative to its RMS."""
+UNIT_FLOORS = {"deg": 1e-9, "m": 1e-6, "m/s": 1e-8, "deg/h": 1e-6, "ug": 1e-4, "ppm": 1e-4,
+               "s": 1e-9, "deg/s": 1e-9, "Hz": 1e-9, "1": 1e-9, "see unit": 1e-8}
+"""Least tolerance of a float column in its unit (``see unit``: the row's unit of a long-form
+table, arcsec, deg/h, m/s or m), whatever its RMS."""
+_SUFFIX_UNITS = {"_deg": "deg", "_m": "m", "_mps": "m/s", "_dph": "deg/h", "_ug": "ug",
+                 "_ppm": "ppm", "_s": "s", "_dps": "deg/s", "_hz": "Hz"}
 SAMPLED_ROWS = 32
 
 
@@ -88,8 +103,20 @@ def run_fingerprint(run_dir: Path) -> dict[str, dict[str, list[float] | str]]:
             if (run_dir / f"{name}.parquet").is_file()}
 
 
+def unit_floor(table: str, column: str) -> float:
+    """The absolute floor of a column's tolerance: ``UNIT_FLOORS`` of its unit in the table's
+    schema, else of its name's unit suffix (the summary's extra columns), else of "1"."""
+    from pospp.io.parquet_tables import TABLES
+
+    unit = next((c.unit for c in TABLES.get(table, ()) if c.name == column), None)
+    if unit is None:
+        unit = next((u for s, u in _SUFFIX_UNITS.items() if column.endswith(s)), "1")
+    return UNIT_FLOORS.get(unit, UNIT_FLOORS["1"])
+
+
 def differences(got: dict, expected: dict) -> list[str]:
-    """Table.column entries whose fingerprints differ (beyond RTOL for floats)."""
+    """Table.column entries whose fingerprints differ (floats: beyond RTOL of the column's
+    RMS or its unit's floor, whichever is larger)."""
     out = [f"{t}: table missing or extra" for t in sorted(set(got) ^ set(expected))]
     for t in sorted(set(got) & set(expected)):
         g, e = got[t], expected[t]
@@ -104,7 +131,7 @@ def differences(got: dict, expected: dict) -> list[str]:
             if not np.array_equal(a_arr[:2], b_arr[:2]):
                 out.append(f"{t}.{c}: counts {a[:2]} != {b[:2]}")
                 continue
-            tol = RTOL * max(abs(b_arr[3]), 1e-300) if np.isfinite(b_arr[3]) else 0.0
+            tol = max(RTOL * abs(b_arr[3]) if np.isfinite(b_arr[3]) else 0.0, unit_floor(t, c))
             same = np.isclose(a_arr[2:], b_arr[2:], rtol=0.0, atol=tol, equal_nan=True)
             if not np.all(same):
                 k = int(np.flatnonzero(~same)[0]) + 2
@@ -135,6 +162,23 @@ def test_sample_run_tables_are_unchanged_and_timed(tmp_path):
     assert np.all(stages > 0)
     assert stages.sum() == pytest.approx(summary.wall_time_s, rel=1e-9)
     assert outcome.wall_time_s == summary.wall_time_s
+
+
+def test_a_small_column_is_compared_to_its_units_floor():
+    """``pairs.dspeed_mps`` of about 5e-5 m/s failed the comparison on another CPU by 5e-11
+    m/s (issue 38 item 15): rounding within its unit's floor passes; a change beyond, not."""
+    values = pd.Series(np.array([4.8e-5, -1.3e-5, 5.1e-5]))
+    base = {"pairs": {"dspeed_mps": _column_fingerprint(values)}}
+    for delta, same in ((2e-10, True), (1e-6, False)):
+        moved = {"pairs": {"dspeed_mps": _column_fingerprint(values + delta)}}
+        assert (differences(moved, base) == []) == same, (delta, differences(moved, base))
+    # every fingerprinted float column has a floor in its own unit
+    from pospp.io.parquet_tables import TABLES as SCHEMAS
+
+    for t in TABLES:
+        for c in SCHEMAS[t]:
+            if pa.types.is_floating(c.type):
+                assert c.unit in UNIT_FLOORS, (t, c.name, c.unit)
 
 
 def test_summary_schema_has_a_column_for_every_stage():

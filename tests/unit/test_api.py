@@ -157,6 +157,11 @@ def test_import_pospp_is_light():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout
     assert "open_run" in out and "open_archive" in out and "diff_paths" in out
+    assert "process_flight" in out and "load_config" in out
+    from pospp.pipeline import process_flight
+    assert pospp.process_flight is process_flight
+    assert set(pospp.__all__) == {*pospp._HOME, "__version__"}
+    assert all(callable(getattr(pospp, name)) for name in pospp.__all__ if name != "__version__")
     with pytest.raises(AttributeError, match="no attribute 'nope'"):
         pospp.nope  # noqa: B018
 

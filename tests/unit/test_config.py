@@ -15,7 +15,7 @@ def test_empty_config_is_the_defaults():
     assert config_from_dict({}) == PipelineConfig()
 
 
-@pytest.mark.parametrize("path", sorted(PIPELINES.glob("*.toml")), ids=lambda p: p.name)
+@pytest.mark.parametrize("path", sorted(PIPELINES.rglob("*.toml")), ids=lambda p: p.name)
 def test_shipped_pipelines_load(path):
     cfg = load_config(path)
     assert cfg.name == path.stem
@@ -73,14 +73,14 @@ def test_grade_defaults_fill_only_what_is_omitted():
 @pytest.mark.parametrize(
     ("data", "needle"),
     [  # each of these was a traceback or a silent "ok" (issue 13)
-        ({"filter": {"output_rate_hz": 0}}, "filter.output_rate_hz: expected a value > 0"),
-        ({"filter": {"output_rate_hz": -10}}, "filter.output_rate_hz: expected a value > 0"),
-        ({"outputs": {"mcap_rate_hz": 0}}, "outputs.mcap_rate_hz: expected a value > 0"),
-        ({"replay": {"sample_rate_hz": 0}}, "replay.sample_rate_hz: expected a value > 0"),
-        ({"replay": {"horizon_s": -300}}, "replay.horizon_s: expected a value > 0"),
+        ({"filter": {"output_rate_hz": 0}}, "filter.output_rate_hz: expected a value >= 0.01"),
+        ({"filter": {"output_rate_hz": -10}}, "filter.output_rate_hz: expected a value >= 0.01"),
+        ({"outputs": {"mcap_rate_hz": 0}}, "outputs.mcap_rate_hz: expected a value >= 0.01"),
+        ({"replay": {"sample_rate_hz": 0}}, "replay.sample_rate_hz: expected a value >= 0.01"),
+        ({"replay": {"horizon_s": -300}}, "replay.horizon_s: expected a value >= 1"),
         ({"replay": {"transition_step": 0}}, "replay.transition_step: expected a value >= 1"),
-        ({"gnss": {"gate_probability": 1.0}}, "gnss.gate_probability: expected a value > 0, "
-                                              "< 1"),
+        ({"gnss": {"gate_probability": 1.0}}, "gnss.gate_probability: expected a value >= 0.5, "
+                                              "<= 0.999999"),
         ({"gnss": {"lever_arm_m": [0.0, 1e9, 0.0]}}, "gnss.lever_arm_m[1]: expected a value"),
         ({"input": {"max_chunk_mib": 0}}, "input.max_chunk_mib: expected a value >= 1"),
         ({"input": {"start_s": 100.0, "end_s": 50.0}}, "input.end_s: expected a value > "
@@ -94,6 +94,68 @@ def test_out_of_range_value_names_the_key_and_the_limit(data, needle):
     with pytest.raises(ConfigError) as err:
         config_from_dict(data, source="x.toml")
     assert needle in str(err.value) and str(err.value).startswith("x.toml")
+
+
+@pytest.mark.parametrize(
+    ("data", "needle"),
+    [  # each of these was accepted (issue 38 item 5)
+        ({"input": {"start_s": 9.3e9}}, "input.start_s: expected a value >= 0, <= 1e+07"),
+        ({"replay": {"horizon_s": 1e-300}}, "replay.horizon_s: expected a value >= 1"),
+        ({"filter": {"output_rate_hz": 1e-300}}, "filter.output_rate_hz: expected a value >= "),
+        ({"imu": {"gyro_gm_tau_s": 1e-300}}, "imu.gyro_gm_tau_s: expected a value >= 1"),
+        ({"gnss": {"pos_sigma_floor_m": 1e300}}, "gnss.pos_sigma_floor_m: expected a value"),
+        ({"replay": {"sample_rate_hz": 1000}}, "replay.sample_rate_hz: expected a value"),
+        ({"pairs": {"noise_step_s": 1e-300}}, "pairs.noise_step_s: expected a value >= 0.1"),
+    ],
+)
+def test_nonsense_values_are_refused_naming_the_physical_range(data, needle):
+    with pytest.raises(ConfigError) as err:
+        config_from_dict(data, source="x.toml")
+    assert needle in str(err.value), str(err.value)
+
+
+def _number_keys():
+    """(section class, key) of every numeric key (float or int, lists of numbers too)."""
+    import typing
+
+    for section, cls in typing.get_type_hints(PipelineConfig).items():
+        if section == "name":
+            continue
+        for name, tp in typing.get_type_hints(cls).items():
+            args = typing.get_args(tp) or (tp,)
+            if float in args or int in args or typing.get_origin(tp) is tuple:
+                yield cls, name
+
+
+@pytest.mark.parametrize(("cls", "key"), list(_number_keys()),
+                         ids=lambda x: getattr(x, "__name__", x))
+def test_every_number_has_a_physical_range(cls, key):
+    """A lower and an upper bound on every number (issue 38 item 5): an open end let
+    ``start_s = 9.3e9`` overflow the nanosecond stamps and ``horizon_s = 1e-300`` pass."""
+    from pospp.config import limits_of
+
+    lim = limits_of(cls, key)
+    assert (lim.gt is not None or lim.ge is not None) and (lim.lt is not None or
+                                                           lim.le is not None), (key, lim)
+    assert (lim.gt or 0.0) > -1e12 and (lim.le or lim.lt) < 1e15, (key, lim)
+
+
+def test_a_config_made_in_python_lists_its_out_of_range_keys():
+    from dataclasses import replace
+
+    cfg = PipelineConfig()
+    assert cfg.problems() == []
+    bad = replace(cfg, replay=replace(cfg.replay, horizon_s=1e-300),
+                  input=replace(cfg.input, start_s=9.3e9))
+    texts = bad.problems()
+    assert any(t.startswith("replay.horizon_s: expected a value >= 1") for t in texts), texts
+    assert any(t.startswith("input.start_s: expected a value >= 0, <= 1e+07") for t in texts)
+
+
+def test_a_named_pipe_as_the_pipeline_file_is_refused_at_once(tmp_path, make_fifo):
+    fifo = make_fifo(tmp_path / "pipe.toml")
+    with pytest.raises(ConfigError, match="pipe.toml: is a named pipe"):
+        load_config(fifo)  # used to block until a writer came (forever from the CLI)
 
 
 def _numeric_keys():

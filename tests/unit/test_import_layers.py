@@ -20,7 +20,7 @@ ARCHITECTURE_DOC = PACKAGE.parent / "docs" / "architecture.md"
 LAYERS: tuple[frozenset[str], ...] = (
     # the data contract and the small facts
     frozenset({"pospp", "types", "units", "earth", "rotation", "threads", "memory",
-               "distributions"}),
+               "distributions", "config_schema"}),
     # files <-> contract; the navigation core
     frozenset({"io", "nav"}),
     # stage results -> table columns (names the result types of io and nav)
@@ -38,10 +38,10 @@ LAYERS: tuple[frozenset[str], ...] = (
 )
 
 
-FACADE = {"api"}
+FACADE = {"api", "pipeline", "config"}
 """What the package module ``pospp/__init__.py`` may name above its layer: the public API it
-re-exports, imported at first access (``pospp.__getattr__``) or for type checkers only
-(docs/architecture.md)."""
+re-exports (the readers, ``process_flight`` and its configuration), imported at first access
+(``pospp.__getattr__``) or for type checkers only (docs/architecture.md)."""
 
 
 def _layer_of(top: str) -> int:

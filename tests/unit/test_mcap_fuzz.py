@@ -19,6 +19,7 @@ import pytest
 from mcap.writer import CompressionType
 from test_mcap_reader import make_log, top_records, write_with_library
 
+from pospp.io import ros_messages as rm
 from pospp.io.errors import IngestError
 from pospp.io.mcap_reader import FlightLog, read_flight_log
 from pospp.io.mcap_writer import write_flight_log
@@ -263,3 +264,122 @@ def test_chunk_size_claim_over_the_cap_is_rejected_unread(tmp_path: Path, small_
         assert len(log.imu) == len(small_log[0])  # every real chunk read
     with pytest.raises(ValueError, match="max_chunk_bytes"):
         read_flight_log(p, max_chunk_bytes=0)
+
+
+# --------------------------------------------------------------------------- issue 38
+
+
+def _plain_file(tmp_path: Path, small_log, *, crcs: bool) -> tuple[bytearray, int, int]:
+    """A file of uncompressed chunks (mcap's Writer) as bytes, the offset of its third chunk's
+    records_length field and of its records."""
+    imu, fix, _ = small_log
+    src = write_with_library(tmp_path / "plain.mcap", imu, fix,
+                             compression=CompressionType.NONE, chunk_size=16384,
+                             enable_crcs=crcs)
+    data = bytearray(src.read_bytes())
+    off = [r for r in top_records(bytes(data)) if r[1] == 0x06][2][0]
+    rl_at = _chunk_fields(bytes(data), off)["records_length"]
+    return data, rl_at, rl_at + 8
+
+
+def _replace_accel(data: bytearray, start: int, imu, value: float) -> int:
+    """Put ``value`` in place of the first IMU z specific force (as logged, FLU) found after
+    ``start``; returns the message's index."""
+    for k in range(len(imu)):
+        at = bytes(data).find(struct.pack("<d", -imu.f_ib_b_mps2[k, 2]), start)
+        if at >= 0:
+            data[at : at + 8] = struct.pack("<d", value)
+            return k
+    raise AssertionError("no IMU value found")
+
+
+def test_overstated_records_length_still_checks_the_chunk_crc(tmp_path: Path, small_log):
+    """A chunk whose records_length claims more than its record holds used to be read as a
+    cut-off chunk, unchecked: a changed value then passed (issue 38 item 4). Its records are
+    checked by size and CRC like any chunk's: a changed byte skips the chunk."""
+    imu = small_log[0]
+    data, rl_at, rec_at = _plain_file(tmp_path, small_log, crcs=True)
+    (rl,) = struct.unpack_from("<Q", data, rl_at)
+    struct.pack_into("<Q", data, rl_at, rl + 1000)
+    intact = tmp_path / "overstated.mcap"
+    intact.write_bytes(bytes(data))
+    log = read_flight_log(intact)  # the records match their CRC: kept, with a warning
+    assert log.complete and len(log.imu) == len(imu)
+    assert any("records_length claims 1000 bytes more" in i.message and i.severity == "warning"
+               for i in log.issues)
+    _replace_accel(data, rec_at, imu, 1e-300)  # finite, in range: only the CRC can tell
+    changed = tmp_path / "changed.mcap"
+    changed.write_bytes(bytes(data))
+    log = read_flight_log(changed, check_units=False)
+    assert not log.complete
+    assert any("chunk CRC mismatch" in i.message and i.byte_offset is not None
+               for i in log.issues if i.severity == "error")
+    assert np.abs(log.imu.f_ib_b_mps2[:, 2]).min() > 9.0  # the changed value is not read
+
+
+@pytest.mark.parametrize(("value", "field"), [(3e206, "linear_acceleration"),
+                                              (-1e5, "linear_acceleration")])
+def test_a_value_beyond_its_physical_limit_is_refused(tmp_path: Path, small_log, value, field):
+    """Without a CRC nothing vouches for a chunk's bytes: a flipped exponent bit gave a 3e206
+    m/s^2 sample that the reader passed on (issue 38 item 4). Every decoded value is bounded
+    (docs/formats.md, "Physical limits")."""
+    data, _, rec_at = _plain_file(tmp_path, small_log, crcs=False)
+    k = _replace_accel(data, rec_at, small_log[0], value)
+    p = tmp_path / "huge.mcap"
+    p.write_bytes(bytes(data))
+    with pytest.raises(IngestError) as err:
+        read_flight_log(p, check_units=False)
+    e = err.value
+    assert e.file == str(p) and e.topic == "/imu/data" and e.index == k
+    assert f"{field} = " in e.reason and "outside its physical range [-2000, 2000] m/s^2" \
+        in e.reason
+
+
+def _repeated_imu_chunk(imu, n_messages: int) -> bytes:
+    """A zstd Chunk record of ``n_messages`` identical IMU Message records on channel 1 (the
+    IMU channel of pospp's writer; 360 bytes each, compressed about 1000-fold)."""
+    import zstandard
+
+    payload = rm.encode_batch(rm.IMU_FIELDS, imu.time_ns[:1], "imu_link", {
+        "angular_velocity": imu.w_ib_b_radps[:1], "linear_acceleration": imu.f_ib_b_mps2[:1]})
+    body = struct.pack("<HIQQ", 1, 0, int(imu.time_ns[0]), int(imu.time_ns[0])) + \
+        payload[0].tobytes()
+    record = struct.pack("<BQ", 0x05, len(body)) + body
+    raw = record * n_messages
+    comp = zstandard.ZstdCompressor(level=1).compress(raw)
+    t = int(imu.time_ns[-1])
+    head = struct.pack("<QQQII", t, t, len(raw), 0, 4) + b"zstd" + struct.pack("<Q", len(comp))
+    return struct.pack("<BQ", 0x06, len(head) + len(comp)) + head + comp
+
+
+def test_decoded_size_is_bounded_by_the_file_size(tmp_path: Path, small_log):
+    """Chunks of repeated messages decode to thousands of times their size: a 2 MB file
+    decoded to 4.1 GB (issue 38 item 11). Here 25 chunks of 100,000 IMU messages (a 2.2 MB
+    file, 160 MiB of samples): refused in one line when the decoded arrays would pass 64 x
+    the file's size (64 MiB at least), the memory bounded by that (the reader took 294 MiB
+    and ended on the stamps before)."""
+    data = write_flight_log(tmp_path / "src.mcap", *small_log).read_bytes()
+    first = [r for r in top_records(data) if r[1] == 0x06][0]
+    end = first[0] + 9 + first[2]
+    chunk = _repeated_imu_chunk(small_log[0], 100_000)
+    p = tmp_path / "repeated.mcap"
+    p.write_bytes(data[:end] + chunk * 25 + data[end:])
+    before = _reset_peak()
+    with pytest.raises(IngestError) as err:
+        read_flight_log(p)
+    growth = _peak_growth_mib(before)
+    assert err.value.file == str(p) and err.value.topic == "/imu/data"
+    assert "decode to more than 64 times the file's size" in err.value.reason
+    assert "decompression bomb" in err.value.reason and "\n" not in str(err.value)
+    # the arrays at the budget, their last doubling's copy and one chunk: 294 MiB before
+    assert growth < 2 * 64 + 64, f"peak resident set grew by {growth:.0f} MiB"
+
+
+def test_a_named_pipe_is_refused_not_read(tmp_path: Path, make_fifo):
+    """A FIFO named like a log blocked the reader forever (issue 38 item 12)."""
+    from pospp.io.files import NotRegularFileError, sha256_file
+
+    fifo = make_fifo(tmp_path / "pipe.mcap")
+    for read in (read_flight_log, sha256_file):
+        with pytest.raises(NotRegularFileError, match="pipe.mcap: is a named pipe"):
+            read(fifo)

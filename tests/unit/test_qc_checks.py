@@ -301,7 +301,7 @@ def test_completeness_calibration_compensation_and_config():
     bad = replace(cfg, replay=replace(cfg.replay, horizon_s=-300.0),
                   filter=replace(cfg.filter, output_rate_hz=0.0))
     problems = config_problems(bad)
-    assert "[replay] horizon_s = -300.0 must be a finite number > 0" in problems
+    assert "replay.horizon_s: expected a value >= 1, <= 86400, got -300.0" in problems
     assert any("output_rate_hz" in p for p in problems)
     assert qc.config_sanity(problems).severity == "failed"
 

@@ -39,6 +39,7 @@ def test_clean_reference_cases_pass_every_check(reference_cases, name):
     assert checks["gnss_time_offset"].value < 0.03
     assert checks["lever_arm"].value == 0.0
     assert checks["gnss_jumps"].value < 0.0
+    assert checks["gnss_coverage"].value <= 2.0  # s, GNSS at 1 Hz throughout
     # the innovations A records (FilterResult.innovations) against the simulator's GNSS noise:
     # mean NIS of chi-square(3) (measured 2.91, 2.92 over 2471 records each) and innovation
     # RMS of the injected noise (measured 0.053 / 0.055 / 0.103 m, 0.020 / 0.020 / 0.030 m/s)
@@ -68,3 +69,50 @@ def test_hidden_time_offset_is_named_with_its_size(reference_cases):
     assert "time_offset, IMU minus GNSS time, -1" in toff.suggestion
     assert "reject" in toff.suggestion  # the lever-arm reading, with its numbers
     assert checks["lever_arm"].passed, checks["lever_arm"]
+
+
+@pytest.fixture(scope="module")
+def gnss_cut(reference_cases, tmp_path_factory):
+    """flight_survey_errors with its GNSS cut from 1700 s to 1800 s after the first IMU stamp
+    (inside survey line 2, 1619-2019 s), written as MCAP; A, the calibration and the QC on it."""
+    from dataclasses import replace
+
+    from pospp.io.mcap_reader import read_flight_log
+    from pospp.io.mcap_writer import write_flight_log
+
+    name = "flight_survey_errors"
+    params = json.loads((reference_cases / f"{name}.params.json").read_text())
+    log = read_flight_log(reference_cases / f"{name}.mcap")
+    t0 = int(log.imu.time_ns[0])
+
+    def cut(obj):
+        t = (obj.time_ns - t0) * 1e-9
+        m = (t < 1700.0) | (t >= 1800.0)
+        return replace(obj, **{k: v[m] for k, v in vars(obj).items()
+                               if isinstance(v, np.ndarray) and v.shape[:1] == m.shape})
+
+    path = tmp_path_factory.mktemp("gnss_cut") / f"{name}_cut.mcap"
+    write_flight_log(path, log.imu, cut(log.fix), cut(log.vel))
+    cfg = config_from_dict({"imu": {"grade": "flight"},
+                            "gnss": {"lever_arm_m": params["gnss"]["lever_arm_m"]}})
+    log = pipeline.ingest(path, cfg)
+    nav = pipeline.navigate(log, cfg)
+    calib_run, _ = pipeline.calibrate_from_a(pipeline.imu_increments(log), nav, cfg)
+    return calib_run, pipeline.quality_control(log, nav, calib_run, cfg)
+
+
+def test_gnss_cut_inside_a_survey_line_is_named_and_the_leg_refused(gnss_cut):
+    """The coverage check and the calibration's refusal on the independent simulator's flight
+    (issue 38 item 1): the gap found where it was cut, the survey line inside it refused (and
+    so both pairs, which share it), the run not ok."""
+    calib_run, report = gnss_cut
+    check = {c.name: c for c in report.checks}["gnss_coverage"]
+    assert not check.passed and 99.0 < check.value < 102.0, check
+    line2 = [g.leg_id for g in calib_run.legs if g.start_s < 1750.0 < g.end_s]
+    assert len(line2) == 1 and set(calib_run.leg_refusals) == set(line2)
+    assert f"leg {line2[0]} in it" in check.suggestion
+    assert "no GNSS from t = 1700 s to t = 1801 s (101 s" in check.suggestion
+    for p in calib_run.pairs:
+        assert not p.used and p.reason.startswith(f"leg {line2[0]}: reference A not "
+                                                  "GNSS-aided")
+    assert report.status == "degraded" and not calib_run.calibrated

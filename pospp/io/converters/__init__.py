@@ -38,7 +38,8 @@ from pospp.io.converters._common import (
 )
 
 __all__ = ["FORMATS", "ConversionError", "ConversionReport", "MountingInput", "ParsedLog",
-           "apply_mounting", "detect_format", "parse", "write_parsed"]
+           "UnknownOptionError", "apply_mounting", "detect_format", "format_options", "parse",
+           "write_parsed"]
 
 
 def _ardupilot(src: Path, **kw: Any) -> ParsedLog:
@@ -86,6 +87,30 @@ FORMATS: dict[str, Callable[..., ParsedLog]] = {
     "navego_reference": _navego,
 }
 """Format name -> parser ``(source, **options) -> ParsedLog``."""
+_PARSER_FUNCTIONS = {
+    "ardupilot_csv": ("ardupilot", "parse_ardupilot"),
+    "comma2k19": ("comma2k19", "parse_comma2k19"),
+    "ansfl_quadrotor": ("ansfl_quadrotor", "parse_ansfl_quadrotor"),
+    "ansfl_quadrotor_raw": ("ansfl_dot_raw", "parse_ansfl_dot_raw"),
+    "kfgins_rtk": ("gnss_reference", "parse_kfgins_rtk"),
+    "navego_reference": ("gnss_reference", "parse_navego_reference"),
+}
+"""Format name -> (module of pospp.io.converters, function): where each parser's options are
+declared (its keyword parameters)."""
+
+
+class UnknownOptionError(ConversionError):
+    """An option the chosen format's parser does not take (a usage error of ``convert``)."""
+
+
+def format_options(name: str) -> tuple[str, ...]:
+    """The options (keyword parameters) the parser of format ``name`` takes."""
+    import importlib
+    import inspect
+
+    module, function = _PARSER_FUNCTIONS[name]
+    fn = getattr(importlib.import_module(f"pospp.io.converters.{module}"), function)
+    return tuple(list(inspect.signature(fn).parameters)[1:])
 
 
 def detect_format(source: str | Path) -> str:
@@ -144,4 +169,9 @@ def parse(source_dir_or_file: str | Path, *, fmt: str | None = None,
     name = fmt if fmt is not None else detect_format(src)
     if name not in FORMATS:
         raise ConversionError(f"unknown format {name!r}; known: {sorted(FORMATS)}")
+    known = format_options(name)
+    unknown = sorted(set(options) - set(known))
+    if unknown:  # a TypeError of the parser's call was an "internal error" (issue 38 item 13)
+        raise UnknownOptionError(f"format {name!r} has no option {', '.join(map(repr, unknown))}; "
+                              f"its options: {', '.join(known) or 'none'}")
     return FORMATS[name](src, **options)
