@@ -19,12 +19,19 @@ from typing import Any
 
 import numpy as np
 
-from pospp.calib.compensate import joint_calibration
+from pospp.calib.compensate import (
+    COMPENSATION_MODES,
+    ModeChoice,
+    ModeInputs,
+    compensate_legs,
+    joint_calibration,
+)
 from pospp.calib.replay import ImuSource, LegReplay, SolutionA
 from pospp.calib.solve import DriftPrior
 from pospp.calib.stage import CalibrationRun
 from pospp.config import PipelineConfig
 from pospp.diagnose import null_model
+from pospp.diagnose._candidates import leg_origins, shaped
 from pospp.diagnose.alternative import (
     LIBRARY_ALTERNATIVES,
     library_fits,
@@ -34,7 +41,8 @@ from pospp.diagnose.alternative import (
     start_removed,
     with_library,
 )
-from pospp.diagnose.effects import ACCEL_SETTLING_S, effect_by_id
+from pospp.diagnose.effects import ACCEL_SETTLING_S, effect_by_id, signature
+from pospp.diagnose.refit import Refit, refit_calibration
 from pospp.diagnose.rerun import (
     PIPELINE_RERUN,
     REFINE_FRACTION,
@@ -46,11 +54,13 @@ from pospp.diagnose.rerun import (
     signature_at,
     warmed,
 )
+from pospp.diagnose.results import EffectResponse
 from pospp.diagnose.workflow import HELDOUT_WHITENED, Diagnosis, diagnose_replays
 from pospp.flight_stages import (
     _lever_arm_and_start,
     _scale_factor_start,
     _warmup_start,
+    forward_bias_record,
     imu_tuning,
     leg_epochs_ns,
     navigate,
@@ -62,8 +72,11 @@ from pospp.flight_stages import (
 )
 from pospp.io import mcap_reader
 from pospp.nav import filter as nav_filter
+from pospp.qc.checks import Check, model_fit
+from pospp.sensor_stage import SensorFamilies, sensor_families, with_sensor_families
 from pospp.threads import Later, Threads
 from pospp.units import DEG_PER_H_RADPS
+from pospp.units import G0_MPS2 as GRAVITY_MPS2
 
 
 def rerun_base(log: mcap_reader.FlightLog | None, nav: nav_filter.FilterResult | None,
@@ -301,11 +314,35 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuSource, solution_a: 
     A's result are given (seed 0: a run is reproducible). ``threads``: A re-runs made at once
     (:func:`pospp.threads.map_in_threads`; the result does not depend on it). ``start``: the
     re-runs :func:`diagnosis_reruns` made with the same arguments; None: made here.
+
+    With the log, the sensor families (accelerometer and gyro bias changes over flight time,
+    :mod:`pospp.sensor_stage`) are then fitted on A's innovations with the named GNSS-side
+    effects removed, and named as steps before the closing row. Every named effect's response
+    on B minus A is in ``Diagnosis.responses`` (the calibration's refit,
+    :mod:`pospp.diagnose.refit`).
     """
     n_null = config.pairs.null_realisations
     if null_dv is None and n_null > 0 and log is not None and nav is not None:
         null_dv = null_realisations(log, nav, calib_run, config, n_null, threads=threads)
     replays = [calib_run.replays[i] for i in sorted(calib_run.replays)]
+    d, sigs = _diagnose_legs(calib_run, imu, solution_a, config, replays, log=log, nav=nav,
+                             null_dv=null_dv, lever_estimate=lever_estimate, threads=threads,
+                             start=start)
+    fams = (sensor_families(d, replays, log, config, threads, solution_a) if log is not None
+            else None)
+    d = with_sensor_families(d, fams)
+    return replace(d, responses=named_responses(d, replays, sigs, fams, solution_a))
+
+
+def _diagnose_legs(calib_run: CalibrationRun, imu: ImuSource, solution_a: SolutionA,
+                   config: PipelineConfig, replays: list, *,
+                   log: mcap_reader.FlightLog | None, nav: nav_filter.FilterResult | None,
+                   null_dv: list[list[np.ndarray]] | None,
+                   lever_estimate: nav_filter.LeverArmEstimate | None, threads: int,
+                   start: DiagnosisStart | None
+                   ) -> tuple[Diagnosis, dict[str, list[np.ndarray]] | None]:
+    """:func:`diagnose_calibration` on the legs (B minus A): the diagnosis and the A re-run
+    signatures it named its re-run effects with (None without the log)."""
     if start is None:
         start = diagnosis_reruns(calib_run, config, log=log, nav=nav,
                                  lever_estimate=lever_estimate, threads=threads)
@@ -351,25 +388,178 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuSource, solution_a: 
     # it removed
     alt = with_library(replays, removed, d, candidate=True) if sigs else None
     if alt is None:
-        return replace(d, null_model=note)
+        return replace(d, null_model=note), sigs
     drift = (drift_under_alternative(calib_run, alt, config)
              if null_dv and log is not None and nav is not None else None)
+    rebuilt: tuple[str, ...] = ()
     if drift is not None:
         assert null_log is not None and null_nav is not None and sigs is not None and null_dv
         null_dv = null_realisations(null_log, null_nav, calib_run, config, len(null_dv),
                                     drift=drift, threads=threads)
         d, d_base = diagnose_with(sigs, white), d
         if removed is None and not set(LIBRARY_ALTERNATIVES) & set(d.named):
-            return replace(d_base, null_model=note)  # the library effect is not borne out
-        gone = " + ".join(removed_names(d_base, sigs,
-                                        list(library_fits(d_base, candidate=True))))
-        note = null_note(null_dv, *drift, f"re-estimated with {gone} removed",
+            return replace(d_base, null_model=note), sigs  # the library effect: not borne out
+        rebuilt = tuple(removed_names(d_base, sigs, list(library_fits(d_base, candidate=True))))
+        note = null_note(null_dv, *drift, f"re-estimated with {' + '.join(rebuilt)} removed",
                          base=null_drift(calib_run, config)) + warm_note
         removed = named_removed(replays, d, sigs)
     removed = with_library(replays, removed, d, candidate=False)  # whitened under it too
     if removed is None:
-        return replace(d, null_model=note)
+        return replace(d, null_model=note, null_rebuilt_with=rebuilt), sigs
     # the whitening under the model named: a pass whose whitening drops an effect it was
     # estimated under is not self-consistent, and the first stands (measured: a 3 m lever arm)
     d2 = diagnose_with(sigs, removed)
-    return replace(d2 if set(d.named) <= set(d2.named) else d, null_model=note)
+    return replace(d2 if set(d.named) <= set(d2.named) else d, null_model=note,
+                   null_rebuilt_with=rebuilt), sigs
+
+
+def named_responses(d: Diagnosis, replays: list, sigs: dict[str, list[np.ndarray]] | None,
+                    fams: SensorFamilies | None, solution_a: SolutionA | None = None
+                    ) -> tuple[EffectResponse, ...]:
+    """What each effect ``d`` named does to B minus A (legs in id order): a sensor family's
+    along B per hinge coefficient (:func:`pospp.sensor_stage.family_response`), a re-run
+    effect's A re-run signature (``sigs``), a library effect's signature along B; the
+    estimate and its covariance (the legs' effects: their sigmas, independent). An effect
+    whose signature cannot be made here is left out (the refit then says which it used)."""
+    out = []
+    origins, extent = leg_origins(replays, solution_a)
+    for e in d.named:
+        if fams is not None and e in fams.responses:
+            out.append(fams.responses[e])
+            continue
+        step = d.step_of(e)
+        eff = shaped(effect_by_id(e), step.shape)
+        p = np.asarray(step.values, dtype=float) * eff.si_per_unit
+        try:
+            cols = sigs[e] if sigs and e in sigs else [
+                signature(e, r, shape=step.shape or None,
+                          origin_n_m=None if origins is None else origins[k], extent_m=extent)
+                for k, r in enumerate(replays)]
+        except ValueError:  # a signature that needs what is not here (the Earth-rate's)
+            continue
+        if any(np.shape(c)[2] != p.size for c in cols):
+            continue
+        out.append(EffectResponse(e, tuple(np.asarray(c, float) for c in cols), p,
+                                  np.diag((np.asarray(step.sigmas, dtype=float)
+                                           * eff.si_per_unit) ** 2)))
+    return tuple(out)
+
+
+def refit_stage(calib_run: CalibrationRun, diagnosis: Diagnosis | None, imu: ImuSource,
+                solution_a: SolutionA, config: PipelineConfig, threads: Threads = 1,
+                nav: nav_filter.FilterResult | None = None) -> Refit | None:
+    """The calibration refitted with the effects the diagnosis named
+    (:func:`pospp.diagnose.refit.refit_calibration`) and B re-run with it on every leg (the
+    compensation's replays and improvements, as the calibration stage makes them, in
+    ``[compensation] mode`` with the refit's fit; the modes reading A's forward bias
+    estimates need ``nav``, else the refit's constant): what the run compensates with when an
+    effect outside the calibration's model was named. None when nothing was named or the
+    refit fails."""
+    if diagnosis is None or not diagnosis.responses or not calib_run.calibrated:
+        return None
+    refit = refit_calibration(calib_run, diagnosis.responses)
+    if refit is None or refit.run.chosen is None:
+        return None
+    rc = config.replay
+    replays = dict(calib_run.replays)
+    mode = ModeChoice({}, "constant")
+    if nav is not None and calib_run.compensation_source != "constant":
+        tuning = imu_tuning(config)
+        gm = bool(np.isfinite(tuning.gyro_gm_tau_s) and tuning.gyro_gm_sigma_dph > 0)
+        name = str(config.compensation.mode)
+        mode = COMPENSATION_MODES[name if gm or name != "per_leg" else "constant"](ModeInputs(
+            imu, solution_a, replays, refit.run.chosen, refit.sigma_b_radps, rc.options(),
+            forward_bias_record(nav, tuning), threads=threads))
+    after, improvements = compensate_legs(
+        imu, solution_a, replays, refit.run.chosen,
+        accel_compensation=rc.accel_compensation, horizon_s=rc.horizon_s,
+        transition_step=int(rc.transition_step), sample_rate_hz=rc.sample_rate_hz,
+        sigma_floor_mps=rc.sigma_floor_mps, threads=threads, **mode.kwargs)
+    return replace(refit, run=replace(refit.run, replays_after=after, improvements=improvements,
+                                      compensation_source=mode.source))
+
+
+def _bias_text(b_radps: np.ndarray, sigma_radps: np.ndarray | None = None) -> str:
+    """'(0.391 +- 0.023, -0.299 +- 0.017) deg/h' of the x and y body gyro bias."""
+    b = np.asarray(b_radps)[:2] / DEG_PER_H_RADPS
+    if sigma_radps is None:
+        return "(" + ", ".join(f"{v:+.3g}" for v in b) + ") deg/h"
+    s = np.asarray(sigma_radps)[:2] / DEG_PER_H_RADPS
+    return "(" + ", ".join(f"{v:.3g} +- {e:.2g}" for v, e in zip(b, s, strict=True)) + ") deg/h"
+
+
+def refit_shift_sigmas(refit: Refit) -> float:
+    """The refit's largest change of the horizontal gyro bias, in the calibration's sigmas
+    (an axis of infinite sigma counts 0)."""
+    r = np.abs(refit.change_b_radps[:2]) / refit.base_sigma_b_radps[:2]
+    return float(np.max(np.where(np.isfinite(r), r, 0.0)))
+
+
+def model_fit_check(diagnosis: Diagnosis, refit: Refit | None, calib_run: CalibrationRun,
+                    config: PipelineConfig) -> Check:
+    """The QC check ``model_fit`` of a diagnosed run (:func:`pospp.qc.checks.model_fit`): the
+    effects named outside the calibration's model with the refit's change of the gyro bias,
+    and the unexplained gap with the gyro bias it could stand for."""
+    named = [s for s in diagnosis.steps if s.effect in diagnosis.named]
+    texts = []
+    for s in named:
+        shape = f"{s.shape}, " if s.shape else ""
+        texts.append(f"{s.effect} ({shape}{s.value:.3g} +- {s.sigma:.2g} "
+                     f"{s.unit.replace('_per_', '/')}) is not in the calibration's model")
+    if refit is not None:
+        texts.append(f"refitted with {', '.join(refit.effects)} removed, the gyro bias moves by "
+                     f"{_bias_text(refit.change_b_radps)} "
+                     f"({refit_shift_sigmas(refit):.2g} sigma) from "
+                     f"{_bias_text(refit.base_bias_b_radps, refit.base_sigma_b_radps)} to "
+                     f"{_bias_text(refit.bias_b_radps, refit.sigma_b_radps)}, which the "
+                     "compensation uses")
+    last = diagnosis.steps[-1]
+    sigma = calib_run.gyro_bias_sigma_b_radps[:2]
+    sigma_max = float(np.max(sigma)) if np.all(np.isfinite(sigma)) else float("inf")
+    t = last.horizon_s
+    bound = (2.0 * last.gap_horizon_mps / (GRAVITY_MPS2 * t**2)
+             if last.effect == "unexplained" and t > 0 else float("nan"))
+    gap_text = (f"an unexplained gap (p = {last.p_value:.2g}) worth "
+                f"{1e3 * last.gap_horizon_mps:.3g} mm/s at the {t:.0f} s horizon: the calibrated "
+                f"gyro bias may be biased by up to {bound / DEG_PER_H_RADPS:.2g} deg/h (the bias "
+                f"that would make it), {bound / sigma_max:.2g} times its 1-sigma")
+    shift = float("nan") if refit is None else refit_shift_sigmas(refit)
+    return model_fit([s.effect for s in named], shift,
+                     last.p_value if last.effect == "unexplained" else float("nan"),
+                     diagnosis.alpha, bound, sigma_max, texts, gap_text)
+
+
+@dataclass(frozen=True)
+class RefitOutcome:
+    """What the run takes from the refit (:func:`refit_and_check`)."""
+
+    refit: Refit | None
+    solutions: dict[str, Any]
+    """``{"compensated": A re-run with the refit's gyro bias}`` when it was made, else {}."""
+    checks: tuple[Check, ...]
+    """``(model_fit,)`` when a diagnosis ran, else ()."""
+
+    def tables(self, epoch_ns: int) -> dict[str, Any]:
+        """The refit's ``leg_errors`` table (B after the compensation with it), or {}."""
+        if self.refit is None:
+            return {}
+        return {"leg_errors": self.refit.run.tables(epoch_ns)["leg_errors"]}
+
+
+def refit_and_check(log: mcap_reader.FlightLog, calib_run: CalibrationRun,
+                    diagnosis: Diagnosis | None, imu: ImuSource, solution_a: SolutionA,
+                    config: PipelineConfig, threads: Threads = 1, *, compensate: bool = True,
+                    nav: nav_filter.FilterResult | None = None) -> RefitOutcome:
+    """The run's refit stage after its diagnosis: the calibration refitted with the named
+    effects (:func:`refit_stage`), A re-run with the refit's gyro bias removed when
+    ``compensate`` (the compensated solution then uses the refit), and the ``model_fit``
+    check (:func:`model_fit_check`); ``nav``: A's result, for the legs' compensation in the
+    configured mode (:func:`refit_stage`)."""
+    if diagnosis is None:
+        return RefitOutcome(None, {}, ())
+    refit = refit_stage(calib_run, diagnosis, imu, solution_a, config, threads, nav)
+    sols: dict[str, Any] = {}
+    if refit is not None and compensate:
+        comp = navigate(log, config, gyro_bias_correction_b_radps=refit.bias_b_radps)
+        sols["compensated"] = comp.smoothed if comp.smoothed is not None else comp.forward
+    return RefitOutcome(refit, sols, (model_fit_check(diagnosis, refit, calib_run, config),))

@@ -23,11 +23,14 @@ Scale factors    measured = (1 + s) true.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 from pospp.units import ARCSEC_RAD, DEG_PER_H_RADPS, G0_MPS2, UG_MPS2
 
-__all__ = ["CatalogEffect", "CATALOG", "catalog_entry"]
+__all__ = ["CatalogEffect", "CATALOG", "catalog_entry", "CatalogShape", "SHAPES", "shape_entry",
+           "shape_unit", "row_named"]
 
 _XYZ = ("x", "y", "z")
 
@@ -52,6 +55,9 @@ class CatalogEffect:
     plausible_si : float
         A large but plausible size for a navigation- or survey-grade POS (SI of the first
         parameter's unit).
+    shapes : tuple of str
+        A family's shapes (:data:`SHAPES`), the one its parameters and unit describe first;
+        empty for an effect of one form.
     """
 
     name: str
@@ -60,6 +66,7 @@ class CatalogEffect:
     unit: str
     si_per_unit: float | tuple[float, ...]
     plausible_si: float
+    shapes: tuple[str, ...] = ()
 
 
 CATALOG: tuple[CatalogEffect, ...] = (
@@ -83,19 +90,26 @@ CATALOG: tuple[CatalogEffect, ...] = (
     CatalogEffect("vertical_gyro_drift", "vertical (body z) gyro drift", ("gyro_bias_z",),
                   "deg_per_h", DEG_PER_H_RADPS, 0.5 * DEG_PER_H_RADPS),
     CatalogEffect("accel_bias_change",
-                  "horizontal accelerometer bias settling in-run (warm-up step)",
+                  "horizontal accelerometer bias changing in-run (warm-up settling, step, "
+                  "ramp, random walk)",
                   ("accel_bias_change_x", "accel_bias_change_y"), "ug", UG_MPS2,
-                  100.0 * UG_MPS2),
+                  100.0 * UG_MPS2, ("settling", "step", "ramp", "walk")),
+    CatalogEffect("gyro_bias_change",
+                  "horizontal gyro bias changing in-run beyond the drift model (step, ramp, "
+                  "settling, random walk)",
+                  ("gyro_bias_change_x", "gyro_bias_change_y"), "deg_per_h", DEG_PER_H_RADPS,
+                  0.05 * DEG_PER_H_RADPS, ("step", "ramp", "settling", "walk")),
     CatalogEffect("gyro_scale_factor", "gyro scale-factor error",
                   tuple(f"gyro_sf_{a}" for a in _XYZ), "ppm", 1e-6, 1000e-6),
     CatalogEffect("earth_rate_coupling",
                   "Earth-rate (Foucault) coupling dropped by the closed form",
                   ("earth_rate_fraction",), "fraction", 1.0, 1.0),
     CatalogEffect("gravity_disturbance",
-                  "gravity disturbance (deflection of the vertical) gradient",
+                  "gravity disturbance (deflection of the vertical) over position: its "
+                  "gradient, or a smooth field along the track",
                   ("gravity_gradient_nn", "gravity_gradient_ne", "gravity_gradient_ee"),
                   "arcsec_per_km", G0_MPS2 * ARCSEC_RAD / 1000.0,
-                  1.0 * G0_MPS2 * ARCSEC_RAD / 1000.0),
+                  1.0 * G0_MPS2 * ARCSEC_RAD / 1000.0, ("gradient", "field", "deflection")),
     # the measured-versus-simulated comparison
     CatalogEffect("vibration", "IMU vibration (sinusoidal), RMS per axis",
                   ("accel_vibration_rms", "gyro_vibration_rms"), "m_per_s2 | deg_per_s",
@@ -119,9 +133,76 @@ CATALOG: tuple[CatalogEffect, ...] = (
 """Every effect name of both libraries, once."""
 
 
+@dataclass(frozen=True)
+class CatalogShape:
+    """One shape an effect family takes (the ``shape`` column of diagnosis.parquet).
+
+    Attributes
+    ----------
+    name : str
+    description : str
+    per_hour : bool
+        Its parameters are rates: the family's unit per hour (``ug_per_h``).
+    unit : str
+        Its own display unit when not the family's (empty: the family's), with
+        ``si_per_unit`` the SI value of one and ``plausible_si`` a large but plausible size of
+        each of its parameters (SI; the observability screen's).
+    """
+
+    name: str
+    description: str
+    per_hour: bool = False
+    unit: str = ""
+    si_per_unit: float = 1.0
+    plausible_si: float = float("nan")
+
+
+SHAPES: tuple[CatalogShape, ...] = (
+    # sensor-bias changes over flight time (pospp.diagnose.shapes)
+    CatalogShape("settling", "first-order settling b_inf + db exp(-t / T), T fitted on a grid"),
+    CatalogShape("step", "a step between two knots of the flight time"),
+    CatalogShape("ramp", "a linear change over the flight (rate)", per_hour=True),
+    CatalogShape("walk", "a random walk: a free value at every knot, linear between"),
+    # the gravity disturbance over position (pospp.diagnose.effects)
+    CatalogShape("gradient", "a constant horizontal gradient of the deflection"),
+    CatalogShape("field", "a smooth field along the track: the disturbing potential a "
+                 "polynomial of degree 2-4 over the flown area; parameters: the deflection each "
+                 "term makes at the area's edge, size their norm", unit="arcsec",
+                 si_per_unit=G0_MPS2 * ARCSEC_RAD, plausible_si=3.0 * G0_MPS2 * ARCSEC_RAD),
+    CatalogShape("deflection", "a constant deflection of the vertical (absorbed like a "
+                 "constant accelerometer bias: not observable on legs)", unit="arcsec",
+                 si_per_unit=G0_MPS2 * ARCSEC_RAD, plausible_si=10.0 * G0_MPS2 * ARCSEC_RAD),
+)
+"""Every shape name a family's row may carry, once."""
+
+
+def row_named(rows: Sequence[Any], key: str, name: str, what: str) -> Any:
+    """The row of a registry whose attribute ``key`` is ``name`` (ValueError saying ``what``
+    and naming the known ones otherwise)."""
+    for r in rows:
+        if getattr(r, key) == name:
+            return r
+    raise ValueError(f"{what}: expected one of {tuple(getattr(r, key) for r in rows)}, "
+                     f"got {name!r}")
+
+
+def shape_entry(name: str) -> CatalogShape:
+    """The shape of a name (ValueError naming the known ones otherwise)."""
+    return row_named(SHAPES, "name", name, "shape")
+
+
+def shape_unit(effect: str, shape: str) -> tuple[str, float]:
+    """(display unit, SI per unit) of a family's parameters in one of its shapes (the rate
+    of a ``ramp`` per hour of the family's unit; a shape with its own unit, that one)."""
+    e, s = catalog_entry(effect), shape_entry(shape)
+    if shape not in e.shapes:
+        raise ValueError(f"{effect}: expected a shape of {e.shapes}, got {shape!r}")
+    if s.unit:
+        return s.unit, s.si_per_unit
+    si = e.si_per_unit if isinstance(e.si_per_unit, float) else e.si_per_unit[0]
+    return (e.unit + "_per_h" if s.per_hour else e.unit), si
+
+
 def catalog_entry(name: str) -> CatalogEffect:
     """The catalogue entry of a name (ValueError naming the known ones otherwise)."""
-    for e in CATALOG:
-        if e.name == name:
-            return e
-    raise ValueError(f"effect: expected one of {tuple(e.name for e in CATALOG)}, got {name!r}")
+    return row_named(CATALOG, "name", name, "effect")

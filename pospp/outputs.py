@@ -95,6 +95,27 @@ def bias_table(histories: Mapping[str, BiasHistory | None], epoch_ns: int, *, ra
     return pd.concat(blocks, ignore_index=True)
 
 
+def event_poses_table(events_ns: ArrayLike, solution: Any, name: str, epoch_ns: int,
+                      sensor: Any, note: Any) -> pd.DataFrame:
+    """events.parquet: the ``[sensor]``'s pose (its lever arm and boresight, config section
+    ``sensor``) at every trigger event ``events_ns`` on a solution (:class:`pospp.nav.filter.
+    NavSolution` ``name``, run epoch ``epoch_ns``) (pospp.nav.events); ``note(text)`` says how
+    many events fall outside the solution's time span."""
+    from pospp import rotation
+    from pospp.nav import events as sensor_events
+    from pospp.units import t_s_from_time_ns
+
+    poses = sensor_events.sensor_poses(
+        solution, t_s_from_time_ns(np.asarray(events_ns), epoch_ns),
+        lever_b_m=sensor.lever_arm_m,
+        c_bs=rotation.dcm_from_euler(np.radians(sensor.boresight_rpy_deg)))
+    n_out = int(np.count_nonzero(~poses.inside))
+    if n_out:
+        note(f"{n_out} of {len(poses)} trigger event(s) outside the solution's time span: NaN "
+             "in events.parquet")
+    return events_table(poses, events_ns, name)
+
+
 def events_table(poses: SensorPoses, events_ns: ArrayLike, solution: str) -> pd.DataFrame:
     """events.parquet: the sensor's pose at every trigger event.
 
@@ -281,6 +302,27 @@ def velocity_gap_rms_mps(dv_n_mps: Iterable[ArrayLike]) -> float:
     parts = [np.asarray(d, dtype=float)[1:, :2].ravel() for d in dv_n_mps]
     a = np.concatenate(parts) if parts else np.zeros(0)
     return float(np.sqrt(np.mean(a**2))) if a.size else float("nan")
+
+
+def refit_summary(refit: Any) -> dict[str, Any]:
+    """Summary columns of the calibration's refit with the named effects
+    (:class:`pospp.diagnose.refit.Refit`, or None: no columns): the effects removed, the
+    refit's body gyro bias and 1-sigma [deg/h] (NaN: not estimated), and B's error at the
+    horizon after the compensation, which uses the refit (``dv_after_mps``,
+    ``dp_after_m``: replacing the calibration's)."""
+    if refit is None:
+        return {}
+    out: dict[str, Any] = {"refit_effects": ";".join(refit.effects)}
+    for i, ax in enumerate("xyz"):
+        sig = float(refit.sigma_b_radps[i])
+        known = bool(np.isfinite(sig))
+        out[f"gyro_bias_{ax}_refit_dph"] = (float(refit.bias_b_radps[i]) / DEG_PER_H_RADPS
+                                            if known else float("nan"))
+        out[f"gyro_bias_{ax}_refit_sigma_dph"] = sig / DEG_PER_H_RADPS if known else \
+            float("nan")
+    s = refit.run.summary()
+    out.update({k: s[k] for k in ("dv_after_mps", "dp_after_m")})
+    return out
 
 
 def diagnosis_summary(steps: Any) -> dict[str, float]:

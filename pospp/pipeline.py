@@ -34,12 +34,12 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from pospp import outputs, rotation
+from pospp import outputs
 from pospp.calib.observability import observability_table
 from pospp.calib.stage import CalibrationRun, with_null_covariance
 from pospp.config import PipelineConfig, config_from_dict
 from pospp.diagnose.workflow import Diagnosis, diagnosis_columns, residual_curve_columns
-from pospp.diagnosis_stage import diagnose_calibration
+from pospp.diagnosis_stage import diagnose_calibration, refit_and_check
 from pospp.evaluate import evaluation_rows, solution_errors
 from pospp.flight_stages import (  # the stage functions, importable from here as before
     calibrate_from_a,
@@ -61,7 +61,6 @@ from pospp.io.files import require_regular, sha256_file
 from pospp.io.run_lock import locked
 from pospp.lever_time_stage import lever_time_estimate, qc_passes  # noqa: F401 (compare_sim)
 from pospp.memory import release_free_heap, share_one_heap
-from pospp.nav import events as sensor_events
 from pospp.nav import filter as nav_filter
 from pospp.passes_ahead import (
     checks_ahead,
@@ -70,12 +69,11 @@ from pospp.passes_ahead import (
     passes_on_a,
     passes_on_log,
 )
-from pospp.qc.checks import comparison_text
+from pospp.qc.checks import Check, comparison_text
 from pospp.qc.stage import QualityReport, qc_columns, quality_checks, worst_status
 from pospp.report import figures
 from pospp.report.html import render_report
 from pospp.threads import Later, available_cores
-from pospp.units import t_s_from_time_ns
 
 ProgressFn = Callable[[str, float], None]
 """Progress callback: (stage name, fraction of the whole run done in [0, 1])."""
@@ -362,14 +360,6 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
         comp = ahead.compensated.take()
         solutions["compensated"] = comp.smoothed if comp.smoothed is not None else comp.forward
         del comp  # the rest of the second A pass (forward, biases, innovations) is not used
-    # the trajectory MCAP's messages on the lane while the run diagnoses (one thread: in the
-    # write stage); its metadata record, with the run's status, is written there
-    calib_tables = calib_run.tables(epoch_ns)
-    best_name = next(k for k in ("compensated", "smoothed", "forward") if k in solutions)
-    mcap = Later(lane, trajectory_mcap.trajectory_messages, solutions[best_name], epoch_ns,
-                 rate_hz=config.outputs.mcap_rate_hz, legs=calib_tables.get("legs")
-                 ) if config.outputs.mcap else None
-
     # --- diagnosis -----------------------------------------------------------------------------
     book.stage("diagnose")
     # A's lever-arm estimate, made once: the diagnosis starts from it and QC checks it
@@ -387,10 +377,23 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
             book.note("warning", "diagnose", f"no diagnosis: {exc}")
             status = "partial"
 
+    # --- refit with the named effects (the compensation uses it) and the model_fit check ------
+    fit = refit_and_check(log, calib_run, diagnosis, imu, solution_a, config, threads,
+                          compensate="compensated" in solutions, nav=nav)
+    solutions.update(fit.solutions)
+    # the trajectory MCAP's messages on the lane while the QC stage runs (one thread: in the
+    # write stage); its metadata record, with the run's status, is written there
+    calib_tables = {**calib_run.tables(epoch_ns), **fit.tables(epoch_ns)}
+    best_name = next(k for k in ("compensated", "smoothed", "forward") if k in solutions)
+    mcap = Later(lane, trajectory_mcap.trajectory_messages, solutions[best_name], epoch_ns,
+                 rate_hz=config.outputs.mcap_rate_hz, legs=calib_tables.get("legs")
+                 ) if config.outputs.mcap else None
+
     # --- quality checks: the run is ok only when every check passes (docs/qc.md) -------------
     book.stage("qc")
     report = quality_control(log, nav, calib_run, config, book, lever=lever,
-                             checks=ahead.checks.take() if ahead.checks is not None else None)
+                             checks=ahead.checks.take() if ahead.checks is not None else None,
+                             also=fit.checks)
     status = worst_status(status, report.status)
 
     # --- outputs -------------------------------------------------------------------------------
@@ -406,11 +409,14 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
         tables["diagnosis"] = diagnosis_columns(diagnosis)
         tables["diagnosis_curves"] = residual_curve_columns(diagnosis)
     if len(log.events_ns):
-        tables["events"] = _event_poses(log, solutions[best_name], best_name, config, book)
+        tables["events"] = outputs.event_poses_table(
+            log.events_ns, solutions[best_name], best_name, int(log.imu.time_ns[0]),
+            config.sensor, lambda text: book.note("warning", "write", text))
     for name, table in tables.items():
         write(name, table)
     c_bs = sensor_to_body_dcm(config.input.sensor_frame, config.input.mounting_rpy_deg)
     summary.update(outputs.with_sensor_axes(calib_run.summary(), c_bs))
+    summary.update(outputs.refit_summary(fit.refit))
     summary.update(outputs.diagnosis_summary(diagnosis.steps if diagnosis is not None else None))
     summary["calibration_reason"] = calib_run.reason
     if mcap is not None:
@@ -424,26 +430,12 @@ def _stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
     return finish(status, report=config.outputs.report)
 
 
-def _event_poses(log: mcap_reader.FlightLog, solution: nav_filter.NavSolution, name: str,
-                 config: PipelineConfig, book: _Progress) -> pd.DataFrame:
-    """events.parquet: the [sensor]'s pose at every trigger event (pospp.nav.events)."""
-    epoch_ns = int(log.imu.time_ns[0])
-    sc = config.sensor
-    poses = sensor_events.sensor_poses(
-        solution, t_s_from_time_ns(log.events_ns, epoch_ns), lever_b_m=sc.lever_arm_m,
-        c_bs=rotation.dcm_from_euler(np.radians(sc.boresight_rpy_deg)))
-    n_out = int(np.count_nonzero(~poses.inside))
-    if n_out:
-        book.note("warning", "write", f"{n_out} of {len(poses)} trigger event(s) outside the "
-                  "solution's time span: NaN in events.parquet")
-    return outputs.events_table(poses, log.events_ns, name)
-
-
 def quality_control(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                     calib_run: CalibrationRun | None, config: PipelineConfig,
                     book: _Progress | None = None, *,
                     lever: tuple[nav_filter.LeverArmEstimate | None, str | None] | None = None,
-                    checks: QualityReport | None = None) -> QualityReport:
+                    checks: QualityReport | None = None,
+                    also: tuple[Check, ...] = ()) -> QualityReport:
     """The QC stage (pospp.qc): every check, with the lever arm re-estimated by A.
 
     Unless A already estimated it, the lever arm is estimated by one more forward pass of A
@@ -451,7 +443,7 @@ def quality_control(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     checks are noted in ``book`` (stage "qc"). ``lever``: that estimate and why it failed, when
     already made (:func:`pospp.passes_ahead.lever_re_estimate`); None: made here.
     ``checks``: the checks already made with that estimate
-    (:func:`pospp.passes_ahead.checks_ahead`); None: made here.
+    (:func:`pospp.passes_ahead.checks_ahead`); None: made here. ``also``: later stages'.
     """
     estimate, failure = (lever_re_estimate(log, lever_arm_seen(nav), config) if lever is None
                          else lever)
@@ -462,6 +454,7 @@ def quality_control(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
         log, nav, calib_run, config, lever_estimate=estimate,
         c_bs=sensor_to_body_dcm(cin.sensor_frame, cin.mounting_rpy_deg),
         **qc_passes(log, nav, config, estimate))
+    report = replace(report, checks=report.checks + tuple(also))
     if book is not None:
         for c in report.failed:
             book.note("error" if c.severity == "failed" else "warning", "qc",

@@ -50,9 +50,12 @@ def library_fits(d: Diagnosis, *, candidate: bool) -> dict[str, np.ndarray]:
                  and (c.explained_fraction >= LIBRARY_ALT_EXPLAINED
                       or (eid in SIGNIFICANT_ALTERNATIVES and c.significant
                           and not c.explained_fraction > 0.0))]
-        if eid in d.named:
+        # the effect's own shape only (the gravity gradient's, not the field's: its
+        # signature along B needs the legs' positions, which this removal does not have)
+        own = effect_by_id(eid).shapes[0]
+        if eid in d.named and d.step_of(eid).shape in ("", own):
             fits[eid] = np.asarray(d.step_of(eid).values, dtype=float)
-        elif candidate and first:
+        elif candidate and first and first[0].shape in ("", own):
             fits[eid] = np.asarray(first[0].values, dtype=float)
     return fits
 

@@ -72,7 +72,7 @@ Effects (stable identifiers)
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -87,7 +87,7 @@ from pospp.calib.replay import (
     SolutionA,
     replay_velocity_error,
 )
-from pospp.effects_catalog import catalog_entry
+from pospp.effects_catalog import catalog_entry, row_named
 from pospp.nav.error_model import BG, DR, DV, PHI
 from pospp.threads import map_in_threads
 from pospp.units import ARCSEC_RAD, UG_MPS2  # noqa: F401  (display units, used as fx.*)
@@ -96,68 +96,6 @@ from pospp.units import G0_MPS2 as GRAVITY_MPS2  # noqa: F401
 
 ACCEL_SETTLING_S = 1200.0
 """Default time constant of the accelerometer-bias warm-up of ``accel_bias_change`` [s]."""
-
-
-@dataclass(frozen=True)
-class Effect:
-    """A candidate effect of the library.
-
-    Attributes
-    ----------
-    effect_id : str
-        Stable identifier (the ``effect`` column of diagnosis.parquet).
-    description : str
-        Physical name.
-    parameters : tuple of str
-        Parameter names (frames in the name: ``_x`` body FRD, ``_n`` / ``_e`` NED).
-    unit : str
-        Display unit of the parameters (diagnosis.parquet ``unit``).
-    si_per_unit : float
-        SI value of one display unit.
-    plausible_si : float
-        A large but plausible size (SI) for a navigation-grade POS: the observability screen
-        drops parameter directions in which an effect of this size would stand less than 2
-        noise sigmas above the current model (these legs cannot reveal it).
-    needs_imu : bool
-        True when the signature re-runs B (needs the IMU increments and A's solution).
-    """
-
-    effect_id: str
-    description: str
-    parameters: tuple[str, ...]
-    unit: str
-    si_per_unit: float
-    plausible_si: float
-    needs_imu: bool = False
-
-
-def _catalogued(effect_id: str, needs_imu: bool = False) -> Effect:
-    """The library entry with the name, parameters, unit, SI conversion and plausible size of
-    the catalogue both workflows share (:mod:`pospp.effects_catalog`)."""
-    c = catalog_entry(effect_id)
-    if isinstance(c.si_per_unit, tuple):
-        raise ValueError(f"{effect_id}: a diagnosis effect has one display unit")
-    return Effect(c.name, c.description, c.parameters, c.unit, c.si_per_unit, c.plausible_si,
-                  needs_imu)
-
-
-LIBRARY: tuple[Effect, ...] = (
-    _catalogued("body_fixed_gyro_bias"), _catalogued("vertical_gyro_drift"),
-    _catalogued("accel_bias_change"), _catalogued("gyro_scale_factor", needs_imu=True),
-    _catalogued("time_offset", needs_imu=True), _catalogued("lever_arm"),
-    _catalogued("earth_rate_coupling"), _catalogued("gravity_disturbance"),
-)
-"""The candidate effects, in the order they are tested."""
-
-EFFECT_IDS: tuple[str, ...] = tuple(e.effect_id for e in LIBRARY)
-
-
-def effect_by_id(effect_id: str) -> Effect:
-    """The library entry of an identifier (ValueError naming the known ones otherwise)."""
-    for e in LIBRARY:
-        if e.effect_id == effect_id:
-            return e
-    raise ValueError(f"effect: expected one of {EFFECT_IDS}, got {effect_id!r}")
 
 
 @dataclass(frozen=True)
@@ -179,6 +117,90 @@ class ReplayContext:
     imu: ImuSource
     solution_a: SolutionA
     replay_kwargs: dict = dataclasses.field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class SignatureInputs:
+    """What a signature may need besides its leg (SI; every field optional).
+
+    Attributes
+    ----------
+    context : ReplayContext or None
+        For the signatures that re-run B (``time_offset``; ``gyro_scale_factor`` exact).
+    base_x_leg : ndarray (6,) or None
+        The leg's current base estimates [phi_N, phi_E, phi_D, b_x, b_y, b_z] (Earth-rate).
+    accel_settling_s : float
+        The warm-up's time constant [s].
+    origin_n_m : ndarray (2,) or None
+        The leg's start, north and east of the flight's reference point [m] (a field over
+        position: ``gravity_disturbance`` shape ``field``).
+    extent_m : float
+        The half-size of the flown area about that point [m] (the field's length scale).
+    """
+
+    context: ReplayContext | None = None
+    base_x_leg: NDArray | None = None
+    accel_settling_s: float = ACCEL_SETTLING_S
+    origin_n_m: NDArray | None = None
+    extent_m: float = float("nan")
+
+
+Signature = Callable[[LegReplay, SignatureInputs], NDArray]
+"""A signature function: (leg, inputs) -> d dv_h / d p (M, 2, P), SI."""
+
+
+@dataclass(frozen=True)
+class Effect:
+    """A candidate effect of the library: a row with its behaviour.
+
+    Attributes
+    ----------
+    effect_id : str
+        Stable identifier (the ``effect`` column of diagnosis.parquet).
+    description : str
+        Physical name.
+    parameters : tuple of str
+        Parameter names (frames in the name: ``_x`` body FRD, ``_n`` / ``_e`` NED).
+    unit : str
+        Display unit of the parameters (diagnosis.parquet ``unit``).
+    si_per_unit : float
+        SI value of one display unit.
+    plausible_si : float
+        A large but plausible size (SI) for a navigation-grade POS: the observability screen
+        drops parameter directions in which an effect of this size would stand less than 2
+        noise sigmas above the current model (these legs cannot reveal it).
+    needs_imu : bool
+        True when the signature re-runs B (needs the IMU increments and A's solution).
+    signatures : tuple of (str, Signature)
+        Per shape the legs test (the catalogue's :data:`pospp.effects_catalog.SHAPES`; ""
+        for an effect of one form) its signature; the first is the effect's own (its
+        parameters and unit).
+    """
+
+    effect_id: str
+    description: str
+    parameters: tuple[str, ...]
+    unit: str
+    si_per_unit: float
+    plausible_si: float
+    needs_imu: bool = False
+    signatures: tuple[tuple[str, Signature], ...] = ()
+
+    @property
+    def shapes(self) -> tuple[str, ...]:
+        """The shapes the legs test ("" for one form)."""
+        return tuple(s for s, _ in self.signatures)
+
+
+def _catalogued(effect_id: str, signatures: dict[str, Signature],
+                needs_imu: bool = False) -> Effect:
+    """The library entry with the name, parameters, unit, SI conversion and plausible size of
+    the catalogue both workflows share (:mod:`pospp.effects_catalog`) and its signatures."""
+    c = catalog_entry(effect_id)
+    if isinstance(c.si_per_unit, tuple):
+        raise ValueError(f"{effect_id}: a diagnosis effect has one display unit")
+    return Effect(c.name, c.description, c.parameters, c.unit, c.si_per_unit, c.plausible_si,
+                  needs_imu, tuple(signatures.items()))
 
 
 # --------------------------------------------------------------------------------------------
@@ -275,6 +297,39 @@ def _sig_gravity(rep: LegReplay) -> NDArray:
     return forced_response(rep, g)
 
 
+FIELD_DEGREES = (2, 3, 4)
+"""Degrees of the disturbing potential's monomials in the ``field`` shape (2: the gradient)."""
+
+
+def field_monomials() -> list[tuple[int, int]]:
+    """(i, j) of the monomials ``u^i w^j`` of the field's potential, degree by degree."""
+    return [(d - j, j) for d in FIELD_DEGREES for j in range(d + 1)]
+
+
+def field_gradient(u: NDArray, w: NDArray) -> NDArray:
+    """d/du and d/dw of every monomial of :func:`field_monomials` at (u, w) (N,): (N, 2, P)."""
+    out = []
+    for i, j in field_monomials():
+        du = i * u ** max(i - 1, 0) * w**j if i else np.zeros_like(u)
+        dw = j * u**i * w ** max(j - 1, 0) if j else np.zeros_like(u)
+        out.append(np.stack([du, dw], axis=1))
+    return np.stack(out, axis=2)
+
+
+def _sig_gravity_field(rep: LegReplay, origin_n_m: NDArray, extent_m: float) -> NDArray:
+    """A smooth deflection field over position: the disturbing potential a polynomial of
+    degree 2-4 (:data:`FIELD_DEGREES`) in u = N / L, w = E / L (L = ``extent_m``, north and
+    east of the flight's reference point), ``dg_h(r) = sum_k c_k grad_u P_k(u, w)``, c_k
+    [m/s^2] g0 times the deflection each monomial makes at the area's edge; B (normal
+    gravity) errs by ``dv' = -(dg_h(r(t)) - dg_h(r0))`` (the leg start's value absorbed like a
+    constant accelerometer bias), along the leg's nominal track ``r = r0 + v0 t``."""
+    d = origin_n_m[None, :] + _displacement_n_m(rep)
+    grad = field_gradient(d[:, 0] / extent_m, d[:, 1] / extent_m)
+    g = np.zeros((rep.t_s.size, 15, grad.shape[2]))
+    g[:, 3:5, :] = -(grad - grad[0:1])
+    return forced_response(rep, g)
+
+
 def _sig_earth_rate(rep: LegReplay, base_x_leg: NDArray) -> NDArray:
     """(numerical - closed form) [d_phi, d_bg] applied to the current base estimates."""
     dp_n, db_n = leg_sensitivities(rep, "numerical")
@@ -329,9 +384,60 @@ def _sig_gyro_scale_rerun(rep: LegReplay, ctx: ReplayContext, s: float = 1e-4) -
     return out
 
 
-def signature(effect_id: str, rep: LegReplay, *, context: ReplayContext | None = None,
-              base_x_leg: NDArray | None = None,
-              accel_settling_s: float = ACCEL_SETTLING_S) -> NDArray:
+def _settling(rep: LegReplay, x: SignatureInputs) -> NDArray:
+    return _sig_accel_settling(rep, x.accel_settling_s)
+
+
+def _scale(rep: LegReplay, x: SignatureInputs) -> NDArray:
+    return _sig_gyro_scale(rep) if x.context is None else _sig_gyro_scale_rerun(rep, x.context)
+
+
+def _offset(rep: LegReplay, x: SignatureInputs) -> NDArray:
+    if x.context is None:
+        raise ValueError("time_offset: the IMU increments and A's solution are needed")
+    return _sig_time_offset(rep, x.context)
+
+
+def _earth(rep: LegReplay, x: SignatureInputs) -> NDArray:
+    if x.base_x_leg is None:
+        raise ValueError("earth_rate_coupling: the current base estimates are needed")
+    return _sig_earth_rate(rep, np.asarray(x.base_x_leg, dtype=float))
+
+
+def _field(rep: LegReplay, x: SignatureInputs) -> NDArray:
+    if x.origin_n_m is None or not x.extent_m > 0:
+        raise ValueError("gravity_disturbance field: the legs' positions are needed")
+    return _sig_gravity_field(rep, np.asarray(x.origin_n_m, dtype=float), float(x.extent_m))
+
+
+LIBRARY: tuple[Effect, ...] = (
+    _catalogued("body_fixed_gyro_bias", {"": lambda r, x: _sig_body_bias(r, slice(0, 2))}),
+    _catalogued("vertical_gyro_drift", {"": lambda r, x: _sig_body_bias(r, slice(2, 3))}),
+    _catalogued("accel_bias_change", {"settling": _settling}),
+    _catalogued("gyro_scale_factor", {"": _scale}, needs_imu=True),
+    _catalogued("time_offset", {"": _offset}, needs_imu=True),
+    _catalogued("lever_arm", {"": lambda r, x: _sig_lever_arm(r)}),
+    _catalogued("earth_rate_coupling", {"": _earth}),
+    _catalogued("gravity_disturbance", {"gradient": lambda r, x: _sig_gravity(r),
+                                        "field": _field}),
+)
+"""The candidate effects on the legs, in the order they are tested, each with its signature
+per shape (adding an effect: a catalogue row, a row here with its function, its test in
+tests/unit/test_diagnose_effects.py and its line in docs/diagnose.md). The sensor families
+fitted on A's innovations are :data:`pospp.diagnose.sensor_families.SENSOR_FAMILIES`."""
+
+EFFECT_IDS: tuple[str, ...] = tuple(e.effect_id for e in LIBRARY)
+
+
+def effect_by_id(effect_id: str) -> Effect:
+    """The library entry of an identifier (ValueError naming the known ones otherwise)."""
+    return row_named(LIBRARY, "effect_id", effect_id, "effect")
+
+
+def signature(effect_id: str, rep: LegReplay, *, shape: str | None = None,
+              context: ReplayContext | None = None, base_x_leg: NDArray | None = None,
+              accel_settling_s: float = ACCEL_SETTLING_S, origin_n_m: NDArray | None = None,
+              extent_m: float = float("nan")) -> NDArray:
     """Signature of one library effect on one leg, ``d dv_h / d p`` (M, 2, P), SI.
 
     Parameters
@@ -340,35 +446,19 @@ def signature(effect_id: str, rep: LegReplay, *, context: ReplayContext | None =
         A library identifier (:data:`EFFECT_IDS`).
     rep : LegReplay
         The leg.
-    context : ReplayContext, optional
-        Needed by ``time_offset`` (and used by ``gyro_scale_factor`` for an exact re-run).
-    base_x_leg : ndarray, shape (6,), optional
-        Current estimates [phi_N, phi_E, phi_D, b_x, b_y, b_z] of the leg (SI), needed by
-        ``earth_rate_coupling``.
-    accel_settling_s : float
-        Time constant T of ``accel_bias_change`` [s].
+    shape : str, optional
+        One of the effect's shapes (:attr:`Effect.shapes`; default its first).
+    context, base_x_leg, accel_settling_s, origin_n_m, extent_m
+        :class:`SignatureInputs` (``time_offset`` needs the context, ``earth_rate_coupling``
+        the base estimates, the gravity ``field`` the legs' positions).
     """
-    if effect_id == "body_fixed_gyro_bias":
-        return _sig_body_bias(rep, slice(0, 2))
-    if effect_id == "vertical_gyro_drift":
-        return _sig_body_bias(rep, slice(2, 3))
-    if effect_id == "accel_bias_change":
-        return _sig_accel_settling(rep, accel_settling_s)
-    if effect_id == "gyro_scale_factor":
-        return _sig_gyro_scale(rep) if context is None else _sig_gyro_scale_rerun(rep, context)
-    if effect_id == "time_offset":
-        if context is None:
-            raise ValueError("time_offset: the IMU increments and A's solution are needed")
-        return _sig_time_offset(rep, context)
-    if effect_id == "lever_arm":
-        return _sig_lever_arm(rep)
-    if effect_id == "earth_rate_coupling":
-        if base_x_leg is None:
-            raise ValueError("earth_rate_coupling: the current base estimates are needed")
-        return _sig_earth_rate(rep, np.asarray(base_x_leg, dtype=float))
-    if effect_id == "gravity_disturbance":
-        return _sig_gravity(rep)
-    raise ValueError(f"effect: expected one of {EFFECT_IDS}, got {effect_id!r}")
+    eff = effect_by_id(effect_id)
+    table = dict(eff.signatures)
+    key = eff.shapes[0] if shape is None else shape
+    if key not in table:
+        raise ValueError(f"{effect_id}: expected a shape of {eff.shapes}, got {shape!r}")
+    return table[key](rep, SignatureInputs(context, base_x_leg, accel_settling_s, origin_n_m,
+                                           extent_m))
 
 
 def signatures(effect_id: str, replays: Sequence[LegReplay], *, threads: int = 1,

@@ -34,6 +34,8 @@ class CandidateTest:
     gap_horizon_m: float = float("nan")
     values: NDArray = field(default_factory=lambda: np.zeros(0))
     """Per-parameter estimates, display unit (the observable directions' minimum norm)."""
+    shape: str = ""
+    """The family's shape tested (:data:`pospp.effects_catalog.SHAPES`; empty: one form)."""
 
 
 @dataclass(frozen=True)
@@ -81,6 +83,9 @@ class DiagnosisStep:
     residual_horizon_mps, residual_horizon_m : float
         The calibration's own residual (B minus A minus the base model) measured the same way
         [m/s, m]: the scale the row's worth is compared against.
+    shape, shape_parameters : str
+        A family's shape (:data:`pospp.effects_catalog.SHAPES`: ``ramp``, ``step``, ...) and
+        its non-linear parameter ("T = 1200 s"); empty for an effect of one form.
     """
 
     step: int
@@ -107,6 +112,8 @@ class DiagnosisStep:
     gap_horizon_m: float = float("nan")
     residual_horizon_mps: float = float("nan")
     residual_horizon_m: float = float("nan")
+    shape: str = ""
+    shape_parameters: str = ""
 
 
 @dataclass(frozen=True)
@@ -124,6 +131,25 @@ class LegGap:
     heldout_gap_after_mps: float
     phase_gap_before_mps: NDArray
     phase_gap_after_mps: NDArray
+
+
+@dataclass(frozen=True)
+class EffectResponse:
+    """What a named effect does to B minus A (the calibration's data), for its refit.
+
+    ``columns`` per leg (legs in id order) ``(M, 2, P)``: B minus A's [dv_N, dv_E] [m/s]
+    per SI parameter, at the replay samples (row 0 at t = 0); ``p_si`` (P,) the estimate and
+    ``cov_si`` (P, P) its covariance: the effect's response is ``columns @ p_si``.
+    """
+
+    effect: str
+    columns: tuple[NDArray, ...]
+    p_si: NDArray
+    cov_si: NDArray
+
+    def curves(self) -> list[NDArray]:
+        """The response at the estimate, per leg (M, 2) [m/s]."""
+        return [c @ self.p_si for c in self.columns]
 
 
 @dataclass(frozen=True)
@@ -160,6 +186,15 @@ class Diagnosis:
         drift they inject; whether they were re-made with the drift re-estimated with a
         named effect removed); empty when the caller did not say
         (:func:`pospp.diagnosis_stage.diagnose_calibration` does).
+    null_rebuilt_with : tuple of str
+        The effects whose fitted response was removed when the null realisations were
+        re-made with the gyro drift estimated under the alternative
+        (:func:`pospp.diagnosis_stage.drift_under_alternative`); empty when the null is the
+        base model's.
+    responses : tuple of EffectResponse
+        What each named effect does to B minus A (:mod:`pospp.diagnose.refit`); empty when
+        the caller did not make them (:func:`pospp.diagnosis_stage.diagnose_calibration`
+        does).
     """
 
     base_formulation: str
@@ -178,6 +213,8 @@ class Diagnosis:
     heldout_after_n_mps: tuple[NDArray, ...] = field(repr=False)
     location: GapLocation | None = None
     null_model: str = ""
+    null_rebuilt_with: tuple[str, ...] = ()
+    responses: tuple[EffectResponse, ...] = field(default=(), repr=False)
 
     @property
     def named(self) -> tuple[str, ...]:

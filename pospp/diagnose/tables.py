@@ -21,10 +21,12 @@ DIAGNOSIS_COLUMNS = (
     "heldout_gap_before_mps", "heldout_gap_after_mps", "confounded_with", "parameters",
     "parameter_values", "parameter_sigmas", "horizon_s", "gap_horizon_mps", "gap_horizon_m",
     "residual_horizon_mps", "residual_horizon_m", "gap_legs", "gap_channel", "gap_part",
-    "gap_basis", "gap_location", "null_model",
+    "gap_basis", "gap_location", "null_model", "shape", "shape_parameters", "null_rebuilt",
+    "null_rebuilt_with",
 )
-"""Columns of diagnosis.parquet, in order (the last eleven: issue 12, items 4-5 and the null
-the p-values are calibrated on)."""
+"""Columns of diagnosis.parquet, in order (issue 12 items 4-5 and the null the p-values are
+calibrated on: from ``horizon_s`` to ``null_model``; issue 34: the family's shape and whether
+the null was re-made under the alternative)."""
 
 
 def diagnosis_columns(diagnosis: Diagnosis) -> dict[str, NDArray]:
@@ -78,6 +80,11 @@ def diagnosis_columns(diagnosis: Diagnosis) -> dict[str, NDArray]:
         "gap_basis": np.array([where(x, loc and loc.basis) for x in s], dtype=object),
         "gap_location": np.array([where(x, loc and loc.text) for x in s], dtype=object),
         "null_model": np.array([diagnosis.null_model for _ in s], dtype=object),
+        "shape": np.array([x.shape for x in s], dtype=object),
+        "shape_parameters": np.array([x.shape_parameters for x in s], dtype=object),
+        "null_rebuilt": np.array([bool(diagnosis.null_rebuilt_with) for _ in s], dtype=bool),
+        "null_rebuilt_with": np.array([";".join(diagnosis.null_rebuilt_with) for _ in s],
+                                      dtype=object),
     }
 
 
@@ -86,7 +93,7 @@ def candidate_columns(diagnosis: Diagnosis) -> dict[str, NDArray]:
     c = diagnosis.candidates
     names = ("step", "effect", "n_parameters", "value", "sigma", "unit", "statistic", "p_value",
              "delta_bic", "explained_fraction", "gap_after_mps", "heldout_gap_after_mps",
-             "significant", "gap_horizon_mps", "gap_horizon_m")
+             "significant", "gap_horizon_mps", "gap_horizon_m", "shape")
     return {k: np.array([getattr(x, k) for x in c]) for k in names}
 
 

@@ -55,7 +55,6 @@ Steps
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import replace
 from functools import partial
 
 import numpy as np
@@ -67,17 +66,23 @@ from pospp.calib.replay import ImuSource, LegReplay, SolutionA
 from pospp.calib.segment import Leg
 from pospp.calib.solve import fit_calibration, fit_noise_model
 from pospp.diagnose import effects as fx
-from pospp.diagnose._linear import Fit, Problem, Term, bic, f_test, rms
+from pospp.diagnose._candidates import (
+    family_trial,
+    leg_origins,
+    shape_signatures,
+    shaped,
+    trial,
+)
+from pospp.diagnose._linear import Fit, Problem, Term, f_test, rms
 from pospp.diagnose._terms import (
     LOF_DEGREE,
     _base_terms,
     _base_x_per_leg,
-    _effect_estimate,
-    _effect_term,
     _lof_term,
 )
 from pospp.diagnose.locate import horizon_worth, locate_gap
-from pospp.diagnose.null_model import calibrated_p_value, few_parameter_p_value
+from pospp.diagnose.null_calibration import FEW_PARAMETERS  # noqa: F401  (its home before)
+from pospp.diagnose.null_calibration import NullCalibration as _NullCalibration
 from pospp.diagnose.results import CandidateTest, Diagnosis, DiagnosisStep, LegGap
 from pospp.diagnose.tables import (  # noqa: F401  (the tables' home before issue 17)
     DIAGNOSIS_COLUMNS,
@@ -86,14 +91,10 @@ from pospp.diagnose.tables import (  # noqa: F401  (the tables' home before issu
     leg_gap_columns,
     residual_curve_columns,
 )
-from pospp.threads import Threads, map_in_threads
 
 BASE_FORMULATIONS = ("body", "paper")
 BASE_TRANSITIONS = ("numerical", "closed_form")
 CRITERION = "F_test_bonferroni_and_heldout"
-FEW_PARAMETERS = 3
-"""Nested tests of up to this many parameters (the library's candidates) get the predictive
-F(1, R) of :func:`pospp.diagnose.null_model.few_parameter_p_value`."""
 LOF_CRITERION = "lack_of_fit_F"
 
 
@@ -202,66 +203,6 @@ def informative_heldout_legs(legs: Sequence[Leg],
                for k, a in enumerate(others) for b in others[k + 1:]):
             out.append(i)
     return out or list(range(len(legs)))
-
-
-class _NullCalibration:
-    """Each nested F-test's null distribution from B-minus-A null realisations.
-
-    The same design as the flight's problem, with the data replaced by each realisation
-    (:mod:`pospp.diagnose.null_model`) and, when ``whitening`` is given, the whitening
-    re-estimated on each realisation as it was on the flight (the statistic is then the
-    same function of the data on both); the flight's F gets the p-value of
-    :func:`pospp.diagnose.null_model.calibrated_p_value` against the R null F statistics.
-    """
-
-    def __init__(self, prob: Problem, null_dv: Sequence[Sequence[NDArray]],
-                 whitening: Callable[[tuple[LegReplay, ...]], tuple[float, float]] | None = None,
-                 threads: Threads = 1):
-        self._threads = threads  # realisations refitted at once (the same fits at any number)
-        if whitening is None:
-            self.probs = [prob.with_data([np.asarray(d)[1:, 0:2] for d in real])
-                          for real in null_dv]
-        else:
-            def rewhitened(real: Sequence[NDArray]) -> Problem:
-                reps = tuple(replace(r, dv_n_mps=np.asarray(d))
-                             for r, d in zip(prob.reps, real, strict=True))
-                return prob.rewhitened(reps, *whitening(reps))
-
-            self.probs = map_in_threads(rewhitened, null_dv, threads)
-        self._rss: dict[tuple[int, ...], tuple[list[Term], list[tuple[float, int]]]] = {}
-
-    def _fits(self, terms: Sequence[Term]) -> list[tuple[float, int]]:
-        key = tuple(id(t) for t in terms)
-        if key not in self._rss:  # the entry holds the terms: freed ids could be reused
-            fits = map_in_threads(lambda q: q.fit(terms), self.probs, self._threads)
-            self._rss[key] = (list(terms), [(f.rss_w, f.rank) for f in fits])
-        return self._rss[key][1]
-
-    def statistics(self, terms0: Sequence[Term], terms1: Sequence[Term]) -> NDArray:
-        """The nested F of terms0 within terms1 on every realisation."""
-        out = []
-        for (r0, k0), (r1, k1), q in zip(self._fits(terms0), self._fits(terms1), self.probs,
-                                         strict=True):
-            out.append(f_test(r0, r1, k1 - k0, q.n - k1)[0])
-        return np.array(out)
-
-    def noise_factor(self, terms0: Sequence[Term], terms1: Sequence[Term]) -> float:
-        """The RSS reduction that noise alone gives terms1 beyond terms0, per parameter and in
-        units of the residual variance: the mean of the null F statistics (1 for white noise;
-        B minus A's correlated noise reads far above it in the smooth lack-of-fit basis)."""
-        f = self.statistics(terms0, terms1)
-        f = f[np.isfinite(f)]
-        return float(np.mean(f)) if f.size else 1.0
-
-    def p_value(self, f: float, p_nominal: float, terms0: Sequence[Term],
-                terms1: Sequence[Term]) -> float:
-        """The flight's p-value against the null statistics: the predictive F(1, R) of a
-        test of at most :data:`FEW_PARAMETERS` parameters (the candidates), the predictive
-        log-normal of the many-parameter ones (the lack of fit); nominal when uncalibrated."""
-        r = self._fits(terms1)[0][1] - self._fits(terms0)[0][1] if self.probs else 0
-        rule = few_parameter_p_value if 0 < r <= FEW_PARAMETERS else calibrated_p_value
-        p = rule(f, self.statistics(terms0, terms1))
-        return p_nominal if not np.isfinite(p) else p
 
 
 # --------------------------------------------------------------------------------------------
@@ -439,11 +380,9 @@ def diagnose_replays(
     suffix = "_null_calibrated" if null is not None else ""
     terms = _base_terms(replays, base_formulation, base_transition)
     lof = _lof_term(replays, lof_terms)
-    fixed_sigs = {e.effect_id: [np.asarray(a, dtype=float) for a in given[e.effect_id]]
-                  if e.effect_id in given else
-                  fx.signatures(e.effect_id, replays, context=ctx,
-                                accel_settling_s=accel_settling_s, threads=threads)
-                  for e in pool if e.effect_id != "earth_rate_coupling"}
+    origins, extent_m = leg_origins(replays, solution_a)
+    fixed_sigs = shape_signatures(pool, replays, given, ctx, accel_settling_s, threads,
+                                  origins, extent_m)
 
     base_fit = prob.fit(terms)
     base_ho = prob.heldout(terms)
@@ -471,37 +410,27 @@ def diagnose_replays(
         frac_of = partial(_explained_fraction, prob, terms, fit0, fit_lof, lof, s2_lof, g_lof,
                           null)
         trials = []
+
+        def p_of(f: float, p: float, t0: list[Term], t1: list[Term]) -> float:
+            return p if null is None else null.p_value(f, p, t0, t1)
+
         for eff in pool:
-            if any(t.effect is eff for t in terms):
+            if any(t.effect is not None and t.effect.effect_id == eff.effect_id
+                   for t in terms):
                 continue
             if eff.effect_id == "earth_rate_coupling":
                 bx = _base_x_per_leg(prob, terms, fit0, base_formulation)
-                sigs = [fx.signature(eff.effect_id, r, base_x_leg=b)
-                        for r, b in zip(replays, bx, strict=True)]
+                shapes = {"": [fx.signature(eff.effect_id, r, base_x_leg=b)
+                               for r, b in zip(replays, bx, strict=True)]}
             else:
-                sigs = fixed_sigs[eff.effect_id]
-            term = _effect_term(prob, terms, eff, sigs)
-            if term is None:
-                if step == 1:
-                    unobservable.append(eff.effect_id)
-                continue
-            new_terms = terms + [term]
-            fit1 = prob.fit(new_terms)
-            r = fit1.rank - fit0.rank
-            dof1 = n - fit1.rank
-            f, p = f_test(fit0.rss_w, fit1.rss_w, r, dof1)
-            if null is not None:
-                p = null.p_value(f, p, terms, new_terms)
-            ho1 = prob.heldout(new_terms)
-            s2 = fit1.rss_w / max(dof1, 1)
-            vals, sigs_, size, size_sig = _effect_estimate(term, fit1, new_terms, s2)
-            frac = frac_of(new_terms, fit1)
-            trials.append(dict(eff=eff, term=term, fit=fit1, ho=ho1, f=f, p=p, r=r, vals=vals,
-                               sigs=sigs_, size=size, size_sig=size_sig, frac=frac,
-                               worth=worth([a - b for a, b in zip(fit0.res_raw,
-                                                                  fit1.res_raw, strict=True)]),
-                               dbic=bic(fit1.rss_w, n, fit1.rank) - bic(fit0.rss_w, n,
-                                                                           fit0.rank)))
+                shapes = {sh: fixed_sigs[(eff.effect_id, sh)] for sh in eff.shapes
+                          if (eff.effect_id, sh) in fixed_sigs}
+            tried = [tr for sh, sg in shapes.items() if (tr := trial(
+                prob, terms, fit0, shaped(eff, sh), sg, sh, p_of, frac_of, worth)) is not None]
+            if tried:
+                trials.append(family_trial(tried))
+            elif step == 1:
+                unobservable.append(eff.effect_id)
         m = max(len(trials), 1)
         for tr in trials:
             tr["sig"] = bool(tr["p"] < alpha / m and _heldout_lower(prob, tr, ho0, ho_legs,
@@ -510,7 +439,7 @@ def diagnose_replays(
                 step, tr["eff"].effect_id, tr["r"], tr["size"], tr["size_sig"], tr["eff"].unit,
                 tr["f"], tr["p"], float(tr["dbic"]), tr["frac"], rms(tr["fit"].res_raw),
                 rms(tr["ho"]), tr["sig"], tr["worth"].dv_mps, tr["worth"].dr_m,
-                np.asarray(tr["vals"], dtype=float)))
+                np.asarray(tr["vals"], dtype=float), tr["shape"]))
         good = [tr for tr in trials if tr["sig"] and tr["frac"] >= min_explained_fraction]
         if not good:
             good = _pair_explaining(prob, terms, fit0, trials, lof, frac_of, alpha,
@@ -543,7 +472,9 @@ def diagnose_replays(
             heldout_gap_before_mps=hgap0, heldout_gap_after_mps=rms(best["ho"]),
             horizon_s=calib_worth.horizon_s, gap_horizon_mps=best["worth"].dv_mps,
             gap_horizon_m=best["worth"].dr_m, residual_horizon_mps=calib_worth.dv_mps,
-            residual_horizon_m=calib_worth.dr_m,
+            residual_horizon_m=calib_worth.dr_m, shape=best["shape"],
+            shape_parameters=(f"T = {accel_settling_s:.0f} s" if best["shape"] == "settling"
+                              else ""),
         ))
         terms = terms + [best["term"]]
         fit0, ho0 = best["fit"], best["ho"]

@@ -208,6 +208,11 @@ TABLES: dict[str, list[Column]] = {
                       f"flight's fitted legs, body {ax} (FRD){' 1-sigma' if kind else ''}; "
                       f"gyro_bias_{ax}_dph: the turn-on constant; NaN: not estimated",
                       "b (FRD)")) for ax in "xyz" for kind in ("", "_sigma")],
+        _opt(Column("refit_effects", _S, "", "';'-joined effects removed from B minus A for "
+                    "the calibration's refit (the compensation, dv/dp_after use it)")),
+        *[_opt(Column(f"gyro_bias_{ax}_refit{k}_dph", _F, "deg/h", f"refitted gyro bias, body "
+                      f"{ax}{' 1-sigma' if k else ''}", "b (FRD)")) for ax in "xyz"
+          for k in ("", "_sigma")],
         _opt(Column("not_observable", _S, "", "'; '-joined 'parameter: sigma > bound: why' of "
                     "the applied fit's parameters not observable on these legs (docs/report.md)"
                     )),
@@ -273,6 +278,10 @@ TABLES: dict[str, list[Column]] = {
         _opt(Column("null_model", _S, "", "what the p-values are calibrated on: the null "
                     "realisations and the gyro drift they inject, and whether they were re-made "
                     "with the drift re-estimated with a named effect removed")),
+        _opt(Column("shape", _S, "", "a family's shape (effects_catalog.SHAPES; empty: one form)")),
+        _opt(Column("shape_parameters", _S, "", "its own parameter, what was removed first")),
+        _opt(Column("null_rebuilt", _B, "", "null re-made with the drift under the alternative")),
+        _opt(Column("null_rebuilt_with", _S, "", "';'-joined effects removed for that")),
     ],
     "observability": [
         Column("formulation", _S, "", "'paper' or 'body'"),

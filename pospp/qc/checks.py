@@ -569,3 +569,44 @@ def config_sanity(problems: list[str]) -> Check:
     """Configuration values that make no sense but were not refused (threshold 0)."""
     return Check("config", "config", "configuration values out of their meaningful range",
                  float(len(problems)), 0.0, "1", not problems, "failed", "; ".join(problems))
+
+
+MODEL_FIT_SIGMAS = 2.0
+"""A finding fails ``model_fit`` when it could move the calibrated gyro bias beyond this many
+of its 1-sigma (out of its 95 % interval): the refit with the named effects, or the bias an
+unexplained gap stands for. Measured on clean flights: the null Monte Carlo's one
+closing-row alarm (tests/unit/test_diagnose_null_mc.py, seed 4, p = 0.009) stands for 1.4
+sigma; the QC benchmark's MEMS flights at 50 Hz name accelerometer changes their sensor does
+not have, whose refit moves the bias by 0.07 and 0.12 sigma (docs/diagnose.md);
+flight_accel_ramp_100hz's ramp moves it by 3.0 sigma (y) and its gap stands for 2.3."""
+
+
+def model_fit(named: list[str], refit_shift_sigmas: float, gap_p_value: float, alpha: float,
+              gap_bias_bound_radps: float, bias_sigma_radps: float,
+              named_texts: list[str], gap_text: str = "") -> Check:
+    """The calibration's model explains B minus A (issue 34): no effect the diagnosis named
+    outside it and no unexplained gap could move the calibrated gyro bias out of its 95 %
+    interval.
+
+    Statistic: the findings, counted: the effects the diagnosis named that the calibration
+    does not model (``named``), when the calibration refitted with them removed moves the
+    horizontal gyro bias by more than :data:`MODEL_FIT_SIGMAS` of its 1-sigma on an axis
+    (``refit_shift_sigmas``; NaN, no refit: they count), plus one for a significant
+    unexplained gap (the closing row's p below ``alpha``) standing for more than that: the
+    horizontal gyro bias a structured gap of ``dv(T)`` at the horizon T stands for on a level
+    leg (T well below the Schuler period) is ``b = 2 dv(T) / (g T^2)``
+    (``gap_bias_bound_radps``). Threshold 0. ``named_texts`` (the named effects and the
+    refit) and ``gap_text`` (the gap): the suggestion, each when it counts. Severity
+    "degraded": the calibration may be biased; the refit (which the compensation uses) says
+    by how much.
+    """
+    moved = bool(named) and not refit_shift_sigmas <= MODEL_FIT_SIGMAS
+    gap = (math.isfinite(gap_p_value) and gap_p_value < alpha
+           and gap_bias_bound_radps > MODEL_FIT_SIGMAS * bias_sigma_radps)
+    n = (len(named) if moved else 0) + int(gap)
+    return Check("model_fit", "diagnose",
+                 "effects named outside the calibration's model whose refit moves the gyro "
+                 "bias beyond 2 sigma, plus an unexplained gap (p < alpha) that could",
+                 float(n), 0.0, "1", n == 0, "degraded",
+                 "; ".join([*(named_texts if moved else []),
+                            *([gap_text] if gap and gap_text else [])]))

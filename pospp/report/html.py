@@ -191,6 +191,12 @@ def _answer_section(h: Headline, tables: Mapping[str, pd.DataFrame]) -> list[str
                     f"{html.escape(h.sensor_axes_text.replace(' +- ', _PM))}</td>"
                     f"<td class='l'>the same, in the IMU's axes "
                     f"({html.escape(h.sensor_axes_name)})</td></tr>")
+    for e in h.refit:
+        rows.append(f"<tr><th class='l'>{html.escape(e.name)}</th><td class='headline'>"
+                    f"{_pm(e.value, e.sigma, e.unit)}</td><td class='l'>refitted with "
+                    f"{html.escape(h.refit_effects.replace(';', ', '))} removed from B minus A "
+                    "(the diagnosis named them outside the calibration's model); the "
+                    "compensation uses it</td></tr>")
     for e in h.not_observable:
         rows.append(f"<tr><th class='l'>{html.escape(e.name)}</th><td class='flag'>not "
                     f"observable</td><td class='l'>{html.escape(e.why_not)}</td></tr>")
@@ -267,7 +273,7 @@ def _diagnosis_section(diag: pd.DataFrame, curves: pd.DataFrame | None) -> list[
             "m/s predicting each leg from the others (held out). ")
     if len(named):
         text += ("Effects the data support, in order: " + ", ".join(
-            f"{r.effect} ({pm_text(r.value, r.sigma, unit_text(r.unit))})"
+            f"{r.effect} ({_shape_prefix(r)}{pm_text(r.value, r.sigma, unit_text(r.unit))})"
             for r in named.itertuples())
             + f"; held-out gap after them {last.heldout_gap_after_mps:.2g} m/s. ")
     else:
@@ -281,8 +287,10 @@ def _diagnosis_section(diag: pd.DataFrame, curves: pd.DataFrame | None) -> list[
         parts.append(_img(figures.diagnosis_steps(d, backend=_FIG)))
     if curves is not None and not curves.empty:
         parts.append(_img(figures.diagnosis_curves(curves, backend=_FIG)))
+    shape = d["shape"].fillna("") if "shape" in d else pd.Series("", index=d.index)
     view = pd.DataFrame({
-        "step": d.step, "effect": d.effect,
+        "step": d.step, "effect": [f"{e} ({s})" if s else e for e, s in
+                                   zip(d.effect, shape, strict=True)],
         "value \u00b1 1-sigma": [pm_text(r.value, r.sigma, r.unit).replace(" +- ", " \u00b1 ")
                                   if np.isfinite(r.value) else "" for r in d.itertuples()],
         "p-value": d.p_value, "test": d.criterion if "criterion" in d else "",
@@ -294,6 +302,12 @@ def _diagnosis_section(diag: pd.DataFrame, curves: pd.DataFrame | None) -> list[
     })
     parts.append(_table(view))
     return parts
+
+
+def _shape_prefix(row: Any) -> str:
+    """"ramp: " for a family's row with a shape, "" otherwise."""
+    shape = getattr(row, "shape", "")
+    return f"{shape}: " if isinstance(shape, str) and shape else ""
 
 
 def _diagnosis_worth_text(d: pd.DataFrame) -> str:

@@ -125,6 +125,27 @@ class Headline:
         return ", ".join(f"{e.name[-1]} {pm_text(e.value, e.sigma)}"
                          for e in self.sensor_axes) + f" {unit}"
 
+    refit: tuple[Estimate, ...] = ()
+    """The calibration refitted with the effects the diagnosis named outside its model (the
+    compensation uses it; summary ``gyro_bias_*_refit_dph``)."""
+    refit_effects: str = ""
+
+    @property
+    def refit_text(self) -> str:
+        """"refitted with accel_bias_change removed: gyro_bias_x ... (the compensation uses
+        it)", or "" without a refit."""
+        if not self.refit:
+            return ""
+        base = {e.name: e for e in self.results}
+        parts = []
+        for e in self.refit:
+            b = base.get(e.name)
+            moved = (f" (calibration {b.text}, change {e.value - b.value:+.2g})"
+                     if b is not None else "")
+            parts.append(f"{e.name} {e.text}{moved}")
+        return (f"refitted with {self.refit_effects.replace(';', ', ')} removed from B minus A "
+                f"(the compensation uses it): " + ", ".join(parts))
+
     @property
     def in_sample_text(self) -> str:
         if not np.isfinite(self.dv_before_mps):
@@ -218,8 +239,12 @@ def headline(tables: Mapping[str, pd.DataFrame]) -> Headline:
                    for ax in "xyz"
                    if any(e.name == f"gyro_bias_{ax}" for e in results)
                    and np.isfinite(_num(row, f"gyro_bias_sensor_{ax}_dph")))
+    refit = tuple(Estimate(f"gyro_bias_{ax}", _num(row, f"gyro_bias_{ax}_refit_dph"),
+                           _num(row, f"gyro_bias_{ax}_refit_sigma_dph"), "deg_per_h")
+                  for ax in "xyz" if np.isfinite(_num(row, f"gyro_bias_{ax}_refit_dph")))
     return Headline(
         sensor_axes=sensor, sensor_axes_name=SENSOR_AXES.get(str(row.get("imu_axes")), ""),
+        refit=refit, refit_effects=str(row.get("refit_effects") or ""),
         status=str(row.get("status") or "?"), qc_verdict=verdict, qc_failed=failed,
         calibration_reason=str(row.get("calibration_reason") or ""), formulation=form,
         results=tuple(results), per_leg=tuple(per_leg), not_observable=tuple(unobs),
@@ -252,6 +277,8 @@ def headline_lines(h: Headline) -> list[str]:
                          f"{h.sensor_axes_text}")
     elif h.calibration_reason and h.calibration_reason != "ok":
         lines.append(f"  calibration: {h.calibration_reason}")
+    if h.refit_text:
+        lines.append(f"  {h.refit_text}")
     if h.not_observable:
         lines.append("  not observable (no result): " + ", ".join(
             f"{e.name} (sigma {e.sigma:.4g} {unit_text(e.unit)})" for e in h.not_observable))

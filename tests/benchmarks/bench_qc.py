@@ -2,6 +2,7 @@
 
     python tests/benchmarks/bench_qc.py clean [N_SEEDS]   # clean short flights, every grade
     python tests/benchmarks/bench_qc.py faults [N_SEEDS]  # issue 13's faults, a few seeds
+    python tests/benchmarks/bench_qc.py model_fit [N_SEEDS]  # the diagnosis's check (issue 34)
 
 A clean flight is simulated by pospp's simulator (:func:`pospp.sim.api.simulate`): an optional
 static start, a take-off, a straight line, a 180 deg turn and the line back (a few minutes),
@@ -9,6 +10,11 @@ with the IMU grade, GNSS rate and noise of the case and the lever arm configured
 algorithm A and ``pipeline.quality_control`` (no calibration) run on it, in memory. A false
 alarm is a failed check on such a flight. Cases are drawn from a seeded grid (grade x GNSS
 rate x GNSS noise x static start) so a run of N seeds covers it evenly.
+
+``model_fit``: the same cases with three 180 s lines (legs from 120 s, the horizon 180 s), the
+calibration, the null realisations (6), the diagnosis with the log and A (the sensor families
+on A's innovations included), the refit and the ``model_fit`` check as ``pospp run`` makes
+them: its false alarms on clean flights (issue 34: at most 2 %).
 """
 
 from __future__ import annotations
@@ -26,6 +32,7 @@ if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
 from pospp import pipeline  # noqa: E402
+from pospp.calib.stage import with_null_covariance  # noqa: E402
 from pospp.config import PipelineConfig, config_from_dict  # noqa: E402
 from pospp.io.mcap_reader import FlightLog  # noqa: E402
 from pospp.sim.api import simulate  # noqa: E402
@@ -42,14 +49,16 @@ GNSS_RATES_HZ = (1.0, 5.0, 10.0)
 LEVER_B_M = (0.3, 0.1, -1.5)
 
 
-def profile(static_s: float, line_s: float = 60.0):
-    """Static start (or none), take-off to 50 m/s, a line, a 180 deg turn, the line back."""
+def profile(static_s: float, line_s: float = 60.0, n_lines: int = 2):
+    """Static start (or none), take-off to 50 m/s, a line, a 180 deg turn, the line back (and
+    ``n_lines`` - 2 more lines, each after a 180 deg turn)."""
     seg = [{"type": "static", "duration_s": static_s}] if static_s > 0 else []
     seg += [{"type": "accelerate", "to_speed_mps": 50.0, "duration_s": 40.0},
             {"type": "climb", "rate_mps": 5.0, "delta_m": 100.0},
-            {"type": "straight", "duration_s": line_s},
-            {"type": "turn", "angle_deg": 180.0, "rate_dps": 3.0},
             {"type": "straight", "duration_s": line_s}]
+    for _ in range(n_lines - 1):
+        seg += [{"type": "turn", "angle_deg": 180.0, "rate_dps": 3.0},
+                {"type": "straight", "duration_s": line_s}]
     return parse_profile({"name": "qc_mc", "start": {"lat_deg": 40.0, "lon_deg": 116.0,
                                                      "height_m": 60.0, "heading_deg": 60.0},
                           "options": {"turn_bank": "coordinated", "blend_s": 5.0},
@@ -73,13 +82,13 @@ def config_for(grade: str, lever_b_m=LEVER_B_M) -> PipelineConfig:
                              "outputs": {"mcap": False, "report": False, "diagnose": False}})
 
 
-def clean_log(c: dict) -> FlightLog:
+def clean_log(c: dict, line_s: float = 60.0, n_lines: int = 2) -> FlightLog:
     """The simulated flight of case ``c`` as a FlightLog (body FRD, in memory)."""
     gnss = GnssModel(rate_hz=c["rate_hz"], pos_noise_m=c["noise"][0],
                      vel_noise_mps=c["noise"][1], lever_arm_b_m=LEVER_B_M,
                      time_offset_s=c.get("time_offset_s", 0.0))
-    sim = simulate(profile(c["static_s"]), imu_grade=c["grade"], gnss=gnss, seed=c["seed"],
-                   imu_rate_hz=c["imu_rate_hz"])
+    sim = simulate(profile(c["static_s"], line_s, n_lines), imu_grade=c["grade"], gnss=gnss,
+                   seed=c["seed"], imu_rate_hz=c["imu_rate_hz"])
     return FlightLog(sim.imu, sim.fix, sim.vel, path=f"sim:{c['seed']}")
 
 
@@ -105,6 +114,48 @@ def false_alarms(seeds: range) -> tuple[Counter, int, list]:
         any_fail += bool(names)
         detail.append((c, rep))
     return per_check, any_fail, detail
+
+
+def model_fit_of(c: dict):
+    """The ``model_fit`` check of case ``c`` flown with 180 s lines (None: no calibration or
+    diagnosis), and the diagnosis."""
+    from pospp.diagnosis_stage import refit_and_check
+
+    cfg = config_from_dict({**config_for(c["grade"]).to_dict(),
+                            "legs": {"min_duration_s": 120.0, "min_speed_mps": 20.0},
+                            "replay": {"reference": "smoothed", "horizon_s": 180.0},
+                            "pairs": {"null_realisations": 6}})
+    log = clean_log(c, 180.0, 3)
+    nav = pipeline.navigate(log, cfg)
+    imu = pipeline.imu_increments(log)
+    run, ref = pipeline.calibrate_from_a(imu, nav, cfg)
+    if not run.calibrated:
+        return None, run.reason
+    null = pipeline.null_realisations(log, nav, run, cfg, 6, seed=c["seed"])
+    run = with_null_covariance(run, null)
+    d = pipeline.diagnose_calibration(run, imu, ref, cfg, log=log, nav=nav, null_dv=null)
+    return refit_and_check(log, run, d, imu, ref, cfg, compensate=False).checks[0], d
+
+
+def model_fit_alarms(seeds: range) -> None:
+    """The model_fit check over clean cases ``seeds`` (printed per case and in total)."""
+    n = alarms = 0
+    for i in seeds:
+        c = case(i)
+        try:
+            check, d = model_fit_of(c)
+        except ValueError as exc:  # algorithm A refused the flight: not a QC verdict
+            print(f"  seed {c['seed']} {c['grade']}: A failed: {exc}", flush=True)
+            continue
+        if check is None:
+            print(f"  seed {c['seed']} {c['grade']}: no calibration ({d})", flush=True)
+            continue
+        n += 1
+        alarms += not check.passed
+        print(f"  seed {c['seed']} {c['grade']} {c['rate_hz']} Hz {c['noise'][0]}: named "
+              f"{d.named}, closing {d.conclusion} (p = {d.steps[-1].p_value:.3g}); model_fit "
+              f"{'passed' if check.passed else 'FAILED: ' + check.suggestion}", flush=True)
+    print(f"model_fit false alarms over {n} clean runs: {alarms} ({alarms / max(n, 1):.1%})")
 
 
 def _late(log: FlightLog, s: float) -> FlightLog:
@@ -188,6 +239,8 @@ def main() -> None:
         n = sum(not isinstance(rep, str) for _, rep in detail)
         print(f"false alarms over {n} clean runs: any check {any_fail} ({any_fail / n:.1%}); "
               + (", ".join(f"{k} {v}" for k, v in per_check.items()) or "none"))
+    elif what == "model_fit":
+        model_fit_alarms(range(n))
     else:
         for name, res in detection(range(n)).items():
             hits = sum(not r.startswith("ok") for r in res)

@@ -163,6 +163,35 @@ def test_gravity_disturbance_gradient(flight):
     _check(meas, reps, lambda r: fx.signature("gravity_disturbance", r), g, 2e-3)
 
 
+def test_gravity_disturbance_field_over_position(flight):
+    # a smooth deflection field (issue 34, shape "field"): the disturbing potential a
+    # polynomial of degree 2-4 over the flown area, about a reference point between the legs;
+    # each leg's signature needs its start relative to that point
+    fl, ref, reps = flight
+    t, tr = fl.imu.t_s, fl.truth
+    dt = np.diff(t)
+    k = len(fx.field_monomials())
+    c = np.random.default_rng(3).normal(size=k) * 2.0 * fx.GRAVITY_MPS2 * fx.ARCSEC_RAD
+    lat_r, lon_r = 0.5 * (tr.lat_rad[0] + tr.lat_rad[-1]), 0.5 * (tr.lon_rad[0] + tr.lon_rad[-1])
+    extent = 20_000.0
+    d = earth.llh_to_ned_m(tr.lat_rad[:-1], tr.lon_rad[:-1], tr.height_m[:-1], lat_r, lon_r,
+                           tr.height_m[0])
+    field = np.zeros((dt.size, 3))
+    field[:, 0:2] = fx.field_gradient(d[:, 0] / extent, d[:, 1] / extent) @ c
+    for leg, rep in zip(fl.legs, reps, strict=True):
+        k0 = int(np.searchsorted(t, rep.t0_s))
+        # true gravity = normal + dg: the IMU senses f - dg for the same motion; the value at
+        # the leg start is what A's tilt takes up (here A is the truth: it is left out)
+        dg = field - field[k0]
+        dv = fl.imu.dv_b_mps - np.einsum("kji,kj->ki", tr.c_nb[:-1], dg) * dt[:, None]
+        m = replay_leg(ImuIncrements(t, fl.imu.dtheta_b_rad, dv), ref, leg).dv_n_mps[:, 0:2]
+        # measured 1.2e-3 at most: the signature moves along B's initial velocity
+        _check([m], [rep], lambda r, o=d[k0, 0:2]: fx.signature(
+            "gravity_disturbance", r, shape="field", origin_n_m=o, extent_m=extent), c, 5e-3)
+    with pytest.raises(ValueError, match="positions"):
+        fx.signature("gravity_disturbance", reps[0], shape="field")
+
+
 def test_gyro_scale_factor_linear_and_rerun(flight):
     fl, ref, reps = flight
     s = np.array([2000.0, -1000.0, 3000.0]) * 1e-6

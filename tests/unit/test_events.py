@@ -156,11 +156,12 @@ def test_sensor_pose_at_events_against_the_simulator_truth(sim_run):
 
 
 def test_pipeline_writes_events_and_biases_tables(sim_run, tmp_path):
-    from pospp import outputs, pipeline
+    from pospp import outputs
 
     _, _, log, nav = sim_run
     cfg = config_from_dict({"sensor": {"lever_arm_m": LEVER_B_M.tolist()}})
-    table = pipeline._event_poses(log, nav.smoothed, "smoothed", cfg, pipeline._Progress(None))
+    table = outputs.event_poses_table(log.events_ns, nav.smoothed, "smoothed",
+                                      int(log.imu.time_ns[0]), cfg.sensor, print)
     assert len(table) == len(log.events_ns) and table.inside.all()
     assert np.array_equal(table.time_ns.to_numpy(), log.events_ns)
     epoch = int(log.imu.time_ns[0])

@@ -30,6 +30,7 @@ LAYERS: tuple[frozenset[str], ...] = (
     frozenset({"diagnose", "simcompare", "report"}),
     frozenset({"config"}),
     frozenset({"flight_stages"}),
+    frozenset({"sensor_stage"}),
     frozenset({"diagnosis_stage", "lever_time_stage"}),
     frozenset({"passes_ahead"}),
     frozenset({"pipeline", "convert", "api"}),

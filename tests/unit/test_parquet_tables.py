@@ -73,6 +73,9 @@ UNITLESS |= {"action", "imu_axes"}
 # diff (pospp diff, issue 37): the row's unit column names the unit of its numbers
 UNITLESS |= {"flight", "item", "text_a", "text_b", "within", "note"}
 ROW_UNIT |= {"value_a", "value_b", "max_diff", "rms_diff", "tolerance"}
+# diagnosis: a family's shape, the null re-made under the alternative; summary: the refit's
+# effects (issue 34)
+UNITLESS |= {"shape", "shape_parameters", "null_rebuilt", "null_rebuilt_with", "refit_effects"}
 
 
 @pytest.mark.parametrize("name", sorted(PROMISED))

@@ -342,3 +342,25 @@ def test_report_opens_with_the_quality_checks():
     later = [h for h in heads if not page[h:].startswith(("<h2>The answer", "<h2>Quality"))]
     assert page.index("GNSS lags the IMU") < (later[0] if later else len(page))
     assert "GNSS lags the IMU by about 2.0 s" in page and "failed: gnss_time_offset" in page
+
+
+def test_model_fit_counts_unmodelled_effects_and_a_gap_that_could_bias_the_calibration():
+    # issue 34: a named effect the calibration does not model fails the check when its refit
+    # moves the gyro bias beyond MODEL_FIT_SIGMAS (or there is no refit); so does a
+    # significant unexplained gap standing for more than that
+    nan, sigma, bar = math.nan, 1e-7, qc.MODEL_FIT_SIGMAS
+    ok = qc.model_fit([], nan, nan, 0.05, nan, sigma, [])
+    assert ok.name == "model_fit" and ok.passed and ok.value == 0 and ok.suggestion == ""
+    named = qc.model_fit(["accel_bias_change"], 1.1 * bar, nan, 0.05, nan, sigma,
+                         ["the ramp; refit"])
+    assert not named.passed and named.value == 1 and named.severity == "degraded"
+    assert named.suggestion == "the ramp; refit"
+    assert qc.model_fit(["accel_bias_change"], 0.9 * bar, nan, 0.05, nan, sigma, ["r"]).passed
+    assert not qc.model_fit(["lever_arm"], nan, nan, 0.05, nan, sigma, ["r"]).passed  # no refit
+    gap = qc.model_fit([], nan, 0.001, 0.05, 1.1 * bar * sigma, sigma, [], "the gap")
+    assert not gap.passed and gap.value == 1 and gap.suggestion == "the gap"
+    assert qc.model_fit([], nan, 0.001, 0.05, 0.9 * bar * sigma, sigma, [], "gap").passed
+    assert qc.model_fit([], nan, 0.2, 0.05, 1.1 * bar * sigma, sigma, [], "gap").passed
+    both = qc.model_fit(["lever_arm", "time_offset"], 3 * bar, 0.001, 0.05, 3 * bar * sigma,
+                        sigma, ["a"], "b")
+    assert both.value == 3 and both.suggestion == "a; b"

@@ -1,0 +1,405 @@
+"""Sensor-bias changes over flight time named by family and shape from A's own innovations.
+
+Frames and units: body FRD axes x, y; SI inside (m/s^2, rad/s, s); display units only in the
+findings' ``unit``. No I/O: the innovations and their responses come from
+:mod:`pospp.sensor_stage`.
+
+Why A's innovations and not B minus A
+-------------------------------------
+A linear change of a horizontal accelerometer bias inside a leg, ``b_a = b0 + r t``, forces B
+like a horizontal gyro bias ``r / g`` (both give ``dv'' + w_s^2 dv = const`` on a level leg:
+exactly, measured, removing the true 985 ug/h ramp of flight_accel_ramp_100hz from B minus A
+leaves the diagnosis's closing F unchanged at 206 and moves only the calibrated gyro bias,
+docs/diagnose.md). What reveals it is the bias *level* A sees at each heading change (a
+body-fixed bias flips in the navigation frame, a tilt does not), i.e. A's GNSS innovations.
+
+The likelihood
+--------------
+A as configured (its own bias and drift model: "beyond the drift model") is run on the log
+with its Kalman gains recorded; with those gains replayed (:class:`pospp.nav.filter.
+GainReplay`) A is a fixed linear system, and its innovations are linear in a bias change
+``b(t)`` added to the IMU samples. With ``b = sum_k a_k R_k(t)`` on the hinge basis of
+:mod:`pospp.diagnose.shapes`, one replay per knot and axis gives the innovations' response
+``J_k``; the innovations of the flight with the change removed are ``nu - J a``, and A's
+prediction-error likelihood (whitened by ``S^-1 = L L^T``, ``w = L^T nu``) is least squares::
+
+    RSS(a) = sum_records | L^T (nu - J a) |^2
+
+Each shape (``a = W c``) is fitted by least squares; a family's shape is the one of smallest
+BIC, ``n log(RSS / n) + k log n`` (the workflow's criterion; k counts a shape's grid-searched
+parameter too: a settling of T far beyond the span is a ramp), over every shape and grid value;
+it is named when its nested F-test against the model before it, ``F = ((RSS_0 - RSS_1) / q) /
+(RSS_1 / (n - k_1))``, is significant at ``alpha / m`` after a Bonferroni factor for the
+variants tried (m: families tested at the step). Families are named in turn, the strongest F
+first, each later one with the earlier ones' columns in the model (an accelerometer ramp also
+reads, alone, as a gyro ramp: 13.9 of F on the ramp flight, nothing once the accelerometer's is
+in). Sigmas: the least squares' covariance with the residual variance estimated.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pospp.diagnose._candidates import FIELD_PARAMETERS
+from pospp.diagnose._linear import f_test
+from pospp.diagnose.shapes import Variant, all_variants, change_at, shape_values
+from pospp.distributions import f_sf
+from pospp.effects_catalog import catalog_entry, row_named, shape_entry, shape_unit
+
+AXES = ("x", "y")
+"""The body axes a sensor family is fitted on (the horizontal ones the calibration's gyro
+bias and B's horizontal error see)."""
+
+
+@dataclass(frozen=True)
+class InnovationDesign:
+    """A's whitened innovations and their responses to each family's hinge coefficients.
+
+    Attributes
+    ----------
+    y : ndarray (n,)
+        ``L^T nu`` over the records A used (whitened by its own ``S^-1``).
+    responses : mapping str -> ndarray (n, K, 2)
+        Per family, ``L^T J`` per SI hinge coefficient (slope change of one SI unit per hour
+        at knot k) on body axis x and y.
+    knots : ndarray (K,)
+        The hinge knots [s run time].
+    t_end_s : float
+        The end of the span the shapes are written over [s].
+    record_t_s : ndarray (n / 3,)
+        Each record's time [s run time] (the whitened innovation of a record is 3 rows of y).
+    field_extent_m : float
+        The half-size of the flown area the gravity field's potential is written over [m]
+        (:func:`pospp.diagnose.effects.field_gradient`; NaN without the gravity family).
+    """
+
+    y: NDArray
+    responses: Mapping[str, NDArray]
+    knots: NDArray
+    t_end_s: float
+    record_t_s: NDArray
+    field_extent_m: float = float("nan")
+
+
+@dataclass(frozen=True)
+class FamilyFinding:
+    """One family named (or tested) with its chosen shape; display units in ``unit``."""
+
+    effect: str
+    shape: str
+    shape_parameters: str
+    parameters: tuple[str, ...]
+    values: NDArray
+    sigmas: NDArray
+    value: float
+    sigma: float
+    unit: str
+    statistic: float
+    p_value: float
+    delta_bic: float
+    explained_fraction: float
+    significant: bool
+    hinge_si: NDArray
+    """(K, A): the fitted coefficients, SI: a sensor change's hinge coefficients (per hour)
+    on body x and y (A = 2), the gravity field's potential terms (A = 1)."""
+    hinge_cov_si: NDArray
+    """(A K, A K): their covariance (axis-major: x's K, then y's)."""
+    n_variants: int
+
+
+def _fit(x: NDArray, y: NDArray) -> tuple[NDArray, float, int, NDArray]:
+    """Least squares: (coefficients, RSS, rank, (X^T X)^+)."""
+    c, _, rank, _ = np.linalg.lstsq(x, y, rcond=None)
+    r = y - x @ c
+    return c, float(r @ r), int(rank), np.linalg.pinv(x.T @ x)
+
+
+def _columns(resp: NDArray, w: NDArray) -> NDArray:
+    """The shape's columns on both axes: (n, 2 q), axis-major."""
+    return np.concatenate([resp[:, :, a] @ w for a in range(resp.shape[2])], axis=1)
+
+
+def _bic(rss: float, n: int, k: int) -> float:
+    return n * np.log(rss / n) + k * np.log(n)
+
+
+RATE_PLAUSIBLE_PER_H = 10.0
+"""A plausible rate of change (a ramp's, a walk's slopes at its knots) is this many of the
+family's plausible sizes per hour (1000 ug/h, 0.5 deg/h per hour; the catalogue's
+``accel_bias_ramp`` says 1000 ug/h)."""
+
+
+def _plausible(fam: str, v: Variant) -> float:
+    """A large but plausible coefficient (SI) of a family's variant: its shape's own (the
+    gravity field's 3 arcsec); a rate's (ramp, walk: slopes per hour)
+    :data:`RATE_PLAUSIBLE_PER_H` times the family's; else the family's (a step's, a
+    settling's: 100 ug, 0.05 deg/h)."""
+    own = shape_entry(v.shape).plausible_si
+    if np.isfinite(own):
+        return own
+    scale = RATE_PLAUSIBLE_PER_H if v.per_hour or v.shape == "walk" else 1.0
+    return scale * float(catalog_entry(fam).plausible_si)
+
+
+def _candidate(design: InnovationDesign, fam: str, v: Variant, base_x: NDArray,
+               rss0: float, k0: int, ratio: float = 1.0) -> dict | None:
+    """One variant fitted: its observable directions (those in which a plausible
+    coefficient stands 2 noise sigmas above what the model before it fits, the workflow's
+    screen; None when it has none), the nested F-test and the BIC."""
+    cols = _columns(design.responses[fam], v.weights)
+    proj = cols - base_x @ np.linalg.lstsq(base_x, cols, rcond=None)[0] if base_x.shape[1] \
+        else cols
+    lam, vec = np.linalg.eigh(proj.T @ proj * _plausible(fam, v) ** 2)
+    keep = vec[:, lam >= 4.0]
+    if not keep.shape[1]:
+        return None
+    x1 = np.concatenate([base_x, cols @ keep], axis=1)
+    c, rss1, k1, inv = _fit(x1, design.y)
+    n = design.y.size
+    f, _ = f_test(rss0, rss1, k1 - k0, n - k1)
+    f = f / ratio  # the residual's correlation (long-run variance)
+    p = float(f_sf(f, k1 - k0, n - k1)) if np.isfinite(f) else 1.0
+    # a shape's non-linear parameter (the step's time, the settling's T: searched on a grid)
+    # counts in its BIC: a settling of T well beyond the span is a ramp, and the ramp wins
+    nonlinear = int(np.isfinite(v.parameter))
+    b = base_x.shape[1]
+    return dict(v=v, c=keep @ c[b:], inv=keep @ inv[b:, b:] @ keep.T, rss=rss1, k=k1, f=f,
+                p=p, bic=_bic(rss1, n, k1 + nonlinear), cols=x1[:, b:])
+
+
+def _finding(design: InnovationDesign, fam: str, best: dict, walk: dict, rss0: float,
+             k0: int, p_adj: float, significant: bool, n_var: int) -> FamilyFinding:
+    n = design.y.size
+    s2 = best["rss"] / max(n - best["k"], 1)
+    v: Variant = best["v"]
+    entry = catalog_entry(fam)
+    unit_name, unit_si = shape_unit(fam, v.shape)
+    q = v.weights.shape[1]
+    n_ax = design.responses[fam].shape[2]
+    c = best["c"].reshape(n_ax, q)  # axis-major
+    cov = best["inv"] * s2
+    # the reported values are linear in c: their covariance through the same map (a walk's
+    # are its change at each knot's end; every other shape's, c)
+    mp = (shape_values(v, np.eye(q), design.knots, design.t_end_s) if v.shape == "walk"
+          else np.eye(q))
+    m = np.kron(np.eye(n_ax), mp)
+    vals = m @ best["c"] / unit_si
+    cv = m @ cov @ m.T / unit_si**2
+    sig = np.sqrt(np.clip(np.diag(cv), 0.0, None))
+    if v.shape == "walk":  # the size: the RMS change over the knots' ends, both axes
+        size = float(np.sqrt(np.mean(vals**2)))
+        g = vals / (vals.size * size) if size > 0 else np.zeros_like(vals)
+    else:
+        size = float(np.linalg.norm(vals))
+        g = vals / size if size > 0 else np.zeros_like(vals)
+    size_sig = float(np.sqrt(max(g @ cv @ g, 0.0)))
+    excess = rss0 - best["rss"] - (best["k"] - k0) * s2
+    total = rss0 - walk["rss"] - (walk["k"] - k0) * s2
+    frac = float(np.clip(excess / total, 0.0, None)) if total > 0 else float("nan")
+    if v.shape == "field":
+        names: tuple[str, ...] = FIELD_PARAMETERS
+    else:
+        names = tuple(f"{p}_{i}" if v.shape == "walk" else p
+                      for p in entry.parameters for i in range(len(vals) // n_ax))
+    hinge = np.stack([v.weights @ c[a] for a in range(n_ax)], axis=1)
+    wcov = np.kron(np.eye(n_ax), v.weights) @ cov @ np.kron(np.eye(n_ax), v.weights).T
+    return FamilyFinding(fam, v.shape, v.parameter_text, names, vals, sig, size, size_sig,
+                         unit_name, best["f"], p_adj, best["bic"] - _bic(rss0, n, k0), frac,
+                         significant, hinge, wcov, n_var)
+
+
+SCALE_BAND = 3.0
+"""A's whitened innovations must have the variance its own S says, within this factor either
+way, after every family's most flexible shape (per scalar, 1 when A's model holds): outside
+it A's model does not hold where the shapes live and no family is named. Measured: 0.89-0.99
+on flight_accel_ramp_100hz and the null reference flights; 0.025 on a clean MEMS flight of the
+QC benchmark with 2 cm GNSS and 6 m/s^2 of vibration (S 40 times the innovations' variance,
+their long-run variance ratio 10), which named an accelerometer and a gyro walk."""
+
+
+def long_run_ratio(residual: NDArray, record_t_s: NDArray, window_s: float) -> float:
+    """The long-run variance of the whitened residual over its variance, the largest over the
+    three components of a record (Bartlett weights over lags up to ``window_s`` of records;
+    1 for white noise, at least 1 returned): the factor by which an F-test on regressors
+    smooth over ``window_s`` is too liberal (a heteroskedasticity-and-autocorrelation-
+    consistent correction). The fit's window is the knot spacing: the hinge responses vary
+    over it, and so the estimates' variance is the residual's spectrum below that scale."""
+    r = np.asarray(residual, dtype=float).reshape(-1, 3)
+    t = np.asarray(record_t_s, dtype=float)
+    rate = (t.size - 1) / max(float(t[-1] - t[0]), 1e-9) if t.size > 1 else 1.0
+    lags = int(min(max(1, round(window_s * rate)), r.shape[0] // 4))
+    worst = 1.0
+    for c in range(3):
+        x = r[:, c] - r[:, c].mean()
+        g0 = float(x @ x)
+        if not g0 > 0:
+            continue
+        s = g0 + 2.0 * sum((1.0 - k / (lags + 1)) * float(x[k:] @ x[:-k])
+                           for k in range(1, lags + 1))
+        worst = max(worst, s / g0)
+    return worst
+
+
+def fit_sensor_families(design: InnovationDesign, families: Sequence[str],
+                        shapes: Mapping[str, Sequence[str]], alpha: float
+                        ) -> tuple[list[FamilyFinding], list[FamilyFinding], float, bool]:
+    """Name the sensor families the innovations hold, in turn (module docstring).
+
+    Parameters
+    ----------
+    design : InnovationDesign
+    families : sequence of str
+        Catalogue names with a response in ``design``.
+    shapes : mapping
+        Family -> the shapes tried (:data:`pospp.diagnose.shapes.TIME_SHAPES` names; the
+        ``walk`` among them is the reference of the explained fraction).
+    alpha : float
+        Family-wise level of each step.
+
+    Returns
+    -------
+    (named, tested, ratio, holds)
+        The families named, in order, every family's chosen shape at every step, and the
+        long-run variance ratio of the residual after every family's most flexible shape
+        (:func:`long_run_ratio`, over the knot spacing): each F is divided by it (an
+        unmodelled random walk leaves a rough residual the knots cannot follow). Nothing is
+        named when that residual's variance per scalar
+        is outside :data:`SCALE_BAND` (A's S does not describe its innovations: ``holds``
+        False).
+    """
+    n = design.y.size
+    base_x = np.zeros((n, 0))
+    rss0, k0 = float(design.y @ design.y), 0
+    named: list[FamilyFinding] = []
+    tested: list[FamilyFinding] = []
+    left = [f for f in families if f in design.responses]
+    flexible = [_columns(design.responses[f], np.eye(design.responses[f].shape[1]))
+                for f in left]
+    full = np.concatenate([base_x, *flexible], axis=1)
+    resid = design.y - full @ _fit(full, design.y)[0]
+    spacing = (design.t_end_s - float(design.knots[0])) / design.knots.size
+    ratio = long_run_ratio(resid, design.record_t_s, spacing)
+    scale = float(resid @ resid) / max(n - full.shape[1], 1)
+    holds = 1.0 / SCALE_BAND <= scale <= SCALE_BAND
+    while left:
+        trials = {}
+        for fam in left:
+            variants = family_variants(fam, shapes[fam], design)
+            cands = [c for v in variants
+                     if (c := _candidate(design, fam, v, base_x, rss0, k0, ratio)) is not None]
+            if not cands:  # these data cannot reveal the family
+                continue
+            best = min(cands, key=lambda c: c["bic"])
+            walk = next((c for c in cands if c["v"].shape == "walk"), best)
+            p_adj = min(1.0, best["p"] * len(cands))
+            sig = bool(p_adj < alpha / len(left)) and holds
+            trials[fam] = (best, _finding(design, fam, best, walk, rss0, k0, p_adj, sig,
+                                          len(cands)))
+            tested.append(trials[fam][1])
+        good = [fam for fam, (_, fnd) in trials.items() if fnd.significant]
+        if not good:
+            break
+        fam = max(good, key=lambda f: trials[f][1].statistic)
+        best, fnd = trials[fam]
+        named.append(fnd)
+        base_x = np.concatenate([base_x, best["cols"]], axis=1)
+        rss0, k0 = best["rss"], best["k"]
+        left.remove(fam)
+    return named, tested, ratio, holds
+
+
+# --------------------------------------------------------------------------------------------
+# what a named change does to B minus A (the calibration's data)
+
+
+def _forced(rep, g: NDArray) -> NDArray:
+    from pospp.diagnose.effects import forced_response
+    return forced_response(rep, g)
+
+
+def accel_response_along_b(rep, change_b: NDArray, change_b0: NDArray) -> NDArray:
+    """B's horizontal velocity error (M, 2) [m/s] from an accelerometer bias change
+    ``change_b`` (M, 2) [m/s^2] at the leg's samples, body x and y: B starts on A, whose tilt
+    and bias estimate took up the bias at the leg start (``change_b0``), so the forcing is
+    ``dv' = C_nb (b(t) - b(t0))`` (checked against flight_accel_ramp_100hz's truth: B's error
+    within 0.6-3.2 mm/s RMS per leg of this, the true gyro bias and the tilts)."""
+    g = np.zeros((rep.t_s.size, 15, 1))
+    g[:, 3:6, 0] = np.einsum("kij,kj->ki", rep.c_nb[:, :, 0:2], change_b - change_b0)
+    return _forced(rep, g)[:, :, 0]
+
+
+def gyro_response_along_b(rep, change_b: NDArray, change_b0: NDArray) -> NDArray:
+    """B's horizontal velocity error (M, 2) [m/s] from a gyro bias change ``change_b`` (M, 2)
+    [rad/s], body x and y: B integrates the raw rates, so the whole change forces its tilt,
+    ``phi' = -C_nb b(t)`` (pospp.nav.error_model); ``change_b0`` is not used (the tilt at the
+    leg start is A's)."""
+    g = np.zeros((rep.t_s.size, 15, 1))
+    g[:, 0:3, 0] = -np.einsum("kij,kj->ki", rep.c_nb[:, :, 0:2], change_b)
+    return _forced(rep, g)[:, :, 0]
+
+
+def gravity_response_along_b(rep, field_change: NDArray, field_change0: NDArray) -> NDArray:
+    """B's horizontal velocity error (M, 2) [m/s] from a gravity disturbance ``dg_h`` (M, 2)
+    [m/s^2] along the leg: B (normal gravity) errs by ``dv' = -(dg_h(r) - dg_h(r0))``
+    (:mod:`pospp.diagnose.effects`, the ``field`` shape)."""
+    g = np.zeros((rep.t_s.size, 15, 1))
+    g[:, 3:5, 0] = -(field_change - field_change0)
+    return _forced(rep, g)[:, :, 0]
+
+
+@dataclass(frozen=True)
+class SensorFamily:
+    """A family fitted on A's innovations: what its change perturbs and what it does to B."""
+
+    effect_id: str
+    sensor: str
+    """"accel" (a specific-force bias), "gyro" (a rate bias): a change over flight time on
+    the hinge basis; "gravity": a deflection field over position (the potential's terms of
+    :func:`pospp.diagnose.effects.field_monomials`), the specific force's ``-C_bn dg_n``."""
+    response_along_b: Callable[..., NDArray]
+    """(replay, change (M, 2) SI, change at the leg start (2,)) -> B's error (M, 2) [m/s]."""
+
+
+SENSOR_FAMILIES: tuple[SensorFamily, ...] = (
+    SensorFamily("accel_bias_change", "accel", accel_response_along_b),
+    SensorFamily("gyro_bias_change", "gyro", gyro_response_along_b),
+    SensorFamily("gravity_disturbance", "gravity", gravity_response_along_b),
+)
+"""The families fitted on A's innovations, in the order they are tested. The gravity field
+competes with the sensor changes: a deflection wave along the track reads, alone, as an
+accelerometer and a gyro change (docs/diagnose.md, "Power on shapes")."""
+
+
+def family_variants(effect_id: str, shapes: Sequence[str], design: InnovationDesign
+                    ) -> list[Variant]:
+    """The variants a family is fitted in: a sensor change's every shape and grid value on the
+    hinge basis (:func:`pospp.diagnose.shapes.all_variants`), the gravity field's one (all
+    its potential's terms)."""
+    if sensor_family(effect_id).sensor == "gravity":
+        p = design.responses[effect_id].shape[1]
+        return [Variant("field", np.eye(p),
+                        parameter_text=f"over {design.field_extent_m / 1000.0:.0f} km")]
+    return all_variants([s for s in shapes if s not in ("gradient", "field", "deflection")],
+                        design.knots, design.t_end_s)
+
+
+def sensor_family(effect_id: str) -> SensorFamily:
+    """The family of a name (ValueError naming the known ones otherwise)."""
+    return row_named(SENSOR_FAMILIES, "effect_id", effect_id, "sensor family")
+
+
+def response_along_b(finding: FamilyFinding, knots: NDArray, replays: Sequence,
+                     hinge_si: NDArray | None = None) -> list[NDArray]:
+    """B minus A's response (M, 2) per leg to a finding's change (its fitted hinge
+    coefficients, or ``hinge_si`` (K, 2)), relative to the change's mean over the legs'
+    samples (the constant part is the calibration's own bias: what it reads is then the
+    bias at the legs' mean, not at the first knot)."""
+    fam = sensor_family(finding.effect)
+    a = finding.hinge_si if hinge_si is None else hinge_si
+    ch = [change_at(r.t0_s + r.t_s, knots, a) for r in replays]
+    mean = np.mean(np.concatenate(ch), axis=0) if fam.sensor == "gyro" else 0.0
+    return [fam.response_along_b(r, c - mean, c[0]) for r, c in zip(replays, ch, strict=True)]

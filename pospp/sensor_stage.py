@@ -1,0 +1,330 @@
+"""The sensor families of the diagnosis: A's innovations and their responses (issue 34).
+
+:func:`innovation_design` runs algorithm A as configured on the log (summed down to ``[pairs]
+rerun_imu_rate_hz``, the named GNSS-side effects removed) recording its gains, then once more
+per hinge knot, axis and sensor with a bias change added to the IMU samples and the gains
+replayed (:class:`pospp.nav.filter.GainReplay`): the innovations' linear responses of
+:mod:`pospp.diagnose.sensor_families`. :func:`sensor_family_steps` names the families and
+returns them as diagnosis rows with what each does to B (its worth at the horizon).
+Nothing here touches files.
+
+Cost: one forward pass with gains recorded and ``1 + 2 K`` replays per family (K knots,
+:data:`pospp.diagnose.shapes.MAX_KNOTS` at most): on flight_accel_ramp_100hz (2700 s, 9
+knots, 50 Hz) 0.3 s and 37 replays of 0.08 s.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from pospp import earth, rotation
+from pospp.calib.replay import SolutionA
+from pospp.config import PipelineConfig
+from pospp.diagnose import null_model
+from pospp.diagnose.effects import ACCEL_SETTLING_S, field_gradient, signature
+from pospp.diagnose.locate import horizon_worth
+from pospp.diagnose.rerun import _gnss_earlier, _with_rates, warmed
+from pospp.diagnose.results import CandidateTest, Diagnosis, DiagnosisStep, EffectResponse
+from pospp.diagnose.sensor_families import (
+    SENSOR_FAMILIES,
+    FamilyFinding,
+    InnovationDesign,
+    fit_sensor_families,
+    response_along_b,
+    sensor_family,
+)
+from pospp.diagnose.shapes import hinge_basis, knots_s
+from pospp.effects_catalog import catalog_entry
+from pospp.flight_stages import imu_tuning, navigate, rerun_decimation
+from pospp.io import mcap_reader
+from pospp.nav.filter import STATUS_USED
+from pospp.threads import Threads, map_in_threads
+from pospp.units import t_s_from_time_ns
+
+CRITERION = "innovation_F_bonferroni_shapes"
+"""The criterion of a sensor family's row: the nested F-test on A's whitened innovations,
+Bonferroni over the shape variants tried and the families tested."""
+GNSS_SIDE = ("time_offset", "lever_arm", "gyro_scale_factor", "accel_bias_change")
+"""Named effects removed from the log (or A's configuration) before the families are fitted:
+a 15 ms GNSS offset left in reads as an accelerometer change on A's innovations
+(flight_time_offset_200hz: the walk's likelihood ratio 340 on 20 parameters; removed, 1.7)."""
+
+
+def _removed(log: Any, config: PipelineConfig, d: Diagnosis
+             ) -> tuple[Any, np.ndarray | None, tuple[str, ...]]:
+    """(log, lever arm) with the named GNSS-side effects of ``d`` taken off (the conventions of
+    :func:`pospp.diagnose.rerun.signature_at`), and the effects removed."""
+    lever = None
+    done = []
+    for e in d.named:
+        if e not in GNSS_SIDE:
+            continue
+        p = np.asarray(d.step_of(e).values, dtype=float) * catalog_entry(e).si_per_unit
+        if e == "time_offset":
+            log = _gnss_earlier(log, -float(p[0]))
+        elif e == "lever_arm":
+            lever = np.asarray(config.gnss.lever_arm_m, dtype=float) - p
+        elif e == "gyro_scale_factor":
+            log = _with_rates(log, log.imu.w_ib_b_radps / (1.0 + p))
+        elif d.step_of(e).shape in ("", "settling"):  # the legs' warm-up (its T)
+            log = warmed(log, -p, ACCEL_SETTLING_S)
+        done.append(e)
+    return log, lever, tuple(done)
+
+
+NOISE_BAND = 3.0
+"""The IMU white noise read from the samples may exceed A's configured angle and velocity
+random walk by at most this factor for the families to be fitted: the likelihood is A's, and
+A's noise model must hold. Measured (read / configured): 0.2 ARW and 0.0 VRW on the reference
+flights, 0.4-0.7 and 0.0-0.8 on the simulated grades; the simulator's MEMS at 100 Hz (6 m/s^2
+of vibration) 10 and 125, where the families named accelerometer ramps of 16 000 ug that the
+sensor's 60 s means do not show (they wander by 300 ug)."""
+
+
+def imu_noise_holds(log: Any, config: PipelineConfig) -> bool:
+    """Whether the IMU white noise read from the log's samples
+    (:func:`pospp.diagnose.null_model.imu_white_noise_from_samples`) is within
+    :data:`NOISE_BAND` of A's configured ARW and VRW."""
+    arw, vrw = null_model.imu_white_noise_from_samples(log.imu.time_ns, log.imu.w_ib_b_radps,
+                                                       log.imu.f_ib_b_mps2)
+    si = imu_tuning(config).noise()
+    return bool(arw <= NOISE_BAND * si.gyro_arw_radpsqrts
+                and vrw <= NOISE_BAND * si.accel_vrw_mpspsqrts)
+
+
+def _perturbed(log: Any, sensor: str, axis: int, column: np.ndarray) -> Any:
+    """The log with ``column`` [SI] added to the rates or the specific force: on one ``axis``
+    ((N,)), or on all three (``axis`` -1, (N, 3))."""
+    imu = log.imu
+    name = "f_ib_b_mps2" if sensor == "accel" else "w_ib_b_radps"
+    arr = getattr(imu, name).copy()
+    if axis < 0:
+        arr += column
+    else:
+        arr[:, axis] += column
+    return replace(log, imu=replace(imu, **{name: arr}))
+
+
+def _field_columns(nav_b: Any, t_run: np.ndarray, reference: tuple[float, float],
+                   extent_m: float) -> np.ndarray:
+    """The specific-force change (N, 3, P) [m/s^2 per SI coefficient] of each term of the
+    gravity field's potential along A's track (``nav_b``'s forward solution, interpolated to
+    the IMU times): ``-C_bn dg_n``, dg_h the term's gradient at A's position north and east
+    of ``reference`` (lat, lon [rad]) in units of ``extent_m`` (:mod:`pospp.diagnose.effects`,
+    the ``field`` shape)."""
+    sol = nav_b.forward
+    lat = np.interp(t_run, sol.t_s, sol.lat_rad)
+    lon = np.interp(t_run, sol.t_s, sol.lon_rad)
+    ne = north_east_m(lat, lon, *reference, 0.0)
+    grad = field_gradient(ne[:, 0] / extent_m, ne[:, 1] / extent_m)  # (N, 2, P)
+    k = np.clip(np.searchsorted(sol.t_s, t_run), 0, sol.t_s.size - 1)
+    c_nb = rotation.dcm_from_quat(sol.q_nb[k])
+    return -np.einsum("kji,kjp->kip", c_nb[:, 0:2, :], grad)
+
+
+def north_east_m(lat_rad: Any, lon_rad: Any, lat0_rad: float, lon0_rad: float,
+                 height_m: float) -> np.ndarray:
+    """North and east of (lat0, lon0) [m] (WGS-84 radii there), (N, 2)."""
+    r_m, r_n = earth.principal_radii_m(lat0_rad)
+    lat, lon = np.atleast_1d(lat_rad), np.atleast_1d(lon_rad)
+    return np.stack([(lat - lat0_rad) * (r_m + height_m),
+                     (lon - lon0_rad) * (r_n + height_m) * np.cos(lat0_rad)], axis=1)
+
+
+def innovation_design(log: mcap_reader.FlightLog, config: PipelineConfig,
+                      families: Sequence[str], *, lever_b_m: Any = None,
+                      reference: tuple[float, float] | None = None,
+                      threads: Threads = 1) -> InnovationDesign:
+    """A's whitened innovations on ``log`` and their responses to each family's coefficients
+    (module docstring); the gravity family's only with ``reference`` (lat, lon [rad]: the
+    field's origin, the legs' mean start), its extent the farthest point of A's track after
+    its alignment (at least 1 km). Raises ValueError when A fails."""
+    factor = rerun_decimation(log, config.pairs.rerun_imu_rate_hz)
+    log_r = null_model.decimate_imu(log, factor)
+    opts = replace(config.filter_options(), smoother=False, covariance_outputs=False)
+    base = navigate(log_r, config, options=opts, lever_arm_b_m=lever_b_m, record_gains=True)
+    gains = base.gain_replay
+    if gains is None or base.innovations is None:
+        raise ValueError("A recorded no gains")
+
+    def innovations(lg: Any) -> np.ndarray:
+        rec = navigate(lg, config, options=opts, lever_arm_b_m=lever_b_m,
+                       replay=gains).innovations
+        assert rec is not None  # A always records its innovations
+        return rec.dz_ned
+
+    nu0 = innovations(log_r)
+    t_from = float(base.alignment.t_s)  # before it the horizontal bias is A's tilt
+    used = (gains.status == STATUS_USED) & (base.innovations.status == STATUS_USED) & \
+        np.all(np.isfinite(nu0), axis=1) & (base.innovations.t_s >= t_from)
+    chol = np.linalg.cholesky(gains.s_inv[used])  # S^-1 = L L^T: L^T nu is white
+
+    def white(nu: np.ndarray) -> np.ndarray:
+        return np.einsum("kji,kj->ki", chol, nu[used]).reshape(-1)
+
+    t_run = t_s_from_time_ns(log_r.imu.time_ns, int(log_r.imu.time_ns[0]))
+    knots = knots_s(t_from, float(t_run[-1]))
+    hinges = hinge_basis(t_run, knots)
+    extent = float("nan")
+    fams = [f for f in families if reference is not None or sensor_family(f).sensor != "gravity"]
+    runs = []  # (family, sensor, (N, 3) specific force or (N,) on an axis, axis, step)
+    for fam in fams:
+        fs = sensor_family(fam)
+        step = catalog_entry(fam).plausible_si
+        if fs.sensor == "gravity":
+            assert reference is not None
+            sol = base.forward
+            after = sol.t_s >= base.alignment.t_s
+            ne = north_east_m(sol.lat_rad[after], sol.lon_rad[after], *reference, 0.0)
+            extent = max(1000.0, float(np.max(np.hypot(ne[:, 0], ne[:, 1]))))
+            cols = _field_columns(base, t_run, reference, extent)
+            runs += [(fam, "accel", cols[:, :, j], -1, step) for j in range(cols.shape[2])]
+        else:
+            runs += [(fam, fs.sensor, hinges[:, k], a, step) for a in range(2)
+                     for k in range(knots.size)]
+    out = map_in_threads(lambda r: white(innovations(_perturbed(
+        log_r, r[1], r[3], r[4] * r[2])) - nu0) / r[4], runs, threads)
+    responses = {}
+    for fam in fams:
+        stacked = np.stack([c for r, c in zip(runs, out, strict=True) if r[0] == fam], axis=1)
+        responses[fam] = (stacked[:, :, None] if sensor_family(fam).sensor == "gravity" else
+                          stacked.reshape(-1, 2, knots.size).transpose(0, 2, 1))
+    return InnovationDesign(white(nu0), responses, knots, float(t_run[-1]),
+                            base.innovations.t_s[used], extent)
+
+
+@dataclass(frozen=True)
+class SensorFamilies:
+    """The families named on A's innovations, and what B carries of each."""
+
+    families: tuple[str, ...]
+    """The families fitted (those the legs did not name)."""
+    named: tuple[FamilyFinding, ...]
+    tested: tuple[FamilyFinding, ...]
+    knots: np.ndarray
+    responses: dict[str, EffectResponse]
+    """Per named family, what it does to B minus A (per hinge coefficient, legs in id
+    order)."""
+    removed: tuple[str, ...]
+    """The named GNSS-side effects taken off the log before the fit."""
+    lrv_ratio: float
+    """The long-run variance ratio of A's whitened innovations after every family's most
+    flexible shape (:func:`pospp.diagnose.sensor_families.long_run_ratio`), which divides
+    every F."""
+    holds: bool
+    """Whether A's model holds for the families' likelihood: the IMU's white noise within
+    :data:`NOISE_BAND` of A's and its innovations' variance what its S says there
+    (:data:`pospp.diagnose.sensor_families.SCALE_BAND`); else nothing is named and the
+    families are the diagnosis's ``not_evaluated``."""
+
+
+def sensor_families(d: Diagnosis, replays: list, log: mcap_reader.FlightLog,
+                    config: PipelineConfig, threads: Threads = 1,
+                    solution_a: SolutionA | None = None) -> SensorFamilies | None:
+    """Fit the families on A's innovations of ``log`` with ``d``'s named GNSS-side effects
+    removed; families ``d`` named on the legs are not fitted again, the gravity field only
+    with A's solution (its origin: the legs' mean start). None when A fails on the log or no
+    family is left; nothing named where A's model does not hold (:func:`imu_noise_holds`,
+    the innovations' scale)."""
+    families = [f.effect_id for f in SENSOR_FAMILIES if f.effect_id not in d.named
+                and (solution_a is not None or sensor_family(f.effect_id).sensor != "gravity")]
+    if not families:
+        return None
+    if not imu_noise_holds(log, config):
+        return SensorFamilies(tuple(families), (), (), np.zeros(0), {}, (), float("nan"),
+                              False)
+    log_s, lever, removed = _removed(log, config, d)
+    ref = _legs_reference(replays, solution_a)
+    try:
+        design = innovation_design(log_s, config, families, lever_b_m=lever, reference=ref,
+                                   threads=threads)
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+    named, tested, ratio, holds = fit_sensor_families(
+        design, families, {f: catalog_entry(f).shapes for f in families},
+        config.pairs.diagnose_alpha)
+    resp = {f.effect: family_response(f, design, replays, solution_a, ref) for f in named}
+    return SensorFamilies(tuple(families), tuple(named), tuple(tested), design.knots, resp,
+                          removed, ratio, holds)
+
+
+def _legs_reference(replays: list, solution_a: SolutionA | None
+                    ) -> tuple[float, float] | None:
+    """(lat, lon) [rad] of the legs' mean start on A's solution (the gravity field's origin,
+    as :func:`pospp.diagnose._candidates.leg_origins` takes it), or None."""
+    if solution_a is None:
+        return None
+    tr = solution_a.trajectory
+    return (float(np.mean([np.interp(r.t0_s, tr.t_s, tr.lat_rad) for r in replays])),
+            float(np.mean([np.interp(r.t0_s, tr.t_s, tr.lon_rad) for r in replays])))
+
+
+def family_response(f: FamilyFinding, design: InnovationDesign, replays: list,
+                    solution_a: SolutionA | None = None,
+                    reference: tuple[float, float] | None = None) -> EffectResponse:
+    """A named family's response on B minus A per coefficient, its fitted coefficients and
+    their covariance: a sensor change's per hinge coefficient (axis-major: x's K, then y's);
+    the gravity field's per potential term (the legs' starts on A's solution, north and east
+    of ``reference``, over the design's extent)."""
+    if sensor_family(f.effect).sensor == "gravity":
+        assert solution_a is not None and reference is not None
+        tr = solution_a.trajectory
+        columns = tuple(signature(
+            "gravity_disturbance", r, shape="field", extent_m=design.field_extent_m,
+            origin_n_m=north_east_m(np.interp(r.t0_s, tr.t_s, tr.lat_rad),
+                                    np.interp(r.t0_s, tr.t_s, tr.lon_rad), *reference, 0.0)[0])
+            for r in replays)
+        return EffectResponse(f.effect, columns, f.hinge_si[:, 0], f.hinge_cov_si)
+    k = design.knots.size
+    cols = []
+    for j in range(2 * k):
+        unit = np.zeros(2 * k)
+        unit[j] = 1.0
+        cols.append(response_along_b(f, design.knots, replays, hinge_si=unit.reshape(2, k).T))
+    columns = tuple(np.stack([c[i] for c in cols], axis=-1) for i in range(len(replays)))
+    return EffectResponse(f.effect, columns, f.hinge_si.T.reshape(-1), f.hinge_cov_si)
+
+
+def _step(f: FamilyFinding, number: int, worth: Any, closing: DiagnosisStep,
+          removed: tuple[str, ...]) -> DiagnosisStep:
+    note = f"; fitted with {', '.join(removed)} removed" if removed else ""
+    return DiagnosisStep(
+        step=number, effect=f.effect, parameters=f.parameters, values=f.values,
+        sigmas=f.sigmas, value=f.value, sigma=f.sigma, unit=f.unit, statistic=f.statistic,
+        p_value=f.p_value, criterion=CRITERION, significant=True, delta_bic=f.delta_bic,
+        explained_fraction=f.explained_fraction, confounded_with=(),
+        gap_before_mps=closing.gap_before_mps, gap_after_mps=closing.gap_after_mps,
+        heldout_gap_before_mps=closing.heldout_gap_before_mps,
+        heldout_gap_after_mps=closing.heldout_gap_after_mps,
+        horizon_s=closing.horizon_s, gap_horizon_mps=worth.dv_mps, gap_horizon_m=worth.dr_m,
+        residual_horizon_mps=closing.residual_horizon_mps,
+        residual_horizon_m=closing.residual_horizon_m, shape=f.shape,
+        shape_parameters=f.shape_parameters + note)
+
+
+def with_sensor_families(d: Diagnosis, fams: SensorFamilies | None) -> Diagnosis:
+    """``d`` with the named families as steps before its closing row (the closing row
+    renumbered) and every family tested among its candidates."""
+    if fams is None:
+        return d
+    closing = d.steps[-1]
+    named = list(d.steps[:-1])
+    t_legs = d.t_s
+    ids = [g.leg_id for g in d.legs]
+    for f in fams.named:
+        curves = [r[1:] for r in fams.responses[f.effect].curves()]
+        named.append(_step(f, len(named) + 1, horizon_worth(t_legs, curves, ids), closing,
+                           fams.removed))
+    left = () if fams.holds else fams.families
+    tests = tuple(CandidateTest(len(d.steps[:-1]) + 1, f.effect, f.values.size, f.value,
+                                f.sigma, f.unit, f.statistic, f.p_value, f.delta_bic,
+                                f.explained_fraction, float("nan"), float("nan"),
+                                f.significant, values=f.values, shape=f.shape)
+                  for f in fams.tested)
+    return replace(d, steps=(*named, replace(closing, step=len(named) + 1)),
+                   candidates=d.candidates + tests,
+                   not_evaluated=d.not_evaluated + left)
