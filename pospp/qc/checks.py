@@ -2,7 +2,8 @@
 
 Frames and units: body FRD (b), navigation NED (n), sensor as logged (s); SI and radians
 inside, the reported ``value`` / ``threshold`` in the unit named by ``Check.unit``. Times
-``t_s`` are seconds from the run epoch (the first IMU stamp).
+``t_s`` are seconds from the run epoch (the first IMU stamp). The record :class:`Check` and
+the run status are in :mod:`pospp.qc.check_record` (re-exported here).
 
 Each check states the statistic it computes, the threshold, and (docs/qc.md) its false-alarm
 level and the margins measured on clean data. A check that cannot be evaluated on the data
@@ -16,84 +17,22 @@ worst severity among the failed checks (:func:`run_status`).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pospp import earth
 from pospp.distributions import chi2_ppf, poisson_isf
+from pospp.qc.check_record import STATUS_ORDER as STATUS_ORDER
+from pospp.qc.check_record import Check as Check
+from pospp.qc.check_record import comparison_text as comparison_text
+from pospp.qc.check_record import run_status as run_status
+from pospp.qc.check_record import skip as skip
+from pospp.qc.check_record import time_offset_ns as _toff
 from pospp.qc.lever_time import LEVER_ARM_FLOOR_M, LeverTime, lever_time_verdict
-from pospp.units import DEG_PER_H_RADPS, G0_MPS2, NS_PER_S
-
-STATUS_ORDER = ("ok", "partial", "degraded", "failed")
-"""Run statuses from best to worst."""
+from pospp.units import DEG_PER_H_RADPS, G0_MPS2
 
 _DPH = DEG_PER_H_RADPS
-
-
-@dataclass(frozen=True)
-class Check:
-    """One named check and its outcome.
-
-    Attributes
-    ----------
-    name : str
-        Check name (``gravity_direction``, ``gnss_time_offset``, ...).
-    stage : str
-        Pipeline stage whose data or result it checks.
-    statistic : str
-        What ``value`` is (or why the check was not applicable).
-    value, threshold : float
-        The statistic and the limit it is compared with (fail when value > threshold, unless
-        the statistic says otherwise); NaN value when not applicable.
-    unit : str
-    passed : bool
-    severity : str
-        Run status a failure imposes ("partial", "degraded" or "failed").
-    suggestion : str
-        What the data suggest (empty when passed or nothing can be estimated).
-    time_ns_offset : int or None
-        Time of the worst sample, as nanoseconds from the run epoch (None if not timed).
-    """
-
-    name: str
-    stage: str
-    statistic: str
-    value: float
-    threshold: float
-    unit: str
-    passed: bool
-    severity: str
-    suggestion: str = ""
-    time_ns_offset: int | None = None
-
-
-def comparison_text(value: float, threshold: float, unit: str) -> str:
-    """``"4985 > 30 m"``: a check's value against its threshold, for messages and the console.
-
-    Most checks fail above their threshold; a few (``calibration``: pairs used) below it.
-    """
-    op = "<" if value < threshold else ">"
-    return f"{value:.4g} {op} {threshold:.4g}" + ("" if unit in ("", "1") else f" {unit}")
-
-
-def run_status(checks: tuple[Check, ...] | list[Check]) -> str:
-    """The worst severity among the failed checks ("ok" when all passed)."""
-    worst = 0
-    for c in checks:
-        if not c.passed:
-            worst = max(worst, STATUS_ORDER.index(c.severity))
-    return STATUS_ORDER[worst]
-
-
-def skip(name: str, stage: str, why: str, unit: str, threshold: float = math.nan) -> Check:
-    return Check(name, stage, f"not applicable: {why}", math.nan, threshold, unit, True,
-                 "degraded")
-
-
-def _toff(t_s: float | None) -> int | None:
-    return None if t_s is None or not math.isfinite(t_s) else int(round(t_s * NS_PER_S))
 
 
 # =============================================================================================
