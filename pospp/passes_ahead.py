@@ -36,6 +36,7 @@ from pospp.config import PipelineConfig
 from pospp.diagnosis_stage import diagnosis_reruns, scale_factor_start, signature_starts
 from pospp.flight_stages import lever_arm_passes, lever_arm_seen, navigate, sensor_to_body_dcm
 from pospp.io import mcap_reader
+from pospp.lever_time_stage import qc_passes
 from pospp.nav import filter as nav_filter
 from pospp.qc.checks import lever_arm_observable_from_track
 from pospp.qc.stage import quality_checks
@@ -164,4 +165,6 @@ def checks_ahead(ahead: Ahead, log: mcap_reader.FlightLog, nav: nav_filter.Filte
         lane, lambda: quality_checks(log, nav, calib_run, config,
                                      lever_estimate=ahead.lever.result()[0],
                                      c_bs=sensor_to_body_dcm(cin.sensor_frame,
-                                                             cin.mounting_rpy_deg))))
+                                                             cin.mounting_rpy_deg),
+                                     **qc_passes(log, nav, config,
+                                                 ahead.lever.result()[0]))))

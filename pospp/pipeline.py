@@ -56,6 +56,7 @@ from pospp.io import mcap_reader, parquet_tables, report_files, run_folder, traj
 from pospp.io.errors import IngestError
 from pospp.io.files import require_regular, sha256_file
 from pospp.io.run_lock import locked
+from pospp.lever_time_stage import lever_time_estimate, qc_passes  # noqa: F401 (compare_sim)
 from pospp.memory import release_free_heap, share_one_heap
 from pospp.nav import filter as nav_filter
 from pospp.null_stage import (  # the null stage's functions, importable from here as before
@@ -453,7 +454,8 @@ def quality_control(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     cin = config.input
     report = checks if checks is not None else quality_checks(
         log, nav, calib_run, config, lever_estimate=estimate,
-        c_bs=sensor_to_body_dcm(cin.sensor_frame, cin.mounting_rpy_deg))
+        c_bs=sensor_to_body_dcm(cin.sensor_frame, cin.mounting_rpy_deg),
+        **qc_passes(log, nav, config, estimate))
     report = replace(report, checks=report.checks + tuple(also))
     if book is not None:
         for c in report.failed:

@@ -32,7 +32,7 @@ LAYERS: tuple[frozenset[str], ...] = (
     frozenset({"flight_stages"}),
     frozenset({"null_stage"}),
     frozenset({"sensor_stage"}),
-    frozenset({"diagnosis_stage"}),
+    frozenset({"diagnosis_stage", "lever_time_stage"}),
     frozenset({"passes_ahead"}),
     frozenset({"pipeline", "convert", "api"}),
     frozenset({"batch", "compare_sim"}),
