@@ -343,6 +343,8 @@ class PairsConfig:
     null_realisations: int = _key(10, ge=0, le=1000)
     """Null realisations of B minus A (docs/diagnose.md): the calibration's covariance and the
     diagnosis's null. 0: the formal covariance and nominal F (cries wolf on GNSS noise)."""
+    null_reruns: bool = False
+    """The null from A re-run on noisy logs, not from A's gains (docs/diagnose.md: slower)."""
     diagnose_alpha: float = _key(0.05, ge=1.0e-6, lt=0.5)
     """Significance level of the diagnosis's tests (candidates Bonferroni-corrected per step;
     on null flights "none" in at least 1 - alpha of runs: docs/diagnose.md)."""

@@ -75,6 +75,13 @@ CATALOG: tuple[CatalogEffect, ...] = (
                   ("time_offset",), "ms", 1e-3, 20e-3),
     CatalogEffect("lever_arm", "GNSS antenna lever-arm error (configured minus true)",
                   tuple(f"lever_arm_{a}" for a in _XYZ), "m", 1.0, 0.5),
+    # the two above estimated jointly (pospp.qc.lever_time): named so when the flight shows
+    # both, or cannot tell them apart (forward lever arm + v x time offset)
+    CatalogEffect("lever_arm_time_offset",
+                  "GNSS antenna lever-arm error and IMU-GNSS time offset, estimated jointly "
+                  "(confounded along the track: forward lever arm + v x time offset)",
+                  (*(f"lever_arm_{a}" for a in _XYZ), "time_offset"), "m | ms",
+                  (1.0, 1.0, 1.0, 1e-3), 0.5),
     # the leg-based diagnosis
     CatalogEffect("body_fixed_gyro_bias",
                   "horizontal gyro bias fixed in the body frame (vs nav frame)",

@@ -1,16 +1,15 @@
 """The stages of one flight, each a function of the results of the stages before it.
 
 Ingestion, algorithm A (with the lever-arm re-estimation the QC stage and the diagnosis share),
-the calibration stage over A (legs, B replays, pairs, least squares, B re-run), B minus A's null
-realisations, and A's first estimates the diagnosis starts from (scale factor, warm-up); the
-diagnosis itself is :mod:`pospp.diagnosis_stage`. :mod:`pospp.pipeline` runs them in order and
-writes what they return; the names are importable from there too.
+the calibration stage over A (legs, B replays, pairs, least squares, B re-run), and A's first
+estimates the diagnosis starts from (scale factor, warm-up); B minus A's null is
+:mod:`pospp.null_stage`, the diagnosis :mod:`pospp.diagnosis_stage`. :mod:`pospp.pipeline`
+runs them in order and writes what they return; the names are importable from there too.
 Nothing here touches files but through :mod:`pospp.io`'s reader.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -18,28 +17,26 @@ from typing import Any
 import numpy as np
 
 from pospp import rotation
-from pospp.calib.bias_smoother import ForwardBiases, span_means
+from pospp.calib.bias_smoother import ForwardBiases
 from pospp.calib.replay import (
     ImuRates,
     ImuSource,
     LegReplay,
     SolutionA,
     replay_legs,
-    replay_velocity_error,
 )
 from pospp.calib.segment import Leg, find_legs
 from pospp.calib.stage import CalibrationRun, calibrate_flight
 from pospp.config import PipelineConfig
-from pospp.diagnose import null_model
 from pospp.diagnose.effects import ACCEL_SETTLING_S, effect_by_id
 from pospp.diagnose.rerun import REFINE_FRACTION, gate_excess, warmed, warmup_fit
 from pospp.io import mcap_reader
 from pospp.nav import filter as nav_filter
 from pospp.nav import tuning as nav_tuning
 from pospp.nav.aiding import aiding_of, leg_aiding_problem
-from pospp.threads import Threads, first_kept
+from pospp.threads import Threads
 from pospp.types import FLU_TO_FRD
-from pospp.units import UG_MPS2, t_s_from_time_ns
+from pospp.units import UG_MPS2
 
 
 def sensor_to_body_dcm(sensor_frame: str, mounting_rpy_deg: tuple[float, float, float]) -> Any:
@@ -325,223 +322,6 @@ def forward_bias_record(nav: nav_filter.FilterResult, tuning: nav_tuning.ImuTuni
                         ) -> ForwardBiases:
     """What the smoothed compensation reads of A (:meth:`ForwardBiases.of_filter`)."""
     return ForwardBiases.of_filter(nav, tuning.noise().gyro_bias_psd_radps2ps)
-
-
-def null_drift(calib_run: CalibrationRun, config: PipelineConfig) -> tuple[float, float, str]:
-    """The gyro drift the null realisations inject: (sigma [rad/s], tau [s], source).
-
-    The drift the flight shows (its level and tau by REML, the grade a weak prior: issue 16
-    item 3; source "flight", or "grade" when the flight does not reject the grade's), so the
-    calibration's and the diagnosis's sigmas follow the flight; the configured ``[imu]
-    gyro_gm_sigma_dph`` / ``gyro_gm_tau_s`` (source "configured") when the calibration did not
-    estimate it.
-    """
-    if calib_run.drift_source in ("flight", "grade"):
-        return calib_run.drift_sigma_radps, calib_run.drift_tau_s, calib_run.drift_source
-    si = imu_tuning(config).noise()
-    return si.gyro_gm_sigma_radps, si.gyro_gm_tau_s, "configured"
-
-
-def null_white_noise(log: mcap_reader.FlightLog, config: PipelineConfig
-                     ) -> tuple[float, float]:
-    """The IMU white noise the null realisations add: (gyro ARW [rad/s^0.5], accelerometer
-    VRW [m/s^1.5]), read from the log's samples (``[pairs] null_imu_noise`` "measured",
-    :func:`pospp.diagnose.null_model.imu_white_noise_from_samples`) or the configured grade's
-    ("grade"). It needs the log alone: a run on two threads makes it while A runs."""
-    if config.pairs.null_imu_noise == "grade":
-        si = imu_tuning(config).noise()
-        return float(si.gyro_arw_radpsqrts), float(si.accel_vrw_mpspsqrts)
-    arw, vrw = null_model.imu_white_noise_from_samples(
-        log.imu.time_ns, log.imu.w_ib_b_radps, log.imu.f_ib_b_mps2)
-    return float(arw), float(vrw)
-
-
-def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
-                      calib_run: CalibrationRun, config: PipelineConfig, n: int, *,
-                      seed: int = 0, drift: tuple[float, float] | None = None,
-                      threads: int = 1, white_noise: tuple[float, float] | None = None,
-                      base: NullBase | None = None, injected_out: list[np.ndarray] | None = None
-                      ) -> list[list[np.ndarray]]:
-    """B minus A's null realisations along this flight (pospp.diagnose.null_model).
-
-    Each: the log with IMU noise (white: ``[pairs] null_imu_noise`` "measured", the
-    density read from the samples, or "grade", the configured ARW / VRW; plus the
-    Gauss-Markov gyro drift of :func:`null_drift`; and the configured
-    accelerometer bias drift ``accel_gm_sigma_ug`` / ``accel_gm_tau_s``) and GNSS noise
-    at the level of the flight's GNSS minus A (:func:`null_model.gnss_noise_from_residuals`),
-    added to the base from A's alignment point on; A re-run exactly as configured, B replayed
-    on the same legs (same start and end times), minus the base's own B minus A. The base is
-    the flight with its GNSS replaced by A's solution at the antenna
-    (:func:`pospp.diagnose.null_model.gnss_on_solution`). A and B run on the IMU summed down
-    to ``[pairs] rerun_imu_rate_hz`` (:func:`rerun_decimation`, :func:`null_model.decimate_imu`;
-    the same responses as at the flight's rate to about 1e-4 of their size), and the noise is
-    drawn on the summed-down samples (:func:`null_sample_stamps_ns`): white noise of a group's
-    mean is exactly the flight-rate draws' mean in distribution (sigma ``ARW / sqrt(T)``), the
-    Gauss-Markov path is sampled at the groups' ends (O(T / tau) from its group means).
-    Returns ``n`` lists of (M, 3) arrays, legs in id order (fewer when A fails on more than ``n`` of
-    ``2 n`` perturbed logs). ``drift``: (sigma [rad/s], tau [s]) of the gyro drift to inject instead
-    (:func:`drift_under_alternative`). ``white_noise``: :func:`null_white_noise` of the log,
-    made before (None: made here). ``threads``: realisations made at once
-    (:func:`pospp.threads.first_kept`, the next log drawn while A runs); the logs are drawn
-    in the same order from the same generator, so the result does not depend on it.
-    ``base``: :func:`null_base` on the run's legs and replays, made before (None: made here).
-    ``injected_out``: when a list, each kept realisation appends the mean over each leg (id
-    order, the replays' span; (L, 3), body FRD [rad/s]) of the gyro error it injected (white
-    noise and drift): the truth a realisation's flight bias is measured against
-    (:func:`pospp.calib.stage.with_null_covariance`).
-    """
-    si = imu_tuning(config).noise()
-    gm_sigma, gm_tau, _ = null_drift(calib_run, config) if drift is None else (*drift, "")
-    arw, vrw = null_white_noise(log, config) if white_noise is None else white_noise
-    b = null_base(log, nav, calib_run.legs, calib_run.replays, config) if base is None \
-        else base
-    noise = null_model.NullNoise(
-        gyro_arw_radpsqrts=float(arw), accel_vrw_mpspsqrts=float(vrw),
-        gyro_gm_sigma_radps=float(gm_sigma), gyro_gm_tau_s=float(gm_tau),
-        accel_gm_sigma_mps2=float(si.accel_gm_sigma_mps2), accel_gm_tau_s=float(si.accel_gm_tau_s),
-        pos_sigma_ned_m=b.pos_sigma_ned_m, vel_sigma_ned_mps=b.vel_sigma_ned_mps)
-    rng = np.random.default_rng(seed)
-
-    epoch_ns = int(log.imu.time_ns[0])
-    spans = [(epoch_ns + round(r.t0_s * 1e9), epoch_ns + round((r.t0_s + r.t_s[-1]) * 1e9))
-             for _, r in sorted(calib_run.replays.items())]
-
-    def attempt(log_r: mcap_reader.FlightLog
-                ) -> tuple[list[np.ndarray], np.ndarray | None] | None:
-        try:  # A with the base's gains (nav_filter.GainReplay): first order in the noise
-            dv = rerun_b_minus_a(log_r, nav, calib_run.legs, calib_run.replays, config,
-                                 replay=b.gains)[0]
-        except ValueError:  # a realisation whose A fails (alignment) is skipped
-            return None
-        return dv, (span_means(b.log.imu.time_ns, log_r.imu.w_ib_b_radps
-                               - b.log.imu.w_ib_b_radps, spans) if injected_out is not None
-                    else None)
-
-    # drawn on the summed-down samples (a quarter of the flight-rate draws at 200 -> 50 Hz);
-    # in this thread (drawing and scaling them in the workers held a draw per thread, +230
-    # MiB on the 1.5 h flight, for no time: the generator's draws are serial)
-    perturbed = (null_model.perturb_log(b.log, noise, rng, from_time_ns=b.t_align_ns)
-                 for _ in range(2 * n))
-    # never more logs drawn than realisations still missing: the draws, and so the
-    # realisations, are those of one log at a time; the next drawn while A runs on the others
-    kept = first_kept(attempt, perturbed, n, threads)
-    if injected_out is not None:
-        injected_out.extend(k[1] for k in kept if k[1] is not None)
-    return [[d - d0 for d, d0 in zip(k[0], b.dv_n_mps, strict=True)] for k in kept]
-
-
-
-@dataclass(frozen=True)
-class NullBase:
-    """What the null realisations perturb and subtract (:func:`null_base`): none of it
-    depends on the calibration's fit (its drift sets the noise only)."""
-
-    log: mcap_reader.FlightLog
-    """The flight with its GNSS on A's solution at the antenna, IMU summed down (or not)."""
-    dv_n_mps: list[np.ndarray]
-    """B minus A on ``log`` per leg with a replay, in id order (M, 3) [m/s]."""
-    gains: nav_filter.GainReplay | None
-    """A's gains on ``log``, which the realisations' A re-uses."""
-    pos_sigma_ned_m: np.ndarray
-    """The GNSS position noise the realisations add (NED) [m]."""
-    vel_sigma_ned_mps: np.ndarray
-    """The GNSS velocity noise the realisations add (NED) [m/s]."""
-    t_align_ns: int
-    """The noise is added from A's alignment point on [ns, log stamps]."""
-
-
-def null_base(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult, legs: Sequence[Leg],
-              replays: Mapping[int, LegReplay], config: PipelineConfig) -> NullBase:
-    """The base of :func:`null_realisations` on ``legs`` and their B ``replays`` (before the
-    fit: a run on two threads makes it while it calibrates): the flight with its GNSS replaced
-    by A's solution at the antenna (:func:`pospp.diagnose.null_model.gnss_on_solution`; noise
-    on top of the flight's own GNSS noise is not linear), the IMU summed down to ``[pairs]
-    rerun_imu_rate_hz`` (the flight's rate when A fails on the summed-down base), A re-run on
-    it recording its gains and B replayed on the legs. Raises ValueError when A fails on it
-    at the flight's rate."""
-    which = nav_filter.reference_name(nav, config.replay.reference)
-    solution = nav.smoothed if which == "smoothed" and nav.smoothed is not None else nav.forward
-    base = null_model.gnss_on_solution(log, solution, int(log.imu.time_ns[0]),
-                                       nav.lever_arm.lever_b_m)
-    pos_sig, vel_sig = null_model.gnss_noise_from_residuals(log, base)
-    factor = rerun_decimation(log, config.pairs.rerun_imu_rate_hz)
-    t_align_ns = int(log.imu.time_ns[0]) + round(nav.alignment.t_s * 1e9)
-    leg_ns = null_sample_stamps_ns(log, legs, t_align_ns)
-    base_r = null_model.decimate_imu(base, factor, leg_ns)
-    try:
-        base_dv, gains = rerun_b_minus_a(base_r, nav, legs, replays, config, record=True)
-        if any(d.shape != replays[i].dv_n_mps.shape
-               for d, i in zip(base_dv, sorted(replays), strict=True)):
-            raise ValueError("B on the summed-down base is not on the flight's samples")
-    except ValueError:  # A fails on the summed-down base (its alignment): the flight's rate
-        if factor == 1:
-            raise
-        base_r = base
-        base_dv, gains = rerun_b_minus_a(base_r, nav, legs, replays, config, record=True)
-    return NullBase(base_r, base_dv, gains, pos_sig, vel_sig, t_align_ns)
-
-
-def rerun_b_minus_a(log_r: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
-                    legs: Sequence[Leg], replays: Mapping[int, LegReplay],
-                    config: PipelineConfig, record: bool = False,
-                    replay: nav_filter.GainReplay | None = None
-                    ) -> tuple[list[np.ndarray], nav_filter.GainReplay | None]:
-    """A re-run on ``log_r`` as the null realisations and the diagnosis's re-run base run it
-    (``record``: recording its gains; ``replay``: with those gains), then B minus it on the
-    legs with a replay, in id order: (M, 3) NED velocity errors [m/s], and the gains recorded
-    (else None). Raises ValueError when A or B fails on ``log_r``."""
-    which = nav_filter.reference_name(nav, config.replay.reference)
-    nav_r = navigate(log_r, config, options=rerun_options(config), record_gains=record,
-                     replay=replay)
-    ref_r = SolutionA(*nav_filter.solution_a_fields(nav_r, which=which))
-    gains = nav_r.gain_replay
-    del nav_r  # the rest of A (its forward solution, biases: 30 MiB) is not read by B
-    imu_r = imu_increments(log_r)
-    by_id = {leg.leg_id: leg for leg in legs}
-    rc = config.replay
-    return [replay_velocity_error(imu_r, ref_r, by_id[i],
-                                  accel_compensation=rc.accel_compensation,
-                                  sample_rate_hz=rc.sample_rate_hz)
-            for i in sorted(replays)], gains
-
-
-def rerun_decimation(log: mcap_reader.FlightLog, rate_hz: float) -> int:
-    """IMU samples summed per null-realisation sample: the largest whole factor keeping the
-    rate at or above ``rate_hz`` (``[pairs] rerun_imu_rate_hz``; 0: 1, the flight's rate)."""
-    t = np.asarray(log.imu.time_ns, dtype=np.int64)
-    if rate_hz <= 0.0 or t.size < 2:
-        return 1
-    flight_hz = 1e9 / float(np.median(np.diff(t)))
-    return max(1, int(flight_hz / rate_hz + 1e-6))
-
-
-def leg_epochs_ns(log: mcap_reader.FlightLog, legs: Sequence[Leg]) -> np.ndarray:
-    """The IMU stamps [ns] a decimated log keeps so that B runs over each leg as on the
-    flight: the epoch before B's first (its previous increments), B's first and its last
-    (:func:`pospp.calib.replay.replay_velocity_error`: the first epoch at or after the leg's
-    start, at least the second, and the last at or before its end)."""
-    t_ns = np.asarray(log.imu.time_ns, dtype=np.int64)
-    t_s = t_s_from_time_ns(t_ns, int(t_ns[0]))  # imu_increments' axis
-    out: list[int] = []
-    for leg in legs:
-        k0 = max(int(np.searchsorted(t_s, leg.start_s)), 1)
-        k1 = int(np.searchsorted(t_s, leg.end_s, side="right")) - 1
-        out += [k0 - 1, k0, max(k1, k0)]
-    return t_ns[np.clip(out, 0, t_ns.size - 1)] if out else np.zeros(0, np.int64)
-
-
-def null_sample_stamps_ns(log: mcap_reader.FlightLog, legs: Sequence[Leg],
-                          from_time_ns: int) -> np.ndarray:
-    """The IMU stamps [ns] the null's summed-down log keeps: the legs' (:func:`leg_epochs_ns`)
-    and the last one before ``from_time_ns`` (where the noise starts: a summed sample then
-    holds flight samples all before it or all at or after it, as the flight-rate noise
-    :func:`pospp.diagnose.null_model.perturb_log` adds to them)."""
-    t_ns = np.asarray(log.imu.time_ns, dtype=np.int64)
-    before = int(np.searchsorted(t_ns, int(from_time_ns))) - 1
-    extra = t_ns[before:before + 1] if before >= 0 else np.zeros(0, np.int64)
-    return np.concatenate([leg_epochs_ns(log, legs), extra])
-
-
 def _lever_arm_and_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                          config: PipelineConfig,
                          est: nav_filter.LeverArmEstimate | None = None

@@ -35,13 +35,14 @@ import pandas as pd
 
 from pospp import outputs
 from pospp.calib.observability import observability_table
-from pospp.calib.stage import CalibrationRun, with_null_covariance
+from pospp.calib.stage import CalibrationRun
 from pospp.config import PipelineConfig, config_from_dict
 from pospp.diagnose.workflow import Diagnosis, diagnosis_columns, residual_curve_columns
 from pospp.diagnosis_stage import diagnose_calibration, refit_and_check
 from pospp.evaluate import evaluation_rows, solution_errors
 from pospp.flight_stages import (  # the stage functions, importable from here as before
     calibrate_from_a,
+    calibration_replays,  # noqa: F401  (re-exported: compare_sim calls it)
     imu_increments,
     imu_tuning,  # noqa: F401  (re-exported: compare_sim and the tests call pipeline.imu_tuning)
     ingest,
@@ -49,15 +50,22 @@ from pospp.flight_stages import (  # the stage functions, importable from here a
     lever_arm_passes,
     lever_arm_seen,
     navigate,
-    null_realisations,
     sensor_to_body_dcm,
 )
 from pospp.io import mcap_reader, parquet_tables, report_files, run_folder, trajectory_mcap
 from pospp.io.errors import IngestError
 from pospp.io.files import require_regular, sha256_file
 from pospp.io.run_lock import locked
+from pospp.lever_time_stage import lever_time_estimate, qc_passes  # noqa: F401 (compare_sim)
 from pospp.memory import release_free_heap, share_one_heap
 from pospp.nav import filter as nav_filter
+from pospp.null_stage import (  # the null stage's functions, importable from here as before
+    null_base,  # noqa: F401
+    null_needs_gains,
+    null_realisations,
+    null_stage,
+    null_white_noise,  # noqa: F401
+)
 from pospp.qc.checks import Check, comparison_text
 from pospp.qc.stage import QualityReport, qc_columns, quality_checks, worst_status
 from pospp.report import figures
@@ -279,7 +287,7 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
     book.stage("navigate")
     epoch_ns = int(log.imu.time_ns[0])
     try:
-        nav = navigate(log, config)
+        nav = navigate(log, config, record_gains=null_needs_gains(config))
     except ValueError as exc:  # named with the reader's finding that caused it, if any
         book.note("error", "navigate", text := log.cause_of(f"algorithm A failed: {exc}"))
         finish("failed")
@@ -304,9 +312,7 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
     null_dv = None
     if calib_run.calibrated and config.pairs.null_realisations > 0 and calib_run.replays:
         book.stage("null_realisations")
-        null_dv = null_realisations(log, nav, calib_run, config, config.pairs.null_realisations,
-                                    threads=threads, injected_out=(injected := list[Any]()))
-        calib_run = with_null_covariance(calib_run, null_dv, injected)  # injected: the truths
+        null_dv, calib_run = null_stage(log, nav, calib_run, config, threads=threads)
 
     # --- compensation: A re-run with the calibrated gyro bias ---------------------------------
     book.stage("compensate")
@@ -412,7 +418,8 @@ def quality_control(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     cin = config.input
     report = quality_checks(
         log, nav, calib_run, config, lever_estimate=estimate,
-        c_bs=sensor_to_body_dcm(cin.sensor_frame, cin.mounting_rpy_deg))
+        c_bs=sensor_to_body_dcm(cin.sensor_frame, cin.mounting_rpy_deg),
+        **qc_passes(log, nav, config, estimate))
     report = replace(report, checks=report.checks + tuple(also))
     if book is not None:
         for c in report.failed:
@@ -518,7 +525,7 @@ def diagnose_run(run_dir: str | Path, *, progress: ProgressFn | None = None) -> 
     book.stage("ingest")
     log = ingest(path, config)
     book.stage("navigate")
-    nav = navigate(log, config)
+    nav = navigate(log, config, record_gains=null_needs_gains(config))
     book.stage("calibrate")
     imu = imu_increments(log)
     calib_run, solution_a = calibrate_from_a(imu, nav, config)

@@ -39,9 +39,10 @@ from pospp.diagnose.sensor_families import (
 )
 from pospp.diagnose.shapes import hinge_basis, knots_s
 from pospp.effects_catalog import catalog_entry
-from pospp.flight_stages import imu_tuning, navigate, rerun_decimation
+from pospp.flight_stages import imu_tuning, navigate
 from pospp.io import mcap_reader
 from pospp.nav.filter import STATUS_USED
+from pospp.null_stage import rerun_decimation
 from pospp.threads import Threads, map_in_threads
 from pospp.units import t_s_from_time_ns
 

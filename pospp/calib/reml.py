@@ -141,6 +141,26 @@ def _solve_scaled(hw: NDArray, zw: NDArray) -> tuple[NDArray, NDArray, bool]:
     return xs / norms, cov_s / np.outer(norms, norms), bool(not keep.all())
 
 
+def _scaled_map(hw: NDArray) -> NDArray:
+    """The linear map (p, n) of :func:`_solve_scaled`: its x is ``_scaled_map(hw) @ zw``."""
+    norms, u, sv, vt, keep = _scaled_svd(hw)
+    return (vt[keep].T / sv[keep]) @ u[:, keep].T / norms[:, None]
+
+
+def _gls_gain(blocks: list[_LegNoise], a: float, q: float, rows: list[NDArray], n_z: int,
+              scaled: NDArray) -> NDArray:
+    """The per-leg GLS's estimate as a linear map of the design's z (p, n_z): each leg's rows
+    ``rows[i]`` whitened as :meth:`_LegNoise.whiten` does, then ``scaled``
+    (:func:`_scaled_map` of the stacked whitened design)."""
+    gain = np.zeros((scaled.shape[0], n_z))
+    at = 0
+    for r, b in zip(rows, blocks, strict=True):
+        m = b.u.shape[1]
+        gain[:, r] = (scaled[:, at:at + m] / np.sqrt(a + q * b.lam)) @ b.u.T / b.sq
+        at += m
+    return gain
+
+
 def _full_reml_nll(theta: NDArray, parts: tuple, fixed: tuple[float | None, float | None]
                    ) -> float:
     """Negative restricted log-likelihood with the full (legs coupled) covariance.
@@ -427,7 +447,11 @@ def _calibrate_gm(legs, h, z, edges, noise_step_s, bases, gm_ops, arw_given, sig
     ll = _cholesky_lower(_full_cov(th, k, gm_cov(tau_best), fixed))
     if ll is None:
         raise np.linalg.LinAlgError("the drift fit's covariance is not positive definite")
-    x, cov, deficient = _solve_scaled(_tri_solve(ll, hs), _tri_solve(ll, zs))
+    hw = _tri_solve(ll, hs)
+    x, cov, deficient = _solve_scaled(hw, _tri_solve(ll, zs))
+    gain = np.zeros((x.size, z.size))  # x = gain z: L^-T maps the whitened rows' weights back
+    gain[:, r_all] = linalg.solve_triangular(ll, _scaled_map(hw).T, lower=True, trans="T",
+                                             check_finite=False).T / sq
     r = zs - hs @ x
     wr = _tri_solve(ll, r)  # innovations: time-ordered within each leg
     white = np.split(wr, cuts)
@@ -436,7 +460,7 @@ def _calibrate_gm(legs, h, z, edges, noise_step_s, bases, gm_ops, arw_given, sig
     drift = DriftSmoother(np.concatenate([o[1] for o in ops]), u, s2, tau_best)
     tau_profile = tuple((t, v) for t, v, _, _ in profile) if use_prior else ()
     return (x, cov, deficient, a, float(np.sqrt(q)), float(np.sqrt(s2)), white, drift,
-            tau_profile, source)
+            tau_profile, source, gain)
 
 
 def _fit_variances(nll: Callable[[NDArray], float], fixed: tuple[float | None, float | None],

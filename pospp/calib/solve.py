@@ -83,10 +83,12 @@ from pospp.calib.reml import (
     _blocks_reml_nll,
     _calibrate_gm,
     _gls,
+    _gls_gain,
     _grid_argmin,
     _lag1,
     _LegNoise,
     _reml_nll,
+    _scaled_map,
     _solve_scaled,
 )
 from pospp.calib.replay import LegReplay
@@ -184,6 +186,11 @@ class Calibration:
     gm_source : str
         With a :class:`DriftPrior`: "flight" (the estimate rejects the grade's drift) or
         "grade" (it does not: the grade's sigma and tau are used); else "".
+    gain : ndarray, shape (P, 2 sum (M_i - 1)) or None
+        The estimate as a linear map of the measurements at the fitted variances, ``x = gain
+        @ z`` (z: per leg in ``leg_ids`` order, [dv_N, dv_E] at the samples t > 0, as
+        :func:`pospp.calib.design.design_matrix` stacks them): the sandwich covariance's
+        bread and weights (:func:`pospp.calib.stage.with_linear_null_covariance`).
     """
 
     formulation: str
@@ -208,6 +215,7 @@ class Calibration:
     drift: DriftSmoother | None = None
     gm_tau_profile: tuple[tuple[float, float], ...] = ()
     gm_source: str = ""
+    gain: NDArray | None = None
 
     def drift_b_radps(self, t_s: NDArray) -> NDArray:
         """Smoothed Gauss-Markov drift (body FRD, rad/s) at run times ``t_s``, shape (N, 3).
@@ -456,6 +464,7 @@ def fit_calibration(
     if noise == "white":
         hw, zw = h / s[:, None], z / s
         x, cov_s, deficient = _solve_scaled(hw, zw)
+        gain = _scaled_map(hw) / s
         res_w = zw - hw @ x
         dof = max(1, zw.size - len(names))
         s0 = float(res_w @ res_w / dof)
@@ -467,7 +476,7 @@ def fit_calibration(
     elif gyro_gm_tau_s is not None and (gyro_gm_sigma_radps is None
                                         or gyro_gm_sigma_radps > 0):
         (x, cov, deficient, vf, arw, gm_sigma, white, drift, tau_profile,
-         gm_source) = _calibrate_gm(
+         gm_source, gain) = _calibrate_gm(
             legs, h, z, edges, noise_step_s, bases, gm_ops, gyro_arw_radpsqrts,
             gyro_gm_sigma_radps, float(gyro_gm_tau_s), gm_bin_s, gm_prior, noise_cache)
     else:
@@ -492,6 +501,7 @@ def fit_calibration(
         q = q_fixed if q_fixed is not None else float(np.exp(th[1]))
         hw, zw, _ = _gls(blocks, vf, q)
         x, cov, deficient = _solve_scaled(hw, zw)
+        gain = _gls_gain(blocks, vf, q, rows_all, z.size, _scaled_map(hw))
         arw = float(np.sqrt(q))
         white = []
         for r_idx, b in zip(rows_all, blocks, strict=True):  # time-ordered Cov^-1/2 r
@@ -522,6 +532,7 @@ def fit_calibration(
         drift=drift,
         gm_tau_profile=tau_profile,
         gm_source=gm_source,
+        gain=gain,
     )
 
 

@@ -92,7 +92,9 @@ class CalibrationRun:
         used them: :func:`with_null_covariance` re-runs that fit on null realisations.
     sigma_source : str
         Where the chosen calibration's covariance comes from: "least_squares" (the GLS's
-        formal covariance) or "null_realisations" (:func:`with_null_covariance`).
+        formal covariance), "linear_null" (its exact covariance under the linear null,
+        :func:`pospp.null_stage.with_null_sigmas`) or "null_realisations" (refits on the
+        realisations, :func:`with_null_covariance`).
     drift_sigma_radps, drift_tau_s : float
         The Gauss-Markov gyro drift of the noise model (steady-state sigma [rad/s] per body
         axis, correlation time [s]); 0 and inf without the drift model. The null
@@ -521,16 +523,28 @@ def with_null_covariance(run: CalibrationRun, null_dv: Sequence[Sequence[NDArray
     if len(dx) < MIN_NULL_REALISATIONS:
         return run
     d = np.asarray(dx)
-    honest = replace(chosen, cov=d.T @ d / d.shape[0])
+    flight_sig = (np.sqrt(np.mean(np.square(df), axis=0)) if injected is not None
+                  and len(df) == len(dx) else None)
+    return with_covariance(run, d.T @ d / d.shape[0], "null_realisations",
+                           f"calibration sigmas from {d.shape[0]} null realisations of B minus "
+                           "A (the least squares re-run on each)", flight_sig)
+
+
+def with_covariance(run: CalibrationRun, cov: NDArray, source: str, note: str,
+                    flight_sigma_b_radps: NDArray | None = None) -> CalibrationRun:
+    """``run`` with the chosen calibration's covariance (and its entry in ``joint``'s) ``cov``,
+    the turn-on constant's gyro bias sigma following, ``sigma_source`` ``source`` and the
+    message ``note``. The flight's gyro bias sigma (``flight_gyro_bias_sigma_b_radps``):
+    ``flight_sigma_b_radps`` [rad/s] on the axes the fit estimates, else the constant's (no
+    injected truth to measure the flight's bias against: the linear null; larger than the
+    flight's own, docs/calibration.md)."""
+    chosen = run.chosen
+    assert chosen is not None  # a covariance is only given to a calibration
+    honest = replace(chosen, cov=cov)
     joint = tuple(honest if c is chosen else c for c in run.joint)
     sig = _gyro_bias_sigma_b_radps(honest, run.replays[chosen.leg_ids[0]])
-    flight_sig = sig
-    if len(df) == len(dx):
-        flight_sig = np.where(np.isfinite(flight_sig),
-                              np.sqrt(np.mean(np.square(df), axis=0)), np.inf)
+    flight_sig = sig if flight_sigma_b_radps is None else np.where(
+        np.isfinite(sig), flight_sigma_b_radps, np.inf)
     return replace(run, joint=joint, chosen=honest, gyro_bias_sigma_b_radps=sig,
-                   flight_gyro_bias_sigma_b_radps=flight_sig,
-                   sigma_source="null_realisations",
-                   messages=run.messages + (
-                       f"calibration sigmas from {d.shape[0]} null realisations of B minus A "
-                       "(the least squares re-run on each)",))
+                   flight_gyro_bias_sigma_b_radps=flight_sig, sigma_source=source,
+                   messages=run.messages + (note,))

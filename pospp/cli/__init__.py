@@ -26,6 +26,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import click  # noqa: E402
 
 from pospp import __version__  # noqa: E402
+from pospp.cli._compare_sim import StepLines, compare_sim_lines  # noqa: E402
 from pospp.cli._diff import diff  # noqa: E402
 from pospp.cli._status import (  # noqa: E402
     EXIT_CODES,
@@ -517,27 +518,25 @@ def diagnose(run_dir: str) -> None:
 def compare_sim(run_dir: str, out_model: str | None, max_steps: int, force: bool) -> None:
     """Measured flight versus its simulation: RUN_DIR/sim_comparison.parquet.
 
-    Simulates the run's flight along A's trajectory with the configured IMU grade, compares
-    statistics every flight has, names the library effect that explains the largest
-    significant gap, adds it and repeats (pospp.compare_sim, docs/compare_sim.md). Writes the
-    fitted model as a TOML file that pospp simulate --model accepts.
+    Fits the base model to the log (white noise, bias instability, biases, GNSS noise; the
+    configured IMU grade as prior), simulates the run's flight along A's trajectory with it,
+    compares statistics every flight has, names the library effect that explains the
+    largest significant gap (the lever arm and the GNSS time offset jointly, or the
+    combination when the flight cannot separate them), adds it and repeats
+    (pospp.compare_sim, docs/compare_sim.md). Writes the fitted model as a TOML file that
+    pospp simulate --model accepts. Progress: a line per step on stderr.
     """
     from pospp.compare_sim import compare_sim_run
 
-    comp = compare_sim_run(run_dir, out=out_model, max_steps=max_steps, force=force)
-    n_sig = sum(g.significant for g in comp.base.values())
-    click.echo(f"configured model: {n_sig} of {len(comp.base)} statistics differ "
-               "significantly")
-    for s in comp.steps:
-        b, a = s.before[s.target], s.after.get(s.target, s.before[s.target])
-        size = ", ".join(f"{p} {v:+.4g} +- {e:.2g}" for p, v, e in
-                         zip(s.params, s.size, s.sigma, strict=True))
-        size = f"{size} {s.unit}".strip()
-        if s.candidate:
-            size = f"(best candidate {s.candidate}: {size}, did not shrink it)"
-        click.echo(f"step {s.step}: {s.target}: {s.effect} {size}; z {b.z:+.2f} -> {a.z:+.2f}")
+    lines = StepLines()
+    try:
+        comp = compare_sim_run(run_dir, out=out_model, max_steps=max_steps, force=force,
+                               progress=lines.step, on_flight=lines.flight)
+    finally:
+        lines.close()
+    for line in compare_sim_lines(comp):
+        click.echo(line)
     n_left = sum(g.significant for g in comp.final.values())
-    click.echo(f"left significant: {n_left}")
     status_line("compare-sim", "ok", f"{n_left} statistic(s) left significant")
 
 

@@ -45,13 +45,14 @@ No I/O. SI units.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from pospp.calib.linear_null import NullNoise
 from pospp.distributions import f_sf, t_sf
 from pospp.earth import principal_radii_m
 from pospp.nav.events import sensor_poses
@@ -59,38 +60,6 @@ from pospp.nav.filter import NavSolution
 
 POSITION_KIND, VELOCITY_KIND = 0, 1
 """Indices into ``pospp.nav.filter.MEAS_KINDS`` ("position", "velocity")."""
-
-
-@dataclass(frozen=True)
-class NullNoise:
-    """White noise levels injected into one null realisation.
-
-    Attributes
-    ----------
-    gyro_arw_radpsqrts : float
-        Gyro angle random walk [rad/s^0.5] (rate noise sigma = ARW / sqrt(dt)).
-    accel_vrw_mpspsqrts : float
-        Accelerometer velocity random walk [m/s / s^0.5].
-    pos_sigma_ned_m : ndarray, shape (3,)
-        GNSS position noise, NED [m].
-    vel_sigma_ned_mps : ndarray, shape (3,)
-        GNSS velocity noise, NED [m/s].
-    gyro_gm_sigma_radps, gyro_gm_tau_s : float
-        First-order Gauss-Markov gyro drift per axis (steady-state sigma [rad/s], correlation
-        time [s]); 0 / inf: none.
-    accel_gm_sigma_mps2, accel_gm_tau_s : float
-        The same for the accelerometer bias [m/s^2], [s].
-    """
-
-    gyro_arw_radpsqrts: float
-    accel_vrw_mpspsqrts: float
-    pos_sigma_ned_m: NDArray
-    vel_sigma_ned_mps: NDArray
-    gyro_gm_sigma_radps: float = 0.0
-    gyro_gm_tau_s: float = float("inf")
-    accel_gm_sigma_mps2: float = 0.0
-    accel_gm_tau_s: float = float("inf")
-
 
 
 def gnss_noise_from_residuals(log: Any, base: Any) -> tuple[NDArray, NDArray]:

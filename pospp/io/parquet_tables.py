@@ -165,9 +165,8 @@ TABLES: dict[str, list[Column]] = {
           for name, extra in (("ingest", " (with checking the run folder and hashing the "
                                          "input)"),
                               ("navigate", " (algorithm A)"), ("calibrate", ""),
-                              ("null_realisations", " (A re-run on the noise draws that "
-                                                    "give the calibration its sigmas and the "
-                                                    "diagnosis its null)"),
+                              ("null_realisations", " (B minus A's null: the calibration's "
+                                                    "sigmas, the diagnosis's realisations)"),
                               ("compensate", " (on 2+ threads: the wait for its A pass, "
                                              "made alongside the null)"),
                               ("diagnose", " (on 2+ threads: likewise its first A passes)"),
@@ -179,8 +178,9 @@ TABLES: dict[str, list[Column]] = {
         _opt(Column("qc_suggestions", _S, "", "'; '-joined 'check: what the data suggest' of "
                     "the failed QC checks")),
         _opt(Column("calibration_sigma_source", _S, "", "where the calibration's sigmas come "
-                    "from: 'null_realisations' (the least squares re-run on B minus A's null "
-                    "realisations, [pairs] null_realisations) or 'least_squares' (its formal "
+                    "from: 'linear_null' (the least squares' exact covariance under B minus A's "
+                    "linear null), 'null_realisations' (refits on the re-run null's "
+                    "realisations, [pairs] null_reruns) or 'least_squares' (its formal "
                     "covariance)")),
         _opt(Column("calibration_formulation", _S, "", "formulation of the calibration applied "
                     "('body' or 'paper')")),
@@ -365,8 +365,10 @@ TABLES: dict[str, list[Column]] = {
     ],
     "sim_comparison": [
         Column("step", _I, "", "0: the configured model; k >= 1: after the k-th effect"),
-        Column("kind", _S, "", "'statistic' (one row per statistic and step) or 'effect' "
-               "(one row per fitted parameter of the step's effect)"),
+        Column("kind", _S, "", "'base' (step 0: one row per level of the base model fitted "
+               "to the log), 'statistic' (one row per statistic and step), 'effect' (one row "
+               "per fitted parameter of the step's effect) or 'reading' (what else the step's "
+               "reading determines: the combination of confounded effects, correlations)"),
         Column("measure", _S, "", "statistic compared (docs/compare_sim.md); on effect rows the "
                "step's target"),
         Column("effect", _S, "", "effect added at this step, 'unexplained', or '' (step 0)"),
@@ -383,8 +385,13 @@ TABLES: dict[str, list[Column]] = {
         Column("significant_before", _B, "", "gap significant before (family-wise level)"),
         Column("significant_after", _B, "", "gap significant after"),
         Column("measured", _F, "see unit", "the measured flight's value"),
-        Column("simulated_before", _F, "see unit", "the simulation's value before"),
+        Column("simulated_before", _F, "see unit", "the simulation's value before (base "
+               "rows: the level simulated, the fit or, within 2 sigma of it, the prior)"),
         Column("simulated_after", _F, "see unit", "the simulation's value after"),
+        Column("prior", _F, "see unit", "base rows: the grade's (or the receiver's reported) "
+               "value of the fitted level; NaN otherwise"),
+        Column("note", _S, "", "base rows: the fit in words; effect rows: the step's reading "
+               "(both readings where the flight cannot separate confounded effects)"),
     ],
 }
 """Table name -> columns. Add a table or a column here; docs/formats.md renders this dict."""

@@ -122,6 +122,36 @@ def propagate_covariance(p, phi_acc, x, fm, wm, t_acc, qc, i_gm, i_sf, inv_tau):
 
 
 @njit(cache=True)
+def fill_extended_f(x, fm, wm, i_gm, i_sf, inv_tau, c_nb, f_out):
+    """A's continuous-time error dynamics F (n x n, zeroed here) at the kernel state ``x`` with
+    mean specific force ``fm`` and rate ``wm`` (body FRD): the 15-state
+    :func:`pospp.nav.error_model.fill_f_matrix` (biases constant there) extended by the
+    optional columns ``phi' += -C_nb (b_g,gm + diag(w) s_g)``, ``dv' += C_nb (b_a,gm +
+    diag(f) s_a)``, ``b_gm' = -b_gm / tau`` (the lever-arm states have none). ``c_nb`` receives
+    the attitude DCM. The one F of A's covariance steps and of :mod:`pospp.calib.linear_null`.
+    """
+    n = f_out.shape[0]
+    _kernels.dcm_from_quat_into(x[X_QUAT:X_QUAT + 4], c_nb)
+    for a in range(n):
+        for b in range(n):
+            f_out[a, b] = 0.0
+    fill_f_matrix(x[X_POS], x[X_POS + 2], x[X_VEL:X_VEL + 3], c_nb, fm, 0.0, 0.0,
+                  f_out[:N_STATES, :N_STATES])
+    if i_gm >= 0:
+        for a in range(3):
+            for b in range(3):
+                f_out[I_PHI + a, i_gm + b] = -c_nb[a, b]
+                f_out[I_DV + a, i_gm + 3 + b] = c_nb[a, b]
+            f_out[i_gm + a, i_gm + a] = -inv_tau[0]
+            f_out[i_gm + 3 + a, i_gm + 3 + a] = -inv_tau[1]
+    if i_sf >= 0:
+        for a in range(3):
+            for b in range(3):
+                f_out[I_PHI + a, i_sf + b] = -c_nb[a, b] * wm[b]
+                f_out[I_DV + a, i_sf + 3 + b] = c_nb[a, b] * fm[b]
+
+
+@njit(cache=True)
 def propagate_covariance_into(p, phi_acc, x, fm, wm, t_acc, qc, i_gm, i_sf, inv_tau, work):
     """:func:`propagate_covariance` in place: ``p`` and ``phi_acc`` are overwritten (``phi_acc``
     of shape (0, 0): not accumulated, as when the pass keeps no smoother nodes).
@@ -134,24 +164,10 @@ def propagate_covariance_into(p, phi_acc, x, fm, wm, t_acc, qc, i_gm, i_sf, inv_
     n = p.shape[0]
     ff, ff2, phi, m, m2 = work[0], work[1], work[2], work[3], work[4]
     c_nb = np.empty((3, 3))
-    _kernels.dcm_from_quat_into(x[X_QUAT:X_QUAT + 4], c_nb)
-    f15 = m[:N_STATES, :N_STATES]  # m is free until the product below
-    fill_f_matrix(x[X_POS], x[X_POS + 2], x[X_VEL:X_VEL + 3], c_nb, fm, 0.0, 0.0, f15)
+    fill_extended_f(x, fm, wm, i_gm, i_sf, inv_tau, c_nb, m)  # m is free until the product
     for a in range(n):
         for b in range(n):
-            ff[a, b] = f15[a, b] * t_acc if a < N_STATES and b < N_STATES else 0.0
-    if i_gm >= 0:
-        for a in range(3):
-            for b in range(3):
-                ff[I_PHI + a, i_gm + b] = -c_nb[a, b] * t_acc
-                ff[I_DV + a, i_gm + 3 + b] = c_nb[a, b] * t_acc
-            ff[i_gm + a, i_gm + a] = -inv_tau[0] * t_acc
-            ff[i_gm + 3 + a, i_gm + 3 + a] = -inv_tau[1] * t_acc
-    if i_sf >= 0:
-        for a in range(3):
-            for b in range(3):
-                ff[I_PHI + a, i_sf + b] = -c_nb[a, b] * wm[b] * t_acc
-                ff[I_DV + a, i_sf + 3 + b] = c_nb[a, b] * fm[b] * t_acc
+            ff[a, b] = m[a, b] * t_acc
     np.dot(ff, ff, ff2)
     for a in range(n):
         for b in range(n):
@@ -356,12 +372,13 @@ def _update_epoch(k, im, t, x, xp, p, sens, lever, w_b, meas, meas_out, gate, re
     """All measurement records of epoch ``k`` from index ``im``: model, gate (or reset),
     update, feedback. Returns the new P and the index after the epoch's records.
 
-    ``gains = (K, S^-1)``, (records, n, 3) and (records, 3, 3). ``record``: each used
-    record's K and S^-1 are stored in them. ``replay``: they are read instead (another pass's,
-    :class:`pospp.nav.filter_state.GainReplay`), with that pass's record status in
-    ``m_status``: a record it used is gated here when ``dz^T S^-1 dz`` exceeds the gate with
-    its S, else ``dx = K dz``; a record it reset with is used; no covariance is touched. A
-    second record of a kind gated in a row (``n_gated`` counts them per kind) ends the replay:
+    ``gains = (K, S^-1, H)``, (records, n, 3), (records, 3, 3) and (records, 3, n).
+    ``record``: each used record's K, S^-1 and H are stored in them. ``replay``: they are
+    read instead (another pass's, :class:`pospp.nav.filter_state.GainReplay`; H is not), with
+    that pass's record status in ``m_status``: a record it used is gated here when ``dz^T
+    S^-1 dz`` exceeds the gate with its S, else ``dx = K dz``; a record it reset with is
+    used; no covariance is touched. A second record of a kind gated in a row (``n_gated``
+    counts them per kind) ends the replay:
     the index returned is -1 (the full filter's covariance would have grown over the gap and
     its gains with it, and it would reset after ``reset_after_s``: no longer this pass's).
     """
@@ -369,7 +386,7 @@ def _update_epoch(k, im, t, x, xp, p, sens, lever, w_b, meas, meas_out, gate, re
     if not (im < m_k.shape[0] and m_k[im] == k):  # most epochs: nothing to allocate
         return p, im
     m_status, m_nis, m_dz = meas_out
-    k_gain, k_sinv = gains
+    k_gain, k_sinv, k_h = gains
     n = p.shape[0]
     h_mat = np.zeros((3, n))
     dz = np.empty(3)
@@ -423,6 +440,7 @@ def _update_epoch(k, im, t, x, xp, p, sens, lever, w_b, meas, meas_out, gate, re
         if record:
             k_gain[im] = np.dot(ph, s_inv)  # kalman_update's K, the same product
             k_sinv[im] = s_inv
+            k_h[im] = h_mat
         p, dxk = kalman_update(p, ph, s_inv, h_mat, dz, m_r[im])
         feedback(x, xp, sens, lever, dxk, i_gm, i_sf, i_l)
         for a in range(n):

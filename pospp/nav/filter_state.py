@@ -143,6 +143,8 @@ class ForwardArrays:
     rows."""
     m_sinv: NDArray
     """Each used record's S^-1 (records, 3, 3), likewise."""
+    m_h: NDArray
+    """Each used record's H (records, 3, n), likewise."""
     replayed: bool = False
     """Whether another pass's gains were replayed (:class:`GainReplay`)."""
 
@@ -193,6 +195,16 @@ class GainReplay:
         the smoother.
     k_from : int
         The epoch from which a replay applies them.
+    h : ndarray, (M, 3, n)
+        The measurement matrix H of each used record (predicted minus measured = H dx).
+    node_k : ndarray of int, (K,)
+        The smoother nodes' epochs (every record's epoch among them).
+    layout : StateLayout
+        The pass's error-state layout.
+    gm_inv_tau : ndarray, (2,)
+        1 / tau of its gyro and accelerometer Gauss-Markov bias states [1/s].
+    The last four are what :mod:`pospp.calib.linear_null` reads: the pass as a linear system
+    with fixed gains.
     """
 
     t_s: NDArray
@@ -204,6 +216,10 @@ class GainReplay:
     s_inv: NDArray
     smoother_gains: NDArray | None
     k_from: int
+    h: NDArray
+    node_k: NDArray
+    layout: StateLayout
+    gm_inv_tau: NDArray
 
     def matches(self, t: NDArray, k_start: int, meas: MeasurementRecords, n: int) -> bool:
         """Whether a pass over epochs ``t`` from ``k_start`` with records ``meas`` and ``n``
@@ -225,12 +241,18 @@ def switch_epoch(fw: ForwardArrays, k_start: int) -> int:
 
 
 def gain_replay(fw: ForwardArrays, t: NDArray, k_start: int, meas: MeasurementRecords,
-                smoother_on: bool) -> GainReplay:
+                smoother_on: bool, lay: StateLayout, noise: NoiseParameters) -> GainReplay:
     """The :class:`GainReplay` of a pass made with ``record_gains`` (before its smoother,
-    which may write over the nodes' P)."""
+    which may write over the nodes' P) with layout ``lay`` and IMU model ``noise``."""
     return GainReplay(t, k_start, meas.k, meas.kind, fw.m_status.copy(), fw.m_gain,
                       fw.m_sinv, smoother_gains(fw.node_pp, fw.node_pu, fw.node_phi)
-                      if smoother_on else None, switch_epoch(fw, k_start))
+                      if smoother_on else None, switch_epoch(fw, k_start), fw.m_h,
+                      fw.node_k.copy(), lay, _inv_tau(noise))
+
+
+def _inv_tau(noise: NoiseParameters) -> NDArray:
+    """[1 / tau_gyro, 1 / tau_accel] of the Gauss-Markov bias states [1/s]."""
+    return np.array([1.0 / noise.gyro_gm_tau_s, 1.0 / noise.accel_gm_tau_s])
 
 
 def forward_pass(t: NDArray, w: NDArray, f: NDArray, al: AlignmentResult,
@@ -240,7 +262,7 @@ def forward_pass(t: NDArray, w: NDArray, f: NDArray, al: AlignmentResult,
                   replay: GainReplay | None = None) -> ForwardArrays:
     """Initial state and covariance, the output arrays, and the compiled forward pass.
 
-    ``record_gains``: store each used record's K and S^-1 (``m_gain``, ``m_sinv``).
+    ``record_gains``: store each used record's K, S^-1 and H (``m_gain``, ``m_sinv``, ``m_h``).
     ``replay``: apply another pass's gains from its ``k_from`` (:class:`GainReplay`, whose
     ``matches`` the caller has checked), keeping node P and Phi only before it; when the
     replay ends (two records of a kind gated in a row), the pass in full."""
@@ -255,7 +277,7 @@ def forward_pass(t: NDArray, w: NDArray, f: NDArray, al: AlignmentResult,
     gate = chi2_ppf(options.gate_probability, 3)
     x0 = np.concatenate([[al.lat_rad, al.lon_rad, al.height_m], al.v_n_mps,
                          rotation.quat_from_euler(al.rpy_rad)])
-    inv_tau = np.array([1.0 / noise.gyro_gm_tau_s, 1.0 / noise.accel_gm_tau_s])
+    inv_tau = _inv_tau(noise)
     n_cov = n_kept if replay is None or not n_kept else int(np.count_nonzero(
         flags[k0:max(k0, replay.k_from)] & FLAG_NODE))  # a replay's own nodes: before it
     status = np.full(n_meas, -1, dtype=np.int64) if replay is None else replay.status.copy()
@@ -271,9 +293,11 @@ def forward_pass(t: NDArray, w: NDArray, f: NDArray, al: AlignmentResult,
         node_k=np.empty(n_kept, dtype=np.int64), node_pp=np.empty((n_cov, packed_size(n))),
         node_pu=np.empty((n_cov, packed_size(n))), node_phi=np.empty((n_cov, n, n)),
         node_dx=np.empty((n_kept, n)), m_gain=np.empty((m_rec, n, 3)),
-        m_sinv=np.empty((m_rec, 3, 3)), replayed=replay is not None,
+        m_sinv=np.empty((m_rec, 3, 3)), m_h=np.empty((m_rec, 3, n)),
+        replayed=replay is not None,
     )
-    gains = (fw.m_gain, fw.m_sinv) if replay is None else (replay.gains, replay.s_inv)
+    gains = (fw.m_gain, fw.m_sinv, fw.m_h) if replay is None else (replay.gains, replay.s_inv,
+                                                                    fw.m_h)
     used_nodes, used_out = forward_kernel(
         t, w, f, k0, x0, np.diag(p0_diag), lever0.copy(), (lay.i_gm, lay.i_sf, lay.i_l),
         inv_tau, flags, (meas.k, meas.kind, meas.z, meas.r, meas.dt_s),

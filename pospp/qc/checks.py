@@ -2,7 +2,8 @@
 
 Frames and units: body FRD (b), navigation NED (n), sensor as logged (s); SI and radians
 inside, the reported ``value`` / ``threshold`` in the unit named by ``Check.unit``. Times
-``t_s`` are seconds from the run epoch (the first IMU stamp).
+``t_s`` are seconds from the run epoch (the first IMU stamp). The record :class:`Check` and
+the run status are in :mod:`pospp.qc.check_record` (re-exported here).
 
 Each check states the statistic it computes, the threshold, and (docs/qc.md) its false-alarm
 level and the margins measured on clean data. A check that cannot be evaluated on the data
@@ -16,83 +17,22 @@ worst severity among the failed checks (:func:`run_status`).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pospp import earth
 from pospp.distributions import chi2_ppf, poisson_isf
-from pospp.units import DEG_PER_H_RADPS, NS_PER_S
-
-STATUS_ORDER = ("ok", "partial", "degraded", "failed")
-"""Run statuses from best to worst."""
+from pospp.qc.check_record import STATUS_ORDER as STATUS_ORDER
+from pospp.qc.check_record import Check as Check
+from pospp.qc.check_record import comparison_text as comparison_text
+from pospp.qc.check_record import run_status as run_status
+from pospp.qc.check_record import skip as skip
+from pospp.qc.check_record import time_offset_ns as _toff
+from pospp.qc.lever_time import LEVER_ARM_FLOOR_M, LeverTime, lever_time_verdict
+from pospp.units import DEG_PER_H_RADPS
 
 _DPH = DEG_PER_H_RADPS
-
-
-@dataclass(frozen=True)
-class Check:
-    """One named check and its outcome.
-
-    Attributes
-    ----------
-    name : str
-        Check name (``gravity_direction``, ``gnss_time_offset``, ...).
-    stage : str
-        Pipeline stage whose data or result it checks.
-    statistic : str
-        What ``value`` is (or why the check was not applicable).
-    value, threshold : float
-        The statistic and the limit it is compared with (fail when value > threshold, unless
-        the statistic says otherwise); NaN value when not applicable.
-    unit : str
-    passed : bool
-    severity : str
-        Run status a failure imposes ("partial", "degraded" or "failed").
-    suggestion : str
-        What the data suggest (empty when passed or nothing can be estimated).
-    time_ns_offset : int or None
-        Time of the worst sample, as nanoseconds from the run epoch (None if not timed).
-    """
-
-    name: str
-    stage: str
-    statistic: str
-    value: float
-    threshold: float
-    unit: str
-    passed: bool
-    severity: str
-    suggestion: str = ""
-    time_ns_offset: int | None = None
-
-
-def comparison_text(value: float, threshold: float, unit: str) -> str:
-    """``"4985 > 30 m"``: a check's value against its threshold, for messages and the console.
-
-    Most checks fail above their threshold; a few (``calibration``: pairs used) below it.
-    """
-    op = "<" if value < threshold else ">"
-    return f"{value:.4g} {op} {threshold:.4g}" + ("" if unit in ("", "1") else f" {unit}")
-
-
-def run_status(checks: tuple[Check, ...] | list[Check]) -> str:
-    """The worst severity among the failed checks ("ok" when all passed)."""
-    worst = 0
-    for c in checks:
-        if not c.passed:
-            worst = max(worst, STATUS_ORDER.index(c.severity))
-    return STATUS_ORDER[worst]
-
-
-def skip(name: str, stage: str, why: str, unit: str, threshold: float = math.nan) -> Check:
-    return Check(name, stage, f"not applicable: {why}", math.nan, threshold, unit, True,
-                 "degraded")
-
-
-def _toff(t_s: float | None) -> int | None:
-    return None if t_s is None or not math.isfinite(t_s) else int(round(t_s * NS_PER_S))
 
 
 # =============================================================================================
@@ -391,8 +331,9 @@ def gnss_jumps(fix_t_s: ArrayLike, r_n_m: ArrayLike, vel_t_s: ArrayLike, v_n_mps
                  passed, "degraded", sug, _toff(float(t[k + 1])))
 
 
-LEVER_ARM_MAX_M = 0.2
-"""Largest difference between the configured and the estimated lever arm per axis [m]."""
+LEVER_ARM_MAX_M = LEVER_ARM_FLOOR_M
+"""Largest difference between the configured and the estimated lever arm per axis [m] (the
+practical floor; a difference must also be beyond LEVER_ARM_SIGMAS of its sigma)."""
 LEVER_ARM_SIGMAS = 5.0
 LEVER_ARM_MIN_YAW_SPAN_DEG = 90.0
 """The forward and right components count only when the heading turned this much."""
@@ -419,15 +360,21 @@ def lever_arm_observable(rpy_rad: ArrayLike) -> NDArray:
 
 def lever_arm(configured_b_m: ArrayLike, estimated_b_m: ArrayLike, sigma_b_m: ArrayLike,
               *, observable: ArrayLike = (True, True, True),
-              mean_speed_mps: float = math.nan) -> Check:
+              mean_speed_mps: float = math.nan, joint: LeverTime | None = None) -> Check:
     """Configured antenna lever arm against the one the data estimate (A with lever states).
 
     Statistic: max over axes of |l_cfg - l_est| where that difference is also beyond
     LEVER_ARM_SIGMAS of the estimate's sigma and the axis is ``observable``
     (:func:`lever_arm_observable`; an axis the flight cannot reveal does not count) [m];
-    threshold LEVER_ARM_MAX_M. A GNSS time offset tau moves the antenna along
-    the track by -v tau, which the lever-arm states read as a forward lever arm: when the
-    forward axis dominates, the suggestion names the equivalent offset -dl_x / v as well.
+    threshold LEVER_ARM_MAX_M, the practical floor. A GNSS time offset tau moves the antenna
+    along the track by -v tau, which the lever-arm states read as a forward lever arm.
+    ``joint`` (:func:`pospp.qc.lever_time.lever_time_joint`), when made, separates the two
+    where the flight's speed changes allow: the statistic is then taken on the lever arm at
+    the joint offset with its sigma including the offset's uncertainty, and the suggestion
+    is the joint reading's (:func:`pospp.qc.lever_time.lever_time_verdict`: the lever arm,
+    the offset, both, or, where the flight cannot tell them apart, the combination it
+    determines with both readings). Without it, when the forward axis dominates, the
+    suggestion names the equivalent offset -dl_x / v as well.
     """
     cfg = np.asarray(configured_b_m, dtype=float)
     est = np.asarray(estimated_b_m, dtype=float)
@@ -438,6 +385,12 @@ def lever_arm(configured_b_m: ArrayLike, estimated_b_m: ArrayLike, sigma_b_m: Ar
     if not obs.any():
         return skip("lever_arm", "navigate", "no turn and no tilt change to reveal it", "m",
                    LEVER_ARM_MAX_M)
+    verdict = lever_time_verdict(joint, sigmas=LEVER_ARM_SIGMAS) if joint else None
+    at = ""
+    if joint is not None and verdict is not None and verdict.kind in (
+            "time_offset", "lever_arm", "both"):
+        est, sig = joint.lever_b_m, joint.sigma_lever_b_m
+        at = f" at the joint GNSS time offset {1e3 * joint.tau_s:+.1f} ms"
     d = np.abs(cfg - est)
     seen = (d > LEVER_ARM_SIGMAS * sig) & obs
     value = float(np.max(np.where(seen, d, 0.0)))
@@ -448,13 +401,15 @@ def lever_arm(configured_b_m: ArrayLike, estimated_b_m: ArrayLike, sigma_b_m: Ar
         f"{', '.join(f'{s:.2f}' for s in sig)}) where [{', '.join(f'{x:.2f}' for x in cfg)}] "
         "m is configured: set [gnss] lever_arm_m")
     dx = est[0] - cfg[0]
-    if not passed and int(np.argmax(np.where(seen, d, 0.0))) == 0 and mean_speed_mps > 1.0:
+    if verdict is not None and verdict.kind in ("lever_arm", "both", "confounded"):
+        sug = "" if passed else verdict.text
+    elif not passed and int(np.argmax(np.where(seen, d, 0.0))) == 0 and mean_speed_mps > 1.0:
         sug += (f" (or, if the forward lever is right, GNSS {'lags' if dx < 0 else 'leads'} "
                 f"the IMU by about {abs(dx) / mean_speed_mps:.3f} s)")
     return Check("lever_arm", "navigate",
                  "largest |configured - estimated| antenna lever arm component (beyond "
                  f"{LEVER_ARM_SIGMAS:.0f} sigma; axes seen: "
-                 f"{''.join(a for a, o in zip('xyz', obs, strict=True) if o)})", value,
+                 f"{''.join(a for a, o in zip('xyz', obs, strict=True) if o)}){at}", value,
                  LEVER_ARM_MAX_M, "m", passed, "degraded", sug)
 
 

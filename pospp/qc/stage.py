@@ -12,6 +12,7 @@ epoch (the first IMU stamp).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
@@ -31,6 +32,7 @@ from pospp.units import t_s_from_time_ns
 if TYPE_CHECKING:
     from pospp.io.mcap_reader import FlightLog
     from pospp.nav.filter import FilterResult, LeverArmEstimate, NavSolution
+    from pospp.qc.lever_time import LeverTime
 
 
 @dataclass(frozen=True)
@@ -105,6 +107,104 @@ def _down_rate(t: NDArray, w: NDArray, sol: NavSolution) -> NDArray:
     return np.einsum("ij,ij->i", row, w) + earth.EARTH_RATE_RADPS * np.sin(lat)
 
 
+def _lever_velocity(t: NDArray, w: NDArray, sol: NavSolution, vel_t: NDArray,
+                    lever_b_m: Any) -> NDArray:
+    """The configured lever arm's share of the antenna velocity at the GNSS velocity times,
+    ``C_nb (w_ib_b x l)`` [m/s NED] (the Earth rate's share, below 1 mm/s for a few metres,
+    left out): subtracted, the course is the IMU's, which turns with its yaw rate alone."""
+    lever = np.asarray(lever_b_m, dtype=float)
+    if vel_t.shape[0] == 0 or not np.any(lever):
+        return np.zeros((vel_t.shape[0], 3))
+    ts = np.asarray(sol.t_s, dtype=float)
+    c = rotation.dcm_from_quat(sol.q_nb)
+    c_at = np.stack([[np.interp(vel_t, ts, c[:, i, j]) for j in range(3)] for i in range(3)])
+    w_at = np.stack([np.interp(vel_t, t, w[:, a]) for a in range(3)], axis=1)
+    wl = np.cross(w_at, lever)
+    return np.einsum("ijn,nj->ni", c_at, wl)
+
+
+def _offset_and_lever(t: NDArray, w: NDArray, sol: NavSolution, v_t: NDArray, v_n: NDArray,
+                      nav: FilterResult, config: Any,
+                      lever_estimate: LeverArmEstimate | None,
+                      joint: Callable[[], LeverTime | None] | None,
+                      renavigate: Callable[[float], FilterResult] | None
+                      ) -> tuple[list[Check], LeverArmEstimate | None]:
+    """The ``gnss_time_offset`` and ``lever_arm`` checks (:func:`quality_checks`): the turns'
+    offset (seconds measured again, :func:`_offset_again`) and A's lever-arm estimate, each
+    alone; when either fails below ``TIME_OFFSET_MAX_S``, both from the joint estimate. Also
+    A's lever-arm estimate used (None without one), which the mounting naming reads."""
+    out: list[Check] = []
+    v_imu = v_n - _lever_velocity(t, w, sol, v_t, config.gnss.lever_arm_m)
+    est = time_offset.estimate_time_offset(t, _down_rate(t, w, sol), v_t, v_imu)
+    if est is not None and abs(est.offset_s) >= time_offset.TIME_OFFSET_MAX_S and renavigate:
+        est = _offset_again(t, w, v_t, v_n, config.gnss.lever_arm_m, est, renavigate)
+    lev = lever_estimate if lever_estimate is not None else (
+        nav.lever_arm if nav.lever_arm.estimated else None)
+    speed = np.hypot(sol.v_n_mps[:, 0], sol.v_n_mps[:, 1])
+    moving = speed > time_offset.TIME_OFFSET_MIN_SPEED_MPS
+    obs = qc.lever_arm_observable(sol.rpy_rad)
+    mean_speed = float(speed[moving].mean()) if moving.any() else math.nan
+    first = [time_offset.gnss_time_offset(est)]
+    if lev is not None:
+        first.append(qc.lever_arm(config.gnss.lever_arm_m, lev.lever_b_m, lev.sigma_b_m,
+                                  observable=obs, mean_speed_mps=mean_speed))
+    small = est is None or abs(est.offset_s) < time_offset.TIME_OFFSET_MAX_S
+    need = small and joint is not None and not all(c.passed for c in first)
+    lt = joint() if need and joint is not None else None
+    out.append(time_offset.gnss_time_offset(est, lt) if lt is not None else first[0])
+    if lev is None:
+        out.append(qc.skip("lever_arm", "navigate", "no lever-arm estimate", "m",
+                           qc.LEVER_ARM_MAX_M))
+    else:
+        out.append(first[1] if lt is None else qc.lever_arm(
+            config.gnss.lever_arm_m, lev.lever_b_m, lev.sigma_b_m, observable=obs,
+            mean_speed_mps=mean_speed, joint=lt))
+    toff, lev_check = out[-2], out[-1]
+    if lt is None and not toff.passed and not lev_check.passed:
+        # a late GNSS bends the lever-arm estimate
+        out[-1] = replace(lev_check, suggestion="fix the GNSS time offset first, the lever-arm "
+                          "estimate is not reliable until then; " + lev_check.suggestion)
+    return out, lev
+
+
+def _offset_again(t: NDArray, w: NDArray, v_t: NDArray, v_n: NDArray, lever_b_m: Any,
+                  est: time_offset.TimeOffsetEstimate,
+                  renavigate: Callable[[float], FilterResult]
+                  ) -> time_offset.TimeOffsetEstimate:
+    """An offset of seconds measured again: A, fed GNSS records seconds away from their
+    true time, banks and pitches wrongly in the turns, and the vertical rate projected with
+    that attitude biases the offset (the sample flight with its GNSS 18 s late read 18.59 +-
+    0.01 s, 37 s early 36.32 +- 0.02 s). A is re-run with the GNSS re-stamped by the first
+    estimate (to 0.01 s) and the rest measured within +-2 s, again from there while the rest
+    exceeds :data:`OFFSET_AGAIN_DONE_S`, the lever arm's share of the
+    antenna velocity (:func:`_lever_velocity`) taken at the re-stamped times (at the stamps,
+    a 2 s offset read 1.91 s: the lever arm's velocity in the roll-in at the wrong time); the
+    estimate is the sum, with the second's sigma (the first unchanged when that run fails).
+    """
+    for _ in range(OFFSET_AGAIN_RUNS):
+        shift = round(est.offset_s, 2)
+        try:
+            nav2 = renavigate(shift)
+        except ValueError:
+            return est
+        sol2 = nav2.smoothed if nav2.smoothed is not None else nav2.forward
+        v_imu = v_n - _lever_velocity(t, w, sol2, v_t - shift, lever_b_m)
+        rest = time_offset.estimate_time_offset(t, _down_rate(t, w, sol2), v_t - shift,
+                                                v_imu, search_s=2.0)
+        if rest is None:
+            return est
+        est = replace(rest, offset_s=shift + rest.offset_s)
+        if abs(rest.offset_s) < OFFSET_AGAIN_DONE_S:
+            break
+    return est
+
+
+OFFSET_AGAIN_RUNS = 3
+""":func:`_offset_again` re-runs A at most this many times, each at the last estimate."""
+OFFSET_AGAIN_DONE_S = 0.05
+"""... until the rest it measures is below this [s] (A then ran near the right offset)."""
+
+
 def _gnss_processed(rec: Any) -> NDArray:
     """The position and velocity records A processed after its start (used, gated, or used
     after a covariance reset) in the filter's ``InnovationRecord``."""
@@ -130,7 +230,9 @@ def _innovation_checks(rec: Any, gate_probability: float) -> list[Check]:
 
 
 def quality_checks(log: FlightLog, nav: FilterResult, calib_run: Any, config: Any, *,
-                   c_bs: NDArray, lever_estimate: LeverArmEstimate | None = None
+                   c_bs: NDArray, lever_estimate: LeverArmEstimate | None = None,
+                   joint: Callable[[], LeverTime | None] | None = None,
+                   renavigate: Callable[[float], FilterResult] | None = None
                    ) -> QualityReport:
     """Run every check on a run's results.
 
@@ -147,6 +249,15 @@ def quality_checks(log: FlightLog, nav: FilterResult, calib_run: Any, config: An
     lever_estimate : pospp.nav.filter.LeverArmEstimate, optional
         The lever arm estimated by a re-run of A with lever-arm states (None: not re-run; the
         check then uses ``nav.lever_arm`` when A estimated it, else is not applicable).
+    joint : callable() -> LeverTime or None, optional
+        Makes the joint estimate of the lever arm and the GNSS time offset
+        (:func:`pospp.flight_stages.lever_time_estimate`); called only when the time-offset
+        or the lever-arm check fails on its own estimate (an offset below
+        ``TIME_OFFSET_MAX_S``), and then both checks take its reading.
+    renavigate : callable(shift_s) -> FilterResult, optional
+        A on the log with its GNSS re-stamped ``t - shift_s``
+        (:func:`pospp.flight_stages.restamped`): an offset of seconds found by the turns is
+        measured again on A's attitude with the GNSS re-stamped by it (:func:`_offset_again`).
     """
     imu = log.imu
     epoch_ns = int(imu.time_ns[0])
@@ -194,25 +305,9 @@ def quality_checks(log: FlightLog, nav: FilterResult, calib_run: Any, config: An
     rec = getattr(nav, "innovations", None)
     if rec is not None:
         out += _innovation_checks(rec, config.filter_options().gate_probability)
-    est = time_offset.estimate_time_offset(t, _down_rate(t, w, sol), v_t, v_n)
-    out.append(time_offset.gnss_time_offset(est))
-    lev = lever_estimate if lever_estimate is not None else (
-        nav.lever_arm if nav.lever_arm.estimated else None)
-    if lev is None:
-        out.append(qc.skip("lever_arm", "navigate", "no lever-arm estimate", "m",
-                          qc.LEVER_ARM_MAX_M))
-    else:
-        speed = np.hypot(sol.v_n_mps[:, 0], sol.v_n_mps[:, 1])
-        moving = speed > time_offset.TIME_OFFSET_MIN_SPEED_MPS
-        out.append(qc.lever_arm(config.gnss.lever_arm_m, lev.lever_b_m, lev.sigma_b_m,
-                                observable=qc.lever_arm_observable(sol.rpy_rad),
-                                mean_speed_mps=float(speed[moving].mean()) if moving.any()
-                                else math.nan))
-
-    toff, lev_check = out[-2], out[-1]
-    if not toff.passed and not lev_check.passed:  # a late GNSS bends the lever-arm estimate
-        out[-1] = replace(lev_check, suggestion="fix the GNSS time offset first, the lever-arm "
-                          "estimate is not reliable until then; " + lev_check.suggestion)
+    offset_and_lever, lev = _offset_and_lever(t, w, sol, v_t, v_n, nav, config,
+                                              lever_estimate, joint, renavigate)
+    out += offset_and_lever
 
     # --- A's heading against the GNSS course; where A was GNSS-aided ------------------------
     _heading_and_aiding_checks(out, config, v_t, v_n, sol, lev, nav, calib_run)

@@ -410,8 +410,9 @@ def render_report(tables: Mapping[str, pd.DataFrame], *, title: str = "pospp run
 
 
 def sim_comparison_section(sc: pd.DataFrame | None) -> list[str]:
-    """``pospp compare-sim``: |gap| / sigma per statistic, configured model versus the last
-    step's model (figure), the steps (effect, fitted size, target gap before and after) and
+    """``pospp compare-sim``: the base model fitted to the log (step 0: each level with its
+    sigma and prior), |gap| / sigma per statistic, base model versus the last step's model
+    (figure), the steps (effect, fitted size, target gap before and after, the reading) and
     every statistic's gap (table)."""
     if sc is None or sc.empty:
         return []
@@ -424,7 +425,7 @@ def sim_comparison_section(sc: pd.DataFrame | None) -> list[str]:
     names = list(base.index)
     x = range(len(names))
     ax.bar([i - 0.2 for i in x], base.z_before.abs().reindex(names), 0.4,
-           label="configured model")
+           label="base model")
     if last_step > 0:
         ax.bar([i + 0.2 for i in x], last.z_after.abs().reindex(names), 0.4,
                label=f"after step {last_step}")
@@ -434,10 +435,18 @@ def sim_comparison_section(sc: pd.DataFrame | None) -> list[str]:
     ax.legend(fontsize=8)
     fig.tight_layout()
     eff = sc[sc.kind == "effect"][["step", "measure", "effect", "parameter", "value", "sigma",
-                                   "unit", "gap_before", "gap_after", "z_before", "z_after"]]
+                                   "unit", "gap_before", "gap_after", "z_before", "z_after"]
+                                  + (["note"] if "note" in sc else [])]
     eff = eff.assign(unit=eff["unit"].map(unit_text))
     cols = ["measure", "measured", "simulated_before", "gap_before", "sigma_gap", "z_before",
             "p_before", "significant_before"]
-    return ["<h2>Measured flight versus its simulation (compare-sim)</h2>",
-            _img(fig), "<h3>Steps</h3>", _table(eff),
-            "<h3>Gaps of the configured model</h3>", _table(base.reset_index()[cols])]
+    out = ["<h2>Measured flight versus its simulation (compare-sim)</h2>"]
+    if "kind" in sc and (sc.kind == "base").any():
+        fit = sc[sc.kind == "base"][["parameter", "value", "sigma", "unit", "prior",
+                                     "significant_before", "measure"]]
+        fit = fit.rename(columns={"significant_before": "differs from prior",
+                                  "measure": "measured on"})
+        out += ["<h3>Base model fitted to the log (step 0)</h3>",
+                _table(fit.assign(unit=fit["unit"].map(unit_text)))]
+    return [*out, _img(fig), "<h3>Steps</h3>", _table(eff),
+            "<h3>Gaps of the base model</h3>", _table(base.reset_index()[cols])]

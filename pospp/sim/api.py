@@ -25,11 +25,12 @@ from numpy.typing import ArrayLike
 
 from pospp import __version__, rotation
 from pospp.nav.strapdown import Trajectory
-from pospp.sim.gnss import GnssModel, simulate_gnss
+from pospp.sim.gnss import GnssModel
 from pospp.sim.gravity import GravityDisturbance
-from pospp.sim.imu import Motion, exact_increments, quat_nb_from_euler
+from pospp.sim.imu import Motion, quat_nb_from_euler
+from pospp.sim.kinematics import Kinematics, ProgressFn, kinematics, sensors
 from pospp.sim.profile import MissionProfile, load_profile, plan_mission
-from pospp.sim.sensors import ImuErrorModel, RealisedImuErrors, apply_imu_errors, imu_grade
+from pospp.sim.sensors import ImuErrorModel, RealisedImuErrors, imu_grade
 from pospp.sim.trajectory import MotionSample, ProfileMotion, SplineMotion
 from pospp.types import GnssFixes, GnssVelocities, ImuSamples, ReferenceTrajectory
 from pospp.units import DEG_PER_H_RADPS, UG_MPS2, time_ns_from_t_s
@@ -39,12 +40,16 @@ __all__ = [
     "GnssModel",
     "GravityDisturbance",
     "ImuErrorModel",
+    "Kinematics",
     "Simulation",
     "TrueLeg",
+    "along_motion",
     "gnss_model_from_params",
     "imu_error_model_from_params",
     "imu_grade",
     "load_profile",
+    "kinematics",
+    "sensors",
     "simulate",
     "simulate_along",
 ]
@@ -52,8 +57,6 @@ __all__ = [
 DEFAULT_START_TIME_NS = 1_717_200_000_000_000_000
 """2024-06-01T00:00:00 UTC, the default mission start (same epoch as the reference cases)."""
 
-ProgressFn = Callable[[str, float], None]
-"""progress(stage, fraction): stage in {"trajectory", "imu", "errors", "gnss", "truth"}."""
 
 CONVENTIONS = {
     "nav_frame": "NED (local geodetic, WGS-84)",
@@ -220,16 +223,6 @@ def _resolve_grade(g: str | ImuErrorModel) -> tuple[str, ImuErrorModel]:
     return str(g), imu_grade(str(g))
 
 
-def _rate_dt_ns(imu_rate_hz: float) -> int:
-    if not imu_rate_hz > 0:
-        raise ValueError(f"imu_rate_hz must be > 0, got {imu_rate_hz!r}")
-    dt_ns = round(1e9 / imu_rate_hz)
-    if abs(dt_ns - 1e9 / imu_rate_hz) > 1e-3:
-        raise ValueError(f"imu_rate_hz {imu_rate_hz} does not give a whole number of "
-                         "nanoseconds per interval")
-    return dt_ns
-
-
 def _truth(motion: Motion, t_s: np.ndarray, progress: ProgressFn | None) -> Trajectory:
     """The true IMU state at the epochs ``t_s``, in blocks of 200 000 epochs."""
     n1 = t_s.shape[0]
@@ -329,38 +322,20 @@ def _generate(
         timings[key] = now - clock
         clock = now
 
-    dt_ns = _rate_dt_ns(imu_rate_hz)
-    n = int(math.floor(duration_s * 1e9 / dt_ns))
-    if n < 2:
-        raise ValueError(f"mission of {duration_s} s is shorter than two IMU intervals")
-    k = np.arange(n + 1, dtype=np.int64)
-    t_s = (k * dt_ns).astype(float) * 1e-9
-    ss_imu, ss_gnss = np.random.SeedSequence(seed).spawn(2)
-    prog_imu = None if progress is None else (lambda f: progress("imu", f))
-    dth, dv = exact_increments(motion, t_s, n_sub=n_sub, n_gl=n_gl, progress=prog_imu,
-                               gravity=gravity)
+    kin = kinematics(motion, duration_s, imu_rate_hz=imu_rate_hz, start_time_ns=start_time_ns,
+                     n_sub=n_sub, n_gl=n_gl, progress=progress, gravity=gravity)
     tick("increments_s")
-    dth_m, dv_m, realised = apply_imu_errors(t_s, dth, dv, model, ss_imu)
-    del dth, dv
-    if progress is not None:
-        progress("errors", 1.0)
+    imu, fix, vel, realised = sensors(kin, model, gnss, seed, progress)
     tick("imu_errors_s")
-    dt = np.diff(t_s)[:, None]
-    dth_m /= dt  # mean rates, in place
-    dv_m /= dt
-    imu = ImuSamples(np.int64(start_time_ns) + k[1:] * dt_ns, dth_m, dv_m, "imu_link")
-    fix, vel = simulate_gnss(motion, n * dt_ns * 1e-9, gnss, start_time_ns=start_time_ns,
-                             seed=ss_gnss)
-    if progress is not None:
-        progress("gnss", 1.0)
-    tick("gnss_s")
-    truth = _truth(motion, t_s, progress)
+    truth = _truth(motion, kin.t_s, progress)
     tick("truth_s")
     legs = legs_fn(truth)
+    n = kin.t_s.shape[0] - 1
     params = _params(grade_name=grade_name, model=model, realised=realised, gnss=gnss,
                      n_fix=len(fix), seed=seed, imu_rate_hz=imu_rate_hz,
-                     start_time_ns=start_time_ns, dt_ns=dt_ns, n=n, n_sub=n_sub, n_gl=n_gl,
-                     extra_params=extra_params, legs=legs, timings=timings, gravity=gravity)
+                     start_time_ns=start_time_ns, dt_ns=kin.dt_ns, n=n, n_sub=n_sub,
+                     n_gl=n_gl, extra_params=extra_params, legs=legs, timings=timings,
+                     gravity=gravity)
     return Simulation(name, imu, fix, vel, truth, int(start_time_ns), legs, realised, params)
 
 
@@ -479,6 +454,19 @@ class _ShiftedMotion:
             "rpy_rate_radps")))
 
 
+def along_motion(time_s: ArrayLike, lat_rad: ArrayLike, lon_rad: ArrayLike,
+                 height_m: ArrayLike, *, vehicle: str = "car", position_sigma_m: float = 0.02,
+                 heading_sigma_rad: float = 0.01, heading_min_speed_mps: float = 1.0
+                 ) -> Motion:
+    """The smooth motion :func:`simulate_along` follows (its parameters), with time from
+    ``time_s[0]``: :class:`pospp.sim.trajectory.SplineMotion` shifted to start at 0."""
+    t = np.asarray(time_s, dtype=float)
+    sm = SplineMotion(t, lat_rad, lon_rad, height_m, vehicle=vehicle,
+                      position_sigma_m=position_sigma_m, heading_sigma_rad=heading_sigma_rad,
+                      heading_min_speed_mps=heading_min_speed_mps)
+    return _ShiftedMotion(sm, float(t[0]))
+
+
 def simulate_along(
     time_s: ArrayLike,
     lat_rad: ArrayLike,
@@ -523,10 +511,10 @@ def simulate_along(
     grade_name, model = _resolve_grade(imu_grade)
     gnss = gnss if gnss is not None else GnssModel()
     t0 = time.perf_counter()
-    sm = SplineMotion(t, lat_rad, lon_rad, height_m, vehicle=vehicle,
-                      position_sigma_m=position_sigma_m, heading_sigma_rad=heading_sigma_rad,
-                      heading_min_speed_mps=heading_min_speed_mps)
-    motion = _ShiftedMotion(sm, float(t[0]))
+    motion = along_motion(t, lat_rad, lon_rad, height_m, vehicle=vehicle,
+                          position_sigma_m=position_sigma_m,
+                          heading_sigma_rad=heading_sigma_rad,
+                          heading_min_speed_mps=heading_min_speed_mps)
     if progress is not None:
         progress("trajectory", 1.0)
     t_traj = time.perf_counter() - t0

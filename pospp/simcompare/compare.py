@@ -1,21 +1,25 @@
 """Step-wise comparison of a measured flight with its simulation (docs/compare_sim.md).
 
-At each step, every statistic's gap g = measured - simulated is tested against
-sigma_g = sqrt(sigma_m^2 + sigma_s^2) (two-sided, Student t with Welch-Satterthwaite degrees
-of freedom, normal for A's own sigmas) with a Holm-Bonferroni correction over all statistics
-at family-wise level ``alpha`` (default 0.01). The most significant gap (largest |g| /
-sigma_g) is the target. Every library effect that moves the target and is not yet in the
-model is fitted by weighted least squares on its linear statistics (slopes: identity or a
-trial simulation, :mod:`pospp.simcompare.effects`; then secant iterations on the simulated
+At each step, every statistic's gap g = measured - simulated is tested against sigma_g =
+sqrt(sigma_m^2 + sigma_s^2) (two-sided, Student t with Welch-Satterthwaite degrees of
+freedom, normal for A's own sigmas) with a Holm-Bonferroni correction over all statistics at
+family-wise level ``alpha`` (default 0.01). The most significant gap (largest |g| / sigma_g)
+is the target. Every library effect that moves the target and is not yet in the model is
+fitted by weighted least squares on its linear statistics (slopes: identity or a trial
+simulation, :mod:`pospp.simcompare.effects`; then secant iterations on the simulated
 statistics for effects with ``refine``, or a grid over a parameter for effects with
 ``grid``); a candidate whose trial flight A cannot process is dropped. An effect is
-admissible when its fitted u differs from zero (chi-square test, level ``alpha`` / number
-of candidates). Each admissible effect is added with its fitted size and the flight
-re-simulated; the one with the least sum of z^2 after (plus 2 per parameter, as AIC) over
-the statistics that some candidate of the step moves is kept, and the gaps after are
-recorded. A multi-parameter effect adds only its components at least ``MIN_COMPONENT_Z``
-sigma from zero (the others are reported as 0 with their sigma). A target that no
-admissible effect explains, or whose gap the added effect does not shrink, is
+admissible when its fitted u differs from zero (chi-square test, level ``alpha`` / number of
+candidates); since a weighted least-squares fit's chi-square u^T H^T W H u is at most the
+sum of its statistics' z^2 (a projection), a candidate whose fit statistics' z^2 sum stays
+below that test's bound is dropped before any trial simulation. A joint effect
+(``SimEffect.joint``: the lever arm and the GNSS time offset) is fitted on the measured log
+instead, and names what its reading finds. Each admissible effect is added with its fitted
+size and the flight re-simulated; the one with the least sum of z^2 after (plus 2 per
+parameter, as AIC) over the statistics that some candidate of the step moves is kept, and
+the gaps after are recorded. A multi-parameter effect adds only its components at least
+``MIN_COMPONENT_Z`` sigma from zero (the others are reported as 0 with their sigma). A
+target that no admissible effect explains, or whose gap the added effect does not shrink, is
 ``unexplained`` and left out of later targets (a step of its own, which does not count
 against ``max_steps``). The loop stops when no target is left or ``max_steps`` effects have
 been added.
@@ -33,6 +37,7 @@ draw), are at least their spread over the draws, with its degrees of freedom
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -42,7 +47,8 @@ from scipy import stats as sps
 
 from pospp.sim.gnss import GnssModel
 from pospp.sim.sensors import ImuErrorModel
-from pospp.simcompare.effects import LIBRARY, EffectContext, SimEffect
+from pospp.simcompare.base_model import BaseParameter
+from pospp.simcompare.effects import LIBRARY, EffectContext, JointFit, SimEffect
 from pospp.simcompare.stats import STAT_UNITS, FlightStats, Stat
 
 __all__ = ["ALPHA", "ENSEMBLE_DRAWS", "Comparison", "Gap", "SimulateFn", "compare_flights",
@@ -175,6 +181,22 @@ class Step:
     candidate: str = ""
     """For an ``unexplained`` step with parameters: the best candidate, whose fit (params,
     size, sigma, after) did not shrink the target."""
+    units: tuple[str, ...] = ()
+    """The unit of each parameter (``unit`` split at " | " when it names one per parameter)."""
+    note: str = ""
+    """The reading in words (a joint effect's: both readings where the flight cannot tell
+    them apart)."""
+    extra: tuple[tuple[str, float, float, str], ...] = ()
+    """Further rows (parameter, value, sigma, unit): a joint effect's combination and
+    correlations."""
+
+    def param_units(self) -> tuple[str, ...]:
+        """The unit of each parameter."""
+        if self.units:
+            return self.units
+        parts = [u.strip() for u in self.unit.split("|")]
+        return tuple(parts) if len(parts) == len(self.params) else (self.unit,) * len(
+            self.params)
 
 
 @dataclass(frozen=True)
@@ -187,6 +209,9 @@ class Comparison:
     gnss_model: GnssModel
     final: dict[str, Gap]
     effects_added: tuple[str, ...] = field(default=())
+    base_fit: tuple[BaseParameter, ...] = field(default=())
+    """Step 0: the base model's levels fitted to the log (:mod:`pospp.simcompare.base_model`;
+    empty when the comparison started from given models)."""
 
 
 def _wls(h: NDArray, g: NDArray, w: NDArray):
@@ -300,6 +325,13 @@ def _grid_point(effect: SimEffect, v: float, names: list[str], g: NDArray, w: ND
     return (res if np.isfinite(res) else np.inf), fit
 
 
+def _fit_names(effect: SimEffect, gap: dict[str, Gap]) -> list[str]:
+    """The statistics an effect's fit uses: its ``fit_first`` when the flight has them, else
+    its ``fit_stats`` (those with a gap)."""
+    return ([s for s in effect.fit_first if s in gap]
+            or [s for s in effect.fit_stats if s in gap])
+
+
 def _fit(effect: SimEffect, gap: dict[str, Gap], base: FlightStats, simulate: SimulateFn,
          imu: ImuErrorModel, gnss: GnssModel, ctx: EffectContext):
     """Weighted least squares of the effect's parameters on its fit statistics' gaps:
@@ -309,10 +341,10 @@ def _fit(effect: SimEffect, gap: dict[str, Gap], base: FlightStats, simulate: Si
     value of an effect with a ``grid``: :func:`_grid_fit`), or, for an
     effect with ``screen``, the identity to choose the parameters at least
     ``MIN_COMPONENT_Z`` sigma from zero and a trial simulation for those only (the others
-    keep the identity fit's sigma and a value of 0).
+    keep the identity fit's sigma and a value of 0); with ``trial_at_fit``, each trial at
+    the size the identity fit reads (the statistics need not be linear far from it).
     """
-    names = [s for s in effect.fit_first if s in gap] or [s for s in effect.fit_stats
-                                                          if s in gap]
+    names = _fit_names(effect, gap)
     if not names:
         return None
     p = len(effect.params)
@@ -322,7 +354,7 @@ def _fit(effect: SimEffect, gap: dict[str, Gap], base: FlightStats, simulate: Si
     if effect.trial is None:
         return _wls(eye, g, w)
     cols = list(range(p))
-    cov0 = None
+    cov0 = u0 = None
     if effect.screen:
         fit0 = _wls(eye, g, w)
         if fit0 is None:
@@ -336,9 +368,10 @@ def _fit(effect: SimEffect, gap: dict[str, Gap], base: FlightStats, simulate: Si
     h = np.zeros((len(names), len(cols)))
     for k, j in enumerate(cols):
         u = np.zeros(p)
-        u[j] = effect.trial[j]
+        # the trial at the size the identity fit reads (effect.trial_at_fit), else fixed
+        u[j] = u0[j] if effect.trial_at_fit and u0 is not None else effect.trial[j]
         sim = simulate(*effect.apply(imu, gnss, u, ctx))
-        h[:, k] = [(sim.stats[s].value - base.stats[s].value) / effect.trial[j] for s in names]
+        h[:, k] = [(sim.stats[s].value - base.stats[s].value) / u[j] for s in names]
     fit = _wls(h, g, w)
     if fit is not None and effect.refine:
         fit = _refine(effect, names, cols, h, g, w, fit, base, simulate, imu, gnss, ctx)
@@ -358,20 +391,37 @@ def _candidate(e: SimEffect, measured: FlightStats, cur: dict[str, Gap], sim: Fl
     """One candidate of a step: fitted, tested, added and re-simulated (module docstring).
     Returns (score, effect, u, cov, imu, gnss, sim, gaps after, spread after) or None (not
     admissible, or a flight A cannot process)."""
-    try:
-        fit = _fit(e, cur, sim, simulate, imu, gnss, ctx)
-    except ValueError:  # a trial flight A cannot process (e.g. cannot align)
-        return None
-    if fit is None:
-        return None
-    u, cov, chi_u = fit
-    if sps.chi2.sf(chi_u, len(u)) > alpha / max(n_cands, 1):
-        return None
-    if len(u) > 1:  # components within MIN_COMPONENT_Z sigma of zero are not added
-        keep = np.abs(u) >= MIN_COMPONENT_Z * np.sqrt(np.diag(cov))
-        if e.grid is not None:  # a grid parameter (a correlation time) is a choice
-            keep[e.grid[0]] = True
-        u = np.where(keep, u, 0.0)
+    jf: JointFit | None = None
+    if e.joint is not None:  # confounded effects, jointly on the measured log
+        jf = e.joint(ctx)
+        if jf is None:
+            return None
+        u, cov = jf.u, jf.cov
+    else:
+        names = _fit_names(e, cur)
+        if sum(cur[n].z ** 2 for n in names) < sps.chi2.isf(alpha / max(n_cands, 1),
+                                                            len(e.params)):
+            return None  # no fit on these gaps can be admissible: no trial simulation
+        try:
+            fit = _fit(e, cur, sim, simulate, imu, gnss, ctx)
+        except ValueError:  # a trial flight A cannot process (e.g. cannot align)
+            return None
+        if fit is None:
+            return None
+        u, cov, chi_u = fit
+        if sps.chi2.sf(chi_u, len(u)) > alpha / max(n_cands, 1):
+            return None
+        var = np.broadcast_to(np.asarray(e.variance, dtype=bool), u.shape)
+        u = np.where(var, np.clip(u, 0.0, None), u)  # an added variance is >= 0
+        if not np.any(u):  # a variance below the base model's is no effect
+            return None
+        if len(u) > 1:  # components within MIN_COMPONENT_Z sigma of zero are not added
+            keep = np.abs(u) >= MIN_COMPONENT_Z * np.sqrt(np.diag(cov))
+            if e.grid is not None:  # a grid parameter (a correlation time) is a choice
+                keep[e.grid[0]] = True
+            u = np.where(keep, u, 0.0)
+        if not e.plausible(u, cov):
+            return None
     imu2, gnss2 = e.apply(imu, gnss, u, ctx)
     try:
         sim2 = simulate(imu2, gnss2)
@@ -381,12 +431,30 @@ def _candidate(e: SimEffect, measured: FlightStats, cur: dict[str, Gap], sim: Fl
         spread = ensemble_spread(simulate, imu2, gnss2, sim2, e.ensemble)
     after = gaps(measured, sim2, alpha=alpha, spread=spread)
     score = sum(g.z ** 2 for n, g in after.items() if n in moved) + 2.0 * np.count_nonzero(u)
-    return score, e, u, cov, imu2, gnss2, sim2, after, spread
+    return score, e, u, cov, imu2, gnss2, sim2, after, spread, jf
+
+
+Progress = Callable[[str], None]
+"""progress(line): one line per step of the comparison (the CLI prints them)."""
+
+
+def _describe(e: SimEffect, u: NDArray, cov: NDArray, jf: JointFit | None) -> dict:
+    """The Step fields naming the effect added: the joint fit's naming when it has one."""
+    if jf is not None:
+        return {"effect": jf.effect, "params": jf.params, "size": jf.size, "sigma": jf.sigma,
+                "unit": " | ".join(dict.fromkeys(jf.units)), "units": jf.units,
+                "note": jf.note, "extra": jf.extra}
+    size, sig = e.size(u, cov)
+    return {"effect": e.name, "params": e.params, "size": tuple(size), "sigma": tuple(sig),
+            "unit": e.unit}
 
 
 def compare_flights(measured: FlightStats, simulate: SimulateFn, imu: ImuErrorModel,
                     gnss: GnssModel, *, library: tuple[SimEffect, ...] = LIBRARY,
-                    alpha: float = ALPHA, max_steps: int = 4) -> Comparison:
+                    alpha: float = ALPHA, max_steps: int = 4,
+                    context: EffectContext | None = None,
+                    progress: Progress | None = None,
+                    base_ensemble: tuple[str, ...] = ()) -> Comparison:
     """The step-wise comparison (module docstring).
 
     Parameters
@@ -395,15 +463,30 @@ def compare_flights(measured: FlightStats, simulate: SimulateFn, imu: ImuErrorMo
     simulate : callable(imu_model, gnss_model, draw=0) -> FlightStats
         Simulates the flight with the given models (draw 0: always the same seed; draw k:
         another seed, for :func:`ensemble_spread`) and returns its statistics.
-    imu, gnss : the configured (base) simulation models.
+    imu, gnss : the base simulation models (step 0's fit, or the configured grade).
+    context : EffectContext, optional
+        What the effects need beyond the models (default: the measured IMU's vibration line
+        only; no joint estimate of the lever arm and the time offset).
+    progress : callable(line), optional
+        Told what each step does.
+    base_ensemble : tuple of str
+        Statistics that are one draw of a random effect already in the base model (step
+        0's gyro drift): their spread between draws of the base model floors their sigmas
+        from the start (:func:`ensemble_spread`).
     """
-    ctx = EffectContext(hf_peak_hz=measured.hf_peak_hz)
+    say = progress or (lambda line: None)
+    ctx = context or EffectContext(hf_peak_hz=measured.hf_peak_hz)
     sim = simulate(imu, gnss)
-    cur = gaps(measured, sim, alpha=alpha)
+    # the base model: batch means and A's sigmas, and the draws' spread of its drift
+    spread = ensemble_spread(simulate, imu, gnss, sim, base_ensemble) if base_ensemble \
+        else None
+    cur = gaps(measured, sim, alpha=alpha, spread=spread)
     base = cur
-    spread: dict[str, Stat] | None = None  # the configured model: batch means and A's sigmas
+    say(f"base model simulated: {sum(g.significant for g in cur.values())} of {len(cur)} "
+        "statistics differ significantly")
     steps: list[Step] = []
-    added: list[str] = []
+    added: list[str] = []  # the library's effects in the model
+    named: list[str] = []  # what their steps named (a joint effect names what it found)
     dropped: set[str] = set()
     k = 0
     while len(added) < max_steps:
@@ -414,6 +497,8 @@ def compare_flights(measured: FlightStats, simulate: SimulateFn, imu: ImuErrorMo
         k += 1
         target = targets[0].statistic
         cands = [e for e in library if target in e.explains and e.name not in added]
+        say(f"step {k}: target {target} (z {cur[target].z:+.1f}); candidates "
+            f"{', '.join(e.name for e in cands) or 'none'}")
         # the statistics the choice is about: those some candidate moves (the others only
         # add noise to the score)
         moved = {st for e in cands for st in e.explains}
@@ -424,17 +509,17 @@ def compare_flights(measured: FlightStats, simulate: SimulateFn, imu: ImuErrorMo
             steps.append(Step(k, target, "unexplained", (), (), (), "", cur, cur))
             dropped.add(target)
             continue
-        _, e, u, cov, imu2, gnss2, sim2, after, spread2 = min(tried, key=lambda x: x[0])
-        size, sig = e.size(u, cov)
+        _, e, u, cov, imu2, gnss2, sim2, after, spread2, jf = min(tried, key=lambda x: x[0])
+        d = _describe(e, u, cov, jf)
         if target in after and abs(after[target].z) >= abs(cur[target].z):
             # the best effect did not shrink its target: not kept
             # the model is unchanged: "after" is "before"
-            steps.append(Step(k, target, "unexplained", e.params, tuple(size), tuple(sig), e.unit,
-                              cur, cur, candidate=e.name))
+            d["candidate"] = d.pop("effect")
+            steps.append(Step(k, target, "unexplained", before=cur, after=cur, **d))
             dropped.add(target)
             continue
-        steps.append(Step(k, target, e.name, e.params, tuple(size), tuple(sig), e.unit, cur,
-                          after))
+        steps.append(Step(k, target, before=cur, after=after, **d))
         added.append(e.name)
+        named.append(d["effect"])
         imu, gnss, sim, cur, spread = imu2, gnss2, sim2, after, spread2
-    return Comparison(base, tuple(steps), imu, gnss, cur, tuple(added))
+    return Comparison(base, tuple(steps), imu, gnss, cur, tuple(named))

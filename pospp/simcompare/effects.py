@@ -12,9 +12,11 @@ and how the slope d stat / d u is found:
 * ``screen`` (scale factors): A's estimates choose the parameters (identity fit, at least
   2 sigma), and a trial simulation measures the slope of those only.
 
-Variance-type effects (vibration, coloured GNSS error, bias instability) add a variance u to
-the model's: the model's RMS becomes sqrt(rms_0^2 + u); their size is reported as
-sign(u) sqrt(|u|).
+Variance-type effects (vibration, coloured GNSS error, bias instability) add a variance u >= 0
+to the model's: the model's RMS becomes sqrt(rms_0^2 + u); their size is reported as sqrt(u)
+with the upper 1-sigma distance sqrt(u + sigma_u) - sqrt(u). A fit below zero (less than the
+base model) is no effect: the base model's levels are the log's own (step 0,
+:mod:`pospp.simcompare.base_model`).
 
 Names, parameter names, units and sign conventions are the shared catalogue's
 (:mod:`pospp.effects_catalog`), the same as the leg-based diagnosis uses.
@@ -54,12 +56,17 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pospp.effects_catalog import catalog_entry
+from pospp.qc.lever_time import LeverTime, lever_time_verdict
 from pospp.sim.gnss import GnssModel
 from pospp.sim.sensors import ImuErrorModel
 from pospp.units import ARCSEC_RAD, DEG_PER_H_RADPS, UG_MPS2
 
-__all__ = ["SimEffect", "LIBRARY", "EffectContext", "coloured_tau_library", "library_by_name"]
+__all__ = ["BI_DRAW", "SimEffect", "LIBRARY", "EffectContext", "JointFit",
+           "coloured_tau_library", "library_by_name", "lever_time_fit"]
 
+IMPLAUSIBLE_FACTOR = 50.0
+"""A fitted effect more than this many times its catalogue's plausible size is not admissible
+(:meth:`SimEffect.plausible`)."""
 ACCEL_RAMP_TRIAL_MPS3 = 1e-4
 """Trial ramp of ``accel_bias_ramp`` [m/s^3] (about 37 000 ug/h): A's smoothed bias follows
 only part of a ramp (its bias random walk lags), so the slope is measured, not the identity."""
@@ -86,9 +93,33 @@ white velocity noise, was named a 3 s coloured velocity error)."""
 @dataclass(frozen=True)
 class EffectContext:
     """What an effect needs beyond the models: the measured IMU's dominant high-frequency
-    line [Hz] (vibration frequency when the base model has none)."""
+    line [Hz] (vibration frequency when the base model has none), and the joint estimate of
+    the lever arm and the GNSS time offset on the measured log (made when first asked:
+    :func:`pospp.flight_stages.lever_time_estimate`; None: not available)."""
 
     hf_peak_hz: float = float("nan")
+    lever_time: Callable[[], LeverTime | None] | None = None
+
+
+@dataclass(frozen=True)
+class JointFit:
+    """The fit of a joint effect (``SimEffect.joint``) and what it names.
+
+    ``u``, ``cov``: the model change (SI, ``SimEffect.apply``'s parameters) and its
+    covariance; ``effect``, ``params``, ``size``, ``sigma``, ``units``: the effect named and
+    its parameters in the catalogue's units and signs; ``note``: the reading in words (both
+    readings where the flight cannot separate them); ``extra``: further rows (parameter,
+    value, sigma, unit), e.g. the combination the flight determines."""
+
+    u: NDArray
+    cov: NDArray
+    effect: str
+    params: tuple[str, ...]
+    size: tuple[float, ...]
+    sigma: tuple[float, ...]
+    units: tuple[str, ...]
+    note: str
+    extra: tuple[tuple[str, float, float, str], ...] = ()
 
 
 Apply = Callable[[ImuErrorModel, GnssModel, NDArray, EffectContext],
@@ -161,6 +192,27 @@ class SimEffect:
     between the draws (:func:`pospp.simcompare.compare.ensemble_spread`). Mean-square
     statistics (NIS, Allan variance, bias wander), whose expectation the effect moves, are
     not among them."""
+    trial_at_fit: bool = False
+    """With ``screen``: each trial simulation at the size the identity fit reads, not at
+    ``trial`` (``accel_bias_ramp``: a fixed 1e-4 m/s^3 made A diverge on a 45 min flight, 27
+    mg by its end)."""
+    joint: Callable[[EffectContext], JointFit | None] | None = None
+    """For a group of confounded effects estimated jointly on the measured log (not from the
+    statistics): the fit and what it names (:class:`JointFit`; None: nothing to add)."""
+
+    def plausible(self, u: NDArray, cov: NDArray) -> bool:
+        """Every fitted size in the first parameter's unit within ``IMPLAUSIBLE_FACTOR`` x the
+        catalogue's plausible size (:attr:`pospp.effects_catalog.CatalogEffect.plausible_si`):
+        a fit beyond it is no sensor's error but another model's misfit (the quadrotor's
+        DJI RTK/INS "GNSS" fitted an 8 348 000 ppm gyro scale factor and an 86 deg yaw
+        mounting, docs/results.md)."""
+        size, _ = self.size(u, cov)
+        k = np.broadcast_to(np.asarray(self.si_per_unit, dtype=float), size.shape)
+        units = [x.strip() for x in self.unit.split("|")]
+        same = (np.array([x == units[0] for x in units]) if len(units) == size.size
+                else np.ones(size.shape, bool))
+        limit = IMPLAUSIBLE_FACTOR * catalog_entry(self.name).plausible_si / k[0]
+        return bool(np.all(np.abs(size[same]) <= limit))
 
     def size(self, u: NDArray, cov: NDArray) -> tuple[NDArray, NDArray]:
         """Reported size and 1-sigma [unit] of the fitted u (SI) and its covariance."""
@@ -168,9 +220,11 @@ class SimEffect:
         s = np.sqrt(np.clip(np.diag(cov), 0.0, None))
         k = np.asarray(self.si_per_unit, dtype=float)
         var = np.broadcast_to(np.asarray(self.variance, dtype=bool), u.shape)
-        r = np.sign(u) * np.sqrt(np.abs(u))
-        # delta method, sigma of sqrt(u) = sigma_u / (2 sqrt(u)); at u ~ 0 use sqrt(sigma_u)
-        sr = np.where(np.abs(u) > s, s / (2.0 * np.maximum(np.abs(r), 1e-300)), np.sqrt(s))
+        # an added variance is >= 0 (the candidate clips it): sqrt(u), and as its sigma the
+        # upper 1-sigma distance sqrt(u + sigma_u) - sqrt(u) (never negative)
+        up = np.clip(u, 0.0, None)
+        r = np.sqrt(up)
+        sr = np.sqrt(up + s) - r
         size = self.sign * np.where(var, r, u) / k
         if self.offset is not None:
             size = size + np.asarray(self.offset, dtype=float)
@@ -194,6 +248,59 @@ def _time_offset(imu, gnss, u, ctx):
 
 def _lever(imu, gnss, u, ctx):
     return imu, replace(gnss, lever_arm_b_m=tuple(np.add(gnss.lever_arm_b_m, u)))
+
+
+def _lever_time(imu, gnss, u, ctx):
+    return imu, replace(gnss, lever_arm_b_m=tuple(np.add(gnss.lever_arm_b_m, u[:3])),
+                        time_offset_s=gnss.time_offset_s + float(u[3]))
+
+
+JOINT_SIGMAS = 5.0
+"""A joint reading names an effect beyond this many of its sigmas (the QC checks' level)."""
+
+
+def lever_time_fit(ctx: EffectContext) -> JointFit | None:
+    """``lever_arm_time_offset``'s fit: the joint estimate on the measured log
+    (:class:`pospp.qc.lever_time.LeverTime`) read by
+    :func:`pospp.qc.lever_time.lever_time_verdict`. It names ``time_offset`` (the catalogue's
+    IMU minus GNSS time, -tau, ms), ``lever_arm`` (configured minus true, m), both
+    (``lever_arm_time_offset``), or, where the flight cannot separate them, the combination
+    (``lever_arm_time_offset`` at the apparent lever arm, time offset 0, with the row
+    ``forward_lever_arm_plus_v_time_offset``: the apparent forward lever arm, m, and the
+    speed); None when the reading is "none". The model change u = [l - l_cfg, tau]."""
+    lt = ctx.lever_time() if ctx.lever_time is not None else None
+    if lt is None:
+        return None
+    v = lever_time_verdict(lt, sigmas=JOINT_SIGMAS)
+    if v.kind == "none":
+        return None
+    cfg = lt.configured_b_m
+    lev_names = tuple(f"lever_arm_{a}" for a in _XYZ)
+    cov = np.zeros((4, 4))
+    if v.kind == "confounded":
+        dl, sl = lt.apparent_lever_b_m - cfg, lt.sigma_apparent_b_m
+        cov[:3, :3] = np.diag(sl ** 2)
+        extra = (("forward_lever_arm_plus_v_time_offset", float(lt.apparent_lever_b_m[0]),
+                  float(sl[0]), "m"), ("speed_for_time_offset", lt.speed_mps, 0.0, "m_per_s"))
+        return JointFit(np.array([*dl, 0.0]), cov, "lever_arm_time_offset", lev_names,
+                        tuple(-dl), tuple(sl), ("m",) * 3, v.text, extra)
+    dl, sl = lt.lever_b_m - cfg, lt.sigma_lever_b_m
+    tau, st = lt.tau_s, lt.sigma_tau_s
+    cov[:3, :3] = np.diag(lt.sigma_lever_given_tau_b_m ** 2) + np.outer(
+        lt.dlever_dtau_mps, lt.dlever_dtau_mps) * st ** 2
+    cov[:3, 3] = cov[3, :3] = lt.dlever_dtau_mps * st ** 2
+    cov[3, 3] = st ** 2
+    corr = tuple((f"correlation_lever_arm_{a}_time_offset", float(c), 0.0, "-")
+                 for a, c in zip(_XYZ, lt.correlation, strict=True))
+    if v.kind == "time_offset":
+        return JointFit(np.array([*dl, tau]), cov, "time_offset", ("time_offset",),
+                        (-1e3 * tau,), (1e3 * st,), ("ms",), v.text, corr)
+    if v.kind == "lever_arm":
+        return JointFit(np.array([*dl, tau]), cov, "lever_arm", lev_names, tuple(-dl),
+                        tuple(sl), ("m",) * 3, v.text, corr)
+    return JointFit(np.array([*dl, tau]), cov, "lever_arm_time_offset",
+                    (*lev_names, "time_offset"), (*(-dl), -1e3 * tau), (*sl, 1e3 * st),
+                    ("m", "m", "m", "ms"), v.text, corr)
 
 
 def _scale(imu, gnss, u, ctx):
@@ -237,7 +344,7 @@ def _accel_change(imu, gnss, u, ctx):
 
 _XYZ = ("x", "y", "z")
 _LEGS = ("legs_bma_ms", "legs_bma_heldout_ms")
-_BI_DRAW = ("att_offset_roll", "att_offset_pitch", "att_offset_yaw",
+BI_DRAW = ("att_offset_roll", "att_offset_pitch", "att_offset_yaw",
             *(f"a_lever_{a}" for a in _XYZ), *(f"a_{k}_trend_{a}" for k in ("gyro", "accel")
                                               for a in _XYZ))
 """The statistics that are a signed mean of one draw of the gyro random drift
@@ -264,16 +371,15 @@ LIBRARY: tuple[SimEffect, ...] = (
             ("imu_hf_accel_var", "imu_hf_gyro_var", *_IMU_SPECTRUM, "imu_avar_accel_1s",
              "imu_avar_gyro_1s"),
             (0.25, np.radians(0.5) ** 2), True, _vibration),
-    # u = GNSS stamp minus true time; the catalogue's time_offset is IMU minus GNSS: -u
-    _effect("time_offset", ("gnss_vel_dot_accel", "a_lever_x", "a_lever_y", "att_offset_pitch"),
-            ("gnss_vel_dot_accel", "a_lever_x", "a_lever_y", "att_offset_pitch",
-             "gnss_vel_nis", "gnss_pos_nis", "gnss_vel_norm_n", "gnss_vel_norm_e",
-             "gnss_vel_lb_n", "gnss_vel_lb_e", "gnss_vel_lowband", *_LEGS), (0.05,), False,
-            _time_offset, sign=-1.0),
-    # u = true minus configured lever arm; the catalogue's lever_arm is configured minus true
-    _effect("lever_arm", tuple(f"a_lever_{a}" for a in _XYZ),
-            (*(f"a_lever_{a}" for a in _XYZ), "gnss_pos_nis", "gnss_vel_nis",
-             *_norm("pos"), *_norm("vel"), *_LEGS), None, False, _lever, sign=-1.0),
+    # the lever arm and the GNSS time offset, jointly (pospp.qc.lever_time): u = true minus
+    # configured lever arm (3), GNSS stamp minus true time; named by the joint reading
+    _effect("lever_arm_time_offset", (),
+            ("lt_time_offset", *(f"lt_lever_{a}" for a in _XYZ), "gnss_vel_dot_accel",
+             *(f"a_lever_{a}" for a in _XYZ),
+             "att_offset_pitch",
+             "gnss_pos_nis", "gnss_vel_nis", *_norm("pos"), *_norm("vel"),
+             "gnss_vel_lb_n", "gnss_vel_lb_e", "gnss_vel_lowband", *_LEGS), None, False,
+            _lever_time, joint=lever_time_fit),
     _effect("scale_factor",
             (*(f"a_gyro_sf_{a}" for a in _XYZ), *(f"a_accel_sf_{a}" for a in _XYZ)),
             (*(f"a_gyro_sf_{a}" for a in _XYZ), *(f"a_accel_sf_{a}" for a in _XYZ),
@@ -292,12 +398,13 @@ LIBRARY: tuple[SimEffect, ...] = (
     _effect("bias_instability", ("imu_avar_gyro_static", "a_gyro_bias_wander",
                                  "imu_avar_gyro_10s", *_LEGS),
             ("imu_avar_gyro_static", "a_gyro_bias_wander", "imu_avar_gyro_10s",
-             "gnss_vel_nis", *_norm("vel"), *_BI_DRAW, *_LEGS),
+             "gnss_vel_nis", *_norm("vel"), *BI_DRAW, *_LEGS),
             ((BI_TRIAL_DPH * DEG_PER_H_RADPS) ** 2,), True, _instability,
-            fit_first=("imu_avar_gyro_static",), ensemble=_BI_DRAW),
+            fit_first=("imu_avar_gyro_static",), ensemble=BI_DRAW),
     _effect("accel_bias_ramp", tuple(f"a_accel_trend_{a}" for a in _XYZ),
             (*(f"a_accel_trend_{a}" for a in _XYZ), "a_accel_bias_wander", *_LEGS),
-            (ACCEL_RAMP_TRIAL_MPS3,) * 3, False, _accel_change),
+            (ACCEL_RAMP_TRIAL_MPS3,) * 3, False, _accel_change, screen=True,
+            trial_at_fit=True),
 )
 """The library, in a fixed order."""
 

@@ -95,7 +95,7 @@ def run_null(name: str, n_null: int) -> None:
     cfg, params = case_config(name)
     log = pipeline.ingest(CASES / f"{name}.mcap", cfg)
     t0 = time.perf_counter()
-    nav = pipeline.navigate(log, cfg)
+    nav = pipeline.navigate(log, cfg, record_gains=pipeline.null_needs_gains(cfg))
     t_a = time.perf_counter() - t0
     imu = pipeline.imu_increments(log)
     run, ref = pipeline.calibrate_from_a(imu, nav, cfg)

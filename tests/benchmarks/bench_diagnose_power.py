@@ -67,7 +67,7 @@ DIRECTION = {"time_offset": np.array([1e-3]), "lever_arm": tp.LEVER_DIRECTION,
 
 def null_case(seed: int, gnss_pos_m: float, leg_s: float):
     log, cfg = tp.simulate_flight(None, 0.0, seed, gnss_pos_m=gnss_pos_m, leg_s=leg_s)
-    nav = pipeline.navigate(log, cfg)
+    nav = pipeline.navigate(log, cfg, record_gains=pipeline.null_needs_gains(cfg))
     imu = pipeline.imu_increments(log)
     run, ref = pipeline.calibrate_from_a(imu, nav, cfg)
     null = pipeline.null_realisations(log, nav, run, cfg, tp.N_NULL, seed=seed)

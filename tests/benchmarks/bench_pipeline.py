@@ -3,6 +3,7 @@
 Run on demand (not collected by pytest)::
 
     python tests/benchmarks/bench_pipeline.py [--minutes 15 45 90] [--rate-hz 200] [--threads N]
+        [--methods linear rerun] [--repeat 2]
 
 For each duration, the ``flight`` preset (paper_flight IMU, 1 Hz GNSS 0.05/0.1 m,
 0.02/0.03 m/s) is simulated once into /tmp/pospp_bench (cached), then the pipeline runs in a
@@ -86,10 +87,15 @@ def main() -> None:
     ap.add_argument("--pipeline", default=str(REPO / "pipelines" / "flight.toml"))
     ap.add_argument("--threads", default="auto",
                     help="pospp run --threads (A re-runs at once); auto: the process's cores")
+    ap.add_argument("--methods", nargs="+", default=["linear"], choices=["linear", "rerun"],
+                    help="the null: from A's gains, or from A re-runs ([pairs] null_reruns)")
+    ap.add_argument("--repeat", type=int, default=1,
+                    help="runs per method, interleaved (one of each, then again)")
     args = ap.parse_args()
     CACHE.mkdir(parents=True, exist_ok=True)
     # as the CLI does (pospp/cli.py): one OpenBLAS thread
     env = {**os.environ, "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS", "1")}
+    pipelines = {m: _with_null_method(Path(args.pipeline), m) for m in args.methods}
     rows = []
     for minutes in args.minutes:
         mcap = _simulate(minutes, args.rate_hz)
@@ -98,40 +104,65 @@ def main() -> None:
         if not rows:
             subprocess.run([sys.executable, "-c", _CHILD, str(mcap), args.pipeline, str(out),
                             args.threads], check=True, capture_output=True, env=env)
-        res = subprocess.run([sys.executable, "-c", _CHILD, str(mcap), args.pipeline,
-                              str(out), args.threads], check=True, capture_output=True,
-                             text=True, env=env)
-        r = json.loads(res.stdout.strip().splitlines()[-1])
-        # the simulator's flight mission ends at 137.5 min: a longer request gets the whole
-        # mission, labelled by what was flown
-        r["minutes"] = round(r["n_imu"] / args.rate_hz / 60.0, 1)
-        if r["minutes"] < minutes - 0.1:
-            print(f"  asked for {minutes:g} min: the mission ends at {r['minutes']:g} min",
-                  file=sys.stderr)
-        rows.append(r)
-        print(f"  {r['minutes']:g} min: {r['wall_s']:.1f} s wall, {r['cpu_s']:.1f} s CPU, "
-              f"{r['peak_rss_mib']:.0f} MiB, {r['n_legs']} legs, {r['status']}",
+        for _, method in [(k, m) for k in range(args.repeat) for m in args.methods]:
+            res = subprocess.run([sys.executable, "-c", _CHILD, str(mcap), pipelines[method],
+                                  str(out), args.threads], check=True, capture_output=True,
+                                 text=True, env=env)
+            _row(rows, json.loads(res.stdout.strip().splitlines()[-1]), minutes, method,
+                 args.rate_hz)
+    _print(rows)
+
+
+def _with_null_method(pipeline: Path, method: str) -> str:
+    """A copy of the pipeline file with ``[pairs] null_reruns`` set for ``method``."""
+    text = pipeline.read_text()
+    line = f"null_reruns = {'true' if method == 'rerun' else 'false'}\n"
+    text = text.replace("[pairs]\n", "[pairs]\n" + line, 1) if "[pairs]\n" in text \
+        else text + "\n[pairs]\n" + line
+    out = CACHE / f"{pipeline.stem}_{method}.toml"
+    out.write_text(text)
+    return str(out)
+
+
+def _row(rows: list, r: dict, minutes: float, method: str, rate_hz: float) -> None:
+    """Label one run's result and keep it."""
+    r["method"] = method
+    # the simulator's flight mission ends at 137.5 min: a longer request gets the whole
+    # mission, labelled by what was flown
+    r["minutes"] = round(r["n_imu"] / rate_hz / 60.0, 1)
+    if r["minutes"] < minutes - 0.1:
+        print(f"  asked for {minutes:g} min: the mission ends at {r['minutes']:g} min",
               file=sys.stderr)
-    print("| duration | IMU epochs | legs | wall [s] | CPU [s] | wall per epoch [us] | "
+    rows.append(r)
+    print(f"  {r['minutes']:g} min, {method} null: {r['wall_s']:.1f} s wall, "
+          f"{r['cpu_s']:.1f} s CPU, {r['peak_rss_mib']:.0f} MiB, {r['n_legs']} legs, "
+          f"{r['status']}", file=sys.stderr)
+
+
+def _print(rows: list) -> None:
+    """The runs as markdown tables, then as JSON."""
+    print("| duration | null | IMU epochs | legs | wall [s] | CPU [s] | wall per epoch [us] | "
           "peak RSS [MiB] | slowest stages [s] |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         top = sorted(r["stages_s"].items(), key=lambda kv: -kv[1])[:3]
         stages = ", ".join(f"{k} {v:.1f}" for k, v in top)
-        print(f"| {r['minutes']:g} min | {r['n_imu']} | {r['n_legs']} | {r['wall_s']:.1f} | "
+        print(f"| {r['minutes']:g} min | {r['method']} | {r['n_imu']} | {r['n_legs']} | "
+              f"{r['wall_s']:.1f} | "
               f"{r['cpu_s']:.1f} | {1e6 * r['wall_s'] / r['n_imu']:.1f} | "
               f"{r['peak_rss_mib']:.0f} | {stages} |")
     print()
     print("Per stage: wall / CPU [s], peak RSS of the process at the stage's end [MiB] "
           "(imports: before pipeline.process_flight)")
     names = list(dict.fromkeys(k for r in rows for k in r["stages_s"]))
-    print("| duration | imports | " + " | ".join(names) + " |")
-    print("|---|---|" + "---|" * len(names))
+    print("| duration | null | imports | " + " | ".join(names) + " |")
+    print("|---|---|---|" + "---|" * len(names))
     for r in rows:
         imp = r["imports"]
         cells = [f"{r['stages_s'].get(k, 0):.2f} / {r['stages_cpu_s'].get(k, 0):.2f}, "
                  f"{r['stages_peak_rss_mib'].get(k, 0):.0f}" for k in names]
-        print(f"| {r['minutes']:g} min | {imp['wall_s']:.2f} / {imp['cpu_s']:.2f}, "
+        print(f"| {r['minutes']:g} min | {r['method']} | {imp['wall_s']:.2f} / "
+              f"{imp['cpu_s']:.2f}, "
               f"{imp['peak_rss_mib']:.0f} | " + " | ".join(cells) + " |")
     print()
     print(json.dumps(rows))

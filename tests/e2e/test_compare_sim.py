@@ -4,8 +4,11 @@ and a model file that the simulator reads back."""
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pandas as pd
+import pytest
 from click.testing import CliRunner
 
 from pospp.cli import main
@@ -40,16 +43,55 @@ def test_compare_sim_cli(tmp_path):
     r = CliRunner().invoke(main, ["compare-sim", str(run_dir)])
     assert r.exit_code == 0, r.output
     assert "time_offset" in r.output
+    # not a terminal: a line per step on stderr with the seconds since the start, no
+    # transient flight counter (issue 33 item 5)
+    steps = re.findall(r"^  \[ *[\d.]+ s\] (.+)$", r.stderr, flags=re.M)
+    assert "simulating the trajectory (kinematics)" in steps, r.stderr
+    assert len(steps) >= 4 and "simulated flight" not in r.stderr
     tab = read_table(run_dir / "sim_comparison.parquet")
     eff = tab[(tab.kind == "effect") & (tab.effect == "time_offset")]
     # ms, 25 %; the catalogue's sign: IMU minus GNSS time (GNSS 80 ms late: -80)
     assert len(eff) == 1 and abs(eff["value"].iloc[0] + 80.0) < 20.0
+    assert eff["parameter"].iloc[0] == "time_offset" and eff["unit"].iloc[0] == "ms"
     assert abs(eff.z_after.iloc[0]) < abs(eff.z_before.iloc[0])
     assert "compare-sim" in (run_dir / "report.html").read_text()
     model = run_dir / "sim_model.toml"
-    assert imu_grade(str(model)) == imu_grade("tactical")
+    # the base model (step 0) is the log's: the simulated tactical IMU's own levels
+    # (34 s of steady parts: 3.5 % sd of the ARW, measured on 200 white series with this
+    # flight's parts: tests/unit/test_simcompare_base.py), the one simulated with
+    base = tab[tab.kind == "base"].set_index("parameter")
+    arw = base.loc[["gyro_arw_x", "gyro_arw_y", "gyro_arw_z"]]
+    assert np.allclose(arw["prior"], 0.1) and (arw["unit"] == "deg_per_sqrt_h").all()
+    assert (np.abs(arw["value"] / 0.1 - 1.0) < 0.15).all(), arw
+    # simulated at the fit, or at the grade's where the fit is within 2 sigma of it
+    assert imu_grade(str(model)).gyro_arw_dpsh == pytest.approx(tuple(arw["simulated_before"]))
+    assert all(v in (f, 0.1) for v, f in zip(arw["simulated_before"], arw["value"], strict=True))
     import tomllib
 
     gn = GnssModel.from_dict(tomllib.loads(model.read_text())["gnss"])
     assert abs(gn.time_offset_s - 0.08) < 0.02
     assert isinstance(tab, pd.DataFrame) and set(tab.step) >= {0, 1}
+    _signs_and_units_agree(r.output, eff.iloc[0], (run_dir / "report.html").read_text(),
+                           model.read_text(), gn)
+
+
+def _signs_and_units_agree(console: str, row: pd.Series, report: str, toml_text: str,
+                           gnss: GnssModel) -> None:
+    """Issue 33 item 4: the size printed on the console, the table's row, the report's steps
+    table and sim_model.toml (its comment header, and its field through the documented
+    conversion: time_offset [ms, IMU minus GNSS] = -1000 x time_offset_s [GNSS minus true])
+    read back as one number with one sign and one unit."""
+    value = float(row["value"])
+    m = re.search(r"step \d+: \S+: time_offset time_offset ([+-][\d.]+) \+- ([\d.]+) ms",
+                  console)
+    assert m, console
+    assert float(m.group(1)) == pytest.approx(value, rel=1e-3)
+    assert float(m.group(2)) == pytest.approx(float(row["sigma"]), rel=0.05)
+    cell = re.search(r">time_offset</td><td[^>]*>([-+]?[\d.]+)</td>", report)
+    assert cell, "no time_offset row in the report's steps"
+    assert float(cell.group(1)) == pytest.approx(value, rel=2e-3)
+    head = re.search(r"# step \d+: time_offset: time_offset ([+-][\d.]+) \+- [\d.e+-]+ ms",
+                     toml_text)
+    assert head, toml_text[:800]
+    assert float(head.group(1)) == pytest.approx(value, rel=1e-5)
+    assert -1000.0 * gnss.time_offset_s == pytest.approx(value, rel=1e-9)

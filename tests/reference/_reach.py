@@ -160,8 +160,9 @@ def grid_flight(tau_s: float | None, seed: int, *, n_null: int = 10) -> dict[str
     - held out: the fit made on the middle legs only (2..L-1), the reach on the first and
       last legs (the calibration's reach back and ahead; median over those two legs);
 
-    and the two quantities' errors over their sigmas (``n_null`` null realisations and
-    ``with_null_covariance`` as in the pipeline): the turn-on constant against the simulated
+    and the two quantities' errors over their sigmas (``n_null`` null realisations and the
+    calibration's covariance from them as the pipeline makes them, :func:`pospp.null_stage.
+    null_stage`): the turn-on constant against the simulated
     constant, the flight's bias against the realised mean gyro error (constant, drift and
     white noise: the simulated rates minus the error-free run's) over the fitted legs
     (``n_null`` 0: the reach alone).
@@ -175,16 +176,16 @@ def grid_flight(tau_s: float | None, seed: int, *, n_null: int = 10) -> dict[str
     from pospp import flight_stages as fs
     from pospp.calib.bias_smoother import span_means
     from pospp.calib.compensate import COMPENSATION_MODES, ModeInputs, compensate_legs
-    from pospp.calib.stage import with_null_covariance
     from pospp.config import config_from_dict
     from pospp.io.mcap_reader import FlightLog
+    from pospp.null_stage import null_needs_gains, null_stage
     from pospp.units import DEG_PER_H_RADPS
 
     sim = grid_simulation(tau_s, seed)
     clean = grid_simulation(tau_s, seed, errors=False)
     config = config_from_dict(tomllib.loads(pipeline_text("flight", [0.0, 0.0, 0.0])))
     log = FlightLog(sim.imu, sim.fix, sim.vel, f"grid tau {tau_s} seed {seed}")
-    nav = fs.navigate(log, config)
+    nav = fs.navigate(log, config, record_gains=null_needs_gains(config))
     imu = fs.imu_increments(log)
     made = fs.calibration_replays(imu, nav, config)
     fwd = fs.forward_bias_record(nav, config.imu.tuning())
@@ -211,9 +212,7 @@ def grid_flight(tau_s: float | None, seed: int, *, n_null: int = 10) -> dict[str
     result: dict[str, Any] = {"in": reach(run, ids), "held": reach(run_mid, [ids[0], ids[-1]])}
     if n_null == 0:
         return result
-    injected: list[Any] = []
-    null = fs.null_realisations(log, nav, run, config, n_null, seed=seed, injected_out=injected)
-    run = with_null_covariance(run, null, injected)
+    null, run = null_stage(log, nav, run, config, n=n_null, seed=seed)
     const = np.array(sim.params["imu_errors"]["gyro_bias_dph"]) * DEG_PER_H_RADPS
     err_rate = sim.imu.w_ib_b_radps - clean.imu.w_ib_b_radps
     epoch = int(sim.imu.time_ns[0])

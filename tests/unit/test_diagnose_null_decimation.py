@@ -22,7 +22,7 @@ import pytest
 from _missions import SimLog, three_leg_survey
 
 from pospp import flight_stages as fs
-from pospp import pipeline
+from pospp import null_stage, pipeline
 from pospp.calib.replay import SolutionA, replay_velocity_error
 from pospp.config import config_from_dict
 from pospp.diagnose import null_model
@@ -75,11 +75,11 @@ def _t_align_ns(log, nav):
 
 def test_decimation_factor_from_the_rate(flight):
     log, _, _, _ = flight
-    assert fs.rerun_decimation(log, 50.0) == 4
-    assert fs.rerun_decimation(log, 25.0) == 8
-    assert fs.rerun_decimation(log, 60.0) == 3
-    assert fs.rerun_decimation(log, 0.0) == 1
-    assert fs.rerun_decimation(log, 400.0) == 1
+    assert null_stage.rerun_decimation(log, 50.0) == 4
+    assert null_stage.rerun_decimation(log, 25.0) == 8
+    assert null_stage.rerun_decimation(log, 60.0) == 3
+    assert null_stage.rerun_decimation(log, 0.0) == 1
+    assert null_stage.rerun_decimation(log, 400.0) == 1
 
 
 def test_summed_down_response_is_the_full_rate_response(flight):
@@ -94,7 +94,7 @@ def test_summed_down_response_is_the_full_rate_response(flight):
                                       strict=True)]
         size = np.sqrt(np.mean(np.concatenate(full) ** 2))
         assert size > 1e-3  # the response is there: mm/s
-        keep = fs.leg_epochs_ns(log, run.legs)
+        keep = null_stage.leg_epochs_ns(log, run.legs)
         for factor in (4, 8):
             dec = [a - b for a, b in zip(
                 _b_minus_a(null_model.decimate_imu(pert, factor, keep), run, cfg)[1],
@@ -143,7 +143,7 @@ def test_gain_replay_response_is_the_full_response(flight):
 
     base = null_model.decimate_imu(null_model.gnss_on_solution(
         log, nav.smoothed, int(log.imu.time_ns[0]), nav.lever_arm.lever_b_m), 4,
-        fs.leg_epochs_ns(log, run.legs))
+        null_stage.leg_epochs_ns(log, run.legs))
     plain, dv_plain = rerun(base)
     rec, dv_base = rerun(base, record_gains=True)
     gains = rec.gain_replay

@@ -210,13 +210,13 @@ def test_compiled_perturbation_is_the_numpy_one():
 
 
 def test_noise_on_the_summed_down_log_is_the_summed_flight_rate_noise():
-    # the null draws its noise on the summed-down log (flight_stages.null_realisations): a
+    # the null draws its noise on the summed-down log (null_stage.null_realisations): a
     # summed sample's white noise must have the distribution of the flight-rate draws' mean
     # over its group (sigma ARW / sqrt(T), T the group's span, gaps and short groups
     # included), and none may reach the samples before the noise starts; checked against
     # many flight-rate draws summed by decimate_imu (the reference: that is what the
     # flight-rate null did), by the variance of each summed sample
-    from pospp import flight_stages
+    from pospp import null_stage
 
     rng = np.random.default_rng(11)
     n = 400
@@ -226,7 +226,7 @@ def test_noise_on_the_summed_down_log_is_the_summed_flight_rate_noise():
     log = _Log(_Imu(t, zeros, zeros), _Fix(t[:1], np.full(1, 0.7), np.ones(1), np.ones(1)),
                _Vel(t[:1], np.zeros((1, 3))))
     t_from = int(t[123]) - 1  # the noise starts mid-group at factor 4
-    keep = flight_stages.null_sample_stamps_ns(log, [], t_from)
+    keep = null_stage.null_sample_stamps_ns(log, [], t_from)
     assert keep.tolist() == [t[122]]
     noise = null_model.NullNoise(2e-3, 4e-2, np.zeros(3), np.zeros(3))
     summed = null_model.decimate_imu(log, 4, keep)

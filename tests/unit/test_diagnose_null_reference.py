@@ -20,7 +20,6 @@ import numpy as np
 import pytest
 
 from pospp import pipeline
-from pospp.calib.stage import with_null_covariance
 from pospp.config import load_config
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -46,7 +45,7 @@ def _flight(cases: Path, name: str, extra: str = "", lever_arm_m: list[float] | 
     from its params.json (or ``lever_arm_m``)."""
     cfg, _ = case_config(cases, name, extra, lever_arm_m)
     log = pipeline.ingest(cases / f"{name}.mcap", cfg)
-    nav = pipeline.navigate(log, cfg)
+    nav = pipeline.navigate(log, cfg, record_gains=pipeline.null_needs_gains(cfg))
     run, ref = pipeline.calibrate_from_a(pipeline.imu_increments(log), nav, cfg)
     return log, nav, run, ref, cfg
 
@@ -58,8 +57,8 @@ def _run(cases: Path, name: str, extra: str = "", lever_arm_m: list[float] | Non
     log, nav, run, ref, cfg = _flight(cases, name, extra, lever_arm_m)
     imu = pipeline.imu_increments(log)
     assert run.calibrated, run.reason
-    null = pipeline.null_realisations(log, nav, run, cfg, 8, seed=2)
-    honest = with_null_covariance(run, null)
+    stage = pipeline.null_stage(log, nav, run, cfg, n=8, seed=2)
+    null, honest = stage.realisations, stage.calibration
     true_b = np.radians(np.asarray(params["imu_errors"]["gyro_bias_dph"], float)) / 3600.0
     z = ((honest.gyro_bias_b_radps - true_b) / honest.gyro_bias_sigma_b_radps)[:2]
     # the pipeline's whole path (log and A's result: the A re-run candidates are tested too)
@@ -77,7 +76,7 @@ def test_null_flights_close_none(reference_cases, name):
                                      "earth_rate_coupling"}
     assert calibrated.steps[-1].criterion == "lack_of_fit_F_null_calibrated"
     # the calibrated body gyro bias (x, y) within 3 sigma of the simulated one, the sigma
-    # from the same 8 null realisations (calib.stage.with_null_covariance)
+    # from the same null (pospp.null_stage.null_stage)
     assert np.all(np.abs(z) < 3.0), z
 
 
@@ -163,7 +162,7 @@ def test_null_realisation_summed_down_on_an_independent_flight(reference_cases):
     # one null noise draw on flight_null_200hz (independent simulator), B minus A's response
     # at 200 Hz and with the IMU summed down to 50 Hz (as null_realisations does): measured
     # 1-3e-4 of the 20-36 mm/s response per leg
-    from pospp import flight_stages
+    from pospp import flight_stages, null_stage
     from pospp.calib.replay import SolutionA, replay_velocity_error
     from pospp.diagnose import null_model
     from pospp.nav import filter as nav_filter
@@ -181,13 +180,13 @@ def test_null_realisation_summed_down_on_an_independent_flight(reference_cases):
                                        nav.lever_arm.lever_b_m)
     arw, vrw = null_model.imu_white_noise_from_samples(log.imu.time_ns, log.imu.w_ib_b_radps,
                                                        log.imu.f_ib_b_mps2)
-    sigma, tau, _ = flight_stages.null_drift(run, cfg)
+    sigma, tau, _ = null_stage.null_drift(run, cfg)
     noise = null_model.NullNoise(float(arw), float(vrw), np.full(3, 0.05), np.full(3, 0.02),
                                  float(sigma), float(tau))
     t_align_ns = int(log.imu.time_ns[0]) + round(nav.alignment.t_s * 1e9)
     pert = null_model.perturb_log(base, noise, np.random.default_rng(3), from_time_ns=t_align_ns)
-    factor = flight_stages.rerun_decimation(log, cfg.pairs.rerun_imu_rate_hz)
-    keep = flight_stages.leg_epochs_ns(log, run.legs)
+    factor = null_stage.rerun_decimation(log, cfg.pairs.rerun_imu_rate_hz)
+    keep = null_stage.leg_epochs_ns(log, run.legs)
     assert factor == 4
     full = [a - b for a, b in zip(b_minus_a(pert), b_minus_a(base), strict=True)]
     down = [a - b for a, b in zip(b_minus_a(null_model.decimate_imu(pert, factor, keep)),

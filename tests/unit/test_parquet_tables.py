@@ -59,7 +59,8 @@ UNITLESS = {"solution", "leg_id", "pair_id", "leg_a", "leg_b", "used", "reason",
 ROW_UNIT = {"value", "sigma", "threshold"}
 # sim_comparison (compare-sim): gaps in the row's unit, tests unitless
 ROW_UNIT |= {"gap_before", "gap_after", "sigma_gap", "measured", "simulated_before",
-             "simulated_after"}
+             "simulated_after", "prior"}
+UNITLESS |= {"note"}  # sim_comparison: the step's reading in words (issue 33)
 UNITLESS |= {"z_before", "z_after", "p_before", "significant_before", "significant_after"}
 # diagnosis: where an unexplained gap sits (issue 12, item 4)
 UNITLESS |= {"gap_legs", "gap_channel", "gap_part", "gap_basis", "gap_location"}
