@@ -235,41 +235,103 @@ def _write_failed(mcap_path: str | Path, sha: str, config: PipelineConfig, out: 
     parquet_tables.write_table(out / "summary.parquet", summary, "summary", metadata=meta)
 
 
+@dataclass
+class _RunTables:
+    """The run folder's writer: every table with the run's metadata, the summary last."""
+
+    out: Path
+    meta: dict[str, Any]
+    summary: dict[str, Any]
+    book: _Progress
+
+    def write(self, name: str, data: Any) -> None:
+        parquet_tables.write_table(self.out / f"{name}.parquet", data, name, metadata=self.meta)
+
+    def finish(self, status: str, *, report: bool = False) -> RunOutcome:
+        """messages.parquet, then summary.parquet (a folder with a summary is a finished run);
+        with ``report``, the report rendered from the tables, then the summary again with the
+        report's time in it (its wall_time_s is the whole run's)."""
+        summary, book = self.summary, self.book
+        summary["status"] = status
+        summary.update(book.timings())
+        msgs = pd.DataFrame(book.rows(), columns=["severity", "stage", "time_ns", "text"])
+        self.write("messages", outputs.messages_table(book.rows()))
+        self.write("summary", summary)
+        if report:
+            book.stage("report")
+            _render_report(self.out)
+            summary.update(book.timings())
+            self.write("summary", summary)
+        return RunOutcome(self.out, status, summary, msgs, summary["wall_time_s"])
+
+
 def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Path,
                 book: _Progress, threads: int) -> RunOutcome:
     """Every stage of :func:`process_flight` in the method's order, writing into the (staging)
     folder ``out``: ingest -> navigate (A) -> calibrate (legs, B, pairs, least squares) ->
-    null (B minus A's null, the calibration's covariance) -> compensate -> diagnose -> qc ->
-    write. Each stage is a function of the results before it; ``threads`` is used only
-    inside the embarrassingly parallel loops (B's replays, the null's and the diagnosis's
-    A re-runs)."""
+    null (B minus A's null, the calibration's covariance) -> compensate -> diagnose (and the
+    refit with what it names) -> qc -> write. Each stage is a function of the results before
+    it; ``threads`` is used only inside the embarrassingly parallel loops (B's replays, the
+    null's and the diagnosis's A re-runs)."""
     if threads > 1:
         share_one_heap()  # the loops' threads in one heap, not one each (pospp.memory)
-    meta = {"input_file": run_folder.display_path(mcap_path), "input_sha256": sha,
-            "config": config.to_dict()}
-    summary: dict[str, Any] = {"input_file": meta["input_file"],
-                               "input_sha256": meta["input_sha256"]}
+    display = run_folder.display_path(mcap_path)
+    run = _RunTables(out, {"input_file": display, "input_sha256": sha,
+                           "config": config.to_dict()},
+                     {"input_file": display, "input_sha256": sha}, book)
+    log = _ingest_stage(mcap_path, config, run)
+    nav = _navigate_stage(log, config, run)
+    solutions = {"forward": nav.forward}
+    if nav.smoothed is not None:
+        solutions["smoothed"] = nav.smoothed
 
-    def write(name: str, data: Any, schema: str | None = None) -> None:
-        parquet_tables.write_table(out / f"{name}.parquet", data, schema or name, metadata=meta)
+    book.stage("calibrate")
+    imu = imu_increments(log)
+    calib_run, solution_a = calibrate_from_a(imu, nav, config, threads=threads)
+    for text in (*calib_run.messages, *(() if calib_run.calibrated else (calib_run.reason,))):
+        book.note("warning", "calibrate", text)
+    status = "ok" if calib_run.calibrated else "partial"
 
-    def finish(status: str, *, report: bool = False) -> RunOutcome:
-        summary["status"] = status
-        summary.update(book.timings())
-        msgs = pd.DataFrame(book.rows(), columns=["severity", "stage", "time_ns", "text"])
-        write("messages", outputs.messages_table(book.rows()))
-        write("summary", summary)  # last: a folder with a summary is a finished run
-        if report:
-            # the report is rendered from the tables (the summary among them), then the
-            # summary is written again with the report's time in it: its wall_time_s is the
-            # whole run's (only the marker and the swap, milliseconds, come after)
-            book.stage("report")
-            _render_report(out)
-            summary.update(book.timings())
-            write("summary", summary)
-        return RunOutcome(out, status, summary, msgs, summary["wall_time_s"])
+    null_dv = None  # B minus A's null: the calibration's sigmas and the diagnosis's null
+    if calib_run.calibrated and config.pairs.null_realisations > 0 and calib_run.replays:
+        book.stage("null_realisations")
+        null_dv, calib_run = null_stage(log, nav, calib_run, config, threads=threads)
 
-    # --- ingest -------------------------------------------------------------------------------
+    book.stage("compensate")  # A re-run with the calibrated gyro bias
+    if calib_run.calibrated and config.compensation.rerun_filter:
+        comp = navigate(log, config, gyro_bias_correction_b_radps=calib_run.gyro_bias_b_radps)
+        solutions["compensated"] = comp.smoothed if comp.smoothed is not None else comp.forward
+        del comp  # the rest of the second A pass (forward, biases, innovations) is not used
+
+    book.stage("diagnose")
+    # A's lever-arm estimate, made once: the diagnosis starts from it and QC checks it
+    lever = lever_re_estimate(log, lever_arm_seen(nav), config)
+    diagnosis = None
+    if calib_run.calibrated and config.outputs.diagnose:
+        diagnosis = _diagnose_stage(calib_run, imu, solution_a, config, log, nav, null_dv,
+                                    lever[0], threads, book)
+        status = status if diagnosis is not None else "partial"
+    # the refit with the named effects (the compensation uses it) and the model_fit check
+    fit = refit_and_check(log, calib_run, diagnosis, imu, solution_a, config, threads,
+                          compensate="compensated" in solutions, nav=nav)
+    solutions.update(fit.solutions)
+
+    book.stage("qc")  # the run is ok only when every check passes (docs/qc.md)
+    report = quality_control(log, nav, calib_run, config, book, lever=lever, also=fit.checks)
+    status = worst_status(status, report.status)
+
+    book.stage("write")
+    _write_stage(run, log, nav, solutions, calib_run, fit, diagnosis, report, config, status)
+    # the report reads the tables back: the run's arrays are let go first, so that it
+    # reuses their memory instead of adding to the peak (1.5 h flight: 110 MiB)
+    del log, nav, imu, solution_a, calib_run, null_dv, diagnosis, solutions, fit
+    return run.finish(status, report=config.outputs.report)
+
+
+def _ingest_stage(mcap_path: str | Path, config: PipelineConfig, run: _RunTables
+                  ) -> mcap_reader.FlightLog:
+    """The log as read (``[input]``), its reader's findings noted; a failed run on refusal."""
+    book = run.book
     book.stage("ingest")
     try:
         log = ingest(mcap_path, config)
@@ -277,98 +339,78 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
         for issue in getattr(exc, "issues", ()):
             book.messages.append(outputs.issue_message(issue))
         book.note("error", "ingest", str(exc))
-        finish("failed")
+        run.finish("failed")
         raise
     for issue in log.issues:
         book.messages.append(outputs.issue_message(issue))
-    summary.update(outputs.log_summary(log))
+    run.summary.update(outputs.log_summary(log))
+    return log
 
-    # --- algorithm A --------------------------------------------------------------------------
+
+def _navigate_stage(log: mcap_reader.FlightLog, config: PipelineConfig, run: _RunTables
+                    ) -> nav_filter.FilterResult:
+    """Algorithm A (forward and smoother, its gains recorded when the null needs them), its
+    rejections and events noted; a failed run naming the reader's finding that caused it."""
+    book = run.book
     book.stage("navigate")
-    epoch_ns = int(log.imu.time_ns[0])
     try:
         nav = navigate(log, config, record_gains=null_needs_gains(config))
-    except ValueError as exc:  # named with the reader's finding that caused it, if any
+    except ValueError as exc:
         book.note("error", "navigate", text := log.cause_of(f"algorithm A failed: {exc}"))
-        finish("failed")
+        run.finish("failed")
         raise ValueError(text) from exc
     book.messages.extend(outputs.rejection_messages(nav.rejections))
-    book.messages.extend(outputs.filter_event_messages(nav.resets, nav.imu_gaps, epoch_ns))
-    solutions = {"forward": nav.forward}
-    if nav.smoothed is not None:
-        solutions["smoothed"] = nav.smoothed
+    book.messages.extend(outputs.filter_event_messages(nav.resets, nav.imu_gaps,
+                                                       int(log.imu.time_ns[0])))
+    return nav
 
-    # --- calibration: legs, B, pairs, least squares -------------------------------------------
-    book.stage("calibrate")
-    imu = imu_increments(log)
-    calib_run, solution_a = calibrate_from_a(imu, nav, config, threads=threads)
-    for text in calib_run.messages:
-        book.note("warning", "calibrate", text)
-    if not calib_run.calibrated:
-        book.note("warning", "calibrate", calib_run.reason)
-    status = "ok" if calib_run.calibrated else "partial"
 
-    # --- null realisations of B minus A: the calibration's sigmas and the diagnosis's null ----
-    null_dv = None
-    if calib_run.calibrated and config.pairs.null_realisations > 0 and calib_run.replays:
-        book.stage("null_realisations")
-        null_dv, calib_run = null_stage(log, nav, calib_run, config, threads=threads)
+def _diagnose_stage(calib_run: CalibrationRun, imu: Any, solution_a: Any,
+                    config: PipelineConfig, log: mcap_reader.FlightLog,
+                    nav: nav_filter.FilterResult, null_dv: Any,
+                    lever_estimate: nav_filter.LeverArmEstimate | None, threads: int,
+                    book: _Progress) -> Diagnosis | None:
+    """The diagnosis (:func:`pospp.diagnosis_stage.diagnose_calibration`), noted; None (the
+    run then partial) when it could not be made."""
+    try:
+        diagnosis = diagnose_calibration(calib_run, imu, solution_a, config, log=log, nav=nav,
+                                         null_dv=null_dv, lever_estimate=lever_estimate,
+                                         threads=threads)
+    except ValueError as exc:
+        book.note("warning", "diagnose", f"no diagnosis: {exc}")
+        return None
+    book.note("info", "diagnose", f"p-values calibrated on {diagnosis.null_model}")
+    if diagnosis.location is not None:  # "unexplained": where the gap sits
+        book.note("warning", "diagnose", diagnosis.location.text)
+    return diagnosis
 
-    # --- compensation: A re-run with the calibrated gyro bias ---------------------------------
-    book.stage("compensate")
-    if calib_run.calibrated and config.compensation.rerun_filter:
-        comp = navigate(log, config, gyro_bias_correction_b_radps=calib_run.gyro_bias_b_radps)
-        solutions["compensated"] = comp.smoothed if comp.smoothed is not None else comp.forward
-        del comp  # the rest of the second A pass (forward, biases, innovations) is not used
 
-    # --- diagnosis -----------------------------------------------------------------------------
-    book.stage("diagnose")
-    # A's lever-arm estimate, made once: the diagnosis starts from it and QC checks it
-    lever = lever_re_estimate(log, lever_arm_seen(nav), config)
-    diagnosis = None
-    if calib_run.calibrated and config.outputs.diagnose:
-        try:
-            diagnosis = diagnose_calibration(calib_run, imu, solution_a, config, log=log, nav=nav,
-                                             null_dv=null_dv, lever_estimate=lever[0],
-                                             threads=threads)
-            book.note("info", "diagnose", f"p-values calibrated on {diagnosis.null_model}")
-            if diagnosis.location is not None:  # "unexplained": where the gap sits (issue 12)
-                book.note("warning", "diagnose", diagnosis.location.text)
-        except ValueError as exc:
-            book.note("warning", "diagnose", f"no diagnosis: {exc}")
-            status = "partial"
-
-    # --- refit with the named effects (the compensation uses it) and the model_fit check ------
-    fit = refit_and_check(log, calib_run, diagnosis, imu, solution_a, config, threads,
-                          compensate="compensated" in solutions, nav=nav)
-    solutions.update(fit.solutions)
-    calib_tables = {**calib_run.tables(epoch_ns), **fit.tables(epoch_ns)}
+def _write_stage(run: _RunTables, log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
+                 solutions: dict[str, Any], calib_run: CalibrationRun, fit: Any,
+                 diagnosis: Diagnosis | None, report: QualityReport, config: PipelineConfig,
+                 status: str) -> None:
+    """Every table but messages and summary, the summary's columns, and trajectory.mcap (its
+    metadata record with the run's ``status``)."""
+    epoch_ns = int(log.imu.time_ns[0])
     best_name = next(k for k in ("compensated", "smoothed", "forward") if k in solutions)
-
-    # --- quality checks: the run is ok only when every check passes (docs/qc.md) -------------
-    book.stage("qc")
-    report = quality_control(log, nav, calib_run, config, book, lever=lever,
-                             also=fit.checks)
-    status = worst_status(status, report.status)
-
-    # --- outputs -------------------------------------------------------------------------------
-    book.stage("write")
+    calib_tables = {**calib_run.tables(epoch_ns), **fit.tables(epoch_ns)}
     tables: dict[str, Any] = {"trajectory": outputs.trajectory_table(solutions, epoch_ns)}
     tables["biases"] = outputs.bias_table(
         {"forward": nav.forward_biases, "smoothed": nav.smoothed_biases}, epoch_ns)
     tables["qc"] = qc_columns(report, epoch_ns)
-    summary["qc_failed_checks"] = report.failed_names
-    summary["qc_suggestions"] = report.suggestions
     tables.update(calib_tables)
     if diagnosis is not None:
         tables["diagnosis"] = diagnosis_columns(diagnosis)
         tables["diagnosis_curves"] = residual_curve_columns(diagnosis)
     if len(log.events_ns):
         tables["events"] = outputs.event_poses_table(
-            log.events_ns, solutions[best_name], best_name, int(log.imu.time_ns[0]),
-            config.sensor, lambda text: book.note("warning", "write", text))
+            log.events_ns, solutions[best_name], best_name, epoch_ns, config.sensor,
+            lambda text: run.book.note("warning", "write", text))
     for name, table in tables.items():
-        write(name, table)
+        run.write(name, table)
+    summary = run.summary
+    summary["qc_failed_checks"] = report.failed_names
+    summary["qc_suggestions"] = report.suggestions
     c_bs = sensor_to_body_dcm(config.input.sensor_frame, config.input.mounting_rpy_deg)
     summary.update(outputs.with_sensor_axes(calib_run.summary(), c_bs))
     summary.update(outputs.refit_summary(fit.refit))
@@ -377,13 +419,9 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
     if config.outputs.mcap:
         trajectory_mcap.trajectory_messages(
             solutions[best_name], epoch_ns, rate_hz=config.outputs.mcap_rate_hz,
-            legs=calib_tables.get("legs")).finish(out / "trajectory.mcap", {
-            "input_file": meta["input_file"], "input_sha256": sha, "status": status,
-            "solution": best_name})
-    # the report reads the tables back: the run's arrays are let go first, so that it
-    # reuses their memory instead of adding to the peak (1.5 h flight: 110 MiB)
-    del log, nav, imu, solution_a, calib_run, null_dv, diagnosis, solutions, tables, calib_tables
-    return finish(status, report=config.outputs.report)
+            legs=calib_tables.get("legs")).finish(run.out / "trajectory.mcap", {
+                "input_file": run.meta["input_file"], "input_sha256": run.meta["input_sha256"],
+                "status": status, "solution": best_name})
 
 
 def lever_re_estimate(log: mcap_reader.FlightLog, seen: np.ndarray, config: PipelineConfig

@@ -34,8 +34,6 @@ FUNCTION_EXCEPTIONS = {
                                        "fits, compensation, drift source) in one readable list",
     "diagnose/workflow.py:diagnose_replays": "the diagnosis's step loop (screen, candidates, "
                                              "nested tests, closing lack of fit) in one place",
-    "pipeline.py:_run_stages": "the stage runner: each stage's call, its clock and its "
-                               "failure record, in the order a run takes",
 }
 
 
@@ -77,3 +75,47 @@ def test_every_exception_names_a_function_that_exists(name: str) -> None:
     tree = ast.parse((PACKAGE / rel).read_text())
     assert any(isinstance(n, ast.FunctionDef) and n.name == func for n in ast.walk(tree)), \
         f"{name} is listed as an exception but does not exist: remove the entry"
+
+
+MAX_PARAMETERS = 12
+_KERNEL = "a numba-compiled kernel: arrays and scalars in, no Python objects in nopython mode"
+_OPTIONS = "the fit's options one by one: to become one options object (issue 36)"
+PARAMETER_EXCEPTIONS = {
+    "nav/_filter_kernel.py:_update_epoch": _KERNEL,
+    "nav/_filter_kernel.py:forward_kernel": _KERNEL,
+    "calib/_drift_kernel.py:drift_filter_whiten": _KERNEL,
+    "diagnose/workflow.py:diagnose_replays": _OPTIONS,
+    "calib/stage.py:calibrate_flight": _OPTIONS,
+    "calib/compensate.py:compensate_legs": _OPTIONS,
+    "calib/solve.py:fit_calibration": _OPTIONS,
+    "calib/reml.py:_calibrate_gm": _OPTIONS,
+    "sim/api.py:simulate_along": "the simulator's keyword API: one physical quantity each",
+    "sim/api.py:_params": "the simulator's keyword API: one physical quantity each",
+    "sim/api.py:_generate": "the simulator's keyword API: one physical quantity each",
+    "io/mcap_writer.py:write_flight_log": "one keyword per topic of the data contract",
+    "api/diff.py:_row": "one row of the diff table, a field each",
+}
+"""Functions allowed more than MAX_PARAMETERS parameters, each with why."""
+
+
+def _n_parameters(node: ast.FunctionDef | ast.AsyncFunctionDef) -> int:
+    a = node.args
+    names = [*a.posonlyargs, *a.args, *a.kwonlyargs]
+    n = len(names) + (a.vararg is not None) + (a.kwarg is not None)
+    return n - (bool(a.args) and a.args[0].arg in ("self", "cls"))
+
+
+def test_functions_take_at_most_12_parameters() -> None:
+    bad, seen = {}, set()
+    for path in _modules():
+        rel = str(path.relative_to(PACKAGE))
+        for node in ast.walk(ast.parse(path.read_text(), rel)):
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                key = f"{rel}:{node.name}"
+                if _n_parameters(node) > MAX_PARAMETERS:
+                    seen.add(key)
+                    if key not in PARAMETER_EXCEPTIONS:
+                        bad[f"{key} (line {node.lineno})"] = _n_parameters(node)
+    assert not bad, f"functions with more than {MAX_PARAMETERS} parameters: {bad}"
+    stale = set(PARAMETER_EXCEPTIONS) - seen
+    assert not stale, f"exceptions no longer needed (remove them): {sorted(stale)}"
