@@ -123,23 +123,17 @@ def _lever_velocity(t: NDArray, w: NDArray, sol: NavSolution, vel_t: NDArray,
     return np.einsum("ijn,nj->ni", c_at, wl)
 
 
-def _offset_and_lever(t: NDArray, w: NDArray, sol: NavSolution, v_t: NDArray, v_n: NDArray,
-                      nav: FilterResult, config: Any,
-                      lever_estimate: LeverArmEstimate | None,
-                      joint: Callable[[], LeverTime | None] | None,
-                      renavigate: Callable[[float], FilterResult] | None
-                      ) -> tuple[list[Check], LeverArmEstimate | None]:
-    """The ``gnss_time_offset`` and ``lever_arm`` checks (:func:`quality_checks`): the turns'
-    offset (seconds measured again, :func:`_offset_again`) and A's lever-arm estimate, each
-    alone; when either fails below ``TIME_OFFSET_MAX_S``, both from the joint estimate. Also
-    A's lever-arm estimate used (None without one), which the mounting naming reads."""
+def _offset_and_lever(q: QcInputs, _: list[Check]) -> list[Check]:
+    """The ``gnss_time_offset`` and ``lever_arm`` checks: the turns' offset (seconds measured
+    again, :func:`_offset_again`) and A's lever-arm estimate, each alone; when either fails
+    below ``TIME_OFFSET_MAX_S``, both from the joint estimate."""
+    t, w, sol, v_t, v_n, config = q.t, q.log.imu.w_ib_b_radps, q.sol, q.v_t, q.v_n, q.config
+    joint, renavigate, lev = q.joint, q.renavigate, q.lever
     out: list[Check] = []
     v_imu = v_n - _lever_velocity(t, w, sol, v_t, config.gnss.lever_arm_m)
     est = time_offset.estimate_time_offset(t, _down_rate(t, w, sol), v_t, v_imu)
     if est is not None and abs(est.offset_s) >= time_offset.TIME_OFFSET_MAX_S and renavigate:
         est = _offset_again(t, w, v_t, v_n, config.gnss.lever_arm_m, est, renavigate)
-    lev = lever_estimate if lever_estimate is not None else (
-        nav.lever_arm if nav.lever_arm.estimated else None)
     speed = np.hypot(sol.v_n_mps[:, 0], sol.v_n_mps[:, 1])
     moving = speed > time_offset.TIME_OFFSET_MIN_SPEED_MPS
     obs = qc.lever_arm_observable(sol.rpy_rad)
@@ -164,7 +158,7 @@ def _offset_and_lever(t: NDArray, w: NDArray, sol: NavSolution, v_t: NDArray, v_
         # a late GNSS bends the lever-arm estimate
         out[-1] = replace(lev_check, suggestion="fix the GNSS time offset first, the lever-arm "
                           "estimate is not reliable until then; " + lev_check.suggestion)
-    return out, lev
+    return out
 
 
 def _offset_again(t: NDArray, w: NDArray, v_t: NDArray, v_n: NDArray, lever_b_m: Any,
@@ -229,12 +223,171 @@ def _innovation_checks(rec: Any, gate_probability: float) -> list[Check]:
     return [qc.nis_band(rec.t_s[gnss], rec.nis[gnss]), gate_check(rec, gate_probability)]
 
 
+@dataclass(frozen=True)
+class QcInputs:
+    """What the checks read: a run's stage results and the series derived from them once.
+
+    Times ``t_s`` from the run epoch (the first IMU stamp) [s]; IMU in body FRD (rad/s,
+    m/s^2); GNSS velocities ``v_n`` at ``v_t`` in NED [m/s] (the track's own differences at
+    its midpoints when the log has no velocity topic); ``r_n`` the fixes in NED about the
+    first one [m]."""
+
+    log: FlightLog
+    nav: FilterResult
+    calib_run: Any
+    config: Any
+    c_bs: NDArray
+    lever_estimate: LeverArmEstimate | None
+    joint: Callable[[], LeverTime | None] | None
+    renavigate: Callable[[float], FilterResult] | None
+    t: NDArray
+    fix_t: NDArray
+    vel_t: NDArray
+    static: NDArray
+    lat0: float
+    h0: float
+    dt: float
+    sol: NavSolution
+    r_n: NDArray
+    v_t: NDArray
+    v_n: NDArray
+
+    @property
+    def lever(self) -> LeverArmEstimate | None:
+        """A's lever-arm estimate the checks use: the re-run's, else A's own when it
+        estimated one, else None."""
+        if self.lever_estimate is not None:
+            return self.lever_estimate
+        return self.nav.lever_arm if self.nav.lever_arm.estimated else None
+
+
+def qc_inputs(log: FlightLog, nav: FilterResult, calib_run: Any, config: Any, *,
+              c_bs: NDArray, lever_estimate: LeverArmEstimate | None = None,
+              joint: Callable[[], LeverTime | None] | None = None,
+              renavigate: Callable[[float], FilterResult] | None = None) -> QcInputs:
+    """:class:`QcInputs` of a run (arguments as :func:`quality_checks`)."""
+    imu = log.imu
+    epoch_ns = int(imu.time_ns[0])
+    t = t_s_from_time_ns(imu.time_ns, epoch_ns)
+    vel_t = t_s_from_time_ns(log.vel.time_ns, epoch_ns)
+    fix_t = t_s_from_time_ns(log.fix.time_ns, epoch_ns)
+    static = _static_mask(t, imu.w_ib_b_radps, imu.f_ib_b_mps2, vel_t, log.vel.v_n_mps,
+                          log.vel.vel_cov_ned_m2ps2)
+    lat0 = float(log.fix.lat_rad[0]) if len(log.fix.time_ns) else nav.alignment.lat_rad
+    h0 = float(log.fix.height_m[0]) if len(log.fix.time_ns) else nav.alignment.height_m
+    dt = float(np.median(np.diff(t))) if t.shape[0] > 1 else 0.0
+    r_n = earth.llh_to_ned_m(log.fix.lat_rad, log.fix.lon_rad, log.fix.height_m,
+                             lat0, float(log.fix.lon_rad[0]) if len(fix_t) else 0.0, h0)
+    if len(vel_t) >= 2:
+        v_t, v_n = vel_t, log.vel.v_n_mps
+    elif len(fix_t) >= 3:  # no velocity topic: the track's own differences, at the midpoints
+        v_t = 0.5 * (fix_t[1:] + fix_t[:-1])
+        v_n = np.diff(r_n, axis=0) / np.diff(fix_t)[:, None]
+    else:
+        v_t, v_n = np.zeros(0), np.zeros((0, 3))
+    sol = nav.smoothed if nav.smoothed is not None else nav.forward
+    return QcInputs(log, nav, calib_run, config, c_bs, lever_estimate, joint, renavigate, t,
+                    fix_t, vel_t, static, lat0, h0, dt, sol, r_n, v_t, v_n)
+
+
+def _config_sanity(q: QcInputs, _: list[Check]) -> list[Check]:
+    return [qc.config_sanity(config_problems(q.config))]
+
+
+def _data_complete(q: QcInputs, _: list[Check]) -> list[Check]:
+    errors = [i for i in q.log.issues if i.severity == "error"]
+    cin = q.config.input
+    window = None if cin.end_s is None else cin.end_s - (cin.start_s or 0.0)
+    return [qc.data_complete(bool(q.log.complete), len(errors),
+                             errors[0].message if errors else "",
+                             float(q.t[-1] - q.t[0]) if q.t.shape[0] else 0.0, window)]
+
+
+def _gravity(q: QcInputs, _: list[Check]) -> list[Check]:
+    f = q.log.imu.f_ib_b_mps2
+    return [qc.gravity_direction(f, q.static, q.c_bs, q.config.input.sensor_frame),
+            qc.gravity_magnitude(f, q.static, q.lat0, q.h0,
+                                 window_n=int(round(1.0 / q.dt)) if q.dt > 0 else 1)]
+
+
+def _earth_rate(q: QcInputs, _: list[Check]) -> list[Check]:
+    noise = q.config.imu.tuning().noise()
+    sb = math.hypot(noise.gyro_turn_on_sigma_radps, noise.gyro_gm_sigma_radps) \
+        or noise.gyro_bias_sigma_radps
+    return [qc.earth_rate(q.log.imu.w_ib_b_radps, q.log.imu.f_ib_b_mps2, q.static, q.dt,
+                          q.lat0, gyro_bias_sigma_radps=sb,
+                          gyro_arw_radpsqrts=noise.gyro_arw_radpsqrts)]
+
+
+def _gnss_jumps(q: QcInputs, _: list[Check]) -> list[Check]:
+    vel = (q.vel_t, q.log.vel.v_n_mps) if len(q.vel_t) >= 2 else \
+        (q.nav.forward.t_s, q.nav.forward.v_n_mps)
+    return [qc.gnss_jumps(q.fix_t, q.r_n, *vel)]
+
+
+def _innovations(q: QcInputs, _: list[Check]) -> list[Check]:
+    rec = getattr(q.nav, "innovations", None)
+    return [] if rec is None else _innovation_checks(
+        rec, q.config.filter_options().gate_probability)
+
+
+def _mounting_yaw(q: QcInputs, so_far: list[Check]) -> list[Check]:
+    """``mounting_yaw`` (A's heading against the GNSS course); the ``lever_arm`` check again,
+    naming the mounting when its estimate is the configured lever arm rotated."""
+    head = mounting.heading_offset(q.v_t, q.v_n, q.sol.t_s, q.sol.q_nb)
+    mount = mounting.mounting_yaw(head, q.config.input.mounting_rpy_deg)
+    lev = q.lever
+    if lev is None:
+        return [mount]
+    lever_check = next(c for c in so_far if c.name == "lever_arm")
+    return [mounting.lever_arm_naming_mounting(
+        lever_check, q.config.gnss.lever_arm_m, lev.lever_b_m, lev.sigma_b_m,
+        qc.lever_arm_observable(q.sol.rpy_rad), mount,
+        None if head is None else head.offset_rad), mount]
+
+
+def _coverage(q: QcInputs, _: list[Check]) -> list[Check]:
+    run = q.calib_run
+    legs = [] if run is None else [(g.leg_id, g.start_s, g.end_s) for g in run.legs]
+    return [gnss_coverage(aiding_of(q.nav), legs, getattr(run, "leg_refusals", None))]
+
+
+def _calibration(q: QcInputs, _: list[Check]) -> list[Check]:
+    run = q.calib_run
+    if run is None:
+        return []
+    s = run.summary()
+    return [qc.calibration_quality(run.calibrated, run.reason, int(s["n_pairs_used"])),
+            qc.compensation_gain(float(s["dv_before_mps"]), float(s["dv_after_mps"]))]
+
+
+QC_CHECKS: tuple[tuple[tuple[str, ...], Callable[[QcInputs, list[Check]], list[Check]]], ...] = (
+    (("config",), _config_sanity),
+    (("data_complete",), _data_complete),
+    (("gravity_direction", "gravity_magnitude"), _gravity),
+    (("earth_rate",), _earth_rate),
+    (("gnss_jumps",), _gnss_jumps),
+    (("gnss_nis", "gnss_gate"), _innovations),
+    (("gnss_time_offset", "lever_arm"), _offset_and_lever),
+    (("lever_arm", "mounting_yaw"), _mounting_yaw),
+    (("gnss_coverage",), _coverage),
+    (("calibration", "compensation"), _calibration),
+)
+"""The QC stage's checks in report order: (the names of the checks a row may make, its
+function). A row's function takes the inputs and the checks made so far and returns its
+checks (a check that does not apply is left out: no innovations, no calibration); one named
+like an earlier check replaces it in place (the mounting row re-reads the lever arm). A new check
+is a function of :mod:`pospp.qc.checks` (or its own module), a row here, its test and its
+entry in docs/qc.md; checks of later stages (the diagnosis's ``model_fit``) are appended by
+the pipeline."""
+
+
 def quality_checks(log: FlightLog, nav: FilterResult, calib_run: Any, config: Any, *,
                    c_bs: NDArray, lever_estimate: LeverArmEstimate | None = None,
                    joint: Callable[[], LeverTime | None] | None = None,
                    renavigate: Callable[[float], FilterResult] | None = None
                    ) -> QualityReport:
-    """Run every check on a run's results.
+    """Run every check of :data:`QC_CHECKS` on a run's results.
 
     Parameters
     ----------
@@ -259,84 +412,17 @@ def quality_checks(log: FlightLog, nav: FilterResult, calib_run: Any, config: An
         (:func:`pospp.flight_stages.restamped`): an offset of seconds found by the turns is
         measured again on A's attitude with the GNSS re-stamped by it (:func:`_offset_again`).
     """
-    imu = log.imu
-    epoch_ns = int(imu.time_ns[0])
-    t = t_s_from_time_ns(imu.time_ns, epoch_ns)
-    w, f = imu.w_ib_b_radps, imu.f_ib_b_mps2
-    vel_t = t_s_from_time_ns(log.vel.time_ns, epoch_ns)
-    fix_t = t_s_from_time_ns(log.fix.time_ns, epoch_ns)
-    out: list[Check] = [qc.config_sanity(config_problems(config))]
-
-    # --- completeness -------------------------------------------------------------------------
-    errors = [i for i in log.issues if i.severity == "error"]
-    cin = config.input
-    window = None if cin.end_s is None else cin.end_s - (cin.start_s or 0.0)
-    out.append(qc.data_complete(bool(log.complete), len(errors),
-                                errors[0].message if errors else "",
-                                float(t[-1] - t[0]) if t.shape[0] else 0.0, window))
-
-    # --- IMU against gravity and the Earth rate ----------------------------------------------
-    static = _static_mask(t, w, f, vel_t, log.vel.v_n_mps, log.vel.vel_cov_ned_m2ps2)
-    out.append(qc.gravity_direction(f, static, c_bs, cin.sensor_frame))
-    lat0 = float(log.fix.lat_rad[0]) if len(log.fix.time_ns) else nav.alignment.lat_rad
-    h0 = float(log.fix.height_m[0]) if len(log.fix.time_ns) else nav.alignment.height_m
-    dt = float(np.median(np.diff(t))) if t.shape[0] > 1 else 0.0
-    out.append(qc.gravity_magnitude(f, static, lat0, h0,
-                                    window_n=int(round(1.0 / dt)) if dt > 0 else 1))
-    noise = config.imu.tuning().noise()
-    sb = math.hypot(noise.gyro_turn_on_sigma_radps, noise.gyro_gm_sigma_radps) \
-        or noise.gyro_bias_sigma_radps
-    out.append(qc.earth_rate(w, f, static, dt, lat0, gyro_bias_sigma_radps=sb,
-                             gyro_arw_radpsqrts=noise.gyro_arw_radpsqrts))
-
-    # --- GNSS track, innovations, time offset, lever arm --------------------------------------
-    sol = nav.smoothed if nav.smoothed is not None else nav.forward
-    r_n = earth.llh_to_ned_m(log.fix.lat_rad, log.fix.lon_rad, log.fix.height_m,
-                             lat0, float(log.fix.lon_rad[0]) if len(fix_t) else 0.0, h0)
-    if len(vel_t) >= 2:
-        v_t, v_n = vel_t, log.vel.v_n_mps
-    elif len(fix_t) >= 3:  # no velocity topic: the track's own differences, at the midpoints
-        v_t = 0.5 * (fix_t[1:] + fix_t[:-1])
-        v_n = np.diff(r_n, axis=0) / np.diff(fix_t)[:, None]
-    else:
-        v_t, v_n = np.zeros(0), np.zeros((0, 3))
-    out.append(qc.gnss_jumps(fix_t, r_n, *((vel_t, log.vel.v_n_mps) if len(vel_t) >= 2
-                                          else (nav.forward.t_s, nav.forward.v_n_mps))))
-    rec = getattr(nav, "innovations", None)
-    if rec is not None:
-        out += _innovation_checks(rec, config.filter_options().gate_probability)
-    offset_and_lever, lev = _offset_and_lever(t, w, sol, v_t, v_n, nav, config,
-                                              lever_estimate, joint, renavigate)
-    out += offset_and_lever
-
-    # --- A's heading against the GNSS course; where A was GNSS-aided ------------------------
-    _heading_and_aiding_checks(out, config, v_t, v_n, sol, lev, nav, calib_run)
-
-    # --- calibration and compensation --------------------------------------------------------
-    if calib_run is not None:
-        s = calib_run.summary()
-        out.append(qc.calibration_quality(calib_run.calibrated, calib_run.reason,
-                                          int(s["n_pairs_used"])))
-        out.append(qc.compensation_gain(float(s["dv_before_mps"]), float(s["dv_after_mps"])))
+    q = qc_inputs(log, nav, calib_run, config, c_bs=c_bs, lever_estimate=lever_estimate,
+                  joint=joint, renavigate=renavigate)
+    out: list[Check] = []
+    for _, make in QC_CHECKS:
+        for check in make(q, out):
+            at = next((i for i, c in enumerate(out) if c.name == check.name), None)
+            if at is None:
+                out.append(check)
+            else:
+                out[at] = check
     return QualityReport(tuple(out))
-
-
-def _heading_and_aiding_checks(out: list[Check], config: Any, v_t: NDArray, v_n: NDArray,
-                               sol: NavSolution, lev: LeverArmEstimate | None,
-                               nav: FilterResult, calib_run: Any) -> None:
-    """Append ``mounting_yaw`` (A's heading against the GNSS course ``v_n`` at ``v_t``, issue
-    38 item 2; the lever-arm check in ``out`` then names the mounting when its estimate is the
-    configured lever arm rotated) and ``gnss_coverage`` (where A was GNSS-aided, against the
-    calibration's legs and the legs it refused, item 1)."""
-    head = mounting.heading_offset(v_t, v_n, sol.t_s, sol.q_nb)
-    out.append(mount := mounting.mounting_yaw(head, config.input.mounting_rpy_deg))
-    if lev is not None:
-        i = next(i for i, c in enumerate(out) if c.name == "lever_arm")
-        out[i] = mounting.lever_arm_naming_mounting(
-            out[i], config.gnss.lever_arm_m, lev.lever_b_m, lev.sigma_b_m,
-            qc.lever_arm_observable(sol.rpy_rad), mount, None if head is None else head.offset_rad)
-    legs = [] if calib_run is None else [(g.leg_id, g.start_s, g.end_s) for g in calib_run.legs]
-    out.append(gnss_coverage(aiding_of(nav), legs, getattr(calib_run, "leg_refusals", None)))
 
 
 def qc_columns(report: QualityReport, epoch_ns: int) -> dict[str, list[Any]]:

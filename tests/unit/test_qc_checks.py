@@ -346,3 +346,17 @@ def test_model_fit_counts_unmodelled_effects_and_a_gap_that_could_bias_the_calib
     both = qc.model_fit(["lever_arm", "time_offset"], 3 * bar, 0.001, 0.05, 3 * bar * sigma,
                         sigma, ["a"], "b")
     assert both.value == 3 and both.suggestion == "a; b"
+
+
+def test_the_registry_names_every_check_in_the_docs():
+    """QC_CHECKS' rows name their checks; each is in docs/qc.md's table of checks."""
+    import re
+    from pathlib import Path
+
+    from pospp.qc.stage import QC_CHECKS
+
+    repo = Path(__file__).resolve().parents[2]
+    names = {n for row, _ in QC_CHECKS for n in row}
+    documented = set(re.findall(r"^\| `([a-z_]+)` \|", (repo / "docs" / "qc.md").read_text(),
+                                re.M))
+    assert names <= documented, names - documented
