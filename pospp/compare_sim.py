@@ -63,7 +63,7 @@ EST_SF_PRIOR_PPM = (2000.0, 5000.0)
 at least the grade's (twice and five times the catalogue's plausible 1000 ppm; the diagnosis's
 scale-factor pass takes 2000 ppm for the gyros): at the flight grade's 10 / 50 ppm the
 states could not move, and a 500 ppm z gyro scale factor over two 180 deg turns read 0.8
-+- 14 ppm (issue 33: a few hundred ppm on a flight of many 180 deg turns not named)."""
++- 14 ppm."""
 QUADRATURE = (1, 2)
 """Sub-intervals and Gauss-Legendre nodes per IMU interval of the comparison's kinematics
 (the simulator's default is 2 x 4): on flight_time_offset_200hz's trajectory the increments

@@ -46,12 +46,12 @@ if TYPE_CHECKING:  # the stages' option types (imported where used: `pospp --hel
 
 MAX_LOG_S = 1.0e7
 """Longest log time any key may name [s] (116 days): ``[input] start_s / end_s`` beyond it
-overflowed the int64 nanosecond stamps (9.2e9 s) and were silently ignored (issue 38)."""
+overflowed the int64 nanosecond stamps (9.2e9 s) and were silently ignored."""
 MAX_LEG_S = 86400.0
 """Longest leg, replay horizon or leg tolerance [s] (a day)."""
 MAX_REPLAY_RATE_HZ = 10.0
 """Highest ``[replay] sample_rate_hz`` [Hz]: B minus A is smooth on the Schuler period and on
-the least squares' ``noise_step_s``; 1000 Hz took 5.5 GB on the sample (issue 38 item 11)."""
+the least squares' ``noise_step_s``; 1000 Hz took 5.5 GB on the sample."""
 
 
 class SensorFrame(StrEnum):

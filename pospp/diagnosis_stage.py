@@ -5,8 +5,7 @@ B-minus-A replays with every test calibrated on B minus A's null realisations
 (:func:`pospp.null_stage.null_realisations`), the A re-run signatures
 (:mod:`pospp.diagnose.rerun`) made by Gauss-Newton from A's own estimates where the pipeline has
 them, the secant refinements, and the drift under the alternative
-(:func:`drift_under_alternative`). Moved out of :mod:`pospp.flight_stages` (issue 18: that
-module had reached the house's 600 lines); :mod:`pospp.pipeline` imports it as before.
+(:func:`drift_under_alternative`).
 Nothing here touches files.
 """
 
@@ -130,8 +129,8 @@ def drift_under_alternative(calib_run: CalibrationRun, replays_minus_effect: lis
                             config: PipelineConfig) -> tuple[float, float] | None:
     """The flight's gyro drift re-estimated with a candidate effect in the model, or None.
 
-    The calibration reads the drift by REML on B minus A under the base model (issue 16 item
-    3); an effect the base model leaves out (a 12 ms GNSS offset: 0.28 deg/h at 100 s against
+    The calibration reads the drift by REML on B minus A under the base model; an effect the
+    base model leaves out (a 12 ms GNSS offset: 0.28 deg/h at 100 s against
     the grade's 0.05) is then read as drift, the null realisations inject it, and the
     effect's test loses its power (docs/diagnose.md, "Power"). Here the same REML (the grade's
     drift the same weak prior, the joint fit over the same pairs) runs on

@@ -1,4 +1,4 @@
-"""The one catalogue of effect names shared by both discrepancy workflows (issue 14).
+"""The one catalogue of effect names shared by both discrepancy workflows.
 
 The leg-based diagnosis (:mod:`pospp.diagnose.effects`: signatures on B minus A) and the
 measured-versus-simulated comparison (:mod:`pospp.simcompare.effects`: changes of the

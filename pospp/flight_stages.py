@@ -272,7 +272,7 @@ def calibration_replays(imu: ImuSource, nav: nav_filter.FilterResult, config: Pi
     reference`` solution) and B's replays over them
     (:func:`pospp.calib.replay.replay_legs`, ``threads`` legs at once). A leg over which A is
     not GNSS-aided (:func:`pospp.nav.aiding.leg_aiding_problem`) is refused, not replayed:
-    B minus a free-inertial A is not B's error (issue 38 item 1)."""
+    B minus a free-inertial A is not B's error."""
     which = nav_filter.reference_name(nav, config.replay.reference)
     solution_a = SolutionA(*nav_filter.solution_a_fields(nav, which=which))
     traj = solution_a.trajectory
@@ -311,7 +311,7 @@ def calibrate_from_a(imu: ImuSource, nav: nav_filter.FilterResult,
         forward_biases=forward_bias_record(nav, tuning),
         # the grade's Gauss-Markov ("random") drift enters the least squares' noise model;
         # its level and correlation time are the flight's own (REML on the joint fit, tau
-        # profiled), the grade's a weak prior (solve.DriftPrior; issue 16, item 3)
+        # profiled), the grade's a weak prior (solve.DriftPrior)
         gyro_gm_sigma_dph=None,
         gyro_gm_tau_s=tuning.gyro_gm_tau_s if gm else None,
         gyro_gm_prior_sigma_dph=tuning.gyro_gm_sigma_dph if gm else None,

@@ -1,5 +1,5 @@
 """The joint estimate of the lever arm and the GNSS time offset on a flight, and the log with its
-GNSS re-stamped (issue 33): the stage functions over A's lever-arm pass
+GNSS re-stamped: the stage functions over A's lever-arm pass
 (:func:`pospp.flight_stages.lever_arm_passes`) that :mod:`pospp.qc.lever_time` profiles. The
 QC stage, compare-sim and the diagnosis call :func:`lever_time_estimate`.
 """

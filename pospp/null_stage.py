@@ -41,8 +41,8 @@ def null_needs_gains(config: PipelineConfig) -> bool:
 def null_drift(calib_run: CalibrationRun, config: PipelineConfig) -> tuple[float, float, str]:
     """The gyro drift the null realisations inject: (sigma [rad/s], tau [s], source).
 
-    The drift the flight shows (its level and tau by REML, the grade a weak prior: issue 16
-    item 3; source "flight", or "grade" when the flight does not reject the grade's), so the
+    The drift the flight shows (its level and tau by REML, the grade a weak prior; source
+    "flight", or "grade" when the flight does not reject the grade's), so the
     calibration's and the diagnosis's sigmas follow the flight; the configured ``[imu]
     gyro_gm_sigma_dph`` / ``gyro_gm_tau_s`` (source "configured") when the calibration did not
     estimate it.

@@ -191,7 +191,7 @@ ROUTINE_REJECTIONS = frozenset({"before the filter start (alignment)",
                                 "outside the IMU time span"})
 """Reasons (``GnssRejection.reason``) for which every flight leaves GNSS records out: the
 records logged while A aligns, or before the IMU starts and after it stops. They say nothing
-about the data's quality (issue 39: 172 of the 176 warnings of the comma2k19 run): one "info"
+about the data's quality (172 of the 176 warnings of the comma2k19 run were these): one "info"
 row per kind and reason with the count, not a warning per record."""
 
 

@@ -1,4 +1,4 @@
-"""The sensor families of the diagnosis: A's innovations and their responses (issue 34).
+"""The sensor families of the diagnosis: A's innovations and their responses.
 
 :func:`innovation_design` runs algorithm A as configured on the log (summed down to ``[pairs]
 rerun_imu_rate_hz``, the named GNSS-side effects removed) recording its gains, then once more

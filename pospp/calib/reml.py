@@ -5,7 +5,7 @@ likelihoods, the residual autocorrelation inflation, and the Gauss-Markov drift 
 grade-versus-flight likelihood-ratio test.
 
 Used by :func:`pospp.calib.solve.fit_calibration` and :func:`pospp.calib.solve.fit_noise_model`.
-Moved out of :mod:`pospp.calib.solve` (issue 17); frames and units as there (SI).
+Moved out of :mod:`pospp.calib.solve`; frames and units as there (SI).
 """
 
 from __future__ import annotations
@@ -56,7 +56,7 @@ def _blocks_reml_nll(params: NDArray, mats: list[tuple], hs: list[NDArray],
 def _cholesky_lower(c: NDArray) -> NDArray | None:
     """L with C = L L^T (LAPACK dpotrf, upper triangle zeroed), None when C is not positive
     definite. The same factor as ``np.linalg.cholesky`` (bit for bit here), at half its
-    time for the 700-row covariances of a 1.5 h flight's legs (issue 18)."""
+    time for the 700-row covariances of a 1.5 h flight's legs."""
     ll, info = lapack.dpotrf(c, lower=1, clean=1)
     if info < 0:
         raise ValueError(f"dpotrf: argument {-info} illegal")
@@ -93,7 +93,7 @@ def _reml_whitened(hw: NDArray, zw: NDArray, logdet: float) -> float:
     information's determinant from the column-scaled SVD (rank-deficient directions dropped).
     A tall system is first reduced to the R of its QR factorisation (LAPACK dgeqrf): an
     orthogonal transform of the rows, which leaves every term unchanged (column norms,
-    singular values, residual) and makes the SVD one of (p + 1) rows (issue 18).
+    singular values, residual) and makes the SVD one of (p + 1) rows.
     """
     if hw.shape[0] > hw.shape[1] + 1:
         qr, _, _, info = lapack.dgeqrf(np.column_stack([hw, zw]))
@@ -219,7 +219,7 @@ class DriftLegs:
         C = a I + q K + s2 S E S^T,   E_jk = exp(-|tau_j - tau_k| / tau) I_3
 
     couples every leg to every other through the drift bins' correlation E, so factoring C costs
-    the legs cubed (1.15 s at 45 min, 4.7 s at 90, issue 18). The drift is a first-order
+    the legs cubed (1.15 s at 45 min, 4.7 s at 90). The drift is a first-order
     Gauss-Markov (Ornstein-Uhlenbeck) process, which is Markov: given the drift at the last bin of
     leg L - 1, leg L's bins are independent of every earlier leg. A Kalman filter over the legs
     (in time order) whose state is the unit-variance drift e at the previous leg's last bin (3

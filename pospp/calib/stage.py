@@ -472,7 +472,7 @@ MIN_NULL_REALISATIONS = 3
 
 def with_null_covariance(run: CalibrationRun, null_dv: Sequence[Sequence[NDArray]],
                          injected: Sequence[NDArray] | None = None) -> CalibrationRun:
-    """The chosen calibration's covariance from B minus A's null realisations (issue 12).
+    """The chosen calibration's covariance from B minus A's null realisations.
 
     Each realisation ``d_r`` (one (M, 3) array per leg in id order, the replays' rows:
     :func:`pospp.pipeline.null_realisations`) is B minus A's response to one draw of the

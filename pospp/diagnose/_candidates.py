@@ -1,4 +1,4 @@
-"""One candidate of the diagnosis at one step, in each of its shapes (issue 34).
+"""One candidate of the diagnosis at one step, in each of its shapes.
 
 An effect with several shapes on the legs (the gravity disturbance: ``gradient``, ``field``)
 is tried in each; the family's candidate is the shape of smallest BIC (the workflow's

@@ -1,5 +1,5 @@
 """Each nested F-test's null distribution from B-minus-A null realisations
-(:func:`pospp.diagnose.workflow.diagnose_replays`; moved out of that module, issue 34).
+(:func:`pospp.diagnose.workflow.diagnose_replays`; moved out of that module).
 
 Frames and units as the workflow's (NED, SI). No I/O.
 """

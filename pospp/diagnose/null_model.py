@@ -1,4 +1,4 @@
-"""Null realisations of B minus A, made by pospp itself along the flight (issue 12).
+"""Null realisations of B minus A, made by pospp itself along the flight.
 
 The noise of B minus A is not B's IMU noise plus an independent A error: A integrates the same
 increments as B between GNSS fixes, and its GNSS corrections drive what is left. Rather than

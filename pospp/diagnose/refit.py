@@ -1,4 +1,4 @@
-"""The calibration refitted with the effects the diagnosis named (issue 34).
+"""The calibration refitted with the effects the diagnosis named.
 
 An effect the calibration's model leaves out is partly read by it: a 985 ug/h accelerometer
 ramp forces B like a horizontal gyro bias of ``r / g`` (0.05 deg/h), and the calibrated gyro

@@ -1,4 +1,4 @@
-"""Shapes of a sensor-bias change over flight time, on one hinge basis (issue 34).
+"""Shapes of a sensor-bias change over flight time, on one hinge basis.
 
 Frames and units: run time t [s from the first IMU stamp]; a bias change b(t) per body axis
 in SI (m/s^2 or rad/s). No I/O.

@@ -24,9 +24,9 @@ DIAGNOSIS_COLUMNS = (
     "gap_basis", "gap_location", "null_model", "shape", "shape_parameters", "null_rebuilt",
     "null_rebuilt_with",
 )
-"""Columns of diagnosis.parquet, in order (issue 12 items 4-5 and the null the p-values are
-calibrated on: from ``horizon_s`` to ``null_model``; issue 34: the family's shape and whether
-the null was re-made under the alternative)."""
+"""Columns of diagnosis.parquet, in order (docs/formats.md): the step, its effect and
+statistics, what a gap is worth at the horizon, the null the p-values are calibrated on, the
+family's shape and whether the null was re-made under the alternative."""
 
 
 def diagnosis_columns(diagnosis: Diagnosis) -> dict[str, NDArray]:

@@ -1,4 +1,4 @@
-"""Model-discrepancy workflow: predict, compare, name, add, iterate (issue 7).
+"""Model-discrepancy workflow: predict, compare, name, add, iterate.
 
 Frames and units: NED (n), FRD (b), SI inside; display units only in the output rows.
 Errors are computed minus true (B minus A).
@@ -84,7 +84,7 @@ from pospp.diagnose.locate import horizon_worth, locate_gap
 from pospp.diagnose.null_calibration import FEW_PARAMETERS  # noqa: F401  (its home before)
 from pospp.diagnose.null_calibration import NullCalibration as _NullCalibration
 from pospp.diagnose.results import CandidateTest, Diagnosis, DiagnosisStep, LegGap
-from pospp.diagnose.tables import (  # noqa: F401  (the tables' home before issue 17)
+from pospp.diagnose.tables import (  # noqa: F401  (re-exported: the tables' former home)
     DIAGNOSIS_COLUMNS,
     candidate_columns,
     diagnosis_columns,

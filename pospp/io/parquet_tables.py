@@ -529,7 +529,7 @@ def write_table(
     }
     table = table.replace_schema_metadata(kv)
     # dictionary encoding for the text only: on unique floats it cost the 1.5 h flight's
-    # trajectory.parquet 0.24 s instead of 0.07 and 4 MB (issue 18)
+    # trajectory.parquet 0.24 s instead of 0.07 and 4 MB
     text = [f.name for f in table.schema if pa.types.is_string(f.type)]
     with atomic_path(path) as tmp:
         pq.write_table(table, tmp, compression="zstd", use_dictionary=text)

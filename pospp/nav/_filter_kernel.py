@@ -157,7 +157,7 @@ def propagate_covariance_into(p, phi_acc, x, fm, wm, t_acc, qc, i_gm, i_sf, inv_
     of shape (0, 0): not accumulated, as when the pass keeps no smoother nodes).
 
     ``work``: float64[5, n, n] scratch, reused across steps (the step allocates nothing n x n:
-    issue 18, where the allocations and the separate ``Phi Q_c Phi^T`` product were half of
+    the allocations and the separate ``Phi Q_c Phi^T`` product were half of
     the step's time). ``Phi P Phi^T + (Phi Q_c Phi^T + Q_c) T / 2`` is computed as the one
     product ``Phi (P + Q_c T / 2) Phi^T + Q_c T / 2``.
     """

@@ -174,7 +174,7 @@ class GainReplay:
     moves at second order, as long as the two attitudes are close: ``k_from`` is where A's
     heading sigma has come within twice its median over the flight (:func:`switch_epoch`),
     before which a static alignment can leave a realisation's heading degrees from this
-    pass's (docs/filter.md, "Gain replay"; issue 18).
+    pass's (docs/filter.md, "Gain replay").
 
     Attributes
     ----------

@@ -493,7 +493,7 @@ flight_accel_ramp_100hz's ramp moves it by 3.0 sigma (y) and its gap stands for 
 def model_fit(named: list[str], refit_shift_sigmas: float, gap_p_value: float, alpha: float,
               gap_bias_bound_radps: float, bias_sigma_radps: float,
               named_texts: list[str], gap_text: str = "") -> Check:
-    """The calibration's model explains B minus A (issue 34): no effect the diagnosis named
+    """The calibration's model explains B minus A: no effect the diagnosis named
     outside it and no unexplained gap could move the calibrated gyro bias out of its 95 %
     interval.
 

@@ -311,7 +311,7 @@ def _shape_prefix(row: Any) -> str:
 
 
 def _diagnosis_worth_text(d: pd.DataFrame) -> str:
-    """What each row is worth at the horizon against the calibration's residual (issue 12)."""
+    """What each row is worth at the horizon against the calibration's residual."""
     if "gap_horizon_m" not in d or not np.isfinite(d.residual_horizon_m.iloc[-1]):
         return ""
     last = d.iloc[-1]
