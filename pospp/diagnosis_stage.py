@@ -78,7 +78,6 @@ from pospp.null_stage import (
 )
 from pospp.qc.checks import Check, model_fit
 from pospp.sensor_stage import SensorFamilies, sensor_families, with_sensor_families
-from pospp.threads import Threads
 from pospp.units import DEG_PER_H_RADPS
 from pospp.units import G0_MPS2 as GRAVITY_MPS2
 
@@ -198,7 +197,7 @@ def signature_starts(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
 def _rerun_signatures_at_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                                calib_run: CalibrationRun, config: PipelineConfig,
                                starts: dict[str, np.ndarray | None],
-                               navigate_a: Any, threads: Threads = 1,
+                               navigate_a: Any, threads: int = 1,
                                rerun: tuple[Any, CalibrationRun] | None = None
                                ) -> tuple[dict[str, list[np.ndarray]], dict[str, np.ndarray]]:
     """The diagnosis's first A re-run signatures and the estimates they were made at.
@@ -287,7 +286,7 @@ def diagnosis_reruns(calib_run: CalibrationRun, config: PipelineConfig, *,
                      log: mcap_reader.FlightLog | None = None,
                      nav: nav_filter.FilterResult | None = None,
                      lever_estimate: nav_filter.LeverArmEstimate | None = None,
-                     threads: Threads = 1,
+                     threads: int = 1,
                      starts: dict[str, np.ndarray | None] | None = None) -> DiagnosisStart:
     """The diagnosis's base for its re-runs (:func:`rerun_base`) and its first re-run
     signatures (:func:`_rerun_signatures_at_start`): the A passes that need the calibration
@@ -452,7 +451,7 @@ def named_responses(d: Diagnosis, replays: list, sigs: dict[str, list[np.ndarray
 
 
 def refit_stage(calib_run: CalibrationRun, diagnosis: Diagnosis | None, imu: ImuSource,
-                solution_a: SolutionA, config: PipelineConfig, threads: Threads = 1,
+                solution_a: SolutionA, config: PipelineConfig, threads: int = 1,
                 nav: nav_filter.FilterResult | None = None) -> Refit | None:
     """The calibration refitted with the effects the diagnosis named
     (:func:`pospp.diagnose.refit.refit_calibration`) and B re-run with it on every leg (the
@@ -554,7 +553,7 @@ class RefitOutcome:
 
 def refit_and_check(log: mcap_reader.FlightLog, calib_run: CalibrationRun,
                     diagnosis: Diagnosis | None, imu: ImuSource, solution_a: SolutionA,
-                    config: PipelineConfig, threads: Threads = 1, *, compensate: bool = True,
+                    config: PipelineConfig, threads: int = 1, *, compensate: bool = True,
                     nav: nav_filter.FilterResult | None = None) -> RefitOutcome:
     """The run's refit stage after its diagnosis: the calibration refitted with the named
     effects (:func:`refit_stage`), A re-run with the refit's gyro bias removed when

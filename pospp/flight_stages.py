@@ -34,7 +34,6 @@ from pospp.io import mcap_reader
 from pospp.nav import filter as nav_filter
 from pospp.nav import tuning as nav_tuning
 from pospp.nav.aiding import aiding_of, leg_aiding_problem
-from pospp.threads import Threads
 from pospp.types import FLU_TO_FRD
 from pospp.units import UG_MPS2
 
@@ -267,7 +266,7 @@ class LegReplays:
 
 
 def calibration_replays(imu: ImuSource, nav: nav_filter.FilterResult, config: PipelineConfig,
-                        threads: Threads = 1) -> LegReplays:
+                        threads: int = 1) -> LegReplays:
     """The calibration's legs (:func:`pospp.calib.segment.find_legs` on A's ``[replay]
     reference`` solution) and B's replays over them
     (:func:`pospp.calib.replay.replay_legs`, ``threads`` legs at once). A leg over which A is
@@ -291,7 +290,7 @@ def calibration_replays(imu: ImuSource, nav: nav_filter.FilterResult, config: Pi
 
 def calibrate_from_a(imu: ImuSource, nav: nav_filter.FilterResult,
                      config: PipelineConfig, made: LegReplays | None = None,
-                     threads: Threads = 1) -> tuple[CalibrationRun, SolutionA]:
+                     threads: int = 1) -> tuple[CalibrationRun, SolutionA]:
     """Legs, B replays, pairs, least squares and B re-run (pospp.calib.stage); ``made``: the
     legs and replays of :func:`calibration_replays`, made before (None: made here);
     ``threads``: B's replays made that many legs at once."""

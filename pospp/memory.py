@@ -5,7 +5,8 @@ only grows; :func:`release_free_heap` (``malloc_trim(0)``, a few milliseconds) r
 pages at each stage's end. glibc also gives each new thread that allocates a heap ("arena") of
 its own, where what that thread frees stays: :func:`share_one_heap` (``M_ARENA_MAX`` = 1) puts
 the threads of the run's parallel loops (B's replays, the A re-runs) in one heap. Elsewhere
-(another C library, macOS, Windows) both are no-ops. Measured effect: docs/decisions.md.
+(another C library, macOS, Windows) both are no-ops. Measured effect: docs/history/
+speed_rounds.md, "Speed and memory, fifth round" and "Speed, eighth round".
 """
 
 from __future__ import annotations

@@ -186,7 +186,7 @@ def process_flight(
     force : bool
         Replace an earlier pospp run in ``out_dir``.
     threads : int, optional
-        Threads of the embarrassingly parallel loops (B's replays, the null's and the
+        int of the embarrassingly parallel loops (B's replays, the null's and the
         diagnosis's A re-runs); None: the cores this process may use
         (:func:`pospp.threads.available_cores`). The outputs do not depend on it.
 

@@ -43,7 +43,7 @@ from pospp.flight_stages import imu_tuning, navigate
 from pospp.io import mcap_reader
 from pospp.nav.filter import STATUS_USED
 from pospp.null_stage import rerun_decimation
-from pospp.threads import Threads, map_in_threads
+from pospp.threads import map_in_threads
 from pospp.units import t_s_from_time_ns
 
 CRITERION = "innovation_F_bonferroni_shapes"
@@ -139,7 +139,7 @@ def north_east_m(lat_rad: Any, lon_rad: Any, lat0_rad: float, lon0_rad: float,
 def innovation_design(log: mcap_reader.FlightLog, config: PipelineConfig,
                       families: Sequence[str], *, lever_b_m: Any = None,
                       reference: tuple[float, float] | None = None,
-                      threads: Threads = 1) -> InnovationDesign:
+                      threads: int = 1) -> InnovationDesign:
     """A's whitened innovations on ``log`` and their responses to each family's coefficients
     (module docstring); the gravity family's only with ``reference`` (lat, lon [rad]: the
     field's origin, the legs' mean start), its extent the farthest point of A's track after
@@ -224,7 +224,7 @@ class SensorFamilies:
 
 
 def sensor_families(d: Diagnosis, replays: list, log: mcap_reader.FlightLog,
-                    config: PipelineConfig, threads: Threads = 1,
+                    config: PipelineConfig, threads: int = 1,
                     solution_a: SolutionA | None = None) -> SensorFamilies | None:
     """Fit the families on A's innovations of ``log`` with ``d``'s named GNSS-side effects
     removed; families ``d`` named on the legs are not fitted again, the gravity field only

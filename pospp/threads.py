@@ -25,11 +25,7 @@ def available_cores() -> int:
         return os.cpu_count() or 1
 
 
-Threads = int
-"""Threads for independent calls (:func:`map_in_threads`)."""
-
-
-def map_in_threads(fn: Callable[[Any], Any], items: Iterable[Any], threads: Threads
+def map_in_threads(fn: Callable[[Any], Any], items: Iterable[Any], threads: int
                    ) -> list[Any]:
     """``[fn(x) for x in items]`` on up to ``threads`` threads, results in the items' order.
 

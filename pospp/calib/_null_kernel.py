@@ -150,6 +150,19 @@ def _ba_total(v, i_gm, out, col):
 
 
 @njit(cache=True)
+def _nav_and_ba_total(v, i_gm, tot, out):
+    """``out`` (12, R): the navigation rows (attitude, velocity, position) of state columns
+    ``v`` and A's total accelerometer-bias error of each (:func:`_ba_total`); ``tot`` (3,)
+    scratch."""
+    for r in range(9):
+        out[r] = v[r]
+    for c in range(v.shape[1]):
+        _ba_total(v, i_gm, tot, c)
+        for k in range(3):
+            out[9 + k, c] = tot[k]
+
+
+@njit(cache=True)
 def _normals(xi, at, rows, n_draws, rng):
     """The next ``rows`` standard normals per draw: from ``xi`` (rows consumed in order from
     ``at[0]``) when it has rows, else from the generator ``rng``."""
@@ -215,12 +228,7 @@ def forward_draws(grid, lay, inv_tau_a, inj, events, records, n_draws, rng, outs
             z[jb:jb + 9] = 0.0
             for k in range(3):
                 z[jb + 9 + k] = -z[n_a + 3 + k]
-            for r in range(9):
-                eps0[leg, r] = z[r]
-            for c in range(n_draws):
-                _ba_total(z, i_gm, tot, c)
-                for k in range(3):
-                    eps0[leg, 9 + k, c] = tot[k]
+            _nav_and_ba_total(z, i_gm, tot, eps0[leg])
         j = g_sample[g]
         if j >= 0:
             for a in range(3):
@@ -255,12 +263,7 @@ def smooth_draws(a_gains, dx, interp, i_gm, ehat_s, ehat0):
         while ls >= 0 and l_node[ls] == k:
             al = l_alpha[ls]
             est[:, :] = (1.0 - al) * e_plus + al * e_next
-            for r in range(9):
-                ehat0[ls, r] = est[r]
-            for c in range(n_r):
-                _ba_total(est, i_gm, tot, c)
-                for a in range(3):
-                    ehat0[ls, 9 + a, c] = tot[a]
+            _nav_and_ba_total(est, i_gm, tot, ehat0[ls])
             ls -= 1
         e_next[:, :] = e_plus + dx[k]
 

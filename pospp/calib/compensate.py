@@ -47,7 +47,7 @@ from pospp.calib.replay import (
     replay_position_error,
 )
 from pospp.calib.solve import Calibration, fit_calibration
-from pospp.threads import Threads, map_in_threads
+from pospp.threads import map_in_threads
 
 
 @dataclass(frozen=True)
@@ -184,7 +184,7 @@ def compensate_legs(
     gyro_bias_by_leg: Mapping[int, NDArray] | None = None,
     gyro_bias_history: tuple[NDArray, NDArray] | None = None,
     history_hold: bool = True,
-    threads: Threads = 1,
+    threads: int = 1,
 ) -> tuple[dict[int, LegReplay], tuple[LegImprovement, ...]]:
     """Re-run B on every leg with the calibration applied; report the improvement.
 
@@ -284,7 +284,7 @@ class ModeInputs:
     replay: ReplayOptions
     forward: Any = None
     causal_prior_scale: float = CAUSAL_PRIOR_SCALE
-    threads: Threads = 1
+    threads: int = 1
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,7 @@ from pospp import earth, rotation
 from pospp.calib.segment import Leg
 from pospp.nav import strapdown
 from pospp.nav.error_model import transition_matrices
-from pospp.threads import Threads, map_in_threads
+from pospp.threads import map_in_threads
 from pospp.units import t_s_from_time_ns
 
 
@@ -264,7 +264,7 @@ def replay_leg(
 
 
 def replay_legs(imu: ImuSource, solution_a: SolutionA, legs: Sequence[Leg],
-                options: ReplayOptions | None = None, threads: Threads = 1
+                options: ReplayOptions | None = None, threads: int = 1
                 ) -> tuple[dict[int, LegReplay], tuple[str, ...]]:
     """B replayed over every leg (:func:`replay_leg` with ``options``' settings; defaults when
     None) on up to ``threads`` threads (B's kernels release the GIL): ({leg id: replay} in

@@ -47,7 +47,6 @@ from pospp.calib.tables import (
     legs_table,
     pairs_table,
 )
-from pospp.threads import Threads
 from pospp.units import DEG_PER_H_RADPS
 from pospp.units import DEG_PER_SQRT_H_RAD_PER_SQRT_S as _DPSH_RADPSQRTS
 
@@ -240,7 +239,7 @@ def calibrate_flight(
     gyro_gm_prior_sigma_dph: float | None = None,
     causal_prior_scale: float = CAUSAL_PRIOR_SCALE,
     made_replays: tuple[dict[int, LegReplay], tuple[str, ...]] | None = None,
-    threads: Threads = 1,
+    threads: int = 1,
     leg_refusals: Mapping[int, str] | None = None,
 ) -> CalibrationRun:
     """Run the double-strapdown calibration on one flight.

@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 from pospp.calib.replay import LegReplay
 from pospp.diagnose._linear import Problem, Term, f_test
 from pospp.diagnose.null_model import calibrated_p_value, few_parameter_p_value
-from pospp.threads import Threads, map_in_threads
+from pospp.threads import map_in_threads
 
 FEW_PARAMETERS = 3
 """Nested tests of up to this many parameters (the library's candidates) get the predictive
@@ -34,7 +34,7 @@ class NullCalibration:
 
     def __init__(self, prob: Problem, null_dv: Sequence[Sequence[NDArray]],
                  whitening: Callable[[tuple[LegReplay, ...]], tuple[float, float]] | None = None,
-                 threads: Threads = 1):
+                 threads: int = 1):
         self._threads = threads  # realisations refitted at once (the same fits at any number)
         if whitening is None:
             self.probs = [prob.with_data([np.asarray(d)[1:, 0:2] for d in real])

@@ -42,7 +42,7 @@ from pospp.diagnose.effects import ACCEL_SETTLING_S, effect_by_id
 from pospp.nav import filter as nav_filter
 from pospp.nav.filter import FilterResult
 from pospp.qc.stage import gate_check
-from pospp.threads import Threads, map_in_threads
+from pospp.threads import map_in_threads
 
 STEP_FRACTION = 1.0
 """Finite-difference step as a fraction of ``Effect.plausible_si`` (20 ms, 0.5 m, 1000 ppm,
@@ -129,7 +129,7 @@ def warmed(log, db_b_mps2, accel_settling_s: float):
 
 def rerun_signatures(log, nav, calib_run, config, effect_ids=RERUN_EFFECTS, *,
                      navigate: Navigate, accel_settling_s: float = ACCEL_SETTLING_S,
-                     threads: Threads = 1) -> dict[str, list[NDArray]]:
+                     threads: int = 1) -> dict[str, list[NDArray]]:
     """Per effect, per leg (legs in id order) the signature (M, 2, P), SI parameters.
 
     Parameters
@@ -193,7 +193,7 @@ def rerun_signatures(log, nav, calib_run, config, effect_ids=RERUN_EFFECTS, *,
 
 
 def signature_at(log, nav, calib_run, config, effect_id: str, p, *, navigate: Navigate,
-                 accel_settling_s: float = ACCEL_SETTLING_S, threads: Threads = 1
+                 accel_settling_s: float = ACCEL_SETTLING_S, threads: int = 1
                  ) -> list[NDArray]:
     """Gauss-Newton signature of a re-run effect at the estimate ``p`` (SI, (P,)).
 

@@ -214,18 +214,13 @@ class ExportFormat:
     """File extension of the default output name ``RUN_DIR/<trajectory|events>.<ext>``."""
     records: bool
     write: Callable[..., Path]
-    help: str
-    """One line for ``pospp export --help``."""
 
 
 EXPORT_FORMATS: dict[str, ExportFormat] = {
-    "sbet": ExportFormat("out", True, write_sbet,
-                         "Applanix SBET binary (*.out, as POSPac names it)"),
-    "csv": ExportFormat("csv", True, write_csv, "GPS week/seconds of week, UTC, every column"),
-    "geojson": ExportFormat("geojson", False, write_geojson,
-                            "the track, the legs and the events (RFC 7946)"),
-    "kml": ExportFormat("kml", False, write_kml,
-                        "the same features as KML Placemarks, clamped to the ground"),
+    "sbet": ExportFormat("out", True, write_sbet),  # SBET files are *.out, as POSPac names them
+    "csv": ExportFormat("csv", True, write_csv),
+    "geojson": ExportFormat("geojson", False, write_geojson),
+    "kml": ExportFormat("kml", False, write_kml),
 }
 """The export formats by name (docs/formats.md, "Exports"): a new one is a row here, its
 writer, its test and its doc line."""
