@@ -127,7 +127,7 @@ def _offset_and_lever(q: QcInputs, _: list[Check]) -> list[Check]:
     """The ``gnss_time_offset`` and ``lever_arm`` checks: the turns' offset (seconds measured
     again, :func:`_offset_again`) and A's lever-arm estimate, each alone; when either fails
     below ``TIME_OFFSET_MAX_S``, both from the joint estimate."""
-    t, w, sol, v_t, v_n, config = q.t, q.log.imu.w_ib_b_radps, q.sol, q.v_t, q.v_n, q.config
+    t, w, sol, v_t, v_n, config = q.t_s, q.log.imu.w_ib_b_radps, q.sol, q.v_t_s, q.v_n_mps, q.config
     joint, renavigate, lev = q.joint, q.renavigate, q.lever
     out: list[Check] = []
     v_imu = v_n - _lever_velocity(t, w, sol, v_t, config.gnss.lever_arm_m)
@@ -227,10 +227,11 @@ def _innovation_checks(rec: Any, gate_probability: float) -> list[Check]:
 class QcInputs:
     """What the checks read: a run's stage results and the series derived from them once.
 
-    Times ``t_s`` from the run epoch (the first IMU stamp) [s]; IMU in body FRD (rad/s,
-    m/s^2); GNSS velocities ``v_n`` at ``v_t`` in NED [m/s] (the track's own differences at
-    its midpoints when the log has no velocity topic); ``r_n`` the fixes in NED about the
-    first one [m]."""
+    Times from the run epoch (the first IMU stamp) [s]; IMU in body FRD (rad/s, m/s^2); GNSS
+    velocities ``v_n_mps`` at ``v_t_s`` in NED (the track's own differences at its midpoints
+    when the log has no velocity topic); ``r_n_m`` the fixes in NED about the first one;
+    ``static`` the IMU samples at rest; ``lat0_rad``, ``h0_m`` the first fix's (A's alignment's
+    without one); ``dt_s`` the median IMU interval."""
 
     log: FlightLog
     nav: FilterResult
@@ -240,17 +241,17 @@ class QcInputs:
     lever_estimate: LeverArmEstimate | None
     joint: Callable[[], LeverTime | None] | None
     renavigate: Callable[[float], FilterResult] | None
-    t: NDArray
-    fix_t: NDArray
-    vel_t: NDArray
+    t_s: NDArray
+    fix_t_s: NDArray
+    vel_t_s: NDArray
     static: NDArray
-    lat0: float
-    h0: float
-    dt: float
+    lat0_rad: float
+    h0_m: float
+    dt_s: float
     sol: NavSolution
-    r_n: NDArray
-    v_t: NDArray
-    v_n: NDArray
+    r_n_m: NDArray
+    v_t_s: NDArray
+    v_n_mps: NDArray
 
     @property
     def lever(self) -> LeverArmEstimate | None:
@@ -300,29 +301,29 @@ def _data_complete(q: QcInputs, _: list[Check]) -> list[Check]:
     window = None if cin.end_s is None else cin.end_s - (cin.start_s or 0.0)
     return [qc.data_complete(bool(q.log.complete), len(errors),
                              errors[0].message if errors else "",
-                             float(q.t[-1] - q.t[0]) if q.t.shape[0] else 0.0, window)]
+                             float(q.t_s[-1] - q.t_s[0]) if q.t_s.shape[0] else 0.0, window)]
 
 
 def _gravity(q: QcInputs, _: list[Check]) -> list[Check]:
     f = q.log.imu.f_ib_b_mps2
     return [qc.gravity_direction(f, q.static, q.c_bs, q.config.input.sensor_frame),
-            qc.gravity_magnitude(f, q.static, q.lat0, q.h0,
-                                 window_n=int(round(1.0 / q.dt)) if q.dt > 0 else 1)]
+            qc.gravity_magnitude(f, q.static, q.lat0_rad, q.h0_m,
+                                 window_n=int(round(1.0 / q.dt_s)) if q.dt_s > 0 else 1)]
 
 
 def _earth_rate(q: QcInputs, _: list[Check]) -> list[Check]:
     noise = q.config.imu.tuning().noise()
     sb = math.hypot(noise.gyro_turn_on_sigma_radps, noise.gyro_gm_sigma_radps) \
         or noise.gyro_bias_sigma_radps
-    return [qc.earth_rate(q.log.imu.w_ib_b_radps, q.log.imu.f_ib_b_mps2, q.static, q.dt,
-                          q.lat0, gyro_bias_sigma_radps=sb,
+    return [qc.earth_rate(q.log.imu.w_ib_b_radps, q.log.imu.f_ib_b_mps2, q.static, q.dt_s,
+                          q.lat0_rad, gyro_bias_sigma_radps=sb,
                           gyro_arw_radpsqrts=noise.gyro_arw_radpsqrts)]
 
 
 def _gnss_jumps(q: QcInputs, _: list[Check]) -> list[Check]:
-    vel = (q.vel_t, q.log.vel.v_n_mps) if len(q.vel_t) >= 2 else \
+    vel = (q.vel_t_s, q.log.vel.v_n_mps) if len(q.vel_t_s) >= 2 else \
         (q.nav.forward.t_s, q.nav.forward.v_n_mps)
-    return [qc.gnss_jumps(q.fix_t, q.r_n, *vel)]
+    return [qc.gnss_jumps(q.fix_t_s, q.r_n_m, *vel)]
 
 
 def _innovations(q: QcInputs, _: list[Check]) -> list[Check]:
@@ -334,7 +335,7 @@ def _innovations(q: QcInputs, _: list[Check]) -> list[Check]:
 def _mounting_yaw(q: QcInputs, so_far: list[Check]) -> list[Check]:
     """``mounting_yaw`` (A's heading against the GNSS course); the ``lever_arm`` check again,
     naming the mounting when its estimate is the configured lever arm rotated."""
-    head = mounting.heading_offset(q.v_t, q.v_n, q.sol.t_s, q.sol.q_nb)
+    head = mounting.heading_offset(q.v_t_s, q.v_n_mps, q.sol.t_s, q.sol.q_nb)
     mount = mounting.mounting_yaw(head, q.config.input.mounting_rpy_deg)
     lev = q.lever
     if lev is None:
