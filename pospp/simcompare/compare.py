@@ -225,22 +225,24 @@ def _wls(h: NDArray, g: NDArray, w: NDArray):
 
 def _refine(effect: SimEffect, names: list[str], cols: list[int], h: NDArray, g: NDArray,
             w: NDArray, fit, base: FlightStats, simulate: SimulateFn, imu: ImuErrorModel,
-            gnss: GnssModel, ctx: EffectContext):
+            gnss: GnssModel, ctx: EffectContext, u_rest: NDArray | None = None):
     """Fit u on the simulated statistic itself, not on its slope at zero: Broyden's secant
     method. With S(u) the simulated fit statistics of the model with u added and S(0) the
     base's, solve S(u) - S(0) = g (weighted least squares) by simulating at the current
     u_k, updating the slope along the last step (H += (dS - H du) du^T / du^T du) and
     stepping u_{k+1} = u_k + WLS(H, g - (S(u_k) - S(0))), for ``effect.refine`` iterations
-    at most (stops when the step is below a tenth of its sigma). Returns the iterate with
-    the least weighted residual, with the covariance (H^T W H)^-1 of the local slope there
-    and the chi-square of u against zero (u^T H^T W H u)."""
+    at most (stops when the step is below a tenth of its sigma). ``u_rest``: the full
+    parameter vector the fitted ``cols`` are set in (a grid value; default zeros). Returns
+    the iterate with the least weighted residual sum(w r^2): (that residual, u, the
+    covariance (H^T W H)^-1 of the local slope there, the chi-square of u against zero
+    u^T H^T W H u); the residual is NaN when no iterate was simulated (the fit returned)."""
     p = len(effect.params)
     s0 = np.array([base.stats[s].value for s in names])
     u_prev, s_prev = np.zeros(len(cols)), s0
     u_k, cov_k, _ = fit
     best = None
     for _ in range(effect.refine):
-        full = np.zeros(p)
+        full = np.zeros(p) if u_rest is None else np.array(u_rest, dtype=float)
         full[cols] = u_k
         sim = simulate(*effect.apply(imu, gnss, full, ctx))
         s_k = np.array([sim.stats[s].value if s in sim.stats else np.nan for s in names])
@@ -261,7 +263,7 @@ def _refine(effect: SimEffect, names: list[str], cols: list[int], h: NDArray, g:
         if np.all(np.abs(step) < 0.1 * np.sqrt(np.diag(cov_k))):
             break
         u_prev, s_prev, u_k = u_k, s_k, u_k + step
-    return fit if best is None else best[1:]
+    return (np.nan, *fit) if best is None else best
 
 
 def _grid_fit(effect: SimEffect, names: list[str], g: NDArray, w: NDArray, base: FlightStats,
@@ -269,7 +271,8 @@ def _grid_fit(effect: SimEffect, names: list[str], g: NDArray, w: NDArray, base:
     """Fit of an effect with a parameter the statistics are far from linear in (``grid``:
     its index and trial values, SI): at each value, the other parameters' slopes by one trial
     simulation each (with the grid parameter at that value) and their weighted least squares,
-    re-simulated; the value whose re-simulation leaves the least weighted residual
+    re-simulated (for an effect with ``refine``: the best of the secant iterations from it,
+    :func:`_refine`); the value whose re-simulation leaves the least weighted residual
     sum(w r^2) of the fit statistics is kept. Its sigma: the
     Delta chi^2 = 1 half-width of the parabola through the residuals at the best value and
     its two neighbours (NaN at the grid's ends)."""
@@ -317,7 +320,13 @@ def _grid_point(effect: SimEffect, v: float, names: list[str], g: NDArray, w: ND
     if fit is None:
         return None
     u = np.zeros(p)
-    u[free], u[jg] = fit[0], v
+    u[jg] = v
+    if effect.refine:  # secant iterations from the trial slope; their best iterate
+        res, *fit = _refine(effect, names, free, h, g, w, fit, base, simulate, imu, gnss,
+                            ctx, u_rest=u)
+        if np.isfinite(res):
+            return res, tuple(fit)
+    u[free] = fit[0]
     sim = simulate(*effect.apply(imu, gnss, u, ctx))  # the fit, re-simulated
     r = g - np.array([sim.stats[s].value - base.stats[s].value if s in sim.stats
                       else np.nan for s in names])
@@ -374,7 +383,7 @@ def _fit(effect: SimEffect, gap: dict[str, Gap], base: FlightStats, simulate: Si
         h[:, k] = [(sim.stats[s].value - base.stats[s].value) / u[j] for s in names]
     fit = _wls(h, g, w)
     if fit is not None and effect.refine:
-        fit = _refine(effect, names, cols, h, g, w, fit, base, simulate, imu, gnss, ctx)
+        fit = _refine(effect, names, cols, h, g, w, fit, base, simulate, imu, gnss, ctx)[1:]
     if fit is None or cov0 is None:
         return fit
     uc, covc, chi = fit
