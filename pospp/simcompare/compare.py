@@ -335,9 +335,12 @@ def _grid_point(effect: SimEffect, v: float, names: list[str], g: NDArray, w: ND
 
 
 def _fit_names(effect: SimEffect, gap: dict[str, Gap]) -> list[str]:
-    """The statistics an effect's fit uses: its ``fit_first`` when the flight has them, else
-    its ``fit_stats`` (those with a gap)."""
+    """The statistics an effect's fit uses: its ``fit_first`` when the flight has them, its
+    ``fit_censored`` when one of them differs significantly, else its ``fit_stats`` (those
+    with a gap)."""
+    censored = [s for s in effect.fit_censored if s in gap]
     return ([s for s in effect.fit_first if s in gap]
+            or (censored if any(gap[s].significant for s in censored) else [])
             or [s for s in effect.fit_stats if s in gap])
 
 

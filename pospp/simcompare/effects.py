@@ -172,6 +172,11 @@ class SimEffect:
     """Fit statistics that, when the flight has them, are used alone (the others are weaker
     readings of the same parameter: e.g. the static gyro Allan variance for
     ``bias_instability``, which is linear in the added variance)."""
+    fit_censored: tuple[str, ...] = ()
+    """Fit statistics that, when one of them differs significantly, are used alone: the
+    others are then censored readings that are neither monotone nor smooth in u (a coloured
+    GNSS error that A's gate rejects records of: the NIS and the lag-1 correlation of the
+    records used, ``gnss_pos_gated``)."""
     refine: int = 0
     """Secant iterations on the simulated statistic after the trial-slope fit (0: none):
     for effects that A's statistics follow non-linearly (scale factors, whose estimates in A
@@ -395,12 +400,12 @@ LIBRARY: tuple[SimEffect, ...] = (
             _mounting),
     # the position error at 60 s (the velocity's and the time fixed; coloured_tau_library
     # fits all three)
-    _effect("coloured_gnss", ("gnss_pos_lag1", "gnss_pos_nis"),
-            ("gnss_pos_lag1", "gnss_pos_nis", *_norm("pos"),
+    _effect("coloured_gnss", ("gnss_pos_lag1", "gnss_pos_nis", "gnss_pos_gated"),
+            ("gnss_pos_lag1", "gnss_pos_nis", "gnss_pos_gated", *_norm("pos"),
              *(f"gnss_pos_lb_{a}" for a in "ned"), "gnss_pos_lowband"),
             (0.04, 0.0, 0.0025), (True, False, True), _coloured,
             grid=(1, (0.0,)), fixed=(2,), offset=(0.0, COLOURED_GNSS_TAU_S, 0.0),
-            refine=COLOURED_REFINE),
+            refine=COLOURED_REFINE, fit_censored=("gnss_pos_gated",)),
     _effect("bias_instability", ("imu_avar_gyro_static", "a_gyro_bias_wander",
                                  "imu_avar_gyro_10s", *_LEGS),
             ("imu_avar_gyro_static", "a_gyro_bias_wander", "imu_avar_gyro_10s",
@@ -422,7 +427,7 @@ def coloured_tau_library(taus_s: tuple[float, ...] = TAU_GRID_S) -> tuple[SimEff
     variances are fitted and re-simulated, and the best is kept). Not the default: on the
     hidden-error flight (0.3 m at 60 s) it chose 30 s and 0.19 m (docs/compare_sim.md)."""
     grid = (1, tuple(float(t) - COLOURED_GNSS_TAU_S for t in taus_s))
-    fit = ("gnss_pos_lag1", "gnss_pos_nis", "gnss_vel_lag1", "gnss_vel_nis")
+    fit = ("gnss_pos_lag1", "gnss_pos_nis", "gnss_pos_gated", "gnss_vel_lag1", "gnss_vel_nis")
     vel = ("gnss_vel_lag1", "gnss_vel_nis", *_norm("vel"),
            *(f"gnss_vel_lb_{a}" for a in "ned"), "gnss_vel_lowband")
     return tuple(replace(e, grid=grid, fixed=(), fit_stats=fit, explains=(*e.explains, *vel))

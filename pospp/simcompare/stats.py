@@ -16,6 +16,12 @@ Statistics (name: series, unit)
 ``gnss_pos_nis`` / ``gnss_vel_nis``
     Normalised innovation squared of the GNSS position / velocity records A used (3 dof;
     3 when A's model matches the data).
+``gnss_pos_gated``
+    Share of the GNSS position records A's innovation gate rejected (batch means; 1 - the
+    gate probability, 1e-4, when A's model matches the data). Under a GNSS error several
+    times its reported sigma A's NIS is no measure of its size: the gate drops the largest
+    innovations and, after ``gate_reset_s`` of them, resets, so the NIS of the records used
+    is neither monotone nor smooth in the error's level, while the share gated rises with it.
 ``gnss_pos_lag1`` / ``gnss_vel_lag1``
     Whiteness: z_k z_k-1 averaged over N and E, z the horizontal innovation divided by its
     flight RMS, for consecutive records (lag-1 autocorrelation; 0 for white innovations).
@@ -113,7 +119,14 @@ from numpy.typing import NDArray
 from scipy.ndimage import uniform_filter1d
 
 from pospp import rotation
-from pospp.nav.filter import BiasHistory, FilterResult, NavSolution
+from pospp.nav.filter import (
+    STATUS_GATED,
+    STATUS_RESET,
+    STATUS_USED,
+    BiasHistory,
+    FilterResult,
+    NavSolution,
+)
 from pospp.units import G0_MPS2
 
 __all__ = ["FlightStats", "Stat", "STAT_UNITS", "flight_stats", "dominant_frequency_hz",
@@ -146,6 +159,7 @@ STATIC_MIN_PRODUCTS = 5
 
 STAT_UNITS = {
     "gnss_pos_nis": "-", "gnss_vel_nis": "-", "gnss_pos_lag1": "-", "gnss_vel_lag1": "-",
+    "gnss_pos_gated": "-",
     "gnss_vel_dot_accel": "m2/s3", "imu_hf_accel_var": "m2/s4", "imu_hf_gyro_var": "rad2/s2",
     "att_offset_roll": "rad", "att_offset_pitch": "rad", "att_offset_yaw": "rad",
     "a_gyro_bias_wander": "rad2/s2",
@@ -371,6 +385,16 @@ def _innov(nav: FilterResult, kind: int) -> tuple[NDArray, NDArray, NDArray]:
     return inn.t_s[m], inn.nis[m], inn.dz_ned[m]
 
 
+def _gated_share(nav: FilterResult, t0: float, t1: float, n_blocks: int) -> Stat:
+    """``gnss_pos_gated``: per position record after the filter's start, 1 when gated, 0
+    when used (or used after a reset); batch means."""
+    inn = nav.innovations
+    assert inn is not None  # the filter's result of a run with GNSS updates
+    m = (inn.kind == 0) & np.isin(inn.status, (STATUS_USED, STATUS_GATED, STATUS_RESET))
+    return _batch(inn.t_s[m], (inn.status[m] == STATUS_GATED).astype(float), t0, t1,
+                  n_blocks)
+
+
 def _lag1(t: NDArray, dz: NDArray) -> tuple[NDArray, NDArray]:
     if t.size < 3:
         return t[:0], t[:0]
@@ -458,6 +482,7 @@ def _innovation_stats(nav: FilterResult, sol: NavSolution, t0: float, t1: float,
     channel, Ljung-Box per channel, low-band share (module docstring)."""
     out: dict[str, Stat] = {}
     acc = np.gradient(sol.v_n_mps, sol.t_s, axis=0)
+    out["gnss_pos_gated"] = _gated_share(nav, t0, t1, n_blocks)
     for name, kind in (("pos", 0), ("vel", 1)):
         t, nis, dz = _innov(nav, kind)
         out[f"gnss_{name}_nis"] = _batch(t, nis, t0, t1, n_blocks)

@@ -2,6 +2,7 @@
 
     python tests/benchmarks/bench_compare_sim.py null N            # nulls, N seeds per scale
     python tests/benchmarks/bench_compare_sim.py limits [SEEDS]    # each effect's sigma -> limit
+    python tests/benchmarks/bench_compare_sim.py iterate [SEEDS] [NAMES]  # the limit at itself
     python tests/benchmarks/bench_compare_sim.py effects N [NAMES] # each effect at 3 x its limit
     python tests/benchmarks/bench_compare_sim.py outsider N
     python tests/benchmarks/bench_compare_sim.py time MCAP PIPELINE [ROUNDS]  # vs pospp run
@@ -25,6 +26,15 @@ statistic that the Holm test over the comparison's ~50 statistics at 1 % calls s
 the sigma measured at an injected size large enough to be named (``limits``); variance-type
 effects (vibration, coloured GNSS error, bias instability) have it on the variance: the RMS
 limit is sqrt(4 sigma_var).
+
+A variance-type level whose sigma grows with its size (the bias instability: the Allan
+variance of 300 s at rest scatters in proportion to the drift's variance, about 19 % of it,
+above a floor set by the white noise) has its limit where the sigma is taken at the limit
+itself (``iterate``): the size s at which the fitted variance is 4 of its own sigmas above
+the prior's, s^2 = s_prior^2 + 4 sigma_var(s), by the iteration s <- sqrt(s_prior^2 + 4
+sigma_var(s)) from ``LIMITS`` (s_prior: the configured grade's level, 0 for an effect the
+base model has none of). It is measured per noise scale (``SCALE_LIMITS``): the white
+noise's floor differs ninefold in variance between the two.
 """
 
 from __future__ import annotations
@@ -194,13 +204,55 @@ LIMITS: dict[str, float] = {
 }
 """Effect -> detection limit (the injected size's unit), from ``limits`` (docs/compare_sim.md):
 the larger of the two noise scales'; 3 seeds."""
+SCALE_LIMITS: dict[str, dict[float, float]] = {
+    # iterate 3 bias_instability: s^2 = 0.5^2 + 4 sigma_var(s) at each scale
+    "bias_instability": {SCALES[0]: 1.2, SCALES[1]: 5.9},
+}
+"""Effect -> noise scale -> detection limit where it is measured per scale (``iterate``)."""
+PRIORS = {"bias_instability": float(np.mean(imu_grade("paper_flight").gyro_gm_sigma_dph))}
+"""The configured grade's level of a variance-type effect the base model has [its unit]."""
+
+
+def limit_at(name: str, scale: float) -> float:
+    """The detection limit of ``name`` at the noise ``scale``."""
+    return SCALE_LIMITS.get(name, {}).get(scale, LIMITS[name])
+
+
+def mode_iterate(seeds: int, names: list[str], rounds: int = 6) -> None:
+    """Per scale, s <- sqrt(s_prior^2 + 4 sigma_var(s)) (module docstring; sigma_var from
+    the median over ``seeds`` of the reported upper 1-sigma distance d: (s + d)^2 - s^2) for
+    variance-type effects, s <- 4 sigma(s) for the others, until it moves by under 5 %."""
+    for name in names:
+        var = name in ("vibration", "coloured_gnss", "bias_instability")
+        prior = PRIORS.get(name, 0.0)
+        for scale in SCALES:
+            s = limit_at(name, scale)
+            for k in range(rounds):
+                sig = []
+                for seed in range(seeds):
+                    comp, _ = run(200 + seed, scale, name, s)
+                    ok, val, sg = _reading(comp, name)
+                    print(f"  {name} {s:.4g} scale {scale:.2f} seed {200 + seed}: named {ok} "
+                          f"{np.round(val, 4)} +- {np.round(sg, 4)}", flush=True)
+                    if ok:
+                        sig.append(((val[0] + sg[0]) ** 2 - val[0] ** 2) if var else sg[0])
+                if not sig:
+                    print(f"| {name} | {scale:.2f} | round {k} | {s:.4g} | not named |")
+                    break
+                q = float(np.median(sig))
+                new = float(np.sqrt(prior ** 2 + 4.0 * q)) if var else 4.0 * q
+                print(f"| {name} | {scale:.2f} | round {k} | {s:.4g} | sigma "
+                      f"{q:.4g} | -> {new:.4g} |", flush=True)
+                if abs(new - s) < 0.05 * s:
+                    break
+                s = new
 
 
 def mode_effects(n: int, names: list[str]) -> None:
     for name in names:
-        size = 3.0 * LIMITS[name]
-        truth = np.asarray(EFFECTS[name][4](size))
         for scale in SCALES:
+            size = 3.0 * limit_at(name, scale)
+            truth = np.asarray(EFFECTS[name][4](size))
             named = within = 0
             for seed in range(n):
                 comp, dt = run(300 + seed, scale, name, size)
@@ -257,5 +309,5 @@ if __name__ == "__main__":
     arg = int(sys.argv[2]) if len(sys.argv) > 2 else 3
     names = sys.argv[3:] or list(EFFECTS)
     {"null": lambda: mode_null(arg), "limits": lambda: mode_limits(arg, names),
-     "effects": lambda: mode_effects(arg, names), "outsider": lambda: mode_outsider(arg)
-     }[mode]()
+     "effects": lambda: mode_effects(arg, names), "outsider": lambda: mode_outsider(arg),
+     "iterate": lambda: mode_iterate(arg, names)}[mode]()

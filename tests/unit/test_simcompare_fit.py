@@ -59,3 +59,70 @@ def test_coloured_gnss_fit_reads_a_concave_statistic_at_its_size(sigma_m):
         assert first.size[0] < 0.7 * sigma_m
     else:
         assert first.size[0] == pytest.approx(sigma_m, rel=0.01)
+
+
+GATED_KNEE_M2 = 0.08
+
+
+def _regime_stats(q_m2: float, draw_jump_m2: float) -> FlightStats:
+    """A flight whose GNSS position error (horizontal variance q) is several times its
+    reported sigma: past ``draw_jump_m2`` (where this draw's filter starts to reset) the
+    NIS and lag-1 correlation of the records used jump (NIS 18, lag-1 -0.1), below it they
+    rise; the share of position records gated rises smoothly, 1 - exp(-q / 0.08)."""
+    if q_m2 < draw_jump_m2:
+        nis, lag = NIS_0 + NIS_GAIN * q_m2, LAG_0 + 6.0 * q_m2
+    else:
+        nis, lag = 18.0, -0.1
+    return FlightStats({"gnss_pos_nis": Stat(nis, 0.5, np.inf),
+                        "gnss_pos_lag1": Stat(lag, 0.06, np.inf),
+                        "gnss_pos_gated": Stat(1.0 - np.exp(-q_m2 / GATED_KNEE_M2), 0.04,
+                                               np.inf)}, np.nan)
+
+
+def test_coloured_gnss_fit_uses_the_gated_share_when_the_gate_censors():
+    """When the share of gated position records differs significantly, the coloured GNSS
+    error is fitted on it alone: the NIS and lag-1 correlation of the records used are then
+    censored and jump where the simulated draw's filter starts to reset (the Monte Carlo's
+    seed 302 at 3 x noise: dS(NIS) 3.5 at 0.033 m^2, 15.3 at 0.068 m^2, measured 6.5 at
+    0.117 m^2), which pulled the fit to the jump (0.18-0.20 m for 0.342 m). Here the measured
+    flight (0.342 m) is in the other regime than the simulation's draw past 0.04 m^2: the
+    fit reads 0.342 m within 1 %, and on NIS and lag-1 (the old fit) it stops at the jump."""
+    q = 0.342 ** 2
+    measured = _regime_stats(q, draw_jump_m2=1.0)  # this draw did not reset
+
+    def simulate(imu, gnss, draw=0):
+        return _regime_stats(gnss.pos_gm_sigma_m[0] ** 2, draw_jump_m2=0.04)
+
+    lib = tuple(e for e in LIBRARY if e.name == "coloured_gnss")
+    step = compare_flights(measured, simulate, imu_grade("tactical"), GnssModel(),
+                           library=lib, max_steps=1).steps[0]
+    assert step.effect == "coloured_gnss"
+    assert step.size[0] == pytest.approx(0.342, rel=0.01)
+    old = (replace(lib[0], fit_censored=()),)
+    first = compare_flights(measured, simulate, imu_grade("tactical"), GnssModel(),
+                            library=old, max_steps=1).steps[0]
+    assert first.effect == "coloured_gnss" and first.size[0] < 0.2
+
+
+def test_gated_share_counts_the_position_records_after_the_start():
+    """``gnss_pos_gated``: the share of position records the gate rejected among those used,
+    gated or used after a reset (records before the filter's start and velocity records left
+    out), batch means over the blocks."""
+    from types import SimpleNamespace
+
+    from pospp.nav.filter import InnovationRecord
+    from pospp.simcompare.stats import _gated_share
+
+    t = np.repeat(np.arange(40.0), 2)
+    kind = np.tile([0, 1], 40)  # position, velocity
+    status = np.zeros(80, int)
+    status[0:10:2] = 3  # five position records before the start
+    status[10:50:4] = 1  # ten of the next twenty position records gated
+    status[1::8] = 1  # velocity records gated: not counted
+    status[50] = 2  # used after a reset
+    inn = InnovationRecord(t, kind, status, np.ones(80), np.zeros((80, 3)))
+    st = _gated_share(SimpleNamespace(innovations=inn), 0.0, 39.0, 5)
+    pos = (kind == 0) & (status != 3)
+    share = (status[pos] == 1).mean()
+    assert st.value == pytest.approx(share) and share == pytest.approx(10 / 35)
+    assert st.dof == 4 and st.sigma > 0
