@@ -126,3 +126,31 @@ def test_gated_share_counts_the_position_records_after_the_start():
     share = (status[pos] == 1).mean()
     assert st.value == pytest.approx(share) and share == pytest.approx(10 / 35)
     assert st.dof == 4 and st.sigma > 0
+
+
+def test_screened_fit_uses_the_chosen_components_own_statistics():
+    """A screened effect (``accel_bias_ramp``) is fitted on the statistics of the components
+    its identity fit chose: an x ramp's trial moved this draw's vertical trend by a
+    hundredth of it (a cross-coupling the measured draw does not have), and that trend's A
+    sigma (4e-8 m/s^3) is 350 times smaller than the x trend's, so on all three statistics
+    the fit read 25 000 ug/h as 1 900 ug/h, not admissible (the Monte Carlo's seed 304 at
+    3 x noise: 21 900 ug/h read as 3 400, not named); on its own statistic, the truth."""
+    from pospp.units import UG_MPS2
+
+    ramp_mps3 = 25000.0 * UG_MPS2 / 3600.0
+    sig = {"a_accel_trend_x": 1.4e-5, "a_accel_trend_y": 1.4e-5, "a_accel_trend_z": 4e-8}
+
+    def trends(x_mps3: float, cross: float) -> FlightStats:
+        val = {"a_accel_trend_x": x_mps3, "a_accel_trend_y": 0.0,
+               "a_accel_trend_z": cross * x_mps3}
+        return FlightStats({k: Stat(v, sig[k], np.inf) for k, v in val.items()}, np.nan)
+
+    def simulate(imu, gnss, draw=0):
+        return trends(imu.accel_bias_drift_ugph[0] * UG_MPS2 / 3600.0, 0.01)
+
+    measured = trends(ramp_mps3, 0.0)
+    lib = tuple(e for e in LIBRARY if e.name == "accel_bias_ramp")
+    step = compare_flights(measured, simulate, imu_grade("tactical"), GnssModel(),
+                           library=lib, max_steps=1).steps[0]
+    assert step.effect == "accel_bias_ramp", [(s.target, s.effect) for s in [step]]
+    assert step.size == pytest.approx((25000.0, 0.0, 0.0), rel=1e-6)
