@@ -154,3 +154,35 @@ def test_screened_fit_uses_the_chosen_components_own_statistics():
                            library=lib, max_steps=1).steps[0]
     assert step.effect == "accel_bias_ramp", [(s.target, s.effect) for s in [step]]
     assert step.size == pytest.approx((25000.0, 0.0, 0.0), rel=1e-6)
+
+
+def test_score_charges_an_effect_for_the_sigmas_it_widens():
+    """The candidate kept is the one with the least -2 log-likelihood of the gaps after:
+    sum z^2 + ln(sigma_after^2 / sigma_before^2) + 2 per parameter. The Monte Carlo's seed 301
+    at 3 x noise (a 0.72 deg roll and 1.43 deg yaw mounting): the mounting explains the roll
+    and yaw offsets (z 71.6 -> 0.1, 20.4 -> 0.2, sigmas unchanged); a random gyro drift
+    widens their sigmas by its spread between draws (roll 1.7e-4 -> 3.1e-3 rad, yaw 1.25e-3
+    -> 0.18 rad) and leaves the roll at z 4.0. Over all the statistics the step moved, sum
+    z^2 + 2 k was 38.3 for the drift and 61.3 for the mounting, and the drift was named;
+    the log terms (57.9 and 1.3) reverse it. Here, the three attitude offsets: a gap at a
+    widened sigma costs its log term, a gap at an unchanged sigma only its z^2."""
+    from pospp.simcompare.compare import Gap, _score
+
+    def gap(z, sigma):
+        return Gap("", 0.0, 0.0, z * sigma, sigma, z, 0.0, False)
+
+    before = {"att_offset_roll": gap(71.6, 1.74e-4), "att_offset_yaw": gap(20.4, 1.25e-3),
+              "att_offset_pitch": gap(0.6, 5.61e-3)}
+    mounting = {"att_offset_roll": gap(0.1, 1.74e-4), "att_offset_yaw": gap(0.2, 1.25e-3),
+                "att_offset_pitch": gap(0.6, 5.61e-3)}
+    drift = {"att_offset_roll": gap(4.0, 3.10e-3), "att_offset_yaw": gap(0.1, 1.80e-1),
+             "att_offset_pitch": gap(0.5, 7.44e-3)}
+    moved = set(before) | {"gnss_vel_nis"}  # moved, but in neither: no term
+    assert _score(mounting, before, moved, 2) == pytest.approx(0.01 + 0.04 + 0.36 + 4.0)
+    widen = 2 * np.log(3.10e-3 / 1.74e-4) + 2 * np.log(0.18 / 1.25e-3) + 2 * np.log(
+        7.44e-3 / 5.61e-3)
+    assert _score(drift, before, moved, 1) == pytest.approx(16.0 + 0.01 + 0.25 + 2.0 + widen)
+    assert widen > 16.0
+    # statistics not moved by the step's candidates are not scored
+    assert _score(drift, before, {"att_offset_pitch"}, 1) == pytest.approx(
+        0.25 + 2 * np.log(7.44e-3 / 5.61e-3) + 2.0)
