@@ -450,8 +450,8 @@ def _candidate(e: SimEffect, measured: FlightStats, cur: dict[str, Gap], sim: Fl
     if e.ensemble:  # the model's own spread between draws (module docstring)
         spread = ensemble_spread(simulate, imu2, gnss2, sim2, e.ensemble)
     after = gaps(measured, sim2, alpha=alpha, spread=spread)
-    return (_score(after, cur, moved, np.count_nonzero(u)), e, u, cov, imu2, gnss2, sim2, after,
-            spread, jf)
+    score = _score(after, cur, moved, int(np.count_nonzero(u)))
+    return score, e, u, cov, imu2, gnss2, sim2, after, spread, jf
 
 
 def _score(after: dict[str, Gap], before: dict[str, Gap], moved: set[str], k: int) -> float:
