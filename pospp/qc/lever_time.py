@@ -27,7 +27,8 @@ walked to in steps of ``LEVER_TIME_STEP_S``, and the least-squares parabola thro
 lowest and two steps either side gives tau and its sigma (Delta J = 1, scaled by the reduced
 chi-square at the minimum when above 1: a receiver noisier than it reports; the parabola's
 own fit error added). The lever arm at tau is l interpolated at tau; its sigma at a known
-offset is the pass's own, and with tau's uncertainty
+offset is the pass's own (times the same sqrt of the reduced chi-square when above 1; the
+apparent lever arm's likewise), and with tau's uncertainty
 ``var l_i = sigma_l,i^2 + (dl_i / d tau)^2 sigma_tau^2``,
 ``corr(l_i, tau) = (dl_i / d tau) sigma_tau / sd(l_i)``.
 
@@ -309,6 +310,9 @@ def _joint(passes: list[LeverPass], prof: tuple[float, float, float, int, float]
         tau, c2, j_min, n, sig_fit = prof
         red = j_min / (3.0 * n) if n else math.nan
         sig_tau = math.sqrt(max(1.0, red if math.isfinite(red) else 1.0) / c2 + sig_fit ** 2)
+    # a receiver noisier than it reports widens the lever arm's sigmas as it does tau's
+    widen = math.sqrt(max(1.0, red)) if math.isfinite(red) else 1.0
+    sig_given = sig_given * widen
     fit2 = [np.polyfit(s, lev[:, i], 2) for i in range(3)]
     lever_tau = np.array([np.polyval(f, tau) for f in fit2])
     # the apparent lever arm: the pass at 0 (its own sigma), else the profile's at 0
@@ -320,8 +324,8 @@ def _joint(passes: list[LeverPass], prof: tuple[float, float, float, int, float]
         corr = np.where(np.isfinite(var), slope * sig_tau / np.sqrt(var), np.sign(slope))
     tau_b = (tau + (cfg[0] - lever_tau[0]) / slope[0]) if abs(slope[0]) > 1e-3 else math.inf
     return LeverTime(float(tau), float(sig_tau), lever_tau, np.sqrt(var), sig_given, apparent,
-                     np.asarray(p0.sigma_b_m, dtype=float), slope, corr, cfg, float(tau_b),
-                     float(red), n)
+                     np.asarray(p0.sigma_b_m, dtype=float) * widen, slope, corr, cfg,
+                     float(tau_b), float(red), n)
 
 
 @dataclass(frozen=True)

@@ -225,3 +225,26 @@ def test_where_the_flight_cannot_separate_them_the_offset_is_the_apparent_lever_
     assert not bad.passed and bad.value == pytest.approx(0.03)
     assert "forward lever arm + v x time offset = -1.80 +- 0.02 m at 60 m/s" in bad.suggestion
     assert "cannot tell them apart" in bad.suggestion
+
+
+def test_a_noisier_receiver_widens_the_lever_arms_sigma_as_tau_s():
+    """Records whose NIS averages 4 times its 3 dof (reduced chi-square 4: a receiver noisier
+    than it reports, or a coloured GNSS error) widen the lever arm's sigmas by sqrt(4), as
+    they do tau's: a vertical lever arm 6 of the passes' own sigmas (0.3 m, 0.05 m) from the
+    configured one is 3 of the widened ones and is not read (it was named `lever_arm`: the Monte Carlo's
+    0.342 m coloured GNSS error at 3 x noise, reduced chi-square 3-6.5, was named a lever arm
+    at 7-15 of the passes' sigmas)."""
+    cfg = np.array([0.3, 0.1, -1.5])
+    run0, _ = closed_form(0.0, 0.002, cfg + [0.0, 0.0, 0.3], sigma_l_m=0.05)
+
+    def run(s, start):
+        p = run0(s, start)
+        return LeverPass(p.shift_s, p.lever_b_m, p.sigma_b_m, p.record_key, 4.0 * p.nis)
+
+    est = lever_time_joint(run, cfg, cfg, grid_s=0.005)
+    assert est is not None and est.chi2_reduced == pytest.approx(4.0, rel=1e-3)
+    assert est.sigma_lever_given_tau_b_m == pytest.approx(np.full(3, 0.1), rel=1e-3)
+    assert est.sigma_apparent_b_m == pytest.approx(np.full(3, 0.1), rel=1e-3)
+    assert lever_time_verdict(est).kind == "none"
+    assert lever_time_verdict(lever_time_joint(run0, cfg, cfg, grid_s=0.005)).kind == \
+        "lever_arm"
