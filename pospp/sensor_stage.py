@@ -21,7 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from pospp import earth, rotation
+from pospp import earth
+from pospp.calib.innovation_response import innovation_responses
 from pospp.calib.replay import SolutionA
 from pospp.config import PipelineConfig
 from pospp.diagnose import null_model
@@ -43,7 +44,6 @@ from pospp.flight_stages import imu_tuning, navigate
 from pospp.io import mcap_reader
 from pospp.nav.filter import STATUS_USED
 from pospp.null_stage import rerun_decimation
-from pospp.threads import map_in_threads
 from pospp.units import t_s_from_time_ns
 
 CRITERION = "innovation_F_bonferroni_shapes"
@@ -97,34 +97,53 @@ def imu_noise_holds(log: Any, config: PipelineConfig) -> bool:
                 and vrw <= NOISE_BAND * si.accel_vrw_mpspsqrts)
 
 
-def _perturbed(log: Any, sensor: str, axis: int, column: np.ndarray) -> Any:
-    """The log with ``column`` [SI] added to the rates or the specific force: on one ``axis``
-    ((N,)), or on all three (``axis`` -1, (N, 3))."""
-    imu = log.imu
-    name = "f_ib_b_mps2" if sensor == "accel" else "w_ib_b_radps"
-    arr = getattr(imu, name).copy()
-    if axis < 0:
-        arr += column
-    else:
-        arr[:, axis] += column
-    return replace(log, imu=replace(imu, **{name: arr}))
+def _column_input(fams: Sequence[str], knots: np.ndarray, field: Any) -> Any:
+    """The families' columns as :data:`pospp.calib.innovation_response.BodyInput`: per
+    sensor family a hinge ``R_k(t)`` per body axis x, y (axis-major) on its sensor's rows,
+    per gravity term its specific-force change (``field(t, C_nb)``, (T, 3, P)); the columns
+    in ``fams``' order."""
+    def body_input(t_s: np.ndarray, c_nb: np.ndarray) -> np.ndarray:
+        parts = []
+        for fam in fams:
+            sensor = sensor_family(fam).sensor
+            if sensor == "gravity":
+                g = field(t_s, c_nb)
+                parts.append(np.concatenate([np.zeros_like(g), g], axis=1))
+                continue
+            hinges = hinge_basis(t_s, knots)  # (T, K)
+            u = np.zeros((t_s.size, 6, 2, knots.size))
+            row = 0 if sensor == "gyro" else 3
+            for a in range(2):
+                u[:, row + a, a, :] = hinges
+            parts.append(u.reshape(t_s.size, 6, -1))
+        return np.concatenate(parts, axis=2)
+    return body_input
 
 
-def _field_columns(nav_b: Any, t_run: np.ndarray, reference: tuple[float, float],
-                   extent_m: float) -> np.ndarray:
-    """The specific-force change (N, 3, P) [m/s^2 per SI coefficient] of each term of the
-    gravity field's potential along A's track (``nav_b``'s forward solution, interpolated to
-    the IMU times): ``-C_bn dg_n``, dg_h the term's gradient at A's position north and east
-    of ``reference`` (lat, lon [rad]) in units of ``extent_m`` (:mod:`pospp.diagnose.effects`,
-    the ``field`` shape)."""
+def _field_input(nav_b: Any, reference: tuple[float, float], extent_m: float) -> Any:
+    """``(t_s, C_nb) -> (T, 3, P)``: the specific-force change [m/s^2 per SI coefficient] of
+    each term of the gravity field's potential along A's track (``nav_b``'s forward solution,
+    interpolated to ``t_s``): ``-C_bn dg_n``, dg_h the term's gradient at A's position north
+    and east of ``reference`` (lat, lon [rad]) in units of ``extent_m``
+    (:mod:`pospp.diagnose.effects`, the ``field`` shape)."""
     sol = nav_b.forward
-    lat = np.interp(t_run, sol.t_s, sol.lat_rad)
-    lon = np.interp(t_run, sol.t_s, sol.lon_rad)
-    ne = north_east_m(lat, lon, *reference, 0.0)
-    grad = field_gradient(ne[:, 0] / extent_m, ne[:, 1] / extent_m)  # (N, 2, P)
-    k = np.clip(np.searchsorted(sol.t_s, t_run), 0, sol.t_s.size - 1)
-    c_nb = rotation.dcm_from_quat(sol.q_nb[k])
-    return -np.einsum("kji,kjp->kip", c_nb[:, 0:2, :], grad)
+
+    def field(t_s: np.ndarray, c_nb: np.ndarray) -> np.ndarray:
+        lat = np.interp(t_s, sol.t_s, sol.lat_rad)
+        lon = np.interp(t_s, sol.t_s, sol.lon_rad)
+        ne = north_east_m(lat, lon, *reference, 0.0)
+        grad = field_gradient(ne[:, 0] / extent_m, ne[:, 1] / extent_m)  # (T, 2, P)
+        return -np.einsum("kji,kjp->kip", c_nb[:, 0:2, :], grad)
+    return field
+
+
+def _static_window(nav_a: Any, opts: Any) -> tuple[float, float] | None:
+    """The period (t0, t1] [s] whose means A's static alignment used (None: in motion), as
+    :func:`pospp.nav.alignment.align` takes it."""
+    al = nav_a.alignment
+    if al.method != "static" or al.static_end_s is None:
+        return None
+    return al.t_s, min(al.static_end_s, al.t_s + opts.alignment.max_static_alignment_s)
 
 
 def north_east_m(lat_rad: Any, lon_rad: Any, lat0_rad: float, lon0_rad: float,
@@ -138,8 +157,7 @@ def north_east_m(lat_rad: Any, lon_rad: Any, lat0_rad: float, lon0_rad: float,
 
 def innovation_design(log: mcap_reader.FlightLog, config: PipelineConfig,
                       families: Sequence[str], *, lever_b_m: Any = None,
-                      reference: tuple[float, float] | None = None,
-                      threads: int = 1) -> InnovationDesign:
+                      reference: tuple[float, float] | None = None) -> InnovationDesign:
     """A's whitened innovations on ``log`` and their responses to each family's coefficients
     (module docstring); the gravity family's only with ``reference`` (lat, lon [rad]: the
     field's origin, the legs' mean start), its extent the farthest point of A's track after
@@ -148,54 +166,40 @@ def innovation_design(log: mcap_reader.FlightLog, config: PipelineConfig,
     log_r = null_model.decimate_imu(log, factor)
     opts = replace(config.filter_options(), smoother=False, covariance_outputs=False)
     base = navigate(log_r, config, options=opts, lever_arm_b_m=lever_b_m, record_gains=True)
-    gains = base.gain_replay
-    if gains is None or base.innovations is None:
+    gains, rec = base.gain_replay, base.innovations
+    if gains is None or rec is None:
         raise ValueError("A recorded no gains")
-
-    def innovations(lg: Any) -> np.ndarray:
-        rec = navigate(lg, config, options=opts, lever_arm_b_m=lever_b_m,
-                       replay=gains).innovations
-        assert rec is not None  # A always records its innovations
-        return rec.dz_ned
-
-    nu0 = innovations(log_r)
+    nu0 = rec.dz_ned
     t_from = float(base.alignment.t_s)  # before it the horizontal bias is A's tilt
-    used = (gains.status == STATUS_USED) & (base.innovations.status == STATUS_USED) & \
-        np.all(np.isfinite(nu0), axis=1) & (base.innovations.t_s >= t_from)
+    used = (gains.status == STATUS_USED) & (rec.status == STATUS_USED) & \
+        np.all(np.isfinite(nu0), axis=1) & (rec.t_s >= t_from)
     chol = np.linalg.cholesky(gains.s_inv[used])  # S^-1 = L L^T: L^T nu is white
-
-    def white(nu: np.ndarray) -> np.ndarray:
-        return np.einsum("kji,kj->ki", chol, nu[used]).reshape(-1)
-
     t_run = t_s_from_time_ns(log_r.imu.time_ns, int(log_r.imu.time_ns[0]))
     knots = knots_s(t_from, float(t_run[-1]))
-    hinges = hinge_basis(t_run, knots)
     extent = float("nan")
     fams = [f for f in families if reference is not None or sensor_family(f).sensor != "gravity"]
-    runs = []  # (family, sensor, (N, 3) specific force or (N,) on an axis, axis, step)
+    field = None
+    if reference is not None and any(sensor_family(f).sensor == "gravity" for f in fams):
+        sol = base.forward
+        after = sol.t_s >= base.alignment.t_s
+        ne = north_east_m(sol.lat_rad[after], sol.lon_rad[after], *reference, 0.0)
+        extent = max(1000.0, float(np.max(np.hypot(ne[:, 0], ne[:, 1]))))
+        field = _field_input(base, reference, extent)
+    dnu = innovation_responses(gains, base.forward.trajectory, t_run, log_r.imu.w_ib_b_radps,
+                               log_r.imu.f_ib_b_mps2, _column_input(fams, knots, field),
+                               breaks_s=knots, static_window_s=_static_window(base, opts))
+    white = np.einsum("kji,kjm->kim", chol, dnu[used]).reshape(-1, dnu.shape[2])
+    responses, at = {}, 0
     for fam in fams:
-        fs = sensor_family(fam)
-        step = catalog_entry(fam).plausible_si
-        if fs.sensor == "gravity":
-            assert reference is not None
-            sol = base.forward
-            after = sol.t_s >= base.alignment.t_s
-            ne = north_east_m(sol.lat_rad[after], sol.lon_rad[after], *reference, 0.0)
-            extent = max(1000.0, float(np.max(np.hypot(ne[:, 0], ne[:, 1]))))
-            cols = _field_columns(base, t_run, reference, extent)
-            runs += [(fam, "accel", cols[:, :, j], -1, step) for j in range(cols.shape[2])]
+        if sensor_family(fam).sensor == "gravity":
+            p = field_gradient(np.zeros(1), np.zeros(1)).shape[2]
+            responses[fam] = white[:, at:at + p, None]
         else:
-            runs += [(fam, fs.sensor, hinges[:, k], a, step) for a in range(2)
-                     for k in range(knots.size)]
-    out = map_in_threads(lambda r: white(innovations(_perturbed(
-        log_r, r[1], r[3], r[4] * r[2])) - nu0) / r[4], runs, threads)
-    responses = {}
-    for fam in fams:
-        stacked = np.stack([c for r, c in zip(runs, out, strict=True) if r[0] == fam], axis=1)
-        responses[fam] = (stacked[:, :, None] if sensor_family(fam).sensor == "gravity" else
-                          stacked.reshape(-1, 2, knots.size).transpose(0, 2, 1))
-    return InnovationDesign(white(nu0), responses, knots, float(t_run[-1]),
-                            base.innovations.t_s[used], extent)
+            p = 2 * knots.size
+            responses[fam] = white[:, at:at + p].reshape(-1, 2, knots.size).transpose(0, 2, 1)
+        at += p
+    return InnovationDesign(np.einsum("kji,kj->ki", chol, nu0[used]).reshape(-1), responses,
+                            knots, float(t_run[-1]), rec.t_s[used], extent)
 
 
 @dataclass(frozen=True)
@@ -224,8 +228,8 @@ class SensorFamilies:
 
 
 def sensor_families(d: Diagnosis, replays: list, log: mcap_reader.FlightLog,
-                    config: PipelineConfig, threads: int = 1,
-                    solution_a: SolutionA | None = None) -> SensorFamilies | None:
+                    config: PipelineConfig, solution_a: SolutionA | None = None
+                    ) -> SensorFamilies | None:
     """Fit the families on A's innovations of ``log`` with ``d``'s named GNSS-side effects
     removed; families ``d`` named on the legs are not fitted again, the gravity field only
     with A's solution (its origin: the legs' mean start). None when A fails on the log or no
@@ -241,8 +245,7 @@ def sensor_families(d: Diagnosis, replays: list, log: mcap_reader.FlightLog,
     log_s, lever, removed = _removed(log, config, d)
     ref = _legs_reference(replays, solution_a)
     try:
-        design = innovation_design(log_s, config, families, lever_b_m=lever, reference=ref,
-                                   threads=threads)
+        design = innovation_design(log_s, config, families, lever_b_m=lever, reference=ref)
     except (ValueError, np.linalg.LinAlgError):
         return None
     named, tested, ratio, holds = fit_sensor_families(
