@@ -1,16 +1,18 @@
 """The sensor families of the diagnosis: A's innovations and their responses.
 
 :func:`innovation_design` runs algorithm A as configured on the log (summed down to ``[pairs]
-rerun_imu_rate_hz``, the named GNSS-side effects removed) recording its gains, then once more
-per hinge knot, axis and sensor with a bias change added to the IMU samples and the gains
-replayed (:class:`pospp.nav.filter.GainReplay`): the innovations' linear responses of
-:mod:`pospp.diagnose.sensor_families`. :func:`sensor_family_steps` names the families and
-returns them as diagnosis rows with what each does to B (its worth at the horizon).
-Nothing here touches files.
+rerun_imu_rate_hz``, the named GNSS-side effects removed) recording its gains, and
+propagates every column of the families (a hinge per knot, body axis x, y and sensor; a term
+of the gravity field's potential) through A's closed-loop error dynamics with those gains in
+one linear pass (:func:`pospp.calib.innovation_response.innovation_responses`): the
+innovations' linear responses of :mod:`pospp.diagnose.sensor_families`.
+:func:`sensor_families` names the families and :func:`with_sensor_families` returns them as
+diagnosis rows with what each does to B (its worth at the horizon). Nothing here touches
+files.
 
-Cost: one forward pass with gains recorded and ``1 + 2 K`` replays per family (K knots,
-:data:`pospp.diagnose.shapes.MAX_KNOTS` at most): on flight_accel_ramp_100hz (2700 s, 9
-knots, 50 Hz) 0.3 s and 37 replays of 0.08 s.
+Cost: one forward pass of A with its gains recorded and one linear pass of all m columns
+(a 15 x m matrix over a grid of A's records and the knots, at most 1 s apart): on
+flight_accel_ramp_100hz (2700 s, 9 knots, 50 Hz, m = 48) 0.06 s for the linear pass.
 """
 
 from __future__ import annotations
