@@ -25,15 +25,26 @@ prediction-error likelihood (whitened by ``S^-1 = L L^T``, ``w = L^T nu``) is le
 
     RSS(a) = sum_records | L^T (nu - J a) |^2
 
-Each shape (``a = W c``) is fitted by least squares; a family's shape is the one of smallest
-BIC, ``n log(RSS / n) + k log n`` (the workflow's criterion; k counts a shape's grid-searched
-parameter too: a settling of T far beyond the span is a ramp), over every shape and grid value;
-it is named when its nested F-test against the model before it, ``F = ((RSS_0 - RSS_1) / q) /
-(RSS_1 / (n - k_1))``, is significant at ``alpha / m`` after a Bonferroni factor for the
-variants tried (m: families tested at the step). Families are named in turn, the strongest F
-first, each later one with the earlier ones' columns in the model (an accelerometer ramp also
-reads, alone, as a gyro ramp: 13.9 of F on the ramp flight, nothing once the accelerometer's is
-in). Sigmas: the least squares' covariance with the residual variance estimated.
+Each shape (``a = W c``) is fitted by least squares. The observability screen first asks
+whether the family can be seen at all: a variant keeps the directions in which a plausible
+coefficient stands 2 noise sigmas above the model before it (:func:`_candidate`); a family
+none of whose variants keeps one is not tested. The screened fits' smallest BIC gives the
+family's test: its nested F-test against the model before it, ``F = ((RSS_0 - RSS_1) / q) /
+(RSS_1 / (n - k_1))``, significant at ``alpha / m`` after a Bonferroni factor for the variants
+the screen kept (m: families tested at the step). The shape is then the one of smallest BIC,
+``n log(RSS / n) + k log n`` (the workflow's criterion; k counts a shape's grid-searched
+parameter too: a settling of T far beyond the span is a ramp), over the shapes of one
+coefficient per axis (ramp, step, settling at every grid value) fitted in full and the
+many-coefficient ones (the walk, the field) in their screened directions only: the screen
+judges shapes at their plausible sizes, and there a walk's many knot rates reach more than a
+ramp's one, so screening every shape alike named every gyro change `walk`; a few-coefficient
+shape fitted in full is as well-posed as its sigmas say, while a walk's or a field's
+unscreened directions read noise at implausible sizes. The family is named when the screened
+test and the chosen shape's own F-test are both significant at ``alpha / m``. Families are
+named in turn, the strongest F first, each later one with the earlier ones' columns in the
+model (an accelerometer ramp also reads, alone, as a gyro ramp: 13.9 of F on the ramp flight,
+nothing once the accelerometer's is in). Sigmas: the least squares' covariance with the
+residual variance estimated.
 """
 
 from __future__ import annotations
@@ -145,16 +156,27 @@ def _plausible(fam: str, v: Variant) -> float:
     return scale * float(catalog_entry(fam).plausible_si)
 
 
+SCREEN_EIGENVALUE = 4.0
+"""The observability screen's bar: a direction is kept when a plausible coefficient's response
+along it has at least this many noise variances (2 sigmas) beyond the model before it."""
+DEGENERATE = 1e-9
+"""An unscreened variant keeps the directions whose eigenvalue is above this fraction of its
+largest (numerically null ones dropped; weak ones kept: the F-test counts them)."""
+
+
 def _candidate(design: InnovationDesign, fam: str, v: Variant, base_x: NDArray,
-               rss0: float, k0: int, ratio: float = 1.0) -> dict | None:
-    """One variant fitted: its observable directions (those in which a plausible
+               rss0: float, k0: int, ratio: float = 1.0, screened: bool = True
+               ) -> dict | None:
+    """One variant fitted: its observable directions (``screened``: those in which a plausible
     coefficient stands 2 noise sigmas above what the model before it fits, the workflow's
-    screen; None when it has none), the nested F-test and the BIC."""
+    screen; else every direction not numerically null), the nested F-test and the BIC; None
+    when it keeps no direction."""
     cols = _columns(design.responses[fam], v.weights)
     proj = cols - base_x @ np.linalg.lstsq(base_x, cols, rcond=None)[0] if base_x.shape[1] \
         else cols
     lam, vec = np.linalg.eigh(proj.T @ proj * _plausible(fam, v) ** 2)
-    keep = vec[:, lam >= 4.0]
+    bar = SCREEN_EIGENVALUE if screened else DEGENERATE * max(float(lam[-1]), 0.0)
+    keep = vec[:, lam > bar] if lam[-1] > 0 else vec[:, :0]
     if not keep.shape[1]:
         return None
     x1 = np.concatenate([base_x, cols @ keep], axis=1)
@@ -293,12 +315,16 @@ def fit_sensor_families(design: InnovationDesign, families: Sequence[str],
                      if (c := _candidate(design, fam, v, base_x, rss0, k0, ratio)) is not None]
             if not cands:  # these data cannot reveal the family
                 continue
-            best = min(cands, key=lambda c: c["bic"])
-            walk = next((c for c in cands if c["v"].shape == "walk"), best)
-            p_adj = min(1.0, best["p"] * len(cands))
+            screened = min(cands, key=lambda c: c["bic"])
+            walk = next((c for c in cands if c["v"].shape == "walk"), screened)
+            few = [c for v in variants if v.weights.shape[1] == 1 and (c := _candidate(
+                design, fam, v, base_x, rss0, k0, ratio, screened=False)) is not None]
+            best = min([c for c in cands if c["v"].weights.shape[1] > 1] + few,
+                       key=lambda c: c["bic"])
+            p_adj = min(1.0, max(screened["p"] * len(cands), best["p"]))
             sig = bool(p_adj < alpha / len(left)) and holds
             trials[fam] = (best, _finding(design, fam, best, walk, rss0, k0, p_adj, sig,
-                                          len(cands)))
+                                          len(variants)))
             tested.append(trials[fam][1])
         good = [fam for fam, (_, fnd) in trials.items() if fnd.significant]
         if not good:

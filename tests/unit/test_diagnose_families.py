@@ -258,3 +258,36 @@ def test_a_family_the_innovations_cannot_reveal_is_not_tested():
     named, tested, *_ = fit_sensor_families(dataclasses.replace(d, responses=weak), FAMS,
                                             SHAPE_NAMES, 0.05)
     assert {f.effect for f in tested} == {"gyro_bias_change"}
+
+
+def test_a_large_ramp_below_the_screen_at_its_plausible_rate_is_named_a_ramp():
+    """The screen asks whether the family can be seen at a plausible size; the shape is then
+    chosen among the one-coefficient shapes fitted in full and the walk in its screened
+    directions. Here a ramp at the plausible rate stands below the screen's bar (eigenvalue
+    < 4) while the walk's many knot coefficients pass it, and the flight holds a ramp 30
+    times the plausible rate: named `ramp` with its rate (before, the screen kept the walk
+    alone and the family was named `walk` whatever the shape)."""
+    from pospp.diagnose.sensor_families import SCREEN_EIGENVALUE, _columns, _plausible
+
+    knots = knots_s(600.0, 2700.0)
+    fam = "accel_bias_change"
+    d = _design(np.random.default_rng(11), np.zeros((knots.size, 2)), knots)
+    ramp, walk = (time_shape(s).variants(knots, 2700.0)[0] for s in ("ramp", "walk"))
+
+    def lam_max(resp, v):
+        cols = _columns(resp, v.weights)
+        return float(np.linalg.eigvalsh(cols.T @ cols).max()) * _plausible(fam, v) ** 2
+
+    resp = d.responses[fam]
+    scale = np.sqrt(SCREEN_EIGENVALUE / np.sqrt(lam_max(resp, ramp) * lam_max(resp, walk)))
+    resp = resp * scale
+    assert lam_max(resp, ramp) < SCREEN_EIGENVALUE <= lam_max(resp, walk)
+    c_si = 30.0 * _plausible(fam, ramp) * np.array([1.0, -0.5])  # per hinge unit, x and y
+    y = _columns(resp, ramp.weights) @ c_si + np.random.default_rng(12).normal(size=d.y.size)
+    named, *_ = fit_sensor_families(
+        dataclasses.replace(d, y=y, responses={**d.responses, fam: resp}), FAMS,
+        SHAPE_NAMES, 0.05)
+    assert [f.effect for f in named] == [fam]
+    assert named[0].shape == "ramp"
+    unit = shape_unit(fam, "ramp")[1]
+    np.testing.assert_allclose(named[0].values, c_si / unit, atol=4 * named[0].sigmas.max())
