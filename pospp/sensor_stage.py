@@ -2,17 +2,20 @@
 
 :func:`innovation_design` runs algorithm A as configured on the log (summed down to ``[pairs]
 rerun_imu_rate_hz``, the named GNSS-side effects removed) recording its gains, and
-propagates every column of the families (a hinge per knot, body axis x, y and sensor; a term
-of the gravity field's potential) through A's closed-loop error dynamics with those gains in
-one linear pass (:func:`pospp.calib.innovation_response.innovation_responses`): the
-innovations' linear responses of :mod:`pospp.diagnose.sensor_families`.
+propagates every column of each family (a basis function of
+:func:`pospp.diagnose.shapes.change_basis` per body axis x, y and sensor; a term of the
+gravity field's potential) through A's closed-loop error dynamics with those gains in one
+linear pass per family (:func:`pospp.calib.innovation_response.innovation_responses`): the
+innovations' linear responses of :mod:`pospp.diagnose.sensor_families`; a gain replay with
+the GNSS stamped 1 ms earlier gives the GNSS time offset's, with which
+:func:`_without_time_offset` reads an offset left in the log and removes it.
 :func:`sensor_families` names the families and :func:`with_sensor_families` returns them as
 diagnosis rows with what each does to B (its worth at the horizon). Nothing here touches
 files.
 
-Cost: one forward pass of A with its gains recorded and one linear pass of all m columns
-(a 15 x m matrix over a grid of A's records and the knots, at most 1 s apart): on
-flight_accel_ramp_100hz (2700 s, 9 knots, 50 Hz, m = 48) 0.06 s for the linear pass.
+Cost: per design one forward pass of A with its gains recorded, one replay and a linear pass
+per family (a 15 x m matrix over a grid of A's records, the knots and the step times, at most
+1 s apart; m = 2 (K + S), K <= 10 hinges, S <= 60 steps, or 12 field terms).
 """
 
 from __future__ import annotations
@@ -37,10 +40,11 @@ from pospp.diagnose.sensor_families import (
     FamilyFinding,
     InnovationDesign,
     fit_sensor_families,
+    long_run_ratio,
     response_along_b,
     sensor_family,
 )
-from pospp.diagnose.shapes import hinge_basis, knots_s
+from pospp.diagnose.shapes import basis_size, change_basis, knots_s, step_times_s
 from pospp.effects_catalog import catalog_entry
 from pospp.flight_stages import imu_tuning, navigate
 from pospp.io import mcap_reader
@@ -79,6 +83,10 @@ def _removed(log: Any, config: PipelineConfig, d: Diagnosis
     return log, lever, tuple(done)
 
 
+READ_TIME_OFFSET_S = 1e-3
+"""The GNSS time offset A is replayed at for its innovations' response [s], which reads an
+offset left in the log (:func:`_without_time_offset`; linear well beyond it: 60 m/s x 1 ms
+= 6 cm against A's gate)."""
 NOISE_BAND = 3.0
 """The IMU white noise read from the samples may exceed A's configured angle and velocity
 random walk by at most this factor for the families to be fitted: the likelihood is A's, and
@@ -99,26 +107,23 @@ def imu_noise_holds(log: Any, config: PipelineConfig) -> bool:
                 and vrw <= NOISE_BAND * si.accel_vrw_mpspsqrts)
 
 
-def _column_input(fams: Sequence[str], knots: np.ndarray, field: Any) -> Any:
-    """The families' columns as :data:`pospp.calib.innovation_response.BodyInput`: per
-    sensor family a hinge ``R_k(t)`` per body axis x, y (axis-major) on its sensor's rows,
-    per gravity term its specific-force change (``field(t, C_nb)``, (T, 3, P)); the columns
-    in ``fams``' order."""
+def _column_input(fam: str, knots: np.ndarray, field: Any) -> Any:
+    """A family's columns as :data:`pospp.calib.innovation_response.BodyInput`: a sensor
+    family's basis functions (:func:`pospp.diagnose.shapes.change_basis`: hinges and steps)
+    per body axis x, y (axis-major) on its sensor's rows; the gravity family's terms' specific-
+    force change (``field(t, C_nb)``, (T, 3, P))."""
+    sensor = sensor_family(fam).sensor
+
     def body_input(t_s: np.ndarray, c_nb: np.ndarray) -> np.ndarray:
-        parts = []
-        for fam in fams:
-            sensor = sensor_family(fam).sensor
-            if sensor == "gravity":
-                g = field(t_s, c_nb)
-                parts.append(np.concatenate([np.zeros_like(g), g], axis=1))
-                continue
-            hinges = hinge_basis(t_s, knots)  # (T, K)
-            u = np.zeros((t_s.size, 6, 2, knots.size))
-            row = 0 if sensor == "gyro" else 3
-            for a in range(2):
-                u[:, row + a, a, :] = hinges
-            parts.append(u.reshape(t_s.size, 6, -1))
-        return np.concatenate(parts, axis=2)
+        if sensor == "gravity":
+            g = field(t_s, c_nb)
+            return np.concatenate([np.zeros_like(g), g], axis=1)
+        basis = change_basis(t_s, knots)  # (T, K + S)
+        u = np.zeros((t_s.size, 6, 2, basis.shape[1]))
+        row = 0 if sensor == "gyro" else 3
+        for a in range(2):
+            u[:, row + a, a, :] = basis
+        return u.reshape(t_s.size, 6, -1)
     return body_input
 
 
@@ -187,21 +192,65 @@ def innovation_design(log: mcap_reader.FlightLog, config: PipelineConfig,
         ne = north_east_m(sol.lat_rad[after], sol.lon_rad[after], *reference, 0.0)
         extent = max(1000.0, float(np.max(np.hypot(ne[:, 0], ne[:, 1]))))
         field = _field_input(base, reference, extent)
-    dnu = innovation_responses(gains, base.forward.trajectory, t_run, log_r.imu.w_ib_b_radps,
-                               log_r.imu.f_ib_b_mps2, _column_input(fams, knots, field),
-                               breaks_s=knots, static_window_s=_static_window(base, opts))
-    white = np.einsum("kji,kjm->kim", chol, dnu[used]).reshape(-1, dnu.shape[2])
-    responses, at = {}, 0
-    for fam in fams:
-        if sensor_family(fam).sensor == "gravity":
-            p = field_gradient(np.zeros(1), np.zeros(1)).shape[2]
-            responses[fam] = white[:, at:at + p, None]
-        else:
-            p = 2 * knots.size
-            responses[fam] = white[:, at:at + p].reshape(-1, 2, knots.size).transpose(0, 2, 1)
-        at += p
-    return InnovationDesign(np.einsum("kji,kj->ki", chol, nu0[used]).reshape(-1), responses,
-                            knots, float(t_run[-1]), rec.t_s[used], extent)
+    # where a column is not smooth (a step on a knot is one break)
+    breaks = np.unique(np.round(np.concatenate([knots, step_times_s(knots)]), 6))
+    responses = {}
+    for fam in fams:  # a pass per family: its columns' inputs and integrals are in memory
+        dnu = innovation_responses(gains, base.forward.trajectory, t_run,
+                                   log_r.imu.w_ib_b_radps, log_r.imu.f_ib_b_mps2,
+                                   _column_input(fam, knots, field), breaks_s=breaks,
+                                   static_window_s=_static_window(base, opts))
+        white = np.einsum("kji,kjm->kim", chol, dnu[used]).reshape(-1, dnu.shape[2])
+        responses[fam] = (white[:, :, None] if sensor_family(fam).sensor == "gravity" else
+                          white.reshape(-1, 2, basis_size(knots)).transpose(0, 2, 1))
+    white_y = np.einsum("kji,kj->ki", chol, nu0[used]).reshape(-1)
+    shifted = navigate(_gnss_earlier(log_r, READ_TIME_OFFSET_S), config, options=opts,
+                       lever_arm_b_m=lever_b_m, replay=gains).innovations
+    assert shifted is not None  # A always records its innovations
+    offset = np.einsum("kji,kj->ki", chol, shifted.dz_ned[used] - nu0[used]).reshape(-1)
+    return InnovationDesign(white_y, responses, knots, float(t_run[-1]), rec.t_s[used], extent,
+                            offset / READ_TIME_OFFSET_S)
+
+
+TIME_OFFSET_FLOOR_S = 5e-3
+"""A GNSS time offset A's innovations read is removed before the families are fitted when
+it is beyond this and :data:`TIME_OFFSET_SIGMAS` ... (the sample flight, without an offset,
+reads 3.3 ms: its innovations' offset column is not a column of the families' fit, where
+with an accelerometer ramp it explained what neither does alone, 297 +- 71 ug/h, p 0.005)."""
+TIME_OFFSET_SIGMAS = 5.0
+"""... of its sigma (the least squares', times the residual's long-run variance ratio)."""
+TIME_OFFSET_ITERATIONS = 4
+"""At most this many removals: A gates the records an offset spoils in turns, so its
+innovations read less than the whole offset at first (flight_time_offset_200hz: 7.1 of
+15 ms), and each pass on the log with the last reading removed reads the rest."""
+
+
+def _without_time_offset(log: Any, config: PipelineConfig, families: Sequence[str],
+                         lever: Any, reference: tuple[float, float] | None
+                         ) -> tuple[InnovationDesign, Any, float]:
+    """(design, log, offset [s]): the design on ``log`` with the GNSS time offset its
+    innovations read removed (the coefficient of its response: GNSS stamps minus true
+    time; 0 when none is significant, :data:`TIME_OFFSET_FLOOR_S`), by at most
+    :data:`TIME_OFFSET_ITERATIONS` passes. Left in, a 15 ms offset was named as a 143-223 ug
+    accelerometer step (flight_time_offset_200hz with the drift configured, where the legs
+    do not name the offset); removed, nothing."""
+    total = 0.0
+    design = innovation_design(log, config, families, lever_b_m=lever, reference=reference)
+    for _ in range(TIME_OFFSET_ITERATIONS):
+        x = design.time_offset_response
+        assert x is not None
+        xtx = float(x @ x)
+        c = float(x @ design.y) / xtx
+        r = design.y - c * x
+        ratio = long_run_ratio(r, design.record_t_s, 60.0)
+        sigma = float(np.sqrt(ratio * (r @ r) / max(r.size - 1, 1) / xtx))
+        if not (abs(c) > TIME_OFFSET_FLOOR_S and abs(c) > TIME_OFFSET_SIGMAS * sigma):
+            break
+        log = _gnss_earlier(log, -c)  # the column is GNSS stamped 1 s earlier: c late
+        total += c
+        design = innovation_design(log, config, families, lever_b_m=lever,
+                                   reference=reference)
+    return design, log, -total
 
 
 @dataclass(frozen=True)
@@ -247,9 +296,11 @@ def sensor_families(d: Diagnosis, replays: list, log: mcap_reader.FlightLog,
     log_s, lever, removed = _removed(log, config, d)
     ref = _legs_reference(replays, solution_a)
     try:
-        design = innovation_design(log_s, config, families, lever_b_m=lever, reference=ref)
+        design, log_s, offset_s = _without_time_offset(log_s, config, families, lever, ref)
     except (ValueError, np.linalg.LinAlgError):
         return None
+    if offset_s:
+        removed = (*removed, f"the GNSS time offset {1e3 * offset_s:+.1f} ms")
     named, tested, ratio, holds = fit_sensor_families(
         design, families, {f: catalog_entry(f).shapes for f in families},
         config.pairs.diagnose_alpha)
@@ -273,7 +324,7 @@ def family_response(f: FamilyFinding, design: InnovationDesign, replays: list,
                     solution_a: SolutionA | None = None,
                     reference: tuple[float, float] | None = None) -> EffectResponse:
     """A named family's response on B minus A per coefficient, its fitted coefficients and
-    their covariance: a sensor change's per hinge coefficient (axis-major: x's K, then y's);
+    their covariance: a sensor change's per shape coefficient (axis-major: x's q, then y's);
     the gravity field's per potential term (the legs' starts on A's solution, north and east
     of ``reference``, over the design's extent)."""
     if sensor_family(f.effect).sensor == "gravity":
@@ -285,19 +336,21 @@ def family_response(f: FamilyFinding, design: InnovationDesign, replays: list,
                                     np.interp(r.t0_s, tr.t_s, tr.lon_rad), *reference, 0.0)[0])
             for r in replays)
         return EffectResponse(f.effect, columns, f.hinge_si[:, 0], f.hinge_cov_si)
-    k = design.knots.size
     cols = []
-    for j in range(2 * k):
-        unit = np.zeros(2 * k)
-        unit[j] = 1.0
-        cols.append(response_along_b(f, design.knots, replays, hinge_si=unit.reshape(2, k).T))
+    for axis in range(2):  # axis-major, as the shape's coefficients
+        for w in f.weights.T:
+            basis = np.zeros((w.size, 2))
+            basis[:, axis] = w
+            cols.append(response_along_b(f, design.knots, replays, hinge_si=basis))
     columns = tuple(np.stack([c[i] for c in cols], axis=-1) for i in range(len(replays)))
-    return EffectResponse(f.effect, columns, f.hinge_si.T.reshape(-1), f.hinge_cov_si)
+    return EffectResponse(f.effect, columns, f.coefficients_si, f.coefficients_cov_si)
 
 
 def _step(f: FamilyFinding, number: int, worth: Any, closing: DiagnosisStep,
           removed: tuple[str, ...]) -> DiagnosisStep:
-    note = f"; fitted with {', '.join(removed)} removed" if removed else ""
+    note = f"fitted with {', '.join(removed)} removed" if removed else ""
+    if note and f.shape_parameters:
+        note = "; " + note
     return DiagnosisStep(
         step=number, effect=f.effect, parameters=f.parameters, values=f.values,
         sigmas=f.sigmas, value=f.value, sigma=f.sigma, unit=f.unit, statistic=f.statistic,

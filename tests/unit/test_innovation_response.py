@@ -15,7 +15,7 @@ from pospp import pipeline, rotation
 from pospp import sensor_stage as stage
 from pospp.calib.innovation_response import innovation_responses
 from pospp.diagnose import null_model
-from pospp.diagnose.shapes import hinge_basis, knots_s
+from pospp.diagnose.shapes import basis_size, change_basis, knots_s, step_times_s
 from pospp.effects_catalog import catalog_entry
 from pospp.flight_stages import navigate
 from pospp.nav.alignment import static_attitude_jacobian
@@ -57,10 +57,12 @@ def ramp_design(reference_cases):
     sol = base.forward
     ref = (float(sol.lat_rad[sol.t_s.size // 3]), float(sol.lon_rad[sol.t_s.size // 3]))
     field = stage._field_input(base, ref, 20000.0)
-    dnu = innovation_responses(base.gain_replay, sol.trajectory, t_run,
-                               log_r.imu.w_ib_b_radps, log_r.imu.f_ib_b_mps2,
-                               stage._column_input(FAMS, knots, field), breaks_s=knots,
-                               static_window_s=stage._static_window(base, opts))
+    breaks = np.unique(np.round(np.concatenate([knots, step_times_s(knots)]), 6))
+    dnu = {f: innovation_responses(base.gain_replay, sol.trajectory, t_run,
+                                   log_r.imu.w_ib_b_radps, log_r.imu.f_ib_b_mps2,
+                                   stage._column_input(f, knots, field), breaks_s=breaks,
+                                   static_window_s=stage._static_window(base, opts))
+           for f in FAMS}
     return cfg, opts, log_r, base, t_run, knots, field, dnu
 
 
@@ -83,8 +85,11 @@ def _replayed(cfg, opts, log_r, base, sensor, axis, column):
 @pytest.mark.parametrize(("family", "axis", "knot"), [
     ("gyro_bias_change", 0, 0), ("gyro_bias_change", 1, 4), ("accel_bias_change", 0, 0),
     ("accel_bias_change", 1, 8), ("gravity_disturbance", -1, 0),
-    ("gravity_disturbance", -1, 7)])
+    ("gravity_disturbance", -1, 7), ("gyro_bias_change", 0, 20),
+    ("accel_bias_change", 1, 30)])
 def test_the_linear_responses_are_the_gain_replays(ramp_design, family, axis, knot):
+    # ``knot`` indexes the basis (:func:`pospp.diagnose.shapes.change_basis`): the hinges,
+    # then the steps (20 and 30: steps at about 1150 and 1600 s)
     # each column whitened by A's S^-1 over the records the fit uses, as the fit sees it:
     # measured 0.1-1.2 % of its norm (the knot-0 hinges and the gravity terms, which act
     # through the static alignment and before the replay's k_from, at the top); without the
@@ -96,20 +101,19 @@ def test_the_linear_responses_are_the_gain_replays(ramp_design, family, axis, kn
         (rec.t_s >= base.alignment.t_s)
     chol = np.linalg.cholesky(gains.s_inv[used])
     step = catalog_entry(family).plausible_si
-    k = knots.size
     if family == "gravity_disturbance":
         sol = base.forward
         at = np.clip(np.searchsorted(sol.t_s, t_run), 0, sol.t_s.size - 1)
         column = field(t_run, rotation.dcm_from_quat(sol.q_nb[at]))[:, :, knot]
         old = _replayed(cfg, opts, log_r, base, "accel", -1, step * column)
-        j = 4 * k + knot
+        j = knot
     else:
         sensor = "gyro" if family == "gyro_bias_change" else "accel"
         old = _replayed(cfg, opts, log_r, base, sensor, axis,
-                        step * hinge_basis(t_run, knots)[:, knot])
-        j = (0 if sensor == "gyro" else 2 * k) + axis * k + knot
+                        step * change_basis(t_run, knots)[:, knot])
+        j = axis * basis_size(knots) + knot
     old_w = np.einsum("kji,kj->ki", chol, old[used] / step).ravel()
-    new_w = np.einsum("kji,kj->ki", chol, dnu[used, :, j]).ravel()
+    new_w = np.einsum("kji,kj->ki", chol, dnu[family][used, :, j]).ravel()
     assert np.linalg.norm(old_w) > 10.0  # the column is seen on the innovations
     rel = np.linalg.norm(new_w - old_w) / np.linalg.norm(old_w)
     assert rel < 0.02, rel
