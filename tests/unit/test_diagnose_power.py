@@ -384,10 +384,10 @@ def test_vertical_drift_is_named_with_its_size(size_dph, seed, leg_s):
 @pytest.mark.parametrize(("size", "seed"), [
     (3.0, 2), (3.0, 8),
     pytest.param(9.0, 8, marks=pytest.mark.xfail(strict=True, reason=(
-        "known defect (issue 34, open): at 9 arcsec/km A's innovations name the gravity as a "
-        "12-term field (norm 32, not the gradient's 9) and, beside it, an accelerometer step "
-        "(294 ug) and a gyro walk that are not there: the field leaks into the sensor "
-        "families"))),
+        "known defect (docs/diagnose.md, 'Gravity gradient end to end'): at 9 arcsec/km "
+        "A's innovations name the gravity as a 12-term field (norm 32, not the gradient's "
+        "9) and, beside it, a gyro step (0.5 deg/h at 770 s) and an accelerometer step (51 "
+        "ug at 711 s) that are not there: the field leaks into the sensor families"))),
 ])
 def test_gravity_gradient_is_named_with_its_size(size, seed):
     """A horizontal gravity gradient of 3 and 9 arcsec/km (143 and 428 E; the simulator's
