@@ -1,16 +1,21 @@
 """The sensor families of the diagnosis: A's innovations and their responses.
 
 :func:`innovation_design` runs algorithm A as configured on the log (summed down to ``[pairs]
-rerun_imu_rate_hz``, the named GNSS-side effects removed) recording its gains, then once more
-per hinge knot, axis and sensor with a bias change added to the IMU samples and the gains
-replayed (:class:`pospp.nav.filter.GainReplay`): the innovations' linear responses of
-:mod:`pospp.diagnose.sensor_families`. :func:`sensor_family_steps` names the families and
-returns them as diagnosis rows with what each does to B (its worth at the horizon).
-Nothing here touches files.
+rerun_imu_rate_hz``, the named GNSS-side effects removed) recording its gains, and
+propagates every column of each family (a basis function of
+:func:`pospp.diagnose.shapes.change_basis` per body axis x, y and sensor; a term of the
+gravity field's potential) through A's closed-loop error dynamics with those gains in one
+linear pass per family (:func:`pospp.calib.innovation_response.innovation_responses`): the
+innovations' linear responses of :mod:`pospp.diagnose.sensor_families`; a gain replay with
+the GNSS stamped 1 ms earlier gives the GNSS time offset's, with which
+:func:`_without_time_offset` reads an offset left in the log and removes it.
+:func:`sensor_families` names the families and :func:`with_sensor_families` returns them as
+diagnosis rows with what each does to B (its worth at the horizon). Nothing here touches
+files.
 
-Cost: one forward pass with gains recorded and ``1 + 2 K`` replays per family (K knots,
-:data:`pospp.diagnose.shapes.MAX_KNOTS` at most): on flight_accel_ramp_100hz (2700 s, 9
-knots, 50 Hz) 0.3 s and 37 replays of 0.08 s.
+Cost: per design one forward pass of A with its gains recorded, one replay and a linear pass
+per family (a 15 x m matrix over a grid of A's records, the knots and the step times, at most
+1 s apart; m = 2 (K + S), K <= 10 hinges, S <= 60 steps, or 12 field terms).
 """
 
 from __future__ import annotations
@@ -21,7 +26,8 @@ from typing import Any
 
 import numpy as np
 
-from pospp import earth, rotation
+from pospp import earth
+from pospp.calib.innovation_response import innovation_responses
 from pospp.calib.replay import SolutionA
 from pospp.config import PipelineConfig
 from pospp.diagnose import null_model
@@ -34,16 +40,16 @@ from pospp.diagnose.sensor_families import (
     FamilyFinding,
     InnovationDesign,
     fit_sensor_families,
+    long_run_ratio,
     response_along_b,
     sensor_family,
 )
-from pospp.diagnose.shapes import hinge_basis, knots_s
+from pospp.diagnose.shapes import basis_size, change_basis, knots_s, step_times_s
 from pospp.effects_catalog import catalog_entry
 from pospp.flight_stages import imu_tuning, navigate
 from pospp.io import mcap_reader
 from pospp.nav.filter import STATUS_USED
 from pospp.null_stage import rerun_decimation
-from pospp.threads import map_in_threads
 from pospp.units import t_s_from_time_ns
 
 CRITERION = "innovation_F_bonferroni_shapes"
@@ -77,6 +83,10 @@ def _removed(log: Any, config: PipelineConfig, d: Diagnosis
     return log, lever, tuple(done)
 
 
+READ_TIME_OFFSET_S = 1e-3
+"""The GNSS time offset A is replayed at for its innovations' response [s], which reads an
+offset left in the log (:func:`_without_time_offset`; linear well beyond it: 60 m/s x 1 ms
+= 6 cm against A's gate)."""
 NOISE_BAND = 3.0
 """The IMU white noise read from the samples may exceed A's configured angle and velocity
 random walk by at most this factor for the families to be fitted: the likelihood is A's, and
@@ -97,34 +107,50 @@ def imu_noise_holds(log: Any, config: PipelineConfig) -> bool:
                 and vrw <= NOISE_BAND * si.accel_vrw_mpspsqrts)
 
 
-def _perturbed(log: Any, sensor: str, axis: int, column: np.ndarray) -> Any:
-    """The log with ``column`` [SI] added to the rates or the specific force: on one ``axis``
-    ((N,)), or on all three (``axis`` -1, (N, 3))."""
-    imu = log.imu
-    name = "f_ib_b_mps2" if sensor == "accel" else "w_ib_b_radps"
-    arr = getattr(imu, name).copy()
-    if axis < 0:
-        arr += column
-    else:
-        arr[:, axis] += column
-    return replace(log, imu=replace(imu, **{name: arr}))
+def _column_input(fam: str, knots: np.ndarray, field: Any) -> Any:
+    """A family's columns as :data:`pospp.calib.innovation_response.BodyInput`: a sensor
+    family's basis functions (:func:`pospp.diagnose.shapes.change_basis`: hinges and steps)
+    per body axis x, y (axis-major) on its sensor's rows; the gravity family's terms' specific-
+    force change (``field(t, C_nb)``, (T, 3, P))."""
+    sensor = sensor_family(fam).sensor
+
+    def body_input(t_s: np.ndarray, c_nb: np.ndarray) -> np.ndarray:
+        if sensor == "gravity":
+            g = field(t_s, c_nb)
+            return np.concatenate([np.zeros_like(g), g], axis=1)
+        basis = change_basis(t_s, knots)  # (T, K + S)
+        u = np.zeros((t_s.size, 6, 2, basis.shape[1]))
+        row = 0 if sensor == "gyro" else 3
+        for a in range(2):
+            u[:, row + a, a, :] = basis
+        return u.reshape(t_s.size, 6, -1)
+    return body_input
 
 
-def _field_columns(nav_b: Any, t_run: np.ndarray, reference: tuple[float, float],
-                   extent_m: float) -> np.ndarray:
-    """The specific-force change (N, 3, P) [m/s^2 per SI coefficient] of each term of the
-    gravity field's potential along A's track (``nav_b``'s forward solution, interpolated to
-    the IMU times): ``-C_bn dg_n``, dg_h the term's gradient at A's position north and east
-    of ``reference`` (lat, lon [rad]) in units of ``extent_m`` (:mod:`pospp.diagnose.effects`,
-    the ``field`` shape)."""
+def _field_input(nav_b: Any, reference: tuple[float, float], extent_m: float) -> Any:
+    """``(t_s, C_nb) -> (T, 3, P)``: the specific-force change [m/s^2 per SI coefficient] of
+    each term of the gravity field's potential along A's track (``nav_b``'s forward solution,
+    interpolated to ``t_s``): ``-C_bn dg_n``, dg_h the term's gradient at A's position north
+    and east of ``reference`` (lat, lon [rad]) in units of ``extent_m``
+    (:mod:`pospp.diagnose.effects`, the ``field`` shape)."""
     sol = nav_b.forward
-    lat = np.interp(t_run, sol.t_s, sol.lat_rad)
-    lon = np.interp(t_run, sol.t_s, sol.lon_rad)
-    ne = north_east_m(lat, lon, *reference, 0.0)
-    grad = field_gradient(ne[:, 0] / extent_m, ne[:, 1] / extent_m)  # (N, 2, P)
-    k = np.clip(np.searchsorted(sol.t_s, t_run), 0, sol.t_s.size - 1)
-    c_nb = rotation.dcm_from_quat(sol.q_nb[k])
-    return -np.einsum("kji,kjp->kip", c_nb[:, 0:2, :], grad)
+
+    def field(t_s: np.ndarray, c_nb: np.ndarray) -> np.ndarray:
+        lat = np.interp(t_s, sol.t_s, sol.lat_rad)
+        lon = np.interp(t_s, sol.t_s, sol.lon_rad)
+        ne = north_east_m(lat, lon, *reference, 0.0)
+        grad = field_gradient(ne[:, 0] / extent_m, ne[:, 1] / extent_m)  # (T, 2, P)
+        return -np.einsum("kji,kjp->kip", c_nb[:, 0:2, :], grad)
+    return field
+
+
+def _static_window(nav_a: Any, opts: Any) -> tuple[float, float] | None:
+    """The period (t0, t1] [s] whose means A's static alignment used (None: in motion), as
+    :func:`pospp.nav.alignment.align` takes it."""
+    al = nav_a.alignment
+    if al.method != "static" or al.static_end_s is None:
+        return None
+    return al.t_s, min(al.static_end_s, al.t_s + opts.alignment.max_static_alignment_s)
 
 
 def north_east_m(lat_rad: Any, lon_rad: Any, lat0_rad: float, lon0_rad: float,
@@ -138,8 +164,7 @@ def north_east_m(lat_rad: Any, lon_rad: Any, lat0_rad: float, lon0_rad: float,
 
 def innovation_design(log: mcap_reader.FlightLog, config: PipelineConfig,
                       families: Sequence[str], *, lever_b_m: Any = None,
-                      reference: tuple[float, float] | None = None,
-                      threads: int = 1) -> InnovationDesign:
+                      reference: tuple[float, float] | None = None) -> InnovationDesign:
     """A's whitened innovations on ``log`` and their responses to each family's coefficients
     (module docstring); the gravity family's only with ``reference`` (lat, lon [rad]: the
     field's origin, the legs' mean start), its extent the farthest point of A's track after
@@ -148,54 +173,84 @@ def innovation_design(log: mcap_reader.FlightLog, config: PipelineConfig,
     log_r = null_model.decimate_imu(log, factor)
     opts = replace(config.filter_options(), smoother=False, covariance_outputs=False)
     base = navigate(log_r, config, options=opts, lever_arm_b_m=lever_b_m, record_gains=True)
-    gains = base.gain_replay
-    if gains is None or base.innovations is None:
+    gains, rec = base.gain_replay, base.innovations
+    if gains is None or rec is None:
         raise ValueError("A recorded no gains")
-
-    def innovations(lg: Any) -> np.ndarray:
-        rec = navigate(lg, config, options=opts, lever_arm_b_m=lever_b_m,
-                       replay=gains).innovations
-        assert rec is not None  # A always records its innovations
-        return rec.dz_ned
-
-    nu0 = innovations(log_r)
+    nu0 = rec.dz_ned
     t_from = float(base.alignment.t_s)  # before it the horizontal bias is A's tilt
-    used = (gains.status == STATUS_USED) & (base.innovations.status == STATUS_USED) & \
-        np.all(np.isfinite(nu0), axis=1) & (base.innovations.t_s >= t_from)
+    used = (gains.status == STATUS_USED) & (rec.status == STATUS_USED) & \
+        np.all(np.isfinite(nu0), axis=1) & (rec.t_s >= t_from)
     chol = np.linalg.cholesky(gains.s_inv[used])  # S^-1 = L L^T: L^T nu is white
-
-    def white(nu: np.ndarray) -> np.ndarray:
-        return np.einsum("kji,kj->ki", chol, nu[used]).reshape(-1)
-
     t_run = t_s_from_time_ns(log_r.imu.time_ns, int(log_r.imu.time_ns[0]))
     knots = knots_s(t_from, float(t_run[-1]))
-    hinges = hinge_basis(t_run, knots)
     extent = float("nan")
     fams = [f for f in families if reference is not None or sensor_family(f).sensor != "gravity"]
-    runs = []  # (family, sensor, (N, 3) specific force or (N,) on an axis, axis, step)
-    for fam in fams:
-        fs = sensor_family(fam)
-        step = catalog_entry(fam).plausible_si
-        if fs.sensor == "gravity":
-            assert reference is not None
-            sol = base.forward
-            after = sol.t_s >= base.alignment.t_s
-            ne = north_east_m(sol.lat_rad[after], sol.lon_rad[after], *reference, 0.0)
-            extent = max(1000.0, float(np.max(np.hypot(ne[:, 0], ne[:, 1]))))
-            cols = _field_columns(base, t_run, reference, extent)
-            runs += [(fam, "accel", cols[:, :, j], -1, step) for j in range(cols.shape[2])]
-        else:
-            runs += [(fam, fs.sensor, hinges[:, k], a, step) for a in range(2)
-                     for k in range(knots.size)]
-    out = map_in_threads(lambda r: white(innovations(_perturbed(
-        log_r, r[1], r[3], r[4] * r[2])) - nu0) / r[4], runs, threads)
+    field = None
+    if reference is not None and any(sensor_family(f).sensor == "gravity" for f in fams):
+        sol = base.forward
+        after = sol.t_s >= base.alignment.t_s
+        ne = north_east_m(sol.lat_rad[after], sol.lon_rad[after], *reference, 0.0)
+        extent = max(1000.0, float(np.max(np.hypot(ne[:, 0], ne[:, 1]))))
+        field = _field_input(base, reference, extent)
+    # where a column is not smooth (a step on a knot is one break)
+    breaks = np.unique(np.round(np.concatenate([knots, step_times_s(knots)]), 6))
     responses = {}
-    for fam in fams:
-        stacked = np.stack([c for r, c in zip(runs, out, strict=True) if r[0] == fam], axis=1)
-        responses[fam] = (stacked[:, :, None] if sensor_family(fam).sensor == "gravity" else
-                          stacked.reshape(-1, 2, knots.size).transpose(0, 2, 1))
-    return InnovationDesign(white(nu0), responses, knots, float(t_run[-1]),
-                            base.innovations.t_s[used], extent)
+    for fam in fams:  # a pass per family: its columns' inputs and integrals are in memory
+        dnu = innovation_responses(gains, base.forward.trajectory, t_run,
+                                   log_r.imu.w_ib_b_radps, log_r.imu.f_ib_b_mps2,
+                                   _column_input(fam, knots, field), breaks_s=breaks,
+                                   static_window_s=_static_window(base, opts))
+        white = np.einsum("kji,kjm->kim", chol, dnu[used]).reshape(-1, dnu.shape[2])
+        responses[fam] = (white[:, :, None] if sensor_family(fam).sensor == "gravity" else
+                          white.reshape(-1, 2, basis_size(knots)).transpose(0, 2, 1))
+    white_y = np.einsum("kji,kj->ki", chol, nu0[used]).reshape(-1)
+    shifted = navigate(_gnss_earlier(log_r, READ_TIME_OFFSET_S), config, options=opts,
+                       lever_arm_b_m=lever_b_m, replay=gains).innovations
+    assert shifted is not None  # A always records its innovations
+    offset = np.einsum("kji,kj->ki", chol, shifted.dz_ned[used] - nu0[used]).reshape(-1)
+    return InnovationDesign(white_y, responses, knots, float(t_run[-1]), rec.t_s[used], extent,
+                            offset / READ_TIME_OFFSET_S)
+
+
+TIME_OFFSET_FLOOR_S = 5e-3
+"""A GNSS time offset A's innovations read is removed before the families are fitted when
+it is beyond this and :data:`TIME_OFFSET_SIGMAS` ... (the sample flight, without an offset,
+reads 3.3 ms: its innovations' offset column is not a column of the families' fit, where
+with an accelerometer ramp it explained what neither does alone, 297 +- 71 ug/h, p 0.005)."""
+TIME_OFFSET_SIGMAS = 5.0
+"""... of its sigma (the least squares', times the residual's long-run variance ratio)."""
+TIME_OFFSET_ITERATIONS = 4
+"""At most this many removals: A gates the records an offset spoils in turns, so its
+innovations read less than the whole offset at first (flight_time_offset_200hz: 7.1 of
+15 ms), and each pass on the log with the last reading removed reads the rest."""
+
+
+def _without_time_offset(log: Any, config: PipelineConfig, families: Sequence[str],
+                         lever: Any, reference: tuple[float, float] | None
+                         ) -> tuple[InnovationDesign, Any, float]:
+    """(design, log, offset [s]): the design on ``log`` with the GNSS time offset its
+    innovations read removed (the coefficient of its response: GNSS stamps minus true
+    time; 0 when none is significant, :data:`TIME_OFFSET_FLOOR_S`), by at most
+    :data:`TIME_OFFSET_ITERATIONS` passes. Left in, a 15 ms offset was named as a 143-223 ug
+    accelerometer step (flight_time_offset_200hz with the drift configured, where the legs
+    do not name the offset); removed, nothing."""
+    total = 0.0
+    design = innovation_design(log, config, families, lever_b_m=lever, reference=reference)
+    for _ in range(TIME_OFFSET_ITERATIONS):
+        x = design.time_offset_response
+        assert x is not None
+        xtx = float(x @ x)
+        c = float(x @ design.y) / xtx
+        r = design.y - c * x
+        ratio = long_run_ratio(r, design.record_t_s, 60.0)
+        sigma = float(np.sqrt(ratio * (r @ r) / max(r.size - 1, 1) / xtx))
+        if not (abs(c) > TIME_OFFSET_FLOOR_S and abs(c) > TIME_OFFSET_SIGMAS * sigma):
+            break
+        log = _gnss_earlier(log, -c)  # the column is GNSS stamped 1 s earlier: c late
+        total += c
+        design = innovation_design(log, config, families, lever_b_m=lever,
+                                   reference=reference)
+    return design, log, -total
 
 
 @dataclass(frozen=True)
@@ -224,8 +279,8 @@ class SensorFamilies:
 
 
 def sensor_families(d: Diagnosis, replays: list, log: mcap_reader.FlightLog,
-                    config: PipelineConfig, threads: int = 1,
-                    solution_a: SolutionA | None = None) -> SensorFamilies | None:
+                    config: PipelineConfig, solution_a: SolutionA | None = None
+                    ) -> SensorFamilies | None:
     """Fit the families on A's innovations of ``log`` with ``d``'s named GNSS-side effects
     removed; families ``d`` named on the legs are not fitted again, the gravity field only
     with A's solution (its origin: the legs' mean start). None when A fails on the log or no
@@ -241,10 +296,11 @@ def sensor_families(d: Diagnosis, replays: list, log: mcap_reader.FlightLog,
     log_s, lever, removed = _removed(log, config, d)
     ref = _legs_reference(replays, solution_a)
     try:
-        design = innovation_design(log_s, config, families, lever_b_m=lever, reference=ref,
-                                   threads=threads)
+        design, log_s, offset_s = _without_time_offset(log_s, config, families, lever, ref)
     except (ValueError, np.linalg.LinAlgError):
         return None
+    if offset_s:
+        removed = (*removed, f"the GNSS time offset {1e3 * offset_s:+.1f} ms")
     named, tested, ratio, holds = fit_sensor_families(
         design, families, {f: catalog_entry(f).shapes for f in families},
         config.pairs.diagnose_alpha)
@@ -268,7 +324,7 @@ def family_response(f: FamilyFinding, design: InnovationDesign, replays: list,
                     solution_a: SolutionA | None = None,
                     reference: tuple[float, float] | None = None) -> EffectResponse:
     """A named family's response on B minus A per coefficient, its fitted coefficients and
-    their covariance: a sensor change's per hinge coefficient (axis-major: x's K, then y's);
+    their covariance: a sensor change's per shape coefficient (axis-major: x's q, then y's);
     the gravity field's per potential term (the legs' starts on A's solution, north and east
     of ``reference``, over the design's extent)."""
     if sensor_family(f.effect).sensor == "gravity":
@@ -280,19 +336,21 @@ def family_response(f: FamilyFinding, design: InnovationDesign, replays: list,
                                     np.interp(r.t0_s, tr.t_s, tr.lon_rad), *reference, 0.0)[0])
             for r in replays)
         return EffectResponse(f.effect, columns, f.hinge_si[:, 0], f.hinge_cov_si)
-    k = design.knots.size
     cols = []
-    for j in range(2 * k):
-        unit = np.zeros(2 * k)
-        unit[j] = 1.0
-        cols.append(response_along_b(f, design.knots, replays, hinge_si=unit.reshape(2, k).T))
+    for axis in range(2):  # axis-major, as the shape's coefficients
+        for w in f.weights.T:
+            basis = np.zeros((w.size, 2))
+            basis[:, axis] = w
+            cols.append(response_along_b(f, design.knots, replays, hinge_si=basis))
     columns = tuple(np.stack([c[i] for c in cols], axis=-1) for i in range(len(replays)))
-    return EffectResponse(f.effect, columns, f.hinge_si.T.reshape(-1), f.hinge_cov_si)
+    return EffectResponse(f.effect, columns, f.coefficients_si, f.coefficients_cov_si)
 
 
 def _step(f: FamilyFinding, number: int, worth: Any, closing: DiagnosisStep,
           removed: tuple[str, ...]) -> DiagnosisStep:
-    note = f"; fitted with {', '.join(removed)} removed" if removed else ""
+    note = f"fitted with {', '.join(removed)} removed" if removed else ""
+    if note and f.shape_parameters:
+        note = "; " + note
     return DiagnosisStep(
         step=number, effect=f.effect, parameters=f.parameters, values=f.values,
         sigmas=f.sigmas, value=f.value, sigma=f.sigma, unit=f.unit, statistic=f.statistic,

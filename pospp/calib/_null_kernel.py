@@ -39,7 +39,7 @@ def z_size(n_a: int) -> int:
 
 
 @njit(cache=True)
-def _expm4(ft, out, w1, w2):
+def expm4(ft, out, w1, w2):
     """``out = I + A + A^2 / 2 + A^3 / 6 + A^4 / 24`` (Horner) for ``A = ft`` (square)."""
     n = ft.shape[0]
     for a in range(n):
@@ -83,7 +83,7 @@ def interval_matrices(x, fm, wm, dt, lay, inv_tau_a, inj, phi_z, gam, work, work
     for a in range(ny):
         for b in range(ny):
             ft[a, b] = fy[a, b] * dt
-    _expm4(ft, py, work[3], work[4])
+    expm4(ft, py, work[3], work[4])
     phi_z[:, :] = 0.0
     phi_z[:ny, :ny] = py
     # B: [e_B nav (9), beta (6)] with B's gyro error beta_g, accelerometer error beta_a
@@ -97,7 +97,7 @@ def interval_matrices(x, fm, wm, dt, lay, inv_tau_a, inj, phi_z, gam, work, work
             fu[r, 12 + k] = fa[r, 12 + k] * dt
     for k in range(6):
         fu[9 + k, 9 + k] = fy[ib + k, ib + k] * dt
-    _expm4(fu, pu, work_b[2], work_b[3])
+    expm4(fu, pu, work_b[2], work_b[3])
 
     for r in range(9):
         for c in range(9):

@@ -344,7 +344,7 @@ def linear_null(gains: GainReplay, trajectory: Trajectory, imu_t_s: NDArray, imu
     samples = np.concatenate(t_samp) if reps else np.zeros(0)
     if samples.size and (samples[0] < t_nodes[0] or samples[-1] > gains.t_s[-1]):
         raise ValueError("linear null: samples outside A's pass")
-    grid_t, g_node, g_sample = _grid(t_nodes, samples, max_step_s)
+    grid_t, g_node, g_sample = event_grid(t_nodes, samples, max_step_s)
     sizes = [t.size for t in t_samp]
     first = np.concatenate([[0], np.cumsum(sizes)])[:-1].astype(np.int64)
     g_of_j = np.empty(samples.size, dtype=np.int64)
@@ -355,7 +355,7 @@ def linear_null(gains: GainReplay, trajectory: Trajectory, imu_t_s: NDArray, imu
     n_a = lay.n
     slot_g = lay.i_gm if lay.i_gm >= 0 else I_BG
     slot_a = lay.i_gm + 3 if lay.i_gm >= 0 else I_BA
-    ev = _interval_means(grid_t, trajectory, imu_t_s, imu_w_b_radps, imu_f_b_mps2)
+    ev = interval_means(grid_t, trajectory, imu_t_s, imu_w_b_radps, imu_f_b_mps2)
     s_node, s_alpha = _bracket(t_nodes, samples)
     l_node, l_alpha = _bracket(t_nodes, samples[first])
     leg_end = g_of_j[first + np.asarray(sizes) - 1]
@@ -372,7 +372,7 @@ def linear_null(gains: GainReplay, trajectory: Trajectory, imu_t_s: NDArray, imu
                       g_of_j[first], psi)
 
 
-def _grid(t_nodes: NDArray, samples: NDArray, max_step_s: float
+def event_grid(t_nodes: NDArray, samples: NDArray, max_step_s: float
           ) -> tuple[NDArray, NDArray, NDArray]:
     """The grid's times (from A's first node) and the node and sample at each point (-1:
     none): A's nodes, the samples, and points filling every gap to at most ``max_step_s``."""
@@ -410,7 +410,7 @@ def _bracket(t_nodes: NDArray, t: NDArray) -> tuple[NDArray, NDArray]:
     return i.astype(np.int64), np.clip(alpha, 0.0, 1.0)
 
 
-def _interval_means(grid_t: NDArray, trajectory: Trajectory, t_s: NDArray, w: NDArray,
+def interval_means(grid_t: NDArray, trajectory: Trajectory, t_s: NDArray, w: NDArray,
                     f: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray]:
     """(kernel states at the grid points, mean specific force and rate over the interval
     ending at each (row 0: at its start), interval lengths): the IMU's rates integrated

@@ -360,14 +360,14 @@ def _check_choice(option: str, value: str | None, choices: list[str]) -> None:
 @main.command()
 @click.argument("run_dir", type=click.Path(exists=True, file_okay=False))
 @click.option("--format", "fmt", required=True,
-              type=click.Choice(["sbet", "csv", "geojson", "kml"]),
-              help="sbet: Applanix SBET binary; csv: GPS week/seconds of week; geojson, kml: "
-                   "the track, the legs and the events (docs/formats.md).")
+              help="An export format of docs/formats.md, 'Exports' (pospp.io.exports."
+                   "EXPORT_FORMATS): sbet (Applanix SBET binary), csv (GPS week / seconds of "
+                   "week), geojson and kml (the track, the legs and the events), ...")
 @click.option("--rate", "rate_hz", default=None, type=click.FloatRange(min=0, min_open=True),
               help="Thin the trajectory to about this rate [Hz] (default: every epoch).")
 @click.option("-o", "--out", "out_file", default=None, type=click.Path(dir_okay=False),
-              help="Output file (default: RUN_DIR/trajectory.out|.csv|.geojson|.kml, or "
-                   "events.out|.csv with --events).")
+              help="Output file (default: RUN_DIR/trajectory.EXT, or events.EXT with "
+                   "--events; EXT the format's: out for sbet, else its name).")
 @click.option("--solution", default="best", show_default=True,
               type=click.Choice(["best", "compensated", "smoothed", "forward"]),
               help="Which solution of trajectory.parquet (best: compensated > smoothed > "
@@ -380,8 +380,9 @@ def _check_choice(option: str, value: str | None, choices: list[str]) -> None:
 def export(run_dir: str, fmt: str, rate_hz: float | None, out_file: str | None,
            solution: str, events: bool, force: bool) -> None:
     """Export a run's trajectory or trigger poses for other tools (pospp.io.exports)."""
-    from pospp.io.exports import export_run
+    from pospp.io.exports import FORMATS, export_run
 
+    _check_choice("--format", fmt, list(FORMATS))
     path = export_run(run_dir, fmt, rate_hz=rate_hz, out=out_file, solution=solution,
                       data="events" if events else "trajectory", force=force)
     click.echo(str(path))

@@ -74,9 +74,10 @@ class InnovationDesign:
     ----------
     y : ndarray (n,)
         ``L^T nu`` over the records A used (whitened by its own ``S^-1``).
-    responses : mapping str -> ndarray (n, K, 2)
-        Per family, ``L^T J`` per SI hinge coefficient (slope change of one SI unit per hour
-        at knot k) on body axis x and y.
+    responses : mapping str -> ndarray (n, K + S, 2)
+        Per family, ``L^T J`` per SI basis coefficient (:func:`pospp.diagnose.shapes.
+        change_basis`: a slope change of one SI unit per hour at knot k, a step of one SI
+        unit at step time s) on body axis x and y.
     knots : ndarray (K,)
         The hinge knots [s run time].
     t_end_s : float
@@ -86,6 +87,10 @@ class InnovationDesign:
     field_extent_m : float
         The half-size of the flown area the gravity field's potential is written over [m]
         (:func:`pospp.diagnose.effects.field_gradient`; NaN without the gravity family).
+    time_offset_response : ndarray (n,)
+        ``L^T J`` of a GNSS time offset (GNSS stamped one second earlier): what reads an
+        offset left in the log (:func:`pospp.sensor_stage.innovation_design`); not a column
+        of the families' fit.
     """
 
     y: NDArray
@@ -94,6 +99,7 @@ class InnovationDesign:
     t_end_s: float
     record_t_s: NDArray
     field_extent_m: float = float("nan")
+    time_offset_response: NDArray | None = None
 
 
 @dataclass(frozen=True)
@@ -115,11 +121,18 @@ class FamilyFinding:
     explained_fraction: float
     significant: bool
     hinge_si: NDArray
-    """(K, A): the fitted coefficients, SI: a sensor change's hinge coefficients (per hour)
-    on body x and y (A = 2), the gravity field's potential terms (A = 1)."""
+    """(K, A): the fitted change on its basis, SI: a sensor change's basis coefficients
+    (:func:`pospp.diagnose.shapes.change_basis`; K counts hinges and steps) on body x and y
+    (A = 2), the gravity field's potential terms (A = 1)."""
     hinge_cov_si: NDArray
     """(A K, A K): their covariance (axis-major: x's K, then y's)."""
     n_variants: int
+    weights: NDArray
+    """(K, q): the shape's basis coefficients per shape coefficient (its variant's)."""
+    coefficients_si: NDArray
+    """(A q,): the shape's fitted coefficients, SI (axis-major)."""
+    coefficients_cov_si: NDArray
+    """(A q, A q): their covariance."""
 
 
 def _fit(x: NDArray, y: NDArray) -> tuple[NDArray, float, int, NDArray]:
@@ -231,7 +244,7 @@ def _finding(design: InnovationDesign, fam: str, best: dict, walk: dict, rss0: f
     wcov = np.kron(np.eye(n_ax), v.weights) @ cov @ np.kron(np.eye(n_ax), v.weights).T
     return FamilyFinding(fam, v.shape, v.parameter_text, names, vals, sig, size, size_sig,
                          unit_name, best["f"], p_adj, best["bic"] - _bic(rss0, n, k0), frac,
-                         significant, hinge, wcov, n_var)
+                         significant, hinge, wcov, n_var, v.weights, best["c"], cov)
 
 
 SCALE_BAND = 3.0
@@ -299,8 +312,9 @@ def fit_sensor_families(design: InnovationDesign, families: Sequence[str],
     named: list[FamilyFinding] = []
     tested: list[FamilyFinding] = []
     left = [f for f in families if f in design.responses]
-    flexible = [_columns(design.responses[f], np.eye(design.responses[f].shape[1]))
-                for f in left]
+    flexible = [_columns(design.responses[f],
+                         max(family_variants(f, shapes[f], design),
+                             key=lambda v: v.weights.shape[1]).weights) for f in left]
     full = np.concatenate([base_x, *flexible], axis=1)
     resid = design.y - full @ _fit(full, design.y)[0]
     spacing = (design.t_end_s - float(design.knots[0])) / design.knots.size

@@ -202,6 +202,38 @@ def write_kml(path: str | Path, track: pd.DataFrame | None,
     return out
 
 
+GPX_NS = "http://www.topografix.com/GPX/1/1"
+
+
+def write_gpx(path: str | Path, table: pd.DataFrame) -> Path:
+    """Write ``table`` as GPX 1.1: a trajectory as one track segment of points, events (a
+    table with ``event_id``) as waypoints named ``event N``; each point's ``ele`` is the
+    WGS-84 ellipsoidal height [m] (GPX means height above mean sea level: the file's
+    ``desc`` says which) and ``time`` UTC."""
+    ET.register_namespace("", GPX_NS)
+    q = f"{{{GPX_NS}}}"
+    gpx = ET.Element(f"{q}gpx", version="1.1", creator="pospp")
+    meta = ET.SubElement(gpx, f"{q}metadata")
+    ET.SubElement(meta, f"{q}desc").text = (
+        "pospp trajectory; ele: WGS-84 ellipsoidal height [m], not above mean sea level")
+    events = "event_id" in table.columns
+    parent = gpx if events else ET.SubElement(ET.SubElement(gpx, f"{q}trk"), f"{q}trkseg")
+    lat, lon = table["lat_deg"].to_numpy(float), table["lon_deg"].to_numpy(float)
+    h, t = table["height_m"].to_numpy(float), table["time_ns"].to_numpy(np.int64)
+    ids = table["event_id"].to_numpy() if events else np.zeros(len(table), dtype=int)
+    for i in range(len(table)):
+        pt = ET.SubElement(parent, f"{q}wpt" if events else f"{q}trkpt",
+                           lat=f"{lat[i]:.9f}", lon=f"{lon[i]:.9f}")
+        ET.SubElement(pt, f"{q}ele").text = f"{h[i]:.3f}"
+        ET.SubElement(pt, f"{q}time").text = _utc_text(int(t[i]))
+        if events:
+            ET.SubElement(pt, f"{q}name").text = f"event {int(ids[i])}"
+    out = Path(path)
+    with atomic_path(out) as tmp:
+        ET.ElementTree(gpx).write(tmp, encoding="utf-8", xml_declaration=True)
+    return out
+
+
 @dataclass(frozen=True)
 class ExportFormat:
     """One export format: a row of :data:`EXPORT_FORMATS`.
@@ -221,6 +253,7 @@ EXPORT_FORMATS: dict[str, ExportFormat] = {
     "csv": ExportFormat("csv", True, write_csv),
     "geojson": ExportFormat("geojson", False, write_geojson),
     "kml": ExportFormat("kml", False, write_kml),
+    "gpx": ExportFormat("gpx", True, write_gpx),
 }
 """The export formats by name (docs/formats.md, "Exports"): a new one is a row here, its
 writer, its test and its doc line."""

@@ -59,11 +59,7 @@ _TRASH = ".pospp-trash-"
 _OTHER_OUTPUTS = frozenset({"report.html", "trajectory.mcap", "evaluation.png",
                             "observability.png", MARKER,
                             # pospp compare-sim's fitted model (pospp.compare_sim)
-                            "sim_model.toml",
-                            # pospp export's default files (pospp.io.exports.DEFAULT_NAMES)
-                            "trajectory.out", "trajectory.csv", "trajectory.geojson",
-                            "trajectory.kml", "events.out", "events.csv", "events.geojson",
-                            "events.kml"})
+                            "sim_model.toml"})
 _RENAME_EXCHANGE = 2  # linux/fs.h
 
 
@@ -91,8 +87,11 @@ def _few(names: list[str], n: int = 5) -> str:
 
 
 def is_pospp_file(name: str) -> bool:
-    """True for a file name a run folder may hold (tables, report, MCAP, figures, temporaries)."""
-    if name in _OTHER_OUTPUTS:
+    """True for a file name a run folder may hold (tables, report, MCAP, figures, temporaries,
+    ``pospp export``'s default files: :data:`pospp.io.exports.DEFAULT_NAMES`)."""
+    from pospp.io.exports import DEFAULT_NAMES  # the export registry's (imports this module)
+
+    if name in _OTHER_OUTPUTS or name in DEFAULT_NAMES:
         return True
     if name.endswith(".parquet") and name[: -len(".parquet")] in TABLES:
         return True

@@ -265,6 +265,40 @@ def _is_moving(v: NDArray, var: NDArray, c: float, options: AlignmentOptions) ->
             | (speed > options.max_noisy_static_speed_mps))
 
 
+def static_attitude_rpy(w_mean_b_radps: ArrayLike, f_mean_b_mps2: ArrayLike
+                        ) -> tuple[float, float, float]:
+    """(roll, pitch, yaw) [rad] of levelling and gyrocompassing from mean sensor outputs at
+    rest (module docstring)."""
+    f = np.asarray(f_mean_b_mps2, dtype=float)
+    w = np.asarray(w_mean_b_radps, dtype=float)
+    roll = math.atan2(-f[1], -f[2])
+    pitch = math.atan2(f[0], math.hypot(f[1], f[2]))
+    c_level = rotation.dcm_from_euler([roll, pitch, 0.0])  # C_hb, h = levelled body frame
+    w_h = c_level @ w
+    return roll, pitch, math.atan2(-w_h[1], w_h[0]) % (2.0 * math.pi)
+
+
+def static_attitude_jacobian(w_mean_b_radps: ArrayLike, f_mean_b_mps2: ArrayLike) -> NDArray:
+    """The static alignment's attitude error per change of its mean rate and specific force:
+    (3, 6), ``phi = J [dw_b; df_b]`` (phi NED [rad] with ``C_nb_hat = (I - [phi x]) C_nb``,
+    dw [rad/s], df [m/s^2], body FRD), by central differences of
+    :func:`static_attitude_rpy` (steps 1e-9 rad/s and 1e-5 m/s^2: truncation and rounding
+    below 1e-6 of the result)."""
+    x0 = np.concatenate([np.asarray(w_mean_b_radps, float), np.asarray(f_mean_b_mps2, float)])
+    c0_t = rotation.dcm_from_euler(static_attitude_rpy(x0[:3], x0[3:])).T
+    jac = np.empty((3, 6))
+    for i in range(6):
+        h = 1e-9 if i < 3 else 1e-5
+        phis = []
+        for sign in (1.0, -1.0):
+            x = x0.copy()
+            x[i] += sign * h
+            m = np.eye(3) - rotation.dcm_from_euler(static_attitude_rpy(x[:3], x[3:])) @ c0_t
+            phis.append(np.array([m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]]) / 2)
+        jac[:, i] = (phis[0] - phis[1]) / (2.0 * h)
+    return jac
+
+
 def coarse_static_alignment(
     w_mean_b_radps: ArrayLike,
     f_mean_b_mps2: ArrayLike,
@@ -284,12 +318,7 @@ def coarse_static_alignment(
         The gyrocompassing heading sigma (also rpy_sigma_rad[2]).
     """
     f = np.asarray(f_mean_b_mps2, dtype=float)
-    w = np.asarray(w_mean_b_radps, dtype=float)
-    roll = math.atan2(-f[1], -f[2])
-    pitch = math.atan2(f[0], math.hypot(f[1], f[2]))
-    c_level = rotation.dcm_from_euler([roll, pitch, 0.0])  # C_hb, h = levelled body frame
-    w_h = c_level @ w
-    yaw = math.atan2(-w_h[1], w_h[0]) % (2.0 * math.pi)
+    roll, pitch, yaw = static_attitude_rpy(w_mean_b_radps, f)
     g = float(np.linalg.norm(f))
     t = max(duration_s, 1e-3)
     tilt_sigma = math.hypot(noise.accel_bias_sigma_mps2, noise.accel_vrw_mpspsqrts / math.sqrt(t))

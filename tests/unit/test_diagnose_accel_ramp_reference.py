@@ -59,6 +59,10 @@ def test_the_accelerometer_family_is_named_with_shape_ramp_and_its_rate(ramp_run
     assert np.all(np.abs(vals - true) <= 0.25 * np.abs(true)), vals
     assert row.value == pytest.approx(float(np.linalg.norm(true)), rel=0.25)
     assert row.p_value < 1e-6
+    # the responses from one linear pass give the fit of the 48 replays of A it replaced,
+    # (896, -408) +- (42, 43) ug/h, within a sigma (measured (896.5, -407.2) +- (41.7, 42.5))
+    sig = np.array([float(v) for v in row.parameter_sigmas.split(";")])
+    assert np.all(np.abs(vals - [896.0, -408.0]) < sig), (vals, sig)
 
 
 @pytest.mark.slow

@@ -22,9 +22,11 @@ from pospp.diagnose.shapes import (
     HOUR_S,
     SETTLING_GRID_S,
     all_variants,
+    basis_size,
     change_at,
-    hinge_basis,
+    change_basis,
     knots_s,
+    step_times_s,
     time_shape,
 )
 from pospp.effects_catalog import CATALOG, SHAPES, catalog_entry, shape_unit
@@ -43,18 +45,21 @@ def test_every_family_shape_is_catalogued_with_its_unit():
         shape_unit("lever_arm", "ramp")
 
 
-def test_shapes_on_the_hinge_basis_are_their_closed_forms():
+def test_shapes_on_the_basis_are_their_closed_forms():
     knots = knots_s(600.0, 2700.0)
     assert knots.size == 7 and knots[0] == 600.0 and np.all(np.diff(knots) <= 300.0 + 1e-9)
+    taus = step_times_s(knots)
+    assert taus[0] > 600.0 and taus[-1] < 2700.0 and np.all(np.diff(taus) <= 60.0 + 1e-9)
     t = np.linspace(0.0, 2700.0, 2701)
-    h = hinge_basis(t, knots)
+    h = change_basis(t, knots)
+    assert h.shape == (t.size, basis_size(knots)) == (t.size, knots.size + taus.size)
     (ramp,) = time_shape("ramp").variants(knots, 2700.0)
     np.testing.assert_allclose(h @ ramp.weights[:, 0], np.maximum(t - 600.0, 0) / HOUR_S,
                                atol=1e-12)
     steps = time_shape("step").variants(knots, 2700.0)
-    s = h @ steps[2].weights[:, 0]  # the step across [knot 3, knot 4]
-    assert np.all(s[t <= knots[3]] == 0.0)
-    np.testing.assert_allclose(s[t >= knots[4]], 1.0, atol=1e-12)
+    assert [v.parameter for v in steps] == list(taus)
+    s = h @ steps[12].weights[:, 0]  # a true step at its time
+    np.testing.assert_array_equal(s, (t >= taus[12]).astype(float))
     nodes = np.append(knots, 2700.0)
     for v, tau in zip(time_shape("settling").variants(knots, 2700.0), SETTLING_GRID_S,
                       strict=True):
@@ -62,7 +67,8 @@ def test_shapes_on_the_hinge_basis_are_their_closed_forms():
         np.testing.assert_allclose(change_at(nodes, knots, v.weights)[:, 0], exact,
                                    atol=1e-12)  # the interpolant is exact at the knots
     (walk,) = time_shape("walk").variants(knots, 2700.0)
-    assert walk.weights.shape == (7, 7)
+    assert walk.weights.shape == (basis_size(knots), 7)
+    np.testing.assert_array_equal(walk.weights[7:], 0.0)  # the hinges alone
 
 
 SCALE = {"accel_bias_change": 1e-3, "gyro_bias_change": 2.4e-7}
@@ -72,8 +78,8 @@ plausible sizes, 100 ug and 0.05 deg/h: the observability screen keeps them)."""
 
 def _design(rng, a_true: np.ndarray, knots, n: int = 3000) -> InnovationDesign:
     """Whitened 'innovations' y = J a + N(0, 1) with smooth random responses J; ``a_true``
-    (K, 2) the accelerometer's hinge coefficients in units of SCALE."""
-    k = knots.size
+    (K + S, 2) the accelerometer's basis coefficients in units of SCALE."""
+    k = basis_size(knots)
     tt = np.linspace(0.0, 1.0, n)
     base = np.stack([np.sin(2 * np.pi * (j + 1) * tt + rng.uniform(0, 6)) for j in range(4 * k)],
                     axis=1)
@@ -115,7 +121,7 @@ def test_the_family_fit_names_nothing_on_noise_at_its_level():
     for seed in range(40):
         rng = np.random.default_rng(100 + seed)
         found, tested, *_ = fit_sensor_families(
-            _design(rng, np.zeros((knots.size, 2)), knots), FAMS, SHAPE_NAMES, 0.05)
+            _design(rng, np.zeros((basis_size(knots), 2)), knots), FAMS, SHAPE_NAMES, 0.05)
         named += bool(found)
         assert {f.effect for f in tested} == set(FAMS)
     assert named <= 2  # level 0.05 family-wise, Bonferroni over the variants: conservative
@@ -178,7 +184,7 @@ def test_every_variant_of_a_family_is_tried():
     knots = knots_s(0.0, 1800.0)
     v = all_variants(SHAPE_NAMES["accel_bias_change"], knots, 1800.0)
     assert [x.shape for x in v].count("settling") == len(SETTLING_GRID_S)
-    assert [x.shape for x in v].count("step") == knots.size - 1
+    assert [x.shape for x in v].count("step") == step_times_s(knots).size
     assert {x.shape for x in v} == {"settling", "step", "ramp", "walk"}
 
 
@@ -200,7 +206,7 @@ def test_correlated_innovations_are_corrected_and_a_wrong_scale_names_nothing():
     # smooth residuals (each component an AR(1) over the records, rho 0.95, unit variance):
     # the F tests alone would name a walk, divided by the long-run variance ratio they do not
     knots = knots_s(600.0, 2700.0)
-    d = _design(np.random.default_rng(9), np.zeros((knots.size, 2)), knots)
+    d = _design(np.random.default_rng(9), np.zeros((basis_size(knots), 2)), knots)
     e = np.random.default_rng(10).normal(size=(d.y.size // 3, 3))
     x = np.zeros_like(e)
     for k in range(1, e.shape[0]):
@@ -253,7 +259,7 @@ def test_a_family_the_innovations_cannot_reveal_is_not_tested():
     # not stand 2 noise sigmas out are dropped (a gravity field over a flight along one line
     # read 3900 +- 2900 arcsec and moved the refit by 4.3 sigma before it)
     knots = knots_s(600.0, 2700.0)
-    d = _design(np.random.default_rng(3), np.zeros((knots.size, 2)), knots)
+    d = _design(np.random.default_rng(3), np.zeros((basis_size(knots), 2)), knots)
     weak = {**d.responses, "accel_bias_change": d.responses["accel_bias_change"] * 1e-6}
     named, tested, *_ = fit_sensor_families(dataclasses.replace(d, responses=weak), FAMS,
                                             SHAPE_NAMES, 0.05)
@@ -271,7 +277,7 @@ def test_a_large_ramp_below_the_screen_at_its_plausible_rate_is_named_a_ramp():
 
     knots = knots_s(600.0, 2700.0)
     fam = "accel_bias_change"
-    d = _design(np.random.default_rng(11), np.zeros((knots.size, 2)), knots)
+    d = _design(np.random.default_rng(11), np.zeros((basis_size(knots), 2)), knots)
     ramp, walk = (time_shape(s).variants(knots, 2700.0)[0] for s in ("ramp", "walk"))
 
     def lam_max(resp, v):
