@@ -231,9 +231,9 @@ def test_a_noisier_receiver_widens_the_lever_arms_sigma_as_tau_s():
     """Records whose NIS averages 4 times its 3 dof (reduced chi-square 4: a receiver noisier
     than it reports, or a coloured GNSS error) widen the lever arm's sigmas by sqrt(4), as
     they do tau's: a vertical lever arm 6 of the passes' own sigmas (0.3 m, 0.05 m) from the
-    configured one is 3 of the widened ones and is not read (it was named `lever_arm`: the Monte Carlo's
-    0.342 m coloured GNSS error at 3 x noise, reduced chi-square 3-6.5, was named a lever arm
-    at 7-15 of the passes' sigmas)."""
+    configured one is 3 of the widened ones and is not read (it was named `lever_arm`; the
+    Monte Carlo's 0.342 m coloured GNSS error at 3 x noise, reduced chi-square 3-6.5, was
+    named a lever arm at 7-15 of the passes' sigmas)."""
     cfg = np.array([0.3, 0.1, -1.5])
     run0, _ = closed_form(0.0, 0.002, cfg + [0.0, 0.0, 0.3], sigma_l_m=0.05)
 
