@@ -17,11 +17,9 @@ Statistics (name: series, unit)
     Normalised innovation squared of the GNSS position / velocity records A used (3 dof;
     3 when A's model matches the data).
 ``gnss_pos_gated``
-    Share of the GNSS position records A's innovation gate rejected (batch means; 1 - the
-    gate probability, 1e-4, when A's model matches the data). Under a GNSS error several
-    times its reported sigma A's NIS is no measure of its size: the gate drops the largest
-    innovations and, after ``gate_reset_s`` of them, resets, so the NIS of the records used
-    is neither monotone nor smooth in the error's level, while the share gated rises with it.
+    Share of the GNSS position records A's gate rejected (batch means; 1e-4 when A's model
+    matches the data): it rises with a GNSS error several times its reported sigma, whose
+    censored NIS (the gate drops the largest; the filter resets) does not.
 ``gnss_pos_lag1`` / ``gnss_vel_lag1``
     Whiteness: z_k z_k-1 averaged over N and E, z the horizontal innovation divided by its
     flight RMS, for consecutive records (lag-1 autocorrelation; 0 for white innovations).
