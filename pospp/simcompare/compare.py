@@ -224,26 +224,27 @@ def _wls(h: NDArray, g: NDArray, w: NDArray):
     return u, cov, float(u @ a @ u)
 
 
-def _refine(effect: SimEffect, names: list[str], cols: list[int], h: NDArray, g: NDArray,
-            w: NDArray, fit, base: FlightStats, simulate: SimulateFn, imu: ImuErrorModel,
-            gnss: GnssModel, ctx: EffectContext, u_rest: NDArray | None = None):
+def _refine(effect: SimEffect, names: list[str], at: tuple[list[int], NDArray], h: NDArray,
+            g: NDArray, w: NDArray, fit, base: FlightStats, simulate: SimulateFn,
+            imu: ImuErrorModel, gnss: GnssModel, ctx: EffectContext):
     """Fit u on the simulated statistic itself, not on its slope at zero: Broyden's secant
     method. With S(u) the simulated fit statistics of the model with u added and S(0) the
     base's, solve S(u) - S(0) = g (weighted least squares) by simulating at the current
     u_k, updating the slope along the last step (H += (dS - H du) du^T / du^T du) and
     stepping u_{k+1} = u_k + WLS(H, g - (S(u_k) - S(0))), for ``effect.refine`` iterations
-    at most (stops when the step is below a tenth of its sigma). ``u_rest``: the full
-    parameter vector the fitted ``cols`` are set in (a grid value; default zeros). Returns
+    at most (stops when the step is below a tenth of its sigma). ``at = (cols, u_rest)``: the
+    fitted parameters' indices and the full parameter vector they are set in (zeros, or a
+    grid value). Returns
     the iterate with the least weighted residual sum(w r^2): (that residual, u, the
     covariance (H^T W H)^-1 of the local slope there, the chi-square of u against zero
     u^T H^T W H u); the residual is NaN when no iterate was simulated (the fit returned)."""
-    p = len(effect.params)
+    cols, u_rest = at
     s0 = np.array([base.stats[s].value for s in names])
     u_prev, s_prev = np.zeros(len(cols)), s0
     u_k, cov_k, _ = fit
     best = None
     for _ in range(effect.refine):
-        full = np.zeros(p) if u_rest is None else np.array(u_rest, dtype=float)
+        full = np.array(u_rest, dtype=float)
         full[cols] = u_k
         sim = simulate(*effect.apply(imu, gnss, full, ctx))
         s_k = np.array([sim.stats[s].value if s in sim.stats else np.nan for s in names])
@@ -323,8 +324,8 @@ def _grid_point(effect: SimEffect, v: float, names: list[str], g: NDArray, w: ND
     u = np.zeros(p)
     u[jg] = v
     if effect.refine:  # secant iterations from the trial slope; their best iterate
-        res, *fit = _refine(effect, names, free, h, g, w, fit, base, simulate, imu, gnss,
-                            ctx, u_rest=u)
+        res, *fit = _refine(effect, names, (free, u), h, g, w, fit, base, simulate, imu,
+                            gnss, ctx)
         if np.isfinite(res):
             return res, tuple(fit)
     u[free] = fit[0]
@@ -394,7 +395,8 @@ def _fit(effect: SimEffect, gap: dict[str, Gap], base: FlightStats, simulate: Si
         h[:, k] = [(sim.stats[s].value - base.stats[s].value) / u[j] for s in names]
     fit = _wls(h, g, w)
     if fit is not None and effect.refine:
-        fit = _refine(effect, names, cols, h, g, w, fit, base, simulate, imu, gnss, ctx)[1:]
+        fit = _refine(effect, names, (cols, np.zeros(p)), h, g, w, fit, base, simulate, imu,
+                      gnss, ctx)[1:]
     if fit is None or cov0 is None:
         return fit
     uc, covc, chi = fit
