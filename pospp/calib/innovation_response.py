@@ -197,6 +197,9 @@ def _kernel_states(trajectory: Trajectory, t_s: NDArray) -> NDArray:
     return np.column_stack([tr.lat_rad, tr.lon_rad, tr.height_m, tr.v_n_mps, tr.q_nb])
 
 
+_CHUNK = 512
+"""Grid intervals whose input integrals are made at once (their inputs at three points each:
+512 x 3 x 6 x m doubles, 10 MB at m = 140)."""
 _INSIDE_S = 1e-6
 """How far inside its interval an end is evaluated [s] (a hinge moves by its slope times
 this: 3e-10 of an hour)."""
@@ -206,20 +209,27 @@ def _input_integrals(grid_t: NDArray, trajectory: Trajectory, body_input: BodyIn
                      ) -> tuple[NDArray, NDArray]:
     """``D0 = int b ds``, ``D1 = int (t1 - s) b ds`` (G, 6, m) over the interval ending at
     each grid point (row 0 zero), b = [-C_nb u_g; C_nb u_a] the input in the error's phi and
-    dv rows, by Simpson's rule (module docstring). Each interval's ends are evaluated just
-    inside it (:data:`_INSIDE_S`), so that an input with a jump at a grid point (a step) is
-    integrated exactly, its value before the jump in the interval that ends there."""
-    mid = 0.5 * (grid_t[1:] + grid_t[:-1])
-    t_all = np.concatenate([grid_t[:-1] + _INSIDE_S, grid_t[1:] - _INSIDE_S, mid])
-    c_nb = rotation.dcm_from_quat(interpolate_trajectory(trajectory, t_all).q_nb)
-    u = np.asarray(body_input(t_all, c_nb), dtype=float)
-    b = np.concatenate([-np.einsum("tij,tjm->tim", c_nb, u[:, 0:3]),
-                        np.einsum("tij,tjm->tim", c_nb, u[:, 3:6])], axis=1)
+    dv rows, by Simpson's rule (module docstring), :data:`_CHUNK` intervals at a time (the
+    input at three points per interval is the largest array). Each interval's ends are
+    evaluated just inside it (:data:`_INSIDE_S`), so that an input with a jump at a grid point
+    (a step) is integrated exactly, its value before the jump in the interval that ends
+    there."""
     g = grid_t.size
-    h = np.diff(grid_t)[:, None, None]
-    b0, b1, bm = b[:g - 1], b[g - 1:2 * g - 2], b[2 * g - 2:]
-    d0 = np.zeros((g,) + b.shape[1:])
-    d1 = np.zeros_like(d0)
-    d0[1:] = h / 6.0 * (b0 + 4.0 * bm + b1)
-    d1[1:] = h * h / 6.0 * (b0 + 2.0 * bm)
+    d0 = d1 = np.zeros((g, 6, 0))
+    for a in range(0, g - 1, _CHUNK):
+        t0, t1 = grid_t[a:a + _CHUNK], grid_t[a + 1:a + 1 + _CHUNK]
+        t0 = t0[:t1.size]
+        t_all = np.concatenate([t0 + _INSIDE_S, t1 - _INSIDE_S, 0.5 * (t0 + t1)])
+        c_nb = rotation.dcm_from_quat(interpolate_trajectory(trajectory, t_all).q_nb)
+        u = np.asarray(body_input(t_all, c_nb), dtype=float)
+        b = np.concatenate([-np.einsum("tij,tjm->tim", c_nb, u[:, 0:3]),
+                            np.einsum("tij,tjm->tim", c_nb, u[:, 3:6])], axis=1)
+        if not d0.shape[2]:
+            d0 = np.zeros((g, 6, b.shape[2]))
+            d1 = np.zeros_like(d0)
+        k = t1.size
+        h = (t1 - t0)[:, None, None]
+        b0, b1, bm = b[:k], b[k:2 * k], b[2 * k:]
+        d0[a + 1:a + 1 + k] = h / 6.0 * (b0 + 4.0 * bm + b1)
+        d1[a + 1:a + 1 + k] = h * h / 6.0 * (b0 + 2.0 * bm)
     return d0, d1
