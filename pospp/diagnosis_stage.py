@@ -422,7 +422,7 @@ def named_responses(d: Diagnosis, replays: list, sigs: dict[str, list[np.ndarray
                     fams: SensorFamilies | None, solution_a: SolutionA | None = None
                     ) -> tuple[EffectResponse, ...]:
     """What each effect ``d`` named does to B minus A (legs in id order): a sensor family's
-    along B per hinge coefficient (:func:`pospp.sensor_stage.family_response`), a re-run
+    along B per shape coefficient (:func:`pospp.sensor_stage.family_response`), a re-run
     effect's A re-run signature (``sigs``), a library effect's signature along B; the
     estimate and its covariance (the legs' effects: their sigmas, independent). An effect
     whose signature cannot be made here is left out (the refit then says which it used)."""

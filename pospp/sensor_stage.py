@@ -219,6 +219,9 @@ reads 3.3 ms: its innovations' offset column is not a column of the families' fi
 with an accelerometer ramp it explained what neither does alone, 297 +- 71 ug/h, p 0.005)."""
 TIME_OFFSET_SIGMAS = 5.0
 """... of its sigma (the least squares', times the residual's long-run variance ratio)."""
+TIME_OFFSET_WINDOW_S = 60.0
+"""The window of the long-run variance ratio that widens the offset's sigma [s] (the offset's
+response lives in the turns, a minute or so each)."""
 TIME_OFFSET_ITERATIONS = 4
 """At most this many removals: A gates the records an offset spoils in turns, so its
 innovations read less than the whole offset at first (flight_time_offset_200hz: 7.1 of
@@ -242,7 +245,7 @@ def _without_time_offset(log: Any, config: PipelineConfig, families: Sequence[st
         xtx = float(x @ x)
         c = float(x @ design.y) / xtx
         r = design.y - c * x
-        ratio = long_run_ratio(r, design.record_t_s, 60.0)
+        ratio = long_run_ratio(r, design.record_t_s, TIME_OFFSET_WINDOW_S)
         sigma = float(np.sqrt(ratio * (r @ r) / max(r.size - 1, 1) / xtx))
         if not (abs(c) > TIME_OFFSET_FLOOR_S and abs(c) > TIME_OFFSET_SIGMAS * sigma):
             break
@@ -263,7 +266,7 @@ class SensorFamilies:
     tested: tuple[FamilyFinding, ...]
     knots: np.ndarray
     responses: dict[str, EffectResponse]
-    """Per named family, what it does to B minus A (per hinge coefficient, legs in id
+    """Per named family, what it does to B minus A (per shape coefficient, legs in id
     order)."""
     removed: tuple[str, ...]
     """The named GNSS-side effects taken off the log before the fit."""
@@ -335,13 +338,13 @@ def family_response(f: FamilyFinding, design: InnovationDesign, replays: list,
             origin_n_m=north_east_m(np.interp(r.t0_s, tr.t_s, tr.lat_rad),
                                     np.interp(r.t0_s, tr.t_s, tr.lon_rad), *reference, 0.0)[0])
             for r in replays)
-        return EffectResponse(f.effect, columns, f.hinge_si[:, 0], f.hinge_cov_si)
+        return EffectResponse(f.effect, columns, f.basis_si[:, 0], f.basis_cov_si)
     cols = []
     for axis in range(2):  # axis-major, as the shape's coefficients
         for w in f.weights.T:
             basis = np.zeros((w.size, 2))
             basis[:, axis] = w
-            cols.append(response_along_b(f, design.knots, replays, hinge_si=basis))
+            cols.append(response_along_b(f, design.knots, replays, basis_si=basis))
     columns = tuple(np.stack([c[i] for c in cols], axis=-1) for i in range(len(replays)))
     return EffectResponse(f.effect, columns, f.coefficients_si, f.coefficients_cov_si)
 

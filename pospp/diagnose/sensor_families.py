@@ -18,10 +18,12 @@ The likelihood
 A as configured (its own bias and drift model: "beyond the drift model") is run on the log
 with its Kalman gains recorded; with those gains replayed (:class:`pospp.nav.filter.
 GainReplay`) A is a fixed linear system, and its innovations are linear in a bias change
-``b(t)`` added to the IMU samples. With ``b = sum_k a_k R_k(t)`` on the hinge basis of
-:mod:`pospp.diagnose.shapes`, one replay per knot and axis gives the innovations' response
-``J_k``; the innovations of the flight with the change removed are ``nu - J a``, and A's
-prediction-error likelihood (whitened by ``S^-1 = L L^T``, ``w = L^T nu``) is least squares::
+``b(t)`` added to the IMU samples. With ``b = sum_j a_j B_j(t)`` on the basis of hinges and
+steps of :mod:`pospp.diagnose.shapes`, one linear pass of A's closed-loop error dynamics
+(:mod:`pospp.calib.innovation_response`) gives the innovations' response ``J_j`` to every
+basis function and axis; the innovations of the flight with the change removed are
+``nu - J a``, and A's prediction-error likelihood (whitened by ``S^-1 = L L^T``,
+``w = L^T nu``) is least squares::
 
     RSS(a) = sum_records | L^T (nu - J a) |^2
 
@@ -68,7 +70,7 @@ bias and B's horizontal error see)."""
 
 @dataclass(frozen=True)
 class InnovationDesign:
-    """A's whitened innovations and their responses to each family's hinge coefficients.
+    """A's whitened innovations and their responses to each family's basis coefficients.
 
     Attributes
     ----------
@@ -120,11 +122,11 @@ class FamilyFinding:
     delta_bic: float
     explained_fraction: float
     significant: bool
-    hinge_si: NDArray
+    basis_si: NDArray
     """(K, A): the fitted change on its basis, SI: a sensor change's basis coefficients
     (:func:`pospp.diagnose.shapes.change_basis`; K counts hinges and steps) on body x and y
     (A = 2), the gravity field's potential terms (A = 1)."""
-    hinge_cov_si: NDArray
+    basis_cov_si: NDArray
     """(A K, A K): their covariance (axis-major: x's K, then y's)."""
     n_variants: int
     weights: NDArray
@@ -312,9 +314,10 @@ def fit_sensor_families(design: InnovationDesign, families: Sequence[str],
     named: list[FamilyFinding] = []
     tested: list[FamilyFinding] = []
     left = [f for f in families if f in design.responses]
+    variants_of = {f: family_variants(f, shapes[f], design) for f in left}
     flexible = [_columns(design.responses[f],
-                         max(family_variants(f, shapes[f], design),
-                             key=lambda v: v.weights.shape[1]).weights) for f in left]
+                         max(variants_of[f], key=lambda v: v.weights.shape[1]).weights)
+                for f in left]
     full = np.concatenate([base_x, *flexible], axis=1)
     resid = design.y - full @ _fit(full, design.y)[0]
     spacing = (design.t_end_s - float(design.knots[0])) / design.knots.size
@@ -324,7 +327,7 @@ def fit_sensor_families(design: InnovationDesign, families: Sequence[str],
     while left:
         trials = {}
         for fam in left:
-            variants = family_variants(fam, shapes[fam], design)
+            variants = variants_of[fam]
             cands = [c for v in variants
                      if (c := _candidate(design, fam, v, base_x, rss0, k0, ratio)) is not None]
             if not cands:  # these data cannot reveal the family
@@ -433,13 +436,13 @@ def sensor_family(effect_id: str) -> SensorFamily:
 
 
 def response_along_b(finding: FamilyFinding, knots: NDArray, replays: Sequence,
-                     hinge_si: NDArray | None = None) -> list[NDArray]:
-    """B minus A's response (M, 2) per leg to a finding's change (its fitted hinge
-    coefficients, or ``hinge_si`` (K, 2)), relative to the change's mean over the legs'
+                     basis_si: NDArray | None = None) -> list[NDArray]:
+    """B minus A's response (M, 2) per leg to a finding's change (its fitted basis
+    coefficients, or ``basis_si`` (K + S, 2)), relative to the change's mean over the legs'
     samples (the constant part is the calibration's own bias: what it reads is then the
     bias at the legs' mean, not at the first knot)."""
     fam = sensor_family(finding.effect)
-    a = finding.hinge_si if hinge_si is None else hinge_si
+    a = finding.basis_si if basis_si is None else basis_si
     ch = [change_at(r.t0_s + r.t_s, knots, a) for r in replays]
     mean = np.mean(np.concatenate(ch), axis=0) if fam.sensor == "gyro" else 0.0
     return [fam.response_along_b(r, c - mean, c[0]) for r, c in zip(replays, ch, strict=True)]

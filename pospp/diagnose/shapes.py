@@ -47,7 +47,8 @@ HOUR_S = 3600.0
 KNOT_SPACING_S = 300.0
 """Default knot spacing [s] (the flight's span cut into pieces of at most this length)."""
 MAX_KNOTS = 10
-"""Most knots (each costs one A replay per axis and sensor: docs/diagnose.md)."""
+"""Most knots (each adds a column per axis and sensor to the linear pass of
+:mod:`pospp.calib.innovation_response`, and a coefficient to the walk)."""
 MIN_KNOTS = 6
 """Fewest knots (a short flight's are closer than :data:`KNOT_SPACING_S`): with 4 on a 15 min
 flight a 300 ug random walk of the accelerometer was named, and a gyro walk beside it (F

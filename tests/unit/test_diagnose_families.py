@@ -111,8 +111,8 @@ def test_the_family_fit_names_the_shape_it_was_made_of(shape, index):
     np.testing.assert_allclose(f.values, c[0] * SCALE["accel_bias_change"] / unit,
                                atol=4 * f.sigmas.max())
     assert f.p_value < 1e-6 and f.delta_bic < 0
-    np.testing.assert_allclose(f.hinge_si, a_true * SCALE["accel_bias_change"],
-                               atol=5 * np.sqrt(f.hinge_cov_si.max()))
+    np.testing.assert_allclose(f.basis_si, a_true * SCALE["accel_bias_change"],
+                               atol=5 * np.sqrt(f.basis_cov_si.max()))
 
 
 def test_the_family_fit_names_nothing_on_noise_at_its_level():
