@@ -15,6 +15,7 @@ import math
 
 import numpy as np
 import pytest
+from test_qc_checks import _track as turns_track
 
 from pospp.qc import lever_time as lt
 from pospp.qc import time_offset
@@ -130,21 +131,9 @@ def test_failed_pass_gives_no_estimate():
 # --- the time-offset check: seconds, whole seconds, sigma ------------------------------------
 
 def _track(tau_s: float, *, noise_rad: float = 0.002, seed: int = 5):
-    """60 m/s with three 180 deg turns at 4 deg/s; IMU at 100 Hz, GNSS velocity at 1 Hz
-    stamped tau_s late (as tests/unit/test_qc_checks.py)."""
-    rate = math.radians(4.0)
-
-    def heading(t):
-        h = np.zeros_like(t)
-        for t0 in (200.0, 500.0, 800.0):
-            h += rate * np.clip(t - t0, 0.0, 45.0)
-        return h
-
-    t = np.arange(0.0, 1000.0, 0.01)
-    w_d = np.concatenate([[0.0], np.diff(heading(t)) / 0.01])
-    tv = np.arange(10.0, 990.0, 1.0)
-    hv = heading(tv - tau_s) + np.random.default_rng(seed).normal(0.0, noise_rad, tv.shape)
-    return t, w_d, tv, 60.0 * np.column_stack([np.cos(hv), np.sin(hv), np.zeros_like(hv)])
+    """tests/unit/test_qc_checks.py's track (60 m/s, three 180 deg turns at 4 deg/s, IMU at
+    100 Hz, GNSS velocity at 1 Hz stamped tau_s late), with 0.002 rad of course noise."""
+    return turns_track(tau_s, noise_rad=noise_rad, seed=seed)
 
 
 @pytest.mark.parametrize(("tau", "named"), [(18.0, "18 s, the GPS time - UTC difference: the "
