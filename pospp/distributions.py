@@ -6,12 +6,17 @@ Each is the function :mod:`scipy.stats` evaluates for it (scipy 1.17's ``chi2._p
 against scipy.stats on grids. Why not scipy.stats itself: importing it costs every run
 0.3 s and 45 MiB of resident memory (``python -X importtime -c "import pospp.pipeline"``;
 docs/history/speed_rounds.md, "Speed and memory, sixth round"), for five scalar functions.
+
+And the long-run variance ratio of a correlated series (:func:`long_run_ratio`), which widens
+the sigmas of estimates fitted on time-correlated residuals.
 """
 
 from __future__ import annotations
 
 import math
 
+import numpy as np
+from numpy.typing import NDArray
 from scipy import special
 
 
@@ -48,3 +53,81 @@ def poisson_isf(q: float, mu: float) -> float:
     while k > 0 and special.pdtrc(k - 1, mu) <= q:
         k -= 1
     return float(k)
+
+
+def long_run_ratio(residual: NDArray, record_t_s: NDArray, window_s: float, *,
+                   gauss_markov: bool = False) -> float:
+    """The long-run variance of the whitened residual over its variance, the largest over the
+    three components of a record (Bartlett weights over lags up to ``window_s`` of records;
+    1 for white noise, at least 1 returned; ``residual`` (M, 3), ``record_t_s`` (M,) [s]).
+
+    For a least-squares estimate b = (X^T X)^-1 X^T e, Var b = (X^T X)^-1 X^T Cov(e) X
+    (X^T X)^-1 is the white-noise formula times this ratio, 1 + 2 sum_k w_k rho(k) (rho the
+    residual's autocorrelation, w_k = 1 - k / (L + 1), L the window in records), where the
+    regressors stay constant over the window (a heteroskedasticity-and-autocorrelation-
+    consistent, Newey-West, correction; for a regressor constant over blocks of L records the
+    Bartlett weights are exact: the variance of a block's sum). So it is the factor by which an
+    F-test is too liberal, and the square of the factor by which a sigma is too small. The
+    window is the regressors' scale: the sensor families' knot spacing (their hinges vary over
+    it), the turns of the lever arm and GNSS time offset's joint estimate
+    (:mod:`pospp.qc.lever_time`).
+
+    ``gauss_markov``: rho(k) is the fitted Gauss-Markov + white noise model's, c phi^k
+    (:func:`gauss_markov_phi`; c from the first lags), not the sample's: the sample's
+    autocorrelations at lags near the window scatter, and the residual of a fit has lost its
+    share along the regressors (the z of a slope on 120 s legs over phi 0.8-0.97 noise spread
+    1.17-1.24 with the sample's, 0.91-1.11 with the model's; tests/unit/test_distributions.py).
+    """
+    r = np.asarray(residual, dtype=float).reshape(-1, 3)
+    t = np.asarray(record_t_s, dtype=float)
+    rate = (t.size - 1) / max(float(t[-1] - t[0]), 1e-9) if t.size > 1 else 1.0
+    lags = int(min(max(1, round(window_s * rate)), r.shape[0] // 4))
+    weights = 1.0 - np.arange(1, lags + 1) / (lags + 1)
+    worst = 1.0
+    for c in range(3):
+        x = r[:, c] - r[:, c].mean()
+        g0 = float(x @ x)
+        if not g0 > 0:
+            continue
+        if gauss_markov:
+            rho = _gauss_markov_rho(x, lags)
+        else:
+            rho = np.array([float(x[k:] @ x[:-k]) for k in range(1, lags + 1)]) / g0
+        worst = max(worst, 1.0 + 2.0 * float(weights @ rho))
+    return worst
+
+
+PREWHITEN_MAX_PHI = 0.99
+"""The largest AR coefficient :func:`gauss_markov_phi` returns (a correlation time of 100
+records)."""
+PREWHITEN_LAGS = 5
+"""Lags of the autocorrelation :func:`gauss_markov_phi` fits phi on."""
+
+
+def gauss_markov_phi(x: NDArray) -> float:
+    """The AR coefficient of a Gauss-Markov error under white noise fitted to the series ``x``
+    (mean removed): its autocorrelation is rho(k) = c phi^k for k >= 1 (c the Gauss-Markov
+    share of the variance), so phi = sum_(k=2..K+1) rho(k) / sum_(k=1..K) rho(k) with
+    K = :data:`PREWHITEN_LAGS`; 0 when rho(1) is within 2 / sqrt(M) of 0 or the sums are not
+    positive (white noise), at most :data:`PREWHITEN_MAX_PHI`."""
+    x = np.asarray(x, dtype=float)
+    g0 = float(x @ x)
+    if x.size < 4 * (PREWHITEN_LAGS + 2) or not g0 > 0:
+        return 0.0
+    rho = np.array([float(x[k:] @ x[:-k]) for k in range(1, PREWHITEN_LAGS + 2)]) / g0
+    low, high = float(rho[:-1].sum()), float(rho[1:].sum())
+    if not (rho[0] > 2.0 / np.sqrt(x.size) and low > 0.0 and high > 0.0):
+        return 0.0
+    return min(high / low, PREWHITEN_MAX_PHI)
+
+
+def _gauss_markov_rho(x: NDArray, lags: int) -> NDArray:
+    """rho(1..lags) of the Gauss-Markov + white model fitted to ``x`` (zero mean): c phi^k,
+    c = sum_(k<=K) rho(k) / sum_(k<=K) phi^k over the sample's first K lags; 0 for white."""
+    phi = gauss_markov_phi(x)
+    if not phi > 0.0:
+        return np.zeros(lags)
+    k = np.arange(1, PREWHITEN_LAGS + 1)
+    rho = np.array([float(x[j:] @ x[:-j]) for j in k]) / float(x @ x)
+    c = float(rho.sum() / np.sum(phi ** k))
+    return c * phi ** np.arange(1, lags + 1)

@@ -38,14 +38,16 @@ def lever_time_pass(log: mcap_reader.FlightLog, seen: np.ndarray, config: Pipeli
     """One forward pass of A with lever-arm states (as :func:`lever_arm_passes`, one pass,
     the revealed axes ``seen`` from ``start_b_m``, the others at the configured value, the
     gate at :data:`LEVER_TIME_GATE_PROBABILITY`) on the log re-stamped by ``shift_s``
-    (:func:`restamped`): :func:`pospp.qc.lever_time.lever_pass`. ValueError when A fails."""
+    (:func:`restamped`), keeping its gains (their innovation covariances whiten the
+    innovations of :func:`pospp.qc.lever_time.innovation_lrv_ratio`):
+    :func:`pospp.qc.lever_time.lever_pass`. ValueError when A fails."""
     rerun = replace(config, gnss=replace(config.gnss, estimate_lever_arm=True))
     opts = replace(config.filter_options(), smoother=False, lever_arm_sigma_m=QC_LEVER_ARM_SIGMA_M,
                    gate_probability=LEVER_TIME_GATE_PROBABILITY)
     start = np.where(np.asarray(seen, dtype=bool), np.asarray(start_b_m, dtype=float),
                      np.asarray(config.gnss.lever_arm_m, dtype=float))
     return lever_pass(navigate(restamped(log, shift_s), rerun, lever_arm_b_m=start,
-                               options=opts), shift_s)
+                               options=opts, record_gains=True), shift_s)
 
 
 def lever_time_estimate(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,

@@ -60,7 +60,7 @@ from numpy.typing import NDArray
 from pospp.diagnose._candidates import FIELD_PARAMETERS
 from pospp.diagnose._linear import f_test
 from pospp.diagnose.shapes import Variant, all_variants, change_at, shape_values
-from pospp.distributions import f_sf
+from pospp.distributions import f_sf, long_run_ratio
 from pospp.effects_catalog import catalog_entry, row_named, shape_entry, shape_unit
 
 AXES = ("x", "y")
@@ -256,29 +256,6 @@ it A's model does not hold where the shapes live and no family is named. Measure
 on flight_accel_ramp_100hz and the null reference flights; 0.025 on a clean MEMS flight of the
 QC benchmark with 2 cm GNSS and 6 m/s^2 of vibration (S 40 times the innovations' variance,
 their long-run variance ratio 10), which named an accelerometer and a gyro walk."""
-
-
-def long_run_ratio(residual: NDArray, record_t_s: NDArray, window_s: float) -> float:
-    """The long-run variance of the whitened residual over its variance, the largest over the
-    three components of a record (Bartlett weights over lags up to ``window_s`` of records;
-    1 for white noise, at least 1 returned): the factor by which an F-test on regressors
-    smooth over ``window_s`` is too liberal (a heteroskedasticity-and-autocorrelation-
-    consistent correction). The fit's window is the knot spacing: the hinge responses vary
-    over it, and so the estimates' variance is the residual's spectrum below that scale."""
-    r = np.asarray(residual, dtype=float).reshape(-1, 3)
-    t = np.asarray(record_t_s, dtype=float)
-    rate = (t.size - 1) / max(float(t[-1] - t[0]), 1e-9) if t.size > 1 else 1.0
-    lags = int(min(max(1, round(window_s * rate)), r.shape[0] // 4))
-    worst = 1.0
-    for c in range(3):
-        x = r[:, c] - r[:, c].mean()
-        g0 = float(x @ x)
-        if not g0 > 0:
-            continue
-        s = g0 + 2.0 * sum((1.0 - k / (lags + 1)) * float(x[k:] @ x[:-k])
-                           for k in range(1, lags + 1))
-        worst = max(worst, s / g0)
-    return worst
 
 
 def fit_sensor_families(design: InnovationDesign, families: Sequence[str],

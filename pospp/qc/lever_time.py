@@ -25,12 +25,25 @@ innovation against the pass's own covariance, capped at the gate; the records al
 processed). J is -2 log L of the offset with the lever arm profiled out: its minimum is
 walked to in steps of ``LEVER_TIME_STEP_S``, and the least-squares parabola through the
 lowest and two steps either side gives tau and its sigma (Delta J = 1, scaled by the reduced
-chi-square at the minimum when above 1: a receiver noisier than it reports; the parabola's
-own fit error added). The lever arm at tau is l interpolated at tau; its sigma at a known
-offset is the pass's own (times the same sqrt of the reduced chi-square when above 1; the
-apparent lever arm's likewise), and with tau's uncertainty
+chi-square at the minimum when above 1: a receiver noisier than it reports; and by the
+long-run variance ratio of the pass's whitened innovations: a coloured, time-correlated,
+GNSS error; the parabola's own fit error added). The lever arm at tau is l interpolated at
+tau; its sigma at a known offset is the pass's own (times the same sqrt of the reduced
+chi-square when above 1 and of the long-run variance ratio; the apparent lever arm's
+likewise, with the ratio of the pass nearest tau: at 0 an offset left out colours the
+innovations itself), and with tau's uncertainty
 ``var l_i = sigma_l,i^2 + (dl_i / d tau)^2 sigma_tau^2``,
 ``corr(l_i, tau) = (dl_i / d tau) sigma_tau / sd(l_i)``.
+
+Why the long-run variance ratio. A's passes take the records as independent; the reduced
+chi-square corrects their level, not their independence. A Gauss-Markov GNSS position error
+(0.342 m over 60 s in the Monte Carlo, docs/compare_sim.md) leaves A's innovations
+correlated over tens of seconds, so the records carry fewer independent looks at the lever
+arm and the offset than their number: both estimates sum the innovations with weights that
+change only in the turns and speed changes, and their variance is the white formula's times
+the innovations' long-run variance ratio (:func:`pospp.distributions.long_run_ratio`, over
+``LEVER_TIME_COLOUR_WINDOW_S``; 1 for white innovations). A draw of a coloured error then
+reads as a lever arm of a few of its widened sigmas, not of 7-15 of the passes' own.
 
 Two readings are tested against the joint estimate: *all lever arm* (tau = 0) and *all time
 offset* (the lever arm as configured, tau_b where l_x(tau_b) is the configured x). Both lie on
@@ -49,15 +62,25 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from pospp.distributions import long_run_ratio
 from pospp.nav.filter import STATUS_GATED, STATUS_RESET, STATUS_USED, FilterResult
 
-__all__ = ["LEVER_TIME_STEP_S", "LeverPass", "LeverTime", "lever_pass", "lever_time_joint",
-           "lever_time_verdict"]
+__all__ = ["LEVER_TIME_COLOUR_WINDOW_S", "LEVER_TIME_STEP_S", "LeverPass", "LeverTime",
+           "innovation_lrv_ratio", "lever_pass", "lever_time_joint", "lever_time_verdict"]
 
 LEVER_TIME_STEP_S = 0.01
 """Step of the trial offsets [s] (rounded to whole IMU intervals): 0.6 m along the track at
 60 m/s, which moves J by about 100 near its minimum on a 45 min flight (flight_time_offset_200hz),
 far above the passes' rounding."""
+LEVER_TIME_COLOUR_WINDOW_S = 60.0
+"""The window of the innovations' long-run variance ratio [s]
+(:func:`pospp.distributions.long_run_ratio` with the Gauss-Markov + white model's
+autocorrelation): the scale over which the lever arm's response changes (a 180 deg turn at
+3 deg/s takes 60 s) and the offset's (a take-off roll, 40 s). Measured on the Monte Carlo
+flight (docs/compare_sim.md), the largest over the whitened position and velocity
+innovations' components: 11-19 with the 0.342 m, 60 s coloured GNSS error (both noise
+scales), 1.0 on nulls, true lever arms and true time offsets (one seed at 1/3 the noise:
+12.5, a slow wander of A's horizontal innovations; its lever arm and offset still named)."""
 LEVER_TIME_START_PASSES = 2
 LEVER_TIME_START_STEP_M = 0.1
 """The pass at offset 0 is made again from its own estimate, at most
@@ -90,6 +113,9 @@ class LeverPass:
         its *unshifted* stamp [ms], so that the passes' records can be matched.
     nis : (M,) float
         Each record's NIS against the pass's covariance (3 dof), capped at the pass's gate.
+    lrv_ratio : float
+        The long-run variance ratio of the pass's whitened innovations (module docstring;
+        at least 1).
     """
 
     shift_s: float
@@ -97,6 +123,7 @@ class LeverPass:
     sigma_b_m: NDArray
     record_key: NDArray
     nis: NDArray
+    lrv_ratio: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -118,8 +145,12 @@ class LeverTime:
         tau_b: the offset that alone explains the apparent forward lever arm (the lever arm
         as configured).
     chi2_reduced : float
-        J / (3 n) at the minimum (1 when the records' sigmas are right).
+        J / (3 n) at the minimum (1 when the records' sigmas are right; where the offset is
+        not determined, the pass at 0's).
     n_records : int
+    lrv_ratio : float
+        The innovations' long-run variance ratio that widened the sigmas (the pass nearest
+        tau's; 1 when they are white).
     """
 
     tau_s: float
@@ -135,6 +166,7 @@ class LeverTime:
     tau_lever_only_s: float
     chi2_reduced: float
     n_records: int
+    lrv_ratio: float = 1.0
 
     @property
     def speed_mps(self) -> float:
@@ -157,7 +189,8 @@ def lever_pass(nav: FilterResult, shift_s: float) -> LeverPass:
     """The :class:`LeverPass` of A's pass ``nav`` with lever-arm states on the log re-stamped
     by ``shift_s``: its lever-arm estimate and each GNSS position and velocity record it
     processed (used, gated or used after a reset) with its NIS capped at the gate, keyed by
-    its unshifted stamp. ValueError when the pass recorded no innovations."""
+    its unshifted stamp; the long-run variance ratio of its innovations
+    (:func:`innovation_lrv_ratio`). ValueError when the pass recorded no innovations."""
     rec = nav.innovations
     if rec is None:
         raise ValueError("the lever-arm pass recorded no GNSS innovations")
@@ -167,7 +200,36 @@ def lever_pass(nav: FilterResult, shift_s: float) -> LeverPass:
         (rec.t_s[m] + shift_s) * 1e3).astype(np.int64)
     return LeverPass(float(shift_s), np.asarray(nav.lever_arm.lever_b_m, dtype=float),
                      np.asarray(nav.lever_arm.sigma_b_m, dtype=float), key,
-                     np.minimum(rec.nis[m], nav.gate_nis))
+                     np.minimum(rec.nis[m], nav.gate_nis), innovation_lrv_ratio(nav))
+
+
+def innovation_lrv_ratio(nav: FilterResult, window_s: float = LEVER_TIME_COLOUR_WINDOW_S
+                         ) -> float:
+    """The largest long-run variance ratio (:func:`pospp.distributions.long_run_ratio` over
+    ``window_s``) of the innovations of the GNSS positions and of the velocities that ``nav``
+    used, each whitened by its innovation covariance (``L^T dz`` with ``S^-1 = L L^T``: unit
+    white noise where A's model holds) when the pass kept it (``record_gains``: its
+    ``gain_replay``), else as they are [m, m/s]; 1 with fewer than 20 records of a kind."""
+    rec, gains = nav.innovations, nav.gain_replay
+    if rec is None:
+        return 1.0
+    used = np.isin(rec.status, (STATUS_USED, STATUS_RESET)) & np.all(np.isfinite(rec.dz_ned),
+                                                                      axis=1)
+    ratio = 1.0
+    for kind in (0, 1):
+        m = used & (rec.kind == kind)
+        if np.count_nonzero(m) < 20:
+            continue
+        dz = rec.dz_ned[m]
+        if gains is not None:
+            try:
+                low = np.linalg.cholesky(gains.s_inv[m])
+            except np.linalg.LinAlgError:
+                low = None
+            if low is not None:
+                dz = np.einsum("mji,mj->mi", low, dz)
+        ratio = max(ratio, long_run_ratio(dz, rec.t_s[m], window_s, gauss_markov=True))
+    return ratio
 
 
 def _common(passes: list[LeverPass]) -> list[NDArray]:
@@ -304,15 +366,18 @@ def _joint(passes: list[LeverPass], prof: tuple[float, float, float, int, float]
     slope = np.polyfit(s, lev, 1)[0]
     near = min(passes, key=lambda p: abs(p.shift_s - (prof[0] if prof else 0.0)))
     sig_given = np.asarray(near.sigma_b_m, dtype=float)
-    if prof is None:  # J flat or concave: the offset is not determined
-        tau, sig_tau, red, n = 0.0, math.inf, math.nan, int(_common(passes)[0].size)
+    colour = max(1.0, near.lrv_ratio)  # correlated innovations: fewer independent records
+    if prof is None:  # J flat or concave: the offset is not determined; the level: J(0)'s
+        n = int(_common(passes)[0].size)
+        tau, sig_tau, red = 0.0, math.inf, float(np.mean(p0.nis)) / 3.0 if n else math.nan
     else:
         tau, c2, j_min, n, sig_fit = prof
         red = j_min / (3.0 * n) if n else math.nan
-        sig_tau = math.sqrt(max(1.0, red if math.isfinite(red) else 1.0) / c2 + sig_fit ** 2)
+        sig_tau = math.sqrt(max(1.0, red if math.isfinite(red) else 1.0) * colour / c2
+                            + sig_fit ** 2)
     # a receiver noisier than it reports widens the lever arm's sigmas as it does tau's
-    widen = math.sqrt(max(1.0, red)) if math.isfinite(red) else 1.0
-    sig_given = sig_given * widen
+    level = max(1.0, red) if math.isfinite(red) else 1.0
+    sig_given = sig_given * math.sqrt(level * colour)
     fit2 = [np.polyfit(s, lev[:, i], 2) for i in range(3)]
     lever_tau = np.array([np.polyval(f, tau) for f in fit2])
     # the apparent lever arm: the pass at 0 (its own sigma), else the profile's at 0
@@ -324,8 +389,9 @@ def _joint(passes: list[LeverPass], prof: tuple[float, float, float, int, float]
         corr = np.where(np.isfinite(var), slope * sig_tau / np.sqrt(var), np.sign(slope))
     tau_b = (tau + (cfg[0] - lever_tau[0]) / slope[0]) if abs(slope[0]) > 1e-3 else math.inf
     return LeverTime(float(tau), float(sig_tau), lever_tau, np.sqrt(var), sig_given, apparent,
-                     np.asarray(p0.sigma_b_m, dtype=float) * widen, slope, corr, cfg,
-                     float(tau_b), float(red), n)
+                     np.asarray(p0.sigma_b_m, dtype=float) * math.sqrt(level * colour),
+                     slope, corr, cfg,
+                     float(tau_b), float(red), n, colour)
 
 
 @dataclass(frozen=True)

@@ -237,3 +237,83 @@ def test_a_noisier_receiver_widens_the_lever_arms_sigma_as_tau_s():
     assert lever_time_verdict(est).kind == "none"
     assert lever_time_verdict(lever_time_joint(run0, cfg, cfg, grid_s=0.005)).kind == \
         "lever_arm"
+
+
+def test_coloured_innovations_widen_the_joint_estimates_sigmas():
+    """Passes whose innovations have a long-run variance ratio of 9 (a coloured GNSS error:
+    a ninth as many independent records) widen tau's sigma, the lever arm's and the apparent
+    one's by sqrt(9) = 3: a vertical lever arm 6 of the passes' own sigmas from the
+    configured one is 2 of the widened ones and is not read (the Monte Carlo's 0.342 m, 60 s
+    GNSS error at 3 x noise was named a lever arm at 7-15 of the chi-square-widened sigmas;
+    its innovations' ratio is 11-16, 1.0 on nulls and true lever arms)."""
+    cfg = np.array([0.3, 0.1, -1.5])
+    run0, _ = closed_form(0.0, 0.002, cfg + [0.0, 0.0, 0.3], sigma_l_m=0.05)
+
+    def run(s, start):
+        p = run0(s, start)
+        return LeverPass(p.shift_s, p.lever_b_m, p.sigma_b_m, p.record_key, p.nis, 9.0)
+
+    white = lever_time_joint(run0, cfg, cfg, grid_s=0.005)
+    est = lever_time_joint(run, cfg, cfg, grid_s=0.005)
+    assert white is not None and est is not None and est.lrv_ratio == 9.0
+    assert white.lrv_ratio == 1.0 and lever_time_verdict(white).kind == "lever_arm"
+    assert est.sigma_tau_s == pytest.approx(3.0 * white.sigma_tau_s, rel=1e-3)
+    assert est.sigma_lever_given_tau_b_m == pytest.approx(np.full(3, 0.15), rel=1e-3)
+    assert est.sigma_apparent_b_m == pytest.approx(np.full(3, 0.15), rel=1e-3)
+    assert est.lever_b_m == pytest.approx(white.lever_b_m)
+    assert lever_time_verdict(est).kind == "none"
+
+
+def test_an_undetermined_offset_widens_the_apparent_lever_arm_by_its_chi_square():
+    """Where J is flat (the offset not determined) the records' reduced chi-square is the pass
+    at 0's: NIS 4 times its 3 dof widen the apparent lever arm's sigma by 2 (it stayed at the
+    pass's own: a coloured GNSS error at 1/3 the noise, seed 309, read a 0.69 m apparent
+    forward lever arm at 6 of those sigmas)."""
+    cfg = np.array([0.3, 0.1, -1.5])
+
+    def run(s, start):
+        return LeverPass(s, cfg + [0.0, 0.0, 0.3], np.full(3, 0.05), np.arange(N_RECORDS),
+                         np.full(N_RECORDS, 12.0))
+
+    est = lever_time_joint(run, cfg, cfg, grid_s=0.005)
+    assert est is not None and math.isinf(est.sigma_tau_s)
+    assert est.chi2_reduced == pytest.approx(4.0)
+    assert est.sigma_apparent_b_m == pytest.approx(np.full(3, 0.1))
+    assert lever_time_verdict(est).kind == "none"
+
+
+def _nav_with(dz_ned, s_inv, t_s):
+    """A FilterResult stand-in: position records (kind 0) used, with innovations ``dz_ned``
+    and (when ``s_inv`` is not None) the kept gains' S^-1."""
+    from types import SimpleNamespace
+
+    from pospp.nav.filter import InnovationRecord
+
+    m = len(t_s)
+    rec = InnovationRecord(np.asarray(t_s, float), np.zeros(m, dtype=np.int64),
+                           np.zeros(m, dtype=np.int64), np.full(m, 3.0), np.asarray(dz_ned))
+    return SimpleNamespace(innovations=rec, gain_replay=None if s_inv is None else
+                           SimpleNamespace(s_inv=np.asarray(s_inv)))
+
+
+def test_innovation_lrv_ratio_whitens_by_s_and_reads_a_gauss_markov_error():
+    """White innovations whose covariance shrinks 100-fold as A converges read a ratio of 1
+    (whitened by their S); Gauss-Markov innovations of lag-1 correlation 0.9 (under their S)
+    read what a regressor constant over the 60 s window sees of them: the Bartlett sum of
+    0.9^k over 60 lags, 16.1."""
+    from scipy import signal
+
+    rng = np.random.default_rng(3)
+    n = 3000
+    t = np.arange(n, dtype=float)
+    sd = 0.05 * (1.0 + 9.0 * np.exp(-t / 300.0))  # m
+    dz = sd[:, None] * rng.normal(size=(n, 3))
+    s_inv = np.eye(3)[None] / (sd ** 2)[:, None, None]
+    assert lt.innovation_lrv_ratio(_nav_with(dz, s_inv, t)) == pytest.approx(1.0, abs=0.1)
+    gm = signal.lfilter([np.sqrt(0.19)], [1.0, -0.9], rng.normal(size=(n, 3)), axis=0)
+    k = np.arange(1, 61)
+    expect = 1.0 + 2.0 * np.sum((1.0 - k / 61.0) * 0.9 ** k)
+    got = lt.innovation_lrv_ratio(_nav_with(0.05 * gm, np.tile(np.eye(3) / 0.05 ** 2,
+                                                                (n, 1, 1)), t))
+    assert got == pytest.approx(expect, rel=0.2)
+    assert lt.innovation_lrv_ratio(_nav_with(0.05 * gm, None, t)) == pytest.approx(got)
