@@ -236,12 +236,18 @@ def _refine(effect: SimEffect, names: list[str], at: tuple[list[int], NDArray], 
     fitted parameters' indices and the full parameter vector they are set in (zeros, or a
     grid value). Returns
     the iterate with the least weighted residual sum(w r^2): (that residual, u, the
-    covariance (H^T W H)^-1 of the local slope there, the chi-square of u against zero
-    u^T H^T W H u); the residual is NaN when no iterate was simulated (the fit returned)."""
+    covariance (H^T W H)^-1 of the local slope there, the chi-square of u against zero);
+    the residual is NaN when no iterate was simulated (the fit returned). The chi-square is
+    the drop of the weighted residual from u = 0 (sum w g^2) to the iterate's, a likelihood-
+    ratio test: u^T H^T W H u (equal for a linear response) takes the slope of the last
+    secant step, which is noise where that step is below the statistic's sigma (a 0.28 m
+    coloured GNSS error fitting its gap to 0.02 of a sigma read chi-square 3.9 so, 118 as
+    the drop, on the Monte Carlo's seed 305 at 1/3 the noise)."""
     cols, u_rest = at
     s0 = np.array([base.stats[s].value for s in names])
     u_prev, s_prev = np.zeros(len(cols)), s0
     u_k, cov_k, _ = fit
+    res_zero = float(np.sum(w * g * g))
     best = None
     for _ in range(effect.refine):
         full = np.array(u_rest, dtype=float)
@@ -251,7 +257,9 @@ def _refine(effect: SimEffect, names: list[str], at: tuple[list[int], NDArray], 
         if not np.all(np.isfinite(s_k)):
             break
         du, ds = u_k - u_prev, s_k - s_prev
-        if du @ du > 0:
+        moved = du @ du > 0 and max(float(np.sum(w * ds * ds)),
+                                    float(np.sum(w * (h @ du) ** 2))) >= 1.0
+        if moved:  # a secant over less than the statistics' sigma is their noise
             h = h + np.outer(ds - h @ du, du) / (du @ du)
         r = g - (s_k - s0)
         a = h.T @ (h * w[:, None])
@@ -260,11 +268,13 @@ def _refine(effect: SimEffect, names: list[str], at: tuple[list[int], NDArray], 
         cov_k = np.linalg.inv(a)
         res = float(np.sum(w * r * r))
         if best is None or res < best[0]:
-            best = (res, u_k.copy(), cov_k, float(u_k @ a @ u_k))
+            best = (res, u_k.copy(), cov_k, res_zero - res)
         step = cov_k @ (h.T @ (w * r))
         if np.all(np.abs(step) < 0.1 * np.sqrt(np.diag(cov_k))):
             break
-        u_prev, s_prev, u_k = u_k, s_k, u_k + step
+        if moved:
+            u_prev, s_prev = u_k, s_k
+        u_k = u_k + step
     return (np.nan, *fit) if best is None else best
 
 
