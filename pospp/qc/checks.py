@@ -373,8 +373,10 @@ def lever_arm(configured_b_m: ArrayLike, estimated_b_m: ArrayLike, sigma_b_m: Ar
     the joint offset with its sigma including the offset's uncertainty, and the suggestion
     is the joint reading's (:func:`pospp.qc.lever_time.lever_time_verdict`: the lever arm,
     the offset, both, or, where the flight cannot tell them apart, the combination it
-    determines with both readings). Without it, when the forward axis dominates, the
-    suggestion names the equivalent offset -dl_x / v as well.
+    determines with both readings); where it reads neither, the statistic is taken on its
+    apparent lever arm with its sigma (widened by the records' level and colour). Without
+    it, when the forward axis dominates, the suggestion names the equivalent offset
+    -dl_x / v as well.
     """
     cfg = np.asarray(configured_b_m, dtype=float)
     est = np.asarray(estimated_b_m, dtype=float)
@@ -391,6 +393,11 @@ def lever_arm(configured_b_m: ArrayLike, estimated_b_m: ArrayLike, sigma_b_m: Ar
             "time_offset", "lever_arm", "both"):
         est, sig = joint.lever_b_m, joint.sigma_lever_b_m
         at = f" at the joint GNSS time offset {1e3 * joint.tau_s:+.1f} ms"
+    elif joint is not None and verdict is not None and verdict.kind == "none":
+        # the joint estimate sees no lever arm: its apparent one with its sigmas (those of
+        # the records' level and colour, which A's single pass does not have)
+        est, sig = joint.apparent_lever_b_m, joint.sigma_apparent_b_m
+        at = " (the joint estimate's apparent lever arm)"
     d = np.abs(cfg - est)
     seen = (d > LEVER_ARM_SIGMAS * sig) & obs
     value = float(np.max(np.where(seen, d, 0.0)))

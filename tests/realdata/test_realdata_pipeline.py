@@ -117,17 +117,19 @@ def test_ardupilot_runs_end_to_end_and_finds_no_leg(real_data, out_dir):
     convert(real_data / "ardupilot_plane_testlog2", out_dir / "ardupilot.mcap")
     outcome, run_dir = _run(out_dir, "ardupilot", "ardupilot_plane_testlog2")
     s = outcome.summary
-    # no leg (partial), and the QC finds that the GNSS model does not fit this log: NIS, A's
-    # gate (208 of 3408 records gated where its model allows 3), and a 57 ms GNSS lead
-    # (AHRS_GPS_DELAY = 2; docs/qc.md): the joint lever-arm / time-offset estimate reads
-    # 57.8 +- 4.8 ms, the lever arm at it as configured, the 0.88 m forward lever-arm reading
-    # rejected by the speed changes (issue 33: before, lever_arm failed and the time offset
-    # passed under a fixed 0.1 s)
+    # no leg (partial), and the QC finds that the GNSS model does not fit this log: NIS and
+    # A's gate (208 of 3408 records gated where its model allows 3; docs/qc.md). The joint
+    # lever-arm / time-offset estimate reads 57.8 ms of GNSS lead, but A's innovations on this
+    # log are correlated over tens of seconds (their long-run variance ratio 140, whitened):
+    # with that colour its sigma is 57 ms (4.8 ms without), and neither the offset nor the
+    # 0.88 m apparent forward lever arm (+- 0.46 m) is significant (issue 33: the offset was
+    # named, against AHRS_GPS_DELAY = 2's sign and the course method's 7.6 +- 8.5 ms)
     assert outcome.status == "degraded"
-    assert s["qc_failed_checks"] == "gnss_nis,gnss_gate,gnss_time_offset,calibration"
+    assert s["qc_failed_checks"] == "gnss_nis,gnss_gate,calibration"
     qc = pd.read_parquet(run_dir / "qc.parquet").set_index("check")
     assert abs(qc.loc["gnss_time_offset", "value"] - 0.0578) < 0.25 * 0.0578
-    assert "GNSS leads the IMU by" in qc.loc["gnss_time_offset", "suggestion"]
+    assert qc.loc["gnss_time_offset", "threshold"] > 0.2  # 5 sigma of the colour-widened tau
+    assert "apparent lever arm" in qc.loc["lever_arm", "measure"]
     assert s["n_legs"] == 0 and s["n_pairs_used"] == 0
     assert s["calibration_reason"].startswith("no calibration: no straight, level, uniform leg")
     assert 612.0 < s["duration_s"] < 614.0 and 30_600 < s["n_imu_samples"] < 30_700

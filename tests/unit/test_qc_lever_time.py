@@ -317,3 +317,25 @@ def test_innovation_lrv_ratio_whitens_by_s_and_reads_a_gauss_markov_error():
                                                                 (n, 1, 1)), t))
     assert got == pytest.approx(expect, rel=0.2)
     assert lt.innovation_lrv_ratio(_nav_with(0.05 * gm, None, t)) == pytest.approx(got)
+
+
+def test_the_lever_arm_check_takes_the_joint_apparent_lever_arm_where_it_reads_neither():
+    """Where the joint estimate reads neither a lever arm nor an offset (its sigmas widened by
+    coloured innovations), the lever_arm check is taken on its apparent lever arm and sigma,
+    not on A's single pass (0.3 m off at 0.05 m: it failed on ardupilot_plane_testlog2, 0.96 m
+    at 0.04 m, while the joint estimate read 0.88 +- 0.46 m)."""
+    from pospp.qc import checks
+
+    cfg = np.array([0.3, 0.1, -1.5])
+    run0, _ = closed_form(0.0, 0.002, cfg + [0.0, 0.0, 0.3], sigma_l_m=0.05)
+
+    def run(s, start):
+        p = run0(s, start)
+        return LeverPass(p.shift_s, p.lever_b_m, p.sigma_b_m, p.record_key, p.nis, 9.0)
+
+    est = lever_time_joint(run, cfg, cfg, grid_s=0.005)
+    assert est is not None and lever_time_verdict(est).kind == "none"
+    single = cfg + [0.0, 0.0, 0.3]
+    assert not checks.lever_arm(cfg, single, np.full(3, 0.05)).passed
+    c = checks.lever_arm(cfg, single, np.full(3, 0.05), joint=est)
+    assert c.passed and "apparent lever arm" in c.statistic
