@@ -75,8 +75,9 @@ def long_run_ratio(residual: NDArray, record_t_s: NDArray, window_s: float, *,
     ``gauss_markov``: rho(k) is the fitted Gauss-Markov + white noise model's, c phi^k
     (:func:`gauss_markov_phi`; c from the first lags), not the sample's: the sample's
     autocorrelations at lags near the window scatter, and the residual of a fit has lost its
-    share along the regressors (the z of a slope on 120 s legs over phi 0.8-0.97 noise spread
-    1.17-1.24 with the sample's, 0.91-1.11 with the model's; tests/unit/test_distributions.py).
+    share along the regressors (the z of a slope on 120 s legs over Gauss-Markov noise of phi
+    0.8-0.97 spread 0.95-1.04 with the model's, 1.14-1.17 with the sample's at phi 0.8-0.9;
+    tests/unit/test_distributions.py).
     """
     r = np.asarray(residual, dtype=float).reshape(-1, 3)
     t = np.asarray(record_t_s, dtype=float)

@@ -77,7 +77,7 @@ def test_long_run_ratio_gives_a_slope_on_coloured_noise_unit_z(phi, white_share)
     spreads 2.9-5.6 with the white formula's sigma and 1 with the long-run variance ratio of
     the fitted Gauss-Markov + white model over the legs' 120 s (within 0.88-1.12; the spread's
     own sampling error is 3.5 %). The sample's autocorrelations instead of the model's read
-    the ratio low (spread 1.17-1.24 at phi 0.8-0.9)."""
+    the ratio low (spread 1.14-1.17 at phi 0.8-0.9)."""
     naive, corrected = _slope_z(phi, white_share, gauss_markov=True)
     assert 0.88 < corrected < 1.12
     if phi > 0.0:
