@@ -365,8 +365,9 @@ def test_a_coloured_gnss_error_is_read_from_as_passes_whitened_innovations(seed,
     innovations whitened by S read a long-run variance ratio above 5 with the Monte Carlo's
     0.342 m, 60 s coloured GNSS error (seed 301: 15.8; with white sigmas it read 'both', a
     0.46 m lateral lever arm at 10 of them) and 1 on a null flight; the coloured flight's
-    reading is then 'none'. (With the IMU three times noisier than the configured grade, A's own misfit
-    colours them too, 5.5-5.8 on nulls: compare-sim tunes the passes to step 0's fit.)"""
+    reading is then 'none'. (With the IMU three times noisier than the configured grade,
+    A's own misfit colours them too, 5.5-5.8 on nulls: compare-sim tunes the passes to step
+    0's fit.)"""
     from pospp import pipeline
 
     log, config = _mc_flight(seed, effect)
