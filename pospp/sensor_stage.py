@@ -201,6 +201,7 @@ def innovation_design(log: mcap_reader.FlightLog, config: PipelineConfig,
                                    _column_input(fam, knots, field), breaks_s=breaks,
                                    static_window_s=_static_window(base, opts))
         white = np.einsum("kji,kjm->kim", chol, dnu[used]).reshape(-1, dnu.shape[2])
+        del dnu  # every record's columns: not held while the next family's pass runs
         responses[fam] = (white[:, :, None] if sensor_family(fam).sensor == "gravity" else
                           white.reshape(-1, 2, basis_size(knots)).transpose(0, 2, 1))
     white_y = np.einsum("kji,kj->ki", chol, nu0[used]).reshape(-1)
@@ -251,6 +252,7 @@ def _without_time_offset(log: Any, config: PipelineConfig, families: Sequence[st
             break
         log = _gnss_earlier(log, -c)  # the column is GNSS stamped 1 s earlier: c late
         total += c
+        del design, r  # not held while the next one is made
         design = innovation_design(log, config, families, lever_b_m=lever,
                                    reference=reference)
     return design, log, -total
