@@ -92,21 +92,31 @@ pipeline's ``navigate`` with its configuration bound; the lever arm replaces the
 one when given)."""
 
 
-def _response(log_p, nav, calib_run, config, navigate: Navigate, lever_b_m=None
-              ) -> list[NDArray]:
+def _response(log_p, nav, calib_run, config, navigate: Navigate, lever_b_m=None,
+              **a_options: Any) -> list[NDArray]:
     """(B - A)[log_p, lever] - (B - A)[flight] per leg (legs in id order), (M, 2) [m/s]."""
+    return _response_and_gains(log_p, nav, calib_run, config, navigate, lever_b_m,
+                               **a_options)[0]
+
+
+def _response_and_gains(log_p, nav, calib_run, config, navigate: Navigate, lever_b_m=None,
+                        **a_options: Any
+                        ) -> tuple[list[NDArray], nav_filter.GainReplay | None]:
+    """:func:`_response` and the re-run's recorded gains (``a_options``: ``navigate``'s
+    ``record_gains`` or ``replay``; None when it recorded none)."""
     rc = config.replay
     which = nav_filter.reference_name(nav, rc.reference)
     legs = {leg.leg_id: leg for leg in calib_run.legs}
-    nav_p = navigate(log_p, lever_arm_b_m=lever_b_m)
+    nav_p = navigate(log_p, lever_arm_b_m=lever_b_m, **a_options)
     ref_p = SolutionA(*nav_filter.solution_a_fields(nav_p, which=which))
+    gains = nav_p.gain_replay
     del nav_p  # the rest of A (its forward solution, biases: 30 MiB) is not read by B
     t0 = int(log_p.imu.time_ns[0])
     imu = ImuRates.from_rates(log_p.imu.time_ns, log_p.imu.w_ib_b_radps,
                               log_p.imu.f_ib_b_mps2, epoch_ns=t0)
     return [replay_velocity_error(imu, ref_p, legs[i], accel_compensation=rc.accel_compensation,
                                   sample_rate_hz=rc.sample_rate_hz)[:, 0:2]
-            - calib_run.replays[i].dv_n_mps[:, 0:2] for i in sorted(calib_run.replays)]
+            - calib_run.replays[i].dv_n_mps[:, 0:2] for i in sorted(calib_run.replays)], gains
 
 
 def _with_rates(log, rates):
@@ -232,8 +242,12 @@ def signature_at(log, nav, calib_run, config, effect_id: str, p, *, navigate: Na
     size on x and y at the removed state; A is not linear in a warm-up early in the flight:
     measured, a 600 ug warm-up moves B minus A on a leg 170 s after power-up by 61 mm/s RMS
     where the derivative at 0 predicts 38) or four (``lever_arm``); the runs of one signature
-    on up to ``threads`` threads. Returns ``[S_leg (M, 2, P)]``, legs in id order. Raises
-    ValueError when A fails.
+    on up to ``threads`` threads. The local steps replay the removed state's recorded gains
+    (:func:`_removed_and_steps`): J is then A's derivative with its gains and gate decisions
+    held, which is what "A linear at the effect-free state" means, at 0.6 of a full run's
+    cost (the removed run records at 1.2; flight_time_offset_200hz, the lever arm's J on A's
+    smoothed velocity: 0.04 % RMS from the full runs' finite difference). Returns
+    ``[S_leg (M, 2, P)]``, legs in id order. Raises ValueError when A fails.
 
     ``jacobians`` (:data:`Jacobians`, updated in place): J made at an estimate within one
     local step h of p (``|p - p_J| <= h``) is taken instead of re-made, and only the removed
@@ -253,9 +267,9 @@ def signature_at(log, nav, calib_run, config, effect_id: str, p, *, navigate: Na
     steps = [] if known is not None else list(h * np.eye(p.size))
     if effect_id == "lever_arm":
         lever = np.asarray(config.gnss.lever_arm_m, dtype=float) - p
-        removed, *cols = map_in_threads(
-            lambda dl: _response(log, nav, calib_run, config, navigate, lever + dl),
-            [np.zeros(3), *steps], threads)
+        removed, cols = _removed_and_steps(
+            lambda dl, **kw: _response_and_gains(log, nav, calib_run, config, navigate,
+                                                 lever + dl, **kw), p.size, steps, threads)
     elif effect_id == "time_offset":
         removed = _response(_gnss_earlier(log, -float(p[0])), nav, calib_run, config, navigate)
         cols = []
@@ -264,10 +278,10 @@ def signature_at(log, nav, calib_run, config, effect_id: str, p, *, navigate: Na
                             calib_run, config, navigate)
         cols = []  # the secant alone, along A's own estimate (see the docstring)
     elif effect_id == "accel_bias_change":
-        removed, *cols = map_in_threads(
-            lambda db: _response(warmed(log, db, accel_settling_s), nav, calib_run, config,
-                                 navigate),
-            [-p, *(s - p for s in steps)], threads)
+        removed, cols = _removed_and_steps(
+            lambda db, **kw: _response_and_gains(warmed(log, db - p, accel_settling_s), nav,
+                                                 calib_run, config, navigate, **kw),
+            p.size, steps, threads)
     else:
         raise ValueError(f"{effect_id}: no Gauss-Newton signature ({GAUSS_NEWTON_EFFECTS})")
     if known is not None:
@@ -317,6 +331,19 @@ def refine_signatures(log, nav, calib_run, config, signatures: dict[str, list[ND
             continue
         at[eid] = p
     return out, at
+
+
+def _removed_and_steps(response: Callable[..., tuple[list[NDArray], Any]], size: int,
+                       steps: list[NDArray], threads: int
+                       ) -> tuple[list[NDArray], list[list[NDArray]]]:
+    """B minus A's change at the removed state (``response(zeros(size))``) and at each of
+    ``steps`` from it, the steps replaying the removed state's recorded gains
+    (:class:`pospp.nav.filter.GainReplay`: K, S and the smoother's gains fixed, A's gate as
+    there) where it recorded them, else as ``response`` runs A (its own replay)."""
+    removed, gains = response(np.zeros(size), record_gains=bool(steps))
+    replay = {} if gains is None else {"replay": gains}
+    cols = map_in_threads(lambda d: response(d, **replay)[0], steps, threads)
+    return removed, cols
 
 
 def _jacobian_near(jacobians: Jacobians | None, effect_id: str, p: NDArray, h: float

@@ -26,18 +26,25 @@ def _legs_response(lever_m: np.ndarray, quadratic: float) -> list[np.ndarray]:
     return out
 
 
+GAINS = object()  # the removed state's recorded gains (what the local steps must replay)
+
+
 @pytest.fixture
 def calls(monkeypatch):
     made: list[np.ndarray] = []
     quadratic = [0.0]
 
-    def response(log_p, nav, calib_run, config, navigate, lever_b_m=None):
+    def response(log_p, nav, calib_run, config, navigate, lever_b_m=None, **a_options):
+        # the removed state is run first, recording its gains; every step replays them
+        assert a_options == ({"record_gains": True} if not made else {"replay": GAINS}) or (
+            len(a_options) == 1 and a_options.get("record_gains") is False)
         made.append(np.asarray(lever_b_m, dtype=float))
         flight = _legs_response(CONFIGURED_M, quadratic[0])  # (B - A)[flight]
         return [r - f for r, f in zip(_legs_response(lever_b_m, quadratic[0]), flight,
-                                      strict=True)]
+                                      strict=True)], GAINS if a_options.get("record_gains") \
+            else None
 
-    monkeypatch.setattr(rerun, "_response", response)
+    monkeypatch.setattr(rerun, "_response_and_gains", response)
     return made, quadratic
 
 
