@@ -169,7 +169,8 @@ def innovation_responses(gains: GainReplay, trajectory: Trajectory, imu_t_s: NDA
                       np.asarray(gains.gm_inv_tau, dtype=float), g_node,
                       (rec_start, np.ascontiguousarray(gains.gains[applied]),
                        np.ascontiguousarray(gains.h[applied])), e0, d0, d1, dnu)
-    out = np.zeros((st.size, 3, d0.shape[2]))
+    del d0, d1  # the input integrals (G, 6, m) let go before every record's columns are made
+    out = np.zeros((st.size, 3, dnu.shape[2]))
     out[applied] = dnu
     return out
 
