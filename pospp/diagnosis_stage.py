@@ -207,10 +207,10 @@ def _rerun_signatures_at_start(log: mcap_reader.FlightLog, nav: nav_filter.Filte
 
     The re-runs are made on ``rerun`` = (log, run) of :func:`rerun_base` (the flight's own
     when None); ``starts``: :func:`signature_starts`. An effect with a start: Gauss-Newton
-    from it (the lever arm: 1 + 4 A runs; the scale factor: the secant along it, 1 A run;
-    the warm-up: 3 A runs); else at the configuration (the lever arm and the time offset: 1
-    A run each, the warm-up 2); the gyro scale factor without a start keeps the library's
-    signature."""
+    from it (the lever arm: 1 + 1 A runs and 3 replays of the second's gains; the scale
+    factor: the secant along it, 1 A run; the warm-up: 1 A run and 2 replays); else at the
+    configuration (the lever arm and the time offset: 1 A run each, the warm-up 2); the gyro
+    scale factor without a start keeps the library's signature."""
     log_r, run_r = (log, calib_run) if rerun is None else rerun
     sigs = rerun_signatures(log_r, nav, run_r, config,
                             [e for e in PIPELINE_RERUN if e != "gyro_scale_factor"
