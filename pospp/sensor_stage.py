@@ -300,9 +300,10 @@ def sensor_families(d: Diagnosis, replays: list, log: mcap_reader.FlightLog,
                     ) -> SensorFamilies | None:
     """Fit the families on A's innovations of ``log`` with ``d``'s named GNSS-side effects
     removed; families ``d`` named on the legs are not fitted again, the gravity field only
-    with A's solution (its origin: the legs' mean start). None when A fails on the log or no
-    family is left; nothing named where A's model does not hold (:func:`imu_noise_holds`,
-    the innovations' scale)."""
+    with A's solution (its origin: the legs' mean start). None when no family is left;
+    nothing named (the families ``not_evaluated``, ``holds`` False) where A's model does not
+    hold (:func:`imu_noise_holds`, the innovations' scale) or A fails on the log with the
+    named effects removed."""
     families = [f.effect_id for f in SENSOR_FAMILIES if f.effect_id not in d.named
                 and (solution_a is not None or sensor_family(f.effect_id).sensor != "gravity")]
     if not families:
@@ -314,8 +315,9 @@ def sensor_families(d: Diagnosis, replays: list, log: mcap_reader.FlightLog,
     ref = _legs_reference(replays, solution_a)
     try:
         design, log_s, offset_s = _without_time_offset(log_s, config, families, lever, ref)
-    except (ValueError, np.linalg.LinAlgError):
-        return None
+    except (ValueError, np.linalg.LinAlgError):  # A failed on the log with the effects removed
+        return SensorFamilies(tuple(families), (), (), np.zeros(0), {}, removed, float("nan"),
+                              False)
     if offset_s:
         removed = (*removed, f"the GNSS time offset {1e3 * offset_s:+.1f} ms")
     named, tested, ratio, holds = fit_sensor_families(
