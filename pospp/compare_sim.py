@@ -29,7 +29,7 @@ from pospp.sim.gnss import GnssModel
 from pospp.sim.sensors import ImuErrorModel, imu_grade
 from pospp.simcompare.base_model import BaseFit, ImuParts, fit_base_model, has_drift
 from pospp.simcompare.compare import Comparison, SimulateFn, compare_flights
-from pospp.simcompare.effects import BI_DRAW, LIBRARY, EffectContext, SimEffect
+from pospp.simcompare.effects import BASE_DRAW, LIBRARY, EffectContext, SimEffect
 from pospp.simcompare.stats import FlightStats, Stat, flight_stats, leg_stats, static_and_steady
 from pospp.simcompare.tables import comparison_columns, model_toml
 
@@ -466,7 +466,7 @@ def compare_log(log: mcap_reader.FlightLog, config: PipelineConfig, *,
     drift = fit is not None and has_drift(fit)
     comp = compare_flights(measured, simulate_stats(tpl, config, on_flight), imu, gnss,
                            max_steps=max_steps, library=library, context=ctx, progress=say,
-                           base_ensemble=BI_DRAW if drift else ())
+                           base_ensemble=BASE_DRAW if drift else ())
     return replace(comp, base_fit=fit.parameters if fit else ()), tpl
 
 
