@@ -445,6 +445,49 @@ def test_ensemble_spread_floors_the_sigmas():
     assert g.z == pytest.approx(0.5 / (np.sqrt(2) * 0.5)) and not g.significant
 
 
+def test_a_drift_in_the_base_model_masks_the_scale_factor_and_says_so():
+    """A's estimate-pass scale factors are one draw of a drift in the base model (issue 33:
+    the drift's change over the turns read as a gyro scale factor): with a base model whose
+    5 draws spread a_gyro_sf_z by s = 0.0050 (A's own sigma 0.001 on both flights), a
+    measured 0.006 against the simulated 0 is z 0.006 / (sqrt(2) s) = 0.85, not 4.2 (it was
+    named `scale_factor` on 3 of the 6 hidden-drift flights); the comparison names nothing
+    and says that this flight cannot tell a scale factor from the drift within sqrt(2) s,
+    on the console, in the step-0 row's note and in sim_model.toml's header."""
+    from pospp.compare_sim import model_header
+    from pospp.simcompare.compare import compare_flights
+    from pospp.simcompare.effects import BASE_DRAW, BI_DRAW
+    from pospp.simcompare.ensemble import masked_lines
+
+    assert {f"a_{k}_sf_{a}" for k in ("gyro", "accel") for a in "xyz"} <= set(BI_DRAW)
+    assert "gnss_pos_gated" in BASE_DRAW and "gnss_pos_gated" not in BI_DRAW
+    values = [0.0, 0.007, -0.005, 0.004, -0.006]  # draw 0 (the comparison's own), 1-4
+    s = float(np.std(values, ddof=1))
+
+    def simulate(imu, gnss, draw=0):
+        return FlightStats({"a_gyro_sf_z": Stat(values[draw], 0.001, np.inf)}, np.nan)
+
+    measured = FlightStats({"a_gyro_sf_z": Stat(0.006, 0.001, np.inf)}, np.nan)
+    assert gaps(measured, simulate(None, None))["a_gyro_sf_z"].significant  # one draw: z 4.2
+    lines = []
+    comp = compare_flights(measured, simulate, imu_grade("tactical"), GnssModel(),
+                           base_ensemble=BASE_DRAW, progress=lines.append)
+    g = comp.base["a_gyro_sf_z"]
+    assert g.z == pytest.approx(0.006 / (np.sqrt(2) * s)) and not g.significant
+    assert comp.effects_added == () and comp.steps == ()
+    (m,) = comp.masked
+    assert (m.statistic, m.effects) == ("a_gyro_sf_z", ("scale_factor",))
+    assert m.sigma_own == pytest.approx(np.sqrt(2) * 0.001)
+    assert m.sigma_drift == pytest.approx(np.sqrt(2) * s)
+    (line,) = masked_lines(comp.masked)
+    assert line.startswith("scale_factor: this flight cannot tell it from the base model's "
+                           "drift") and f"{np.sqrt(2) * s:.3g}" in line and line in lines
+    cols = comparison_columns(comp)
+    row = [k for k, (st, ms) in enumerate(zip(cols["step"], cols["measure"], strict=True))
+           if st == 0 and ms == "a_gyro_sf_z"]
+    assert len(row) == 1 and "scale_factor cannot be told" in cols["note"][row[0]]
+    assert line in model_header(comp, "x.mcap", CONFIG)
+
+
 def test_unreported_gnss_noise_is_a_base_model_refit():
     """GNSS velocity noise 0.1 m/s above its reported 0.02 m/s (issue 14's outsider): step 0
     fits the log's velocity noise (about sqrt(0.02^2 + 0.1^2) = 0.102 m/s horizontal),
