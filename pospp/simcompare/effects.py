@@ -199,7 +199,7 @@ class SimEffect:
     Their expectation stays where it was, their spread between draws grows, and their
     batch-means sigmas (blocks of one flight) do not see it. A model with the effect is
     simulated with other seeds too, and these statistics' sigmas are at least their spread
-    between the draws (:func:`pospp.simcompare.compare.ensemble_spread`). Mean-square
+    between the draws (:func:`pospp.simcompare.ensemble.ensemble_spread`). Mean-square
     statistics (NIS, Allan variance, bias wander), whose expectation the effect moves, are
     not among them."""
     trial_at_fit: bool = False
