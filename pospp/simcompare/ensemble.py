@@ -97,10 +97,11 @@ class Masked:
 
     def text(self) -> str:
         """The row's statement (sim_comparison.parquet's note at step 0)."""
-        return (f"widened by the base model's drift between draws to {self.sigma_drift:.3g} "
-                f"{STAT_UNITS[self.statistic]} ({self.sigma_drift / self.sigma_own:.1f} x the "
-                f"flights' own {self.sigma_own:.3g}): {' / '.join(self.effects)} cannot be "
-                "told from the drift's realisation within it on this flight")
+        return (f"widened by the spread between draws of the base model (its gyro drift) to "
+                f"{self.sigma_drift:.3g} {STAT_UNITS[self.statistic]} "
+                f"({self.sigma_drift / self.sigma_own:.1f} x the flights' own "
+                f"{self.sigma_own:.3g}): {' / '.join(self.effects)} cannot be told from a "
+                "draw of the base model within it on this flight")
 
 
 def masked_lines(masked: tuple[Masked, ...]) -> list[str]:
@@ -114,8 +115,8 @@ def masked_lines(masked: tuple[Masked, ...]) -> list[str]:
     def unit(m: Masked) -> str:
         return "" if STAT_UNITS[m.statistic] == "-" else f" {STAT_UNITS[m.statistic]}"
 
-    return [f"{e}: this flight cannot tell it from the base model's drift within the drift's "
-            "spread between draws, sigma of the gap "
+    return [f"{e}: this flight cannot tell it from a draw of the base model (its gyro drift) "
+            "within the spread between draws, sigma of the gap "
             + ", ".join(f"{m.statistic} {m.sigma_drift:.3g}{unit(m)} "
                         f"({m.sigma_drift / m.sigma_own:.1f} x the flights' own)" for m in ms)
             for e, ms in by.items()]
