@@ -33,11 +33,6 @@ N_NOISE = 2 * N_IN
 """Standard normals per grid interval: the trapezoid's two ends (:func:`interval_matrices`)."""
 
 
-def z_size(n_a: int) -> int:
-    """Size of the augmented state for A's ``n_a`` error states."""
-    return n_a + 18
-
-
 @njit(cache=True)
 def expm4(ft, out, w1, w2):
     """``out = I + A + A^2 / 2 + A^3 / 6 + A^4 / 24`` (Horner) for ``A = ft`` (square)."""

@@ -62,7 +62,6 @@ from scipy import optimize
 from pospp.calib.design import (
     condition_numbers,
     design_matrix,
-    leg_sensitivities,
 )
 from pospp.calib.noise_model import (
     REFERENCE_KINDS,
@@ -536,14 +535,3 @@ def fit_calibration(
     )
 
 
-def predict_velocity_error(rep: LegReplay, cal: Calibration, *, transition: str = "numerical"
-                           ) -> NDArray:
-    """Model-predicted B velocity error [dv_N, dv_E] (M, 2) on a leg [m/s].
-
-    The gyro bias comes from ``cal``; the leg's own misalignment too when the leg was in the
-    fit, zero otherwise (a held-out leg's tilt is not known to the calibration).
-    """
-    d_phi, d_bg = leg_sensitivities(rep, transition)
-    bg = cal.gyro_bias_b_radps(rep.c_nb0)
-    phi = cal.misalignment_n_rad(rep.leg.leg_id) if rep.leg.leg_id in cal.leg_ids else np.zeros(3)
-    return d_phi @ phi + d_bg @ bg

@@ -289,13 +289,6 @@ def _first_order_recursion(a: NDArray, e: NDArray) -> NDArray:
     return x
 
 
-def null_difference(perturbed_dv_n_mps: dict[int, NDArray], flight_dv_n_mps: dict[int, NDArray]
-                    ) -> dict[int, NDArray]:
-    """d_r = perturbed B minus A less the flight's, per leg id (module docstring, step 3)."""
-    return {k: np.asarray(perturbed_dv_n_mps[k]) - np.asarray(flight_dv_n_mps[k])
-            for k in flight_dv_n_mps}
-
-
 def calibrated_p_value(statistic: float, null_statistics: NDArray) -> float:
     """p-value of a statistic against its R null realisations: the predictive Student t of
     log F.
