@@ -489,6 +489,30 @@ def test_a_drift_in_the_base_model_masks_the_scale_factor_and_says_so():
     assert line in model_header(comp, "x.mcap", CONFIG)
 
 
+def test_the_censored_fit_is_chosen_on_the_flights_own_sigmas():
+    """A's gate censoring the measured records is this flight's fact; a base-model drift's
+    spread between draws says only whether the gap can be one draw. With the gated share
+    0.52 +- 0.025 measured against 0.002 +- 0.002 simulated (a 0.342 m coloured GNSS error at
+    3 x the grade's noise, Monte Carlo seed 308) and a spread of 0.12 between draws, the gap
+    is not significant (z 3.0) but the coloured error is still fitted on the gated share
+    alone (on the censored NIS and lag-1 beside it that seed read 0.205 m for 0.342)."""
+    from pospp.simcompare.compare import _fit_names
+    from pospp.simcompare.effects import library_by_name
+
+    e = library_by_name()["coloured_gnss"]
+    m = FlightStats({"gnss_pos_gated": Stat(0.52, 0.025, 9.0),
+                     "gnss_pos_nis": Stat(10.1, 0.62, 9.0),
+                     "gnss_pos_lag1": Stat(0.32, 0.029, 9.0)}, np.nan)
+    s = FlightStats({"gnss_pos_gated": Stat(0.0023, 0.0016, 9.0),
+                     "gnss_pos_nis": Stat(4.7, 0.12, 9.0),
+                     "gnss_pos_lag1": Stat(0.33, 0.045, 9.0)}, np.nan)
+    cur = gaps(m, s, spread={"gnss_pos_gated": Stat(0.0, 0.12, 4.0)})
+    own = gaps(m, s)
+    assert not cur["gnss_pos_gated"].significant and own["gnss_pos_gated"].significant
+    assert _fit_names(e, cur) == ["gnss_pos_lag1", "gnss_pos_nis", "gnss_pos_gated"]
+    assert _fit_names(e, cur, own) == ["gnss_pos_gated"]
+
+
 def test_unreported_gnss_noise_is_a_base_model_refit():
     """GNSS velocity noise 0.1 m/s above its reported 0.02 m/s (issue 14's outsider): step 0
     fits the log's velocity noise (about sqrt(0.02^2 + 0.1^2) = 0.102 m/s horizontal),
