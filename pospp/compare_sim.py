@@ -28,9 +28,9 @@ from pospp.sim.api import Kinematics, along_motion, kinematics, sensors
 from pospp.sim.gnss import GnssModel
 from pospp.sim.sensors import ImuErrorModel, imu_grade
 from pospp.simcompare.base_model import BaseFit, ImuParts, fit_base_model, has_drift
-from pospp.simcompare.compare import Comparison, SimulateFn, compare_flights
+from pospp.simcompare.compare import Comparison, compare_flights
 from pospp.simcompare.effects import BASE_DRAW, LIBRARY, EffectContext, SimEffect
-from pospp.simcompare.ensemble import masked_lines
+from pospp.simcompare.ensemble import SimulateFn, masked_lines
 from pospp.simcompare.stats import FlightStats, Stat, flight_stats, leg_stats, static_and_steady
 from pospp.simcompare.tables import comparison_columns, model_toml
 

@@ -53,7 +53,6 @@ from pospp.sim.sensors import ImuErrorModel
 from pospp.simcompare.base_model import BaseParameter
 from pospp.simcompare.effects import LIBRARY, EffectContext, JointFit, SimEffect
 from pospp.simcompare.ensemble import (
-    ENSEMBLE_DRAWS,
     Masked,
     SimulateFn,
     ensemble_spread,
@@ -63,8 +62,7 @@ from pospp.simcompare.ensemble import (
 )
 from pospp.simcompare.stats import STAT_UNITS, FlightStats, Stat
 
-__all__ = ["ALPHA", "ENSEMBLE_DRAWS", "Comparison", "Gap", "Masked", "SimulateFn",
-           "compare_flights", "ensemble_spread", "gaps", "with_spread"]
+__all__ = ["ALPHA", "Comparison", "Gap", "compare_flights", "gaps"]
 
 ALPHA = 0.01
 """Family-wise significance level of the gap tests (Holm-Bonferroni)."""

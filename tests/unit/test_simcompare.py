@@ -413,7 +413,7 @@ def test_ensemble_spread_floors_the_sigmas():
     out, a statistic with fewer than 3 values or not simulated gets none); it floors both
     sides' sigmas, so a
     gap of 0.5 with batch sigmas 0.1 (z 3.5) becomes z 0.5 / (sqrt(2) x 0.5) = 0.71."""
-    from pospp.simcompare.compare import ensemble_spread, with_spread
+    from pospp.simcompare.ensemble import ensemble_spread, with_spread
 
     inf = np.inf
     draws = {1: 0.5, 2: -0.5, 3: None, 4: 1.0}  # draw 3: A cannot process it
