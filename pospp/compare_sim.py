@@ -28,8 +28,9 @@ from pospp.sim.api import Kinematics, along_motion, kinematics, sensors
 from pospp.sim.gnss import GnssModel
 from pospp.sim.sensors import ImuErrorModel, imu_grade
 from pospp.simcompare.base_model import BaseFit, ImuParts, fit_base_model, has_drift
-from pospp.simcompare.compare import Comparison, SimulateFn, compare_flights
-from pospp.simcompare.effects import BI_DRAW, LIBRARY, EffectContext, SimEffect
+from pospp.simcompare.compare import Comparison, compare_flights
+from pospp.simcompare.effects import BASE_DRAW, LIBRARY, EffectContext, SimEffect
+from pospp.simcompare.ensemble import SimulateFn, masked_lines
 from pospp.simcompare.stats import FlightStats, Stat, flight_stats, leg_stats, static_and_steady
 from pospp.simcompare.tables import comparison_columns, model_toml
 
@@ -466,7 +467,7 @@ def compare_log(log: mcap_reader.FlightLog, config: PipelineConfig, *,
     drift = fit is not None and has_drift(fit)
     comp = compare_flights(measured, simulate_stats(tpl, config, on_flight), imu, gnss,
                            max_steps=max_steps, library=library, context=ctx, progress=say,
-                           base_ensemble=BI_DRAW if drift else ())
+                           base_ensemble=BASE_DRAW if drift else ())
     return replace(comp, base_fit=fit.parameters if fit else ()), tpl
 
 
@@ -519,6 +520,7 @@ def model_header(comp: Comparison, name: str, config: PipelineConfig) -> str:
              "pospp.sim.sensors.ImuErrorModel fields, [gnss]: pospp.sim.gnss.GnssModel).",
              f"Base model fitted to the log (step 0; the grade {config.imu.grade!r} as prior):"]
     lines += [f"  {b.text()}" for b in comp.base_fit if b.fitted]
+    lines += [f"  {line}" for line in masked_lines(comp.masked)]
     for s in comp.steps:
         if s.effect == "unexplained":
             continue

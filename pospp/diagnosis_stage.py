@@ -46,6 +46,7 @@ from pospp.diagnose.rerun import (
     PIPELINE_RERUN,
     REFINE_FRACTION,
     REFINE_ITERATIONS,
+    Jacobians,
     first_estimates,
     gate_excess,
     refine_signatures,
@@ -198,16 +199,18 @@ def _rerun_signatures_at_start(log: mcap_reader.FlightLog, nav: nav_filter.Filte
                                calib_run: CalibrationRun, config: PipelineConfig,
                                starts: dict[str, np.ndarray | None],
                                navigate_a: Any, threads: int = 1,
-                               rerun: tuple[Any, CalibrationRun] | None = None
+                               rerun: tuple[Any, CalibrationRun] | None = None,
+                               jacobians: Jacobians | None = None
                                ) -> tuple[dict[str, list[np.ndarray]], dict[str, np.ndarray]]:
-    """The diagnosis's first A re-run signatures and the estimates they were made at.
+    """The diagnosis's first A re-run signatures and the estimates they were made at
+    (``jacobians``: their local derivatives, added in place: :func:`signature_at`).
 
     The re-runs are made on ``rerun`` = (log, run) of :func:`rerun_base` (the flight's own
     when None); ``starts``: :func:`signature_starts`. An effect with a start: Gauss-Newton
-    from it (the lever arm: 1 + 4 A runs; the scale factor: the secant along it, 1 A run;
-    the warm-up: 3 A runs); else at the configuration (the lever arm and the time offset: 1
-    A run each, the warm-up 2); the gyro scale factor without a start keeps the library's
-    signature."""
+    from it (the lever arm: 1 + 1 A runs and 3 replays of the second's gains; the scale
+    factor: the secant along it, 1 A run; the warm-up: 1 A run and 2 replays); else at the
+    configuration (the lever arm and the time offset: 1 A run each, the warm-up 2); the gyro
+    scale factor without a start keeps the library's signature."""
     log_r, run_r = (log, calib_run) if rerun is None else rerun
     sigs = rerun_signatures(log_r, nav, run_r, config,
                             [e for e in PIPELINE_RERUN if e != "gyro_scale_factor"
@@ -219,7 +222,7 @@ def _rerun_signatures_at_start(log: mcap_reader.FlightLog, nav: nav_filter.Filte
             continue
         try:
             sigs[eid] = signature_at(log_r, nav, run_r, config, eid, p, navigate=navigate_a,
-                                     threads=threads)
+                                     threads=threads, jacobians=jacobians)
             at[eid] = p
         except (ValueError, np.linalg.LinAlgError):  # A failed at the estimate
             if eid != "gyro_scale_factor":
@@ -280,6 +283,9 @@ class DiagnosisStart:
     """The first re-run signatures (None without the log and A)."""
     at: dict[str, np.ndarray]
     """The estimates the Gauss-Newton signatures were made at."""
+    jacobians: Jacobians
+    """Their local derivatives (:func:`pospp.diagnose.rerun.signature_at`), which the
+    refinements near the same estimates take instead of re-making."""
 
 
 def diagnosis_reruns(calib_run: CalibrationRun, config: PipelineConfig, *,
@@ -297,13 +303,15 @@ def diagnosis_reruns(calib_run: CalibrationRun, config: PipelineConfig, *,
                               replay=gains)  # the re-runs
     sigs: dict[str, list[np.ndarray]] | None = None
     at: dict[str, np.ndarray] = {}
+    jacobians: Jacobians = {}
     if log is not None and nav is not None:
         # lever arm, gyro scale factor, warm-up: Gauss-Newton from A's own estimates
         if starts is None:
             starts = signature_starts(log, nav, config, lever_estimate)
         sigs, at = _rerun_signatures_at_start(log, nav, calib_run, config, starts,
-                                              a_as_configured, threads, (log_r, run_r))
-    return DiagnosisStart(log_r, run_r.replays, a_as_configured, sigs, at)
+                                              a_as_configured, threads, (log_r, run_r),
+                                              jacobians)
+    return DiagnosisStart(log_r, run_r.replays, a_as_configured, sigs, at, jacobians)
 
 
 def diagnose_calibration(calib_run: CalibrationRun, imu: ImuSource, solution_a: SolutionA,
@@ -353,7 +361,7 @@ def _diagnose_legs(calib_run: CalibrationRun, imu: ImuSource, solution_a: Soluti
                                  lever_estimate=lever_estimate, threads=threads)
     log_r, a_as_configured = start.log_r, start.navigate_a
     run_r = replace(calib_run, replays=start.replays_r)
-    sigs, at = start.sigs, dict(start.at)
+    sigs, at, jacobians = start.sigs, dict(start.at), dict(start.jacobians)
     null_log, null_nav, null_dv, warm_note, null_cfg = _null_without_warmup(
         log, nav, at.get("accel_bias_change"), calib_run, config, null_dv, threads)
     # B's residuals carry the gyro angle random walk, correlated along each leg: weighting them
@@ -382,7 +390,8 @@ def _diagnose_legs(calib_run: CalibrationRun, imu: ImuSource, solution_a: Soluti
         # A is not linear in a GNSS-side effect: secants through the current estimates
         refined, at = refine_signatures(log_r, nav, run_r, config, sigs,
                                         first_estimates(d, config.pairs.diagnose_alpha), at,
-                                        navigate=a_as_configured, threads=threads)
+                                        navigate=a_as_configured, threads=threads,
+                                        jacobians=jacobians)
         if all(refined[k] is sigs[k] for k in sigs):
             break
         d, sigs = diagnose_with(refined, white), refined

@@ -380,6 +380,9 @@ def _diagnose_stage(calib_run: CalibrationRun, imu: Any, solution_a: Any,
         book.note("warning", "diagnose", f"no diagnosis: {exc}")
         return None
     book.note("info", "diagnose", f"p-values calibrated on {diagnosis.null_model}")
+    if diagnosis.not_evaluated:
+        book.note("warning", "diagnose", "not evaluated (the log cannot carry their test, or "
+                  f"A's model does not hold on it): {', '.join(diagnosis.not_evaluated)}")
     if diagnosis.location is not None:  # "unexplained": where the gap sits
         book.note("warning", "diagnose", diagnosis.location.text)
     return diagnosis

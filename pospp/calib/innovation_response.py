@@ -80,12 +80,13 @@ def propagate_columns(grid, i_gm, i_sf, inv_tau, g_node, records, e0, d0, d1, dn
     """The forward pass of the m columns (module docstring). ``grid = (xs (G, 10), fm (G, 3),
     wm (G, 3), dt (G,))`` (:func:`pospp.calib.linear_null.interval_means`); ``g_node`` (G,)
     the record epoch at each grid point (-1 none); ``records = (rec_start (E + 1,), K (R,
-    n_a, 3), H (R, 3, n_a))`` the records of each epoch in order; ``e0`` (n_a, m) the error
-    at the first point; ``d0``, ``d1`` (G, 6, m) the input's integrals over the interval
-    ending at each point (row 0 unused); ``dnu`` (R, 3, m) receives each record's innovation
-    change."""
+    n_a, 3), H (R, 3, n_a), row (R,))`` the records of each epoch in order and their rows in
+    ``dnu``; ``e0`` (n_a, m) the error at the first point; ``d0``, ``d1`` (G, 6, m) the
+    input's integrals over the interval ending at each point (row 0 unused); ``dnu`` (., 3,
+    m) receives each record's innovation change in its row. Returns the error after the
+    last point's records (n_a, m): the next stretch of the grid continues from it."""
     xs, fms, wms, dts = grid
-    rec_start, rec_k, rec_h = records
+    rec_start, rec_k, rec_h, rec_row = records
     n_a = rec_k.shape[1]
     e = e0.copy()
     fa, ft, phi = np.empty((n_a, n_a)), np.empty((n_a, n_a)), np.empty((n_a, n_a))
@@ -104,8 +105,9 @@ def propagate_columns(grid, i_gm, i_sf, inv_tau, g_node, records, e0, d0, d1, dn
         if node >= 0:
             for i in range(rec_start[node], rec_start[node + 1]):
                 nu = np.dot(rec_h[i], e)
-                dnu[i] = nu
+                dnu[rec_row[i]] = nu
                 e -= np.dot(rec_k[i], nu)
+    return e
 
 
 def innovation_responses(gains: GainReplay, trajectory: Trajectory, imu_t_s: NDArray,
@@ -156,21 +158,28 @@ def innovation_responses(gains: GainReplay, trajectory: Trajectory, imu_t_s: NDA
     grid_t, g_node, _ = event_grid(t_nodes, breaks, max_step_s)
     xs, fm, wm, dts = interval_means(grid_t, trajectory, imu_t_s, imu_w_b_radps, imu_f_b_mps2)
     xs[1:] = _kernel_states(trajectory, 0.5 * (grid_t[1:] + grid_t[:-1]))
-    d0, d1 = _input_integrals(grid_t, trajectory, body_input)
     node_of_rec = np.searchsorted(t_nodes, t_rec)
     rec_start = np.searchsorted(node_of_rec, np.arange(t_nodes.size + 1)).astype(np.int64)
-    dnu = np.zeros((applied.size, 3, d0.shape[2]))
+    records = (rec_start, np.ascontiguousarray(gains.gains[applied]),
+               np.ascontiguousarray(gains.h[applied]), applied.astype(np.int64))
     lay = gains.layout
-    e0 = np.zeros((lay.n, d0.shape[2]))
+    m = np.shape(body_input(grid_t[:1], np.eye(3)[None]))[2]
+    out = np.zeros((st.size, 3, m))  # zero for the records A did not use
+    e = np.zeros((lay.n, m))
     if static_window_s is not None:
-        e0[:3] = _alignment_response(static_window_s, imu_t_s, imu_w_b_radps, imu_f_b_mps2,
-                                     trajectory, body_input, breaks, max_step_s)
-    propagate_columns((xs, fm, wm, dts), lay.i_gm, lay.i_sf,
-                      np.asarray(gains.gm_inv_tau, dtype=float), g_node,
-                      (rec_start, np.ascontiguousarray(gains.gains[applied]),
-                       np.ascontiguousarray(gains.h[applied])), e0, d0, d1, dnu)
-    out = np.zeros((st.size, 3, d0.shape[2]))
-    out[applied] = dnu
+        e[:3] = _alignment_response(static_window_s, imu_t_s, imu_w_b_radps, imu_f_b_mps2,
+                                    trajectory, body_input, breaks, max_step_s)
+    # the grid a stretch at a time, each stretch's input integrals made for it alone (the
+    # whole grid's are (G, 6, m) twice: 108 MiB on a 1.5 h flight, m = 210); a stretch
+    # starts at the last one's end point, whose records the last one applied
+    for a in range(0, max(grid_t.size - 1, 1), _STRETCH):
+        b = min(a + 1 + _STRETCH, grid_t.size)
+        d0, d1 = _input_integrals(grid_t[a:b], trajectory, body_input)
+        nodes = g_node[a:b].copy()
+        nodes[0] = nodes[0] if a == 0 else -1
+        e = propagate_columns((xs[a:b], fm[a:b], wm[a:b], dts[a:b]), lay.i_gm, lay.i_sf,
+                              np.asarray(gains.gm_inv_tau, dtype=float), nodes, records, e,
+                              d0, d1, out)
     return out
 
 
@@ -197,6 +206,10 @@ def _kernel_states(trajectory: Trajectory, t_s: NDArray) -> NDArray:
     return np.column_stack([tr.lat_rad, tr.lon_rad, tr.height_m, tr.v_n_mps, tr.q_nb])
 
 
+_STRETCH = 256
+"""Grid intervals propagated at once, their input integrals in memory (256 x 6 x m doubles
+twice, and the inputs at three points per interval while they are made: 5 and 8 MiB at
+m = 210, a 1.5 h flight's hinges on two axes)."""
 _CHUNK = 512
 """Grid intervals whose input integrals are made at once (their inputs at three points each:
 512 x 3 x 6 x m doubles, 10 MB at m = 140)."""

@@ -82,27 +82,41 @@ GAUSS_NEWTON_EFFECTS = ("lever_arm", "time_offset", "gyro_scale_factor", "accel_
 """Effects :func:`signature_at` and :func:`refine_signatures` make a signature at an estimate
 for."""
 
+Jacobians = dict[str, tuple[NDArray, list[NDArray]]]
+"""The local derivatives :func:`signature_at` made: effect id -> (the estimate p they were made
+at, SI (P,); per leg J (M, 2, P), d [dv_N, dv_E] / d p at the removed state)."""
+
 Navigate = Callable[..., FilterResult]
 """A as the run configures it: ``navigate(log, lever_arm_b_m=None) -> FilterResult`` (the
 pipeline's ``navigate`` with its configuration bound; the lever arm replaces the configured
 one when given)."""
 
 
-def _response(log_p, nav, calib_run, config, navigate: Navigate, lever_b_m=None
-              ) -> list[NDArray]:
+def _response(log_p, nav, calib_run, config, navigate: Navigate, lever_b_m=None,
+              **a_options: Any) -> list[NDArray]:
     """(B - A)[log_p, lever] - (B - A)[flight] per leg (legs in id order), (M, 2) [m/s]."""
+    return _response_and_gains(log_p, nav, calib_run, config, navigate, lever_b_m,
+                               **a_options)[0]
+
+
+def _response_and_gains(log_p, nav, calib_run, config, navigate: Navigate, lever_b_m=None,
+                        **a_options: Any
+                        ) -> tuple[list[NDArray], nav_filter.GainReplay | None]:
+    """:func:`_response` and the re-run's recorded gains (``a_options``: ``navigate``'s
+    ``record_gains`` or ``replay``; None when it recorded none)."""
     rc = config.replay
     which = nav_filter.reference_name(nav, rc.reference)
     legs = {leg.leg_id: leg for leg in calib_run.legs}
-    nav_p = navigate(log_p, lever_arm_b_m=lever_b_m)
+    nav_p = navigate(log_p, lever_arm_b_m=lever_b_m, **a_options)
     ref_p = SolutionA(*nav_filter.solution_a_fields(nav_p, which=which))
+    gains = nav_p.gain_replay
     del nav_p  # the rest of A (its forward solution, biases: 30 MiB) is not read by B
     t0 = int(log_p.imu.time_ns[0])
     imu = ImuRates.from_rates(log_p.imu.time_ns, log_p.imu.w_ib_b_radps,
                               log_p.imu.f_ib_b_mps2, epoch_ns=t0)
     return [replay_velocity_error(imu, ref_p, legs[i], accel_compensation=rc.accel_compensation,
                                   sample_rate_hz=rc.sample_rate_hz)[:, 0:2]
-            - calib_run.replays[i].dv_n_mps[:, 0:2] for i in sorted(calib_run.replays)]
+            - calib_run.replays[i].dv_n_mps[:, 0:2] for i in sorted(calib_run.replays)], gains
 
 
 def _with_rates(log, rates):
@@ -193,8 +207,8 @@ def rerun_signatures(log, nav, calib_run, config, effect_ids=RERUN_EFFECTS, *,
 
 
 def signature_at(log, nav, calib_run, config, effect_id: str, p, *, navigate: Navigate,
-                 accel_settling_s: float = ACCEL_SETTLING_S, threads: int = 1
-                 ) -> list[NDArray]:
+                 accel_settling_s: float = ACCEL_SETTLING_S, threads: int = 1,
+                 jacobians: Jacobians | None = None) -> list[NDArray]:
     """Gauss-Newton signature of a re-run effect at the estimate ``p`` (SI, (P,)).
 
     A is re-run with the estimate removed (configured lever arm minus p; GNSS stamps moved
@@ -228,8 +242,20 @@ def signature_at(log, nav, calib_run, config, effect_id: str, p, *, navigate: Na
     size on x and y at the removed state; A is not linear in a warm-up early in the flight:
     measured, a 600 ug warm-up moves B minus A on a leg 170 s after power-up by 61 mm/s RMS
     where the derivative at 0 predicts 38) or four (``lever_arm``); the runs of one signature
-    on up to ``threads`` threads. Returns ``[S_leg (M, 2, P)]``, legs in id order. Raises
-    ValueError when A fails.
+    on up to ``threads`` threads. The local steps replay the removed state's recorded gains
+    (:func:`_removed_and_steps`): J is then A's derivative with its gains and gate decisions
+    held, which is what "A linear at the effect-free state" means, at 0.6 of a full run's
+    cost (the removed run records at 1.2; flight_time_offset_200hz, the lever arm's J on A's
+    smoothed velocity: 0.04 % RMS from the full runs' finite difference). Returns
+    ``[S_leg (M, 2, P)]``, legs in id order. Raises ValueError when A fails.
+
+    ``jacobians`` (:data:`Jacobians`, updated in place): J made at an estimate within one
+    local step h of p (``|p - p_J| <= h``) is taken instead of re-made, and only the removed
+    state is re-run (the lever arm: 1 A run instead of 4; the warm-up: 1 instead of 3). J is
+    the derivative at the effect-free state, where A's gate is open and its response linear
+    (above): moving the point it is taken at by less than the finite difference's own step
+    moves it by no more than the difference's truncation. The secant, which carries A's
+    non-linearity, is always re-made at p.
     """
     p = np.asarray(p, dtype=float)
     size = float(np.linalg.norm(p))
@@ -237,11 +263,13 @@ def signature_at(log, nav, calib_run, config, effect_id: str, p, *, navigate: Na
         raise ValueError(f"{effect_id}: the estimate is zero; use rerun_signatures")
     u = p / size
     h = LOCAL_STEP_FRACTION * effect_by_id(effect_id).plausible_si
+    known = _jacobian_near(jacobians, effect_id, p, h)
+    steps = [] if known is not None else list(h * np.eye(p.size))
     if effect_id == "lever_arm":
         lever = np.asarray(config.gnss.lever_arm_m, dtype=float) - p
-        removed, *cols = map_in_threads(
-            lambda dl: _response(log, nav, calib_run, config, navigate, lever + dl),
-            [np.zeros(3), *(h * np.eye(3))], threads)
+        removed, cols = _removed_and_steps(
+            lambda dl, **kw: _response_and_gains(log, nav, calib_run, config, navigate,
+                                                 lever + dl, **kw), p.size, steps, threads)
     elif effect_id == "time_offset":
         removed = _response(_gnss_earlier(log, -float(p[0])), nav, calib_run, config, navigate)
         cols = []
@@ -250,21 +278,27 @@ def signature_at(log, nav, calib_run, config, effect_id: str, p, *, navigate: Na
                             calib_run, config, navigate)
         cols = []  # the secant alone, along A's own estimate (see the docstring)
     elif effect_id == "accel_bias_change":
-        removed, *cols = map_in_threads(
-            lambda db: _response(warmed(log, db, accel_settling_s), nav, calib_run, config,
-                                 navigate),
-            [-p, *(h * np.eye(2) - p)], threads)
+        removed, cols = _removed_and_steps(
+            lambda db, **kw: _response_and_gains(warmed(log, db - p, accel_settling_s), nav,
+                                                 calib_run, config, navigate, **kw),
+            p.size, steps, threads)
     else:
         raise ValueError(f"{effect_id}: no Gauss-Newton signature ({GAUSS_NEWTON_EFFECTS})")
-    local = [np.stack([(c[k] - removed[k]) / h for c in cols], axis=-1) if cols
-             else np.zeros(removed[k].shape + p.shape) for k in range(len(removed))]
+    if known is not None:
+        local = known
+    else:
+        local = [np.stack([(c[k] - removed[k]) / h for c in cols], axis=-1) if cols
+                 else np.zeros(removed[k].shape + p.shape) for k in range(len(removed))]
+        if jacobians is not None and cols:
+            jacobians[effect_id] = (p, local)
     return [s - np.einsum("mcp,p,q->mcq", s, u, u) + (-r / size)[:, :, None] * u
             for s, r in zip(local, removed, strict=True)]
 
 
 def refine_signatures(log, nav, calib_run, config, signatures: dict[str, list[NDArray]],
                       estimates: dict[str, NDArray], at: dict[str, NDArray] | None = None,
-                      *, navigate: Navigate, threads: int = 1
+                      *, navigate: Navigate, threads: int = 1,
+                      jacobians: Jacobians | None = None
                       ) -> tuple[dict[str, list[NDArray]], dict[str, NDArray]]:
     """Gauss-Newton step: the signatures re-made at the current estimates (A is not linear).
 
@@ -275,8 +309,9 @@ def refine_signatures(log, nav, calib_run, config, signatures: dict[str, list[ND
     (measured: a 12 ms GNSS offset is named 5 times in 5 with the 20 ms step and never with the
     2 ms one; a 4 ms offset reads -1.7 ms with the first, -3.8 ms with the second). Effects
     without an estimate, or whose estimate moved by less than :data:`REFINE_TOLERANCE` of
-    itself since the signature in ``at`` was made, keep theirs. Returns the signatures and the
-    estimates they were made at.
+    itself since the signature in ``at`` was made, keep theirs. ``jacobians``: as
+    :func:`signature_at`'s (updated in place). Returns the signatures and the estimates they
+    were made at.
     """
     out = dict(signatures)
     at = dict(at or {})
@@ -291,11 +326,33 @@ def refine_signatures(log, nav, calib_run, config, signatures: dict[str, list[ND
             continue
         try:
             out[eid] = signature_at(log, nav, calib_run, config, eid, p, navigate=navigate,
-                                    threads=threads)
+                                    threads=threads, jacobians=jacobians)
         except (ValueError, np.linalg.LinAlgError):
             continue
         at[eid] = p
     return out, at
+
+
+def _removed_and_steps(response: Callable[..., tuple[list[NDArray], Any]], size: int,
+                       steps: list[NDArray], threads: int
+                       ) -> tuple[list[NDArray], list[list[NDArray]]]:
+    """B minus A's change at the removed state (``response(zeros(size))``) and at each of
+    ``steps`` from it, the steps replaying the removed state's recorded gains
+    (:class:`pospp.nav.filter.GainReplay`: K, S and the smoother's gains fixed, A's gate as
+    there) where it recorded them, else as ``response`` runs A (its own replay)."""
+    removed, gains = response(np.zeros(size), record_gains=bool(steps))
+    replay = {} if gains is None else {"replay": gains}
+    cols = map_in_threads(lambda d: response(d, **replay)[0], steps, threads)
+    return removed, cols
+
+
+def _jacobian_near(jacobians: Jacobians | None, effect_id: str, p: NDArray, h: float
+                   ) -> list[NDArray] | None:
+    """The local derivatives made at an estimate within ``h`` of ``p`` (SI), or None."""
+    made = (jacobians or {}).get(effect_id)
+    if made is None or made[0].shape != p.shape or not np.linalg.norm(p - made[0]) <= h:
+        return None
+    return made[1]
 
 
 def first_estimates(diagnosis, alpha: float | None = None) -> dict[str, NDArray]:

@@ -47,12 +47,15 @@ def comparison_columns(c: Comparison) -> dict[str, list]:
     """Long-form rows of sim_comparison.parquet (schema in pospp.io.parquet_tables): the base
     model's fitted levels (kind "base", step 0; ``significant_before``: the fit differs
     from its prior; ``simulated_before``: the level simulated, the fit or the prior),
-    every statistic at step 0 and at each step (kind "statistic"), and each step's
-    effect parameters (kind "effect", in the catalogue's units and signs, the reading in
-    ``note``) and what else the reading determines (kind "reading": the combination of
-    confounded effects, their correlations)."""
+    every statistic at step 0 and at each step (kind "statistic"; at step 0 ``note`` says
+    when the base model's drift masks the effects fitted on it: ``Comparison.masked``),
+    and each step's effect parameters (kind "effect", in the catalogue's units and signs,
+    the reading in ``note``) and what else the reading determines (kind "reading": the
+    combination of confounded effects, their correlations)."""
     rows = [_base_row(b) for b in c.base_fit]
-    rows += [_stat_row(0, "", n, g, None) for n, g in c.base.items()]
+    masked = {m.statistic: m.text() for m in c.masked}
+    rows += [{**_stat_row(0, "", n, g, None), "note": masked.get(n, "")}
+             for n, g in c.base.items()]
     for s in c.steps:
         for n, b in s.before.items():
             rows.append(_stat_row(s.step, s.effect, n, b, s.after.get(n)))

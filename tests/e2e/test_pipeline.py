@@ -380,3 +380,23 @@ def test_a_failed_diagnosis_re_run_is_a_partial_run(small_config, tmp_path, monk
     assert outcome.status == "partial"
     assert outcome.messages.text.str.contains(
         "no diagnosis: injected: A failed on the re-run base").any()
+
+
+@pytest.mark.slow
+def test_sensor_families_that_cannot_be_fitted_are_said(monkeypatch, tmp_path):
+    """When the sensor families' fit fails (here: A made to fail on the log with the named
+    effects removed), the run says which families were not evaluated instead of reading as a
+    diagnosis that looked and found nothing; the sample's own run has no such note."""
+    import pospp.sensor_stage as sensor_stage
+
+    def fails(*_args, **_kwargs):
+        raise ValueError("A diverged")
+
+    monkeypatch.setattr(sensor_stage, "_without_time_offset", fails)
+    out = tmp_path / "run"
+    code, text = _cli("run", str(SAMPLE), "-p", str(SAMPLE_PIPELINE), "-o", str(out))
+    assert code == 0, text
+    m = pd.read_parquet(out / "messages.parquet")
+    said = m[(m.stage == "diagnose") & m.text.str.startswith("not evaluated")]
+    assert len(said) == 1 and (said.severity == "warning").all()
+    assert all(f in said.text.iloc[0] for f in ("accel_bias_change", "gyro_bias_change"))

@@ -13,6 +13,7 @@ from test_diagnose_null_reference import case_config
 
 from pospp import pipeline, rotation
 from pospp import sensor_stage as stage
+from pospp.calib import innovation_response
 from pospp.calib.innovation_response import innovation_responses
 from pospp.diagnose import null_model
 from pospp.diagnose.shapes import basis_size, change_basis, knots_s, step_times_s
@@ -117,3 +118,32 @@ def test_the_linear_responses_are_the_gain_replays(ramp_design, family, axis, kn
     assert np.linalg.norm(old_w) > 10.0  # the column is seen on the innovations
     rel = np.linalg.norm(new_w - old_w) / np.linalg.norm(old_w)
     assert rel < 0.02, rel
+
+
+@pytest.mark.reference
+def test_the_grid_a_stretch_at_a_time_is_the_whole_grid_at_once(ramp_design, monkeypatch):
+    # the input integrals made per stretch (memory): stretches of 7 intervals, each starting
+    # at the last one's end point, give the whole grid's responses (and every record's)
+    cfg, opts, log_r, base, t_run, knots, field, dnu = ramp_design
+    monkeypatch.setattr(innovation_response, "_STRETCH", 7)
+    breaks = np.unique(np.round(np.concatenate([knots, step_times_s(knots)]), 6))
+    fam = "accel_bias_change"
+    short = innovation_responses(base.gain_replay, base.forward.trajectory, t_run,
+                                 log_r.imu.w_ib_b_radps, log_r.imu.f_ib_b_mps2,
+                                 stage._column_input(fam, knots, field), breaks_s=breaks,
+                                 static_window_s=stage._static_window(base, opts))
+    assert np.count_nonzero(np.any(dnu[fam] != 0.0, axis=(1, 2))) > 1000
+    np.testing.assert_allclose(short, dnu[fam], rtol=1e-12, atol=1e-12 * np.abs(dnu[fam]).max())
+
+
+def test_the_records_are_whitened_in_place_as_all_at_once():
+    # sensor_stage._whitened writes L_k^T dnu_k over dnu's first rows, a chunk at a time
+    rng = np.random.default_rng(3)
+    dnu = rng.standard_normal((50, 3, 4))
+    rows = np.sort(rng.choice(50, size=31, replace=False))
+    a = rng.standard_normal((31, 3, 3))
+    chol = np.linalg.cholesky(a @ a.transpose(0, 2, 1) + 3.0 * np.eye(3))
+    expected = np.einsum("kji,kjm->kim", chol, dnu[rows])
+    got = stage._whitened(chol, dnu, rows, chunk=4)
+    np.testing.assert_allclose(got, expected, rtol=1e-14, atol=1e-14)
+    assert np.shares_memory(got, dnu)  # no second array of every column
