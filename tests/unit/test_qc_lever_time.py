@@ -239,6 +239,18 @@ def test_a_noisier_receiver_widens_the_lever_arms_sigma_as_tau_s():
         "lever_arm"
 
 
+def _coloured(cfg: np.ndarray, ratio: float = 9.0):
+    """The closed-form passes of a vertical lever arm 0.3 m off the configured one (sigma
+    0.05 m), white and with innovations of long-run variance ratio ``ratio``."""
+    run0, _ = closed_form(0.0, 0.002, cfg + [0.0, 0.0, 0.3], sigma_l_m=0.05)
+
+    def run(s, start):
+        p = run0(s, start)
+        return LeverPass(p.shift_s, p.lever_b_m, p.sigma_b_m, p.record_key, p.nis, ratio)
+
+    return run0, run
+
+
 def test_coloured_innovations_widen_the_joint_estimates_sigmas():
     """Passes whose innovations have a long-run variance ratio of 9 (a coloured GNSS error:
     a ninth as many independent records) widen tau's sigma, the lever arm's and the apparent
@@ -247,11 +259,7 @@ def test_coloured_innovations_widen_the_joint_estimates_sigmas():
     GNSS error at 3 x noise was named a lever arm at 7-15 of the chi-square-widened sigmas;
     its innovations' ratio is 11-16, 1.0 on nulls and true lever arms)."""
     cfg = np.array([0.3, 0.1, -1.5])
-    run0, _ = closed_form(0.0, 0.002, cfg + [0.0, 0.0, 0.3], sigma_l_m=0.05)
-
-    def run(s, start):
-        p = run0(s, start)
-        return LeverPass(p.shift_s, p.lever_b_m, p.sigma_b_m, p.record_key, p.nis, 9.0)
+    run0, run = _coloured(cfg)
 
     white = lever_time_joint(run0, cfg, cfg, grid_s=0.005)
     est = lever_time_joint(run, cfg, cfg, grid_s=0.005)
@@ -327,11 +335,7 @@ def test_the_lever_arm_check_takes_the_joint_apparent_lever_arm_where_it_reads_n
     from pospp.qc import checks
 
     cfg = np.array([0.3, 0.1, -1.5])
-    run0, _ = closed_form(0.0, 0.002, cfg + [0.0, 0.0, 0.3], sigma_l_m=0.05)
-
-    def run(s, start):
-        p = run0(s, start)
-        return LeverPass(p.shift_s, p.lever_b_m, p.sigma_b_m, p.record_key, p.nis, 9.0)
+    run0, run = _coloured(cfg)
 
     est = lever_time_joint(run, cfg, cfg, grid_s=0.005)
     assert est is not None and lever_time_verdict(est).kind == "none"
