@@ -372,6 +372,10 @@ carries A's error past the gate (100 deg/h at 600 s on a tactical A: 0.13-0.78 o
 of one model, against batch-means sigmas of 0.07-0.14). The drift's level is fixed there, so
 no effect can explain a gap by widening it; a ``bias_instability`` candidate, whose level is
 fitted, floors ``BI_DRAW`` only (its expectation of the share moves with the level)."""
+COLOURED_DRAW = (*BI_DRAW, "lt_time_offset", *(f"lt_lever_{a}" for a in _XYZ))
+"""The statistics that are a signed mean of one draw of a coloured GNSS error: A's estimates
+that take up the slowly wandering position error (attitude offsets, lever arm, bias trends,
+the estimate pass's scale factors) and the joint lever-arm / time-offset estimate's."""
 _IMU_SPECTRUM = tuple(f"imu_band_{s}_{b}" for s in ("accel", "gyro") for b in ("lo", "hi"))
 
 
@@ -417,7 +421,7 @@ LIBRARY: tuple[SimEffect, ...] = (
              *(f"gnss_pos_lb_{a}" for a in "ned"), "gnss_pos_lowband"),
             (0.04, 0.0, 0.0025), (True, False, True), _coloured,
             grid=(1, (0.0,)), fixed=(2,), offset=(0.0, COLOURED_GNSS_TAU_S, 0.0),
-            refine=COLOURED_REFINE, fit_censored=("gnss_pos_gated",)),
+            refine=COLOURED_REFINE, fit_censored=("gnss_pos_gated",), ensemble=COLOURED_DRAW),
     _effect("bias_instability", ("imu_avar_gyro_static", "a_gyro_bias_wander",
                                  "imu_avar_gyro_10s", *_LEGS),
             ("imu_avar_gyro_static", "a_gyro_bias_wander", "imu_avar_gyro_10s",

@@ -41,3 +41,23 @@ def three_leg_survey(name: str, leg_s: float, *, lat_deg: float, lon_deg: float,
             {"type": "straight", "duration_s": leg_s, "kind": "survey"},
         ],
     }
+
+
+def compare_sim_flight(seed: int, effect: str | None):
+    """tests/benchmarks/bench_compare_sim.py's flight (14 min, take-off roll, two 180 deg
+    turns, the IMU's noise 1/3 of the configured grade's: A's own model holds) with
+    ``effect`` at 3 x its detection limit: the log, its configuration and the bench module
+    (its ``run`` and ``_reading`` count a comparison as the Monte Carlo does)."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_compare_sim.py"
+    spec = importlib.util.spec_from_file_location("bench_compare_sim", path)
+    assert spec is not None and spec.loader is not None
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    scale = bench.SCALES[0]
+    if effect is None:
+        return bench.flight(seed, scale), bench.CONFIG, bench
+    size = 3.0 * bench.limit_at(effect, scale)
+    return bench.flight(seed, scale, effect, size), bench.CONFIG, bench

@@ -15,6 +15,7 @@ import math
 
 import numpy as np
 import pytest
+from _missions import compare_sim_flight
 from test_qc_checks import _track as turns_track
 
 from pospp.qc import lever_time as lt
@@ -345,24 +346,6 @@ def test_the_lever_arm_check_takes_the_joint_apparent_lever_arm_where_it_reads_n
     assert c.passed and "apparent lever arm" in c.statistic
 
 
-def _mc_flight(seed: int, effect: str | None):
-    """tests/benchmarks/bench_compare_sim.py's flight (14 min, take-off roll, two 180 deg
-    turns, the IMU's noise 1/3 of the configured grade's: A's own model holds) with
-    ``effect`` at 3 x its detection limit, and its configuration."""
-    import importlib.util
-    from pathlib import Path
-
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_compare_sim.py"
-    spec = importlib.util.spec_from_file_location("bench_compare_sim", path)
-    assert spec is not None and spec.loader is not None
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
-    scale = bench.SCALES[0]
-    if effect is None:
-        return bench.flight(seed, scale), bench.CONFIG
-    return bench.flight(seed, scale, effect, 3.0 * bench.limit_at(effect, scale)), bench.CONFIG
-
-
 @pytest.mark.parametrize(("seed", "effect"), [(301, "coloured_gnss"), (100, None)])
 def test_a_coloured_gnss_error_is_read_from_as_passes_whitened_innovations(seed, effect):
     """Through A on pospp's simulator: the joint estimate's passes keep their gains, and their
@@ -374,7 +357,7 @@ def test_a_coloured_gnss_error_is_read_from_as_passes_whitened_innovations(seed,
     0's fit.)"""
     from pospp import pipeline
 
-    log, config = _mc_flight(seed, effect)
+    log, config = compare_sim_flight(seed, effect)[:2]
     nav = pipeline.navigate(log, config)
     est = pipeline.lever_time_estimate(log, nav, config)
     assert est is not None

@@ -647,3 +647,19 @@ def test_one_effect_catalogue_for_both_workflows():
         if c.unit in closed:
             assert c.si_per_unit == pytest.approx(closed[c.unit], rel=1e-12), c.name
     assert catalog_entry("vibration").si_per_unit == pytest.approx((1.0, np.pi / 180))
+
+
+@pytest.mark.slow
+def test_a_coloured_gnss_error_is_not_also_read_as_a_scale_factor():
+    """The Monte Carlo's coloured GNSS error (0.342 m at 60 s, 3 x its limit; IMU noise 1/3
+    the grade's, seed 302) moves A's estimates that take up a slow position error (attitude
+    offsets, lever arm, bias trends, scale factors) by one draw of it: once `coloured_gnss` is
+    added, those gaps are measured against its spread between draws, and the false gyro
+    scale factor (29 900 ppm on y before; 8 of the 20 Monte Carlo flights) is not named."""
+    from _missions import compare_sim_flight
+
+    log, config, bench = compare_sim_flight(302, "coloured_gnss")
+    comp, _ = compare_log(log, config)
+    named, size, _ = bench._reading(comp, "coloured_gnss")
+    assert named and size[0] == pytest.approx(0.342, rel=0.25)
+    assert comp.effects_added == ("coloured_gnss",), [(s.target, s.effect) for s in comp.steps]
