@@ -90,10 +90,7 @@ def long_run_ratio(residual: NDArray, record_t_s: NDArray, window_s: float, *,
         g0 = float(x @ x)
         if not g0 > 0:
             continue
-        if gauss_markov:
-            rho = _gauss_markov_rho(x, lags)
-        else:
-            rho = np.array([float(x[k:] @ x[:-k]) for k in range(1, lags + 1)]) / g0
+        rho = _gauss_markov_rho(x, lags) if gauss_markov else _autocorrelation(x, lags)
         worst = max(worst, 1.0 + 2.0 * float(weights @ rho))
     return worst
 
@@ -112,23 +109,36 @@ def gauss_markov_phi(x: NDArray) -> float:
     K = :data:`PREWHITEN_LAGS`; 0 when rho(1) is within 2 / sqrt(M) of 0 or the sums are not
     positive (white noise), at most :data:`PREWHITEN_MAX_PHI`."""
     x = np.asarray(x, dtype=float)
-    g0 = float(x @ x)
-    if x.size < 4 * (PREWHITEN_LAGS + 2) or not g0 > 0:
+    if x.size < 4 * (PREWHITEN_LAGS + 2) or not float(x @ x) > 0:
         return 0.0
-    rho = np.array([float(x[k:] @ x[:-k]) for k in range(1, PREWHITEN_LAGS + 2)]) / g0
+    return _phi(_autocorrelation(x, PREWHITEN_LAGS + 1), x.size)
+
+
+def _autocorrelation(x: NDArray, lags: int) -> NDArray:
+    """The sample autocorrelation rho(1..lags) of the zero-mean series ``x`` (its sum of
+    squares > 0): sum_t x_t x_(t+k) / sum_t x_t^2."""
+    return np.array([float(x[k:] @ x[:-k]) for k in range(1, lags + 1)]) / float(x @ x)
+
+
+def _phi(rho: NDArray, n: int) -> float:
+    """:func:`gauss_markov_phi` from the first ``PREWHITEN_LAGS + 1`` autocorrelations of
+    ``n`` samples."""
     low, high = float(rho[:-1].sum()), float(rho[1:].sum())
-    if not (rho[0] > 2.0 / np.sqrt(x.size) and low > 0.0 and high > 0.0):
+    if not (rho[0] > 2.0 / np.sqrt(n) and low > 0.0 and high > 0.0):
         return 0.0
     return min(high / low, PREWHITEN_MAX_PHI)
 
 
 def _gauss_markov_rho(x: NDArray, lags: int) -> NDArray:
-    """rho(1..lags) of the Gauss-Markov + white model fitted to ``x`` (zero mean): c phi^k,
-    c = sum_(k<=K) rho(k) / sum_(k<=K) phi^k over the sample's first K lags; 0 for white."""
-    phi = gauss_markov_phi(x)
+    """rho(1..lags) of the Gauss-Markov + white model fitted to ``x`` (zero mean, its sum of
+    squares > 0): c phi^k, c = sum_(k<=K) rho(k) / sum_(k<=K) phi^k over the sample's first
+    K lags; 0 for white."""
+    if x.size < 4 * (PREWHITEN_LAGS + 2):
+        return np.zeros(lags)
+    rho = _autocorrelation(x, PREWHITEN_LAGS + 1)
+    phi = _phi(rho, x.size)
     if not phi > 0.0:
         return np.zeros(lags)
     k = np.arange(1, PREWHITEN_LAGS + 1)
-    rho = np.array([float(x[j:] @ x[:-j]) for j in k]) / float(x @ x)
-    c = float(rho.sum() / np.sum(phi ** k))
+    c = float(rho[:PREWHITEN_LAGS].sum() / np.sum(phi ** k))
     return c * phi ** np.arange(1, lags + 1)

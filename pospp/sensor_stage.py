@@ -40,11 +40,11 @@ from pospp.diagnose.sensor_families import (
     FamilyFinding,
     InnovationDesign,
     fit_sensor_families,
-    long_run_ratio,
     response_along_b,
     sensor_family,
 )
 from pospp.diagnose.shapes import basis_size, change_basis, knots_s, step_times_s
+from pospp.distributions import long_run_ratio
 from pospp.effects_catalog import catalog_entry
 from pospp.flight_stages import imu_tuning, navigate
 from pospp.io import mcap_reader
@@ -286,7 +286,7 @@ class SensorFamilies:
     """The named GNSS-side effects taken off the log before the fit."""
     lrv_ratio: float
     """The long-run variance ratio of A's whitened innovations after every family's most
-    flexible shape (:func:`pospp.diagnose.sensor_families.long_run_ratio`), which divides
+    flexible shape (:func:`pospp.distributions.long_run_ratio`), which divides
     every F."""
     holds: bool
     """Whether A's model holds for the families' likelihood: the IMU's white noise within
