@@ -31,7 +31,14 @@ from pospp.simcompare.base_model import BaseFit, ImuParts, fit_base_model, has_d
 from pospp.simcompare.compare import Comparison, compare_flights
 from pospp.simcompare.effects import BASE_DRAW, LIBRARY, EffectContext, SimEffect
 from pospp.simcompare.ensemble import SimulateFn, masked_lines
-from pospp.simcompare.stats import FlightStats, Stat, flight_stats, leg_stats, static_and_steady
+from pospp.simcompare.stats import (
+    STATIC_END_MARGIN_S,
+    FlightStats,
+    Stat,
+    flight_stats,
+    leg_stats,
+    static_and_steady,
+)
 from pospp.simcompare.tables import comparison_columns, model_toml
 
 __all__ = ["SIM_GRADES", "FlightTemplate", "compare_sim_run", "flight_template",
@@ -165,18 +172,37 @@ def flight_template(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
 def _with_static_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                        t_imu: np.ndarray, t_fix: np.ndarray, sol: nav_filter.NavSolution,
                        options: AlignmentOptions):
-    """A's smoothed trajectory (t [s], lat, lon [rad], height [m]), with the log's initial
-    static period prepended (at the median of its fixes, 2 Hz) when A found one and started
-    after it (motion alignment), so that the simulated flight has the same static start
-    (``imu_avar_gyro_static``). The position is held to the last GNSS velocity before A's
-    start that is at rest by the alignment's test (:func:`pospp.nav.alignment.
-    gnss_moving_windows`, each record alone), not only to the end of A's static period, so
-    that the spline of the simulator joins the held position to A's first epoch over the
-    start of motion only (not over minutes of rest after an IMU window that moved)."""
+    """A's smoothed trajectory (t [s], lat, lon [rad], height [m]) with the log's initial
+    static period held at rest (2 Hz), so that the simulated flight has the same static start
+    (``imu_avar_gyro_static``, step 0's static fits) whatever A did there (a drift far above
+    the configured grade's makes A wander and reset at rest; the error-free IMU along that
+    wandering put more power on the static parts than the log has, and step 0 fitted no
+    noise at all).
+
+    Where A covers the period (static alignment) the rest position is the median of A's over
+    it, held to ``STATIC_END_MARGIN_S`` before its end (A's own solution after that: the
+    IMU's static windows end a few seconds into the motion, and the static statistics leave
+    those seconds out). Where A found one and started after it (motion alignment) it is
+    prepended at the median of its fixes, held to the last GNSS velocity before A's start
+    that is at rest by the alignment's test
+    (:func:`pospp.nav.alignment.gnss_moving_windows`, each record alone), not only to the
+    end of A's static period, so that the spline of the simulator joins the held position to
+    A's first epoch over the start of motion only (not over minutes of rest after an IMU
+    window that moved)."""
     t, lat, lon, hgt = sol.t_s, sol.lat_rad, sol.lon_rad, sol.height_m
     end = nav.alignment.static_end_s
-    if end is None or not end < t[0] - 1.0:
+    if end is None:
         return t, lat, lon, hgt
+    if end >= t[0] - 1.0:
+        hold = end - STATIC_END_MARGIN_S
+        at_rest = t <= hold
+        if np.count_nonzero(at_rest) < 2:
+            return t, lat, lon, hgt
+        ts = np.arange(float(t_imu[0]) + 1e-3, hold, 0.5)
+        keep = ~at_rest
+        return (np.concatenate([ts, t[keep]]),
+                *(np.concatenate([np.full(ts.size, float(np.median(x[at_rest]))), x[keep]])
+                  for x in (lat, lon, hgt)))
     m = (t_fix >= t_imu[0]) & (t_fix <= end)
     if not m.any():
         return t, lat, lon, hgt
@@ -389,22 +415,25 @@ def base_fit(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult, tpl: Flig
     return fit_base_model(meas, kin, base_imu_model(config), tpl.gnss, fix=fix, vel=vel)
 
 
-def tuned_to(config: PipelineConfig, fit: BaseFit | None) -> PipelineConfig:
+def tuned_to(config: PipelineConfig, fit: BaseFit | None, *, raise_only: bool = False
+             ) -> PipelineConfig:
     """``config`` with A's white noise and drift (``[imu]`` gyro_arw_dpsh, accel_vrw_mpsph,
     gyro_gm_sigma_dph) at the base model's levels where they differ from the grade's (the
     largest axis): the joint estimate's passes of A (a pass tuned to the grade on an IMU three
-    times noisier read a 0.54 m lever arm as 0.70 m, 2.5 sigma; tuned to its noise 0.60 m)."""
+    times noisier read a 0.54 m lever arm as 0.70 m, 2.5 sigma; tuned to its noise 0.60 m).
+    ``raise_only``: only the levels fitted above the grade's (a filter given more noise than
+    its IMU has stays consistent; given less, it trusts its inertial solution too long)."""
     if fit is None:
         return config
     by = {p.name: p for p in fit.parameters}
     over: dict[str, Any] = {}
-    for key, name in (("gyro_arw_dpsh", "gyro_arw"), ("accel_vrw_mpsph", "accel_vrw")):
-        rows = [by[f"{name}_{a}"] for a in "xyz" if f"{name}_{a}" in by]
-        if any(r.differs for r in rows):
+    for key, name in (("gyro_arw_dpsh", "gyro_arw"), ("accel_vrw_mpsph", "accel_vrw"),
+                      ("gyro_gm_sigma_dph", "gyro_gm_sigma")):
+        rows = [by[n] for n in (f"{name}_{a}" for a in "xyz") if n in by] or \
+            ([by[name]] if name in by else [])
+        rows = [r for r in rows if r.differs and (r.simulated > r.prior or not raise_only)]
+        if rows:
             over[key] = max(r.simulated for r in rows)
-    gm = by.get("gyro_gm_sigma")
-    if gm is not None and gm.differs:
-        over["gyro_gm_sigma_dph"] = gm.simulated
     return replace(config, imu=replace(config.imu, **over)) if over else config
 
 
@@ -443,17 +472,27 @@ def compare_log(log: mcap_reader.FlightLog, config: PipelineConfig, *,
         nav = pipeline.navigate(log, config)
     say("simulating the trajectory (kinematics)")
     tpl = flight_template(log, nav, config, vehicle=vehicle)
-    say("statistics of the measured flight")
-    measured, _, est = log_stats(log, config, vehicle=tpl.vehicle, nav=nav)
     fit: BaseFit | None = None
+    tuned = config
     if imu is None and gnss is None:
         fit = base_fit(log, nav, tpl, config)
+        tuned = tuned_to(config, fit, raise_only=True)
+        if tuned != config:
+            # A as configured is mistuned to this IMU (a drift far above the grade's aligns
+            # on a gyrocompass it cannot resolve and diverges): A, the template and step 0
+            # again with A tuned to the fitted levels; the simulated flights run that A too
+            say("algorithm A again, tuned to the log's fitted noise and drift")
+            nav = pipeline.navigate(log, tuned)
+            tpl = flight_template(log, nav, config, vehicle=vehicle)
+            fit = base_fit(log, nav, tpl, config)
         imu, gnss = fit.imu, fit.gnss
         for prm in fit.parameters:
             if prm.differs:
                 say(f"base model: {prm.text()}")
     imu = base_imu_model(config) if imu is None else imu
     gnss = tpl.gnss if gnss is None else gnss
+    say("statistics of the measured flight")
+    measured, _, est = log_stats(log, tuned, vehicle=tpl.vehicle, nav=nav)
     # the joint estimate of the lever arm and the GNSS time offset on the measured log (its
     # passes start from the lever arm of A's pass with lever-arm states): its offset is a
     # statistic (lt_time_offset), its reading the fit of lever_arm_time_offset
@@ -465,7 +504,7 @@ def compare_log(log: mcap_reader.FlightLog, config: PipelineConfig, *,
         measured = FlightStats({**measured.stats, **joint_stats(lt, seen)}, measured.hf_peak_hz)
     ctx = EffectContext(hf_peak_hz=measured.hf_peak_hz, lever_time=lambda: lt)
     drift = fit is not None and has_drift(fit)
-    comp = compare_flights(measured, simulate_stats(tpl, config, on_flight), imu, gnss,
+    comp = compare_flights(measured, simulate_stats(tpl, tuned, on_flight), imu, gnss,
                            max_steps=max_steps, library=library, context=ctx, progress=say,
                            base_ensemble=BASE_DRAW if drift else ())
     return replace(comp, base_fit=fit.parameters if fit else ()), tpl

@@ -11,9 +11,9 @@ Nothing here touches files.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
-from functools import partial
+from functools import cache, partial
 from typing import Any
 
 import numpy as np
@@ -66,6 +66,7 @@ from pospp.flight_stages import (
     rerun_options,
 )
 from pospp.io import mcap_reader
+from pospp.lever_time_stage import lever_time_estimate
 from pospp.nav import filter as nav_filter
 from pospp.null_stage import (
     leg_epochs_ns,
@@ -78,6 +79,7 @@ from pospp.null_stage import (
     rerun_decimation,
 )
 from pospp.qc.checks import Check, model_fit
+from pospp.qc.lever_time import LeverTime
 from pospp.sensor_stage import SensorFamilies, sensor_families, with_sensor_families
 from pospp.units import DEG_PER_H_RADPS
 from pospp.units import G0_MPS2 as GRAVITY_MPS2
@@ -319,7 +321,8 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuSource, solution_a: 
              nav: nav_filter.FilterResult | None = None,
              null_dv: list[list[np.ndarray]] | None = None,
              lever_estimate: nav_filter.LeverArmEstimate | None = None,
-             threads: int = 1, start: DiagnosisStart | None = None) -> Diagnosis:
+             threads: int = 1, start: DiagnosisStart | None = None,
+             joint: Callable[[], LeverTime | None] | None = None) -> Diagnosis:
     """Model-discrepancy workflow on the calibrated run's B-minus-A curves (pospp.diagnose).
 
     Every test's null distribution is calibrated on ``null_dv`` (:func:`null_realisations`)
@@ -332,7 +335,9 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuSource, solution_a: 
     :mod:`pospp.sensor_stage`) are then fitted on A's innovations with the named GNSS-side
     effects removed, and named as steps before the closing row. Every named effect's response
     on B minus A is in ``Diagnosis.responses`` (the calibration's refit,
-    :mod:`pospp.diagnose.refit`).
+    :mod:`pospp.diagnose.refit`). A GNSS time offset the families' innovations read is the
+    joint lever-arm / time-offset estimate's (``joint``, the QC stage's; made here from
+    ``lever_estimate`` when None and first asked).
     """
     n_null = config.pairs.null_realisations
     if null_dv is None and n_null > 0 and log is not None and nav is not None:
@@ -341,7 +346,9 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuSource, solution_a: 
     d, sigs = _diagnose_legs(calib_run, imu, solution_a, config, replays, log=log, nav=nav,
                              null_dv=null_dv, lever_estimate=lever_estimate, threads=threads,
                              start=start)
-    fams = (sensor_families(d, replays, log, config, solution_a) if log is not None
+    if joint is None and log is not None and nav is not None:
+        joint = cache(lambda: lever_time_estimate(log, nav, config, lever_estimate))
+    fams = (sensor_families(d, replays, log, config, solution_a, joint) if log is not None
             else None)
     d = with_sensor_families(d, fams)
     return replace(d, responses=named_responses(d, replays, sigs, fams, solution_a))

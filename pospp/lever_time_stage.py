@@ -6,6 +6,7 @@ QC stage, compare-sim and the diagnosis call :func:`lever_time_estimate`.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
@@ -71,10 +72,12 @@ def lever_time_estimate(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult
 
 
 def qc_passes(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult, config: PipelineConfig,
-              lever: nav_filter.LeverArmEstimate | None) -> dict[str, Any]:
+              lever: nav_filter.LeverArmEstimate | None,
+              joint: Callable[[], LeverTime | None] | None = None) -> dict[str, Any]:
     """The QC stage's passes of A that it makes only when a check needs them
     (:func:`pospp.qc.stage.quality_checks`'s ``joint`` and ``renavigate``): the joint
-    estimate from A's lever-arm estimate ``lever``, and A on the log re-stamped."""
-    return {"joint": lambda: lever_time_estimate(log, nav, config, lever),
+    estimate (``joint``, when another stage shares it; else made from A's lever-arm
+    estimate ``lever``), and A on the log re-stamped."""
+    return {"joint": joint or (lambda: lever_time_estimate(log, nav, config, lever)),
             "renavigate": lambda shift_s: navigate(restamped(log, shift_s), config)}
 

@@ -26,7 +26,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from functools import partial
+from functools import cache, partial
 from pathlib import Path
 from typing import Any
 
@@ -67,6 +67,7 @@ from pospp.null_stage import (  # the null stage's functions, importable from he
     null_white_noise,  # noqa: F401
 )
 from pospp.qc.checks import Check, comparison_text
+from pospp.qc.lever_time import LeverTime
 from pospp.qc.stage import QualityReport, qc_columns, quality_checks, worst_status
 from pospp.report import figures
 from pospp.report.html import render_report
@@ -306,10 +307,13 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
     book.stage("diagnose")
     # A's lever-arm estimate, made once: the diagnosis starts from it and QC checks it
     lever = lever_re_estimate(log, lever_arm_seen(nav), config)
+    # the joint lever-arm / time-offset estimate, made once when first asked: the
+    # diagnosis's families and the QC checks read the same one
+    joint = cache(partial(lever_time_estimate, log, nav, config, lever[0]))
     diagnosis = None
     if calib_run.calibrated and config.outputs.diagnose:
         diagnosis = _diagnose_stage(calib_run, imu, solution_a, config, log, nav, null_dv,
-                                    lever[0], threads, book)
+                                    lever[0], threads, book, joint)
         status = status if diagnosis is not None else "partial"
     # the refit with the named effects (the compensation uses it) and the model_fit check
     fit = refit_and_check(log, calib_run, diagnosis, imu, solution_a, config, threads,
@@ -317,14 +321,15 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
     solutions.update(fit.solutions)
 
     book.stage("qc")  # the run is ok only when every check passes (docs/qc.md)
-    report = quality_control(log, nav, calib_run, config, book, lever=lever, also=fit.checks)
+    report = quality_control(log, nav, calib_run, config, book, lever=lever, also=fit.checks,
+                             joint=joint)
     status = worst_status(status, report.status)
 
     book.stage("write")
     _write_stage(run, log, nav, solutions, calib_run, fit, diagnosis, report, config, status)
     # the report reads the tables back: the run's arrays are let go first, so that it
     # reuses their memory instead of adding to the peak (1.5 h flight: 110 MiB)
-    del log, nav, imu, solution_a, calib_run, null_dv, diagnosis, solutions, fit
+    del log, nav, imu, solution_a, calib_run, null_dv, diagnosis, solutions, fit, joint
     return run.finish(status, report=config.outputs.report)
 
 
@@ -369,13 +374,14 @@ def _diagnose_stage(calib_run: CalibrationRun, imu: Any, solution_a: Any,
                     config: PipelineConfig, log: mcap_reader.FlightLog,
                     nav: nav_filter.FilterResult, null_dv: Any,
                     lever_estimate: nav_filter.LeverArmEstimate | None, threads: int,
-                    book: _Progress) -> Diagnosis | None:
+                    book: _Progress, joint: Callable[[], LeverTime | None]
+                    ) -> Diagnosis | None:
     """The diagnosis (:func:`pospp.diagnosis_stage.diagnose_calibration`), noted; None (the
     run then partial) when it could not be made."""
     try:
         diagnosis = diagnose_calibration(calib_run, imu, solution_a, config, log=log, nav=nav,
                                          null_dv=null_dv, lever_estimate=lever_estimate,
-                                         threads=threads)
+                                         threads=threads, joint=joint)
     except ValueError as exc:
         book.note("warning", "diagnose", f"no diagnosis: {exc}")
         return None
@@ -444,13 +450,16 @@ def quality_control(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                     calib_run: CalibrationRun | None, config: PipelineConfig,
                     book: _Progress | None = None, *,
                     lever: tuple[nav_filter.LeverArmEstimate | None, str | None] | None = None,
-                    also: tuple[Check, ...] = ()) -> QualityReport:
+                    also: tuple[Check, ...] = (),
+                    joint: Callable[[], LeverTime | None] | None = None) -> QualityReport:
     """The QC stage (pospp.qc): every check, with the lever arm re-estimated by A.
 
     Unless A already estimated it, the lever arm is estimated by one more forward pass of A
     with lever-arm states (:func:`lever_arm_estimate`; about a third of A's time). Failed
     checks are noted in ``book`` (stage "qc"). ``lever``: that estimate and why it failed, when
     already made (:func:`lever_re_estimate`); None: made here. ``also``: later stages' checks.
+    ``joint``: the joint lever-arm / time-offset estimate when already asked for (the
+    diagnosis's), made when first asked; None: made here when a check needs it.
     """
     estimate, failure = (lever_re_estimate(log, lever_arm_seen(nav), config) if lever is None
                          else lever)
@@ -460,7 +469,7 @@ def quality_control(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     report = quality_checks(
         log, nav, calib_run, config, lever_estimate=estimate,
         c_bs=sensor_to_body_dcm(cin.sensor_frame, cin.mounting_rpy_deg),
-        **qc_passes(log, nav, config, estimate))
+        **qc_passes(log, nav, config, estimate, joint))
     report = replace(report, checks=report.checks + tuple(also))
     if book is not None:
         for c in report.failed:

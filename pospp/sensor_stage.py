@@ -20,7 +20,7 @@ per family (a 15 x m matrix over a grid of A's records, the knots and the step t
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -33,7 +33,7 @@ from pospp.config import PipelineConfig
 from pospp.diagnose import null_model
 from pospp.diagnose.effects import ACCEL_SETTLING_S, field_gradient, signature
 from pospp.diagnose.locate import horizon_worth
-from pospp.diagnose.rerun import _gnss_earlier, _with_rates, warmed
+from pospp.diagnose.rerun import _with_rates, warmed
 from pospp.diagnose.results import CandidateTest, Diagnosis, DiagnosisStep, EffectResponse
 from pospp.diagnose.sensor_families import (
     SENSOR_FAMILIES,
@@ -48,8 +48,10 @@ from pospp.distributions import long_run_ratio
 from pospp.effects_catalog import catalog_entry
 from pospp.flight_stages import imu_tuning, navigate
 from pospp.io import mcap_reader
+from pospp.lever_time_stage import restamped
 from pospp.nav.filter import STATUS_USED
 from pospp.null_stage import rerun_decimation
+from pospp.qc.lever_time import LeverTime
 from pospp.units import t_s_from_time_ns
 
 CRITERION = "innovation_F_bonferroni_shapes"
@@ -72,7 +74,7 @@ def _removed(log: Any, config: PipelineConfig, d: Diagnosis
             continue
         p = np.asarray(d.step_of(e).values, dtype=float) * catalog_entry(e).si_per_unit
         if e == "time_offset":
-            log = _gnss_earlier(log, -float(p[0]))
+            log = restamped(log, -float(p[0]))
         elif e == "lever_arm":
             lever = np.asarray(config.gnss.lever_arm_m, dtype=float) - p
         elif e == "gyro_scale_factor":
@@ -205,7 +207,7 @@ def innovation_design(log: mcap_reader.FlightLog, config: PipelineConfig,
         responses[fam] = (white[:, :, None] if sensor_family(fam).sensor == "gravity" else
                           white.reshape(-1, 2, basis_size(knots)).transpose(0, 2, 1))
     white_y = np.einsum("kji,kj->ki", chol, nu0[used]).reshape(-1)
-    shifted = navigate(_gnss_earlier(log_r, READ_TIME_OFFSET_S), config, options=opts,
+    shifted = navigate(restamped(log_r, READ_TIME_OFFSET_S), config, options=opts,
                        lever_arm_b_m=lever_b_m, replay=gains).innovations
     assert shifted is not None  # A always records its innovations
     offset = np.einsum("kji,kj->ki", chol, shifted.dz_ned[used] - nu0[used]).reshape(-1)
@@ -241,30 +243,54 @@ innovations read less than the whole offset at first (flight_time_offset_200hz: 
 15 ms), and each pass on the log with the last reading removed reads the rest."""
 
 
+def _offset_reading(design: InnovationDesign) -> tuple[float, float, bool]:
+    """(c, sigma, significant): the least-squares coefficient of the design's time-offset
+    column on its innovations (the GNSS stamped c s earlier than the log's) and its sigma
+    (widened by the residual's long-run variance ratio), significant beyond
+    :data:`TIME_OFFSET_FLOOR_S` and :data:`TIME_OFFSET_SIGMAS`."""
+    x = design.time_offset_response
+    assert x is not None
+    xtx = float(x @ x)
+    c = float(x @ design.y) / xtx
+    r = design.y - c * x
+    ratio = long_run_ratio(r, design.record_t_s, TIME_OFFSET_WINDOW_S)
+    sigma = float(np.sqrt(ratio * (r @ r) / max(r.size - 1, 1) / xtx))
+    return c, sigma, abs(c) > TIME_OFFSET_FLOOR_S and abs(c) > TIME_OFFSET_SIGMAS * sigma
+
+
 def _without_time_offset(log: Any, config: PipelineConfig, families: Sequence[str],
-                         lever: Any, reference: tuple[float, float] | None
+                         lever: Any, reference: tuple[float, float] | None,
+                         joint: Callable[[], LeverTime | None] | None = None
                          ) -> tuple[InnovationDesign, Any, float]:
     """(design, log, offset [s]): the design on ``log`` with the GNSS time offset its
-    innovations read removed (the coefficient of its response: GNSS stamps minus true
-    time; 0 when none is significant, :data:`TIME_OFFSET_FLOOR_S`), by at most
-    :data:`TIME_OFFSET_ITERATIONS` passes. Left in, a 15 ms offset was named as a 143-223 ug
+    innovations read removed (GNSS stamps minus true time; 0 when none is significant,
+    :data:`TIME_OFFSET_FLOOR_S`). Left in, a 15 ms offset was named as a 143-223 ug
     accelerometer step (flight_time_offset_200hz with the drift configured, where the legs
-    do not name the offset); removed, nothing."""
+    do not name the offset); removed, nothing.
+
+    When the innovations read one, the offset removed is the joint estimate's
+    (``joint()``, :func:`pospp.lever_time_stage.lever_time_estimate`, the one the QC stage
+    reads; nothing when it determines the offset and finds none beyond five of its sigmas
+    and the floor). Without it, or where it cannot determine the offset, the innovations'
+    own reading is removed, by at most :data:`TIME_OFFSET_ITERATIONS` passes."""
     total = 0.0
     design = innovation_design(log, config, families, lever_b_m=lever, reference=reference)
-    for _ in range(TIME_OFFSET_ITERATIONS):
-        x = design.time_offset_response
-        assert x is not None
-        xtx = float(x @ x)
-        c = float(x @ design.y) / xtx
-        r = design.y - c * x
-        ratio = long_run_ratio(r, design.record_t_s, TIME_OFFSET_WINDOW_S)
-        sigma = float(np.sqrt(ratio * (r @ r) / max(r.size - 1, 1) / xtx))
-        if not (abs(c) > TIME_OFFSET_FLOOR_S and abs(c) > TIME_OFFSET_SIGMAS * sigma):
+    for k in range(TIME_OFFSET_ITERATIONS):
+        c, _, significant = _offset_reading(design)
+        if not significant:
             break
-        log = _gnss_earlier(log, -c)  # the column is GNSS stamped 1 s earlier: c late
+        lt = joint() if k == 0 and joint is not None else None
+        if lt is not None and np.isfinite(lt.sigma_tau_s):
+            if not (abs(lt.tau_s) > TIME_OFFSET_FLOOR_S
+                    and abs(lt.tau_s) > TIME_OFFSET_SIGMAS * lt.sigma_tau_s):
+                break
+            del design
+            log = restamped(log, lt.tau_s)
+            return (innovation_design(log, config, families, lever_b_m=lever,
+                                      reference=reference), log, lt.tau_s)
+        log = restamped(log, -c)  # the column is GNSS stamped 1 s earlier: c late
         total += c
-        del design, r  # not held while the next one is made
+        del design  # not held while the next one is made
         design = innovation_design(log, config, families, lever_b_m=lever,
                                    reference=reference)
     return design, log, -total
@@ -296,14 +322,17 @@ class SensorFamilies:
 
 
 def sensor_families(d: Diagnosis, replays: list, log: mcap_reader.FlightLog,
-                    config: PipelineConfig, solution_a: SolutionA | None = None
+                    config: PipelineConfig, solution_a: SolutionA | None = None,
+                    joint: Callable[[], LeverTime | None] | None = None
                     ) -> SensorFamilies | None:
     """Fit the families on A's innovations of ``log`` with ``d``'s named GNSS-side effects
     removed; families ``d`` named on the legs are not fitted again, the gravity field only
     with A's solution (its origin: the legs' mean start). None when no family is left;
     nothing named (the families ``not_evaluated``, ``holds`` False) where A's model does not
     hold (:func:`imu_noise_holds`, the innovations' scale) or A fails on the log with the
-    named effects removed."""
+    named effects removed. ``joint``: the joint lever-arm / time-offset estimate, made when
+    first asked (:func:`_without_time_offset`; the legs' named offset, when they name one,
+    is removed instead)."""
     families = [f.effect_id for f in SENSOR_FAMILIES if f.effect_id not in d.named
                 and (solution_a is not None or sensor_family(f.effect_id).sensor != "gravity")]
     if not families:
@@ -314,12 +343,15 @@ def sensor_families(d: Diagnosis, replays: list, log: mcap_reader.FlightLog,
     log_s, lever, removed = _removed(log, config, d)
     ref = _legs_reference(replays, solution_a)
     try:
-        design, log_s, offset_s = _without_time_offset(log_s, config, families, lever, ref)
+        design, log_s, offset_s = _without_time_offset(
+            log_s, config, families, lever, ref,
+            None if "time_offset" in removed else joint)
     except (ValueError, np.linalg.LinAlgError):  # A failed on the log with the effects removed
         return SensorFamilies(tuple(families), (), (), np.zeros(0), {}, removed, float("nan"),
                               False)
     if offset_s:
-        removed = (*removed, f"the GNSS time offset {1e3 * offset_s:+.1f} ms")
+        removed = (*removed, f"the GNSS time offset {1e3 * offset_s:+.1f} ms (GNSS stamps "
+                   "minus true time)")
     named, tested, ratio, holds = fit_sensor_families(
         design, families, {f: catalog_entry(f).shapes for f in families},
         config.pairs.diagnose_alpha)

@@ -43,10 +43,11 @@ def three_leg_survey(name: str, leg_s: float, *, lat_deg: float, lon_deg: float,
     }
 
 
-def compare_sim_flight(seed: int, effect: str | None):
+def compare_sim_flight(seed: int, effect: str | None, *, noise_scale: float | None = None):
     """tests/benchmarks/bench_compare_sim.py's flight (14 min, take-off roll, two 180 deg
-    turns, the IMU's noise 1/3 of the configured grade's: A's own model holds) with
-    ``effect`` at 3 x its detection limit: the log, its configuration and the bench module
+    turns, the IMU's noise 1/3 of the configured grade's unless ``noise_scale`` says
+    otherwise: one of the bench's ``SCALES``) with ``effect`` at 3 x its detection limit
+    there: the log, its configuration and the bench module
     (its ``run`` and ``_reading`` count a comparison as the Monte Carlo does)."""
     import importlib.util
     from pathlib import Path
@@ -56,7 +57,7 @@ def compare_sim_flight(seed: int, effect: str | None):
     assert spec is not None and spec.loader is not None
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
-    scale = bench.SCALES[0]
+    scale = bench.SCALES[0] if noise_scale is None else noise_scale
     if effect is None:
         return bench.flight(seed, scale), bench.CONFIG, bench
     size = 3.0 * bench.limit_at(effect, scale)

@@ -208,12 +208,26 @@ def test_the_families_remove_the_time_offset_their_innovations_read(reference_ca
     from pospp.diagnose.sensor_families import fit_sensor_families
     from pospp.effects_catalog import catalog_entry
 
-    log, _, _, _, cfg = _flight(reference_cases, "flight_time_offset_200hz")
+    log, nav, _, _, cfg = _flight(reference_cases, "flight_time_offset_200hz")
     params = json.loads((reference_cases / "flight_time_offset_200hz.params.json").read_text())
+    truth_s = float(params["gnss"]["time_offset_s"])
     fams = ["accel_bias_change", "gyro_bias_change"]
+    shapes = {f: catalog_entry(f).shapes for f in fams}
     design, _, offset_s = sensor_stage._without_time_offset(log, cfg, fams, None, None)
     # GNSS stamps minus true time, as the QC check reads it and params.json states it
-    assert offset_s == pytest.approx(float(params["gnss"]["time_offset_s"]), rel=0.1)
-    named, *_ = fit_sensor_families(design, fams, {f: catalog_entry(f).shapes for f in fams},
-                                    cfg.pairs.diagnose_alpha)
+    assert offset_s == pytest.approx(truth_s, rel=0.1)
+    named, *_ = fit_sensor_families(design, fams, shapes, cfg.pairs.diagnose_alpha)
+    assert not named, [(f.effect, f.shape, f.value) for f in named]
+    # with the joint lever-arm / time-offset estimate (the QC stage's) the offset removed is
+    # its, asked once, and the families still name nothing
+    asked = []
+
+    def joint():
+        asked.append(1)
+        return pipeline.lever_time_estimate(log, nav, cfg)
+
+    design, _, offset_s = sensor_stage._without_time_offset(log, cfg, fams, None, None, joint)
+    lt = pipeline.lever_time_estimate(log, nav, cfg)
+    assert len(asked) == 1 and offset_s == lt.tau_s == pytest.approx(truth_s, rel=0.1)
+    named, *_ = fit_sensor_families(design, fams, shapes, cfg.pairs.diagnose_alpha)
     assert not named, [(f.effect, f.shape, f.value) for f in named]

@@ -663,3 +663,28 @@ def test_a_coloured_gnss_error_is_not_also_read_as_a_scale_factor():
     named, size, _ = bench._reading(comp, "coloured_gnss")
     assert named and size[0] == pytest.approx(0.342, rel=0.25)
     assert comp.effects_added == ("coloured_gnss",), [(s.target, s.effect) for s in comp.steps]
+
+
+@pytest.mark.slow
+def test_a_drift_beyond_the_gyrocompass_is_fitted_and_a_retuned():
+    """The Monte Carlo's bias instability at 3 x the noise (17.7 deg/h at 300 s on an IMU
+    configured at 0.5 deg/h, white noise 3 x the grade's; seed 300). A tuned to the grade
+    gyrocompasses 11 deg off (the drift is above the Earth rate's horizontal part, 11.5 deg/h)
+    and diverges: it resets position and velocity every 30 s from 49 s on, still at rest.
+    The template holds the static start at rest whatever A did there, so step 0 reads the
+    drift from the static gyro Allan variance (before: 0 +- 7.6 deg/h, and the white noise 0,
+    against an error-free IMU along A's wandering); A is then run again tuned to the fitted
+    levels (it aligns in motion, no reset) and step 0 refitted on it: the GNSS noise is read
+    about a solution that holds (before: 0 +- 6e6 m)."""
+    from _missions import compare_sim_flight
+
+    log, config, bench = compare_sim_flight(300, "bias_instability", noise_scale=3.0)
+    comp, _ = compare_log(log, config, max_steps=0)
+    fit = {b.name: b for b in comp.base_fit}
+    gm = fit["gyro_gm_sigma"]
+    assert gm.differs and gm.value == pytest.approx(3.0 * bench.limit_at(
+        "bias_instability", 3.0), rel=0.25)
+    for a in "xyz":
+        assert fit[f"gyro_arw_{a}"].value == pytest.approx(0.03, rel=0.1)
+    assert fit["gnss_pos_noise_h"].value == pytest.approx(0.05, rel=0.25)
+    assert fit["gnss_vel_noise_h"].value == pytest.approx(0.02, rel=0.25)
