@@ -179,10 +179,13 @@ def _with_static_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     wandering put more power on the static parts than the log has, and step 0 fitted no
     noise at all).
 
-    Where A covers the period (static alignment) the rest position is the median of A's over
-    it, held to ``STATIC_END_MARGIN_S`` before its end (A's own solution after that: the
-    IMU's static windows end a few seconds into the motion, and the static statistics leave
-    those seconds out). Where A found one and started after it (motion alignment) it is
+    Where A covers the period (static alignment) the rest position is A's at half
+    ``STATIC_END_MARGIN_S`` before its end, held to there, and A's own solution after that:
+    the IMU's static windows end a few seconds into the motion; the static statistics leave
+    the last ``STATIC_END_MARGIN_S`` out, so that what the template's smoothing spline does
+    about the join (a step of a few cm to the median of A's positions bent the aircraft's
+    bank into the static part's gyro power) or after it (A diverged) stays out of them.
+    Where A found one and started after it (motion alignment) it is
     prepended at the median of its fixes, held to the last GNSS velocity before A's start
     that is at rest by the alignment's test
     (:func:`pospp.nav.alignment.gnss_moving_windows`, each record alone), not only to the
@@ -194,14 +197,14 @@ def _with_static_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     if end is None:
         return t, lat, lon, hgt
     if end >= t[0] - 1.0:
-        hold = end - STATIC_END_MARGIN_S
+        hold = end - 0.5 * STATIC_END_MARGIN_S
         at_rest = t <= hold
         if np.count_nonzero(at_rest) < 2:
             return t, lat, lon, hgt
         ts = np.arange(float(t_imu[0]) + 1e-3, hold, 0.5)
         keep = ~at_rest
         return (np.concatenate([ts, t[keep]]),
-                *(np.concatenate([np.full(ts.size, float(np.median(x[at_rest]))), x[keep]])
+                *(np.concatenate([np.full(ts.size, float(np.interp(hold, t, x))), x[keep]])
                   for x in (lat, lon, hgt)))
     m = (t_fix >= t_imu[0]) & (t_fix <= end)
     if not m.any():

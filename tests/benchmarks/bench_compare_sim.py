@@ -117,13 +117,14 @@ EFFECTS = {
 
 
 def _mount(imu, s_arcsec):
-    from pospp.simcompare.effects import mounting_misalignment_arcsec
+    from pospp.simcompare.effects import mounting_sensor_errors
     from pospp.units import ARCSEC_RAD
 
     # roll and yaw: the pitch of the attitude model is the flight-path angle, and a pitch
     # mounting reads as an angle of attack (att_offset_pitch's sigma 1140 arcsec here)
-    m = mounting_misalignment_arcsec(np.array([s_arcsec, 0.0, 2 * s_arcsec]) * ARCSEC_RAD)
-    return replace(imu, gyro_misalign_arcsec=tuple(m), accel_misalign_arcsec=tuple(m))
+    sf, m = mounting_sensor_errors(np.array([s_arcsec, 0.0, 2 * s_arcsec]) * ARCSEC_RAD)
+    return replace(imu, gyro_misalign_arcsec=tuple(m), accel_misalign_arcsec=tuple(m),
+                   gyro_sf_ppm=tuple(sf), accel_sf_ppm=tuple(sf))
 
 
 def flight(seed: int, scale: float, effect: str | None = None, size: float = 0.0,

@@ -27,7 +27,7 @@ from pospp.sim.gnss import GnssModel, simulate_gnss
 from pospp.sim.sensors import ImuErrorModel, imu_grade, imu_model_file
 from pospp.sim.trajectory import MotionSample
 from pospp.simcompare.compare import gaps
-from pospp.simcompare.effects import mounting_misalignment_arcsec
+from pospp.simcompare.effects import mounting_sensor_errors
 from pospp.simcompare.stats import (
     FlightStats,
     Stat,
@@ -129,14 +129,20 @@ def test_holm_against_closed_form():
     assert g["gnss_vel_nis"].p_adjusted == pytest.approx(2 * sps.norm.sf(2.5), rel=1e-9)
 
 
-def test_mounting_matrix_is_small_rotation():
-    """M = -[rho x] is the first order of C_sb = R(rho)^T (scipy), 1e-3 rad per axis."""
-    rho = np.array([1e-3, -2e-3, 1.5e-3])
-    m_arcsec = mounting_misalignment_arcsec(rho)
+def test_mounting_matrix_is_the_rotation():
+    """The sensor matrix of a mounting rho is C_sb = R(rho)^T (scipy) exactly, 3 deg on z
+    and 1e-3 rad on x and y: its diagonal is cos(rho) - 1 from 1 (-1370 ppm on x and y, the
+    second order the first-order -[rho x] left out), its off-diagonals -[rho x] to first
+    order."""
+    rho = np.array([1e-3, -2e-3, np.radians(3.0)])
+    sf, m_arcsec = mounting_sensor_errors(rho)
     from pospp.sim.sensors import _sf_misalign  # the simulator's own matrix assembly
 
     c_sb = Rotation.from_rotvec(rho).as_matrix().T
-    assert np.allclose(_sf_misalign((0, 0, 0), m_arcsec), c_sb, atol=1e-5)
+    assert np.allclose(_sf_misalign(sf, m_arcsec), c_sb, rtol=0.0, atol=1e-15)
+    assert sf[0] == pytest.approx(-1371.0, abs=2.0) and sf[1] == pytest.approx(-1371.0, abs=2.0)
+    first = np.degrees([rho[2], -rho[1], -rho[2], rho[0], rho[1], -rho[0]]) * 3600.0
+    assert np.allclose(m_arcsec, first, rtol=2e-3, atol=12.0)  # second order: rho_i rho_j / 2
 
 
 def test_coloured_gnss_error_statistics():
@@ -297,9 +303,13 @@ def test_hidden_mounting_misalignment_named_and_sized():
     """IMU case rotated by (0.5, -0.5, 1.0) deg in the body: named, each angle within 25 %
     (A's 1-sigma: 35 arcsec on roll and pitch, 300 arcsec on yaw), gap gone."""
     rho = np.radians([0.5, -0.5, 1.0])
-    m = mounting_misalignment_arcsec(rho)
-    comp, _ = compare_log(measured(replace(imu_grade("tactical"), gyro_misalign_arcsec=tuple(m),
-                                           accel_misalign_arcsec=tuple(m))), CONFIG)
+    sf, m = mounting_sensor_errors(rho)
+    g = imu_grade("tactical")
+    comp, _ = compare_log(measured(replace(
+        g, gyro_misalign_arcsec=tuple(np.add(g.gyro_misalign_arcsec, m)),
+        accel_misalign_arcsec=tuple(np.add(g.accel_misalign_arcsec, m)),
+        gyro_sf_ppm=tuple(np.add(g.gyro_sf_ppm, sf)),
+        accel_sf_ppm=tuple(np.add(g.accel_sf_ppm, sf)))), CONFIG)
     s = named(comp, "mounting_misalignment")
     assert np.allclose(s.size, np.degrees(rho) * 3600.0, rtol=0.25)
     assert abs(s.after[s.target].z) < abs(s.before[s.target].z) / 10
