@@ -1,7 +1,8 @@
-"""The joint estimate of the lever arm and the GNSS time offset on a flight, and the log with its
-GNSS re-stamped: the stage functions over A's lever-arm pass
-(:func:`pospp.flight_stages.lever_arm_passes`) that :mod:`pospp.qc.lever_time` profiles. The
-QC stage, compare-sim and the diagnosis call :func:`lever_time_estimate`.
+"""The joint estimate of the lever arm and the GNSS time offset on a flight: the stage
+functions over A's lever-arm pass (:func:`pospp.flight_stages.lever_arm_passes`) on the log
+re-stamped (:func:`pospp.diagnose.rerun.restamped`) that :mod:`pospp.qc.lever_time` profiles.
+The QC stage, compare-sim and the diagnosis's sensor families read :func:`lever_time_estimate`
+(one per run, shared).
 """
 
 from __future__ import annotations
@@ -13,20 +14,13 @@ from typing import Any
 import numpy as np
 
 from pospp.config import PipelineConfig
+from pospp.diagnose.rerun import restamped
 from pospp.flight_stages import QC_LEVER_ARM_SIGMA_M, lever_arm_passes, lever_arm_seen, navigate
 from pospp.io import mcap_reader
 from pospp.nav import filter as nav_filter
 from pospp.qc.lever_time import LeverPass, LeverTime, lever_pass, lever_time_joint
 
-__all__ = ["lever_time_estimate", "lever_time_pass", "qc_passes", "restamped"]
-
-
-def restamped(log: mcap_reader.FlightLog, shift_s: float) -> mcap_reader.FlightLog:
-    """The log with its GNSS records re-stamped ``t - shift_s`` (``shift_s``: the GNSS
-    stamp minus the true time the records are taken to have)."""
-    d = np.int64(round(shift_s * 1e9))
-    return replace(log, fix=replace(log.fix, time_ns=log.fix.time_ns - d),
-                   vel=replace(log.vel, time_ns=log.vel.time_ns - d))
+__all__ = ["lever_time_estimate", "lever_time_pass", "qc_passes"]
 
 
 LEVER_TIME_GATE_PROBABILITY = 1.0 - 1e-9

@@ -33,7 +33,7 @@ from pospp.config import PipelineConfig
 from pospp.diagnose import null_model
 from pospp.diagnose.effects import ACCEL_SETTLING_S, field_gradient, signature
 from pospp.diagnose.locate import horizon_worth
-from pospp.diagnose.rerun import _with_rates, warmed
+from pospp.diagnose.rerun import restamped, warmed, with_rates
 from pospp.diagnose.results import CandidateTest, Diagnosis, DiagnosisStep, EffectResponse
 from pospp.diagnose.sensor_families import (
     SENSOR_FAMILIES,
@@ -48,7 +48,6 @@ from pospp.distributions import long_run_ratio
 from pospp.effects_catalog import catalog_entry
 from pospp.flight_stages import imu_tuning, navigate
 from pospp.io import mcap_reader
-from pospp.lever_time_stage import restamped
 from pospp.nav.filter import STATUS_USED
 from pospp.null_stage import rerun_decimation
 from pospp.qc.lever_time import LeverTime
@@ -78,7 +77,7 @@ def _removed(log: Any, config: PipelineConfig, d: Diagnosis
         elif e == "lever_arm":
             lever = np.asarray(config.gnss.lever_arm_m, dtype=float) - p
         elif e == "gyro_scale_factor":
-            log = _with_rates(log, log.imu.w_ib_b_radps / (1.0 + p))
+            log = with_rates(log, log.imu.w_ib_b_radps / (1.0 + p))
         elif d.step_of(e).shape in ("", "settling"):  # the legs' warm-up (its T)
             log = warmed(log, -p, ACCEL_SETTLING_S)
         done.append(e)

@@ -119,16 +119,17 @@ def _response_and_gains(log_p, nav, calib_run, config, navigate: Navigate, lever
             - calib_run.replays[i].dv_n_mps[:, 0:2] for i in sorted(calib_run.replays)], gains
 
 
-def _with_rates(log, rates):
+def with_rates(log, rates):
     """The log with its IMU rates replaced (body FRD, rad/s)."""
     return replace(log, imu=replace(log.imu, w_ib_b_radps=rates))
 
 
-def _gnss_earlier(log, dt_s: float):
-    """The log with its GNSS fixes and velocities stamped ``dt_s`` earlier."""
-    dt_ns = int(round(dt_s * 1e9))
-    return replace(log, fix=replace(log.fix, time_ns=log.fix.time_ns - dt_ns),
-                   vel=replace(log.vel, time_ns=log.vel.time_ns - dt_ns))
+def restamped(log, shift_s: float):
+    """The log with its GNSS fixes and velocities re-stamped ``t - shift_s`` (``shift_s``:
+    the GNSS stamp minus the true time the records are taken to have)."""
+    d = np.int64(round(shift_s * 1e9))
+    return replace(log, fix=replace(log.fix, time_ns=log.fix.time_ns - d),
+                   vel=replace(log.vel, time_ns=log.vel.time_ns - d))
 
 
 def warmed(log, db_b_mps2, accel_settling_s: float):
@@ -189,10 +190,10 @@ def rerun_signatures(log, nav, calib_run, config, effect_ids=RERUN_EFFECTS, *,
             lever0 = np.asarray(config.gnss.lever_arm_m, dtype=float)
             runs += [(eid, log, lever0 + h * e) for e in np.eye(3)]
         elif eid == "time_offset":
-            runs += [(eid, _gnss_earlier(log, h), None)]
+            runs += [(eid, restamped(log, h), None)]
         elif eid == "gyro_scale_factor":
             w = log.imu.w_ib_b_radps
-            runs += [(eid, _with_rates(log, w * (1.0 + h * e)), None) for e in np.eye(3)]
+            runs += [(eid, with_rates(log, w * (1.0 + h * e)), None) for e in np.eye(3)]
         else:  # accel_bias_change
             runs += [(eid, warmed(log, h * e, accel_settling_s), None) for e in np.eye(2)]
     results = map_in_threads(response, runs, threads)
@@ -271,10 +272,10 @@ def signature_at(log, nav, calib_run, config, effect_id: str, p, *, navigate: Na
             lambda dl, **kw: _response_and_gains(log, nav, calib_run, config, navigate,
                                                  lever + dl, **kw), p.size, steps, threads)
     elif effect_id == "time_offset":
-        removed = _response(_gnss_earlier(log, -float(p[0])), nav, calib_run, config, navigate)
+        removed = _response(restamped(log, -float(p[0])), nav, calib_run, config, navigate)
         cols = []
     elif effect_id == "gyro_scale_factor":
-        removed = _response(_with_rates(log, log.imu.w_ib_b_radps / (1.0 + p)), nav,
+        removed = _response(with_rates(log, log.imu.w_ib_b_radps / (1.0 + p)), nav,
                             calib_run, config, navigate)
         cols = []  # the secant alone, along A's own estimate (see the docstring)
     elif effect_id == "accel_bias_change":

@@ -410,7 +410,7 @@ def quality_checks(log: FlightLog, nav: FilterResult, calib_run: Any, config: An
         ``TIME_OFFSET_MAX_S``), and then both checks take its reading.
     renavigate : callable(shift_s) -> FilterResult, optional
         A on the log with its GNSS re-stamped ``t - shift_s``
-        (:func:`pospp.flight_stages.restamped`): an offset of seconds found by the turns is
+        (:func:`pospp.diagnose.rerun.restamped`): an offset of seconds found by the turns is
         measured again on A's attitude with the GNSS re-stamped by it (:func:`_offset_again`).
     """
     q = qc_inputs(log, nav, calib_run, config, c_bs=c_bs, lever_estimate=lever_estimate,
