@@ -33,6 +33,7 @@ from pospp.simcompare.effects import BASE_DRAW, LIBRARY, EffectContext, SimEffec
 from pospp.simcompare.ensemble import SimulateFn, masked_lines
 from pospp.simcompare.stats import (
     STATIC_END_MARGIN_S,
+    STATIC_SPEED_MPS,
     FlightStats,
     Stat,
     flight_stats,
@@ -179,7 +180,10 @@ def _with_static_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     wandering put more power on the static parts than the log has, and step 0 fitted no
     noise at all).
 
-    Where A covers the period (static alignment) the rest position is A's at half
+    Where A covers the period (static alignment) and held the vehicle at rest there (no reset,
+    its speed below ``STATIC_SPEED_MPS``), the template is A's solution as it is (the
+    vehicle_bias_200hz reference case, a null: held at rest anyway, an accelerometer trend
+    moved 1.3 sigma and was named a ramp). Where A wandered, the rest position is A's at half
     ``STATIC_END_MARGIN_S`` before its end, held to there, and A's own solution after that:
     the IMU's static windows end a few seconds into the motion; the static statistics leave
     the last ``STATIC_END_MARGIN_S`` out, so that what the template's smoothing spline does
@@ -199,7 +203,7 @@ def _with_static_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     if end >= t[0] - 1.0:
         hold = end - 0.5 * STATIC_END_MARGIN_S
         at_rest = t <= hold
-        if np.count_nonzero(at_rest) < 2:
+        if np.count_nonzero(at_rest) < 2 or not _wandered(nav, sol, hold):
             return t, lat, lon, hgt
         ts = np.arange(float(t_imu[0]) + 1e-3, hold, 0.5)
         keep = ~at_rest
@@ -216,6 +220,16 @@ def _with_static_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
            for x in (fix.lat_rad, fix.lon_rad, fix.height_m)]
     return (np.concatenate([ts, t]), *(np.concatenate([p, x])
                                       for p, x in zip(pre, (lat, lon, hgt), strict=True)))
+
+
+def _wandered(nav: nav_filter.FilterResult, sol: nav_filter.NavSolution, until_s: float
+              ) -> bool:
+    """Whether A left the rest before ``until_s`` [s]: a reset, or a smoothed speed of
+    ``STATIC_SPEED_MPS`` or more."""
+    if any(t_s < until_s for t_s, _ in nav.resets):
+        return True
+    m = sol.t_s <= until_s
+    return bool(np.any(np.linalg.norm(sol.v_n_mps[m], axis=1) >= STATIC_SPEED_MPS))
 
 
 def _rest_end_s(log: mcap_reader.FlightLog, end_s: float, limit_s: float,
