@@ -439,7 +439,8 @@ def tuned_to(config: PipelineConfig, fit: BaseFit | None, *, raise_only: bool = 
     largest axis): the joint estimate's passes of A (a pass tuned to the grade on an IMU three
     times noisier read a 0.54 m lever arm as 0.70 m, 2.5 sigma; tuned to its noise 0.60 m).
     ``raise_only``: only the levels fitted above the grade's (a filter given more noise than
-    its IMU has stays consistent; given less, it trusts its inertial solution too long)."""
+    its IMU has stays consistent; given less, it trusts its inertial solution too long):
+    :func:`compare_log`'s A where A as configured reset on the log."""
     if fit is None:
         return config
     by = {p.name: p for p in fit.parameters}
@@ -493,12 +494,14 @@ def compare_log(log: mcap_reader.FlightLog, config: PipelineConfig, *,
     tuned = config
     if imu is None and gnss is None:
         fit = base_fit(log, nav, tpl, config)
-        tuned = tuned_to(config, fit, raise_only=True)
+        tuned = tuned_to(config, fit, raise_only=True) if nav.resets else config
         if tuned != config:
-            # A as configured is mistuned to this IMU (a drift far above the grade's aligns
-            # on a gyrocompass it cannot resolve and diverges): A, the template and step 0
-            # again with A tuned to the fitted levels; the simulated flights run that A too
-            say("algorithm A again, tuned to the log's fitted noise and drift")
+            # A as configured diverged on this log (it reset) where step 0 fits a noise or
+            # drift above the grade's (a drift far above it aligns on a gyrocompass it cannot
+            # resolve): A, the template and step 0 again with A tuned to the fitted levels;
+            # the simulated flights run that A too
+            say(f"algorithm A reset {len(nav.resets)} times as configured: again, tuned to "
+                "the log's fitted noise and drift")
             nav = pipeline.navigate(log, tuned)
             tpl = flight_template(log, nav, config, vehicle=vehicle)
             fit = base_fit(log, nav, tpl, config)
