@@ -18,6 +18,7 @@ import pytest
 
 from pospp.compare_sim import compare_log
 from pospp.config import config_from_dict
+from pospp.sim.gnss import GnssModel
 from pospp.sim.sensors import _gauss_markov, imu_grade
 from pospp.simcompare import base_model as bm
 from pospp.simcompare.stats import allan_products
@@ -118,3 +119,23 @@ def test_true_noise_three_times_off_the_grade_is_a_base_model_refit(scale):
         assert fit[f"accel_vrw_{a}"].value == pytest.approx(0.05 * scale, rel=0.25)
     assert comp.effects_added == () and not comp.steps, [(s.target, s.effect)
                                                           for s in comp.steps]
+
+
+def test_gyrocompass_resolves_below_the_earth_rates_horizontal_part():
+    """compare-sim re-tunes A only on a fitted drift a gyrocompass cannot resolve: at or
+    above Omega cos(lat) (15.041 deg/h x cos 40 deg = 11.52 deg/h); the grade's 0.5 deg/h, a
+    drift over-read at 3.4 deg/h and one fitted 11.4 resolve; 11.6 does not, nor anything at
+    the pole; no drift row (the flight had no static part) leaves A as configured."""
+    from pospp.compare_sim import gyrocompass_resolves
+    from pospp.simcompare.base_model import BaseFit, BaseParameter
+
+    def fit(gm_dph):
+        rows = (BaseParameter("gyro_gm_sigma", gm_dph, 0.6, 0.5, "deg_per_h", "test"),)
+        return BaseFit(rows, imu_grade("tactical"), GnssModel())
+
+    lat = np.radians(40.0)
+    for gm in (0.5, 3.4, 11.4):
+        assert gyrocompass_resolves(fit(gm), lat)
+    assert not gyrocompass_resolves(fit(11.6), lat)
+    assert not gyrocompass_resolves(fit(0.5), np.radians(90.0))
+    assert gyrocompass_resolves(BaseFit((), imu_grade("tactical"), GnssModel()), lat)
