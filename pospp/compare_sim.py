@@ -10,7 +10,6 @@ simulation the same way, and hand both to the step-wise comparison of
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -22,13 +21,20 @@ from pospp import earth, pipeline
 from pospp.config import PipelineConfig
 from pospp.io import mcap_reader, parquet_tables, report_files, run_folder
 from pospp.io.run_lock import locked
+from pospp.lever_time_stage import lever_time_estimate
 from pospp.nav import filter as nav_filter
 from pospp.nav.alignment import AlignmentOptions, gnss_moving_windows
 from pospp.qc.lever_time import LeverTime
 from pospp.sim.api import Kinematics, along_motion, kinematics, sensors
 from pospp.sim.gnss import GnssModel
 from pospp.sim.sensors import ImuErrorModel, imu_grade
-from pospp.simcompare.base_model import BaseFit, ImuParts, fit_base_model, has_drift
+from pospp.simcompare.base_model import (
+    BaseFit,
+    ImuParts,
+    fit_base_model,
+    gyrocompass_resolves,
+    has_drift,
+)
 from pospp.simcompare.compare import Comparison, compare_flights
 from pospp.simcompare.effects import BASE_DRAW, LIBRARY, EffectContext, SimEffect
 from pospp.simcompare.ensemble import SimulateFn, masked_lines
@@ -42,7 +48,6 @@ from pospp.simcompare.stats import (
     static_and_steady,
 )
 from pospp.simcompare.tables import comparison_columns, model_toml
-from pospp.units import DEG_PER_H_RADPS
 
 __all__ = ["SIM_GRADES", "FlightTemplate", "compare_sim_run", "flight_template",
            "log_stats", "simulate_stats"]
@@ -272,7 +277,7 @@ def gnss_residuals(log: mcap_reader.FlightLog, sol: nav_filter.NavSolution, epoc
     """The GNSS records minus A's smoothed solution in its span: (times [s from
     ``epoch_ns``], (M, 3) NED [m]) of the fixes, the antenna at ``C_nb lever_b_m`` from the
     IMU, and the same [m/s] of the velocities (the lever arm's rotation share left out)."""
-    from pospp import earth, rotation
+    from pospp import rotation
 
     def at(t: np.ndarray, x: np.ndarray) -> np.ndarray:
         return np.interp(t, sol.t_s, x)
@@ -457,21 +462,6 @@ def tuned_to(config: PipelineConfig, fit: BaseFit | None, *, raise_only: bool = 
     return replace(config, imu=replace(config.imu, **over)) if over else config
 
 
-def gyrocompass_resolves(fit: BaseFit, lat_rad: float) -> bool:
-    """Whether step 0's gyro drift (``gyro_gm_sigma``, its fitted value) is below the Earth
-    rate's horizontal part at ``lat_rad`` (11.5 deg/h at 40 deg): above it no static
-    alignment can find north, and A as configured for a better gyro gyrocompasses tens of
-    degrees off and diverges (:func:`compare_log` then re-runs it tuned to the fitted
-    levels). A drift fitted above the grade's but below that (step 0 over-read a 1.5 deg/h
-    drift as 3.4 on one Monte Carlo seed, where A's resets came from a coloured GNSS error)
-    leaves A as configured: re-tuned, A and its spread between draws hid every gap."""
-    gm = {p.name: p for p in fit.parameters}.get("gyro_gm_sigma")
-    if gm is None or not math.isfinite(gm.value):
-        return True
-    horizontal_dph = earth.EARTH_RATE_RADPS * math.cos(lat_rad) / DEG_PER_H_RADPS
-    return gm.value < horizontal_dph
-
-
 def joint_stats(lt: LeverTime, seen: np.ndarray) -> dict[str, Stat]:
     """The joint estimate's statistics on the measured flight (:mod:`pospp.simcompare.stats`:
     ``lt_time_offset`` where the offset is determined, ``lt_lever_*`` on the axes ``seen``):
@@ -518,9 +508,8 @@ def compare_log(log: mcap_reader.FlightLog, config: PipelineConfig, *,
             # A as configured diverged on this log (it reset) on a gyro whose fitted drift
             # cannot resolve the Earth rate: A, the template and step 0 again with A tuned
             # to the fitted levels; the simulated flights run that A too
-            say(f"algorithm A reset {len(nav.resets)} times as configured, on a gyro drift "
-                "above the Earth rate's horizontal part: again, tuned to the log's fitted "
-                "noise and drift")
+            say(f"A reset {len(nav.resets)} times as configured on a drift above the Earth "
+                "rate's horizontal part: A again, tuned to the log's fitted noise and drift")
             nav = pipeline.navigate(log, tuned)
             tpl = flight_template(log, nav, config, vehicle=vehicle)
             fit = base_fit(log, nav, tpl, config)
@@ -536,7 +525,7 @@ def compare_log(log: mcap_reader.FlightLog, config: PipelineConfig, *,
     # passes start from the lever arm of A's pass with lever-arm states): its offset is a
     # statistic (lt_time_offset), its reading the fit of lever_arm_time_offset
     say("joint estimate of the lever arm and the GNSS time offset")
-    lt = pipeline.lever_time_estimate(log, nav, tuned_to(config, fit),
+    lt = lever_time_estimate(log, nav, tuned_to(config, fit),
                                       None if est is None else est.lever_arm)
     if lt is not None:
         seen = pipeline.lever_arm_seen(nav)

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
-from functools import cache, partial
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -66,7 +66,6 @@ from pospp.flight_stages import (
     rerun_options,
 )
 from pospp.io import mcap_reader
-from pospp.lever_time_stage import lever_time_estimate
 from pospp.nav import filter as nav_filter
 from pospp.null_stage import (
     leg_epochs_ns,
@@ -336,8 +335,8 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuSource, solution_a: 
     effects removed, and named as steps before the closing row. Every named effect's response
     on B minus A is in ``Diagnosis.responses`` (the calibration's refit,
     :mod:`pospp.diagnose.refit`). A GNSS time offset the families' innovations read is the
-    joint lever-arm / time-offset estimate's (``joint``, the QC stage's; made here from
-    ``lever_estimate`` when None and first asked).
+    joint lever-arm / time-offset estimate's (``joint()``, the QC stage's, made when first
+    asked; None: their own reading, :func:`pospp.sensor_stage._without_time_offset`).
     """
     n_null = config.pairs.null_realisations
     if null_dv is None and n_null > 0 and log is not None and nav is not None:
@@ -346,8 +345,6 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuSource, solution_a: 
     d, sigs = _diagnose_legs(calib_run, imu, solution_a, config, replays, log=log, nav=nav,
                              null_dv=null_dv, lever_estimate=lever_estimate, threads=threads,
                              start=start)
-    if joint is None and log is not None and nav is not None:
-        joint = cache(lambda: lever_time_estimate(log, nav, config, lever_estimate))
     fams = (sensor_families(d, replays, log, config, solution_a, joint) if log is not None
             else None)
     d = with_sensor_families(d, fams)

@@ -56,7 +56,7 @@ from pospp.io import mcap_reader, parquet_tables, report_files, run_folder, traj
 from pospp.io.errors import IngestError
 from pospp.io.files import require_regular, sha256_file
 from pospp.io.run_lock import locked
-from pospp.lever_time_stage import lever_time_estimate, qc_passes  # noqa: F401 (compare_sim)
+from pospp.lever_time_stage import lever_time_estimate, qc_passes
 from pospp.memory import release_free_heap, share_one_heap
 from pospp.nav import filter as nav_filter
 from pospp.null_stage import (  # the null stage's functions, importable from here as before
@@ -307,8 +307,6 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
     book.stage("diagnose")
     # A's lever-arm estimate, made once: the diagnosis starts from it and QC checks it
     lever = lever_re_estimate(log, lever_arm_seen(nav), config)
-    # the joint lever-arm / time-offset estimate, made once when first asked: the
-    # diagnosis's families and the QC checks read the same one
     joint = cache(partial(lever_time_estimate, log, nav, config, lever[0]))
     diagnosis = None
     if calib_run.calibrated and config.outputs.diagnose:
@@ -458,17 +456,15 @@ def quality_control(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     with lever-arm states (:func:`lever_arm_estimate`; about a third of A's time). Failed
     checks are noted in ``book`` (stage "qc"). ``lever``: that estimate and why it failed, when
     already made (:func:`lever_re_estimate`); None: made here. ``also``: later stages' checks.
-    ``joint``: the joint lever-arm / time-offset estimate when already asked for (the
-    diagnosis's), made when first asked; None: made here when a check needs it.
+    ``joint()``: the joint estimate the diagnosis shares (None: made here when needed).
     """
     estimate, failure = (lever_re_estimate(log, lever_arm_seen(nav), config) if lever is None
                          else lever)
     if failure is not None and book is not None:
         book.note("warning", "qc", f"lever arm not re-estimated: {failure}")
-    cin = config.input
     report = quality_checks(
         log, nav, calib_run, config, lever_estimate=estimate,
-        c_bs=sensor_to_body_dcm(cin.sensor_frame, cin.mounting_rpy_deg),
+        c_bs=sensor_to_body_dcm(config.input.sensor_frame, config.input.mounting_rpy_deg),
         **qc_passes(log, nav, config, estimate, joint))
     report = replace(report, checks=report.checks + tuple(also))
     if book is not None:
@@ -589,8 +585,9 @@ def diagnose_run(run_dir: str | Path, *, progress: ProgressFn | None = None) -> 
                                  threads=threads)
                if config.pairs.null_realisations > 0 else None)
     book.stage("diagnose")
+    joint = cache(partial(lever_time_estimate, log, nav, config, None))
     diagnosis = diagnose_calibration(calib_run, imu, solution_a, config, log=log, nav=nav,
-                                     null_dv=null_dv, threads=threads)
+                                     null_dv=null_dv, threads=threads, joint=joint)
     book.stage("write")
     out_meta = {k: meta[k] for k in ("input_file", "input_sha256", "config")}
     parquet_tables.write_table(run / "diagnosis.parquet", diagnosis_columns(diagnosis),

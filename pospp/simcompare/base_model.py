@@ -53,6 +53,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from pospp import earth
 from pospp.sim.gnss import GnssModel
 from pospp.sim.sensors import ImuErrorModel
 from pospp.simcompare.stats import allan_products
@@ -63,7 +64,7 @@ from pospp.units import (
 )
 
 __all__ = ["BaseFit", "BaseParameter", "ImuParts", "fit_base_model", "gm_allan_per_variance",
-           "gnss_white_noise", "imu_white_noise", "has_drift"]
+           "gnss_white_noise", "gyrocompass_resolves", "imu_white_noise", "has_drift"]
 
 WHITE_F_LO_HZ = 2.0
 """Lowest frequency of the white-noise band [Hz] (the trajectory's power is below it)."""
@@ -430,3 +431,19 @@ def has_drift(fit: BaseFit) -> bool:
     0.03 deg/sqrt(h) of noise left A's gyro bias trends 4-7 of A's sigmas from the
     simulation's one draw: `unexplained` on a null flight.)"""
     return any(p.name == "gyro_gm_sigma" and p.simulated > 0.0 for p in fit.parameters)
+
+
+def gyrocompass_resolves(fit: BaseFit, lat_rad: float) -> bool:
+    """Whether step 0's gyro drift (``gyro_gm_sigma``, its fitted value) is below the Earth
+    rate's horizontal part at ``lat_rad`` (11.5 deg/h at 40 deg): above it no static
+    alignment can find north, and A as configured for a better gyro gyrocompasses tens of
+    degrees off and diverges (:func:`pospp.compare_sim.compare_log` then re-runs it tuned to
+    the fitted levels). A drift fitted above the grade's but below that (step 0 over-read a
+    1.5 deg/h drift as 3.4 on one Monte Carlo seed, where A's resets came from a coloured
+    GNSS error) leaves A as configured: re-tuned, A and its spread between draws hid every
+    gap."""
+    gm = {p.name: p for p in fit.parameters}.get("gyro_gm_sigma")
+    if gm is None or not math.isfinite(gm.value):
+        return True
+    horizontal_dph = earth.EARTH_RATE_RADPS * math.cos(lat_rad) / DEG_PER_H_RADPS
+    return gm.value < horizontal_dph

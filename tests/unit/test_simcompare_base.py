@@ -126,8 +126,7 @@ def test_gyrocompass_resolves_below_the_earth_rates_horizontal_part():
     above Omega cos(lat) (15.041 deg/h x cos 40 deg = 11.52 deg/h); the grade's 0.5 deg/h, a
     drift over-read at 3.4 deg/h and one fitted 11.4 resolve; 11.6 does not, nor anything at
     the pole; no drift row (the flight had no static part) leaves A as configured."""
-    from pospp.compare_sim import gyrocompass_resolves
-    from pospp.simcompare.base_model import BaseFit, BaseParameter
+    from pospp.simcompare.base_model import BaseFit, BaseParameter, gyrocompass_resolves
 
     def fit(gm_dph):
         rows = (BaseParameter("gyro_gm_sigma", gm_dph, 0.6, 0.5, "deg_per_h", "test"),)
