@@ -24,7 +24,6 @@ from pospp.io.run_lock import locked
 from pospp.lever_time_stage import lever_time_estimate
 from pospp.nav import filter as nav_filter
 from pospp.nav.alignment import AlignmentOptions, gnss_moving_windows
-from pospp.qc.lever_time import LeverTime
 from pospp.sim.api import Kinematics, along_motion, kinematics, sensors
 from pospp.sim.gnss import GnssModel
 from pospp.sim.sensors import ImuErrorModel, imu_grade
@@ -36,7 +35,7 @@ from pospp.simcompare.base_model import (
     has_drift,
 )
 from pospp.simcompare.compare import Comparison, compare_flights
-from pospp.simcompare.effects import BASE_DRAW, LIBRARY, EffectContext, SimEffect
+from pospp.simcompare.effects import BASE_DRAW, LIBRARY, EffectContext, SimEffect, joint_stats
 from pospp.simcompare.ensemble import SimulateFn, masked_lines
 from pospp.simcompare.stats import (
     STATIC_END_MARGIN_S,
@@ -462,22 +461,16 @@ def tuned_to(config: PipelineConfig, fit: BaseFit | None, *, raise_only: bool = 
     return replace(config, imu=replace(config.imu, **over)) if over else config
 
 
-def joint_stats(lt: LeverTime, seen: np.ndarray) -> dict[str, Stat]:
-    """The joint estimate's statistics on the measured flight (:mod:`pospp.simcompare.stats`:
-    ``lt_time_offset`` where the offset is determined, ``lt_lever_*`` on the axes ``seen``):
-    the offset, and the lever arm minus the configured one at it (the apparent one where the
-    offset is not determined), with their sigmas."""
-    out = {}
-    if np.isfinite(lt.sigma_tau_s):
-        out["lt_time_offset"] = Stat(lt.tau_s, lt.sigma_tau_s, np.inf)
-        lev, sig = lt.lever_b_m, lt.sigma_lever_b_m
-    else:
-        lev, sig = lt.apparent_lever_b_m, lt.sigma_apparent_b_m
-    for i, a in enumerate("xyz"):
-        if seen[i]:
-            out[f"lt_lever_{a}"] = Stat(float(lev[i] - lt.configured_b_m[i]), float(sig[i]),
-                                        np.inf)
-    return out
+def _tuning_text(resets: int, config: PipelineConfig, tuned: PipelineConfig) -> str:
+    """What :func:`compare_log` says when it re-tunes A ("" when it does not)."""
+    if tuned == config:
+        return ""
+    levels = ", ".join(f"{k} {getattr(tuned.imu, k):.4g}" for k in
+                       ("gyro_arw_dpsh", "accel_vrw_mpsph", "gyro_gm_sigma_dph")
+                       if getattr(tuned.imu, k) != getattr(config.imu, k))
+    return (f"A reset {resets} times as configured, on a gyro drift above the Earth rate's "
+            f"horizontal part: A, the template and step 0 made again, and every simulated "
+            f"flight run, with A tuned to the fitted {levels} ([imu] keys)")
 
 
 def compare_log(log: mcap_reader.FlightLog, config: PipelineConfig, *,
@@ -498,18 +491,18 @@ def compare_log(log: mcap_reader.FlightLog, config: PipelineConfig, *,
     say("simulating the trajectory (kinematics)")
     tpl = flight_template(log, nav, config, vehicle=vehicle)
     fit: BaseFit | None = None
-    tuned = config
+    tuned, nav_resets = config, 0
     if imu is None and gnss is None:
         fit = base_fit(log, nav, tpl, config)
         tuned = (tuned_to(config, fit, raise_only=True)
                  if nav.resets and not gyrocompass_resolves(fit, nav.alignment.lat_rad)
                  else config)
+        nav_resets = len(nav.resets)
         if tuned != config:
             # A as configured diverged on this log (it reset) on a gyro whose fitted drift
             # cannot resolve the Earth rate: A, the template and step 0 again with A tuned
             # to the fitted levels; the simulated flights run that A too
-            say(f"A reset {len(nav.resets)} times as configured on a drift above the Earth "
-                "rate's horizontal part: A again, tuned to the log's fitted noise and drift")
+            say(_tuning_text(nav_resets, config, tuned))
             nav = pipeline.navigate(log, tuned)
             tpl = flight_template(log, nav, config, vehicle=vehicle)
             fit = base_fit(log, nav, tpl, config)
@@ -535,7 +528,8 @@ def compare_log(log: mcap_reader.FlightLog, config: PipelineConfig, *,
     comp = compare_flights(measured, simulate_stats(tpl, tuned, on_flight), imu, gnss,
                            max_steps=max_steps, library=library, context=ctx, progress=say,
                            base_ensemble=BASE_DRAW if drift else ())
-    return replace(comp, base_fit=fit.parameters if fit else ()), tpl
+    return replace(comp, base_fit=fit.parameters if fit else (),
+                   a_tuning=_tuning_text(nav_resets, config, tuned)), tpl
 
 
 @locked("pospp compare-sim")
@@ -588,6 +582,7 @@ def model_header(comp: Comparison, name: str, config: PipelineConfig) -> str:
              f"Base model fitted to the log (step 0; the grade {config.imu.grade!r} as prior):"]
     lines += [f"  {b.text()}" for b in comp.base_fit if b.fitted]
     lines += [f"  {line}" for line in masked_lines(comp.masked)]
+    lines += [f"  {comp.a_tuning}"] if comp.a_tuning else []
     for s in comp.steps:
         if s.effect == "unexplained":
             continue

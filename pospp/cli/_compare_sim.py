@@ -52,6 +52,8 @@ def compare_sim_lines(comp: Any) -> list[str]:
         out.append(f"base model fitted to the log (step 0): {len(fitted)} levels, "
                    f"{len(differ)} differ from the prior")
         out += [f"  {b.text()}" for b in differ]
+    if comp.a_tuning:
+        out.append(f"  {comp.a_tuning}")
     n_sig = sum(g.significant for g in comp.base.values())
     out.append(f"base model: {n_sig} of {len(comp.base)} statistics differ significantly")
     for s in comp.steps:

@@ -179,6 +179,9 @@ class Comparison:
     masked: tuple[Masked, ...] = field(default=())
     """The statistics, and the effects fitted on them, that the base model's drift widens
     beyond what this flight can tell apart (:func:`pospp.simcompare.ensemble.masked_by_drift`)."""
+    a_tuning: str = ""
+    """How A was tuned for the measured and every simulated flight where not as configured
+    (:func:`pospp.compare_sim.compare_log`); "" as configured."""
 
 
 def _wls(h: NDArray, g: NDArray, w: NDArray):

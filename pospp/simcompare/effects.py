@@ -60,10 +60,11 @@ from pospp.effects_catalog import catalog_entry
 from pospp.qc.lever_time import LeverTime, lever_time_verdict
 from pospp.sim.gnss import GnssModel
 from pospp.sim.sensors import ImuErrorModel
+from pospp.simcompare.stats import Stat
 from pospp.units import ARCSEC_RAD, DEG_PER_H_RADPS, UG_MPS2
 
 __all__ = ["BASE_DRAW", "BI_DRAW", "SimEffect", "LIBRARY", "EffectContext", "JointFit",
-           "coloured_tau_library", "library_by_name", "lever_time_fit"]
+           "coloured_tau_library", "joint_stats", "library_by_name", "lever_time_fit"]
 
 IMPLAUSIBLE_FACTOR = 50.0
 """A fitted effect more than this many times its catalogue's plausible size is not admissible
@@ -465,3 +466,21 @@ def coloured_tau_library(taus_s: tuple[float, ...] = TAU_GRID_S) -> tuple[SimEff
 
 def library_by_name() -> dict[str, SimEffect]:
     return {e.name: e for e in LIBRARY}
+
+
+def joint_stats(lt: LeverTime, seen: np.ndarray) -> dict[str, Stat]:
+    """The joint estimate's statistics on the measured flight (:mod:`pospp.simcompare.stats`:
+    ``lt_time_offset`` where the offset is determined, ``lt_lever_*`` on the axes ``seen``):
+    the offset, and the lever arm minus the configured one at it (the apparent one where the
+    offset is not determined), with their sigmas."""
+    out = {}
+    if np.isfinite(lt.sigma_tau_s):
+        out["lt_time_offset"] = Stat(lt.tau_s, lt.sigma_tau_s, np.inf)
+        lev, sig = lt.lever_b_m, lt.sigma_lever_b_m
+    else:
+        lev, sig = lt.apparent_lever_b_m, lt.sigma_apparent_b_m
+    for i, a in enumerate("xyz"):
+        if seen[i]:
+            out[f"lt_lever_{a}"] = Stat(float(lev[i] - lt.configured_b_m[i]), float(sig[i]),
+                                        np.inf)
+    return out

@@ -698,3 +698,14 @@ def test_a_drift_beyond_the_gyrocompass_is_fitted_and_a_retuned():
         assert fit[f"gyro_arw_{a}"].value == pytest.approx(0.03, rel=0.1)
     assert fit["gnss_pos_noise_h"].value == pytest.approx(0.05, rel=0.25)
     assert fit["gnss_vel_noise_h"].value == pytest.approx(0.02, rel=0.25)
+    # and says so: on the console, in sim_model.toml's header, on the table's drift row
+    from pospp.cli._compare_sim import compare_sim_lines
+    from pospp.compare_sim import model_header
+    from pospp.simcompare.tables import comparison_columns
+
+    assert "tuned to the fitted" in comp.a_tuning and "gyro_gm_sigma_dph" in comp.a_tuning
+    assert f"  {comp.a_tuning}" in compare_sim_lines(comp)
+    assert comp.a_tuning in model_header(comp, "mc.mcap", config)
+    cols = comparison_columns(comp)
+    row = cols["parameter"].index("gyro_gm_sigma")
+    assert cols["note"][row].endswith(comp.a_tuning)
