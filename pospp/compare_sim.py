@@ -453,18 +453,15 @@ def tuned_to(config: PipelineConfig, fit: BaseFit | None, *, raise_only: bool = 
     over: dict[str, Any] = {}
     for key, name in (("gyro_arw_dpsh", "gyro_arw"), ("accel_vrw_mpsph", "accel_vrw"),
                       ("gyro_gm_sigma_dph", "gyro_gm_sigma")):
-        rows = [by[n] for n in (f"{name}_{a}" for a in "xyz") if n in by] or \
-            ([by[name]] if name in by else [])
-        rows = [r for r in rows if r.differs and (r.simulated > r.prior or not raise_only)]
+        rows = [by[n] for n in (name, f"{name}_x", f"{name}_y", f"{name}_z") if n in by
+                and by[n].differs and (by[n].simulated > by[n].prior or not raise_only)]
         if rows:
             over[key] = max(r.simulated for r in rows)
     return replace(config, imu=replace(config.imu, **over)) if over else config
 
 
 def _tuning_text(resets: int, config: PipelineConfig, tuned: PipelineConfig) -> str:
-    """What :func:`compare_log` says when it re-tunes A ("" when it does not)."""
-    if tuned == config:
-        return ""
+    """What :func:`compare_log` says when it re-tunes A from ``config`` to ``tuned``."""
     levels = ", ".join(f"{k} {getattr(tuned.imu, k):.4g}" for k in
                        ("gyro_arw_dpsh", "accel_vrw_mpsph", "gyro_gm_sigma_dph")
                        if getattr(tuned.imu, k) != getattr(config.imu, k))
@@ -491,18 +488,17 @@ def compare_log(log: mcap_reader.FlightLog, config: PipelineConfig, *,
     say("simulating the trajectory (kinematics)")
     tpl = flight_template(log, nav, config, vehicle=vehicle)
     fit: BaseFit | None = None
-    tuned, nav_resets = config, 0
+    tuned, a_tuning = config, ""
     if imu is None and gnss is None:
         fit = base_fit(log, nav, tpl, config)
-        tuned = (tuned_to(config, fit, raise_only=True)
-                 if nav.resets and not gyrocompass_resolves(fit, nav.alignment.lat_rad)
-                 else config)
-        nav_resets = len(nav.resets)
+        if nav.resets and not gyrocompass_resolves(fit, nav.alignment.lat_rad):
+            tuned = tuned_to(config, fit, raise_only=True)
         if tuned != config:
             # A as configured diverged on this log (it reset) on a gyro whose fitted drift
             # cannot resolve the Earth rate: A, the template and step 0 again with A tuned
             # to the fitted levels; the simulated flights run that A too
-            say(_tuning_text(nav_resets, config, tuned))
+            a_tuning = _tuning_text(len(nav.resets), config, tuned)
+            say(a_tuning)
             nav = pipeline.navigate(log, tuned)
             tpl = flight_template(log, nav, config, vehicle=vehicle)
             fit = base_fit(log, nav, tpl, config)
@@ -519,7 +515,7 @@ def compare_log(log: mcap_reader.FlightLog, config: PipelineConfig, *,
     # statistic (lt_time_offset), its reading the fit of lever_arm_time_offset
     say("joint estimate of the lever arm and the GNSS time offset")
     lt = lever_time_estimate(log, nav, tuned_to(config, fit),
-                                      None if est is None else est.lever_arm)
+                             None if est is None else est.lever_arm)
     if lt is not None:
         seen = pipeline.lever_arm_seen(nav)
         measured = FlightStats({**measured.stats, **joint_stats(lt, seen)}, measured.hf_peak_hz)
@@ -528,8 +524,7 @@ def compare_log(log: mcap_reader.FlightLog, config: PipelineConfig, *,
     comp = compare_flights(measured, simulate_stats(tpl, tuned, on_flight), imu, gnss,
                            max_steps=max_steps, library=library, context=ctx, progress=say,
                            base_ensemble=BASE_DRAW if drift else ())
-    return replace(comp, base_fit=fit.parameters if fit else (),
-                   a_tuning=_tuning_text(nav_resets, config, tuned)), tpl
+    return replace(comp, base_fit=fit.parameters if fit else (), a_tuning=a_tuning), tpl
 
 
 @locked("pospp compare-sim")

@@ -305,7 +305,7 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
         del comp  # the rest of the second A pass (forward, biases, innovations) is not used
 
     book.stage("diagnose")
-    # A's lever-arm estimate, made once: the diagnosis starts from it and QC checks it
+    # A's lever-arm estimate and the joint estimate from it, each made once: diagnosis and QC
     lever = lever_re_estimate(log, lever_arm_seen(nav), config)
     joint = cache(partial(lever_time_estimate, log, nav, config, lever[0]))
     diagnosis = None
@@ -372,8 +372,7 @@ def _diagnose_stage(calib_run: CalibrationRun, imu: Any, solution_a: Any,
                     config: PipelineConfig, log: mcap_reader.FlightLog,
                     nav: nav_filter.FilterResult, null_dv: Any,
                     lever_estimate: nav_filter.LeverArmEstimate | None, threads: int,
-                    book: _Progress, joint: Callable[[], LeverTime | None]
-                    ) -> Diagnosis | None:
+                    book: _Progress, joint: Callable[[], LeverTime | None]) -> Diagnosis | None:
     """The diagnosis (:func:`pospp.diagnosis_stage.diagnose_calibration`), noted; None (the
     run then partial) when it could not be made."""
     try:
@@ -585,9 +584,10 @@ def diagnose_run(run_dir: str | Path, *, progress: ProgressFn | None = None) -> 
                                  threads=threads)
                if config.pairs.null_realisations > 0 else None)
     book.stage("diagnose")
-    joint = cache(partial(lever_time_estimate, log, nav, config, None))
-    diagnosis = diagnose_calibration(calib_run, imu, solution_a, config, log=log, nav=nav,
-                                     null_dv=null_dv, threads=threads, joint=joint)
+    lever = lever_re_estimate(log, lever_arm_seen(nav), config)[0]  # as a run makes it
+    diagnosis = diagnose_calibration(
+        calib_run, imu, solution_a, config, log=log, nav=nav, null_dv=null_dv, threads=threads,
+        lever_estimate=lever, joint=cache(partial(lever_time_estimate, log, nav, config, lever)))
     book.stage("write")
     out_meta = {k: meta[k] for k in ("input_file", "input_sha256", "config")}
     parquet_tables.write_table(run / "diagnosis.parquet", diagnosis_columns(diagnosis),

@@ -243,10 +243,10 @@ innovations read less than the whole offset at first (flight_time_offset_200hz: 
 
 
 def _offset_reading(design: InnovationDesign) -> tuple[float, float, bool]:
-    """(c, sigma, significant): the least-squares coefficient of the design's time-offset
-    column on its innovations (the GNSS stamped c s earlier than the log's) and its sigma
-    (widened by the residual's long-run variance ratio), significant beyond
-    :data:`TIME_OFFSET_FLOOR_S` and :data:`TIME_OFFSET_SIGMAS`."""
+    """(c [s], sigma [s], significant): the least-squares coefficient of the design's
+    time-offset column on its innovations (the GNSS stamped c s earlier than the log's) and
+    its sigma (widened by the residual's long-run variance ratio):
+    :func:`_offset_significant`."""
     x = design.time_offset_response
     assert x is not None
     xtx = float(x @ x)
@@ -254,7 +254,13 @@ def _offset_reading(design: InnovationDesign) -> tuple[float, float, bool]:
     r = design.y - c * x
     ratio = long_run_ratio(r, design.record_t_s, TIME_OFFSET_WINDOW_S)
     sigma = float(np.sqrt(ratio * (r @ r) / max(r.size - 1, 1) / xtx))
-    return c, sigma, abs(c) > TIME_OFFSET_FLOOR_S and abs(c) > TIME_OFFSET_SIGMAS * sigma
+    return c, sigma, _offset_significant(c, sigma)
+
+
+def _offset_significant(offset_s: float, sigma_s: float) -> bool:
+    """An offset [s] beyond :data:`TIME_OFFSET_FLOOR_S` and :data:`TIME_OFFSET_SIGMAS` of its
+    sigma [s]."""
+    return abs(offset_s) > TIME_OFFSET_FLOOR_S and abs(offset_s) > TIME_OFFSET_SIGMAS * sigma_s
 
 
 def _without_time_offset(log: Any, config: PipelineConfig, families: Sequence[str],
@@ -280,8 +286,7 @@ def _without_time_offset(log: Any, config: PipelineConfig, families: Sequence[st
             break
         lt = joint() if k == 0 and joint is not None else None
         if lt is not None and np.isfinite(lt.sigma_tau_s):
-            if not (abs(lt.tau_s) > TIME_OFFSET_FLOOR_S
-                    and abs(lt.tau_s) > TIME_OFFSET_SIGMAS * lt.sigma_tau_s):
+            if not _offset_significant(lt.tau_s, lt.sigma_tau_s):
                 break
             del design
             log = restamped(log, lt.tau_s)

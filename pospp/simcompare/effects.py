@@ -58,6 +58,7 @@ from numpy.typing import NDArray
 
 from pospp.effects_catalog import catalog_entry
 from pospp.qc.lever_time import LeverTime, lever_time_verdict
+from pospp.rotation import dcm_from_rotvec
 from pospp.sim.gnss import GnssModel
 from pospp.sim.sensors import ImuErrorModel
 from pospp.simcompare.stats import Stat
@@ -328,8 +329,6 @@ def mounting_sensor_errors(rho_rad: NDArray) -> tuple[NDArray, NDArray]:
     a 1.43 deg yaw mounting was a 312 ppm x and y scale factor too, which moved A's vertical
     lever-arm estimate by -0.15 m (0.033 m sigma) whichever the yaw's sign, and compare-sim
     named a lever arm beside the mounting on 7 of 10 Monte Carlo flights."""
-    from pospp.rotation import dcm_from_rotvec
-
     c_sb = dcm_from_rotvec(np.asarray(rho_rad, dtype=float)).T
     sf_ppm = (np.diag(c_sb) - 1.0) * 1e6
     off = np.array([c_sb[0, 1], c_sb[0, 2], c_sb[1, 0], c_sb[1, 2], c_sb[2, 0], c_sb[2, 1]])

@@ -46,11 +46,11 @@ def _base_row(b: BaseParameter) -> dict[str, Any]:
 def comparison_columns(c: Comparison) -> dict[str, list]:
     """Long-form rows of sim_comparison.parquet (schema in pospp.io.parquet_tables): the base
     model's fitted levels (kind "base", step 0; ``significant_before``: the fit differs
-    from its prior; ``simulated_before``: the level simulated, the fit or the prior),
-    the drift's row also says how A was tuned where not as configured:
-    ``Comparison.a_tuning``), every statistic at step 0 and at each step (kind "statistic"; at
-    step 0 ``note`` says
-    when the base model's drift masks the effects fitted on it: ``Comparison.masked``),
+    from its prior; ``simulated_before``: the level simulated, the fit or the prior; the
+    ``gyro_gm_sigma`` row's ``note`` also says how A was tuned where not as configured,
+    ``Comparison.a_tuning``), every statistic at step 0 and at each step (kind "statistic";
+    at step 0 ``note`` says when the base model's drift masks the effects fitted on it:
+    ``Comparison.masked``),
     and each step's effect parameters (kind "effect", in the catalogue's units and signs,
     the reading in ``note``) and what else the reading determines (kind "reading": the
     combination of confounded effects, their correlations)."""
