@@ -332,7 +332,7 @@ def bma_leg_stats(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     per-leg gaps give :func:`pospp.simcompare.stats.leg_stats`. Empty when the flight has
     fewer than ``MIN_LEGS`` legs B could replay. (The calibration's own fit is not needed:
     it was 2.3 of the 5.8 s of a simulated flight's statistics on flight_time_offset_200hz.)"""
-    from pospp.diagnose.workflow import diagnose_replays
+    from pospp.diagnose.workflow import DiagnosisOptions, diagnose_replays
 
     try:
         made = pipeline.calibration_replays(pipeline.imu_increments(log), nav, config)
@@ -341,10 +341,10 @@ def bma_leg_stats(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     if len(made.replays) < MIN_LEGS:
         return {}
     replays = [made.replays[i] for i in sorted(made.replays)]
-    d = diagnose_replays(replays, base_formulation=config.pairs.formulation,
-                         base_transition=config.pairs.transition, noise="gyro_rw",
-                         gyro_arw_radpsqrts=pipeline.imu_tuning(config).noise()
-                         .gyro_arw_radpsqrts, effects=(), max_steps=0)
+    d = diagnose_replays(replays, DiagnosisOptions(
+        base_formulation=config.pairs.formulation, base_transition=config.pairs.transition,
+        noise="gyro_rw", gyro_arw_radpsqrts=pipeline.imu_tuning(config).noise().gyro_arw_radpsqrts,
+        effects=(), max_steps=0))
     return leg_stats(np.array([g.gap_before_mps for g in d.legs]),
                      np.array([g.heldout_gap_before_mps for g in d.legs]))
 

@@ -54,8 +54,8 @@ from pospp.diagnose.rerun import (
     signature_at,
     warmed,
 )
-from pospp.diagnose.results import EffectResponse
-from pospp.diagnose.workflow import HELDOUT_WHITENED, Diagnosis, diagnose_replays
+from pospp.diagnose.results import Diagnosis, EffectResponse
+from pospp.diagnose.workflow import HELDOUT_WHITENED, DiagnosisOptions, diagnose_replays
 from pospp.flight_stages import (
     _lever_arm_and_start,
     _scale_factor_start,
@@ -372,13 +372,14 @@ def _diagnose_legs(calib_run: CalibrationRun, imu: ImuSource, solution_a: Soluti
     # as white noise would make every F-test too liberal
     arw_radpsqrts = imu_tuning(config).noise().gyro_arw_radpsqrts
     def diagnose_with(signatures, whitening_replays=None):
-        return diagnose_replays(
-            replays, imu=imu, solution_a=solution_a,
+        opts = DiagnosisOptions(
             replay_kwargs={"accel_compensation": config.replay.accel_compensation},
             base_formulation=config.pairs.formulation, base_transition=config.pairs.transition,
-            noise="gyro_rw", gyro_arw_radpsqrts=arw_radpsqrts, null_dv=null_dv,
-            alpha=config.pairs.diagnose_alpha, signatures=signatures,
-            whitening_replays=whitening_replays, heldout_whitened=ho_white, threads=threads)
+            noise="gyro_rw", gyro_arw_radpsqrts=arw_radpsqrts,
+            alpha=config.pairs.diagnose_alpha, heldout_whitened=ho_white)
+        return diagnose_replays(replays, opts, imu=imu, solution_a=solution_a, null_dv=null_dv,
+                                signatures=signatures, whitening_replays=whitening_replays,
+                                threads=threads)
 
     note = null_note(null_dv, *null_drift(calib_run, config)) + warm_note
 

@@ -2,14 +2,13 @@
 
 One way through the data::
 
-    ingest (io) -> algorithm A (nav) -> legs, B replays, pairs, calibration (calib)
-      -> compensation: B re-run, A re-run with the calibrated gyro bias (calib, nav)
-      -> diagnosis (diagnose) -> quality checks (qc) -> tables, MCAP trajectory, HTML report
+    ingest (io) -> A (nav) -> legs, B, pairs, calibration (calib) -> null (its covariance)
+      -> compensation (B, and A with the calibrated gyro bias) -> diagnosis -> qc -> write
 
 Each stage takes the frozen results of the stages before it and returns its own; nothing
 numeric happens here, only orchestration and the translation of results into output tables
-(:mod:`pospp.outputs`). The stage functions themselves are in :mod:`pospp.flight_stages`
-(importable from here too). Files are touched only through :mod:`pospp.io`.
+(:mod:`pospp.outputs`). The stage functions are in :mod:`pospp.flight_stages`; files are
+touched only through :mod:`pospp.io`.
 
 Failure policy (design.md "nothing is lost"): ingestion problems that make the file unusable
 raise :class:`pospp.io.errors.IngestError` with file, topic and time; every later stage that
@@ -37,7 +36,8 @@ from pospp import outputs
 from pospp.calib.observability import observability_table
 from pospp.calib.stage import CalibrationRun
 from pospp.config import PipelineConfig, config_from_dict
-from pospp.diagnose.workflow import Diagnosis, diagnosis_columns, residual_curve_columns
+from pospp.diagnose.results import Diagnosis
+from pospp.diagnose.tables import diagnosis_columns, residual_curve_columns
 from pospp.diagnosis_stage import diagnose_calibration, refit_and_check
 from pospp.evaluate import evaluation_rows, solution_errors
 from pospp.flight_stages import (  # the stage functions, importable from here as before

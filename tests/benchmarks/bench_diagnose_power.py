@@ -78,15 +78,14 @@ def null_case(seed: int, gnss_pos_m: float, leg_s: float):
 
 
 def _diagnose(run, ref, imu, cfg, null, sigs, replays=None):
-    from pospp.diagnose.workflow import diagnose_replays
+    from pospp.diagnose.workflow import DiagnosisOptions, diagnose_replays
 
     reps = replays if replays is not None else [run.replays[i] for i in sorted(run.replays)]
-    return diagnose_replays(reps, imu=imu, solution_a=ref,
-                    replay_kwargs={"accel_compensation": cfg.replay.accel_compensation},
-                    base_formulation=cfg.pairs.formulation,
-                    base_transition=cfg.pairs.transition, noise="gyro_rw",
-                    gyro_arw_radpsqrts=pipeline.imu_tuning(cfg).noise().gyro_arw_radpsqrts,
-                    null_dv=null, signatures=sigs)
+    return diagnose_replays(reps, DiagnosisOptions(
+        replay_kwargs={"accel_compensation": cfg.replay.accel_compensation},
+        base_formulation=cfg.pairs.formulation, base_transition=cfg.pairs.transition,
+        noise="gyro_rw", gyro_arw_radpsqrts=pipeline.imu_tuning(cfg).noise().gyro_arw_radpsqrts),
+        imu=imu, solution_a=ref, null_dv=null, signatures=sigs)
 
 
 def limits(seeds: int, cells) -> None:

@@ -18,14 +18,14 @@ from _synthetic import noisy_replays, survey_flight
 from pospp import earth
 from pospp.calib.replay import ImuIncrements
 from pospp.diagnose import effects as fx
-from pospp.diagnose.workflow import (
+from pospp.diagnose.tables import (
     DIAGNOSIS_COLUMNS,
     candidate_columns,
-    diagnose_replays,
     diagnosis_columns,
     leg_gap_columns,
     residual_curve_columns,
 )
+from pospp.diagnose.workflow import DiagnosisOptions, diagnose_replays
 
 SIGMA = 0.003  # A's velocity noise [m/s]
 BIAS_B = np.array([0.02, -0.015, 0.0]) * fx.DEG_PER_H  # present in every case, in the base
@@ -61,7 +61,7 @@ def _run(fl, dth, dv, seed, **kw):
     ref = fl.solution_a(SIGMA)
     reps = noisy_replays(fl, imu, sigma_mps=SIGMA, rng=np.random.default_rng(seed),
                          solution_a=ref)
-    return diagnose_replays(reps, imu=imu, solution_a=ref, **kw)
+    return diagnose_replays(reps, DiagnosisOptions(**kw), imu=imu, solution_a=ref)
 
 
 def _excess(gap):
@@ -209,12 +209,13 @@ def test_input_contract(reversal):
     imu = ImuIncrements(reversal.imu.t_s, dth, dv)
     reps = noisy_replays(reversal, imu, sigma_mps=SIGMA, rng=np.random.default_rng(1))
     with pytest.raises(ValueError, match="base_formulation"):
-        diagnose_replays(reps, base_formulation="nav")
+        DiagnosisOptions(base_formulation="nav")
     with pytest.raises(ValueError, match="at least 2 legs"):
         diagnose_replays(reps[:1])
     with pytest.raises(ValueError, match="expected one of"):
-        diagnose_replays(reps, effects=("wind",))
-    d = diagnose_replays(reps, effects=("time_offset",))  # no IMU given: cannot re-run B
+        DiagnosisOptions(effects=("wind",))
+    # no IMU given: cannot re-run B
+    d = diagnose_replays(reps, DiagnosisOptions(effects=("time_offset",)))
     assert d.not_evaluated == ("time_offset",)
 
 
