@@ -158,15 +158,11 @@ def _pair_explaining(prob: Problem, terms: list[Term], fit0: Fit, trials: list[d
 
 HELDOUT_WHITENED = ("vertical_gyro_drift",)
 """Effects whose held-out prediction is compared in noise units (whitened as the fit is), the
-others' in m/s. The held-out rule guards against naming an absent effect that soaks up
-correlated noise (in m/s it keeps a null flight's 1.1 ms GNSS offset at p = 0.005 out of the
-names, measured: test_diagnose_null_mc.py seed 1, whitened it does not); the body z gyro bias
-is present in every IMU, and in m/s the late samples' Gauss-Markov drift dominates the
-held-out gap, which a right vertical drift fitted by weighted least squares can raise (1.1
-deg/h on three 600 s legs: raw 108 -> 137 mm/s on one leg, whitened 0.77 -> 0.16;
-docs/diagnose.md "Power"). The default of ``diagnose_replays(heldout_whitened=...)``; the
-pipeline adds ``accel_bias_change`` where A's own warm-up pass is the evidence that one is
-present (a 600 ug warm-up: raw 13 -> 20 mm/s on a late leg, whitened lower on every leg)."""
+others' in m/s (:attr:`DiagnosisOptions.heldout_whitened`'s default). In m/s the held-out rule
+keeps an absent effect that soaks up correlated noise out of the names; the body z gyro bias,
+present in every IMU, is compared whitened, since in m/s the late samples' Gauss-Markov drift
+dominates its held-out gap (docs/decisions.md, "Held-out prediction in noise units"). The
+pipeline adds ``accel_bias_change`` where A's own warm-up pass is the evidence of one."""
 
 
 def _heldout_lower(prob: Problem, trial: dict, ho0: list[NDArray], legs: list[int],
