@@ -57,13 +57,13 @@ from pospp.diagnose.rerun import (
 from pospp.diagnose.results import Diagnosis, EffectResponse
 from pospp.diagnose.workflow import HELDOUT_WHITENED, DiagnosisOptions, diagnose_replays
 from pospp.flight_stages import (
-    _lever_arm_and_start,
-    _scale_factor_start,
-    _warmup_start,
     forward_bias_record,
     imu_tuning,
+    lever_arm_and_start,
     navigate,
     rerun_options,
+    scale_factor_start,
+    warmup_start,
 )
 from pospp.io import mcap_reader
 from pospp.nav import filter as nav_filter
@@ -186,14 +186,14 @@ def signature_starts(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     attitude Jacobian are those of the wrong lever arm. The gyro scale factor: A's own
     estimate (one forward pass with scale-factor states) only when it is significant. The
     warm-up: A's pass with its dynamics where it explains A's rejections
-    (:func:`_warmup_start`). The usual flight pays the scale-factor pass (docs/diagnose.md,
+    (:func:`warmup_start`). The usual flight pays the scale-factor pass (docs/diagnose.md,
     "Power")."""
-    lever_b_m, p_lever = _lever_arm_and_start(log, nav, config, lever_estimate)
+    lever_b_m, p_lever = lever_arm_and_start(log, nav, config, lever_estimate)
     gn = p_lever is not None and bool(
         np.linalg.norm(p_lever) > REFINE_FRACTION * effect_by_id("lever_arm").plausible_si)
     return {"lever_arm": p_lever if gn else None,
-            "gyro_scale_factor": _scale_factor_start(log, config, lever_b_m),
-            "accel_bias_change": _warmup_start(log, nav, config, lever_b_m)}
+            "gyro_scale_factor": scale_factor_start(log, config, lever_b_m),
+            "accel_bias_change": warmup_start(log, nav, config, lever_b_m)}
 
 
 def _rerun_signatures_at_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
@@ -238,7 +238,7 @@ def _null_without_warmup(log: mcap_reader.FlightLog | None, nav: nav_filter.Filt
                          ) -> tuple[Any, Any, list | None, str, PipelineConfig]:
     """(log, A, null realisations, note, the configuration they were made with) of the
     diagnosis's null: when A's warm-up estimate
-    ``db`` (body x, y, m/s^2) explains A's rejections (:func:`_warmup_start`), re-made on the
+    ``db`` (body x, y, m/s^2) explains A's rejections (:func:`warmup_start`), re-made on the
     log without it (with it, A diverged in them: 1800 ug; docs/diagnose.md "Power")."""
     if not null_dv or log is None or db is None:
         return log, nav, null_dv, "", config

@@ -78,9 +78,9 @@ from pospp.diagnose._candidates import (
 from pospp.diagnose._linear import Fit, Problem, Term, f_test, rms
 from pospp.diagnose._terms import (
     LOF_DEGREE,
-    _base_terms,
-    _base_x_per_leg,
-    _lof_term,
+    base_terms,
+    base_x_per_leg,
+    lof_term,
 )
 from pospp.diagnose.locate import GapLocation, horizon_worth, locate_gap
 from pospp.diagnose.null_calibration import NullCalibration as _NullCalibration
@@ -357,9 +357,9 @@ def diagnose_replays(
     prob = _problem(replays, o, whitening_replays, noise_model)
     null = _null_calibration(prob, replays, o, null_dv, threads)
     origins, extent_m = leg_origins(replays, solution_a)
-    search = _Search(prob, o, null, replays, _base_terms(replays, o.base_formulation,
+    search = _Search(prob, o, null, replays, base_terms(replays, o.base_formulation,
                                                          o.base_transition),
-                     _lof_term(replays, o.lof_terms),
+                     lof_term(replays, o.lof_terms),
                      shape_signatures(pool, replays, given, ctx, o.accel_settling_s, threads,
                                       origins, extent_m))
     base_fit, base_ho = search.fit0, search.ho0
@@ -471,7 +471,7 @@ class _Search:
                    for t in self.terms):
                 continue
             if eff.effect_id == "earth_rate_coupling":
-                bx = _base_x_per_leg(self.prob, self.terms, self.fit0, self.o.base_formulation)
+                bx = base_x_per_leg(self.prob, self.terms, self.fit0, self.o.base_formulation)
                 shapes = {"": [fx.signature(eff.effect_id, r, base_x_leg=b)
                                for r, b in zip(self.replays, bx, strict=True)]}
             else:
