@@ -8,8 +8,8 @@ One way through the data::
 
 Each stage takes the frozen results of the stages before it and returns its own; nothing
 numeric happens here, only orchestration and the translation of results into output tables
-(:mod:`pospp.outputs`). The stage functions themselves are in :mod:`pospp.flight_stages`
-(importable from here too). Files are touched only through :mod:`pospp.io`.
+(:mod:`pospp.outputs`). The stage functions themselves are in :mod:`pospp.flight_stages`.
+Files are touched only through :mod:`pospp.io`.
 
 Failure policy (design.md "nothing is lost"): ingestion problems that make the file unusable
 raise :class:`pospp.io.errors.IngestError` with file, topic and time; every later stage that
@@ -37,16 +37,14 @@ from pospp import outputs
 from pospp.calib.observability import observability_table
 from pospp.calib.stage import CalibrationRun
 from pospp.config import PipelineConfig, config_from_dict
-from pospp.diagnose.workflow import Diagnosis, diagnosis_columns, residual_curve_columns
+from pospp.diagnose.results import Diagnosis
+from pospp.diagnose.tables import diagnosis_columns, residual_curve_columns
 from pospp.diagnosis_stage import diagnose_calibration, refit_and_check
 from pospp.evaluate import evaluation_rows, solution_errors
-from pospp.flight_stages import (  # the stage functions, importable from here as before
+from pospp.flight_stages import (
     calibrate_from_a,
-    calibration_replays,  # noqa: F401  (re-exported: compare_sim calls it)
     imu_increments,
-    imu_tuning,  # noqa: F401  (re-exported: compare_sim and the tests call pipeline.imu_tuning)
     ingest,
-    lever_arm_estimate,  # noqa: F401  (re-exported: the power benchmark calls it)
     lever_arm_passes,
     lever_arm_seen,
     navigate,
@@ -59,12 +57,10 @@ from pospp.io.run_lock import locked
 from pospp.lever_time_stage import lever_time_estimate, qc_passes
 from pospp.memory import release_free_heap, share_one_heap
 from pospp.nav import filter as nav_filter
-from pospp.null_stage import (  # the null stage's functions, importable from here as before
-    null_base,  # noqa: F401
+from pospp.null_stage import (
     null_needs_gains,
     null_realisations,
     null_stage,
-    null_white_noise,  # noqa: F401
 )
 from pospp.qc.checks import Check, comparison_text
 from pospp.qc.lever_time import LeverTime

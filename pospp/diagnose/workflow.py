@@ -81,16 +81,8 @@ from pospp.diagnose._terms import (
     _lof_term,
 )
 from pospp.diagnose.locate import horizon_worth, locate_gap
-from pospp.diagnose.null_calibration import FEW_PARAMETERS  # noqa: F401  (its home before)
 from pospp.diagnose.null_calibration import NullCalibration as _NullCalibration
 from pospp.diagnose.results import CandidateTest, Diagnosis, DiagnosisStep, LegGap
-from pospp.diagnose.tables import (  # noqa: F401  (re-exported: the tables' former home)
-    DIAGNOSIS_COLUMNS,
-    candidate_columns,
-    diagnosis_columns,
-    leg_gap_columns,
-    residual_curve_columns,
-)
 
 BASE_FORMULATIONS = ("body", "paper")
 BASE_TRANSITIONS = ("numerical", "closed_form")

@@ -30,7 +30,7 @@ from mcap.exceptions import McapError
 from mcap.records import Channel, Schema
 from numba.core.errors import NumbaError
 
-from pospp.io._mcap_chunk import (  # noqa: F401  (MAX_CHUNK_BYTES: re-exported)
+from pospp.io._mcap_chunk import (
     MAX_CHUNK_BYTES,
     _decompress,
     _is_corrupt_data_error,
