@@ -561,7 +561,7 @@ def compare_sim_run(run_dir: str | Path, *, out: str | Path | None = None,
     report_files.write_text(model_file, model_toml(comp.imu_model, comp.gnss_model,
                                                    header=model_header(comp, path.name, config)))
     say("writing the report")
-    pipeline._render_report(run)
+    pipeline.report_from_tables(run)
     return comp
 
 

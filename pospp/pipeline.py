@@ -62,7 +62,7 @@ from pospp.null_stage import (
     null_realisations,
     null_stage,
 )
-from pospp.qc.checks import Check, comparison_text
+from pospp.qc.check_record import Check, comparison_text
 from pospp.qc.lever_time import LeverTime
 from pospp.qc.stage import QualityReport, qc_columns, quality_checks, worst_status
 from pospp.report import figures
@@ -256,7 +256,7 @@ class _RunTables:
         self.write("summary", summary)
         if report:
             book.stage("report")
-            _render_report(self.out)
+            report_from_tables(self.out)
             summary.update(book.timings())
             self.write("summary", summary)
         return RunOutcome(self.out, status, summary, msgs, summary["wall_time_s"])
@@ -474,10 +474,12 @@ def quality_control(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
 @locked("pospp report")
 def write_report(run_dir: str | Path) -> Path:
     """Render report.html of a run folder from its tables alone (``pospp report``)."""
-    return _render_report(run_folder.require_run_folder(run_dir))
+    return report_from_tables(run_folder.require_run_folder(run_dir))
 
 
-def _render_report(run_dir: Path) -> Path:
+def report_from_tables(run_dir: Path) -> Path:
+    """Write RUN_DIR/report.html from the run's tables; return its path. Takes no lock:
+    the caller holds the run's (``process_flight``, ``pospp report``, ``pospp compare-sim``)."""
     tables = report_files.read_run_tables(run_dir)
     title = f"pospp run report: {Path(str(tables['summary'].input_file.iloc[0])).name}" \
         if "summary" in tables else "pospp run report"
@@ -591,6 +593,6 @@ def diagnose_run(run_dir: str | Path, *, progress: ProgressFn | None = None) -> 
     parquet_tables.write_table(run / "diagnosis_curves.parquet",
                                residual_curve_columns(diagnosis), "diagnosis_curves",
                                metadata=out_meta)
-    _render_report(run)
+    report_from_tables(run)
     book.done()
     return diagnosis
