@@ -17,6 +17,7 @@ from pathlib import Path
 from click.testing import CliRunner
 
 from pospp import config as cfg
+from pospp import config_schema as schema
 from pospp.cli import main
 from pospp.nav import tuning
 
@@ -192,7 +193,7 @@ def pipelines_markdown() -> str:
         "omitted key takes its default (an empty file is valid); an unknown section or key, a",
         "value of the wrong type, outside its choices or outside its limits is an error naming",
         "the file and the key. Every number must be finite, every string at most",
-        f"{cfg.MAX_STRING_LEN} characters, the file at most {cfg.MAX_CONFIG_BYTES} bytes of",
+        f"{schema.MAX_STRING_LEN} characters, the file at most {schema.MAX_CONFIG_BYTES} bytes of",
         "UTF-8; the limits of each key are written next to its field in `pospp/config.py`",
         "(`Limits`) and listed below; a list's limits apply to each element.",
         "Shipped: `flight.toml` and `vehicle.toml` (the simulator's paper presets),",
@@ -222,7 +223,7 @@ def pipelines_markdown() -> str:
             tp = sub[g.name]
             is_enum = isinstance(tp, type) and issubclass(tp, enum.Enum)
             ch = ", ".join(f"`{m.value}`" for m in tp) if is_enum else ""
-            lim = cfg.limits_of(cls, g.name).describe()
+            lim = schema.limits_of(cls, g.name).describe()
             default = g.default.value if isinstance(g.default, enum.Enum) else g.default
             lines.append(f"| `{g.name}` | {'str' if is_enum else _type_name(tp)} | "
                          f"`{default!r}` | {ch} | {lim} | {meaning.get(g.name, '')} |")

@@ -24,7 +24,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from pospp import pipeline  # noqa: E402
+from pospp import flight_stages, pipeline  # noqa: E402
 from pospp.calib import stage as calib_stage  # noqa: E402
 from pospp.calib.noise_model import noise_basis  # noqa: E402
 from pospp.calib.replay import ImuIncrements, SolutionA  # noqa: E402
@@ -108,7 +108,7 @@ def leg_study(out: Path, stem: str, pipe: str, grade: str,
             r = calibrate_flight(imu, ref, legs_cfg=legs.thresholds(),
                                  replay_cfg=cfg.replay.options(),
                                  pairs_cfg=cfg.pairs.policy(), noise=noise,
-                                 gyro_arw_dpsh=pipeline.imu_tuning(cfg).gyro_arw_dpsh)
+                                 gyro_arw_dpsh=flight_stages.imu_tuning(cfg).gyro_arw_dpsh)
             row = {"grade": grade, "min_duration_s": d, "noise": noise, "n_legs": len(r.legs),
                    "n_pairs_used": r.summary().get("n_pairs_used", 0)}
             if r.calibrated:
@@ -166,7 +166,7 @@ def leg_length_study(grade: str, leg_s: tuple[float, ...] = (10.0, 15.0, 20.0, 3
             "replay": {"horizon_s": L}})
         epoch = int(sim.imu.time_ns[0])
         nav = nav_filter.run_integrated_navigation(
-            sim.imu, sim.fix, sim.vel, pipeline.imu_tuning(cfg), epoch_ns=epoch,
+            sim.imu, sim.fix, sim.vel, flight_stages.imu_tuning(cfg), epoch_ns=epoch,
             output_rate_hz=10.0)
         imu = ImuIncrements(*increments_from_rates(
             sim.imu.time_ns, sim.imu.w_ib_b_radps, sim.imu.f_ib_b_mps2, epoch_ns=epoch))
@@ -181,7 +181,7 @@ def leg_length_study(grade: str, leg_s: tuple[float, ...] = (10.0, 15.0, 20.0, 3
                 r = calibrate_flight(imu, ref, legs_cfg=cfg.legs.thresholds(),
                                      replay_cfg=cfg.replay.options(),
                                      pairs_cfg=cfg.pairs.policy(), noise=noise,
-                                     gyro_arw_dpsh=pipeline.imu_tuning(cfg).gyro_arw_dpsh)
+                                     gyro_arw_dpsh=flight_stages.imu_tuning(cfg).gyro_arw_dpsh)
             except (IndexError, ValueError) as exc:
                 rows.append(row | {"result": f"fails: {type(exc).__name__}"})
                 continue
@@ -227,7 +227,7 @@ def quad_what_if(out: Path) -> pd.DataFrame:
             r = calibrate_flight(imu, ref, legs_cfg=cfg.legs.thresholds(),
                                  replay_cfg=cfg.replay.options(),
                                  pairs_cfg=cfg.pairs.policy(), noise=noise,
-                                 gyro_arw_dpsh=pipeline.imu_tuning(cfg).gyro_arw_dpsh)
+                                 gyro_arw_dpsh=flight_stages.imu_tuning(cfg).gyro_arw_dpsh)
         finally:
             _noise_step(10.0)
         cal = pd.DataFrame(r.tables(0)["calibration"])

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from pospp import earth, pipeline
+from pospp import earth, flight_stages, pipeline
 from pospp.config import PipelineConfig
 from pospp.io import mcap_reader, parquet_tables, report_files, run_folder
 from pospp.io.run_lock import locked
@@ -335,7 +335,7 @@ def bma_leg_stats(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     from pospp.diagnose.workflow import DiagnosisOptions, diagnose_replays
 
     try:
-        made = pipeline.calibration_replays(pipeline.imu_increments(log), nav, config)
+        made = flight_stages.calibration_replays(pipeline.imu_increments(log), nav, config)
     except ValueError:
         return {}
     if len(made.replays) < MIN_LEGS:
@@ -343,8 +343,8 @@ def bma_leg_stats(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     replays = [made.replays[i] for i in sorted(made.replays)]
     d = diagnose_replays(replays, DiagnosisOptions(
         base_formulation=config.pairs.formulation, base_transition=config.pairs.transition,
-        noise="gyro_rw", gyro_arw_radpsqrts=pipeline.imu_tuning(config).noise().gyro_arw_radpsqrts,
-        effects=(), max_steps=0))
+        noise="gyro_rw", effects=(), max_steps=0,
+        gyro_arw_radpsqrts=flight_stages.imu_tuning(config).noise().gyro_arw_radpsqrts))
     return leg_stats(np.array([g.gap_before_mps for g in d.legs]),
                      np.array([g.heldout_gap_before_mps for g in d.legs]))
 
@@ -363,7 +363,7 @@ def log_stats(log: mcap_reader.FlightLog, config: PipelineConfig, *, vehicle: st
     est_cfg = replace(config, gnss=replace(config.gnss, estimate_lever_arm=True),
                       filter=replace(config.filter, estimate_scale_factors=True))
     opts = replace(config.filter_options(), smoother=False, gauss_markov_states=True)
-    grade = pipeline.imu_tuning(config)
+    grade = flight_stages.imu_tuning(config)
     tuning = replace(grade, accel_gm_sigma_ug=max(EST_ACCEL_GM_UG, grade.accel_gm_sigma_ug),
                      accel_gm_tau_s=EST_ACCEL_GM_TAU_S,
                      gyro_sf_sigma_ppm=max(EST_SF_PRIOR_PPM[0], grade.gyro_sf_sigma_ppm),
@@ -561,7 +561,7 @@ def compare_sim_run(run_dir: str | Path, *, out: str | Path | None = None,
     report_files.write_text(model_file, model_toml(comp.imu_model, comp.gnss_model,
                                                    header=model_header(comp, path.name, config)))
     say("writing the report")
-    pipeline._render_report(run)
+    pipeline.report_from_tables(run)
     return comp
 
 

@@ -23,14 +23,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from pospp.calib.segment import LegThresholds
-from pospp.config_schema import (  # re-exported: the public names of pospp.config
+from pospp.config_schema import (
     MAX_CONFIG_BYTES,
-    MAX_STRING_LEN,  # noqa: F401
     ConfigError,
     Limits,
     check_value,
     convert_value,
-    limits_of,  # noqa: F401
     out_of_range,
     short_repr,
 )

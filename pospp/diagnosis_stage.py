@@ -77,7 +77,8 @@ from pospp.null_stage import (
     rerun_b_minus_a,
     rerun_decimation,
 )
-from pospp.qc.checks import Check, model_fit
+from pospp.qc.check_record import Check
+from pospp.qc.checks import model_fit
 from pospp.qc.lever_time import LeverTime
 from pospp.sensor_stage import SensorFamilies, sensor_families, with_sensor_families
 from pospp.units import DEG_PER_H_RADPS

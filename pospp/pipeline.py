@@ -40,13 +40,10 @@ from pospp.diagnose.results import Diagnosis
 from pospp.diagnose.tables import diagnosis_columns, residual_curve_columns
 from pospp.diagnosis_stage import diagnose_calibration, refit_and_check
 from pospp.evaluate import evaluation_rows, solution_errors
-from pospp.flight_stages import (  # the stage functions, importable from here as before
+from pospp.flight_stages import (
     calibrate_from_a,
-    calibration_replays,  # noqa: F401  (re-exported: compare_sim calls it)
     imu_increments,
-    imu_tuning,  # noqa: F401  (re-exported: compare_sim and the tests call pipeline.imu_tuning)
     ingest,
-    lever_arm_estimate,  # noqa: F401  (re-exported: the power benchmark calls it)
     lever_arm_passes,
     lever_arm_seen,
     navigate,
@@ -59,14 +56,12 @@ from pospp.io.run_lock import locked
 from pospp.lever_time_stage import lever_time_estimate, qc_passes
 from pospp.memory import release_free_heap, share_one_heap
 from pospp.nav import filter as nav_filter
-from pospp.null_stage import (  # the null stage's functions, importable from here as before
-    null_base,  # noqa: F401
+from pospp.null_stage import (
     null_needs_gains,
     null_realisations,
     null_stage,
-    null_white_noise,  # noqa: F401
 )
-from pospp.qc.checks import Check, comparison_text
+from pospp.qc.check_record import Check, comparison_text
 from pospp.qc.lever_time import LeverTime
 from pospp.qc.stage import QualityReport, qc_columns, quality_checks, worst_status
 from pospp.report import figures
@@ -260,7 +255,7 @@ class _RunTables:
         self.write("summary", summary)
         if report:
             book.stage("report")
-            _render_report(self.out)
+            report_from_tables(self.out)
             summary.update(book.timings())
             self.write("summary", summary)
         return RunOutcome(self.out, status, summary, msgs, summary["wall_time_s"])
@@ -478,10 +473,12 @@ def quality_control(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
 @locked("pospp report")
 def write_report(run_dir: str | Path) -> Path:
     """Render report.html of a run folder from its tables alone (``pospp report``)."""
-    return _render_report(run_folder.require_run_folder(run_dir))
+    return report_from_tables(run_folder.require_run_folder(run_dir))
 
 
-def _render_report(run_dir: Path) -> Path:
+def report_from_tables(run_dir: Path) -> Path:
+    """Write RUN_DIR/report.html from the run's tables; return its path. Takes no lock:
+    the caller holds the run's (``process_flight``, ``pospp report``, ``pospp compare-sim``)."""
     tables = report_files.read_run_tables(run_dir)
     title = f"pospp run report: {Path(str(tables['summary'].input_file.iloc[0])).name}" \
         if "summary" in tables else "pospp run report"
@@ -595,6 +592,6 @@ def diagnose_run(run_dir: str | Path, *, progress: ProgressFn | None = None) -> 
     parquet_tables.write_table(run / "diagnosis_curves.parquet",
                                residual_curve_columns(diagnosis), "diagnosis_curves",
                                metadata=out_meta)
-    _render_report(run)
+    report_from_tables(run)
     book.done()
     return diagnosis

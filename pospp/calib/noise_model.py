@@ -228,7 +228,7 @@ class NoiseModel:
                 rep, self.reference_length_s, idx, self.reference_kind)
         if self.gyro_gm_sigma_radps > 0 and np.isfinite(self.gyro_gm_tau_s):
             s, tb = gm_noise_operator(rep, idx)
-            c += self.gyro_gm_sigma_radps**2 * _gm_covariance([(s, tb)], self.gyro_gm_tau_s)
+            c += self.gyro_gm_sigma_radps**2 * gm_covariance([(s, tb)], self.gyro_gm_tau_s)
         c[np.diag_indices_from(c)] += self.white_scale * sq**2
         return c
 
@@ -239,7 +239,9 @@ REFERENCE_KINDS = ("matern32", "osc60", "osc120", "osc240")
 """Correlation families of A's error tried by :func:`fit_noise_model` (profile REML)."""
 
 
-def _leg_rows(rep: LegReplay, step_s: float) -> NDArray:
+def leg_rows(rep: LegReplay, step_s: float) -> NDArray:
+    """Sample indices of one leg's replay every ``step_s`` [s] (the leg's median sample
+    interval rounded to a whole step), from index ``step`` on (index 0 is B's start)."""
     dt_s = max(float(np.median(np.diff(rep.t_s))), 1e-9)
     step = max(1, int(round(step_s / dt_s)))
     return np.arange(step, rep.t_s.size, step)
@@ -385,7 +387,7 @@ def gm_noise_operator(rep: LegReplay, rows: NDArray | None = None, *, bin_s: flo
     return sb.reshape(2 * idx.size, 3 * nb), rep.t0_s + centre
 
 
-def _gm_covariance(ops: list[tuple[NDArray, NDArray]], tau_s: float) -> NDArray:
+def gm_covariance(ops: list[tuple[NDArray, NDArray]], tau_s: float) -> NDArray:
     """S E S^T over several legs: unit-variance drift, E = exp(-|tau_j - tau_k| / tau) I_3.
 
     S is block-diagonal (each leg's rows see only its own drift bins), so the blocks are

@@ -24,7 +24,7 @@ from pospp.calib._drift_kernel import drift_filter_whiten
 from pospp.calib.noise_model import (
     DriftSmoother,
     NoiseBasis,
-    _gm_covariance,
+    gm_covariance,
     gm_noise_operator,
     leg_noise_basis,
 )
@@ -34,7 +34,7 @@ GM_REJECT_DNLL = 0.5 * 5.991
 likelihood-ratio test at 5 % (chi-square, 2 degrees of freedom: 2 dnll > 5.991)."""
 
 
-def _blocks_reml_nll(params: NDArray, mats: list[tuple], hs: list[NDArray],
+def blocks_reml_nll(params: NDArray, mats: list[tuple], hs: list[NDArray],
                      zs: list[NDArray]) -> float:
     """Negative restricted log-likelihood over independent leg blocks (constants dropped).
 
@@ -73,7 +73,7 @@ def _chol_whiten(c: NDArray, h: NDArray, z: NDArray) -> tuple[NDArray, NDArray, 
     return hz[:, :-1], hz[:, -1], 2.0 * float(np.sum(np.log(np.diag(ll))))
 
 
-def _grid_argmin(
+def grid_argmin(
     obj, bounds: list[tuple[float, float]], n: int
 ) -> tuple[NDArray, list[NDArray]]:
     """The best point of an n-per-axis grid over ``bounds`` (the start of the REML searches).
@@ -108,7 +108,7 @@ def _reml_whitened(hw: NDArray, zw: NDArray, logdet: float) -> float:
     return 0.5 * (logdet + info + rss)
 
 
-def _autocorr_inflation(res: NDArray, n_series: int) -> tuple[float, float]:
+def autocorr_inflation(res: NDArray, n_series: int) -> tuple[float, float]:
     """((1 + rho) / (1 - rho), rho) from the residuals' lag-one autocorrelation."""
     r = res.reshape(n_series, -1) if res.size % n_series == 0 else res[None, :]
     num = np.sum(r[:, 1:] * r[:, :-1])
@@ -117,7 +117,12 @@ def _autocorr_inflation(res: NDArray, n_series: int) -> tuple[float, float]:
     return (1.0 + rho) / (1.0 - rho), rho
 
 
-def _lag1(series: list[NDArray]) -> float:
+def lag1_autocorrelation(series: list[NDArray]) -> float:
+    """Pooled lag-one autocorrelation of several residual series [-].
+
+    ``rho = sum_s sum_i r_s[i] r_s[i-1] / sum_s sum_i r_s[i]^2`` (0 when every series is
+    zero); each series is a 1-D array in time order (e.g. one leg's whitened N or E rows).
+    """
     num = sum(float(np.sum(r[1:] * r[:-1])) for r in series)
     den = sum(float(np.sum(r * r)) for r in series)
     return num / den if den > 0 else 0.0
@@ -133,7 +138,7 @@ def _scaled_svd(hw: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArra
     return norms, u, sv, vt, sv > sv[0] * 1e-10
 
 
-def _solve_scaled(hw: NDArray, zw: NDArray) -> tuple[NDArray, NDArray, bool]:
+def solve_scaled(hw: NDArray, zw: NDArray) -> tuple[NDArray, NDArray, bool]:
     """Least squares of a whitened system with column scaling; (x, (H^T H)^-1, deficient)."""
     norms, u, sv, vt, keep = _scaled_svd(hw)
     xs = vt[keep].T @ ((u[:, keep].T @ zw) / sv[keep])
@@ -141,17 +146,17 @@ def _solve_scaled(hw: NDArray, zw: NDArray) -> tuple[NDArray, NDArray, bool]:
     return xs / norms, cov_s / np.outer(norms, norms), bool(not keep.all())
 
 
-def _scaled_map(hw: NDArray) -> NDArray:
-    """The linear map (p, n) of :func:`_solve_scaled`: its x is ``_scaled_map(hw) @ zw``."""
+def scaled_map(hw: NDArray) -> NDArray:
+    """The linear map (p, n) of :func:`solve_scaled`: its x is ``scaled_map(hw) @ zw``."""
     norms, u, sv, vt, keep = _scaled_svd(hw)
     return (vt[keep].T / sv[keep]) @ u[:, keep].T / norms[:, None]
 
 
-def _gls_gain(blocks: list[_LegNoise], a: float, q: float, rows: list[NDArray], n_z: int,
+def gls_gain(blocks: list[LegNoise], a: float, q: float, rows: list[NDArray], n_z: int,
               scaled: NDArray) -> NDArray:
     """The per-leg GLS's estimate as a linear map of the design's z (p, n_z): each leg's rows
-    ``rows[i]`` whitened as :meth:`_LegNoise.whiten` does, then ``scaled``
-    (:func:`_scaled_map` of the stacked whitened design)."""
+    ``rows[i]`` whitened as :meth:`LegNoise.whiten` does, then ``scaled``
+    (:func:`scaled_map` of the stacked whitened design)."""
     gain = np.zeros((scaled.shape[0], n_z))
     at = 0
     for r, b in zip(rows, blocks, strict=True):
@@ -214,7 +219,7 @@ class DriftLegs:
     """The legs of a drift fit in time order, with the parts of C that do not depend on tau:
     the Gauss-Markov drift's restricted likelihood by a Kalman filter over the legs.
 
-    The calibration's full covariance (:func:`_calibrate_gm`, scaled units)
+    The calibration's full covariance (:func:`calibrate_gm`, scaled units)
 
         C = a I + q K + s2 S E S^T,   E_jk = exp(-|tau_j - tau_k| / tau) I_3
 
@@ -337,8 +342,13 @@ class DriftFilter:
         return _reml_whitened(w[0][:, :-1], w[0][:, -1], w[1])
 
 
-class _LegNoise:
-    """Projected H and z of one leg in its :class:`NoiseBasis`."""
+class LegNoise:
+    """Projected H and z of one leg in its :class:`NoiseBasis`.
+
+    With ``K = U diag(lam) U^T`` in units scaled by ``sq`` (D^-1/2), the leg's covariance
+    ``a I + q K`` is diagonal in U: ``h = U^T D^-1/2 H`` (m, p), ``z = U^T D^-1/2 z`` (m,),
+    ``logdet_d = log det D``.
+    """
 
     def __init__(self, basis: NoiseBasis, h: NDArray, z: NDArray):
         self.lam, self.u, self.sq = basis.lam, basis.u, basis.sq
@@ -347,22 +357,30 @@ class _LegNoise:
         self.logdet_d = 2.0 * float(np.sum(np.log(basis.sq)))
 
     def whiten(self, a: float, q: float) -> tuple[NDArray, NDArray, float]:
+        """(h, z divided by sqrt(a + q lam), log det of the leg's unscaled covariance)."""
         v = a + q * self.lam
         w = 1.0 / np.sqrt(v)
         return self.h * w[:, None], self.z * w, float(np.sum(np.log(v))) + self.logdet_d
 
 
-def _gls(blocks: list[_LegNoise], a: float, q: float) -> tuple[NDArray, NDArray, float]:
+def stack_whitened(blocks: list[LegNoise], a: float, q: float
+                   ) -> tuple[NDArray, NDArray, float]:
+    """The legs' whitened designs stacked for the per-leg GLS.
+
+    Each leg's covariance is ``a I + q K`` in its :class:`NoiseBasis` (``a`` A's variance
+    scale [-], ``q`` the gyro angle-random-walk PSD [rad^2/s]); returns (H_w (n, p), z_w (n,),
+    log det Cov) with H_w, z_w the blocks of :meth:`LegNoise.whiten` one under the other.
+    """
     parts = [b.whiten(a, q) for b in blocks]
     return (np.vstack([p[0] for p in parts]), np.concatenate([p[1] for p in parts]),
             sum(p[2] for p in parts))
 
 
-def _reml_nll(theta: NDArray, blocks: list[_LegNoise], q_fixed: float | None) -> float:
+def reml_nll(theta: NDArray, blocks: list[LegNoise], q_fixed: float | None) -> float:
     """Negative restricted log-likelihood (constants dropped) of log a (and log q)."""
     a = float(np.exp(theta[0]))
     q = q_fixed if q_fixed is not None else float(np.exp(theta[1]))
-    hw, zw, logdet = _gls(blocks, a, q)
+    hw, zw, logdet = stack_whitened(blocks, a, q)
     return _reml_whitened(hw, zw, logdet)
 
 
@@ -374,7 +392,7 @@ def _kept(memo: dict, key: tuple, make: Callable[[], Any]) -> Any:
     return memo[key]
 
 
-def _calibrate_gm(legs, h, z, edges, noise_step_s, bases, gm_ops, arw_given, sigma_given,
+def calibrate_gm(legs, h, z, edges, noise_step_s, bases, gm_ops, arw_given, sigma_given,
                   tau_s, bin_s, prior=None, noise_cache=None):
     """GLS + REML with the Gauss-Markov drift (full covariance over all legs).
 
@@ -413,7 +431,7 @@ def _calibrate_gm(legs, h, z, edges, noise_step_s, bases, gm_ops, arw_given, sig
 
     def gm_cov(tau: float) -> NDArray:  # S E S^T, kept in the refits' memo (not in B - A)
         return _kept(memo, ("gm_cov", leg_ids, noise_step_s, bin_s, float(tau)),
-                     partial(_gm_covariance, ops, tau))
+                     partial(gm_covariance, ops, tau))
 
     def likelihood(tau: float, fixed: tuple) -> Callable[[NDArray], float]:
         if noise_cache is not None and None not in fixed:  # only A's scale is fitted
@@ -448,9 +466,9 @@ def _calibrate_gm(legs, h, z, edges, noise_step_s, bases, gm_ops, arw_given, sig
     if ll is None:
         raise np.linalg.LinAlgError("the drift fit's covariance is not positive definite")
     hw = _tri_solve(ll, hs)
-    x, cov, deficient = _solve_scaled(hw, _tri_solve(ll, zs))
+    x, cov, deficient = solve_scaled(hw, _tri_solve(ll, zs))
     gain = np.zeros((x.size, z.size))  # x = gain z: L^-T maps the whitened rows' weights back
-    gain[:, r_all] = linalg.solve_triangular(ll, _scaled_map(hw).T, lower=True, trans="T",
+    gain[:, r_all] = linalg.solve_triangular(ll, scaled_map(hw).T, lower=True, trans="T",
                                              check_finite=False).T / sq
     r = zs - hs @ x
     wr = _tri_solve(ll, r)  # innovations: time-ordered within each leg
@@ -481,7 +499,7 @@ def _fit_variances(nll: Callable[[NDArray], float], fixed: tuple[float | None, f
         v = nll(th)
         return v if penalty is None else v + penalty(th)
 
-    best, axes = _grid_argmin(obj, bounds, 9 if len(bounds) == 1 else 6)
+    best, axes = grid_argmin(obj, bounds, 9 if len(bounds) == 1 else 6)
     if len(bounds) == 1:  # only A's scale: bounded Brent around the best grid point
         step = axes[0][1] - axes[0][0]
         opt = optimize.minimize_scalar(

@@ -69,26 +69,26 @@ from pospp.calib.noise_model import (
     DriftSmoother,
     NoiseBasis,
     NoiseModel,
-    _gm_covariance,
-    _leg_rows,
     accel_noise_covariance,
+    gm_covariance,
     gm_noise_operator,
     gyro_noise_covariance,
     leg_noise_basis,
+    leg_rows,
     reference_error_covariance,
 )
 from pospp.calib.reml import (
-    _autocorr_inflation,
-    _blocks_reml_nll,
-    _calibrate_gm,
-    _gls,
-    _gls_gain,
-    _grid_argmin,
-    _lag1,
-    _LegNoise,
-    _reml_nll,
-    _scaled_map,
-    _solve_scaled,
+    LegNoise,
+    autocorr_inflation,
+    blocks_reml_nll,
+    calibrate_gm,
+    gls_gain,
+    grid_argmin,
+    lag1_autocorrelation,
+    reml_nll,
+    scaled_map,
+    solve_scaled,
+    stack_whitened,
 )
 from pospp.calib.replay import LegReplay
 
@@ -307,7 +307,7 @@ def fit_noise_model(
     edges = np.concatenate([[0], np.cumsum(sizes)])
     rows, hs, zs, base = [], [], [], []
     for i, rep in enumerate(legs):
-        smp = _leg_rows(rep, noise_step_s)
+        smp = leg_rows(rep, noise_step_s)
         rr = (2 * (smp - 1)[:, None] + np.arange(2)[None, :]).reshape(-1) + edges[i]
         sq = rep.sigma_v_n_mps[smp, 0:2].reshape(-1)
         rows.append(smp)
@@ -330,7 +330,7 @@ def fit_noise_model(
             m = [eye, k, ka, g]
             if tau is not None:
                 assert op is not None  # a tau only when gyro_gm_taus_s built the operators
-                m.append(_gm_covariance([op], tau))
+                m.append(gm_covariance([op], tau))
             mats.append(tuple(m))
         free_q = q_fixed is None
         lo = [np.log(1e-8)] + ([np.log(1e-22)] if free_q else []) + [np.log(1e-16)] * 2
@@ -349,9 +349,9 @@ def fit_noise_model(
             return np.array(out)
 
         def nll(theta: NDArray) -> float:
-            return _blocks_reml_nll(unpack(theta), mats, hs, zs)
+            return blocks_reml_nll(unpack(theta), mats, hs, zs)
 
-        th0, _ = _grid_argmin(nll, list(zip(lo, hi, strict=True)), 3)
+        th0, _ = grid_argmin(nll, list(zip(lo, hi, strict=True)), 3)
         # Powell (bounded, derivative-free), then Nelder-Mead from its end: the likelihood is
         # flat along components that the data cannot see, and one search alone stalls there
         opt = optimize.minimize(nll, th0, method="Powell", bounds=list(zip(lo, hi, strict=True)),
@@ -462,12 +462,12 @@ def fit_calibration(
         gyro_gm_tau_s = gm_prior.tau_s
     if noise == "white":
         hw, zw = h / s[:, None], z / s
-        x, cov_s, deficient = _solve_scaled(hw, zw)
-        gain = _scaled_map(hw) / s
+        x, cov_s, deficient = solve_scaled(hw, zw)
+        gain = scaled_map(hw) / s
         res_w = zw - hw @ x
         dof = max(1, zw.size - len(names))
         s0 = float(res_w @ res_w / dof)
-        infl, _ = _autocorr_inflation(res_w, 2 * len(legs))
+        infl, _ = autocorr_inflation(res_w, 2 * len(legs))
         vf = max(s0, 1e-12) * infl
         cov = cov_s * vf
         arw = 0.0
@@ -475,7 +475,7 @@ def fit_calibration(
     elif gyro_gm_tau_s is not None and (gyro_gm_sigma_radps is None
                                         or gyro_gm_sigma_radps > 0):
         (x, cov, deficient, vf, arw, gm_sigma, white, drift, tau_profile,
-         gm_source, gain) = _calibrate_gm(
+         gm_source, gain) = calibrate_gm(
             legs, h, z, edges, noise_step_s, bases, gm_ops, gyro_arw_radpsqrts,
             gyro_gm_sigma_radps, float(gyro_gm_tau_s), gm_bin_s, gm_prior, noise_cache)
     else:
@@ -484,7 +484,7 @@ def fit_calibration(
             basis = leg_noise_basis(rep, noise_step_s, bases, noise_cache)
             r = basis.rows + edges[i]
             rows_all.append(r)
-            blocks.append(_LegNoise(basis, h[r], z[r]))
+            blocks.append(LegNoise(basis, h[r], z[r]))
         if gyro_arw_radpsqrts is None:
             bounds = [(np.log(1e-6), np.log(1e4)), (np.log(1e-22), np.log(1e-6))]
             q_fixed = None
@@ -492,15 +492,15 @@ def fit_calibration(
             bounds = [(np.log(1e-6), np.log(1e4))]
             q_fixed = float(gyro_arw_radpsqrts) ** 2
         # coarse grid (the likelihood is flat in q where a is large), then Nelder-Mead
-        theta0, _ = _grid_argmin(lambda th: _reml_nll(th, blocks, q_fixed), bounds, 11)
-        opt = optimize.minimize(_reml_nll, theta0, args=(blocks, q_fixed), method="Nelder-Mead",
+        theta0, _ = grid_argmin(lambda th: reml_nll(th, blocks, q_fixed), bounds, 11)
+        opt = optimize.minimize(reml_nll, theta0, args=(blocks, q_fixed), method="Nelder-Mead",
                                 options={"xatol": 1e-3, "fatol": 1e-4, "maxiter": 400})
         th = np.clip(opt.x, [b[0] for b in bounds], [b[1] for b in bounds])
         vf = float(np.exp(th[0]))
         q = q_fixed if q_fixed is not None else float(np.exp(th[1]))
-        hw, zw, _ = _gls(blocks, vf, q)
-        x, cov, deficient = _solve_scaled(hw, zw)
-        gain = _gls_gain(blocks, vf, q, rows_all, z.size, _scaled_map(hw))
+        hw, zw, _ = stack_whitened(blocks, vf, q)
+        x, cov, deficient = solve_scaled(hw, zw)
+        gain = gls_gain(blocks, vf, q, rows_all, z.size, scaled_map(hw))
         arw = float(np.sqrt(q))
         white = []
         for r_idx, b in zip(rows_all, blocks, strict=True):  # time-ordered Cov^-1/2 r
@@ -524,7 +524,8 @@ def fit_calibration(
         variance_factor=vf,
         gyro_arw_radpsqrts=arw,
         whitened_rms=float(np.sqrt(np.mean(np.concatenate(white) ** 2))),
-        whitened_lag1=_lag1([w.reshape(-1, 2)[:, c] for w in white for c in range(2)]),
+        whitened_lag1=lag1_autocorrelation([w.reshape(-1, 2)[:, c] for w in white
+                                            for c in range(2)]),
         rank_deficient=deficient,
         gyro_gm_sigma_radps=gm_sigma,
         gyro_gm_tau_s=np.inf if drift is None else drift.tau_s,

@@ -425,7 +425,7 @@ def calibrate_flight(
     chosen = next(c for c in joint if c.formulation == policy.formulation)
     first = replays[chosen.leg_ids[0]]
     bg = chosen.gyro_bias_b_radps(first.c_nb0)
-    sig = _gyro_bias_sigma_b_radps(chosen, first)
+    sig = gyro_bias_sigma_b_radps(chosen, first)
     if chosen.formulation != "body":
         messages.append("paper formulation chosen: its nav-frame drift is rotated into the body "
                         f"with leg {first.leg.leg_id}'s attitude")
@@ -449,11 +449,22 @@ def calibrate_flight(
                           compensation_source=mode.source)
 
 
-def _gyro_bias_sigma_b_radps(chosen: Calibration, first: LegReplay) -> NDArray:
+def gyro_bias_sigma_b_radps(chosen: Calibration, first: LegReplay) -> NDArray:
     """1-sigma of the calibrated body gyro bias (inf for an axis not estimated) [rad/s].
 
-    ``paper`` formulation: its navigation-frame drift covariance rotated into the body with
-    the first leg's attitude (``C_bn cov C_bn^T``).
+    Parameters
+    ----------
+    chosen : Calibration
+        The fit; ``body`` formulation: the sigmas of its ``gyro_bias_{x,y,z}`` (FRD b).
+    first : LegReplay
+        The fit's first leg; ``paper`` formulation: its navigation-frame drift covariance
+        (eps_N, eps_E) rotated into the body with this leg's initial attitude,
+        ``sqrt(diag(C_bn[:, :2] cov C_bn[:, :2]^T))``.
+
+    Returns
+    -------
+    (3,) float
+        sigma of (b_x, b_y, b_z) [rad/s].
     """
     if chosen.formulation == "body":
         sig = np.full(3, np.inf)
@@ -541,7 +552,7 @@ def with_covariance(run: CalibrationRun, cov: NDArray, source: str, note: str,
     assert chosen is not None  # a covariance is only given to a calibration
     honest = replace(chosen, cov=cov)
     joint = tuple(honest if c is chosen else c for c in run.joint)
-    sig = _gyro_bias_sigma_b_radps(honest, run.replays[chosen.leg_ids[0]])
+    sig = gyro_bias_sigma_b_radps(honest, run.replays[chosen.leg_ids[0]])
     flight_sig = sig if flight_sigma_b_radps is None else np.where(
         np.isfinite(sig), flight_sigma_b_radps, np.inf)
     return replace(run, joint=joint, chosen=honest, gyro_bias_sigma_b_radps=sig,

@@ -20,7 +20,7 @@ changed beyond tolerance), 4 partial (the run completed but a stage produced not
 calibration)."""
 
 STATUS_RANK = {"ok": 0, "unchanged": 0, "partial": 1, "changed": 2, "degraded": 2, "failed": 3}
-"""The worse of two statuses has the higher rank (as ``pospp.qc.checks.STATUS_ORDER``)."""
+"""The worse of two statuses has the higher rank (as ``pospp.qc.check_record.STATUS_ORDER``)."""
 
 
 def worst_status(*statuses: str | None) -> str:

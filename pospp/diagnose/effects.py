@@ -90,9 +90,6 @@ from pospp.calib.replay import (
 from pospp.effects_catalog import catalog_entry, row_named
 from pospp.nav.error_model import BG, DR, DV, PHI
 from pospp.threads import map_in_threads
-from pospp.units import ARCSEC_RAD, UG_MPS2  # noqa: F401  (display units, used as fx.*)
-from pospp.units import DEG_PER_H_RADPS as DEG_PER_H  # noqa: F401
-from pospp.units import G0_MPS2 as GRAVITY_MPS2  # noqa: F401
 
 ACCEL_SETTLING_S = 1200.0
 """Default time constant of the accelerometer-bias warm-up of ``accel_bias_change`` [s]."""

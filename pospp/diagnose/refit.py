@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pospp.calib.compensate import joint_calibration
-from pospp.calib.stage import CalibrationRun, _gyro_bias_sigma_b_radps
+from pospp.calib.stage import CalibrationRun, gyro_bias_sigma_b_radps
 from pospp.diagnose.results import EffectResponse
 
 DIRECTIONS = 3
@@ -115,8 +115,8 @@ def refit_calibration(run: CalibrationRun, responses: Sequence[EffectResponse],
     refit = replace(cal, cov=chosen.cov + d.T @ d)
     first = run.replays[chosen.leg_ids[0]]
     bg = refit.gyro_bias_b_radps(first.c_nb0)
-    sig = _gyro_bias_sigma_b_radps(refit, first)
-    extra = _gyro_bias_sigma_b_radps(replace(cal, cov=d.T @ d), first)
+    sig = gyro_bias_sigma_b_radps(refit, first)
+    extra = gyro_bias_sigma_b_radps(replace(cal, cov=d.T @ d), first)
     joint = tuple(refit if c is chosen else c for c in run.joint)
     names = tuple(r.effect for r in responses)
     new = replace(run, joint=joint, chosen=refit, gyro_bias_b_radps=bg,

@@ -26,12 +26,19 @@ decompression may produce more than the smaller of this and what its header clai
 _LZ4_PIECE = 16 * 1024 * 1024  # lz4 output produced at a time beyond the first call
 
 
-class _Truncated(Exception):
+class Truncated(Exception):
     """The file ends inside a record or before the Footer."""
 
 
 @dataclass(frozen=True)
-class _RawChunk:
+class RawChunk:
+    """One Chunk record's header fields and its (still compressed) records.
+
+    ``start_ns`` / ``end_ns``: message_start_time / message_end_time [ns, log time];
+    ``uncompressed_size`` [bytes] and ``crc`` (CRC-32 of the uncompressed records, 0: none)
+    as the header claims them; ``compression``: "" (none), "lz4" or "zstd".
+    """
+
     start_ns: int
     end_ns: int
     uncompressed_size: int
@@ -45,21 +52,26 @@ class _RawChunk:
     header is corrupt; the records present are still checked by size and CRC)."""
 
 
-def _parse_chunk(body: bytes, truncated: bool) -> _RawChunk:
+def parse_chunk(body: bytes, truncated: bool) -> RawChunk:
+    """The :class:`RawChunk` of one Chunk record's body (layout in the module docstring).
+
+    ``truncated``: the file ends inside this record. Raises :class:`Truncated` when the
+    header itself is cut off.
+    """
     if len(body) < _CHUNK_HEAD.size:
-        raise _Truncated("chunk header cut off")
+        raise Truncated("chunk header cut off")
     start, end, usize, crc, clen = _CHUNK_HEAD.unpack_from(body, 0)
     p = _CHUNK_HEAD.size
     comp = body[p : p + clen].decode("utf-8")
     p += clen
     (dlen,) = struct.unpack_from("<Q", body, p) if len(body) >= p + 8 else (None,)
     if dlen is None:
-        raise _Truncated("chunk header cut off")
+        raise Truncated("chunk header cut off")
     data = memoryview(body)[p + 8 : p + 8 + dlen]  # not a copy of the compressed records
     # records_length beyond a whole record is a corrupt header, not a cut file: the records
     # present are checked like any chunk's (size, CRC), never let through unchecked
     short = dlen - len(data)
-    return _RawChunk(start, end, usize, crc, comp, data, truncated and short > 0,
+    return RawChunk(start, end, usize, crc, comp, data, truncated and short > 0,
                      0 if truncated else short)
 
 
@@ -95,13 +107,13 @@ RuntimeError, zlib, the mcap library's errors, a declared size that cannot be al
 lazily)."""
 
 
-def _is_corrupt_data_error(exc: BaseException) -> bool:
+def is_corrupt_data_error(exc: BaseException) -> bool:
     """True when ``exc`` is what corrupt chunk bytes raise (:data:`_CORRUPT_DATA_ERRORS`, or
     zstandard's ``ZstdError``), False for anything else (a bug in pospp, which propagates)."""
     return isinstance(exc, _CORRUPT_DATA_ERRORS) or type(exc).__name__ == "ZstdError"
 
 
-def _decompress(chunk: _RawChunk,
+def decompress(chunk: RawChunk,
                 max_bytes: int = MAX_CHUNK_BYTES) -> bytes | bytearray | memoryview:
     """Chunk records; for a truncated chunk, as many bytes as can be decompressed.
 

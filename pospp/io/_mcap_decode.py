@@ -1,7 +1,7 @@
 """Record framing and batched CDR decoding of MCAP records in memory (:mod:`pospp.io._mcap_scan`).
 
 Private module: the topic specs (:class:`Spec`), the compiled (numba) kernels that frame the
-records of a decompressed chunk (:func:`_walk_records`) and decode its Message payloads in
+records of a decompressed chunk (:func:`walk_records`) and decode its Message payloads in
 place (:func:`_prepare_batch`, :func:`_decode_fixed`), and the per-topic :class:`Collector`
 that owns the decoded arrays. Everything here works on a uint8 buffer already in memory; the
 file itself (magic, chunks, decompression, CRCs, summary section) is read by
@@ -31,7 +31,8 @@ from pospp.io.errors import IngestError
 
 _LITTLE_ENDIAN = sys.byteorder == "little"
 # typed for any buffer: numpy's stubs give ndarray no ``__buffer__`` before Python 3.12
-_REC: Callable[[Any, int], tuple[Any, ...]] = struct.Struct("<BQ").unpack_from
+RECORD_HEAD: Callable[[Any, int], tuple[Any, ...]] = struct.Struct("<BQ").unpack_from
+"""``RECORD_HEAD(buf, offset) -> (opcode, length)``: an MCAP record's header (u8, u64 LE)."""
 
 # --------------------------------------------------------------------------- topic specs
 
@@ -101,7 +102,7 @@ few messages go through the generic decoder."""
 @njit(cache=True, nogil=True)
 def _walk_pass(buf: np.ndarray, msg_pos: np.ndarray, msg_ch: np.ndarray, meta_pos: np.ndarray,
                fill: bool) -> tuple:  # pragma: no cover - compiled
-    """One walk of :func:`_walk_records`: counts only, or (``fill``) offsets written too."""
+    """One walk of :func:`walk_records`: counts only, or (``fill``) offsets written too."""
     n = buf.shape[0]
     n_msg = 0
     n_meta = 0
@@ -133,7 +134,7 @@ def _walk_pass(buf: np.ndarray, msg_pos: np.ndarray, msg_ch: np.ndarray, meta_po
 
 
 @njit(cache=True, nogil=True)
-def _walk_records(buf: np.ndarray) -> tuple:  # pragma: no cover - compiled
+def walk_records(buf: np.ndarray) -> tuple:  # pragma: no cover - compiled
     """Frame the records of ``buf`` (uint8): ``opcode u8, length u64, body`` each.
 
     Returns (message count, message record offsets, their channel ids, Schema/Channel count,
@@ -193,7 +194,7 @@ def _prepare_batch(buf: np.ndarray, pos: np.ndarray, state: np.ndarray, log_out:
     generic decoder) for payloads shorter than a CDR header or not little-endian plain CDR
     (encapsulation bytes 0x00 0x01), 0 (not decoded yet) for the others.
 
-    The records were framed by :func:`_walk_records`, so each lies wholly inside ``buf``
+    The records were framed by :func:`walk_records`, so each lies wholly inside ``buf``
     when it is long enough for its log time; returns the index of the first that is not
     (its log time would overrun ``buf``), else -1.
     """
@@ -395,7 +396,7 @@ class Collector:
             for name in self.spec.wanted:
                 out[name][done] = out[name][done].byteswap()
         for i in np.flatnonzero(state == 2):
-            s, ln = int(starts[i]), int(_REC(buf, int(pos[i]))[1]) - 22
+            s, ln = int(starts[i]), int(RECORD_HEAD(buf, int(pos[i]))[1]) - 22
             vals = self._decode_slow(channel_id, buf[s : s + ln].tobytes(), row0 + int(i))
             for name in self.spec.wanted:
                 out[name][row0 + i] = vals[name]
@@ -414,7 +415,7 @@ class Collector:
         dt = _cdr_dtype(self.spec.layout, fl) if fl >= 1 else None
         j = -1  # a message of this frame_id length and the layout's payload length
         if dt is not None:
-            if _REC(buf, int(pos[i]))[1] - 22 == dt.itemsize:
+            if RECORD_HEAD(buf, int(pos[i]))[1] - 22 == dt.itemsize:
                 j = i
             else:
                 same = np.flatnonzero(state == 0)

@@ -30,15 +30,15 @@ from mcap.exceptions import McapError
 from mcap.records import Channel, Schema
 from numba.core.errors import NumbaError
 
-from pospp.io._mcap_chunk import (  # noqa: F401  (MAX_CHUNK_BYTES: re-exported)
+from pospp.io._mcap_chunk import (
     MAX_CHUNK_BYTES,
-    _decompress,
-    _is_corrupt_data_error,
-    _parse_chunk,
-    _RawChunk,
-    _Truncated,
+    RawChunk,
+    Truncated,
+    decompress,
+    is_corrupt_data_error,
+    parse_chunk,
 )
-from pospp.io._mcap_decode import _REC, Collector, _walk_records
+from pospp.io._mcap_decode import RECORD_HEAD, Collector, walk_records
 from pospp.io.errors import IngestError, IngestIssue
 from pospp.io.files import open_regular
 
@@ -103,7 +103,7 @@ def _count_hints(f: Any, size: int) -> dict[int, int]:
     try:
         f.seek(size - tail_len)
         tail = f.read(tail_len)
-        if tail[-len(_MAGIC):] != _MAGIC or _REC(tail, 0) != (_OP_FOOTER, _FOOTER_LEN):
+        if tail[-len(_MAGIC):] != _MAGIC or RECORD_HEAD(tail, 0) != (_OP_FOOTER, _FOOTER_LEN):
             return {}
         start, footer_at = struct.unpack_from("<Q", tail, 9)[0], size - tail_len
         if not len(_MAGIC) <= start < footer_at or footer_at - start > _MAX_SUMMARY_BYTES:
@@ -112,7 +112,7 @@ def _count_hints(f: Any, size: int) -> dict[int, int]:
         data = f.read(footer_at - start)
         pos = 0
         while pos + 9 <= len(data):
-            op, ln = _REC(data, pos)
+            op, ln = RECORD_HEAD(data, pos)
             if op == _OP_STATISTICS:
                 cap = _MAX_RATIO * size // 31
                 counts = _parse_stats(data[pos + 9 : pos + 9 + ln], start + pos).per_channel
@@ -232,15 +232,15 @@ class Scan:
     def _records(self, buf: bytes | bytearray | memoryview, *, partial: bool = False) -> int:
         """Walk the records of a decompressed chunk (or a block of loose messages).
 
-        The framing is one compiled pass (:func:`_walk_records`); Schema and Channel records
+        The framing is one compiled pass (:func:`walk_records`); Schema and Channel records
         are then read in order, and the messages dispatched by channel. With ``partial`` (a
         truncated chunk), stop quietly at the first incomplete record. Returns the number of
         bytes walked.
         """
         arr = np.frombuffer(buf, dtype=np.uint8)
-        n_msg, msg_pos, msg_ch, n_meta, meta_pos, pos, err = _walk_records(arr)
+        n_msg, msg_pos, msg_ch, n_meta, meta_pos, pos, err = walk_records(arr)
         for p in meta_pos[:n_meta].tolist():
-            self._meta(buf[p], buf[p + 9 : p + 9 + _REC(buf, p)[1]])
+            self._meta(buf[p], buf[p + 9 : p + 9 + RECORD_HEAD(buf, p)[1]])
         if err and not partial:
             raise ValueError(f"record overruns the chunk at offset {pos}" if err == 1 else
                              f"record with the reserved opcode 0x00 at offset {pos}")
@@ -298,8 +298,8 @@ class Scan:
                 while True:
                     head = f.read(9)
                     if len(head) < 9:
-                        raise _Truncated("file ends without a Footer record")
-                    op, ln = _REC(head, 0)
+                        raise Truncated("file ends without a Footer record")
+                    op, ln = RECORD_HEAD(head, 0)
                     if op in (_OP_CHUNK, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_STATISTICS):
                         if self.data_end and op in (_OP_CHUNK, _OP_MESSAGE):
                             self._data_after_data_end(op, good)
@@ -308,9 +308,9 @@ class Scan:
                         short = len(body) < ln
                         if op == _OP_CHUNK:
                             self._flush_loose()
-                            self._chunk(_parse_chunk(body, short), good)
+                            self._chunk(parse_chunk(body, short), good)
                         elif short:
-                            raise _Truncated("record cut off")
+                            raise Truncated("record cut off")
                         elif op == _OP_MESSAGE:
                             self._loose.append(head + body)
                             if len(self._loose) >= 10000:
@@ -325,7 +325,7 @@ class Scan:
                         else:
                             self._meta(op, body)
                         if short:
-                            raise _Truncated("chunk cut off (decoded what it held)")
+                            raise Truncated("chunk cut off (decoded what it held)")
                     elif op == _OP_FOOTER and self._footer_at_end(f, good, ln, size):
                         self._flush_loose()
                         self._check_statistics()
@@ -333,7 +333,7 @@ class Scan:
                         return
                     else:
                         if good + 9 + ln > size:
-                            raise _Truncated("record cut off")
+                            raise Truncated("record cut off")
                         if op == _OP_FOOTER:
                             self._flush_loose()
                             self._misplaced_footer(good, ln, size)
@@ -346,7 +346,7 @@ class Scan:
                     good = f.tell()
             except IngestError:
                 raise
-            except (_Truncated, ValueError, struct.error, UnicodeDecodeError, IndexError) as exc:
+            except (Truncated, ValueError, struct.error, UnicodeDecodeError, IndexError) as exc:
                 try:
                     self._flush_loose()
                 except (ValueError, struct.error):
@@ -458,19 +458,19 @@ class Scan:
                 f"{self._when()})", s.offset,
             )
 
-    def _chunk(self, chunk: _RawChunk, offset: int) -> None:
+    def _chunk(self, chunk: RawChunk, offset: int) -> None:
         try:
-            data = _decompress(chunk, self.max_chunk_bytes)
+            data = decompress(chunk, self.max_chunk_bytes)
             self._records(data, partial=chunk.truncated)
             if chunk.overstated_by:
                 self._overstated(chunk, offset)
         except (IngestError, NumbaError):
             raise  # a compiled pass that fails is pospp's error, not a corrupt chunk
         except Exception as exc:  # noqa: BLE001 - zstd/lz4 errors have their own classes
-            if not _is_corrupt_data_error(exc):
+            if not is_corrupt_data_error(exc):
                 raise  # a TypeError or AttributeError is pospp's bug, not the file's
             if chunk.truncated:
-                raise _Truncated(f"chunk cut off and undecodable: {exc}") from exc
+                raise Truncated(f"chunk cut off and undecodable: {exc}") from exc
             cause = str(exc) if isinstance(exc, ValueError | struct.error | IndexError) else (
                 f"{type(exc).__name__}: {exc}")
             self._error(
@@ -479,7 +479,7 @@ class Scan:
                 offset, log_time_ns=chunk.start_ns, time_ns=chunk.start_ns,
             )
 
-    def _overstated(self, chunk: _RawChunk, offset: int) -> None:
+    def _overstated(self, chunk: RawChunk, offset: int) -> None:
         """A chunk whose ``records_length`` claims more than its record holds, and whose
         records passed the size check: kept. With a CRC that matched, the records are intact
         (a warning); without one (CRC 0), nothing vouches for them (an error issue: the file

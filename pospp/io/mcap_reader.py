@@ -61,8 +61,9 @@ import numpy as np
 
 from pospp.io._blockwise import rotation_sums, row_norms
 from pospp.io._bounds import check_values
+from pospp.io._mcap_chunk import MAX_CHUNK_BYTES
 from pospp.io._mcap_decode import EVENT_SPEC, FIX_SPEC, IMU_SPEC, VEL_SPEC, Collector
-from pospp.io._mcap_scan import MAX_CHUNK_BYTES, Scan
+from pospp.io._mcap_scan import Scan
 from pospp.io.errors import IngestError, IngestIssue, MissingTopicError
 from pospp.io.files import require_regular
 from pospp.types import (

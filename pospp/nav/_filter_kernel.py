@@ -212,7 +212,7 @@ def measurement_model(kind, x, lever, w_b, z, dt_meas, i_gm, i_sf, i_l, h_mat, d
         v_ant[a] = x[X_VEL + a] + cwl[a] - wcl[a]
     h_mat[:, :] = 0.0
     if kind == MEAS_POSITION:
-        r_m, r_n = _kernels._radii(lat)
+        r_m, r_n = _kernels.radii(lat)
         d0 = (z[0] - lat) * (r_m + h)
         d1 = (z[1] - x[X_POS + 1]) * (r_n + h) * math.cos(lat)
         d2 = -(z[2] - h)

@@ -43,7 +43,8 @@ from pospp.earth import (
     radii_from_sin2,
 )
 
-_radii = njit(cache=True)(radii_formula)
+radii = njit(cache=True)(radii_formula)
+"""Compiled :func:`pospp.earth.radii_formula`: (R_M, R_N) [m] of geodetic latitude [rad]."""
 _gravity = njit(cache=True)(gravity_formula)
 _radii_s2 = njit(cache=True)(radii_from_sin2)
 _gravity_s2 = njit(cache=True)(gravity_from_sin2)
@@ -102,7 +103,7 @@ def dcm_from_quat_into(q, c):
 @njit(cache=True)
 def nav_rates(lat, h, vn, ve):
     """(w_ie_n, w_en_n) components in NED [rad/s] as two 3-tuples (Groves Eq. 2.123, 5.44)."""
-    r_m, r_n = _radii(lat)
+    r_m, r_n = radii(lat)
     sl = math.sin(lat)
     cl = math.cos(lat)
     wie = (EARTH_RATE_RADPS * cl, 0.0, -EARTH_RATE_RADPS * sl)
@@ -139,7 +140,7 @@ def strapdown_step(x, x_prev, dth, dvel, dth_prev, dv_prev, dt, extrap, x_out):
     ve_m = ve + extrap * (ve - x_prev[4])
     vd_m = vd + extrap * (vd - x_prev[5])
     # Earth terms at the extrapolated mid-interval: one sin/cos/sqrt serves radii, gravity and
-    # the rates (same formulas as nav_rates, _radii, _gravity)
+    # the rates (same formulas as nav_rates, radii, _gravity)
     sl_m = math.sin(lat_m)
     cl_m = math.cos(lat_m)
     s2_m = sl_m * sl_m

@@ -40,7 +40,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from pospp.nav._kernels import X_POS, X_QUAT, X_VEL, _radii, quat_from_rotvec, quat_mul
+from pospp.nav._kernels import X_POS, X_QUAT, X_VEL, quat_from_rotvec, quat_mul, radii
 from pospp.nav.error_model import I_DR, I_DV, I_PHI
 
 
@@ -289,7 +289,7 @@ def apply_correction(x, dx):
     q_nb <- exp(phi) * q_nb, since C_nb,true = (I + [phi x]) C_nb,computed.
     """
     lat, h = x[X_POS], x[X_POS + 2]
-    r_m, r_n = _radii(lat)
+    r_m, r_n = radii(lat)
     x[X_POS] = lat - dx[I_DR] / (r_m + h)
     x[X_POS + 1] = x[X_POS + 1] - dx[I_DR + 1] / ((r_n + h) * math.cos(lat))
     x[X_POS + 2] = h + dx[I_DR + 2]

@@ -3,7 +3,7 @@
 Frames and units: body FRD (b), navigation NED (n), sensor as logged (s); SI and radians
 inside, the reported ``value`` / ``threshold`` in the unit named by ``Check.unit``. Times
 ``t_s`` are seconds from the run epoch (the first IMU stamp). The record :class:`Check` and
-the run status are in :mod:`pospp.qc.check_record` (re-exported here).
+the run status are in :mod:`pospp.qc.check_record`.
 
 Each check states the statistic it computes, the threshold, and (docs/qc.md) its false-alarm
 level and the margins measured on clean data. A check that cannot be evaluated on the data
@@ -11,7 +11,7 @@ level and the margins measured on clean data. A check that cannot be evaluated o
 
 ``severity`` is the run status a failure imposes: "partial" (a stage produced nothing),
 "degraded" (the answer is suspect) or "failed" (the answer is wrong); the run status is the
-worst severity among the failed checks (:func:`run_status`).
+worst severity among the failed checks (:func:`pospp.qc.check_record.run_status`).
 """
 
 from __future__ import annotations
@@ -23,11 +23,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from pospp import earth
 from pospp.distributions import chi2_ppf, poisson_isf
-from pospp.qc.check_record import STATUS_ORDER as STATUS_ORDER
-from pospp.qc.check_record import Check as Check
-from pospp.qc.check_record import comparison_text as comparison_text
-from pospp.qc.check_record import run_status as run_status
-from pospp.qc.check_record import skip as skip
+from pospp.qc.check_record import Check, skip
 from pospp.qc.check_record import time_offset_ns as _toff
 from pospp.qc.lever_time import LEVER_ARM_FLOOR_M, LeverTime, lever_time_verdict
 from pospp.units import DEG_PER_H_RADPS

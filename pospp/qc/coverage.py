@@ -1,5 +1,5 @@
 """QC check of the GNSS coverage of algorithm A: arrays in, a frozen
-:class:`pospp.qc.checks.Check` out (no I/O).
+:class:`pospp.qc.check_record.Check` out (no I/O).
 
 GNSS lost 300-400 s into the sample flight left every other check passing (a NIS band and a
 gate count need GNSS records to judge; the lever-arm and time-offset checks need turns with
@@ -14,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 
 from pospp.nav.aiding import GNSS_GAP_MAX_S, GnssAiding
-from pospp.qc.checks import Check
+from pospp.qc.check_record import Check
 from pospp.units import NS_PER_S
 
 __all__ = ["gnss_coverage"]

@@ -1,6 +1,6 @@
 """QC check of the IMU's mounting yaw: A's heading against the GNSS course.
 
-Arrays in, a frozen :class:`pospp.qc.checks.Check` out (no I/O). Frames: NED, body FRD as
+Arrays in, a frozen :class:`pospp.qc.check_record.Check` out (no I/O). Frames: NED, body FRD as
 declared (the configured ``[input] mounting_rpy_deg`` applied); angles rad inside, deg in the
 check; times ``t_s`` from the run epoch.
 
@@ -28,7 +28,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pospp import rotation
-from pospp.qc.checks import LEVER_ARM_MAX_M, LEVER_ARM_SIGMAS, Check, skip
+from pospp.qc.check_record import Check, skip
+from pospp.qc.checks import LEVER_ARM_MAX_M, LEVER_ARM_SIGMAS
 
 __all__ = ["MOUNTING_YAW_MAX_DEG", "HeadingOffset", "heading_offset", "lever_arm_naming_mounting",
            "mounting_yaw"]

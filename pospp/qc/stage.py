@@ -25,7 +25,7 @@ from pospp.nav.alignment import static_windows
 from pospp.nav.filter import STATUS_GATED, STATUS_RESET, STATUS_USED
 from pospp.qc import checks as qc
 from pospp.qc import mounting, time_offset
-from pospp.qc.checks import Check
+from pospp.qc.check_record import STATUS_ORDER, Check, run_status, skip
 from pospp.qc.coverage import gnss_coverage
 from pospp.units import t_s_from_time_ns
 
@@ -44,7 +44,7 @@ class QualityReport:
     @property
     def status(self) -> str:
         """Worst severity among the failed checks ("ok" when all passed)."""
-        return qc.run_status(self.checks)
+        return run_status(self.checks)
 
     @property
     def failed(self) -> tuple[Check, ...]:
@@ -63,7 +63,7 @@ class QualityReport:
 
 def worst_status(*statuses: str) -> str:
     """The worst of run statuses ("ok" < "partial" < "degraded" < "failed")."""
-    return qc.STATUS_ORDER[max(qc.STATUS_ORDER.index(s) for s in statuses)]
+    return STATUS_ORDER[max(STATUS_ORDER.index(s) for s in statuses)]
 
 
 def config_problems(config: Any) -> list[str]:
@@ -147,8 +147,8 @@ def _offset_and_lever(q: QcInputs, _: list[Check]) -> list[Check]:
     lt = joint() if need and joint is not None else None
     out.append(time_offset.gnss_time_offset(est, lt) if lt is not None else first[0])
     if lev is None:
-        out.append(qc.skip("lever_arm", "navigate", "no lever-arm estimate", "m",
-                           qc.LEVER_ARM_MAX_M))
+        out.append(skip("lever_arm", "navigate", "no lever-arm estimate", "m",
+                        qc.LEVER_ARM_MAX_M))
     else:
         out.append(first[1] if lt is None else qc.lever_arm(
             config.gnss.lever_arm_m, lev.lever_b_m, lev.sigma_b_m, observable=obs,

@@ -1,6 +1,6 @@
 """QC check of the GNSS-IMU time offset: the GNSS course changes against the integrated IMU yaw
 rate, searched over seconds to tens of seconds, and the joint estimate with the lever arm for
-the milliseconds (arrays in, a frozen :class:`pospp.qc.checks.Check` out; no I/O). Times
+the milliseconds (arrays in, a frozen :class:`pospp.qc.check_record.Check` out; no I/O). Times
 ``t_s`` are seconds from the run epoch; rates rad/s; velocities NED m/s.
 
 The check fails when the offset is significant against its own sigma (beyond
@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pospp.qc.checks import Check, skip
+from pospp.qc.check_record import Check, skip
 from pospp.qc.lever_time import TIME_OFFSET_FLOOR_S, LeverTime, lever_time_verdict
 
 TIME_OFFSET_MAX_S = 0.1

@@ -22,7 +22,8 @@ Mapper = Callable[[ArrayLike], np.ndarray]
 
 DPI = 80.0
 """Pixels per inch of the drawing (the PNG figures were saved at 80 dpi)."""
-_PX_PER_PT = DPI / 72.0
+PX_PER_PT = DPI / 72.0
+"""Pixels per typographic point (1 pt = 1/72 inch) at :data:`DPI`."""
 _FONT_PT = 10.0
 _DASHES = {"-": None, "solid": None, "--": (3.7, 1.6), "dashed": (3.7, 1.6),
            ":": (1.0, 1.65), "dotted": (1.0, 1.65), "-.": (6.4, 1.6, 1.0, 1.6),
@@ -34,13 +35,15 @@ def _f(v: float) -> str:
     return f"{v:.1f}"
 
 
-def _text(x: float, y: float, s: str, size_pt: float, *, anchor: str = "middle",
-          baseline: str = "auto", color: str = "#000000", weight: str | None = None,
-          rotate: float = 0.0) -> str:
+def svg_text(x: float, y: float, s: str, size_pt: float, *, anchor: str = "middle",
+             baseline: str = "auto", color: str = "#000000", weight: str | None = None,
+             rotate: float = 0.0) -> str:
+    """An SVG ``<text>`` element at pixel (x, y), ``size_pt`` points, rotated ``rotate``
+    degrees about (x, y); ``s`` escaped, a ``10^{k}`` tick label as a superscript."""
     tr = f' transform="rotate({rotate:g} {_f(x)} {_f(y)})"' if rotate else ""
     wt = f' font-weight="{weight}"' if weight else ""
     fill = "" if color == "#000000" else f' fill="{color}"'
-    return (f'<text x="{_f(x)}" y="{_f(y)}" font-size="{size_pt * _PX_PER_PT:.1f}" '
+    return (f'<text x="{_f(x)}" y="{_f(y)}" font-size="{size_pt * PX_PER_PT:.1f}" '
             f'text-anchor="{anchor}" dominant-baseline="{baseline}"{fill}{wt}{tr}>'
             f"{_markup(s)}</text>")
 
@@ -57,7 +60,7 @@ def _text_width_px(s: str, size_pt: float) -> float:
     """Approximate width of a text line (0.6 em per character)."""
     if s.startswith("10^{"):
         s = s[4:-1] + "10"
-    return 0.6 * size_pt * _PX_PER_PT * len(s)
+    return 0.6 * size_pt * PX_PER_PT * len(s)
 
 
 def _nice_ticks(lo: float, hi: float, target: int) -> np.ndarray:
@@ -139,7 +142,7 @@ def _polyline_runs(px: np.ndarray, py: np.ndarray) -> list[str]:
 
 
 def _marker(kind: str, x: float, y: float, ms_pt: float, fill: str) -> str:
-    r = ms_pt * _PX_PER_PT / 2
+    r = ms_pt * PX_PER_PT / 2
     if kind == "s":
         return (f'<rect x="{_f(x - r)}" y="{_f(y - r)}" width="{_f(2 * r)}" '
                 f'height="{_f(2 * r)}" fill="{fill}"/>')
@@ -196,7 +199,7 @@ def _ticks(ax: Axes, box: tuple[float, float, float, float],
 def _grid_lines(grid: dict[str, Any], box: tuple[float, float, float, float], px: Any,
                 py: Any, pminor: Any) -> list[str]:
     x0, y0, w, h = box
-    g = [f'<g stroke="#b0b0b0" stroke-width="{0.8 * _PX_PER_PT:.2f}" '
+    g = [f'<g stroke="#b0b0b0" stroke-width="{0.8 * PX_PER_PT:.2f}" '
          f'stroke-opacity="{grid["alpha"]:.3g}">']
     g.extend(f'<line x1="{_f(v)}" y1="{_f(y0)}" x2="{_f(v)}" y2="{_f(y0 + h)}"/>' for v in px)
     g.extend(f'<line x1="{_f(x0)}" y1="{_f(v)}" x2="{_f(x0 + w)}" y2="{_f(v)}"/>' for v in py)
@@ -210,10 +213,10 @@ def _grid_lines(grid: dict[str, Any], box: tuple[float, float, float, float], px
 def _frame_and_ticks(box: tuple[float, float, float, float], px: Any, py: Any,
                      pminor: Any) -> list[str]:
     x0, y0, w, h = box
-    tl = 3.5 * _PX_PER_PT
+    tl = 3.5 * PX_PER_PT
     out = [f'<rect x="{_f(x0)}" y="{_f(y0)}" width="{_f(w)}" height="{_f(h)}" '
-           f'fill="none" stroke="#000000" stroke-width="{0.8 * _PX_PER_PT:.2f}"/>',
-           f'<g stroke="#000000" stroke-width="{0.8 * _PX_PER_PT:.2f}">']
+           f'fill="none" stroke="#000000" stroke-width="{0.8 * PX_PER_PT:.2f}"/>',
+           f'<g stroke="#000000" stroke-width="{0.8 * PX_PER_PT:.2f}">']
     out.extend(f'<line x1="{_f(v)}" y1="{_f(y0 + h)}" x2="{_f(v)}" y2="{_f(y0 + h + tl)}"/>'
                for v in px)
     out.extend(f'<line x1="{_f(x0 - tl)}" y1="{_f(v)}" x2="{_f(x0)}" y2="{_f(v)}"/>'
@@ -228,33 +231,33 @@ def _labels(ax: Axes, box: tuple[float, float, float, float], t: dict[str, Any],
             py: Any) -> list[str]:
     """Tick labels, axis labels and the title."""
     x0, y0, w, h = box
-    tl = 3.5 * _PX_PER_PT
+    tl = 3.5 * PX_PER_PT
     out = []
     lab_h = 0.0
     if not ax.hide_xticklabels:
         xpt, xrot = t["xpt"], t["xrot"]
         for v, s in zip(px, t["xlab"], strict=True):
             if xrot:
-                out.append(_text(v, y0 + h + tl + 2, s, xpt, anchor="end", baseline="hanging",
+                out.append(svg_text(v, y0 + h + tl + 2, s, xpt, anchor="end", baseline="hanging",
                                  rotate=-xrot))
             else:
-                out.append(_text(v, y0 + h + tl + 2, s, xpt, baseline="hanging"))
+                out.append(svg_text(v, y0 + h + tl + 2, s, xpt, baseline="hanging"))
         rot_h = max((_text_width_px(s, xpt) for s in t["xlab"]), default=0.0) * math.sin(
             math.radians(xrot))
-        lab_h = tl + 2 + xpt * _PX_PER_PT * 1.2 + rot_h
+        lab_h = tl + 2 + xpt * PX_PER_PT * 1.2 + rot_h
     lab_w = 0.0
     if not ax.hide_yticklabels:
-        out.extend(_text(x0 - tl - 2, v, s, _FONT_PT, anchor="end", baseline="middle")
+        out.extend(svg_text(x0 - tl - 2, v, s, _FONT_PT, anchor="end", baseline="middle")
                    for v, s in zip(py, t["ylab"], strict=True))
         lab_w = tl + 2 + max((_text_width_px(s, _FONT_PT) for s in t["ylab"]), default=0.0)
     if ax.xlabel:
-        out.append(_text(x0 + w / 2, y0 + h + lab_h + 2, ax.xlabel, ax._xlabel_pt,
+        out.append(svg_text(x0 + w / 2, y0 + h + lab_h + 2, ax.xlabel, ax._xlabel_pt,
                          baseline="hanging"))
     if ax.ylabel:
-        out.append(_text(x0 - lab_w - 4, y0 + h / 2, ax.ylabel, ax._ylabel_pt,
+        out.append(svg_text(x0 - lab_w - 4, y0 + h / 2, ax.ylabel, ax._ylabel_pt,
                          baseline="auto", rotate=-90))
     if ax.title:
-        out.append(_text(x0 + w / 2, y0 - 6 * _PX_PER_PT, ax.title, ax._title_pt))
+        out.append(svg_text(x0 + w / 2, y0 - 6 * PX_PER_PT, ax.title, ax._title_pt))
     return out
 
 
@@ -264,10 +267,10 @@ def _annotations(ax: Axes, fx: Mapper, fy: Mapper) -> list[str]:
         px, py = float(fx(an["xy"][0])), float(fy(an["xy"][1]))
         if not (np.isfinite(px) and np.isfinite(py)):
             continue
-        px += an["off"][0] * _PX_PER_PT
-        py -= an["off"][1] * _PX_PER_PT
+        px += an["off"][0] * PX_PER_PT
+        py -= an["off"][1] * PX_PER_PT
         base = {"center": "middle", "top": "hanging", "bottom": "auto"}.get(an["va"], "auto")
-        out.append(_text(px, py, an["text"], an["pt"], anchor="start", baseline=base,
+        out.append(svg_text(px, py, an["text"], an["pt"], anchor="start", baseline=base,
                          color=an["color"], weight=an["weight"]))
     return out
 
@@ -322,7 +325,7 @@ def _draw_artist(a: dict[str, Any], fx: Mapper, fy: Mapper, x0: float, w: float,
     k = a["kind"]
     out: list[str] = []
     if k == "line":
-        lw = a["lw"] * _PX_PER_PT
+        lw = a["lw"] * PX_PER_PT
         px, py = fx(a["x"]), fy(a["y"])
         if a["ls"] not in ("none", "None", ""):
             for pts in _polyline_runs(px, py):
@@ -343,7 +346,7 @@ def _draw_artist(a: dict[str, Any], fx: Mapper, fy: Mapper, x0: float, w: float,
             out.append(f'<polygon points="{pts}" {_paint(a["color"], "fill")} stroke="none"/>')
     elif k == "hline":
         v = float(fy(a["y"]))
-        lw = a["lw"] * _PX_PER_PT
+        lw = a["lw"] * PX_PER_PT
         if np.isfinite(v):
             out.append(f'<line x1="{_f(x0)}" y1="{_f(v)}" x2="{_f(x0 + w)}" y2="{_f(v)}" '
                        f'{_paint(a["color"], "stroke")} stroke-width="{lw:.2f}"'
@@ -368,18 +371,18 @@ def _draw_artist(a: dict[str, Any], fx: Mapper, fy: Mapper, x0: float, w: float,
                        f'{_paint(a["color"], "fill")}/>')
     elif k == "errorbar":
         col = a["color"][0]
-        cap = a["capsize"] * _PX_PER_PT
+        cap = a["capsize"] * PX_PER_PT
         for xv, yv, ev in zip(a["x"], a["y"], a["e"], strict=True):
             xe = float(fx(xv))
             lo, hi, mid = float(fy(yv - ev)), float(fy(yv + ev)), float(fy(yv))
             if np.isfinite(lo) and np.isfinite(hi):
                 out.append(f'<line x1="{_f(xe)}" y1="{_f(lo)}" x2="{_f(xe)}" y2="{_f(hi)}" '
-                           f'stroke="{col}" stroke-width="{1.5 * _PX_PER_PT:.2f}"/>')
+                           f'stroke="{col}" stroke-width="{1.5 * PX_PER_PT:.2f}"/>')
                 if cap:
                     for yy in (lo, hi):
                         out.append(f'<line x1="{_f(xe - cap)}" y1="{_f(yy)}" '
                                    f'x2="{_f(xe + cap)}" y2="{_f(yy)}" stroke="{col}" '
-                                   f'stroke-width="{1.5 * _PX_PER_PT:.2f}"/>')
+                                   f'stroke-width="{1.5 * PX_PER_PT:.2f}"/>')
             if np.isfinite(mid):
                 out.append(_marker(a["marker"], xe, mid, a["ms"], col))
     return out
@@ -393,7 +396,7 @@ def _draw_legend(ax: Axes, box: tuple[float, float, float, float], fx: Mapper,
     leg = ax._legend
     assert leg is not None  # draw_axes draws a legend only when one was asked for
     pt = leg["pt"]
-    fs = pt * _PX_PER_PT
+    fs = pt * PX_PER_PT
     ncol = max(1, min(leg["ncol"], len(items)))
     nrow = -(-len(items) // ncol)
     handle = 2.0 * fs
@@ -438,7 +441,7 @@ def _draw_legend(ax: Axes, box: tuple[float, float, float, float], fx: Mapper,
         hy = ly + 0.3 * fs + (r + 0.5) * 1.3 * fs
         col = a["color"]
         if a["kind"] in ("line", "hline"):
-            lw = a["lw"] * _PX_PER_PT
+            lw = a["lw"] * PX_PER_PT
             if a["ls"] not in ("none", "None", ""):
                 out.append(f'<line x1="{_f(hx)}" y1="{_f(hy)}" x2="{_f(hx + handle)}" '
                            f'y2="{_f(hy)}" {_paint(col, "stroke")} stroke-width="{lw:.2f}"'
@@ -450,7 +453,7 @@ def _draw_legend(ax: Axes, box: tuple[float, float, float, float], fx: Mapper,
         else:
             out.append(f'<rect x="{_f(hx)}" y="{_f(hy - 0.35 * fs)}" width="{_f(handle)}" '
                        f'height="{_f(0.7 * fs)}" {_paint(col, "fill")}/>')
-        out.append(_text(hx + handle + 0.4 * fs, hy, str(a["label"]), pt, anchor="start",
+        out.append(svg_text(hx + handle + 0.4 * fs, hy, str(a["label"]), pt, anchor="start",
                          baseline="middle"))
     out.append("</g>")
     return "\n".join(out)

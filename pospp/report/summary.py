@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from pospp.outputs import not_observable
-from pospp.qc.checks import comparison_text
+from pospp.qc.check_record import comparison_text
 
 UNIT_TEXT = {"deg_per_h": "deg/h", "arcsec": "arcsec", "m_per_s": "m/s", "mps": "m/s"}
 """Unit names of the tables -> what a reader expects on a label."""

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from pospp.report._svg_draw import _PX_PER_PT, DPI, _text, draw_axes
+from pospp.report._svg_draw import DPI, PX_PER_PT, draw_axes, svg_text
 
 _FONT_PT = 10.0
 _TITLE_PT = 12.0
@@ -340,7 +340,7 @@ class Figure:
             parts.append(draw_axes(ax, boxes[id(ax)], limits[id(ax)], f"c{i}"))
         if self._suptitle is not None:
             text, pt = self._suptitle
-            parts.append(_text(w / 2, 0.02 * h + pt * _PX_PER_PT, text, pt))
+            parts.append(svg_text(w / 2, 0.02 * h + pt * PX_PER_PT, text, pt))
         parts.append("</svg>")
         return "\n".join(parts)
 

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pospp import pipeline
+from pospp import flight_stages, pipeline
 from pospp.calib.compensate import compensate_legs
 from pospp.calib.replay import SolutionA
 from pospp.calib.stage import calibrate_flight
@@ -39,7 +39,7 @@ def main() -> None:
     imu = pipeline.imu_increments(log)
     nav = pipeline.navigate(log, cfg)
     ref = SolutionA(*nav_filter.solution_a_fields(nav, which="smoothed"))
-    tun = pipeline.imu_tuning(cfg)
+    tun = flight_stages.imu_tuning(cfg)
     epoch_ns = int(log.imu.time_ns[0])
     bias = pd.read_parquet(ROOT / "sample_data" / "sample_flight.bias.parquet")
     tb = (bias.time_ns.to_numpy() - epoch_ns) * 1e-9

@@ -40,7 +40,7 @@ FUNCTIONS = (
     "pospp.nav.filter:run_integrated_navigation",
     "pospp.nav.filter_state:forward_pass", "pospp.nav.filter_state:smoothed_backward",
     "pospp.io.trajectory_mcap:trajectory_messages", "pospp.qc.stage:quality_checks",
-    "pospp.pipeline:_render_report",
+    "pospp.pipeline:report_from_tables",
 )
 
 

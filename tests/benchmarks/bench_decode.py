@@ -194,19 +194,19 @@ def warm_rows(path: Path, repeat: int) -> list[str]:
     import pospp.io._mcap_scan as scan
     from pospp.io.mcap_reader import read_flight_log
 
-    parse = scan._parse_chunk
+    parse = scan.parse_chunk
 
     def no_crc(body: bytes, truncated: bool):  # the stored CRC set to 0: not checked
         chunk = parse(body, truncated)
-        return scan._RawChunk(chunk.start_ns, chunk.end_ns, chunk.uncompressed_size, 0,
+        return scan.RawChunk(chunk.start_ns, chunk.end_ns, chunk.uncompressed_size, 0,
                               chunk.compression, chunk.data, chunk.truncated)
 
     def reader_no_crc() -> None:
-        scan._parse_chunk = no_crc
+        scan.parse_chunk = no_crc
         try:
             read_flight_log(path)
         finally:
-            scan._parse_chunk = parse
+            scan.parse_chunk = parse
 
     methods = {"floor": lambda: _floor(path), "read_flight_log": lambda: read_flight_log(path),
                "read_flight_log, chunk CRCs not checked": reader_no_crc}

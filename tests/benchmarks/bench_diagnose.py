@@ -28,11 +28,11 @@ from _synthetic import noisy_replays, survey_flight  # noqa: E402
 
 from pospp import earth  # noqa: E402
 from pospp.calib.replay import ImuIncrements  # noqa: E402
-from pospp.diagnose import effects as fx  # noqa: E402
 from pospp.diagnose.workflow import DiagnosisOptions, diagnose_replays  # noqa: E402
+from pospp.units import ARCSEC_RAD, DEG_PER_H_RADPS, G0_MPS2, UG_MPS2  # noqa: E402
 
 SIGMA = 0.003
-BIAS = np.array([0.02, -0.015, 0.0]) * fx.DEG_PER_H
+BIAS = np.array([0.02, -0.015, 0.0]) * DEG_PER_H_RADPS
 
 
 def _flights():
@@ -62,25 +62,25 @@ def _scenarios(fl):
     dth, dv = base(f)
     tm, dt = tm_dt(f)
     db = np.array([250.0, -150.0])
-    dv[:, 0:2] += np.outer(np.exp(-tm / 1200.0), db * fx.UG_MPS2) * dt[:, None]
+    dv[:, 0:2] += np.outer(np.exp(-tm / 1200.0), db * UG_MPS2) * dt[:, None]
     out.append(("accel warm-up 292 ug", f, dth, dv, {}, f"{np.linalg.norm(db):.4g}"))
     dth, dv = base(f)
     for leg, j in zip(f.legs, [[0.01, 0.005], [-0.008, 0.01], [0.012, -0.006], [-0.01, -0.008]],
                       strict=True):
         m = (tm >= leg.start_s - 30.0) & (tm < leg.end_s + 30.0)
-        dth[m, 0:2] += np.array(j) * fx.DEG_PER_H * dt[m, None]
+        dth[m, 0:2] += np.array(j) * DEG_PER_H_RADPS * dt[m, None]
     out.append(("gyro bias jumps (outside)", f, dth, dv, {}, "unexplained"))
     dth, dv = base(f)
-    dv[:, 0] += 300.0 * fx.UG_MPS2 * np.sin(2 * np.pi * tm / 90.0) * dt
+    dv[:, 0] += 300.0 * UG_MPS2 * np.sin(2 * np.pi * tm / 90.0) * dt
     out.append(("accel 90 s sine (outside)", f, dth, dv, {}, "unexplained"))
     f = fl["crossing"]
     b = np.array([0.05, -0.03, 0.0])
-    out.append(("body bias vs paper base", f, *base(f, b * fx.DEG_PER_H),
+    out.append(("body bias vs paper base", f, *base(f, b * DEG_PER_H_RADPS),
                 {"base_formulation": "paper"}, f"{np.linalg.norm(b):.4g}"))
     dth, dv = base(f)
     tr, t = f.truth, f.imu.t_s
     gg = np.array([0.3, 0.1, -0.2])
-    g = gg * fx.GRAVITY_MPS2 * fx.ARCSEC_RAD / 1000.0
+    g = gg * G0_MPS2 * ARCSEC_RAD / 1000.0
     d_n = earth.llh_to_ned_m(tr.lat_rad[:-1], tr.lon_rad[:-1], tr.height_m[:-1],
                              tr.lat_rad[0], tr.lon_rad[0], tr.height_m[0])
     dg = np.zeros((t.size - 1, 3))
@@ -89,8 +89,8 @@ def _scenarios(fl):
     out.append(("gravity gradient", f, dth, dv, {}, f"{np.linalg.norm(gg):.4g}"))
     f = fl["long"]
     out.append(("vertical drift 1 deg/h", f,
-                *base(f, BIAS + np.array([0, 0, 1.0]) * fx.DEG_PER_H), {}, "1"))
-    out.append(("closed-form base", f, *base(f, np.array([0.3, -0.2, 0]) * fx.DEG_PER_H),
+                *base(f, BIAS + np.array([0, 0, 1.0]) * DEG_PER_H_RADPS), {}, "1"))
+    out.append(("closed-form base", f, *base(f, np.array([0.3, -0.2, 0]) * DEG_PER_H_RADPS),
                 {"base_transition": "closed_form"}, "1"))
     f = fl["wander"]
     dth, dv = base(f)

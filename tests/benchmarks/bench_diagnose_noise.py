@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pospp import pipeline, rotation
+from pospp import flight_stages, pipeline, rotation
 from pospp.config import load_config
 from pospp.diagnose.workflow import DiagnosisOptions, diagnose_replays
 from pospp.io.parquet_tables import read_reference_trajectory
@@ -116,7 +116,7 @@ def run_null(name: str, n_null: int) -> None:
                     [run.replays[i] for i in sorted(run.replays)], DiagnosisOptions(
                         replay_kwargs={"accel_compensation": cfg.replay.accel_compensation},
                         noise="gyro_rw", effects=effects,
-                        gyro_arw_radpsqrts=np.radians(pipeline.imu_tuning(cfg).gyro_arw_dpsh)
+                        gyro_arw_radpsqrts=np.radians(flight_stages.imu_tuning(cfg).gyro_arw_dpsh)
                         / 60.0), imu=imu, solution_a=ref, null_dv=nd)
             rows = [(s.effect, f"{s.value:.4g} {s.unit}".strip(), f"F={s.statistic:.2f}",
                      f"p={s.p_value:.2g}") for s in d.steps]

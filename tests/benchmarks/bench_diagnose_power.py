@@ -52,6 +52,7 @@ import test_diagnose_power as tp  # noqa: E402
 from pospp import flight_stages, pipeline  # noqa: E402
 from pospp.diagnose import effects as fx  # noqa: E402
 from pospp.diagnose.rerun import rerun_signatures  # noqa: E402
+from pospp.units import UG_MPS2  # noqa: E402
 
 GRID = {
     "time_offset": (0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0),  # ms
@@ -61,7 +62,7 @@ GRID = {
 }
 DIRECTION = {"time_offset": np.array([1e-3]), "lever_arm": tp.LEVER_DIRECTION,
              "gyro_scale_factor": np.array([0.0, 0.0, 1e-6]),
-             "accel_bias_change": np.array([fx.UG_MPS2, 0.0])}
+             "accel_bias_change": np.array([UG_MPS2, 0.0])}
 """SI parameter vector of one display unit of each effect as hidden."""
 
 
@@ -84,7 +85,8 @@ def _diagnose(run, ref, imu, cfg, null, sigs, replays=None):
     return diagnose_replays(reps, DiagnosisOptions(
         replay_kwargs={"accel_compensation": cfg.replay.accel_compensation},
         base_formulation=cfg.pairs.formulation, base_transition=cfg.pairs.transition,
-        noise="gyro_rw", gyro_arw_radpsqrts=pipeline.imu_tuning(cfg).noise().gyro_arw_radpsqrts),
+        noise="gyro_rw",
+        gyro_arw_radpsqrts=flight_stages.imu_tuning(cfg).noise().gyro_arw_radpsqrts),
         imu=imu, solution_a=ref, null_dv=null, signatures=sigs)
 
 
@@ -162,13 +164,13 @@ def _triggered(log, cfg) -> tuple[bool, float, bool, float]:
     """(the scale factor's Gauss-Newton started, A's largest axis / sigma, the warm-up's
     started, its pass's |db| in ug, A's gate in excess) on one flight."""
     nav = pipeline.navigate(log, cfg)
-    lever = pipeline.lever_arm_estimate(log, nav, cfg).lever_b_m
+    lever = flight_stages.lever_arm_estimate(log, nav, cfg).lever_b_m
     sf, sigma = flight_stages.scale_factor_estimate(log, cfg, lever)
     start = flight_stages.scale_factor_start(log, cfg, lever)
     db = flight_stages.warmup_estimate(log, cfg, lever)
     warm = flight_stages.warmup_start(log, nav, cfg, lever)
     return (start is not None, float(np.max(np.abs(sf) / sigma)), warm is not None,
-            float(np.linalg.norm(db)) / fx.UG_MPS2,
+            float(np.linalg.norm(db)) / UG_MPS2,
             flight_stages.gate_excess(nav, cfg.filter_options().gate_probability))
 
 

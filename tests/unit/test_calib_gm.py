@@ -18,7 +18,7 @@ from _gm_mission import run_once
 from _truth_imu import rhumb_line
 
 from pospp import rotation, units
-from pospp.calib.noise_model import _gm_covariance, gm_noise_operator, noise_basis
+from pospp.calib.noise_model import gm_covariance, gm_noise_operator, noise_basis
 from pospp.calib.replay import ImuIncrements, replay_leg, solution_a_from_trajectory
 from pospp.calib.segment import Leg
 from pospp.calib.solve import fit_calibration
@@ -84,11 +84,11 @@ def test_drift_covariance_with_infinite_tau_is_a_random_constant():
         ops.append(gm_noise_operator(r, rows))
         blocks.append(r.phi[rows, 3:5, BG].reshape(-1, 3))
     p = np.vstack(blocks)
-    g = _gm_covariance(ops, 1e15)
+    g = gm_covariance(ops, 1e15)
     ref = p @ p.T
     assert np.abs(g - ref).max() < 0.02 * np.abs(ref).max()
     # a finite tau: a symmetric positive semi-definite covariance, smaller in trace
-    g300 = _gm_covariance(ops, 300.0)
+    g300 = gm_covariance(ops, 300.0)
     assert np.allclose(g300, g300.T, rtol=0, atol=1e-9 * np.abs(g300).max())
     assert np.linalg.eigvalsh(g300).min() > -1e-9 * np.abs(g300).max()
     assert np.trace(g300) < np.trace(g)

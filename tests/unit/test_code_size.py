@@ -85,7 +85,7 @@ PARAMETER_EXCEPTIONS = {
     "calib/stage.py:calibrate_flight": _OPTIONS,
     "calib/compensate.py:compensate_legs": _OPTIONS,
     "calib/solve.py:fit_calibration": _OPTIONS,
-    "calib/reml.py:_calibrate_gm": _OPTIONS,
+    "calib/reml.py:calibrate_gm": _OPTIONS,
     "sim/api.py:simulate_along": "the simulator's keyword API: one physical quantity each",
     "sim/api.py:_params": "the simulator's keyword API: one physical quantity each",
     "sim/api.py:_generate": "the simulator's keyword API: one physical quantity each",

@@ -132,7 +132,7 @@ def _number_keys():
 def test_every_number_has_a_physical_range(cls, key):
     """A lower and an upper bound on every number (issue 38 item 5): an open end let
     ``start_s = 9.3e9`` overflow the nanosecond stamps and ``horizon_s = 1e-300`` pass."""
-    from pospp.config import limits_of
+    from pospp.config_schema import limits_of
 
     lim = limits_of(cls, key)
     assert (lim.gt is not None or lim.ge is not None) and (lim.lt is not None or

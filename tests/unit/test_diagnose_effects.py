@@ -24,6 +24,7 @@ from pospp.calib.segment import Leg
 from pospp.diagnose import effects as fx
 from pospp.nav import strapdown
 from pospp.nav.error_model import BG
+from pospp.units import ARCSEC_RAD, DEG_PER_H_RADPS, G0_MPS2, UG_MPS2
 
 RATE_HZ = 50.0
 SPEED_MPS = 60.0
@@ -114,11 +115,11 @@ def test_forced_response_of_constant_gyro_bias_equals_phi_column(flight):
 def test_body_and_vertical_gyro_bias(flight):
     fl, ref, reps = flight
     dt = np.diff(fl.imu.t_s)[:, None]
-    b = np.array([0.03, -0.02, 0.0]) * fx.DEG_PER_H
+    b = np.array([0.03, -0.02, 0.0]) * DEG_PER_H_RADPS
     meas = _rerun(fl, ref, fl.imu.dtheta_b_rad + b * dt, fl.imu.dv_b_mps)
     # measured 4e-7 (first order of a linear effect; the mechanization's nonlinearity)
     _check(meas, reps, lambda r: fx.signature("body_fixed_gyro_bias", r), b[:2], 5e-6)
-    bz = np.array([0.0, 0.0, 1.0]) * fx.DEG_PER_H
+    bz = np.array([0.0, 0.0, 1.0]) * DEG_PER_H_RADPS
     meas = _rerun(fl, ref, fl.imu.dtheta_b_rad + bz * dt, fl.imu.dv_b_mps)
     _check(meas, reps, lambda r: fx.signature("vertical_gyro_drift", r), bz[2:], 2e-3)  # 2.8e-4
 
@@ -128,7 +129,7 @@ def test_accel_bias_settling(flight):
     t = fl.imu.t_s
     tm, dt = 0.5 * (t[1:] + t[:-1]), np.diff(t)
     settle = 500.0
-    db = np.array([300.0, -200.0]) * fx.UG_MPS2
+    db = np.array([300.0, -200.0]) * UG_MPS2
     dv = fl.imu.dv_b_mps.copy()
     dv[:, 0:2] += np.outer(np.exp(-tm / settle), db) * dt[:, None]
     # A absorbs the bias at each leg start: give A (the reference) that bias as its estimate
@@ -146,7 +147,7 @@ def test_gravity_disturbance_gradient(flight):
     fl, ref, reps = flight
     t, tr = fl.imu.t_s, fl.truth
     dt = np.diff(t)
-    g = np.array([0.4, 0.15, -0.3]) * fx.GRAVITY_MPS2 * fx.ARCSEC_RAD / 1000.0
+    g = np.array([0.4, 0.15, -0.3]) * G0_MPS2 * ARCSEC_RAD / 1000.0
     gm = np.array([[g[0], g[1]], [g[1], g[2]]])
     meas = []
     for leg, rep in zip(fl.legs, reps, strict=True):
@@ -171,7 +172,7 @@ def test_gravity_disturbance_field_over_position(flight):
     t, tr = fl.imu.t_s, fl.truth
     dt = np.diff(t)
     k = len(fx.field_monomials())
-    c = np.random.default_rng(3).normal(size=k) * 2.0 * fx.GRAVITY_MPS2 * fx.ARCSEC_RAD
+    c = np.random.default_rng(3).normal(size=k) * 2.0 * G0_MPS2 * ARCSEC_RAD
     lat_r, lon_r = 0.5 * (tr.lat_rad[0] + tr.lat_rad[-1]), 0.5 * (tr.lon_rad[0] + tr.lon_rad[-1])
     extent = 20_000.0
     d = earth.llh_to_ned_m(tr.lat_rad[:-1], tr.lon_rad[:-1], tr.height_m[:-1], lat_r, lon_r,

@@ -228,7 +228,7 @@ def test_unknown_lever_arm_is_named_with_its_size():
     norm of the fitted 3-vector against the true norm) within 20 %, and each axis of the
     fitted offset (configured minus true, FRD) within 0.1 m of the truth's. Measured 10 of 10
     seeds, 0.96-1.04 m (bench_diagnose_power.py; docs/diagnose.md, "Power"): the signature is
-    made by Gauss-Newton from A's own lever-arm estimate (pipeline.lever_arm_estimate), and
+    made by Gauss-Newton from A's own lever-arm estimate (flight_stages.lever_arm_estimate), and
     the whitening re-estimated with the named response removed. Before, the lever arm read
     about half its size (0.56 m), its axis derivatives made at the wrong configuration."""
     r = power_run("lever_arm", 1.0, 4)

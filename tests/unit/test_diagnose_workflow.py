@@ -17,7 +17,6 @@ from _synthetic import noisy_replays, survey_flight
 
 from pospp import earth
 from pospp.calib.replay import ImuIncrements
-from pospp.diagnose import effects as fx
 from pospp.diagnose.tables import (
     DIAGNOSIS_COLUMNS,
     candidate_columns,
@@ -26,9 +25,10 @@ from pospp.diagnose.tables import (
     residual_curve_columns,
 )
 from pospp.diagnose.workflow import DiagnosisOptions, diagnose_replays
+from pospp.units import ARCSEC_RAD, DEG_PER_H_RADPS, G0_MPS2, UG_MPS2
 
 SIGMA = 0.003  # A's velocity noise [m/s]
-BIAS_B = np.array([0.02, -0.015, 0.0]) * fx.DEG_PER_H  # present in every case, in the base
+BIAS_B = np.array([0.02, -0.015, 0.0]) * DEG_PER_H_RADPS  # present in every case, in the base
 
 
 @pytest.fixture(scope="module")
@@ -98,14 +98,14 @@ def test_accel_bias_change(reversal):
     t = fl.imu.t_s
     tm, dt = 0.5 * (t[1:] + t[:-1]), np.diff(t)
     db = np.array([250.0, -150.0])  # ug, warm-up with T = 1200 s
-    dv[:, 0:2] += np.outer(np.exp(-tm / 1200.0), db * fx.UG_MPS2) * dt[:, None]
+    dv[:, 0:2] += np.outer(np.exp(-tm / 1200.0), db * UG_MPS2) * dt[:, None]
     d = _run(fl, dth, dv, seed=12)
     _assert_named(d, "accel_bias_change", np.linalg.norm(db))
 
 
 def test_body_fixed_gyro_bias_against_paper_base(crossing):
     b = np.array([0.05, -0.03, 0.0])
-    dth, dv = _increments(crossing, b * fx.DEG_PER_H)
+    dth, dv = _increments(crossing, b * DEG_PER_H_RADPS)
     d = _run(crossing, dth, dv, seed=13, base_formulation="paper")
     _assert_named(d, "body_fixed_gyro_bias", np.linalg.norm(b))
     np.testing.assert_allclose(d.step_of("body_fixed_gyro_bias").values, b[:2], atol=0.01)
@@ -116,7 +116,7 @@ def test_gravity_disturbance(crossing):
     dth, dv = _increments(fl)
     tr, t = fl.truth, fl.imu.t_s
     gg = np.array([0.3, 0.1, -0.2])  # arcsec/km: [G_NN, G_NE, G_EE] / g
-    g = gg * fx.GRAVITY_MPS2 * fx.ARCSEC_RAD / 1000.0
+    g = gg * G0_MPS2 * ARCSEC_RAD / 1000.0
     gm = np.array([[g[0], g[1]], [g[1], g[2]]])
     d_n = earth.llh_to_ned_m(tr.lat_rad[:-1], tr.lon_rad[:-1], tr.height_m[:-1],
                              tr.lat_rad[0], tr.lon_rad[0], tr.height_m[0])
@@ -129,7 +129,7 @@ def test_gravity_disturbance(crossing):
 
 @pytest.mark.slow
 def test_vertical_gyro_drift(long_legs):
-    dth, dv = _increments(long_legs, BIAS_B + np.array([0.0, 0.0, 1.0]) * fx.DEG_PER_H)
+    dth, dv = _increments(long_legs, BIAS_B + np.array([0.0, 0.0, 1.0]) * DEG_PER_H_RADPS)
     d = _run(long_legs, dth, dv, seed=15)
     _assert_named(d, "vertical_gyro_drift", 1.0)
 
@@ -138,7 +138,7 @@ def test_vertical_gyro_drift(long_legs):
 def test_earth_rate_coupling_missing_from_closed_form(long_legs):
     # no injection: the data obey the full error model; the closed-form base drops the
     # Earth-rate coupling, whose fraction must come out as 1
-    dth, dv = _increments(long_legs, np.array([0.3, -0.2, 0.0]) * fx.DEG_PER_H)
+    dth, dv = _increments(long_legs, np.array([0.3, -0.2, 0.0]) * DEG_PER_H_RADPS)
     d = _run(long_legs, dth, dv, seed=16, base_transition="closed_form")
     _assert_named(d, "earth_rate_coupling", 1.0)
 
@@ -152,7 +152,7 @@ def test_out_of_library_gyro_bias_jumps_unexplained(reversal):
     jumps = np.array([[0.01, 0.005], [-0.008, 0.01], [0.012, -0.006], [-0.01, -0.008]])
     for leg, j in zip(fl.legs, jumps, strict=True):
         m = (tm >= leg.start_s - 30.0) & (tm < leg.end_s + 30.0)
-        dth[m, 0:2] += j * fx.DEG_PER_H * dt[m, None]
+        dth[m, 0:2] += j * DEG_PER_H_RADPS * dt[m, None]
     d = _run(fl, dth, dv, seed=17)
     assert d.named == (), d.named
     assert d.conclusion == "unexplained"
@@ -166,7 +166,7 @@ def test_out_of_library_oscillating_accel_bias_unexplained(reversal):
     dth, dv = _increments(fl)
     t = fl.imu.t_s
     tm, dt = 0.5 * (t[1:] + t[:-1]), np.diff(t)
-    dv[:, 0] += 300.0 * fx.UG_MPS2 * np.sin(2 * np.pi * tm / 90.0) * dt
+    dv[:, 0] += 300.0 * UG_MPS2 * np.sin(2 * np.pi * tm / 90.0) * dt
     d = _run(fl, dth, dv, seed=18)
     assert d.named == ()
     assert d.conclusion == "unexplained"
@@ -177,7 +177,7 @@ def test_tables(reversal):
     dth, dv = _increments(fl)
     t = fl.imu.t_s
     tm, dt = 0.5 * (t[1:] + t[:-1]), np.diff(t)
-    dv[:, 0:2] += np.outer(np.exp(-tm / 1200.0), np.array([250.0, -150.0]) * fx.UG_MPS2) \
+    dv[:, 0:2] += np.outer(np.exp(-tm / 1200.0), np.array([250.0, -150.0]) * UG_MPS2) \
         * dt[:, None]
     d = _run(fl, dth, dv, seed=12, effects=("accel_bias_change", "gravity_disturbance"))
     cols = diagnosis_columns(d)

@@ -25,7 +25,7 @@ import pytest
 from _missions import SimLog, three_leg_survey
 from scipy import linalg, stats
 
-from pospp import null_stage, pipeline
+from pospp import flight_stages, null_stage, pipeline
 from pospp.calib import _null_kernel as kernel
 from pospp.calib.design import design_matrix
 from pospp.calib.linear_null import NullNoise, linear_null
@@ -62,7 +62,7 @@ def flight():
     log = SimLog(sim.imu, sim.fix, sim.vel)
     nav = pipeline.navigate(log, cfg, record_gains=True)
     imu = pipeline.imu_increments(log)
-    made = pipeline.calibration_replays(imu, nav, cfg)
+    made = flight_stages.calibration_replays(imu, nav, cfg)
     reps = [dataclasses.replace(r, t_s=r.t_s[:SAMPLES])
             for _, r in sorted(made.replays.items())]
     assert len(reps) == 2

@@ -671,7 +671,7 @@ def test_corrupt_chunk_is_reported_but_a_reader_bug_propagates(
     def corrupt(*_args, **_kwargs):
         raise ValueError("bad zstd frame")
 
-    monkeypatch.setattr(_mcap_scan, "_decompress", corrupt)
+    monkeypatch.setattr(_mcap_scan, "decompress", corrupt)
     with pytest.raises(IngestError) as err:  # every chunk skipped: no IMU left
         read_flight_log(good_file)
     assert "corrupt chunk at byte 34 skipped" in str(err.value)
@@ -680,6 +680,6 @@ def test_corrupt_chunk_is_reported_but_a_reader_bug_propagates(
     def bug(*_args, **_kwargs):
         raise TypeError("unsupported operand")
 
-    monkeypatch.setattr(_mcap_scan, "_decompress", bug)
+    monkeypatch.setattr(_mcap_scan, "decompress", bug)
     with pytest.raises(TypeError, match="unsupported operand"):
         read_flight_log(good_file)

@@ -21,6 +21,7 @@ from pospp.config import PipelineConfig
 from pospp.io import parquet_tables
 from pospp.qc import checks as qc
 from pospp.qc import time_offset
+from pospp.qc.check_record import Check
 from pospp.qc.stage import QualityReport, config_problems, qc_columns, worst_status
 from pospp.report.summary import qc_lines
 from pospp.types import FLU_TO_FRD
@@ -289,9 +290,9 @@ def test_completeness_calibration_compensation_and_config():
 
 
 def test_status_table_and_console_lines(tmp_path):
-    a = qc.Check("a", "ingest", "s", 1.0, 2.0, "m", True, "failed")
-    b = qc.Check("b", "navigate", "s", 3.0, 2.0, "m", False, "degraded", "do this")
-    c = qc.Check("c", "calibrate", "s", 0.0, 1.0, "1", False, "partial")
+    a = Check("a", "ingest", "s", 1.0, 2.0, "m", True, "failed")
+    b = Check("b", "navigate", "s", 3.0, 2.0, "m", False, "degraded", "do this")
+    c = Check("c", "calibrate", "s", 0.0, 1.0, "1", False, "partial")
     rep = QualityReport((a, b, c))
     assert rep.status == "degraded" and rep.failed_names == "b,c"
     assert rep.suggestions == "b: do this"
@@ -311,9 +312,9 @@ def test_status_table_and_console_lines(tmp_path):
 def test_report_opens_with_the_quality_checks():
     from pospp.report.html import render_report
 
-    bad = qc.Check("gnss_time_offset", "navigate", "s", 2.0, 0.1, "s", False, "degraded",
+    bad = Check("gnss_time_offset", "navigate", "s", 2.0, 0.1, "s", False, "degraded",
                    "GNSS lags the IMU by about 2.0 s")
-    good = qc.Check("gravity_direction", "ingest", "s", 0.1, 45.0, "deg", True, "failed")
+    good = Check("gravity_direction", "ingest", "s", 0.1, 45.0, "deg", True, "failed")
     page = render_report({"summary": pd.DataFrame({"input_file": ["x.mcap"],
                                                    "status": ["degraded"]}),
                           "qc": pd.DataFrame(qc_columns(QualityReport((good, bad)), 0))})

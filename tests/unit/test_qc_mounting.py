@@ -11,6 +11,7 @@ import pytest
 
 from pospp import rotation
 from pospp.qc import checks as qc
+from pospp.qc.check_record import skip
 from pospp.qc.mounting import heading_offset, lever_arm_naming_mounting, mounting_yaw
 
 
@@ -70,7 +71,7 @@ def test_a_lever_arm_rotated_by_the_mounting_names_the_mounting():
                                       (True, True, False), mount, math.radians(-90.0))
     assert "rotated by +90 deg about body z: the IMU mounting is wrong" in named.suggestion
     # a quarter turn is named even where the heading check could not judge
-    blind = qc.skip("mounting_yaw", "navigate", "no turn", "deg")
+    blind = skip("mounting_yaw", "navigate", "no turn", "deg")
     named = lever_arm_naming_mounting(lever, cfg, rotated, np.full(3, 0.02),
                                       (True, True, False), blind, None)
     assert "the IMU mounting is wrong, not the lever arm" in named.suggestion

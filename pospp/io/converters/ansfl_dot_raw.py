@@ -42,14 +42,14 @@ from pospp.io.converters._common import (
     seconds_to_ns,
 )
 from pospp.io.converters.ansfl_quadrotor import (
-    _GT_COLS,
+    GT_COLUMNS,
     QUADROTOR_MOUNTING_OPTIONS,
-    _available_paths,
-    _gt_arrays,
-    _log_to_utc_offset_s,
-    _read_path,
-    _root_and_path,
+    available_paths,
     dji_gnss,
+    gt_arrays,
+    log_to_utc_offset_s,
+    read_path,
+    root_and_path,
 )
 from pospp.types import ImuSamples, ReferenceTrajectory
 
@@ -89,15 +89,15 @@ def _clock_offsets(root: Path, unit: int, dot_p: Path, t_dev: np.ndarray, f_s: n
     offsets: list[float] = []
     path_utc_offsets: list[float] = []
     acc_x = f_s[:, 0]
-    for p in _available_paths(root):
-        gt, im, _ = _read_path(root, p, unit)
+    for p in available_paths(root):
+        gt, im, _ = read_path(root, p, unit)
         row = min(5, len(im) - 1)
         hit = np.flatnonzero((np.abs(acc_x - im["Acc_X"].iloc[row]) < 1e-7)
                              & (np.abs(np.degrees(w_s[:, 2]) - im["Gyr_Z"].iloc[row]) < 1e-7))
         if hit.size != 1:
             continue
         log_ms = gt["time(millisecond)"].to_numpy(dtype=float)
-        utc_off, _ = _log_to_utc_offset_s(root, log_ms[0] * 1e-3, log_ms[-1] * 1e-3)
+        utc_off, _ = log_to_utc_offset_s(root, log_ms[0] * 1e-3, log_ms[-1] * 1e-3)
         offsets.append(float(log_ms[0] * 1e-3 + im["time"].iloc[row] + utc_off - t_dev[hit[0]]))
         path_utc_offsets.append(utc_off)
     if not offsets:
@@ -134,7 +134,7 @@ def parse_ansfl_dot_raw(
     -------
     ParsedLog
     """
-    root, _ = _root_and_path(Path(source), None)
+    root, _ = root_and_path(Path(source), None)
     groups = raw_files(root)
     if not 1 <= unit <= len(groups):
         raise ConversionError(f"{root / 'raw' / 'xsens_dot'}: unit {unit} not found; "
@@ -154,12 +154,12 @@ def parse_ansfl_dot_raw(
     raw = sorted((root / "raw").glob("*Airdata.csv"))
     if not raw:
         raise ConversionError(f"{root / 'raw'}: no *Airdata.csv")
-    air = read_csv(raw[0], _GT_COLS, usecols=lambda c: c.strip() in _GT_COLS)
-    a_all = _gt_arrays(air)
+    air = read_csv(raw[0], GT_COLUMNS, usecols=lambda c: c.strip() in GT_COLUMNS)
+    a_all = gt_arrays(air)
     log = a_all["log_s"]
     lo_log = utc_imu[0] - path_utc_offsets[0]
     hi_log = utc_imu[-1] - path_utc_offsets[0]
-    utc_off_rec, half_rec = _log_to_utc_offset_s(root, lo_log, hi_log)
+    utc_off_rec, half_rec = log_to_utc_offset_s(root, lo_log, hi_log)
     sel = (log >= lo_log - 0.5) & (log <= hi_log + 0.5)
     a = {k: v[sel] for k, v in a_all.items()}
     utc_gt = a["log_s"] + utc_off_rec

@@ -59,9 +59,10 @@ from pospp.types import GnssFixes, GnssVelocities, ImuSamples, ReferenceTrajecto
 
 __all__ = ["parse_ansfl_quadrotor", "unit_mounting_input"]
 
-_GT_COLS = ["time(millisecond)", "latitude", "longitude", "altitude_above_seaLevel(meters)",
+GT_COLUMNS = ["time(millisecond)", "latitude", "longitude", "altitude_above_seaLevel(meters)",
             "xSpeed(m/s)", "ySpeed(m/s)", "zSpeed(m/s)", "roll(degrees)", "pitch(degrees)",
             "compass_heading(degrees)"]
+"""The columns read from ``GTExtended.csv`` (and from the Airdata log, which has them too)."""
 _IMU_COLS = ["time", "Acc_X", "Acc_Y", "Acc_Z", "Gyr_X", "Gyr_Y", "Gyr_Z"]
 
 
@@ -105,7 +106,7 @@ def dji_gnss(a: dict, gt_ns: np.ndarray, geoid_undulation_m: float | None
                          vel_cov_ned_m2ps2=diag_cov([0.1, 0.1, 0.1], n))
     return fix, vel, h, datum, warnings
 
-def _root_and_path(source: Path, path: int | None) -> tuple[Path, int]:
+def root_and_path(source: Path, path: int | None) -> tuple[Path, int]:
     """Dataset root and path number, from the root (with ``path``) or a ``path_N`` folder."""
     if source.name.startswith("path_") and (source / "GTExtended.csv").is_file():
         n = int(source.name.split("_")[1])
@@ -123,17 +124,21 @@ def _imu_file(root: Path, path: int, imu: int | str) -> Path:
     return require_file(root / "processed" / f"path_{path}", name)
 
 
-def _read_path(root: Path, path: int, imu: int | str) -> tuple[pd.DataFrame, pd.DataFrame, Path]:
+def read_path(root: Path, path: int, imu: int | str) -> tuple[pd.DataFrame, pd.DataFrame, Path]:
+    """(GTExtended rows, IMU rows, IMU file) of ``processed/path_N``; ``imu`` a unit number
+    or ``"avg"``. Raises ConversionError for a missing file or column or a time that does
+    not increase."""
     gt_p = require_file(root / "processed" / f"path_{path}", "GTExtended.csv")
     imu_p = _imu_file(root, path, imu)
-    gt = read_csv(gt_p, _GT_COLS)
+    gt = read_csv(gt_p, GT_COLUMNS)
     im = read_csv(imu_p, _IMU_COLS)
     check_increasing(gt_p, "time(millisecond)", gt["time(millisecond)"].to_numpy(float))
     check_increasing(imu_p, "time", im["time"].to_numpy(float))
     return gt, im, imu_p
 
 
-def _available_paths(root: Path) -> list[int]:
+def available_paths(root: Path) -> list[int]:
+    """The numbers N of the ``processed/path_N`` folders that hold a ``GTExtended.csv``."""
     out = []
     for d in sorted((root / "processed").glob("path_*")):
         if (d / "GTExtended.csv").is_file():
@@ -141,7 +146,7 @@ def _available_paths(root: Path) -> list[int]:
     return out
 
 
-def _log_to_utc_offset_s(root: Path, lo_s: float, hi_s: float) -> tuple[float, float]:
+def log_to_utc_offset_s(root: Path, lo_s: float, hi_s: float) -> tuple[float, float]:
     """(UTC - log time) offset [s] around log times [lo, hi], and its half-width [s]."""
     raw = sorted((root / "raw").glob("*Airdata.csv"))
     if not raw:
@@ -161,7 +166,10 @@ def _log_to_utc_offset_s(root: Path, lo_s: float, hi_s: float) -> tuple[float, f
     return 0.5 * (lower + upper), 0.5 * abs(upper - lower)
 
 
-def _gt_arrays(gt: pd.DataFrame) -> dict[str, np.ndarray]:
+def gt_arrays(gt: pd.DataFrame) -> dict[str, np.ndarray]:
+    """The DJI solution's columns in SI: ``log_s`` (log time [s]), ``lat_rad``, ``lon_rad``,
+    ``h_m`` (as logged, see the module docstring), ``v_n`` (N, 3) NED [m/s], ``rpy`` (N, 3)
+    roll, pitch, compass heading [rad]."""
     v = gt[["xSpeed(m/s)", "ySpeed(m/s)", "zSpeed(m/s)"]].to_numpy(dtype=float)
     rpy = np.radians(gt[["roll(degrees)", "pitch(degrees)", "compass_heading(degrees)"]]
                      .to_numpy(dtype=float))
@@ -180,12 +188,12 @@ def unit_mounting_input(source: str | Path, imu: int | str = 1) -> MountingInput
     Windows of every path are stacked on the common log time base; the body attitude is the
     drone's roll, pitch and compass heading (module docstring).
     """
-    root, _ = _root_and_path(Path(source), None)
+    root, _ = root_and_path(Path(source), None)
     ts, fs, tv, vv, rr = [], [], [], [], []
     lat0 = h0 = None
-    for p in _available_paths(root):
-        gt, im, imu_p = _read_path(root, p, imu)
-        a = _gt_arrays(gt)
+    for p in available_paths(root):
+        gt, im, imu_p = read_path(root, p, imu)
+        a = gt_arrays(gt)
         ts.append(a["log_s"][0] + im["time"].to_numpy(dtype=float))
         fs.append(im[["Acc_X", "Acc_Y", "Acc_Z"]].to_numpy(dtype=float))
         tv.append(a["log_s"])
@@ -233,14 +241,14 @@ def parse_ansfl_quadrotor(
     """
     if imu != "avg" and imu not in (1, 2, 3, 4):
         raise ValueError(f"imu must be 1, 2, 3, 4 or 'avg'; got {imu!r}")
-    root, p = _root_and_path(Path(source), path)
-    gt, im, imu_p = _read_path(root, p, imu)
-    a = _gt_arrays(gt)
+    root, p = root_and_path(Path(source), path)
+    gt, im, imu_p = read_path(root, p, imu)
+    a = gt_arrays(gt)
     t_imu_log = a["log_s"][0] + im["time"].to_numpy(dtype=float)
     f_s = im[["Acc_X", "Acc_Y", "Acc_Z"]].to_numpy(dtype=float)
     w_s = np.radians(im[["Gyr_X", "Gyr_Y", "Gyr_Z"]].to_numpy(dtype=float))
     g_med = check_gravity(imu_p, f_s, "Acc_* expected in m/s^2")
-    offset_s, half_width_s = _log_to_utc_offset_s(root, a["log_s"][0], a["log_s"][-1])
+    offset_s, half_width_s = log_to_utc_offset_s(root, a["log_s"][0], a["log_s"][-1])
     imu_ns = seconds_to_ns(t_imu_log + offset_s)
     gt_ns = seconds_to_ns(a["log_s"] + offset_s)
     rpy = a["rpy"]
