@@ -490,11 +490,8 @@ def refit_stage(calib_run: CalibrationRun, diagnosis: Diagnosis | None, imu: Imu
         mode = COMPENSATION_MODES[name if gm or name != "per_leg" else "constant"](ModeInputs(
             imu, solution_a, replays, refit.run.chosen, refit.sigma_b_radps, rc.options(),
             forward_bias_record(nav, tuning), threads=threads))
-    after, improvements = compensate_legs(
-        imu, solution_a, replays, refit.run.chosen,
-        accel_compensation=rc.accel_compensation, horizon_s=rc.horizon_s,
-        transition_step=int(rc.transition_step), sample_rate_hz=rc.sample_rate_hz,
-        sigma_floor_mps=rc.sigma_floor_mps, threads=threads, **mode.kwargs)
+    after, improvements = compensate_legs(imu, solution_a, replays, refit.run.chosen,
+                                          replay=rc.options(), threads=threads, **mode.kwargs)
     return replace(refit, run=replace(refit.run, replays_after=after, improvements=improvements,
                                       compensation_source=mode.source))
 

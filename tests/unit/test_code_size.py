@@ -83,7 +83,6 @@ PARAMETER_EXCEPTIONS = {
     "nav/_filter_kernel.py:forward_kernel": _KERNEL,
     "calib/_drift_kernel.py:drift_filter_whiten": _KERNEL,
     "calib/stage.py:calibrate_flight": _OPTIONS,
-    "calib/compensate.py:compensate_legs": _OPTIONS,
     "calib/solve.py:fit_calibration": _OPTIONS,
     "calib/reml.py:calibrate_gm": _OPTIONS,
     "sim/api.py:simulate_along": "the simulator's keyword API: one physical quantity each",
