@@ -28,7 +28,7 @@ from pospp import flight_stages, pipeline  # noqa: E402
 from pospp.calib import stage as calib_stage  # noqa: E402
 from pospp.calib.noise_model import noise_basis  # noqa: E402
 from pospp.calib.replay import ImuIncrements, SolutionA  # noqa: E402
-from pospp.calib.stage import calibrate_flight  # noqa: E402
+from pospp.calib.stage import CalibrationOptions, calibrate_flight  # noqa: E402
 from pospp.config import config_from_dict, load_config  # noqa: E402
 from pospp.convert import convert  # noqa: E402
 from pospp.io.mcap_reader import read_flight_log  # noqa: E402
@@ -105,10 +105,10 @@ def leg_study(out: Path, stem: str, pipe: str, grade: str,
     for d in durations_s:
         for noise in ("gyro_rw", "white"):
             legs = replace(cfg.legs, min_duration_s=d, duration_tolerance_s=0.0)
-            r = calibrate_flight(imu, ref, legs_cfg=legs.thresholds(),
-                                 replay_cfg=cfg.replay.options(),
-                                 pairs_cfg=cfg.pairs.policy(), noise=noise,
-                                 gyro_arw_dpsh=flight_stages.imu_tuning(cfg).gyro_arw_dpsh)
+            r = calibrate_flight(imu, ref, CalibrationOptions(
+                legs_cfg=legs.thresholds(), replay_cfg=cfg.replay.options(),
+                pairs_cfg=cfg.pairs.policy(), noise=noise,
+                gyro_arw_dpsh=flight_stages.imu_tuning(cfg).gyro_arw_dpsh))
             row = {"grade": grade, "min_duration_s": d, "noise": noise, "n_legs": len(r.legs),
                    "n_pairs_used": r.summary().get("n_pairs_used", 0)}
             if r.calibrated:
@@ -178,10 +178,10 @@ def leg_length_study(grade: str, leg_s: tuple[float, ...] = (10.0, 15.0, 20.0, 3
             _noise_step(step)
             row = {"grade": grade, "leg_flown_s": L, "model": label}
             try:
-                r = calibrate_flight(imu, ref, legs_cfg=cfg.legs.thresholds(),
-                                     replay_cfg=cfg.replay.options(),
-                                     pairs_cfg=cfg.pairs.policy(), noise=noise,
-                                     gyro_arw_dpsh=flight_stages.imu_tuning(cfg).gyro_arw_dpsh)
+                r = calibrate_flight(imu, ref, CalibrationOptions(
+                legs_cfg=cfg.legs.thresholds(), replay_cfg=cfg.replay.options(),
+                pairs_cfg=cfg.pairs.policy(), noise=noise,
+                gyro_arw_dpsh=flight_stages.imu_tuning(cfg).gyro_arw_dpsh))
             except (IndexError, ValueError) as exc:
                 rows.append(row | {"result": f"fails: {type(exc).__name__}"})
                 continue
@@ -224,10 +224,10 @@ def quad_what_if(out: Path) -> pd.DataFrame:
                                ("white", "white", 10.0)):
         _noise_step(step)
         try:
-            r = calibrate_flight(imu, ref, legs_cfg=cfg.legs.thresholds(),
-                                 replay_cfg=cfg.replay.options(),
-                                 pairs_cfg=cfg.pairs.policy(), noise=noise,
-                                 gyro_arw_dpsh=flight_stages.imu_tuning(cfg).gyro_arw_dpsh)
+            r = calibrate_flight(imu, ref, CalibrationOptions(
+                legs_cfg=cfg.legs.thresholds(), replay_cfg=cfg.replay.options(),
+                pairs_cfg=cfg.pairs.policy(), noise=noise,
+                gyro_arw_dpsh=flight_stages.imu_tuning(cfg).gyro_arw_dpsh))
         finally:
             _noise_step(10.0)
         cal = pd.DataFrame(r.tables(0)["calibration"])

@@ -26,7 +26,7 @@ from pospp.calib.replay import (
     replay_legs,
 )
 from pospp.calib.segment import Leg, find_legs
-from pospp.calib.stage import CalibrationRun, calibrate_flight
+from pospp.calib.stage import CalibrationOptions, CalibrationRun, calibrate_flight
 from pospp.config import PipelineConfig
 from pospp.diagnose.effects import ACCEL_SETTLING_S, effect_by_id
 from pospp.diagnose.rerun import REFINE_FRACTION, gate_excess, warmed, warmup_fit
@@ -299,28 +299,30 @@ def calibrate_from_a(imu: ImuSource, nav: nav_filter.FilterResult,
     tuning = imu_tuning(config)
     gm = bool(np.isfinite(tuning.gyro_gm_tau_s) and tuning.gyro_gm_sigma_dph > 0)
     mode = config.compensation.mode
-    return calibrate_flight(
-        imu, solution_a, legs=made.legs, made_replays=(made.replays, made.failed),
-        threads=threads, leg_refusals=made.refused,
+    options = CalibrationOptions(
         legs_cfg=config.legs.thresholds(), replay_cfg=config.replay.options(),
         pairs_cfg=config.pairs.policy(), gyro_arw_dpsh=tuning.gyro_arw_dpsh,
         noise=config.pairs.noise, noise_step_s=config.pairs.noise_step_s,
         estimate_gyro_z=config.pairs.estimate_gyro_z,
         compensation=mode if gm or mode != "per_leg" else "constant",
-        forward_biases=forward_bias_record(nav, tuning),
         # the grade's Gauss-Markov ("random") drift enters the least squares' noise model;
         # its level and correlation time are the flight's own (REML on the joint fit, tau
         # profiled), the grade's a weak prior (solve.DriftPrior)
         gyro_gm_sigma_dph=None,
         gyro_gm_tau_s=tuning.gyro_gm_tau_s if gm else None,
-        gyro_gm_prior_sigma_dph=tuning.gyro_gm_sigma_dph if gm else None,
-    ), solution_a
+        gyro_gm_prior_sigma_dph=tuning.gyro_gm_sigma_dph if gm else None)
+    return calibrate_flight(imu, solution_a, options, legs=made.legs,
+                            made_replays=(made.replays, made.failed), threads=threads,
+                            leg_refusals=made.refused,
+                            forward_biases=forward_bias_record(nav, tuning)), solution_a
 
 
 def forward_bias_record(nav: nav_filter.FilterResult, tuning: nav_tuning.ImuTuning
                         ) -> ForwardBiases:
     """What the smoothed compensation reads of A (:meth:`ForwardBiases.of_filter`)."""
     return ForwardBiases.of_filter(nav, tuning.noise().gyro_bias_psd_radps2ps)
+
+
 def lever_arm_and_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                          config: PipelineConfig,
                          est: nav_filter.LeverArmEstimate | None = None

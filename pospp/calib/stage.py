@@ -218,45 +218,19 @@ class CalibrationRun:
         }
 
 
-def calibrate_flight(
-    imu: ImuSource,
-    solution_a: SolutionA,
-    *,
-    legs_cfg: LegThresholds | None = None,
-    replay_cfg: ReplayOptions | None = None,
-    pairs_cfg: PairPolicy | None = None,
-    formulations: tuple[str, ...] = FORMULATIONS,
-    transition: str | None = None,
-    noise: str = "gyro_rw",
-    gyro_arw_dpsh: float | None = None,
-    estimate_gyro_z: bool = False,
-    legs: tuple[Leg, ...] | None = None,
-    gyro_gm_sigma_dph: float | None = None,
-    gyro_gm_tau_s: float | None = None,
-    compensation: str = "constant",
-    noise_step_s: float = 10.0,
-    forward_biases: Any = None,
-    gyro_gm_prior_sigma_dph: float | None = None,
-    causal_prior_scale: float = CAUSAL_PRIOR_SCALE,
-    made_replays: tuple[dict[int, LegReplay], tuple[str, ...]] | None = None,
-    threads: int = 1,
-    leg_refusals: Mapping[int, str] | None = None,
-) -> CalibrationRun:
-    """Run the double-strapdown calibration on one flight.
+@dataclass(frozen=True)
+class CalibrationOptions:
+    """How :func:`calibrate_flight` segments, pairs, fits and compensates (one options object;
+    :meth:`pospp.config.PipelineConfig` builds it for a run).
 
-    Parameters
+    Attributes
     ----------
-    imu : ImuIncrements or ImuRates
-        Raw IMU increments of the whole flight (body FRD, rad and m/s).
-    solution_a : SolutionA
-        Algorithm A (the smoothed solution by default: its errors at each leg start and along
-        the leg are the smallest, and B minus A must be B's error).
-    legs_cfg : LegThresholds, optional
-        Leg thresholds (defaults when None; ``PipelineConfig.legs.thresholds()``).
-    replay_cfg : ReplayOptions, optional
-        B's settings (defaults when None; ``PipelineConfig.replay.options()``).
-    pairs_cfg : PairPolicy, optional
-        Pairing policy (defaults when None; ``PipelineConfig.pairs.policy()``).
+    legs_cfg : LegThresholds
+        Leg thresholds (``PipelineConfig.legs.thresholds()``).
+    replay_cfg : ReplayOptions
+        B's settings (``PipelineConfig.replay.options()``).
+    pairs_cfg : PairPolicy
+        Pairing policy (``PipelineConfig.pairs.policy()``).
     formulations : tuple of str
         Formulations calibrated and reported ("paper", "body"); the compensation formulation
         is added if missing.
@@ -268,84 +242,137 @@ def calibrate_flight(
         Gyro angle random walk [deg/sqrt(h)] (IMU specification); estimated by REML if None.
     estimate_gyro_z : bool
         Also estimate the vertical body gyro bias (weak on straight level legs).
-    legs : tuple of Leg, optional
-        Use these legs instead of segmenting A's trajectory.
     gyro_gm_sigma_dph, gyro_gm_tau_s : float, optional
         First-order Gauss-Markov ("random") gyro drift of the IMU grade (steady-state sigma
         [deg/h], correlation time [s]; ``pospp.nav.tuning.tuning_preset(grade)``): added to
         the ``"gyro_rw"`` covariance, coupling the legs (:func:`pospp.calib.solve.fit_calibration`).
-        Off when the tau is None (the previous model); the sigma is estimated by REML when
-        None and the tau is given.
+        Off when the tau is None; the sigma is estimated by REML when None and the tau given.
     gyro_gm_prior_sigma_dph : float, optional
         With the sigma estimated (None) and the tau given: the grade's drift sigma [deg/h];
         then the drift's sigma **and** tau are the flight's (REML profiled over candidate
         taus on the joint fit), the grade's sigma and tau a weak log-normal prior
         (:class:`pospp.calib.solve.DriftPrior`, one decade 1-sigma).
+    compensation : {"constant", "per_leg", "causal", "smoothed"}
+        What B is re-run with (:data:`pospp.calib.compensate.COMPENSATION_MODES`): the
+        constant bias, the constant plus the smoothed drift's mean over each leg
+        (``"per_leg"``, needs the Gauss-Markov model), A's forward estimate fused with the
+        constant (``"causal"``), or the gyro error's history smoothed from the fit and A's
+        forward estimates (``"smoothed"``, :mod:`pospp.calib.bias_smoother`; the pipeline's
+        default). The constant bias is what ``gyro_bias_b_radps`` feeds back into A either way.
     causal_prior_scale : float
         ``compensation="causal"``: the calibrated prior's sigma is multiplied by this (1: the
         prior kept, > 1 weakened, ``inf``: dropped, A's forward estimate alone).
-    compensation : {"constant", "per_leg", "causal", "smoothed"}
-        What B is re-run with (:data:`pospp.calib.compensate.COMPENSATION_MODES`): the
-        constant bias (this function's default), the constant plus the smoothed drift's mean
-        over each leg (``"per_leg"``, needs the Gauss-Markov model), A's forward estimate
-        fused with the constant (``"causal"``), or the gyro error's history smoothed from the
-        fit and A's forward estimates (``"smoothed"``, :mod:`pospp.calib.bias_smoother`; the
-        pipeline's default). The constant bias is what ``gyro_bias_b_radps`` feeds back into
-        A either way.
-    made_replays : (replays, messages), optional
-        :func:`pospp.calib.replay.replay_legs` of ``legs`` (given with them) with
-        ``replay_cfg``, already made (a run on two threads starts the null's base from them
-        while it calibrates); made here when None.
-    threads : int
-        B's replays before and after the compensation made that many legs at once.
-    leg_refusals : Mapping of int to str, optional
-        Legs not replayed, with why (reference A not GNSS-aided): in their pairs' reasons.
     noise_step_s : float
         Spacing of the samples of the correlated-noise least squares [s] (a leg shorter than
         ten steps is sampled every tenth of its length).
+    """
+
+    legs_cfg: LegThresholds = field(default_factory=LegThresholds)
+    replay_cfg: ReplayOptions = field(default_factory=ReplayOptions)
+    pairs_cfg: PairPolicy = field(default_factory=PairPolicy)
+    formulations: tuple[str, ...] = FORMULATIONS
+    transition: str | None = None
+    noise: str = "gyro_rw"
+    gyro_arw_dpsh: float | None = None
+    estimate_gyro_z: bool = False
+    gyro_gm_sigma_dph: float | None = None
+    gyro_gm_tau_s: float | None = None
+    gyro_gm_prior_sigma_dph: float | None = None
+    compensation: str = "constant"
+    causal_prior_scale: float = CAUSAL_PRIOR_SCALE
+    noise_step_s: float = 10.0
+
+    def __post_init__(self) -> None:
+        if self.compensation not in COMPENSATIONS:
+            raise ValueError(f"compensation: expected one of {COMPENSATIONS}, "
+                             f"got {self.compensation!r}")
+        if self.compensation == "per_leg" and not self.gm_on:
+            raise ValueError("compensation='per_leg' needs the Gauss-Markov drift model "
+                             "(noise='gyro_rw' and gyro_gm_tau_s given)")
+
+    @property
+    def gm_on(self) -> bool:
+        """Whether the fit carries the Gauss-Markov gyro drift."""
+        return self.noise == "gyro_rw" and self.gyro_gm_tau_s is not None and (
+            self.gyro_gm_sigma_dph is None or self.gyro_gm_sigma_dph > 0)
+
+    def policy(self) -> PairPolicy:
+        """The pairing policy, its transition overridden by :attr:`transition` when given."""
+        p = self.pairs_cfg
+        return p if self.transition is None else replace(p, transition=self.transition)
+
+    def formulations_fitted(self) -> tuple[str, ...]:
+        """:attr:`formulations` and the compensation's formulation."""
+        f, chosen = tuple(self.formulations), self.policy().formulation
+        return f + (() if chosen in f else (chosen,))
+
+    def fit_kwargs(self) -> dict[str, Any]:
+        """The least squares' keywords before the flight is seen
+        (:func:`pospp.calib.solve.fit_calibration`; SI)."""
+        kw: dict[str, Any] = {"noise": self.noise, "estimate_gyro_z": self.estimate_gyro_z,
+                              "noise_step_s": self.noise_step_s,
+                              "gyro_arw_radpsqrts": None if self.gyro_arw_dpsh is None
+                              else self.gyro_arw_dpsh * _DPSH_RADPSQRTS}
+        if self.gm_on:
+            assert self.gyro_gm_tau_s is not None  # gm_on needs it
+            kw["gyro_gm_tau_s"] = float(self.gyro_gm_tau_s)
+            kw["gyro_gm_sigma_radps"] = (None if self.gyro_gm_sigma_dph is None
+                                         else self.gyro_gm_sigma_dph * DEG_PER_H_RADPS)
+        return kw
+
+
+def calibrate_flight(
+    imu: ImuSource,
+    solution_a: SolutionA,
+    options: CalibrationOptions | None = None,
+    *,
+    legs: tuple[Leg, ...] | None = None,
+    forward_biases: Any = None,
+    made_replays: tuple[dict[int, LegReplay], tuple[str, ...]] | None = None,
+    leg_refusals: Mapping[int, str] | None = None,
+    threads: int = 1,
+) -> CalibrationRun:
+    """Run the double-strapdown calibration on one flight (module docstring).
+
+    Parameters
+    ----------
+    imu : ImuIncrements or ImuRates
+        Raw IMU increments of the whole flight (body FRD, rad and m/s).
+    solution_a : SolutionA
+        Algorithm A (the smoothed solution by default: its errors at each leg start and along
+        the leg are the smallest, and B minus A must be B's error).
+    options : CalibrationOptions, optional
+        How the flight is segmented, paired, fitted and compensated (the defaults when None).
+    legs : tuple of Leg, optional
+        Use these legs instead of segmenting A's trajectory.
     forward_biases : ForwardBiases or pospp.nav.filter.BiasHistory, optional
         A's forward (filter) gyro-bias record on the run's time axis: ``t_s`` (K,),
         ``gyro_b_radps`` and ``gyro_sigma_b_radps`` (K, 3), body FRD; ``"smoothed"`` needs a
         :class:`pospp.calib.bias_smoother.ForwardBiases` (with A's update times). Used by
         ``"causal"`` and ``"smoothed"`` only.
+    made_replays : (replays, messages), optional
+        :func:`pospp.calib.replay.replay_legs` of ``legs`` (given with them) with the options'
+        ``replay_cfg``, already made; made here when None.
+    leg_refusals : Mapping of int to str, optional
+        Legs not replayed, with why (reference A not GNSS-aided): in their pairs' reasons.
+    threads : int
+        B's replays before and after the compensation made that many legs at once.
 
     Returns
     -------
     CalibrationRun
     """
-    th = legs_cfg if legs_cfg is not None else LegThresholds()
-    policy = pairs_cfg if pairs_cfg is not None else PairPolicy()
-    if transition is not None:
-        policy = PairPolicy(policy.mode, policy.max_cond_scaled, policy.min_dheading_deg,
-                            policy.formulation, transition)
-    rc = replay_cfg if replay_cfg is not None else ReplayOptions()
-    forms = tuple(formulations) + (() if policy.formulation in formulations
-                                   else (policy.formulation,))
-    if compensation not in COMPENSATIONS:
-        raise ValueError(f"compensation: expected one of {COMPENSATIONS}, got {compensation!r}")
-    gm_on = noise == "gyro_rw" and gyro_gm_tau_s is not None and (
-        gyro_gm_sigma_dph is None or gyro_gm_sigma_dph > 0)
-    if compensation in ("causal", "smoothed") and forward_biases is None:
-        raise ValueError(f"compensation={compensation!r} needs A's forward bias record "
+    o = options if options is not None else CalibrationOptions()
+    th, policy, rc = o.legs_cfg, o.policy(), o.replay_cfg
+    if o.compensation in ("causal", "smoothed") and forward_biases is None:
+        raise ValueError(f"compensation={o.compensation!r} needs A's forward bias record "
                          "(forward_biases=)")
-    if compensation == "per_leg" and not gm_on:
-        raise ValueError("compensation='per_leg' needs the Gauss-Markov drift model "
-                         "(noise='gyro_rw' and gyro_gm_tau_s given)")
-    cal_kw: dict[str, Any] = {"noise": noise, "estimate_gyro_z": estimate_gyro_z,
-                              "noise_step_s": noise_step_s,
-                              "gyro_arw_radpsqrts": None if gyro_arw_dpsh is None
-                              else gyro_arw_dpsh * _DPSH_RADPSQRTS}
-    if gm_on:
-        assert gyro_gm_tau_s is not None  # gm_on needs it
-        cal_kw["gyro_gm_tau_s"] = float(gyro_gm_tau_s)
-        cal_kw["gyro_gm_sigma_radps"] = (None if gyro_gm_sigma_dph is None
-                                         else gyro_gm_sigma_dph * DEG_PER_H_RADPS)
-    traj = solution_a.trajectory
-    messages: list[str] = []
+    cal_kw, messages = o.fit_kwargs(), list[str]()
     if legs is None:
         if made_replays is not None:
             raise ValueError("calibrate_flight: made_replays given without their legs")
-        legs = find_legs(traj.t_s, traj.v_n_mps, traj.height_m, thresholds=th)
+        t = solution_a.trajectory
+        legs = find_legs(t.t_s, t.v_n_mps, t.height_m, thresholds=th)
     replays, failed = (replay_legs(imu, solution_a, legs, rc, threads) if made_replays is None
                        else made_replays)
     messages.extend(failed)
@@ -357,68 +384,27 @@ def calibrate_flight(
                               np.full(3, np.inf), {}, reason, tuple(messages),
                               leg_refusals=refusals)
 
-    if not legs:
-        return done(
-            "no calibration: no straight, level, uniform leg of at least "
-            f"{th.min_duration_s - th.duration_tolerance_s:g} s was found "
-            f"(heading rate < {th.max_heading_rate_dps:g} deg/s, speed std < "
-            f"{th.max_speed_std_mps:g} m/s, |v_D| < {th.max_vertical_speed_mps:g} m/s)")
     if len(legs) < 2:
-        return done(f"no calibration: only one leg (leg {legs[0].leg_id}) was found; a pair "
-                    "needs two legs with different headings")
-    if noise == "gyro_rw":
-        cal_kw["bases"] = {i: noise_basis(r, noise_step_s=noise_step_s)
+        return done(_too_few_legs(legs, th))
+    if o.noise == "gyro_rw":  # the correlated noise's bases, made once for every fit
+        cal_kw["bases"] = {i: noise_basis(r, noise_step_s=o.noise_step_s)
                            for i, r in replays.items()}
-        if gm_on:
+        if o.gm_on:
             cal_kw["gm_ops"] = {i: gm_noise_operator(r, cal_kw["bases"][i].samples)
                                 for i, r in replays.items()}
-    drift_source = "none"
-    if gm_on:
-        drift_source = "given" if cal_kw["gyro_gm_sigma_radps"] is not None else "flight_sigma"
-    prior = None
-    if gm_on and cal_kw["gyro_gm_sigma_radps"] is None and gyro_gm_prior_sigma_dph:
-        assert gyro_gm_tau_s is not None  # gm_on needs it
-        prior = DriftPrior(gyro_gm_prior_sigma_dph * DEG_PER_H_RADPS, float(gyro_gm_tau_s))
-    if gm_on and cal_kw["gyro_gm_sigma_radps"] is None:
-        assert gyro_gm_tau_s is not None  # gm_on needs it
-        # the drift's sigma by REML once, on the joint fit of the compensation formulation
-        # over the legs of the usable pairs; the pairs and the other formulations reuse it
-        # (a pair alone has too few legs to estimate it, and it saves most of the cost)
-        screened = evaluate_pairs(replays, legs, policy, formulations=(), leg_reasons=refusals,
-                                  **cal_kw)
-        coarse = {i: noise_basis(r, noise_step_s=_REML_STEP_S) for i, r in replays.items()}
-        first_fit = joint_calibration(
-            replays, screened, policy.formulation, transition=policy.transition,
-            **{**cal_kw, "bases": coarse, "noise_step_s": _REML_STEP_S,
-               "gm_ops": {i: gm_noise_operator(r, coarse[i].samples)
-                          for i, r in replays.items()}, "gm_prior": prior})
-        if first_fit is not None:
-            cal_kw["gyro_gm_sigma_radps"] = first_fit.gyro_gm_sigma_radps
-            if cal_kw["gyro_arw_radpsqrts"] is None:
-                cal_kw["gyro_arw_radpsqrts"] = first_fit.gyro_arw_radpsqrts
-            if prior is not None:
-                cal_kw["gyro_gm_tau_s"] = first_fit.gyro_gm_tau_s
-                drift_source = first_fit.gm_source
-                messages.append(
-                    "Gauss-Markov gyro drift by REML on the joint "
-                    f"{policy.formulation} fit (grade {gyro_gm_prior_sigma_dph:g} deg/h, "
-                    f"{float(gyro_gm_tau_s):g} s as a weak prior): "
-                    f"{first_fit.gyro_gm_sigma_radps / DEG_PER_H_RADPS:.3f} deg/h, "
-                    f"{first_fit.gyro_gm_tau_s:.0f} s ("
-                    + ("the flight rejects the grade's drift" if drift_source == "flight"
-                       else "the flight does not reject the grade's drift: kept") + ")")
-            else:
-                messages.append("Gauss-Markov gyro drift sigma by REML on the joint "
-                                f"{policy.formulation} fit: "
-                                f"{first_fit.gyro_gm_sigma_radps / DEG_PER_H_RADPS:.3f} deg/h")
-    pairs = evaluate_pairs(replays, legs, policy, formulations=forms, leg_reasons=refusals,
-                           **cal_kw)
+    drift_source = "none" if not o.gm_on else (
+        "given" if cal_kw["gyro_gm_sigma_radps"] is not None else "flight_sigma")
+    if o.gm_on and cal_kw["gyro_gm_sigma_radps"] is None:
+        drift_source = _drift_by_reml(replays, legs, o, refusals, cal_kw, messages,
+                                      drift_source)
+    pairs = evaluate_pairs(replays, legs, policy, formulations=o.formulations_fitted(),
+                           leg_reasons=refusals, **cal_kw)
     if not any(p.used for p in pairs):
         why = "; ".join(f"pair {p.pair_id} (legs {p.leg_a}, {p.leg_b}): {p.reason}"
                         for p in pairs)
         return done(f"no calibration: no pair passed the screening: {why}", pairs)
     try:
-        joint = tuple(c for f in forms if (c := joint_calibration(
+        joint = tuple(c for f in o.formulations_fitted() if (c := joint_calibration(
             replays, pairs, f, transition=policy.transition, **cal_kw)) is not None)
     except (ValueError, np.linalg.LinAlgError) as exc:
         return done(f"no calibration: the joint least squares failed: {exc}", pairs)
@@ -429,8 +415,9 @@ def calibrate_flight(
     if chosen.formulation != "body":
         messages.append("paper formulation chosen: its nav-frame drift is rotated into the body "
                         f"with leg {first.leg.leg_id}'s attitude")
-    mode = COMPENSATION_MODES[compensation](ModeInputs(
-        imu, solution_a, replays, chosen, sig, rc, forward_biases, causal_prior_scale, threads))
+    mode = COMPENSATION_MODES[o.compensation](ModeInputs(
+        imu, solution_a, replays, chosen, sig, rc, forward_biases, o.causal_prior_scale,
+        threads))
     after, improvements = compensate_legs(imu, solution_a, replays, chosen, replay=rc,
                                           threads=threads, **mode.kwargs)
     mis = {i: chosen.misalignment_n_rad(i) for i in chosen.leg_ids}
@@ -439,11 +426,62 @@ def calibrate_flight(
                           solve_kwargs={**cal_kw, "transition": policy.transition},
                           drift_sigma_radps=float(chosen.gyro_gm_sigma_radps),
                           drift_tau_s=float(chosen.gyro_gm_tau_s),
-                          drift_source=drift_source if gm_on else "none",
+                          drift_source=drift_source if o.gm_on else "none",
                           leg_refusals=refusals,
                           flight_gyro_bias_b_radps=flight_bias_b_radps(chosen, replays),
                           flight_gyro_bias_sigma_b_radps=sig,
                           compensation_source=mode.source)
+
+
+def _too_few_legs(legs: tuple[Leg, ...], th: LegThresholds) -> str:
+    """Why no calibration was made from fewer than two legs."""
+    if legs:
+        return (f"no calibration: only one leg (leg {legs[0].leg_id}) was found; a pair "
+                "needs two legs with different headings")
+    return ("no calibration: no straight, level, uniform leg of at least "
+            f"{th.min_duration_s - th.duration_tolerance_s:g} s was found "
+            f"(heading rate < {th.max_heading_rate_dps:g} deg/s, speed std < "
+            f"{th.max_speed_std_mps:g} m/s, |v_D| < {th.max_vertical_speed_mps:g} m/s)")
+
+
+def _drift_by_reml(replays: dict[int, LegReplay], legs: tuple[Leg, ...],
+                   o: CalibrationOptions, refusals: Mapping[int, str], cal_kw: dict[str, Any],
+                   messages: list[str], drift_source: str) -> str:
+    """The Gauss-Markov drift's sigma (and, with the grade's prior, its tau) by REML once, on
+    the joint fit of the compensation formulation over the legs of the usable pairs, written
+    into ``cal_kw`` (with the ARW when it was not given) for the pairs and the other
+    formulations to reuse (a pair alone has too few legs to estimate it); its message
+    appended. Returns the drift's source ("flight", "grade" or ``drift_source``)."""
+    policy = o.policy()
+    assert o.gyro_gm_tau_s is not None  # gm_on needs it
+    prior = (DriftPrior(o.gyro_gm_prior_sigma_dph * DEG_PER_H_RADPS, float(o.gyro_gm_tau_s))
+             if o.gyro_gm_prior_sigma_dph else None)
+    screened = evaluate_pairs(replays, legs, policy, formulations=(), leg_reasons=refusals,
+                              **cal_kw)
+    coarse = {i: noise_basis(r, noise_step_s=_REML_STEP_S) for i, r in replays.items()}
+    first_fit = joint_calibration(
+        replays, screened, policy.formulation, transition=policy.transition,
+        **{**cal_kw, "bases": coarse, "noise_step_s": _REML_STEP_S,
+           "gm_ops": {i: gm_noise_operator(r, coarse[i].samples)
+                      for i, r in replays.items()}, "gm_prior": prior})
+    if first_fit is None:
+        return drift_source
+    cal_kw["gyro_gm_sigma_radps"] = first_fit.gyro_gm_sigma_radps
+    if cal_kw["gyro_arw_radpsqrts"] is None:
+        cal_kw["gyro_arw_radpsqrts"] = first_fit.gyro_arw_radpsqrts
+    sigma_dph = first_fit.gyro_gm_sigma_radps / DEG_PER_H_RADPS
+    if prior is None:
+        messages.append("Gauss-Markov gyro drift sigma by REML on the joint "
+                        f"{policy.formulation} fit: {sigma_dph:.3f} deg/h")
+        return drift_source
+    cal_kw["gyro_gm_tau_s"] = first_fit.gyro_gm_tau_s
+    messages.append(
+        f"Gauss-Markov gyro drift by REML on the joint {policy.formulation} fit (grade "
+        f"{o.gyro_gm_prior_sigma_dph:g} deg/h, {float(o.gyro_gm_tau_s):g} s as a weak prior): "
+        f"{sigma_dph:.3f} deg/h, {first_fit.gyro_gm_tau_s:.0f} s ("
+        + ("the flight rejects the grade's drift" if first_fit.gm_source == "flight"
+           else "the flight does not reject the grade's drift: kept") + ")")
+    return first_fit.gm_source
 
 
 def gyro_bias_sigma_b_radps(chosen: Calibration, first: LegReplay) -> NDArray:

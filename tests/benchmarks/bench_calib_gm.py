@@ -21,7 +21,7 @@ import pandas as pd
 from pospp import flight_stages, pipeline
 from pospp.calib.compensate import compensate_legs
 from pospp.calib.replay import ReplayOptions, SolutionA
-from pospp.calib.stage import calibrate_flight
+from pospp.calib.stage import CalibrationOptions, calibrate_flight
 from pospp.config import load_config
 from pospp.nav import filter as nav_filter
 
@@ -55,7 +55,7 @@ def main() -> None:
     }
     for label, kw in variants.items():
         t0 = time.process_time()
-        run = calibrate_flight(imu, ref, **base, **kw)
+        run = calibrate_flight(imu, ref, CalibrationOptions(**base, **kw))
         cpu = time.process_time() - t0
         cal = run.chosen
         print(f"\n== {label}: stage CPU {cpu:.2f} s, legs {len(run.legs)}, pairs used "

@@ -18,7 +18,7 @@ from pospp.calib.compensate import compensate_legs
 from pospp.calib.pairs import PairPolicy
 from pospp.calib.replay import ImuIncrements, replay_leg, solution_a_from_trajectory
 from pospp.calib.solve import fit_calibration
-from pospp.calib.stage import calibrate_flight
+from pospp.calib.stage import CalibrationOptions, calibrate_flight
 from pospp.io.mcap_reader import read_flight_log
 from pospp.io.parquet_tables import read_reference_trajectory, write_table
 from pospp.nav.strapdown import Trajectory, increments_from_rates
@@ -163,8 +163,9 @@ def test_all_pairs_mode_and_closed_form_transition(case):
     transition (ideal legs here) recovers the bias too."""
     params, _, imu, a, run = case
     bias = np.array(params["imu_errors"]["gyro_bias_dph"]) * DPH
-    alt = calibrate_flight(imu, a, legs=run.legs, formulations=("body",),
-                           pairs_cfg=PairPolicy(mode="all", transition="closed_form"))
+    alt = calibrate_flight(imu, a, CalibrationOptions(
+        formulations=("body",), pairs_cfg=PairPolicy(mode="all", transition="closed_form")),
+        legs=run.legs)
     assert [(p.leg_a, p.leg_b, p.used) for p in alt.pairs] == [
         (0, 1, True), (0, 2, False), (1, 2, True)]
     assert alt.pairs[1].reason.startswith("heading change 0.0 deg below the minimum")

@@ -25,7 +25,7 @@ from pospp.calib.compensate import (
 )
 from pospp.calib.replay import ImuIncrements, ReplayOptions, solution_a_from_trajectory
 from pospp.calib.solve import fit_calibration
-from pospp.calib.stage import calibrate_flight
+from pospp.calib.stage import CalibrationOptions, calibrate_flight
 from pospp.nav.filter import run_integrated_navigation
 from pospp.nav.strapdown import increments_from_rates
 from pospp.nav.tuning import tuning_preset
@@ -122,10 +122,10 @@ def run_once(kind: str, seed: int, folder: Path, *, estimate_gm_sigma: bool = Fa
     a = solution_a_from_trajectory(sim.truth, v_sigma_n_mps=[0.02, 0.02, 0.03],
                                   accel_bias_b_mps2=ba)
     tun = tuning_preset(TUNING[kind])
-    run = calibrate_flight(
-        imu, a, formulations=("body",), gyro_arw_dpsh=tun.gyro_arw_dpsh,
+    run = calibrate_flight(imu, a, CalibrationOptions(
+        formulations=("body",), gyro_arw_dpsh=tun.gyro_arw_dpsh,
         gyro_gm_sigma_dph=None if estimate_gm_sigma else tun.gyro_gm_sigma_dph,
-        gyro_gm_tau_s=tun.gyro_gm_tau_s)
+        gyro_gm_tau_s=tun.gyro_gm_tau_s))
     assert run.calibrated, run.reason
     cal = run.chosen
     const = np.array(model.gyro_bias_dph) * (np.pi / 180.0 / 3600.0)
@@ -216,7 +216,7 @@ def run_modes(kind: str, seed: int, folder: Path, *, gm_tau_s: float | None = No
                                   accel_bias_b_mps2=ba)
     gm_kw = {"gyro_arw_dpsh": tun.gyro_arw_dpsh, "gyro_gm_sigma_dph": tun.gyro_gm_sigma_dph,
              "gyro_gm_tau_s": tun.gyro_gm_tau_s}
-    run = calibrate_flight(imu, a, formulations=("body",), **gm_kw)
+    run = calibrate_flight(imu, a, CalibrationOptions(formulations=("body",), **gm_kw))
     assert run.calibrated, run.reason
     cal = run.chosen
     bias = sim.imu_errors.gyro_bias_radps

@@ -169,12 +169,14 @@ def test_two_sigmas_from_null_realisations(gm_legs):
     bias follows each offset exactly, so its sigma against the injected truth is ~0; without
     the injected means the flight's sigma is the constant's."""
     from pospp.calib.replay import replay_leg
-    from pospp.calib.stage import calibrate_flight, with_null_covariance
+    from pospp.calib.stage import CalibrationOptions, calibrate_flight, with_null_covariance
 
     cal, reps, _, imu, sol, _ = gm_legs
     legs = tuple(r.leg for r in reps.values())
-    run = calibrate_flight(imu, sol, legs=legs, formulations=("body",), gyro_arw_dpsh=0.01,
-                           gyro_gm_sigma_dph=0.001, gyro_gm_tau_s=300.0)
+    run = calibrate_flight(imu, sol,
+                           CalibrationOptions(formulations=("body",), gyro_arw_dpsh=0.01,
+                                              gyro_gm_sigma_dph=0.001, gyro_gm_tau_s=300.0),
+                           legs=legs)
     rng = np.random.default_rng(11)
     offsets = rng.normal(0.0, 0.05, (6, 3)) * DPH * np.array([1.0, 1.0, 0.0])
     null, injected = [], []

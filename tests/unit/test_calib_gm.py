@@ -22,7 +22,7 @@ from pospp.calib.noise_model import gm_covariance, gm_noise_operator, noise_basi
 from pospp.calib.replay import ImuIncrements, replay_leg, solution_a_from_trajectory
 from pospp.calib.segment import Leg
 from pospp.calib.solve import fit_calibration
-from pospp.calib.stage import calibrate_flight
+from pospp.calib.stage import CalibrationOptions, calibrate_flight
 from pospp.nav.error_model import BG
 from pospp.nav.strapdown import Trajectory
 
@@ -99,8 +99,8 @@ def test_validation_messages():
     with pytest.raises(ValueError, match="gyro_gm_tau_s: expected > 0 s"):
         fit_calibration(reps, "body", gyro_gm_tau_s=0.0)
     with pytest.raises(ValueError, match="compensation"):
-        calibrate_flight(ImuIncrements(np.zeros(2), np.zeros((1, 3)), np.zeros((1, 3))),
-                         None, compensation="per_leg")
+        calibrate_flight(ImuIncrements(np.zeros(2), np.zeros((1, 3)), np.zeros((1, 3))), None,
+                         CalibrationOptions(compensation="per_leg"))
 
 
 def test_stage_with_drift_model_on_paper_vehicle_grade(tmp_path):

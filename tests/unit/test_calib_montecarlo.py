@@ -21,7 +21,7 @@ from pospp.calib.compensate import compensate_legs
 from pospp.calib.replay import ImuIncrements, replay_leg, solution_a_from_trajectory
 from pospp.calib.segment import find_legs
 from pospp.calib.solve import fit_calibration
-from pospp.calib.stage import calibrate_flight
+from pospp.calib.stage import CalibrationOptions, calibrate_flight
 from pospp.nav.strapdown import increments_from_rates
 from pospp.sim.api import ImuErrorModel, simulate
 
@@ -52,7 +52,7 @@ def test_body_bias_within_10_percent_and_3_sigma(preset):
     lines = []
     for seed in SEEDS:
         imu, a, bias, _ = _simulate(preset, seed, DURATION_S[preset])
-        run = calibrate_flight(imu, a, formulations=("body",))
+        run = calibrate_flight(imu, a, CalibrationOptions(formulations=("body",)))
         assert run.calibrated, run.reason
         cal = run.chosen
         est = np.array([cal.value("gyro_bias_x"), cal.value("gyro_bias_y")])

@@ -15,7 +15,7 @@ from pospp.calib.observability import condition_grid, observability_table
 from pospp.calib.pairs import PairPolicy
 from pospp.calib.replay import ImuIncrements, solution_a_from_trajectory
 from pospp.calib.segment import Leg
-from pospp.calib.stage import calibrate_flight
+from pospp.calib.stage import CalibrationOptions, calibrate_flight
 from pospp.io.parquet_tables import write_table
 from pospp.nav.strapdown import Trajectory
 
@@ -74,7 +74,9 @@ def test_same_heading_pair_is_rejected_with_its_reason(one_line, tmp_path):
     assert not pair.used and "heading change 0.0 deg below the minimum 30 deg" in pair.reason
     assert not run.calibrated and "no pair passed the screening" in run.reason
     # without the heading rule, the condition number rejects it
-    run = calibrate_flight(imu, ref, legs=legs, pairs_cfg=PairPolicy(min_dheading_deg=0.0))
+    run = calibrate_flight(imu, ref,
+                           CalibrationOptions(pairs_cfg=PairPolicy(min_dheading_deg=0.0)),
+                           legs=legs)
     (pair,) = run.pairs
     assert not pair.used and pair.reason.startswith("ill-conditioned: body cond_scaled")
     assert pair.cond_gate > 1e4 and not run.calibrated
@@ -106,7 +108,8 @@ def test_replays_on_two_threads_are_the_replays_on_one(one_line):
     fl = survey_flight(headings_deg=(0.0, 90.0, 180.0), rate_hz=20.0, leg_duration_s=300.0)
     drift = type(fl.imu)(fl.imu.t_s, fl.imu.dtheta_b_rad + np.diff(fl.imu.t_s)[:, None]
                          * np.radians([0.5, -0.3, 0.2]) / 3600.0, fl.imu.dv_b_mps)
-    runs = [calibrate_flight(drift, fl.solution_a(), legs=fl.legs, noise="white", threads=t)
+    runs = [calibrate_flight(drift, fl.solution_a(), CalibrationOptions(noise="white"),
+                             legs=fl.legs, threads=t)
             for t in (1, 2)]
     assert runs[0].calibrated and len(runs[0].replays_after) == 3
     assert runs[0].improvements == runs[1].improvements
@@ -149,7 +152,7 @@ def test_legs_of_a_few_seconds_never_crash_the_stage(tmp_path):
     legs = tuple(Leg(i, t0, t0 + 8.0, np.radians(20.0), 10.0, 100.0, 0.0, 0.0, 0.0, 0.0)
                  for i, t0 in enumerate((5.0, 30.0)))
     policy = PairPolicy("adjacent", 1e30, 0.0, "body", "numerical")
-    run = calibrate_flight(imu, ref, legs=legs, pairs_cfg=policy)
+    run = calibrate_flight(imu, ref, CalibrationOptions(pairs_cfg=policy), legs=legs)
     assert len(run.replays) == 2 and len(run.pairs) == 1
     # with the condition gate opened the pair is used, and on error-free increments the
     # truth is zero: the bias comes out at 3e-5 deg/h (measured; asserted < 1e-3 deg/h), with

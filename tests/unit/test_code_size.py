@@ -30,8 +30,6 @@ FUNCTION_EXCEPTIONS = {
                                       "candidate loop (to split next, issue 12's noise work)",
     "calib/solve.py:fit_calibration": "the joint least squares with its covariance branches "
                                       "(per-leg bases, full Gauss-Markov, null realisations)",
-    "calib/stage.py:calibrate_flight": "the calibration stage's sequence (legs, B, pairs, "
-                                       "fits, compensation, drift source) in one readable list",
 }
 
 
@@ -82,7 +80,6 @@ PARAMETER_EXCEPTIONS = {
     "nav/_filter_kernel.py:_update_epoch": _KERNEL,
     "nav/_filter_kernel.py:forward_kernel": _KERNEL,
     "calib/_drift_kernel.py:drift_filter_whiten": _KERNEL,
-    "calib/stage.py:calibrate_flight": _OPTIONS,
     "calib/solve.py:fit_calibration": _OPTIONS,
     "calib/reml.py:calibrate_gm": _OPTIONS,
     "sim/api.py:simulate_along": "the simulator's keyword API: one physical quantity each",

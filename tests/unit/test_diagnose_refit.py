@@ -10,7 +10,7 @@ import pytest
 from _synthetic import survey_flight
 
 from pospp.calib.replay import ImuIncrements, solution_a_from_trajectory
-from pospp.calib.stage import calibrate_flight
+from pospp.calib.stage import CalibrationOptions, calibrate_flight
 from pospp.diagnose.refit import refit_calibration
 from pospp.diagnose.results import EffectResponse
 from pospp.diagnose.sensor_families import accel_response_along_b
@@ -33,8 +33,9 @@ def ramp_run():
     hist[:, 0:2] = fl.truth.t_s[:, None] * r
     ref = solution_a_from_trajectory(fl.truth, v_sigma_n_mps=np.full(3, 0.003),
                                      accel_bias_b_mps2=hist)
-    run = calibrate_flight(pert, ref, legs=fl.legs, formulations=("body",),
-                           gyro_arw_dpsh=1e-4)
+    run = calibrate_flight(pert, ref,
+                           CalibrationOptions(formulations=("body",), gyro_arw_dpsh=1e-4),
+                           legs=fl.legs)
     assert run.calibrated, run.reason
     return run, bg, r
 
