@@ -294,22 +294,20 @@ def diagnosis_reruns(calib_run: CalibrationRun, config: PipelineConfig, *,
                      log: mcap_reader.FlightLog | None = None,
                      nav: nav_filter.FilterResult | None = None,
                      lever_estimate: nav_filter.LeverArmEstimate | None = None,
-                     threads: int = 1,
-                     starts: dict[str, np.ndarray | None] | None = None) -> DiagnosisStart:
+                     threads: int = 1) -> DiagnosisStart:
     """The diagnosis's base for its re-runs (:func:`rerun_base`) and its first re-run
-    signatures (:func:`_rerun_signatures_at_start`): the A passes that need the calibration
-    and A's lever-arm estimate but not the null realisations. ``starts``:
-    :func:`signature_starts` with the same arguments (None: made here)."""
+    signatures (:func:`_rerun_signatures_at_start`) from A's first estimates
+    (:func:`signature_starts`, its passes on the re-runs' log: the gyro scale factor is a
+    low-frequency error, which the summed-down samples carry as the flight's do)."""
     log_r, run_r, gains = rerun_base(log, nav, calib_run, config)  # what re-runs are made on
     a_as_configured = partial(navigate, config=config, options=rerun_options(config),
                               replay=gains)  # the re-runs
     sigs: dict[str, list[np.ndarray]] | None = None
     at: dict[str, np.ndarray] = {}
     jacobians: Jacobians = {}
-    if log is not None and nav is not None:
+    if log is not None and log_r is not None and nav is not None:
         # lever arm, gyro scale factor, warm-up: Gauss-Newton from A's own estimates
-        if starts is None:
-            starts = signature_starts(log, nav, config, lever_estimate)
+        starts = signature_starts(log_r, nav, config, lever_estimate)
         sigs, at = _rerun_signatures_at_start(log, nav, calib_run, config, starts,
                                               a_as_configured, threads, (log_r, run_r),
                                               jacobians)
@@ -321,15 +319,14 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuSource, solution_a: 
              nav: nav_filter.FilterResult | None = None,
              null_dv: list[list[np.ndarray]] | None = None,
              lever_estimate: nav_filter.LeverArmEstimate | None = None,
-             threads: int = 1, start: DiagnosisStart | None = None,
+             threads: int = 1,
              joint: Callable[[], LeverTime | None] | None = None) -> Diagnosis:
     """Model-discrepancy workflow on the calibrated run's B-minus-A curves (pospp.diagnose).
 
     Every test's null distribution is calibrated on ``null_dv`` (:func:`null_realisations`)
     when given, else on ``[pairs] null_realisations`` realisations made here when the log and
     A's result are given (seed 0: a run is reproducible). ``threads``: A re-runs made at once
-    (:func:`pospp.threads.map_in_threads`; the result does not depend on it). ``start``: the
-    re-runs :func:`diagnosis_reruns` made with the same arguments; None: made here.
+    (:func:`pospp.threads.map_in_threads`; the result does not depend on it).
 
     With the log, the sensor families (accelerometer and gyro bias changes over flight time,
     :mod:`pospp.sensor_stage`) are then fitted on A's innovations with the named GNSS-side
@@ -344,8 +341,7 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuSource, solution_a: 
         null_dv = null_realisations(log, nav, calib_run, config, n_null, threads=threads)
     replays = [calib_run.replays[i] for i in sorted(calib_run.replays)]
     d, sigs = _diagnose_legs(calib_run, imu, solution_a, config, replays, log=log, nav=nav,
-                             null_dv=null_dv, lever_estimate=lever_estimate, threads=threads,
-                             start=start)
+                             null_dv=null_dv, lever_estimate=lever_estimate, threads=threads)
     fams = (sensor_families(d, replays, log, config, solution_a, joint) if log is not None
             else None)
     d = with_sensor_families(d, fams)
@@ -356,14 +352,12 @@ def _diagnose_legs(calib_run: CalibrationRun, imu: ImuSource, solution_a: Soluti
                    config: PipelineConfig, replays: list, *,
                    log: mcap_reader.FlightLog | None, nav: nav_filter.FilterResult | None,
                    null_dv: list[list[np.ndarray]] | None,
-                   lever_estimate: nav_filter.LeverArmEstimate | None, threads: int,
-                   start: DiagnosisStart | None
+                   lever_estimate: nav_filter.LeverArmEstimate | None, threads: int
                    ) -> tuple[Diagnosis, dict[str, list[np.ndarray]] | None]:
     """:func:`diagnose_calibration` on the legs (B minus A): the diagnosis and the A re-run
     signatures it named its re-run effects with (None without the log)."""
-    if start is None:
-        start = diagnosis_reruns(calib_run, config, log=log, nav=nav,
-                                 lever_estimate=lever_estimate, threads=threads)
+    start = diagnosis_reruns(calib_run, config, log=log, nav=nav,
+                             lever_estimate=lever_estimate, threads=threads)
     log_r, a_as_configured = start.log_r, start.navigate_a
     run_r = replace(calib_run, replays=start.replays_r)
     sigs, at, jacobians = start.sigs, dict(start.at), dict(start.jacobians)
