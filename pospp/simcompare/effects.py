@@ -252,14 +252,6 @@ def _vibration(imu: ImuErrorModel, gnss: GnssModel, u: NDArray, ctx: EffectConte
                    gyro_vibration_rms_dps=tuple(np.degrees(gyr)), **kw), gnss
 
 
-def _time_offset(imu, gnss, u, ctx):
-    return imu, replace(gnss, time_offset_s=gnss.time_offset_s + float(u[0]))
-
-
-def _lever(imu, gnss, u, ctx):
-    return imu, replace(gnss, lever_arm_b_m=tuple(np.add(gnss.lever_arm_b_m, u)))
-
-
 def _lever_time(imu, gnss, u, ctx):
     return imu, replace(gnss, lever_arm_b_m=tuple(np.add(gnss.lever_arm_b_m, u[:3])),
                         time_offset_s=gnss.time_offset_s + float(u[3]))
