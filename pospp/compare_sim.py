@@ -319,7 +319,7 @@ def bma_leg_stats(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     pipeline's formulation, transition and gyro-random-walk weighting; no candidates), whose
     per-leg gaps give :func:`pospp.simcompare.stats.leg_stats`. Empty when the flight has
     fewer than ``MIN_LEGS`` legs B could replay."""
-    from pospp.diagnose.workflow import diagnose_replays
+    from pospp.diagnose.workflow import DiagnosisOptions, diagnose_replays
 
     try:
         made = flight_stages.calibration_replays(pipeline.imu_increments(log), nav, config)
@@ -328,10 +328,10 @@ def bma_leg_stats(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     if len(made.replays) < MIN_LEGS:
         return {}
     replays = [made.replays[i] for i in sorted(made.replays)]
-    d = diagnose_replays(replays, base_formulation=config.pairs.formulation,
-                         base_transition=config.pairs.transition, noise="gyro_rw",
-                         gyro_arw_radpsqrts=flight_stages.imu_tuning(config).noise()
-                         .gyro_arw_radpsqrts, effects=(), max_steps=0)
+    d = diagnose_replays(replays, DiagnosisOptions(
+        base_formulation=config.pairs.formulation, base_transition=config.pairs.transition,
+        noise="gyro_rw", effects=(), max_steps=0,
+        gyro_arw_radpsqrts=flight_stages.imu_tuning(config).noise().gyro_arw_radpsqrts))
     return leg_stats(np.array([g.gap_before_mps for g in d.legs]),
                      np.array([g.heldout_gap_before_mps for g in d.legs]))
 

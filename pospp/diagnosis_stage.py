@@ -54,16 +54,16 @@ from pospp.diagnose.rerun import (
     signature_at,
     warmed,
 )
-from pospp.diagnose.results import EffectResponse
-from pospp.diagnose.workflow import HELDOUT_WHITENED, Diagnosis, diagnose_replays
+from pospp.diagnose.results import Diagnosis, EffectResponse
+from pospp.diagnose.workflow import HELDOUT_WHITENED, DiagnosisOptions, diagnose_replays
 from pospp.flight_stages import (
-    _lever_arm_and_start,
-    _scale_factor_start,
-    _warmup_start,
     forward_bias_record,
     imu_tuning,
+    lever_arm_and_start,
     navigate,
     rerun_options,
+    scale_factor_start,
+    warmup_start,
 )
 from pospp.io import mcap_reader
 from pospp.nav import filter as nav_filter
@@ -187,14 +187,14 @@ def signature_starts(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     attitude Jacobian are those of the wrong lever arm. The gyro scale factor: A's own
     estimate (one forward pass with scale-factor states) only when it is significant. The
     warm-up: A's pass with its dynamics where it explains A's rejections
-    (:func:`_warmup_start`). The usual flight pays the scale-factor pass (docs/diagnose.md,
+    (:func:`warmup_start`). The usual flight pays the scale-factor pass (docs/diagnose.md,
     "Power")."""
-    lever_b_m, p_lever = _lever_arm_and_start(log, nav, config, lever_estimate)
+    lever_b_m, p_lever = lever_arm_and_start(log, nav, config, lever_estimate)
     gn = p_lever is not None and bool(
         np.linalg.norm(p_lever) > REFINE_FRACTION * effect_by_id("lever_arm").plausible_si)
     return {"lever_arm": p_lever if gn else None,
-            "gyro_scale_factor": _scale_factor_start(log, config, lever_b_m),
-            "accel_bias_change": _warmup_start(log, nav, config, lever_b_m)}
+            "gyro_scale_factor": scale_factor_start(log, config, lever_b_m),
+            "accel_bias_change": warmup_start(log, nav, config, lever_b_m)}
 
 
 def _rerun_signatures_at_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
@@ -239,7 +239,7 @@ def _null_without_warmup(log: mcap_reader.FlightLog | None, nav: nav_filter.Filt
                          ) -> tuple[Any, Any, list | None, str, PipelineConfig]:
     """(log, A, null realisations, note, the configuration they were made with) of the
     diagnosis's null: when A's warm-up estimate
-    ``db`` (body x, y, m/s^2) explains A's rejections (:func:`_warmup_start`), re-made on the
+    ``db`` (body x, y, m/s^2) explains A's rejections (:func:`warmup_start`), re-made on the
     log without it (with it, A diverged in them: 1800 ug; docs/diagnose.md "Power")."""
     if not null_dv or log is None or db is None:
         return log, nav, null_dv, "", config
@@ -373,13 +373,14 @@ def _diagnose_legs(calib_run: CalibrationRun, imu: ImuSource, solution_a: Soluti
     # as white noise would make every F-test too liberal
     arw_radpsqrts = imu_tuning(config).noise().gyro_arw_radpsqrts
     def diagnose_with(signatures, whitening_replays=None):
-        return diagnose_replays(
-            replays, imu=imu, solution_a=solution_a,
+        opts = DiagnosisOptions(
             replay_kwargs={"accel_compensation": config.replay.accel_compensation},
             base_formulation=config.pairs.formulation, base_transition=config.pairs.transition,
-            noise="gyro_rw", gyro_arw_radpsqrts=arw_radpsqrts, null_dv=null_dv,
-            alpha=config.pairs.diagnose_alpha, signatures=signatures,
-            whitening_replays=whitening_replays, heldout_whitened=ho_white, threads=threads)
+            noise="gyro_rw", gyro_arw_radpsqrts=arw_radpsqrts,
+            alpha=config.pairs.diagnose_alpha, heldout_whitened=ho_white)
+        return diagnose_replays(replays, opts, imu=imu, solution_a=solution_a, null_dv=null_dv,
+                                signatures=signatures, whitening_replays=whitening_replays,
+                                threads=threads)
 
     note = null_note(null_dv, *null_drift(calib_run, config)) + warm_note
 
@@ -489,11 +490,8 @@ def refit_stage(calib_run: CalibrationRun, diagnosis: Diagnosis | None, imu: Imu
         mode = COMPENSATION_MODES[name if gm or name != "per_leg" else "constant"](ModeInputs(
             imu, solution_a, replays, refit.run.chosen, refit.sigma_b_radps, rc.options(),
             forward_bias_record(nav, tuning), threads=threads))
-    after, improvements = compensate_legs(
-        imu, solution_a, replays, refit.run.chosen,
-        accel_compensation=rc.accel_compensation, horizon_s=rc.horizon_s,
-        transition_step=int(rc.transition_step), sample_rate_hz=rc.sample_rate_hz,
-        sigma_floor_mps=rc.sigma_floor_mps, threads=threads, **mode.kwargs)
+    after, improvements = compensate_legs(imu, solution_a, replays, refit.run.chosen,
+                                          replay=rc.options(), threads=threads, **mode.kwargs)
     return replace(refit, run=replace(refit.run, replays_after=after, improvements=improvements,
                                       compensation_source=mode.source))
 

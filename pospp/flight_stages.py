@@ -222,7 +222,7 @@ times the effect's plausible 100 ug; the "vehicle" preset's 5 ug at 3600 s canno
 warm-up: A's smoothed bias then reads 600 ug as a constant 285 ug, docs/diagnose.md)."""
 WARMUP_START_UG = 200.0
 """The warm-up pass's estimate starts a Gauss-Newton signature above this norm [ug] (twice the
-plausible size; the warm-up mission's null flights read at most 110 ug): :func:`_warmup_start`."""
+plausible size; the warm-up mission's null flights read at most 110 ug): :func:`warmup_start`."""
 
 
 def warmup_estimate(log: mcap_reader.FlightLog, config: PipelineConfig, lever_b_m: Any = None,
@@ -321,7 +321,7 @@ def forward_bias_record(nav: nav_filter.FilterResult, tuning: nav_tuning.ImuTuni
                         ) -> ForwardBiases:
     """What the smoothed compensation reads of A (:meth:`ForwardBiases.of_filter`)."""
     return ForwardBiases.of_filter(nav, tuning.noise().gyro_bias_psd_radps2ps)
-def _lever_arm_and_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
+def lever_arm_and_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                          config: PipelineConfig,
                          est: nav_filter.LeverArmEstimate | None = None
                          ) -> tuple[np.ndarray | None, np.ndarray | None]:
@@ -338,7 +338,7 @@ def _lever_arm_and_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResul
     return est.lever_b_m, np.asarray(config.gnss.lever_arm_m, dtype=float) - est.lever_b_m
 
 
-def _scale_factor_start(log: mcap_reader.FlightLog, config: PipelineConfig,
+def scale_factor_start(log: mcap_reader.FlightLog, config: PipelineConfig,
                         lever_b_m: np.ndarray | None) -> np.ndarray | None:
     """A's gyro scale-factor estimate (:func:`scale_factor_estimate`) when an axis of it is
     significant (:data:`GYRO_SF_SIGNIFICANCE`) and its norm above the refinement's bar, else
@@ -356,7 +356,7 @@ def _scale_factor_start(log: mcap_reader.FlightLog, config: PipelineConfig,
     return sf
 
 
-def _warmup_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
+def warmup_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                   config: PipelineConfig, lever_b_m: np.ndarray | None) -> np.ndarray | None:
     """A's warm-up estimate (:func:`warmup_estimate`) when it explains A's rejections: A as
     configured gated more GNSS records than its model allows (:func:`gate_excess`; else no

@@ -2,14 +2,13 @@
 
 One way through the data::
 
-    ingest (io) -> algorithm A (nav) -> legs, B replays, pairs, calibration (calib)
-      -> compensation: B re-run, A re-run with the calibrated gyro bias (calib, nav)
-      -> diagnosis (diagnose) -> quality checks (qc) -> tables, MCAP trajectory, HTML report
+    ingest (io) -> A (nav) -> legs, B, pairs, calibration (calib) -> null (its covariance)
+      -> compensation (B, and A with the calibrated gyro bias) -> diagnosis -> qc -> write
 
 Each stage takes the frozen results of the stages before it and returns its own; nothing
 numeric happens here, only orchestration and the translation of results into output tables
-(:mod:`pospp.outputs`). The stage functions themselves are in :mod:`pospp.flight_stages`.
-Files are touched only through :mod:`pospp.io`.
+(:mod:`pospp.outputs`). The stage functions are in :mod:`pospp.flight_stages`; files are
+touched only through :mod:`pospp.io`.
 
 Failure policy (design.md "nothing is lost"): ingestion problems that make the file unusable
 raise :class:`pospp.io.errors.IngestError` with file, topic and time; every later stage that

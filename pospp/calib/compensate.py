@@ -174,11 +174,7 @@ def compensate_legs(
     before: dict[int, LegReplay],
     cal: Calibration,
     *,
-    accel_compensation: str = "filter",
-    horizon_s: float = 300.0,
-    transition_step: int = 10,
-    sample_rate_hz: float = 1.0,
-    sigma_floor_mps: float = 0.005,
+    replay: ReplayOptions | None = None,
     per_leg_drift: bool = False,
     smoothed_drift: bool = False,
     gyro_bias_by_leg: Mapping[int, NDArray] | None = None,
@@ -194,6 +190,9 @@ def compensate_legs(
 
     Parameters
     ----------
+    replay : ReplayOptions, optional
+        B's settings (accelerometer compensation, transition step, sample rate, sigma floor)
+        and the horizon [s] the improvement is measured at (the defaults when None).
     per_leg_drift : bool
         Add the smoothed Gauss-Markov drift's mean over each leg
         (:meth:`Calibration.leg_drift_b_radps`; zero without a Gauss-Markov noise model) to
@@ -216,6 +215,8 @@ def compensate_legs(
     threads : int
         Legs replayed at once (B's kernels release the GIL; the same replays at any number).
     """
+    replay = replay if replay is not None else ReplayOptions()
+
     def one(item: tuple[int, LegReplay]) -> tuple[LegReplay, LegImprovement]:
         leg_id, rep = item
         in_fit = leg_id in cal.leg_ids
@@ -232,11 +233,12 @@ def compensate_legs(
             bg = np.zeros(3)
         new = replay_leg(
             leg_imu, solution_a, rep.leg, gyro_bias_b_radps=bg, attitude_correction_n_rad=phi,
-            accel_compensation=accel_compensation, transition_step=transition_step,
-            sample_rate_hz=sample_rate_hz, sigma_floor_mps=sigma_floor_mps,
+            accel_compensation=replay.accel_compensation,
+            transition_step=int(replay.transition_step), sample_rate_hz=replay.sample_rate_hz,
+            sigma_floor_mps=replay.sigma_floor_mps,
         )
-        h, v0, p0 = horizontal_error_at(rep, horizon_s)
-        _, v1, p1 = horizontal_error_at(new, horizon_s)
+        h, v0, p0 = horizontal_error_at(rep, replay.horizon_s)
+        _, v1, p1 = horizontal_error_at(new, replay.horizon_s)
         return new, LegImprovement(leg_id, h, v0, v1, p0, p1, in_fit)
 
     made = map_in_threads(one, before.items(), threads)

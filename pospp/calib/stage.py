@@ -431,11 +431,8 @@ def calibrate_flight(
                         f"with leg {first.leg.leg_id}'s attitude")
     mode = COMPENSATION_MODES[compensation](ModeInputs(
         imu, solution_a, replays, chosen, sig, rc, forward_biases, causal_prior_scale, threads))
-    after, improvements = compensate_legs(
-        imu, solution_a, replays, chosen, accel_compensation=rc.accel_compensation,
-        horizon_s=rc.horizon_s, transition_step=int(rc.transition_step),
-        sample_rate_hz=rc.sample_rate_hz, sigma_floor_mps=rc.sigma_floor_mps, threads=threads,
-        **mode.kwargs)
+    after, improvements = compensate_legs(imu, solution_a, replays, chosen, replay=rc,
+                                          threads=threads, **mode.kwargs)
     mis = {i: chosen.misalignment_n_rad(i) for i in chosen.leg_ids}
     return CalibrationRun(legs, replays, pairs, joint, chosen, after, improvements, bg, sig, mis,
                           "ok", tuple(messages),

@@ -19,7 +19,7 @@ from pospp import earth
 from pospp.calib.replay import LegReplay, SolutionA
 from pospp.diagnose import effects as fx
 from pospp.diagnose._linear import Fit, Problem, Term, bic, f_test
-from pospp.diagnose._terms import _effect_estimate, _effect_term
+from pospp.diagnose._terms import effect_estimate, effect_term
 from pospp.effects_catalog import shape_entry
 
 FIELD_PARAMETERS = tuple(f"deflection_u{i}w{j}" for i, j in fx.field_monomials())
@@ -96,7 +96,7 @@ def trial(prob: Problem, terms: list[Term], fit0: Fit, eff: fx.Effect, sigs: lis
     the p-value (``p_value(f, p_nominal, terms, new_terms)``), the held-out prediction, the
     estimate, the explained fraction, the worth and the BIC change; None when the legs cannot
     reveal it."""
-    term = _effect_term(prob, terms, eff, sigs)
+    term = effect_term(prob, terms, eff, sigs)
     if term is None:
         return None
     n = prob.n
@@ -107,7 +107,7 @@ def trial(prob: Problem, terms: list[Term], fit0: Fit, eff: fx.Effect, sigs: lis
     f, p = f_test(fit0.rss_w, fit1.rss_w, r, dof1)
     p = p_value(f, p, terms, new_terms)
     s2 = fit1.rss_w / max(dof1, 1)
-    vals, sigs_, size, size_sig = _effect_estimate(term, fit1, new_terms, s2)
+    vals, sigs_, size, size_sig = effect_estimate(term, fit1, new_terms, s2)
     return dict(eff=eff, shape=shape, term=term, fit=fit1, ho=prob.heldout(new_terms), f=f,
                 p=p, r=r, vals=vals, sigs=sigs_, size=size, size_sig=size_sig,
                 frac=frac_of(new_terms, fit1),

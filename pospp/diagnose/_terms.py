@@ -34,7 +34,7 @@ def _rows(sig: NDArray) -> NDArray:
     return sig[1:].reshape(-1, sig.shape[2])
 
 
-def _base_terms(reps: Sequence[LegReplay], formulation: str, transition: str) -> list[Term]:
+def base_terms(reps: Sequence[LegReplay], formulation: str, transition: str) -> list[Term]:
     nl = len(reps)
     sens = [leg_sensitivities(r, transition) for r in reps]
     terms = []
@@ -51,7 +51,7 @@ def _base_terms(reps: Sequence[LegReplay], formulation: str, transition: str) ->
     return terms
 
 
-def _lof_term(reps: Sequence[LegReplay], k: int) -> list[Term]:
+def lof_term(reps: Sequence[LegReplay], k: int) -> list[Term]:
     terms = []
     for i, r in enumerate(reps):
         t = r.t_s[1:]
@@ -66,7 +66,7 @@ def _lof_term(reps: Sequence[LegReplay], k: int) -> list[Term]:
     return terms
 
 
-def _base_x_per_leg(prob: Problem, terms: list[Term], fit: Fit, formulation: str
+def base_x_per_leg(prob: Problem, terms: list[Term], fit: Fit, formulation: str
                     ) -> list[NDArray]:
     """Current [phi_N, phi_E, phi_D, b_x, b_y, b_z] (SI) of every leg."""
     vals: dict[str, NDArray] = {}
@@ -93,7 +93,7 @@ def _base_x_per_leg(prob: Problem, terms: list[Term], fit: Fit, formulation: str
     return out
 
 
-def _effect_term(prob: Problem, terms: list[Term], eff: fx.Effect, sigs: list[NDArray]
+def effect_term(prob: Problem, terms: list[Term], eff: fx.Effect, sigs: list[NDArray]
                  ) -> Term | None:
     """The effect's observable directions (in units of its plausible size), or None."""
     raw = [_rows(s) * eff.plausible_si for s in sigs]
@@ -117,7 +117,7 @@ def _effect_term(prob: Problem, terms: list[Term], eff: fx.Effect, sigs: list[ND
     return Term(eff.effect_id, [b @ v for b in raw], basis=v * eff.plausible_si, effect=eff)
 
 
-def _effect_estimate(term: Term, fit: Fit, terms: list[Term], s2: float
+def effect_estimate(term: Term, fit: Fit, terms: list[Term], s2: float
                      ) -> tuple[NDArray, NDArray, float, float]:
     """(values, sigmas, size, size sigma) in the effect's display unit."""
     k = 0

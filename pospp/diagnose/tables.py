@@ -1,7 +1,7 @@
 """The diagnosis as flat tables (dicts of arrays; :mod:`pospp.io` writes them).
 
 diagnosis.parquet (one row per step), the candidates tested, the per-leg gaps and the residual
-curves of :class:`pospp.diagnose.workflow.Diagnosis`. Units in the column names (SI: m/s, m,
+curves of :class:`pospp.diagnose.results.Diagnosis`. Units in the column names (SI: m/s, m,
 s); effect sizes in each row's display ``unit``.
 """
 
@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 if TYPE_CHECKING:
-    from pospp.diagnose.workflow import Diagnosis
+    from pospp.diagnose.results import Diagnosis
 
 DIAGNOSIS_COLUMNS = (
     "step", "effect", "value", "sigma", "unit", "statistic", "p_value", "criterion",

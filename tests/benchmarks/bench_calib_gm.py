@@ -20,7 +20,7 @@ import pandas as pd
 
 from pospp import flight_stages, pipeline
 from pospp.calib.compensate import compensate_legs
-from pospp.calib.replay import SolutionA
+from pospp.calib.replay import ReplayOptions, SolutionA
 from pospp.calib.stage import calibrate_flight
 from pospp.config import load_config
 from pospp.nav import filter as nav_filter
@@ -71,7 +71,7 @@ def main() -> None:
             print(f"   leg {lid}: true mean {np.round(true_mean[lid][:2] / DPH, 3)}, "
                   f"constant + smoothed drift {np.round((run.gyro_bias_b_radps + d)[:2] / DPH, 3)}")
         rows = {"constant": run.improvements}
-        opts = {"horizon_s": cfg.replay.horizon_s}
+        opts = {"replay": ReplayOptions(horizon_s=cfg.replay.horizon_s)}
         if cal.drift is not None:
             rows["per_leg"] = compensate_legs(imu, ref, run.replays, cal, per_leg_drift=True,
                                               **opts)[1]

@@ -28,7 +28,7 @@ from _synthetic import noisy_replays, survey_flight  # noqa: E402
 
 from pospp import earth  # noqa: E402
 from pospp.calib.replay import ImuIncrements  # noqa: E402
-from pospp.diagnose.workflow import diagnose_replays  # noqa: E402
+from pospp.diagnose.workflow import DiagnosisOptions, diagnose_replays  # noqa: E402
 from pospp.units import ARCSEC_RAD, DEG_PER_H_RADPS, G0_MPS2, UG_MPS2  # noqa: E402
 
 SIGMA = 0.003
@@ -118,7 +118,7 @@ def main() -> None:
         reps = noisy_replays(f, imu, sigma_mps=SIGMA, rng=np.random.default_rng(7),
                              solution_a=ref)
         c1 = time.process_time()
-        d = diagnose_replays(reps, imu=imu, solution_a=ref, **kw)
+        d = diagnose_replays(reps, DiagnosisOptions(**kw), imu=imu, solution_a=ref)
         c2 = time.process_time()
         first, last = d.steps[0], d.steps[-1]
         named = ", ".join(d.named) + ("; " if d.named else "") + d.conclusion

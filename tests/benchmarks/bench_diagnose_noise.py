@@ -25,7 +25,7 @@ import numpy as np
 
 from pospp import flight_stages, pipeline, rotation
 from pospp.config import load_config
-from pospp.diagnose.workflow import diagnose_replays
+from pospp.diagnose.workflow import DiagnosisOptions, diagnose_replays
 from pospp.io.parquet_tables import read_reference_trajectory
 from pospp.nav import strapdown
 from pospp.nav.strapdown import interpolate_trajectory
@@ -71,9 +71,10 @@ def run_case(name: str) -> None:
     for label, rr in variants:
         for noise in ("gyro_rw", "full"):
             t0 = time.perf_counter()
-            d = diagnose_replays(rr, imu=imu, solution_a=ref, base_formulation="body", noise=noise,
-                         replay_kwargs={"accel_compensation": cfg.replay.accel_compensation},
-                         effects=EFFECTS)
+            d = diagnose_replays(rr, DiagnosisOptions(
+                base_formulation="body", noise=noise, effects=EFFECTS,
+                replay_kwargs={"accel_compensation": cfg.replay.accel_compensation}),
+                imu=imu, solution_a=ref)
             rows = [(s.effect, f"{s.value:.4g} {s.unit}".strip(), f"F={s.statistic:.2f}",
                      f"p={s.p_value:.2g}") for s in d.steps]
             print(f"  {label:32s} {noise:8s} {rows} ({time.perf_counter() - t0:.0f} s)")
@@ -112,11 +113,11 @@ def run_null(name: str, n_null: int) -> None:
             t0 = time.perf_counter()
             d = pipeline.diagnose_calibration(run, imu, ref, cfg, null_dv=nd) \
                 if effects is None else diagnose_replays(
-                    [run.replays[i] for i in sorted(run.replays)], imu=imu, solution_a=ref,
-                         replay_kwargs={"accel_compensation": cfg.replay.accel_compensation},
-                         noise="gyro_rw", null_dv=nd, effects=effects,
-                         gyro_arw_radpsqrts=np.radians(flight_stages.imu_tuning(cfg).gyro_arw_dpsh)
-                         / 60.0)
+                    [run.replays[i] for i in sorted(run.replays)], DiagnosisOptions(
+                        replay_kwargs={"accel_compensation": cfg.replay.accel_compensation},
+                        noise="gyro_rw", effects=effects,
+                        gyro_arw_radpsqrts=np.radians(flight_stages.imu_tuning(cfg).gyro_arw_dpsh)
+                        / 60.0), imu=imu, solution_a=ref, null_dv=nd)
             rows = [(s.effect, f"{s.value:.4g} {s.unit}".strip(), f"F={s.statistic:.2f}",
                      f"p={s.p_value:.2g}") for s in d.steps]
             lab = "pipeline" if effects is None else "bench effects"

@@ -28,8 +28,8 @@ s after power-up, a loiter, the later legs after T = 1200 s; test_diagnose_power
 ``trigger``: on flights with another effect hidden (lever arm, GNSS time offset) or none, A's
 own gyro scale-factor estimate (``flight_stages.scale_factor_estimate`` at A's lever-arm
 estimate) and whether the pipeline would make the scale factor's Gauss-Newton signature
-(``flight_stages._scale_factor_start``), and the same for A's warm-up pass
-(``flight_stages.warmup_estimate``, ``_warmup_start``): how often their Gauss-Newton starts
+(``flight_stages.scale_factor_start``), and the same for A's warm-up pass
+(``flight_stages.warmup_estimate``, ``warmup_start``): how often their Gauss-Newton starts
 where no such effect is hidden; with ``--mc``, on the 40 flights of the null Monte Carlo
 (tests/unit/test_diagnose_null_mc.py) instead; with ``--warmup`` on the warm-up mission.
 """
@@ -79,15 +79,15 @@ def null_case(seed: int, gnss_pos_m: float, leg_s: float):
 
 
 def _diagnose(run, ref, imu, cfg, null, sigs, replays=None):
-    from pospp.diagnose.workflow import diagnose_replays
+    from pospp.diagnose.workflow import DiagnosisOptions, diagnose_replays
 
     reps = replays if replays is not None else [run.replays[i] for i in sorted(run.replays)]
-    return diagnose_replays(reps, imu=imu, solution_a=ref,
-                    replay_kwargs={"accel_compensation": cfg.replay.accel_compensation},
-                    base_formulation=cfg.pairs.formulation,
-                    base_transition=cfg.pairs.transition, noise="gyro_rw",
-                    gyro_arw_radpsqrts=flight_stages.imu_tuning(cfg).noise().gyro_arw_radpsqrts,
-                    null_dv=null, signatures=sigs)
+    return diagnose_replays(reps, DiagnosisOptions(
+        replay_kwargs={"accel_compensation": cfg.replay.accel_compensation},
+        base_formulation=cfg.pairs.formulation, base_transition=cfg.pairs.transition,
+        noise="gyro_rw",
+        gyro_arw_radpsqrts=flight_stages.imu_tuning(cfg).noise().gyro_arw_radpsqrts),
+        imu=imu, solution_a=ref, null_dv=null, signatures=sigs)
 
 
 def limits(seeds: int, cells) -> None:
@@ -166,9 +166,9 @@ def _triggered(log, cfg) -> tuple[bool, float, bool, float]:
     nav = pipeline.navigate(log, cfg)
     lever = flight_stages.lever_arm_estimate(log, nav, cfg).lever_b_m
     sf, sigma = flight_stages.scale_factor_estimate(log, cfg, lever)
-    start = flight_stages._scale_factor_start(log, cfg, lever)
+    start = flight_stages.scale_factor_start(log, cfg, lever)
     db = flight_stages.warmup_estimate(log, cfg, lever)
-    warm = flight_stages._warmup_start(log, nav, cfg, lever)
+    warm = flight_stages.warmup_start(log, nav, cfg, lever)
     return (start is not None, float(np.max(np.abs(sf) / sigma)), warm is not None,
             float(np.linalg.norm(db)) / UG_MPS2,
             flight_stages.gate_excess(nav, cfg.filter_options().gate_probability))

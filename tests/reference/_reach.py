@@ -176,6 +176,7 @@ def grid_flight(tau_s: float | None, seed: int, *, n_null: int = 10) -> dict[str
     from pospp import flight_stages as fs
     from pospp.calib.bias_smoother import span_means
     from pospp.calib.compensate import COMPENSATION_MODES, ModeInputs, compensate_legs
+    from pospp.calib.replay import ReplayOptions
     from pospp.config import config_from_dict
     from pospp.io.mcap_reader import FlightLog
     from pospp.null_stage import null_needs_gains, null_stage
@@ -199,7 +200,8 @@ def grid_flight(tau_s: float | None, seed: int, *, n_null: int = 10) -> dict[str
                 imu, made.solution_a, made.replays, run.chosen, run.gyro_bias_sigma_b_radps,
                 rc, fwd))
             _, imp = compensate_legs(imu, made.solution_a, {i: made.replays[i] for i in legs},
-                                     run.chosen, horizon_s=rc.horizon_s, **choice.kwargs)
+                                     run.chosen, replay=ReplayOptions(horizon_s=rc.horizon_s),
+                                     **choice.kwargs)
             out[mode] = ratios([(i.vel_before_mps, i.pos_before_m) for i in imp],
                                [(i.vel_after_mps, i.pos_after_m) for i in imp])
         return out

@@ -23,7 +23,7 @@ from pospp.calib.compensate import (
     compensate_legs,
     prior_sigma_b_radps,
 )
-from pospp.calib.replay import ImuIncrements, solution_a_from_trajectory
+from pospp.calib.replay import ImuIncrements, ReplayOptions, solution_a_from_trajectory
 from pospp.calib.solve import fit_calibration
 from pospp.calib.stage import calibrate_flight
 from pospp.nav.filter import run_integrated_navigation
@@ -140,7 +140,7 @@ def run_once(kind: str, seed: int, folder: Path, *, estimate_gm_sigma: bool = Fa
         true_mean[lid] = bias[k0:k1].mean(axis=0)
         leg_drift.append((est + cal.leg_drift_b_radps(rep) - true_mean[lid])[0:2])
         leg_const.append((est - true_mean[lid])[0:2])
-    kw = {"horizon_s": 300.0}
+    kw = {"replay": ReplayOptions(horizon_s=300.0)}
     _, per_leg = compensate_legs(imu, a, run.replays, cal, per_leg_drift=True, **kw)
     _, oracle = compensate_legs(imu, a, run.replays, cal, gyro_bias_by_leg=true_mean, **kw)
     _, smooth = compensate_legs(imu, a, run.replays, cal, smoothed_drift=True, **kw)
@@ -240,7 +240,7 @@ def run_modes(kind: str, seed: int, folder: Path, *, gm_tau_s: float | None = No
                                         epoch_ns=sim.start_time_ns, output_rate_hz=10.0)
         fwd = nav.forward_biases
     out: dict[str, float] = {}
-    kw = {"horizon_s": 300.0}
+    kw = {"replay": ReplayOptions(horizon_s=300.0)}
     for where, (c, reps, b0, s0) in fits.items():
         opts: dict[str, dict] = {"constant": {}, "per_leg": {"per_leg_drift": True},
                                  "oracle": {"gyro_bias_by_leg": true_mean}}

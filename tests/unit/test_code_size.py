@@ -32,8 +32,6 @@ FUNCTION_EXCEPTIONS = {
                                       "(per-leg bases, full Gauss-Markov, null realisations)",
     "calib/stage.py:calibrate_flight": "the calibration stage's sequence (legs, B, pairs, "
                                        "fits, compensation, drift source) in one readable list",
-    "diagnose/workflow.py:diagnose_replays": "the diagnosis's step loop (screen, candidates, "
-                                             "nested tests, closing lack of fit) in one place",
 }
 
 
@@ -84,9 +82,7 @@ PARAMETER_EXCEPTIONS = {
     "nav/_filter_kernel.py:_update_epoch": _KERNEL,
     "nav/_filter_kernel.py:forward_kernel": _KERNEL,
     "calib/_drift_kernel.py:drift_filter_whiten": _KERNEL,
-    "diagnose/workflow.py:diagnose_replays": _OPTIONS,
     "calib/stage.py:calibrate_flight": _OPTIONS,
-    "calib/compensate.py:compensate_legs": _OPTIONS,
     "calib/solve.py:fit_calibration": _OPTIONS,
     "calib/reml.py:calibrate_gm": _OPTIONS,
     "sim/api.py:simulate_along": "the simulator's keyword API: one physical quantity each",

@@ -25,7 +25,7 @@ from scipy import stats
 from pospp.calib.noise_model import NoiseModel
 from pospp.calib.replay import replay_leg
 from pospp.diagnose import null_model
-from pospp.diagnose.workflow import diagnose_replays
+from pospp.diagnose.workflow import DiagnosisOptions, diagnose_replays
 
 
 def test_calibrated_p_value_is_exact_for_a_normal_log_statistic():
@@ -290,9 +290,10 @@ def test_the_null_refits_on_two_threads_are_the_refits_on_one(replays):
     null = _draws(replays, model, 6, rng)
     reps = [dataclasses.replace(r, dv_n_mps=r.dv_n_mps + d)
             for r, d in zip(replays, data, strict=True)]
-    kw = dict(noise="gyro_rw", gyro_arw_radpsqrts=2e-6, alpha=0.05, null_dv=null,
-              effects=("accel_bias_change", "gravity_disturbance", "vertical_gyro_drift"))
-    one, two = (diagnose_replays(reps, threads=t, **kw) for t in (1, 2))
+    opts = DiagnosisOptions(noise="gyro_rw", gyro_arw_radpsqrts=2e-6, alpha=0.05,
+                            effects=("accel_bias_change", "gravity_disturbance",
+                                     "vertical_gyro_drift"))
+    one, two = (diagnose_replays(reps, opts, null_dv=null, threads=t) for t in (1, 2))
     assert one.conclusion == two.conclusion
     assert one.steps[-1].criterion == "lack_of_fit_F_null_calibrated"
     tests = [(x.effect, x.statistic, x.p_value) for d in (one, two)
@@ -314,9 +315,10 @@ def test_workflow_calibrated_on_null_realisations_holds_alpha(replays):
         null = _draws(replays, model, 30, rng)
         reps = [dataclasses.replace(r, dv_n_mps=r.dv_n_mps + d)
                 for r, d in zip(replays, data, strict=True)]
-        kw = dict(noise="gyro_rw", gyro_arw_radpsqrts=2e-6, effects=effects, alpha=0.05)
-        nominal.append(diagnose_replays(reps, **kw).conclusion)
-        d = diagnose_replays(reps, null_dv=null, **kw)
+        opts = DiagnosisOptions(noise="gyro_rw", gyro_arw_radpsqrts=2e-6, effects=effects,
+                                alpha=0.05)
+        nominal.append(diagnose_replays(reps, opts).conclusion)
+        d = diagnose_replays(reps, opts, null_dv=null)
         calibrated.append(d.conclusion)
         assert d.steps[-1].criterion == "lack_of_fit_F_null_calibrated"
         # a structured gap outside the library: a 20 mm/s sine over leg 2's north channel
@@ -325,7 +327,7 @@ def test_workflow_calibrated_on_null_realisations_holds_alpha(replays):
         dv = r.dv_n_mps.copy()
         dv[:, 0] += 0.02 * np.sin(3 * np.pi * r.t_s / r.t_s[-1])
         bumped[1] = dataclasses.replace(r, dv_n_mps=dv)
-        powered.append(diagnose_replays(bumped, null_dv=null, **kw).conclusion)
+        powered.append(diagnose_replays(bumped, opts, null_dv=null).conclusion)
     # at alpha = 0.05 over 12 draws, 3 or more false alarms has probability 2 %
     assert nominal.count("unexplained") >= 6
     assert calibrated.count("unexplained") <= 2

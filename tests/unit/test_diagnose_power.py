@@ -271,7 +271,7 @@ def test_scale_factor_pass_starts_the_gauss_newton_only_where_one_is_hidden(effe
     sf, sigma = flight_stages.scale_factor_estimate(log, cfg)
     truth = np.array([0.0, 0.0, size_ppm * 1e-6])
     assert np.all(np.abs(sf - truth) < 3.0 * sigma), (sf, sigma)
-    start = flight_stages._scale_factor_start(log, cfg, None)
+    start = flight_stages.scale_factor_start(log, cfg, None)
     if effect is None:
         assert start is None, start
     else:
@@ -329,7 +329,7 @@ def test_warmup_pass_starts_the_gauss_newton_only_where_one_is_hidden(effect, si
     nav = pipeline.navigate(log, cfg)
     excess = flight_stages.gate_excess(nav, cfg.filter_options().gate_probability)
     db = flight_stages.warmup_estimate(log, cfg) / UG_MPS2
-    start = flight_stages._warmup_start(log, nav, cfg, None)
+    start = flight_stages.warmup_start(log, nav, cfg, None)
     if effect is None:
         assert not excess
         assert np.linalg.norm(db) < flight_stages.WARMUP_START_UG, db

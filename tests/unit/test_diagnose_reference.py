@@ -17,7 +17,7 @@ import pytest
 from pospp import rotation
 from pospp.calib.replay import ImuIncrements, replay_leg, solution_a_from_trajectory
 from pospp.calib.segment import Leg
-from pospp.diagnose.workflow import diagnose_replays
+from pospp.diagnose.workflow import DiagnosisOptions, diagnose_replays
 from pospp.io.mcap_reader import read_flight_log
 from pospp.io.parquet_tables import read_reference_trajectory
 from pospp.nav import strapdown
@@ -45,9 +45,10 @@ def test_paper_base_names_body_fixed_gyro_bias(reference_cases):
     assert len(legs) == 4  # transit at 90 deg and three survey lines at 20 / 200 deg
     reps = [replay_leg(imu, a, leg, sigma_floor_mps=0.001) for leg in legs]
     arw = np.radians(params["imu_errors"]["gyro_arw_dpsh"][0]) / 60.0
-    d = diagnose_replays(reps, imu=imu, solution_a=a, base_formulation="paper", noise="gyro_rw",
-                 gyro_arw_radpsqrts=arw, effects=("body_fixed_gyro_bias", "vertical_gyro_drift",
-                                                  "accel_bias_change", "gravity_disturbance"))
+    d = diagnose_replays(reps, DiagnosisOptions(
+        base_formulation="paper", noise="gyro_rw", gyro_arw_radpsqrts=arw,
+        effects=("body_fixed_gyro_bias", "vertical_gyro_drift", "accel_bias_change",
+                 "gravity_disturbance")), imu=imu, solution_a=a)
     assert d.named[:1] == ("body_fixed_gyro_bias",)
     s = d.steps[0]
     assert s.p_value < 1e-10 and s.explained_fraction > 0.9

@@ -15,7 +15,7 @@ import pytest
 
 from pospp.calib.replay import ImuIncrements, replay_leg, solution_a_from_trajectory
 from pospp.calib.segment import Leg
-from pospp.diagnose.workflow import diagnose_replays
+from pospp.diagnose.workflow import DiagnosisOptions, diagnose_replays
 from pospp.nav import strapdown
 from pospp.sim.api import simulate
 from pospp.sim.profile import parse_profile
@@ -58,7 +58,7 @@ def _diagnose(errors: ImuErrorModel, seed: int, **kw):
         noisy[0] = 0.0
         reps.append(dataclasses.replace(r, dv_n_mps=noisy))
     assert len(reps) == 4
-    return diagnose_replays(reps, imu=imu, solution_a=a, **kw)
+    return diagnose_replays(reps, DiagnosisOptions(**kw), imu=imu, solution_a=a)
 
 
 def test_body_fixed_gyro_bias_against_paper_base():

@@ -24,7 +24,7 @@ from pospp.diagnose.tables import (
     leg_gap_columns,
     residual_curve_columns,
 )
-from pospp.diagnose.workflow import diagnose_replays
+from pospp.diagnose.workflow import DiagnosisOptions, diagnose_replays
 from pospp.units import ARCSEC_RAD, DEG_PER_H_RADPS, G0_MPS2, UG_MPS2
 
 SIGMA = 0.003  # A's velocity noise [m/s]
@@ -61,7 +61,7 @@ def _run(fl, dth, dv, seed, **kw):
     ref = fl.solution_a(SIGMA)
     reps = noisy_replays(fl, imu, sigma_mps=SIGMA, rng=np.random.default_rng(seed),
                          solution_a=ref)
-    return diagnose_replays(reps, imu=imu, solution_a=ref, **kw)
+    return diagnose_replays(reps, DiagnosisOptions(**kw), imu=imu, solution_a=ref)
 
 
 def _excess(gap):
@@ -209,12 +209,13 @@ def test_input_contract(reversal):
     imu = ImuIncrements(reversal.imu.t_s, dth, dv)
     reps = noisy_replays(reversal, imu, sigma_mps=SIGMA, rng=np.random.default_rng(1))
     with pytest.raises(ValueError, match="base_formulation"):
-        diagnose_replays(reps, base_formulation="nav")
+        DiagnosisOptions(base_formulation="nav")
     with pytest.raises(ValueError, match="at least 2 legs"):
         diagnose_replays(reps[:1])
     with pytest.raises(ValueError, match="expected one of"):
-        diagnose_replays(reps, effects=("wind",))
-    d = diagnose_replays(reps, effects=("time_offset",))  # no IMU given: cannot re-run B
+        DiagnosisOptions(effects=("wind",))
+    # no IMU given: cannot re-run B
+    d = diagnose_replays(reps, DiagnosisOptions(effects=("time_offset",)))
     assert d.not_evaluated == ("time_offset",)
 
 

@@ -29,7 +29,7 @@ from pospp.calib.noise_model import (
 )
 from pospp.calib.replay import replay_leg
 from pospp.calib.solve import fit_noise_model
-from pospp.diagnose.workflow import diagnose_replays
+from pospp.diagnose.workflow import DiagnosisOptions, diagnose_replays
 
 G_MPS2 = 9.80
 
@@ -134,8 +134,9 @@ def test_full_model_closes_none_on_data_drawn_from_it(replays):
         assert 0.5e-3 < fitted.reference_sigma_mps < 2e-3
         assert fitted.gyro_arw_radpsqrts == pytest.approx(3e-6, rel=0.3)
         effects = ("accel_bias_change", "gravity_disturbance")
-        closing.append(diagnose_replays(reps, noise="full", noise_model=fitted,
-                                effects=effects).conclusion)
-        closing_white.append(diagnose_replays(reps, noise="white", effects=effects).conclusion)
+        closing.append(diagnose_replays(reps, DiagnosisOptions(noise="full", effects=effects),
+                                        noise_model=fitted).conclusion)
+        closing_white.append(diagnose_replays(
+            reps, DiagnosisOptions(noise="white", effects=effects)).conclusion)
     assert closing == ["none"] * 3
     assert closing_white.count("unexplained") >= 2

@@ -18,21 +18,7 @@ from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[2] / "pospp"
 
-ALLOWED: dict[tuple[str, str], str] = {
-    ("diagnose/workflow.py", "pospp.diagnose._terms._base_terms"): "lead: issue 36 diagnosis work",
-    ("diagnose/workflow.py", "pospp.diagnose._terms._base_x_per_leg"):
-        "lead: issue 36 diagnosis work",
-    ("diagnose/workflow.py", "pospp.diagnose._terms._lof_term"): "lead: issue 36 diagnosis work",
-    ("diagnose/_candidates.py", "pospp.diagnose._terms._effect_estimate"):
-        "lead: issue 36 diagnosis work",
-    ("diagnose/_candidates.py", "pospp.diagnose._terms._effect_term"):
-        "lead: issue 36 diagnosis work",
-    ("diagnosis_stage.py", "pospp.flight_stages._lever_arm_and_start"):
-        "lead: issue 36 diagnosis work",
-    ("diagnosis_stage.py", "pospp.flight_stages._scale_factor_start"):
-        "lead: issue 36 diagnosis work",
-    ("diagnosis_stage.py", "pospp.flight_stages._warmup_start"): "lead: issue 36 diagnosis work",
-}
+ALLOWED: dict[tuple[str, str], str] = {}
 """(importing file relative to pospp/, used private name) -> why it is still there. Each
 entry must still occur (a stale entry fails the test): remove it with the fix."""
 
