@@ -66,13 +66,9 @@ EST_ACCEL_GM_UG = 1000.0
 EST_ACCEL_GM_TAU_S = 3600.0
 """The accelerometer Gauss-Markov states of A's estimate pass (lever arm, scale factors), at
 least the grade's: loose enough that its horizontal bias follows an in-run change between
-the turns that reveal it (``a_accel_trend_x/y``). flight_accel_ramp_100hz (900 / -400 ug/h
-on x / y): the slope of A-as-configured's smoothed bias read 2 % of it (z 0.75 against the
-simulation), this pass's forward bias 963 +- 44 / -568 +- 45 ug/h (z 17 against the
-simulation); the lever arm it estimates is as before (x, y -0.26, 0.45 m for -0.11, 0.37;
-truth -0.2, 0.4). At 100 ug the vertical bias, which A sees all the time, was held so
-tightly (sigma 2-12 ug/h) that the reference cases' null flights differed from their
-simulations at 4-7 sigma: the vertical trend stays A-as-configured's."""
+the turns that reveal it (``a_accel_trend_x/y``); the vertical trend stays
+A-as-configured's (docs/decisions.md "compare-sim's horizontal accelerometer trend from a
+loose pass")."""
 EST_SF_PRIOR_PPM = (2000.0, 5000.0)
 """Prior sigmas of the gyro and accelerometer scale-factor states of A's estimate pass [ppm],
 at least the grade's (twice and five times the catalogue's plausible 1000 ppm; the diagnosis's
@@ -181,27 +177,19 @@ def _with_static_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                        options: AlignmentOptions):
     """A's smoothed trajectory (t [s], lat, lon [rad], height [m]) with the log's initial
     static period held at rest (2 Hz), so that the simulated flight has the same static start
-    (``imu_avar_gyro_static``, step 0's static fits) whatever A did there (a drift far above
-    the configured grade's makes A wander and reset at rest; the error-free IMU along that
-    wandering put more power on the static parts than the log has, and step 0 fitted no
-    noise at all).
+    (``imu_avar_gyro_static``, step 0's static fits) whatever A did there.
 
     Where A covers the period (static alignment) and held the vehicle at rest there (no reset,
-    its speed below ``STATIC_SPEED_MPS``), the template is A's solution as it is (the
-    vehicle_bias_200hz reference case, a null: held at rest anyway, an accelerometer trend
-    moved 1.3 sigma and was named a ramp). Where A wandered, the rest position is A's at half
-    ``STATIC_END_MARGIN_S`` before its end, held to there, and A's own solution after that:
-    the IMU's static windows end a few seconds into the motion; the static statistics leave
-    the last ``STATIC_END_MARGIN_S`` out, so that what the template's smoothing spline does
-    about the join (a step of a few cm to the median of A's positions bent the aircraft's
-    bank into the static part's gyro power) or after it (A diverged) stays out of them.
-    Where A found one and started after it (motion alignment) it is
-    prepended at the median of its fixes, held to the last GNSS velocity before A's start
-    that is at rest by the alignment's test
-    (:func:`pospp.nav.alignment.gnss_moving_windows`, each record alone), not only to the
-    end of A's static period, so that the spline of the simulator joins the held position to
-    A's first epoch over the start of motion only (not over minutes of rest after an IMU
-    window that moved)."""
+    its speed below ``STATIC_SPEED_MPS``), the template is A's solution as it is. Where A
+    wandered, the rest position is A's at half ``STATIC_END_MARGIN_S`` before its end, held to
+    there, and A's own solution after that; the static statistics leave the last
+    ``STATIC_END_MARGIN_S`` out, so the spline's bend about the join stays out of them. Where
+    A found one and started after it (motion alignment) it is prepended at the median of its
+    fixes, held to the last GNSS velocity before A's start that is at rest by the alignment's
+    test (:func:`pospp.nav.alignment.gnss_moving_windows`, each record alone), so that the
+    simulator's spline joins the held position to A's first epoch over the start of motion
+    only. Reasons: docs/decisions.md "compare-sim's A tuned to step 0's levels above the
+    grade's; the static start held at rest"."""
     t, lat, lon, hgt = sol.t_s, sol.lat_rad, sol.lon_rad, sol.height_m
     end = nav.alignment.static_end_s
     if end is None:
@@ -330,8 +318,7 @@ def bma_leg_stats(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     :func:`pospp.diagnose.workflow.diagnose_replays` with its base model only (the
     pipeline's formulation, transition and gyro-random-walk weighting; no candidates), whose
     per-leg gaps give :func:`pospp.simcompare.stats.leg_stats`. Empty when the flight has
-    fewer than ``MIN_LEGS`` legs B could replay. (The calibration's own fit is not needed:
-    it was 2.3 of the 5.8 s of a simulated flight's statistics on flight_time_offset_200hz.)"""
+    fewer than ``MIN_LEGS`` legs B could replay."""
     from pospp.diagnose.workflow import DiagnosisOptions, diagnose_replays
 
     try:

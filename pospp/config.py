@@ -216,9 +216,8 @@ class GradeDefaults:
 
     pos_sigma_floor_m: float
     """``[gnss]``: a MEMS filter trusts the receivers' nominal sigmas too much: on the measured
-    logs (docs/results.md) the innovation gate then locks the GNSS out (quadrotor 0.70 -> 0.11
-    m forward with a 0.2 m floor; ArduPilot 31 -> 9.8 m with 1 m/s); navigation grades keep the
-    receivers' sigmas."""
+    logs the innovation gate then locks the GNSS out (docs/results.md); navigation grades keep
+    the receivers' sigmas."""
     vel_sigma_floor_mps: float
     leg_min_duration_s: float
     """``[legs] min_duration_s``: the paper's 5 min for the flight and vehicle grades; for

@@ -8,9 +8,8 @@ loader). Errors are :class:`ConfigError` and name the file and the key, with wha
 and what was found.
 
 Every number must be finite and within a physical range: a range wider than physics lets
-nonsense through to where it fails as something else (``start_s = 9.3e9`` s
-overflowed the int64 nanosecond stamps and was ignored; ``horizon_s = 1e-300`` gave an "ok"
-run with "0 -> 0 m/s").
+nonsense through to where it fails as something else (docs/decisions.md "Physical ranges for
+every config number").
 """
 
 from __future__ import annotations

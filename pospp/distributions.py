@@ -3,9 +3,8 @@
 Each is the function :mod:`scipy.stats` evaluates for it (scipy 1.17's ``chi2._ppf``,
 ``chi2._isf``, ``f._sf``, ``t._sf``; the Poisson upper quantile by the same definition as
 ``poisson.isf``), so the values are the same; tests/unit/test_distributions.py checks them
-against scipy.stats on grids. Why not scipy.stats itself: importing it costs every run
-0.3 s and 45 MiB of resident memory (``python -X importtime -c "import pospp.pipeline"``;
-docs/history/speed_rounds.md, "Speed and memory, sixth round"), for five scalar functions.
+against scipy.stats on grids. Not scipy.stats itself: its import costs every run 0.3 s and
+45 MiB for five scalar functions (docs/history/speed_rounds.md, "Speed and memory, sixth round").
 
 And the long-run variance ratio of a correlated series (:func:`long_run_ratio`), which widens
 the sigmas of estimates fitted on time-correlated residuals.

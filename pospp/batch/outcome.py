@@ -24,8 +24,6 @@ from pospp.io.manifest import MANIFEST, is_run_name, read_manifest, run_markers
 
 MAX_RUN_NAME_LEN = 160
 """Longest run-folder name (longer ones keep their start and end in a path hash)."""
-RESULT_STATUSES = ("ok", "partial", "degraded", "failed")
-"""A flight's result, the words of ``pospp run`` (pospp.qc.check_record.STATUS_ORDER)."""
 ACTIONS = ("ran", "skipped", "resumed", "queued")
 """What a batch did with a flight."""
 _OLD_STATUS = {"done": "ok", "skipped": None}

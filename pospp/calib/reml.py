@@ -4,8 +4,8 @@ whitened system, the variance grid search, the scaled SVD solve, the per-leg and
 likelihoods, the residual autocorrelation inflation, and the Gauss-Markov drift fit with its
 grade-versus-flight likelihood-ratio test.
 
-Used by :func:`pospp.calib.solve.fit_calibration` and :func:`pospp.calib.solve.fit_noise_model`.
-Moved out of :mod:`pospp.calib.solve`; frames and units as there (SI).
+Used by :func:`pospp.calib.solve.fit_calibration` and :func:`pospp.calib.solve.fit_noise_model`;
+frames and units as there (SI).
 """
 
 from __future__ import annotations
@@ -224,7 +224,7 @@ class DriftLegs:
         C = a I + q K + s2 S E S^T,   E_jk = exp(-|tau_j - tau_k| / tau) I_3
 
     couples every leg to every other through the drift bins' correlation E, so factoring C costs
-    the legs cubed (1.15 s at 45 min, 4.7 s at 90). The drift is a first-order
+    the legs cubed. The drift is a first-order
     Gauss-Markov (Ornstein-Uhlenbeck) process, which is Markov: given the drift at the last bin of
     leg L - 1, leg L's bins are independent of every earlier leg. A Kalman filter over the legs
     (in time order) whose state is the unit-variance drift e at the previous leg's last bin (3

@@ -435,8 +435,8 @@ def fit_calibration(
         and the drift's sigma given): the eigendecomposition of the fixed part of the
         covariance, ``q K + s2 G``, made once, after which each evaluation of the restricted
         likelihood scales ``V^T [H z]`` instead of factoring the covariance (the null
-        realisations' refits, :func:`pospp.calib.stage.with_null_covariance`: 1.9 -> 0.4 s
-        on the 1.5 h flight; the same likelihood to rounding). It also keeps each leg's
+        realisations' refits, :func:`pospp.calib.stage.with_null_covariance`; the same
+        likelihood to rounding). It also keeps each leg's
         :func:`noise_basis` and drift operator (by leg id; neither reads B minus A, only
         the leg's samples, sigmas and transition), where ``bases`` / ``gm_ops`` lack them
         (with or without the drift: the diagnosis's null whitening refits share one too).

@@ -547,10 +547,9 @@ main.add_command(diff)
 @contextmanager
 def _imports_for_the_process() -> Iterator[None]:
     """Imports whose objects live as long as the process (``pospp.pipeline``: numba, pandas,
-    scipy, 116,000 objects): the cyclic garbage collector off while they load, their objects
-    frozen after (``gc.freeze``), so that neither the imports' collections nor the run's walk
-    them again (``import pospp.pipeline`` 0.97-1.08 -> 0.84-0.91 s; a run's collections 0.08 ->
-    0.02 s). Cyclic garbage made by the imports themselves is kept, not freed."""
+    scipy): the cyclic garbage collector off while they load, their objects frozen after
+    (``gc.freeze``), so that neither the imports' collections nor the run's walk them again
+    (docs/history/speed_rounds.md). Cyclic garbage made by the imports themselves is kept."""
     enabled = gc.isenabled()
     gc.disable()
     try:
@@ -563,11 +562,10 @@ def _imports_for_the_process() -> Iterator[None]:
 
 def entry() -> None:
     """The ``pospp`` console script (and ``python -m pospp.cli``): :func:`main`, then the
-    garbage collector frozen before the interpreter ends. Its teardown otherwise walks the
-    objects numba, pandas and scipy hold (170,000 after a sample run) for 0.2-0.4 s after the
-    run's files are closed and renamed (measured: 0.03-0.08 s frozen). Every
-    ``atexit`` handler and stream flush still runs. Not in :func:`main`, which tests call in
-    their own process."""
+    garbage collector frozen before the interpreter ends (its teardown otherwise walks the
+    objects numba, pandas and scipy hold, 0.2-0.4 s after a sample run; 0.03-0.08 s frozen).
+    Every ``atexit`` handler and stream flush still runs. Not in :func:`main`, which tests
+    call in their own process."""
     try:
         main()
     finally:

@@ -2,12 +2,11 @@
 
 Private module: the file's record framing, chunk decompression, CRCs and summary checks behind
 ``read_flight_log``; the compiled (numba) framing of each decompressed chunk and the batched
-decoding of its messages are in :mod:`pospp.io._mcap_decode`. Why pospp frames records
-itself rather than iterating with ``mcap.reader.make_reader(...).iter_messages()`` is measured
-in docs/formats.md ("Why a hand-written framing"): the library builds one Python ``Message``
-object per record, which costs about 4x the time of this pass on a 1.08 M-message file; chunk
-CRCs, compression and the Schema/Channel records are still handled with the library's own
-``mcap.records`` and the ``zstandard`` / ``lz4`` codecs it depends on.
+decoding of its messages are in :mod:`pospp.io._mcap_decode`. pospp frames records itself
+rather than iterating with ``mcap.reader.make_reader(...).iter_messages()`` (one Python
+``Message`` per record; docs/formats.md "Why a hand-written framing"); chunk CRCs,
+compression and the Schema/Channel records are handled with ``mcap.records`` and the
+``zstandard`` / ``lz4`` codecs.
 
 Layout of the bytes walked here (MCAP specification, https://mcap.dev/spec): every record is
 ``opcode u8, length u64, body``; a Message body is ``channel_id u16, sequence u32, log_time u64,
@@ -58,10 +57,8 @@ _MAX_RATIO = 64  # no hint above 64 x (file bytes / 31-byte minimal Message reco
 
 DECODED_PER_FILE_BYTE = 64
 """Largest decoded size per byte of the file: the decoded arrays of a log may take at most
-this many times its size (and at least :data:`MIN_DECODED_BYTES`). Measured: a log of pospp's
-simulator decodes to 1.0 x its size (the sample flight, zstd), messages that differ only in
-their stamps to about 6 x; a decompression bomb of repeated messages to 2000 x (a 2 MB
-file to 4.1 GB)."""
+this many times its size (and at least :data:`MIN_DECODED_BYTES`); legitimate logs decode to
+1-6 x, decompression bombs to thousands (docs/decisions.md, docs/formats.md)."""
 MIN_DECODED_BYTES = 64 * 1024 * 1024
 _READ_PIECE = 1 << 20  # bytes read at a time when a byte range is only checksummed
 

@@ -16,7 +16,7 @@ Nothing of the user's is lost:
 - A batch root is locked with ``flock`` on ``.pospp-batch.lock`` holding the pid; the kernel
   releases it when the holder dies, even by ``kill -9``.
 
-Issue 38 (items 6-8): a run holds its folder's lock (:mod:`pospp.io.run_lock`) from its first
+A run holds its folder's lock (:mod:`pospp.io.run_lock`) from its first
 check to the swap (:class:`StagedRun`), and checks the folder again at the swap: files put
 into it meanwhile stop the swap, never vanish with the previous run. A run that ends without a
 verdict on its input (a full disk, a missing file: any error but a ``ValueError``) leaves the

@@ -3,9 +3,7 @@
 
 A without GNSS is a free inertial solution: its trajectory is not GNSS-controlled, and over a
 leg it drifts with B rather than holding B to the truth, so B minus A there is not B's error
-(the sample flight with GNSS lost 350 s in: every leg calibrated, the bias 3.5 sigma off with
-a sigma 2-7 times too small, the run "ok"). Two facts of A's own result say where it was
-aided:
+(docs/qc.md "gnss_coverage"). Two facts of A's own result say where it was aided:
 
 - the GNSS position and velocity records it received after its start (its innovation record:
   used, gated, or used after a covariance reset), whose gaps longer than
@@ -16,9 +14,7 @@ aided:
 
 Gated records count as present for the gaps: A rejecting records is what the ``gnss_gate``
 check judges, and over a stretch of them (up to ``[filter] gate_reset_s``, 30 s) the smoothed
-reference is bridged from both sides; its sigma says whether it still holds (the warm-up
-missions of tests/unit/test_diagnose_power.py gate 18-23 s inside legs whose calibration the
-diagnosis needs).
+reference is bridged from both sides; its sigma says whether it still holds.
 
 Times ``t_s`` are seconds from the run epoch (A's time axis); sigmas m/s.
 """

@@ -268,9 +268,7 @@ def gnss_gate(n_records: int, n_rejected: int, gate_probability: float,
     - gate_probability)``. Statistic: the count; threshold: the Poisson quantile of upper
     tail :data:`GATE_TAIL` (a false alarm in 1e-3 runs where A's model holds). A run whose A
     rejects more is one where the model does not hold (an accelerometer warm-up beyond the
-    grade's bias, a lever arm or GNSS time offset, GNSS faults): measured, a 600 ug warm-up
-    against the "vehicle" preset gated 33-39 of about 3300 records with one reset, where
-    ``gnss_nis`` passed on one flight of ten (docs/qc.md)."""
+    grade's bias, a lever arm or GNSS time offset, GNSS faults; docs/qc.md)."""
     lam = max(int(n_records), 0) * (1.0 - gate_probability)
     limit = poisson_isf(GATE_TAIL, lam) if lam > 0 else 0.0
     passed = int(n_rejected) <= limit
@@ -486,11 +484,8 @@ def config_sanity(problems: list[str]) -> Check:
 MODEL_FIT_SIGMAS = 2.0
 """A finding fails ``model_fit`` when it could move the calibrated gyro bias beyond this many
 of its 1-sigma (out of its 95 % interval): the refit with the named effects, or the bias an
-unexplained gap stands for. Measured on clean flights: the null Monte Carlo's one
-closing-row alarm (tests/unit/test_diagnose_null_mc.py, seed 4, p = 0.009) stands for 1.4
-sigma; the QC benchmark's MEMS flights at 50 Hz name accelerometer changes their sensor does
-not have, whose refit moves the bias by 0.07 and 0.12 sigma (docs/diagnose.md);
-flight_accel_ramp_100hz's ramp moves it by 3.0 sigma (y) and its gap stands for 2.3."""
+unexplained gap stands for (docs/decisions.md "`model_fit` fails on what could move the
+calibration out of its 95 % interval")."""
 
 
 def model_fit(named: list[str], refit_shift_sigmas: float, gap_p_value: float, alpha: float,

@@ -1,10 +1,9 @@
 """QC check of the GNSS coverage of algorithm A: arrays in, a frozen
 :class:`pospp.qc.check_record.Check` out (no I/O).
 
-GNSS lost 300-400 s into the sample flight left every other check passing (a NIS band and a
-gate count need GNSS records to judge; the lever-arm and time-offset checks need turns with
-GNSS), the trajectory 40 m to 1.2 km off and the calibration up to 3.5 sigma off with a sigma
-2-7 times too small: "ok". This check measures where A was GNSS-aided
+A check that the other checks cannot replace: with GNSS lost, a NIS band and a gate count
+have no records to judge and the lever-arm and time-offset checks no turns, while B minus A
+is no longer B's error (docs/qc.md). This check measures where A was GNSS-aided
 (:mod:`pospp.nav.aiding`): the gaps between the GNSS records A received, where they fall
 against the legs, and A's velocity sigma along each leg. Times ``t_s`` from the run epoch.
 """

@@ -76,11 +76,8 @@ LEVER_TIME_COLOUR_WINDOW_S = 60.0
 """The window of the innovations' long-run variance ratio [s]
 (:func:`pospp.distributions.long_run_ratio` with the Gauss-Markov + white model's
 autocorrelation): the scale over which the lever arm's response changes (a 180 deg turn at
-3 deg/s takes 60 s) and the offset's (a take-off roll, 40 s). Measured on the Monte Carlo
-flight (docs/compare_sim.md), the largest over the whitened position and velocity
-innovations' components: 11-19 with the 0.342 m, 60 s coloured GNSS error (both noise
-scales), 1.0 on nulls, true lever arms and true time offsets (one seed at 1/3 the noise:
-12.5, a slow wander of A's horizontal innovations; its lever arm and offset still named)."""
+3 deg/s takes 60 s) and the offset's (a take-off roll, 40 s). Measured ratios: docs/decisions.md
+"The joint lever-arm estimate's sigmas widened by its innovations' colour"."""
 LEVER_TIME_START_PASSES = 2
 LEVER_TIME_START_STEP_M = 0.1
 """The pass at offset 0 is made again from its own estimate, at most

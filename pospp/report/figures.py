@@ -6,9 +6,8 @@ Nothing here reads or writes files: :mod:`pospp.report.html` embeds the figures,
 
 Every figure function takes ``backend``: "mpl" (default) returns a matplotlib Figure (Agg;
 matplotlib is imported at the first such call), "svg" a :class:`pospp.report.svg.Figure`
-drawn by pospp's own SVG writer through the same calls. The HTML report uses "svg": drawn
-in milliseconds instead of 0.1-0.6 s per figure, and no matplotlib import in a run
-(docs/history/speed_rounds.md).
+drawn by pospp's own SVG writer through the same calls. The HTML report uses "svg" (no
+matplotlib import in a run: docs/history/speed_rounds.md).
 """
 
 from __future__ import annotations

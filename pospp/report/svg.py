@@ -1,10 +1,9 @@
 """A small SVG drawing backend for the report's figures (no matplotlib at run time).
 
 The report's figures (:mod:`pospp.report.figures`) are line, band, bar and error-bar plots
-with titles, labels, legends and grids. Drawing them with matplotlib's Agg backend took
-1.7-2.4 s of a sample run (per-artist Python: ticks, text layout) plus 0.7 s to import it
-(docs/history/speed_rounds.md); writing the same content as SVG text from numpy takes a few
-milliseconds per figure, and the browser draws it (vector: sharp at any zoom).
+with titles, labels, legends and grids, written as SVG text from numpy (a few milliseconds per
+figure, against seconds for matplotlib's Agg and its import: docs/history/speed_rounds.md);
+the browser draws them (vector: sharp at any zoom).
 
 Only the subset of matplotlib's ``Axes`` interface the report uses is implemented, with the
 same names and meanings, so that one function in :mod:`pospp.report.figures` draws either

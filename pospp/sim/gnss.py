@@ -24,8 +24,8 @@ axis, stationary, horizontal / vertical sigma ``pos_gm_sigma_m`` and correlation
 a = exp(-dt_k / tau). It is added to the white noise; the reported covariance is unchanged
 (a receiver does not report its multipath). The velocity may have one too
 (``vel_gm_sigma_mps``, ``vel_gm_tau_s``), drawn after the position's. Drawn after the white
-noise from the same stream, and only when a sigma is non-zero, so models without it give the
-same bits as before.
+noise from the same stream, and only when a sigma is non-zero: a model without it draws the
+same bits as if the error did not exist.
 """
 
 from __future__ import annotations
@@ -120,8 +120,7 @@ class GnssModel:
         return cls(**d)
 
     def as_dict(self) -> dict[str, Any]:
-        """JSON-ready dict; the coloured-error keys only when that error is on (params files
-        of runs without it stay as before)."""
+        """JSON-ready dict; the coloured-error keys only when that error is on."""
         d = asdict(self)
         if not any(self.pos_gm_sigma_m):
             d.pop("pos_gm_sigma_m")

@@ -38,8 +38,8 @@ Model, per IMU interval k of length dt (t_mid its midpoint, t from the mission s
 
 Random streams are seeded per sensor (gyro, accel) from one ``numpy.random.SeedSequence``, so
 the same seed gives bit-identical output. The vibration phases come from a third child of that
-SeedSequence (spawn key index 2), drawn only when a vibration RMS is non-zero, so models without
-vibration give the same bits as before it existed.
+SeedSequence (spawn key index 2), drawn only when a vibration RMS is non-zero: a model without
+vibration draws the same gyro and accelerometer bits as if vibration did not exist.
 """
 
 from __future__ import annotations
@@ -132,8 +132,8 @@ class ImuErrorModel:
         return cls(**d)
 
     def as_dict(self) -> dict[str, Any]:
-        """JSON-ready dict (lists), field names as keys. The vibration keys are left out when
-        both vibration RMS are zero (params files of vibration-free runs stay as before)."""
+        """JSON-ready dict (lists), field names as keys; the vibration keys only when a
+        vibration RMS is non-zero."""
         d = {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
         if not self.has_vibration():
             for k in _VIBRATION_FIELDS:

@@ -29,13 +29,12 @@ a 1-sigma, and the flight is simulated with them:
   residuals' lag-1 autocorrelation (sigma 1 / sqrt(n)), reported only: a coloured error is
   the library's ``coloured_gnss``.
 
-The vibration is none: a platform's, not the sensor's (the ``mems`` preset's 6 m/s^2 at 50
-Hz is the ArduPilot plane's propeller; simulated for a phone in a car, comma2k19, it put the
-high-frequency accelerometer variance 25 sigma above the measured, which no effect could
-take back): it is the library's ``vibration``. The constant biases, the accelerometer's
-Gauss-Markov part and the correlation times stay the grade's (A estimates the biases on both
-flights; A's own estimate would carry the effects into the base model: on circles turned one
-way, A reads a 2000 ppm z scale factor as a 75 deg/h z bias). A parameter whose fit differs
+The vibration is none: a platform's, not the sensor's (the ``mems`` preset's, the ArduPilot
+plane's propeller, put comma2k19's high-frequency accelerometer variance 25 sigma above the
+measured): it is the library's ``vibration``. The constant
+biases, the accelerometer's Gauss-Markov part and the correlation times stay the grade's (A
+estimates the biases on both flights; A's own estimate would carry the effects into the base
+model, docs/compare_sim.md). A parameter whose fit differs
 from the prior by more than ``DIFFERS_SIGMAS`` sigma and ``DIFFERS_FRACTION`` of the prior
 is reported as such ("gyro ARW x 0.0020 +- 0.0001 deg/sqrt(h) fitted, grade 0.01"), never as
 an effect.
@@ -251,9 +250,8 @@ def _level_rows(name: str, unit: str, var: NDArray, sig_var: NDArray, per_unit: 
     """Rows of a variance-type level fitted per axis (``name_x``, ...): sqrt of max(var, 0)
     in ``unit`` (SI / ``per_unit``), the upper 1-sigma distance sqrt(var + sigma_var) -
     sqrt(var) as its sigma (never negative, also at the bound 0). The grade is the prior: a
-    fit within ``KEEP_PRIOR_SIGMAS`` of it (on the variance) keeps it (``model`` = prior):
-    a 1.5 deg/h drift that 300 s at rest could not tell from 0 over 0.03 deg/sqrt(h) of
-    noise was fitted 0, and the simulation then drew none."""
+    fit within ``KEEP_PRIOR_SIGMAS`` of it (on the variance) keeps it (``model`` = prior), so
+    a drift the flight cannot tell from 0 is still simulated (docs/compare_sim.md)."""
     out = []
     for i, a in zip(range(len(var)), "xyz", strict=False):
         v = max(float(var[i]), 0.0)
@@ -426,10 +424,8 @@ def has_drift(fit: BaseFit) -> bool:
     """The base model simulates a gyro Gauss-Markov drift (a level above 0 on some axis,
     fitted or the grade's): over a flight of minutes one random bias per axis, so the
     statistics that are a signed mean of it are one draw of it (``SimEffect.ensemble``),
-    and the comparison takes their spread between draws of the base model. (Taken only when
-    the fit was significant, a 1.5 deg/h drift that 300 s at rest could not establish over
-    0.03 deg/sqrt(h) of noise left A's gyro bias trends 4-7 of A's sigmas from the
-    simulation's one draw: `unexplained` on a null flight.)"""
+    and the comparison takes their spread between draws of the base model (also where the
+    fit was not significant: docs/compare_sim.md)."""
     return any(p.name == "gyro_gm_sigma" and p.simulated > 0.0 for p in fit.parameters)
 
 

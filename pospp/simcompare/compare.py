@@ -203,15 +203,13 @@ def _refine(effect: SimEffect, names: list[str], at: tuple[list[int], NDArray], 
     stepping u_{k+1} = u_k + WLS(H, g - (S(u_k) - S(0))), for ``effect.refine`` iterations
     at most (stops when the step is below a tenth of its sigma). ``at = (cols, u_rest)``: the
     fitted parameters' indices and the full parameter vector they are set in (zeros, or a
-    grid value). Returns
-    the iterate with the least weighted residual sum(w r^2): (that residual, u, the
-    covariance (H^T W H)^-1 of the local slope there, the chi-square of u against zero);
-    the residual is NaN when no iterate was simulated (the fit returned). The chi-square is
-    the drop of the weighted residual from u = 0 (sum w g^2) to the iterate's, a likelihood-
-    ratio test: u^T H^T W H u (equal for a linear response) takes the slope of the last
-    secant step, which is noise where that step is below the statistic's sigma (a 0.28 m
-    coloured GNSS error fitting its gap to 0.02 of a sigma read chi-square 3.9 so, 118 as
-    the drop, on the Monte Carlo's seed 305 at 1/3 the noise)."""
+    grid value). Returns the iterate with the least weighted residual sum(w r^2): (that
+    residual, u, the covariance (H^T W H)^-1 of the local slope there, the chi-square of u
+    against zero); the residual is NaN when no iterate was simulated. The chi-square is the
+    drop of the weighted residual from u = 0 (sum w g^2) to the iterate's, a likelihood-ratio
+    test (u^T H^T W H u for a linear response; the secant's slope is noise where its last
+    step is below the statistic's sigma: docs/decisions.md "compare-sim's secant
+    refinement")."""
     cols, u_rest = at
     s0 = np.array([base.stats[s].value for s in names])
     u_prev, s_prev = np.zeros(len(cols)), s0
@@ -322,10 +320,7 @@ def _fit_names(effect: SimEffect, gap: dict[str, Gap],
     ``gap``), else its ``fit_stats`` (those with a gap). ``censoring``: the gaps on the two
     flights' own sigmas, without a drift's spread between draws: whether A's gate censors
     the measured records is this flight's fact, while the spread says whether the gap can
-    be one draw (a 0.342 m coloured GNSS error at 3 x the grade's noise, seed 308: the gated
-    share 0.52 measured against 0.002-0.22 over 5 draws of a 3.2 deg/h base drift, z 21 on
-    the flights' own sigmas, 4.1 on the spread; fitted on the censored NIS and lag-1 beside
-    it, 0.205 m)."""
+    be one draw (docs/decisions.md "The coloured GNSS error's censored fit")."""
     censored = [s for s in effect.fit_censored if s in gap]
     by = gap if censoring is None else censoring
     return ([s for s in effect.fit_first if s in gap]
@@ -451,9 +446,7 @@ def _score(after: dict[str, Gap], before: dict[str, Gap], moved: set[str], k: in
     statistics ``moved``, relative to the sigmas before, plus 2 per parameter (AIC):
     sum z^2 + ln(sigma_after^2 / sigma_before^2) + 2 k. The log term charges an effect that
     widens the sigmas (a random drift's spread between draws) for what it does not explain
-    (a 0.72 deg roll mounting at 3 x the grade's noise: the drift's spread took the roll's
-    sigma from 1.7e-4 to 3.1e-3 rad, its z from 71.6 to 4.0, sum z^2 38 against the
-    mounting's 61, and was named instead; with the term 96 against 63)."""
+    (docs/decisions.md "Candidates scored by their log-likelihood")."""
     score = 2.0 * k
     for n, g in after.items():
         if n in moved:

@@ -94,8 +94,7 @@ MIN_COLOURED_TAU_S = 1.0
 """Shortest correlation time of the coloured GNSS error [s]."""
 TAU_GRID_S = (10.0, 30.0, 60.0, 120.0, 300.0)
 """A grid for :func:`coloured_tau_library` [s]. None below 10 s: at 1 Hz a shorter one is
-nearly white noise, which the library must not explain (with 3 s in the grid the outsider,
-white velocity noise, was named a 3 s coloured velocity error)."""
+nearly white noise, which the library must not explain."""
 
 
 @dataclass(frozen=True)
@@ -207,8 +206,7 @@ class SimEffect:
     not among them."""
     trial_at_fit: bool = False
     """With ``screen``: each trial simulation at the size the identity fit reads, not at
-    ``trial`` (``accel_bias_ramp``: a fixed 1e-4 m/s^3 made A diverge on a 45 min flight, 27
-    mg by its end)."""
+    ``trial`` (a fixed trial can take A far from where the statistics are linear)."""
     joint: Callable[[EffectContext], JointFit | None] | None = None
     """For a group of confounded effects estimated jointly on the measured log (not from the
     statistics): the fit and what it names (:class:`JointFit`; None: nothing to add)."""
@@ -216,9 +214,8 @@ class SimEffect:
     def plausible(self, u: NDArray, cov: NDArray) -> bool:
         """Every fitted size in the first parameter's unit within ``IMPLAUSIBLE_FACTOR`` x the
         catalogue's plausible size (:attr:`pospp.effects_catalog.CatalogEffect.plausible_si`):
-        a fit beyond it is no sensor's error but another model's misfit (the quadrotor's
-        DJI RTK/INS "GNSS" fitted an 8 348 000 ppm gyro scale factor and an 86 deg yaw
-        mounting, docs/results.md)."""
+        a fit beyond it is no sensor's error but another model's misfit (the quadrotor's DJI
+        RTK/INS "GNSS": an 8.3e6 ppm gyro scale factor, an 86 deg yaw mounting)."""
         size, _ = self.size(u, cov)
         k = np.broadcast_to(np.asarray(self.si_per_unit, dtype=float), size.shape)
         units = [x.strip() for x in self.unit.split("|")]
@@ -253,14 +250,6 @@ def _vibration(imu: ImuErrorModel, gnss: GnssModel, u: NDArray, ctx: EffectConte
         kw = {"vibration_freq_hz": float(f), "vibration_bandwidth_hz": 0.0}
     return replace(imu, accel_vibration_rms_mps2=tuple(acc),
                    gyro_vibration_rms_dps=tuple(np.degrees(gyr)), **kw), gnss
-
-
-def _time_offset(imu, gnss, u, ctx):
-    return imu, replace(gnss, time_offset_s=gnss.time_offset_s + float(u[0]))
-
-
-def _lever(imu, gnss, u, ctx):
-    return imu, replace(gnss, lever_arm_b_m=tuple(np.add(gnss.lever_arm_b_m, u)))
 
 
 def _lever_time(imu, gnss, u, ctx):
@@ -325,10 +314,8 @@ def mounting_sensor_errors(rho_rad: NDArray) -> tuple[NDArray, NDArray]:
     """(scale factors [ppm] (3,), misalignments [xy, xz, yx, yz, zx, zy] [arcsec] (6,)) whose
     sensor matrix I + diag(sf) + off-diagonals is C_sb = R(rho)^T exactly (IMU case rotated by
     rho in the body, FRD; v_s = C_sb v_b). To first order the off-diagonals are -[rho x] and
-    the scale factors 0; the second order, cos(rho) - 1 on the diagonal, matters: without it
-    a 1.43 deg yaw mounting was a 312 ppm x and y scale factor too, which moved A's vertical
-    lever-arm estimate by -0.15 m (0.033 m sigma) whichever the yaw's sign, and compare-sim
-    named a lever arm beside the mounting on 7 of 10 Monte Carlo flights."""
+    the scale factors 0; the second order, cos(rho) - 1 on the diagonal, is kept
+    (docs/decisions.md "A mounting misalignment simulated as the exact rotation")."""
     c_sb = dcm_from_rotvec(np.asarray(rho_rad, dtype=float)).T
     sf_ppm = (np.diag(c_sb) - 1.0) * 1e6
     off = np.array([c_sb[0, 1], c_sb[0, 2], c_sb[1, 0], c_sb[1, 2], c_sb[2, 0], c_sb[2, 1]])
@@ -381,10 +368,9 @@ BASE_DRAW = (*BI_DRAW, "gnss_pos_gated")
 """The statistics that are one draw of a gyro drift already in the base model (step 0's level,
 :func:`pospp.simcompare.compare.compare_flights`' ``base_ensemble``): those of ``BI_DRAW`` and
 the share of position records A's gate rejects, which is decided by whether this draw's drift
-carries A's error past the gate (100 deg/h at 600 s on a tactical A: 0.13-0.78 over 8 draws
-of one model, against batch-means sigmas of 0.07-0.14). The drift's level is fixed there, so
-no effect can explain a gap by widening it; a ``bias_instability`` candidate, whose level is
-fitted, floors ``BI_DRAW`` only (its expectation of the share moves with the level)."""
+carries A's error past the gate. The drift's level is fixed there, so no effect can explain a
+gap by widening it; a ``bias_instability`` candidate, whose level is fitted, floors
+``BI_DRAW`` only (its expectation of the share moves with the level)."""
 COLOURED_DRAW = (*BI_DRAW, "lt_time_offset", *(f"lt_lever_{a}" for a in _XYZ))
 """The statistics that are a signed mean of one draw of a coloured GNSS error: A's estimates
 that take up the slowly wandering position error (attitude offsets, lever arm, bias trends,
@@ -453,8 +439,8 @@ def coloured_tau_library(taus_s: tuple[float, ...] = TAU_GRID_S) -> tuple[SimEff
     """The library with the coloured GNSS error's correlation time chosen from ``taus_s``
     [s] and its velocity error fitted too, on the position and velocity innovations'
     whiteness and NIS (the statistics are far from linear in tau: at each value the two
-    variances are fitted and re-simulated, and the best is kept). Not the default: on the
-    hidden-error flight (0.3 m at 60 s) it chose 30 s and 0.19 m (docs/compare_sim.md)."""
+    variances are fitted and re-simulated, and the best is kept). Not the default (its
+    reading of the hidden-error flight: docs/compare_sim.md)."""
     grid = (1, tuple(float(t) - COLOURED_GNSS_TAU_S for t in taus_s))
     fit = ("gnss_pos_lag1", "gnss_pos_nis", "gnss_pos_gated", "gnss_vel_lag1", "gnss_vel_nis")
     vel = ("gnss_vel_lag1", "gnss_vel_nis", *_norm("vel"),
