@@ -153,14 +153,12 @@ def drift_under_alternative(calib_run: CalibrationRun, replays_minus_effect: lis
             or not np.isfinite(tuning.gyro_gm_tau_s) or not grade_radps > 0
             or not calib_run.drift_sigma_radps > grade_radps):
         return None
-    kw = dict(calib_run.solve_kwargs)
-    transition = kw.pop("transition", calib_run.chosen.transition)
-    kw.update(gyro_gm_sigma_radps=None, gyro_gm_tau_s=None,
-              gm_prior=DriftPrior(grade_radps, float(tuning.gyro_gm_tau_s)))
+    fit = replace(calib_run.fit_options, gyro_gm_sigma_radps=None, gyro_gm_tau_s=None,
+                  gm_prior=DriftPrior(grade_radps, float(tuning.gyro_gm_tau_s)))
     reps = {r.leg.leg_id: r for r in replays_minus_effect}
     try:
-        cal = joint_calibration(reps, calib_run.pairs, calib_run.chosen.formulation,
-                                transition=transition, **kw)
+        cal = joint_calibration(reps, calib_run.pairs, calib_run.chosen.formulation, fit,
+                                **calib_run.fit_bases)
     except (ValueError, np.linalg.LinAlgError):
         return None
     if cal is None:

@@ -46,7 +46,7 @@ from pospp.calib.replay import (
     replay_leg,
     replay_position_error,
 )
-from pospp.calib.solve import Calibration, fit_calibration
+from pospp.calib.solve import Calibration, FitOptions, fit_calibration
 from pospp.threads import map_in_threads
 
 
@@ -67,16 +67,16 @@ def joint_calibration(
     replays: dict[int, LegReplay],
     pairs: tuple[Pair, ...],
     formulation: str,
-    *,
-    transition: str = "numerical",
-    **calibrate_kwargs: Any,
+    options: FitOptions | None = None,
+    **caches: Any,
 ) -> Calibration | None:
-    """One fit over every leg that belongs to a used pair (None if no pair is used)."""
+    """One fit over every leg that belongs to a used pair (None if no pair is used):
+    :func:`pospp.calib.solve.fit_calibration` with ``options`` and its ``caches`` (``bases``,
+    ``gm_ops``, ``noise_cache``)."""
     ids = sorted({i for p in pairs if p.used for i in (p.leg_a, p.leg_b)})
     if len(ids) < 2:
         return None
-    return fit_calibration(tuple(replays[i] for i in ids), formulation, transition=transition,
-                     **calibrate_kwargs)
+    return fit_calibration(tuple(replays[i] for i in ids), formulation, options, **caches)
 
 
 def horizontal_error_at(rep: LegReplay, horizon_s: float) -> tuple[float, float, float]:

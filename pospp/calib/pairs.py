@@ -15,7 +15,7 @@ the matrix actually inverted.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -23,7 +23,7 @@ import numpy as np
 from pospp.calib.design import condition_numbers, design_matrix
 from pospp.calib.replay import LegReplay
 from pospp.calib.segment import Leg
-from pospp.calib.solve import Calibration, fit_calibration
+from pospp.calib.solve import Calibration, FitOptions, fit_calibration
 
 MODES = ("adjacent", "all")
 
@@ -115,7 +115,8 @@ def evaluate_pairs(
     *,
     formulations: tuple[str, ...] = ("paper", "body"),
     leg_reasons: Mapping[int, str] | None = None,
-    **calibrate_kwargs: Any,
+    options: FitOptions | None = None,
+    **caches: Any,
 ) -> tuple[Pair, ...]:
     """Screen every candidate pair and calibrate the usable ones with each formulation.
 
@@ -130,8 +131,11 @@ def evaluate_pairs(
     leg_reasons : Mapping of int to str, optional
         Why a leg has no replay (it was refused: its reference A not GNSS-aided), named in
         the reason of its pairs.
-    **calibrate_kwargs
-        Passed to :func:`pospp.calib.solve.fit_calibration` (noise model, ARW, ...).
+    options : FitOptions, optional
+        The least squares' model (:func:`pospp.calib.solve.fit_calibration`), its transition
+        the policy's.
+    **caches
+        :func:`pospp.calib.solve.fit_calibration`'s ``bases`` and ``gm_ops``.
 
     Returns
     -------
@@ -139,6 +143,7 @@ def evaluate_pairs(
         Every candidate, used or not, with its reason. Never raises for bad geometry.
     """
     out: list[Pair] = []
+    fit = replace(options or FitOptions(), transition=policy.transition)
     for pid, (a, b) in enumerate(candidate_pairs(legs, policy.mode)):
         dh = heading_difference_rad(a, b)
         dv = float(b.speed_mps - a.speed_mps)
@@ -163,8 +168,7 @@ def evaluate_pairs(
         cals: tuple[Calibration, ...] = ()
         if not reason:
             try:
-                cals = tuple(fit_calibration(reps, f, transition=policy.transition,
-                                       **calibrate_kwargs) for f in formulations)
+                cals = tuple(fit_calibration(reps, f, fit, **caches) for f in formulations)
             except (ValueError, np.linalg.LinAlgError) as exc:
                 reason = f"least squares failed: {exc}"
         out.append(Pair(pid, a.leg_id, b.leg_id, dh, dv, c_raw, c_scaled, c_gate, not reason,

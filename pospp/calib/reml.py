@@ -13,7 +13,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -28,6 +28,9 @@ from pospp.calib.noise_model import (
     gm_noise_operator,
     leg_noise_basis,
 )
+
+if TYPE_CHECKING:  # for the annotation only: solve imports this module
+    from pospp.calib.solve import FitOptions
 
 GM_REJECT_DNLL = 0.5 * 5.991
 """The flight's drift replaces the grade's only when the grade's (sigma, tau) is rejected by a
@@ -392,9 +395,11 @@ def _kept(memo: dict, key: tuple, make: Callable[[], Any]) -> Any:
     return memo[key]
 
 
-def calibrate_gm(legs, h, z, edges, noise_step_s, bases, gm_ops, arw_given, sigma_given,
-                  tau_s, bin_s, prior=None, noise_cache=None):
-    """GLS + REML with the Gauss-Markov drift (full covariance over all legs).
+def calibrate_gm(legs, h, z, edges, options: FitOptions, tau_s: float, bases=None,
+                 gm_ops=None, noise_cache=None):
+    """GLS + REML with the Gauss-Markov drift (full covariance over all legs): the model of
+    ``options`` (:class:`pospp.calib.solve.FitOptions`), the drift's correlation time ``tau_s``
+    [s] (the start of its profile with a prior).
 
     With ``prior`` (:class:`DriftPrior`) and the sigma estimated, tau is profiled over the
     prior's candidates and the grade's weak prior is added to the restricted likelihood
@@ -403,6 +408,8 @@ def calibrate_gm(legs, h, z, edges, noise_step_s, bases, gm_ops, arw_given, sigm
     evaluated by the Kalman filter over the legs (:class:`DriftLegs`, linear in the legs);
     the chosen model's GLS factors the full covariance once.
     """
+    noise_step_s, bin_s, prior = options.noise_step_s, options.gm_bin_s, options.gm_prior
+    arw_given, sigma_given = options.gyro_arw_radpsqrts, options.gyro_gm_sigma_radps
     rows, sqs, kb, ops = [], [], [], []
     memo = {} if noise_cache is None else noise_cache  # the refits share the legs' grids
     for i, rep in enumerate(legs):
@@ -425,7 +432,7 @@ def calibrate_gm(legs, h, z, edges, noise_step_s, bases, gm_ops, arw_given, sigm
     q_fixed = None if arw_given is None else float(arw_given) ** 2
     s2_fixed = None if sigma_given is None else float(sigma_given) ** 2
     fixed = (q_fixed, s2_fixed)
-    use_prior = prior is not None and s2_fixed is None
+    grade = prior if s2_fixed is None else None  # the prior acts with the sigma estimated
 
     leg_ids = tuple(rep.leg.leg_id for rep in legs)
 
@@ -445,22 +452,22 @@ def calibrate_gm(legs, h, z, edges, noise_step_s, bases, gm_ops, arw_given, sigm
         filt = dlegs.at_tau(tau)
         return lambda th: filt.reml_nll(*_full_params(th, fixed))
 
-    taus = prior.candidates_s() if use_prior else (float(tau_s),)
+    taus = grade.candidates_s() if grade is not None else (float(tau_s),)
     profile = []
     for tau in taus:
-        pen = ((lambda th, tau=tau: prior.penalty(_full_params(th, fixed)[2], tau))
-               if use_prior else None)
+        pen = ((lambda th, tau=tau, g=grade: g.penalty(_full_params(th, fixed)[2], tau))
+               if grade is not None else None)
         nll = likelihood(tau, fixed)
         th, val = _fit_variances(nll, fixed, pen)
         profile.append((float(tau), val, th, nll))
     tau_best, _, th, nll = min(profile, key=lambda p: p[1])
     source = ""
-    if use_prior:
+    if grade is not None:
         source = "flight"
-        g_fixed = (q_fixed, float(prior.sigma_radps) ** 2)
-        g_th, g_nll = _fit_variances(likelihood(float(prior.tau_s), g_fixed), g_fixed)
+        g_fixed = (q_fixed, float(grade.sigma_radps) ** 2)
+        g_th, g_nll = _fit_variances(likelihood(float(grade.tau_s), g_fixed), g_fixed)
         if g_nll - nll(th) < GM_REJECT_DNLL:  # the flight does not reject the grade
-            source, tau_best, fixed, th = "grade", float(prior.tau_s), g_fixed, g_th
+            source, tau_best, fixed, th = "grade", float(grade.tau_s), g_fixed, g_th
     a, q, s2 = _full_params(th, fixed)
     ll = _cholesky_lower(_full_cov(th, k, gm_cov(tau_best), fixed))
     if ll is None:
@@ -476,7 +483,7 @@ def calibrate_gm(legs, h, z, edges, noise_step_s, bases, gm_ops, arw_given, sigm
     alpha = np.split(linalg.cho_solve((ll, True), r), cuts)
     u = np.vstack([(o[0].T @ al).reshape(-1, 3) for o, al in zip(ops, alpha, strict=True)])
     drift = DriftSmoother(np.concatenate([o[1] for o in ops]), u, s2, tau_best)
-    tau_profile = tuple((t, v) for t, v, _, _ in profile) if use_prior else ()
+    tau_profile = tuple((t, v) for t, v, _, _ in profile) if grade is not None else ()
     return (x, cov, deficient, a, float(np.sqrt(q)), float(np.sqrt(s2)), white, drift,
             tau_profile, source, gain)
 

@@ -376,31 +376,12 @@ def fit_noise_model(
     return best[1]
 
 
-def fit_calibration(
-    legs: tuple[LegReplay, ...],
-    formulation: str,
-    *,
-    transition: str = "numerical",
-    estimate_gyro_z: bool = False,
-    noise: str = "gyro_rw",
-    gyro_arw_radpsqrts: float | None = None,
-    noise_step_s: float = 10.0,
-    bases: Mapping[int, NoiseBasis] | None = None,
-    gyro_gm_sigma_radps: float | None = None,
-    gyro_gm_tau_s: float | None = None,
-    gm_bin_s: float = 5.0,
-    gm_ops: Mapping[int, tuple[NDArray, NDArray]] | None = None,
-    gm_prior: DriftPrior | None = None,
-    noise_cache: dict | None = None,
-) -> Calibration:
-    """Calibrate from the B-minus-A velocity errors of a set of legs (paper Eq. 17).
+@dataclass(frozen=True)
+class FitOptions:
+    """The least squares' model (:func:`fit_calibration`; SI).
 
-    Parameters
+    Attributes
     ----------
-    legs : tuple of LegReplay
-        Two legs for a pair, or more for a joint fit (distinct leg ids).
-    formulation : {"paper", "body"}
-        See the module docstring.
     transition : {"numerical", "closed_form"}
         Sensitivity rows from Phi along B, or the ideal-leg closed forms.
     estimate_gyro_z : bool
@@ -412,8 +393,6 @@ def fit_calibration(
     noise_step_s : float
         Spacing of the samples entering the ``"gyro_rw"`` GLS [s] (the estimate uses every
         ``noise_step_s``-th second; the condition numbers and residuals use all samples).
-    bases : Mapping of leg id to NoiseBasis, optional
-        Precomputed :func:`noise_basis` per leg (reused across pairs and formulations).
     gyro_gm_sigma_radps, gyro_gm_tau_s : float, optional
         First-order Gauss-Markov gyro drift (body, per axis; steady-state sigma [rad/s],
         correlation time [s]) added to the ``"gyro_rw"`` covariance:
@@ -423,94 +402,99 @@ def fit_calibration(
         None or the sigma is 0; the sigma is estimated by REML when None (with the tau given).
     gm_bin_s : float
         Width of the drift bins of :func:`gm_noise_operator` [s].
-    gm_ops : Mapping of leg id to (S, tau_bin_s), optional
-        Precomputed :func:`gm_noise_operator` per leg on its basis' samples.
     gm_prior : DriftPrior, optional
         The grade's drift as a weak prior: with the sigma estimated (None), the drift's sigma
         and tau are both the flight's (maximum of the restricted likelihood plus the prior,
         tau profiled over the prior's candidates; ``gyro_gm_tau_s`` defaults to the prior's
         and is then only a candidate). Switches the Gauss-Markov model on by itself.
+    """
+
+    transition: str = "numerical"
+    estimate_gyro_z: bool = False
+    noise: str = "gyro_rw"
+    gyro_arw_radpsqrts: float | None = None
+    noise_step_s: float = 10.0
+    gyro_gm_sigma_radps: float | None = None
+    gyro_gm_tau_s: float | None = None
+    gm_bin_s: float = 5.0
+    gm_prior: DriftPrior | None = None
+
+    def __post_init__(self) -> None:
+        if self.noise not in NOISE_MODELS:
+            raise ValueError(f"noise: expected one of {NOISE_MODELS}, got {self.noise!r}")
+        if self.gyro_gm_tau_s is not None and not self.gyro_gm_tau_s > 0:
+            raise ValueError(f"gyro_gm_tau_s: expected > 0 s, got {self.gyro_gm_tau_s!r}")
+
+    @property
+    def gm_tau_s(self) -> float | None:
+        """The drift's correlation time [s] the fit starts from (the prior's when not given),
+        None without the drift."""
+        return (self.gm_prior.tau_s if self.gm_prior is not None and self.gyro_gm_tau_s is None
+                else self.gyro_gm_tau_s)
+
+
+def fit_calibration(
+    legs: tuple[LegReplay, ...],
+    formulation: str,
+    options: FitOptions | None = None,
+    *,
+    bases: Mapping[int, NoiseBasis] | None = None,
+    gm_ops: Mapping[int, tuple[NDArray, NDArray]] | None = None,
+    noise_cache: dict | None = None,
+) -> Calibration:
+    """Calibrate from the B-minus-A velocity errors of a set of legs (paper Eq. 17).
+
+    Parameters
+    ----------
+    legs : tuple of LegReplay
+        Two legs for a pair, or more for a joint fit (distinct leg ids).
+    formulation : {"paper", "body"}
+        See the module docstring.
+    options : FitOptions, optional
+        The model (the defaults when None).
+    bases : Mapping of leg id to NoiseBasis, optional
+        Precomputed :func:`noise_basis` per leg (reused across pairs and formulations).
+    gm_ops : Mapping of leg id to (S, tau_bin_s), optional
+        Precomputed :func:`gm_noise_operator` per leg on its basis' samples.
     noise_cache : dict, optional
         Shared by calls with the same legs and noise where only A's scale is fitted (the ARW
         and the drift's sigma given): the eigendecomposition of the fixed part of the
         covariance, ``q K + s2 G``, made once, after which each evaluation of the restricted
         likelihood scales ``V^T [H z]`` instead of factoring the covariance (the null
         realisations' refits, :func:`pospp.calib.stage.with_null_covariance`; the same
-        likelihood to rounding). It also keeps each leg's
+        likelihood to rounding: docs/decisions.md). It also keeps each leg's
         :func:`noise_basis` and drift operator (by leg id; neither reads B minus A, only
-        the leg's samples, sigmas and transition), where ``bases`` / ``gm_ops`` lack them
-        (with or without the drift: the diagnosis's null whitening refits share one too).
+        the leg's samples, sigmas and transition), where ``bases`` / ``gm_ops`` lack them.
 
     Returns
     -------
     Calibration
     """
-    if noise not in NOISE_MODELS:
-        raise ValueError(f"noise: expected one of {NOISE_MODELS}, got {noise!r}")
-    if gyro_gm_tau_s is not None and not gyro_gm_tau_s > 0:
-        raise ValueError(f"gyro_gm_tau_s: expected > 0 s, got {gyro_gm_tau_s!r}")
+    o = options if options is not None else FitOptions()
     if len(legs) < 1:
         raise ValueError("legs: expected at least one leg")
     h, z, s, names = design_matrix(
-        legs, formulation, transition=transition, estimate_gyro_z=estimate_gyro_z
+        legs, formulation, transition=o.transition, estimate_gyro_z=o.estimate_gyro_z
     )
     cond_raw, cond_scaled = condition_numbers(h / s[:, None])
     sizes = [2 * (r.t_s.size - 1) for r in legs]
     edges = np.concatenate([[0], np.cumsum(sizes)])
     gm_sigma, drift, tau_profile, gm_source = 0.0, None, (), ""
-    if gm_prior is not None and gyro_gm_tau_s is None:
-        gyro_gm_tau_s = gm_prior.tau_s
-    if noise == "white":
-        hw, zw = h / s[:, None], z / s
-        x, cov_s, deficient = solve_scaled(hw, zw)
-        gain = scaled_map(hw) / s
-        res_w = zw - hw @ x
-        dof = max(1, zw.size - len(names))
-        s0 = float(res_w @ res_w / dof)
-        infl, _ = autocorr_inflation(res_w, 2 * len(legs))
-        vf = max(s0, 1e-12) * infl
-        cov = cov_s * vf
-        arw = 0.0
-        white = [res_w[edges[i]:edges[i + 1]] / np.sqrt(vf) for i in range(len(legs))]
-    elif gyro_gm_tau_s is not None and (gyro_gm_sigma_radps is None
-                                        or gyro_gm_sigma_radps > 0):
+    tau_s = o.gm_tau_s
+    if o.noise == "white":
+        x, cov, deficient, vf, arw, white, gain = _fit_white(h, z, s, edges, len(names))
+    elif tau_s is not None and (o.gyro_gm_sigma_radps is None or o.gyro_gm_sigma_radps > 0):
         (x, cov, deficient, vf, arw, gm_sigma, white, drift, tau_profile,
-         gm_source, gain) = calibrate_gm(
-            legs, h, z, edges, noise_step_s, bases, gm_ops, gyro_arw_radpsqrts,
-            gyro_gm_sigma_radps, float(gyro_gm_tau_s), gm_bin_s, gm_prior, noise_cache)
+         gm_source, gain) = calibrate_gm(legs, h, z, edges, o, float(tau_s), bases, gm_ops,
+                                         noise_cache)
     else:
-        blocks, rows_all = [], []
-        for i, rep in enumerate(legs):
-            basis = leg_noise_basis(rep, noise_step_s, bases, noise_cache)
-            r = basis.rows + edges[i]
-            rows_all.append(r)
-            blocks.append(LegNoise(basis, h[r], z[r]))
-        if gyro_arw_radpsqrts is None:
-            bounds = [(np.log(1e-6), np.log(1e4)), (np.log(1e-22), np.log(1e-6))]
-            q_fixed = None
-        else:
-            bounds = [(np.log(1e-6), np.log(1e4))]
-            q_fixed = float(gyro_arw_radpsqrts) ** 2
-        # coarse grid (the likelihood is flat in q where a is large), then Nelder-Mead
-        theta0, _ = grid_argmin(lambda th: reml_nll(th, blocks, q_fixed), bounds, 11)
-        opt = optimize.minimize(reml_nll, theta0, args=(blocks, q_fixed), method="Nelder-Mead",
-                                options={"xatol": 1e-3, "fatol": 1e-4, "maxiter": 400})
-        th = np.clip(opt.x, [b[0] for b in bounds], [b[1] for b in bounds])
-        vf = float(np.exp(th[0]))
-        q = q_fixed if q_fixed is not None else float(np.exp(th[1]))
-        hw, zw, _ = stack_whitened(blocks, vf, q)
-        x, cov, deficient = solve_scaled(hw, zw)
-        gain = gls_gain(blocks, vf, q, rows_all, z.size, scaled_map(hw))
-        arw = float(np.sqrt(q))
-        white = []
-        for r_idx, b in zip(rows_all, blocks, strict=True):  # time-ordered Cov^-1/2 r
-            r = (z[r_idx] - h[r_idx] @ x) / b.sq
-            white.append(b.u @ ((b.u.T @ r) / np.sqrt(vf + q * b.lam)))
+        x, cov, deficient, vf, arw, white, gain = _fit_gyro_rw(
+            legs, h, z, edges, o, bases, noise_cache)
     res = z - h @ x
     return Calibration(
         formulation=formulation,
-        transition=transition,
-        noise=noise,
+        transition=o.transition,
+        noise=o.noise,
         leg_ids=tuple(r.leg.leg_id for r in legs),
         names=names,
         x=x,
@@ -536,3 +520,54 @@ def fit_calibration(
     )
 
 
+
+
+def _fit_white(h: NDArray, z: NDArray, s: NDArray, edges: NDArray, n_par: int) -> tuple:
+    """Weighted least squares with A's sigmas ``s`` (``noise="white"``), its variance factor
+    inflated by the residual's autocorrelation: (x, cov, deficient, vf, arw 0, whitened
+    residuals per leg, gain)."""
+    hw, zw = h / s[:, None], z / s
+    x, cov_s, deficient = solve_scaled(hw, zw)
+    gain = scaled_map(hw) / s
+    res_w = zw - hw @ x
+    dof = max(1, zw.size - n_par)
+    s0 = float(res_w @ res_w / dof)
+    infl, _ = autocorr_inflation(res_w, 2 * (edges.size - 1))
+    vf = max(s0, 1e-12) * infl
+    white = [res_w[edges[i]:edges[i + 1]] / np.sqrt(vf) for i in range(edges.size - 1)]
+    return x, cov_s * vf, deficient, vf, 0.0, white, gain
+
+
+def _fit_gyro_rw(legs: tuple[LegReplay, ...], h: NDArray, z: NDArray, edges: NDArray,
+                 o: FitOptions, bases: Mapping[int, NoiseBasis] | None,
+                 noise_cache: dict | None) -> tuple:
+    """GLS with ``Cov = a D + q K`` per leg (``noise="gyro_rw"``, no drift), a and q (q fixed
+    when the ARW is given) by REML: a coarse grid (the likelihood is flat in q where a is
+    large), then Nelder-Mead. Returns (x, cov, deficient, vf, arw, whitened residuals per
+    leg, gain)."""
+    blocks, rows_all = [], []
+    for i, rep in enumerate(legs):
+        basis = leg_noise_basis(rep, o.noise_step_s, bases, noise_cache)
+        r = basis.rows + edges[i]
+        rows_all.append(r)
+        blocks.append(LegNoise(basis, h[r], z[r]))
+    if o.gyro_arw_radpsqrts is None:
+        bounds = [(np.log(1e-6), np.log(1e4)), (np.log(1e-22), np.log(1e-6))]
+        q_fixed = None
+    else:
+        bounds = [(np.log(1e-6), np.log(1e4))]
+        q_fixed = float(o.gyro_arw_radpsqrts) ** 2
+    theta0, _ = grid_argmin(lambda th: reml_nll(th, blocks, q_fixed), bounds, 11)
+    opt = optimize.minimize(reml_nll, theta0, args=(blocks, q_fixed), method="Nelder-Mead",
+                            options={"xatol": 1e-3, "fatol": 1e-4, "maxiter": 400})
+    th = np.clip(opt.x, [b[0] for b in bounds], [b[1] for b in bounds])
+    vf = float(np.exp(th[0]))
+    q = q_fixed if q_fixed is not None else float(np.exp(th[1]))
+    hw, zw, _ = stack_whitened(blocks, vf, q)
+    x, cov, deficient = solve_scaled(hw, zw)
+    gain = gls_gain(blocks, vf, q, rows_all, z.size, scaled_map(hw))
+    white = []
+    for r_idx, b in zip(rows_all, blocks, strict=True):  # time-ordered Cov^-1/2 r
+        r = (z[r_idx] - h[r_idx] @ x) / b.sq
+        white.append(b.u @ ((b.u.T @ r) / np.sqrt(vf + q * b.lam)))
+    return x, cov, deficient, vf, float(np.sqrt(q)), white, gain

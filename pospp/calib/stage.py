@@ -38,7 +38,7 @@ from pospp.calib.replay import (
     replay_legs,
 )
 from pospp.calib.segment import Leg, LegThresholds, find_legs
-from pospp.calib.solve import Calibration, DriftPrior
+from pospp.calib.solve import Calibration, DriftPrior, FitOptions
 from pospp.calib.tables import (
     Row,
     calibration_rows,
@@ -86,9 +86,12 @@ class CalibrationRun:
         "ok" or why no calibration was produced.
     messages : tuple of str
         Per-leg problems (replay failures) and notes.
-    solve_kwargs : Mapping
-        The least squares' settings (noise model, its fixed levels, bases) as the joint fit
-        used them: :func:`with_null_covariance` re-runs that fit on null realisations.
+    fit_options : FitOptions
+        The least squares' model as the joint fit used it (the flight's drift and ARW fixed
+        where REML read them): :func:`with_null_covariance` and the refits re-run that fit.
+    fit_bases : Mapping
+        Its precomputed per-leg noise bases and drift operators (``bases``, ``gm_ops`` of
+        :func:`pospp.calib.solve.fit_calibration`).
     sigma_source : str
         Where the chosen calibration's covariance comes from: "least_squares" (the GLS's
         formal covariance), "linear_null" (its exact covariance under the linear null,
@@ -117,7 +120,8 @@ class CalibrationRun:
     misalignment_n_rad: Mapping[int, NDArray]
     reason: str
     messages: tuple[str, ...]
-    solve_kwargs: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
+    fit_options: FitOptions = field(default_factory=FitOptions, repr=False, compare=False)
+    fit_bases: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
     sigma_source: str = "least_squares"
     drift_sigma_radps: float = 0.0
     drift_tau_s: float = float("inf")
@@ -306,19 +310,18 @@ class CalibrationOptions:
         f, chosen = tuple(self.formulations), self.policy().formulation
         return f + (() if chosen in f else (chosen,))
 
-    def fit_kwargs(self) -> dict[str, Any]:
-        """The least squares' keywords before the flight is seen
+    def fit_options(self) -> FitOptions:
+        """The least squares' model before the flight is seen
         (:func:`pospp.calib.solve.fit_calibration`; SI)."""
-        kw: dict[str, Any] = {"noise": self.noise, "estimate_gyro_z": self.estimate_gyro_z,
-                              "noise_step_s": self.noise_step_s,
-                              "gyro_arw_radpsqrts": None if self.gyro_arw_dpsh is None
-                              else self.gyro_arw_dpsh * _DPSH_RADPSQRTS}
-        if self.gm_on:
-            assert self.gyro_gm_tau_s is not None  # gm_on needs it
-            kw["gyro_gm_tau_s"] = float(self.gyro_gm_tau_s)
-            kw["gyro_gm_sigma_radps"] = (None if self.gyro_gm_sigma_dph is None
-                                         else self.gyro_gm_sigma_dph * DEG_PER_H_RADPS)
-        return kw
+        on = self.gm_on
+        return FitOptions(
+            transition=self.policy().transition, estimate_gyro_z=self.estimate_gyro_z,
+            noise=self.noise, noise_step_s=self.noise_step_s,
+            gyro_arw_radpsqrts=(None if self.gyro_arw_dpsh is None
+                                else self.gyro_arw_dpsh * _DPSH_RADPSQRTS),
+            gyro_gm_tau_s=float(self.gyro_gm_tau_s) if on and self.gyro_gm_tau_s else None,
+            gyro_gm_sigma_radps=(self.gyro_gm_sigma_dph * DEG_PER_H_RADPS
+                                 if on and self.gyro_gm_sigma_dph is not None else None))
 
 
 def calibrate_flight(
@@ -367,7 +370,7 @@ def calibrate_flight(
     if o.compensation in ("causal", "smoothed") and forward_biases is None:
         raise ValueError(f"compensation={o.compensation!r} needs A's forward bias record "
                          "(forward_biases=)")
-    cal_kw, messages = o.fit_kwargs(), list[str]()
+    fit, bases, messages = o.fit_options(), dict[str, Any](), list[str]()
     if legs is None:
         if made_replays is not None:
             raise ValueError("calibrate_flight: made_replays given without their legs")
@@ -387,25 +390,25 @@ def calibrate_flight(
     if len(legs) < 2:
         return done(_too_few_legs(legs, th))
     if o.noise == "gyro_rw":  # the correlated noise's bases, made once for every fit
-        cal_kw["bases"] = {i: noise_basis(r, noise_step_s=o.noise_step_s)
-                           for i, r in replays.items()}
+        bases["bases"] = {i: noise_basis(r, noise_step_s=o.noise_step_s)
+                          for i, r in replays.items()}
         if o.gm_on:
-            cal_kw["gm_ops"] = {i: gm_noise_operator(r, cal_kw["bases"][i].samples)
-                                for i, r in replays.items()}
+            bases["gm_ops"] = {i: gm_noise_operator(r, bases["bases"][i].samples)
+                               for i, r in replays.items()}
     drift_source = "none" if not o.gm_on else (
-        "given" if cal_kw["gyro_gm_sigma_radps"] is not None else "flight_sigma")
-    if o.gm_on and cal_kw["gyro_gm_sigma_radps"] is None:
-        drift_source = _drift_by_reml(replays, legs, o, refusals, cal_kw, messages,
-                                      drift_source)
+        "given" if fit.gyro_gm_sigma_radps is not None else "flight_sigma")
+    if o.gm_on and fit.gyro_gm_sigma_radps is None:
+        fit, drift_source = _drift_by_reml(replays, legs, o, refusals, fit, bases, messages,
+                                           drift_source)
     pairs = evaluate_pairs(replays, legs, policy, formulations=o.formulations_fitted(),
-                           leg_reasons=refusals, **cal_kw)
+                           leg_reasons=refusals, options=fit, **bases)
     if not any(p.used for p in pairs):
         why = "; ".join(f"pair {p.pair_id} (legs {p.leg_a}, {p.leg_b}): {p.reason}"
                         for p in pairs)
         return done(f"no calibration: no pair passed the screening: {why}", pairs)
     try:
         joint = tuple(c for f in o.formulations_fitted() if (c := joint_calibration(
-            replays, pairs, f, transition=policy.transition, **cal_kw)) is not None)
+            replays, pairs, f, fit, **bases)) is not None)
     except (ValueError, np.linalg.LinAlgError) as exc:
         return done(f"no calibration: the joint least squares failed: {exc}", pairs)
     chosen = next(c for c in joint if c.formulation == policy.formulation)
@@ -423,7 +426,7 @@ def calibrate_flight(
     mis = {i: chosen.misalignment_n_rad(i) for i in chosen.leg_ids}
     return CalibrationRun(legs, replays, pairs, joint, chosen, after, improvements, bg, sig, mis,
                           "ok", tuple(messages),
-                          solve_kwargs={**cal_kw, "transition": policy.transition},
+                          fit_options=fit, fit_bases=bases,
                           drift_sigma_radps=float(chosen.gyro_gm_sigma_radps),
                           drift_tau_s=float(chosen.gyro_gm_tau_s),
                           drift_source=drift_source if o.gm_on else "none",
@@ -445,43 +448,44 @@ def _too_few_legs(legs: tuple[Leg, ...], th: LegThresholds) -> str:
 
 
 def _drift_by_reml(replays: dict[int, LegReplay], legs: tuple[Leg, ...],
-                   o: CalibrationOptions, refusals: Mapping[int, str], cal_kw: dict[str, Any],
-                   messages: list[str], drift_source: str) -> str:
+                   o: CalibrationOptions, refusals: Mapping[int, str], fit: FitOptions,
+                   bases: Mapping[str, Any], messages: list[str], drift_source: str
+                   ) -> tuple[FitOptions, str]:
     """The Gauss-Markov drift's sigma (and, with the grade's prior, its tau) by REML once, on
-    the joint fit of the compensation formulation over the legs of the usable pairs, written
-    into ``cal_kw`` (with the ARW when it was not given) for the pairs and the other
-    formulations to reuse (a pair alone has too few legs to estimate it); its message
-    appended. Returns the drift's source ("flight", "grade" or ``drift_source``)."""
+    the joint fit of the compensation formulation over the legs of the usable pairs (rows
+    every :data:`_REML_STEP_S`), fixed in the model for the pairs and the other formulations
+    to reuse (with the ARW when it was not given; a pair alone has too few legs to estimate
+    it); its message appended. Returns the model and the drift's source ("flight", "grade"
+    or ``drift_source``)."""
     policy = o.policy()
     assert o.gyro_gm_tau_s is not None  # gm_on needs it
     prior = (DriftPrior(o.gyro_gm_prior_sigma_dph * DEG_PER_H_RADPS, float(o.gyro_gm_tau_s))
              if o.gyro_gm_prior_sigma_dph else None)
     screened = evaluate_pairs(replays, legs, policy, formulations=(), leg_reasons=refusals,
-                              **cal_kw)
+                              options=fit, **bases)
     coarse = {i: noise_basis(r, noise_step_s=_REML_STEP_S) for i, r in replays.items()}
     first_fit = joint_calibration(
-        replays, screened, policy.formulation, transition=policy.transition,
-        **{**cal_kw, "bases": coarse, "noise_step_s": _REML_STEP_S,
-           "gm_ops": {i: gm_noise_operator(r, coarse[i].samples)
-                      for i, r in replays.items()}, "gm_prior": prior})
+        replays, screened, policy.formulation,
+        replace(fit, noise_step_s=_REML_STEP_S, gm_prior=prior), bases=coarse,
+        gm_ops={i: gm_noise_operator(r, coarse[i].samples) for i, r in replays.items()})
     if first_fit is None:
-        return drift_source
-    cal_kw["gyro_gm_sigma_radps"] = first_fit.gyro_gm_sigma_radps
-    if cal_kw["gyro_arw_radpsqrts"] is None:
-        cal_kw["gyro_arw_radpsqrts"] = first_fit.gyro_arw_radpsqrts
+        return fit, drift_source
+    fit = replace(fit, gyro_gm_sigma_radps=first_fit.gyro_gm_sigma_radps,
+                  gyro_arw_radpsqrts=(first_fit.gyro_arw_radpsqrts
+                                      if fit.gyro_arw_radpsqrts is None
+                                      else fit.gyro_arw_radpsqrts))
     sigma_dph = first_fit.gyro_gm_sigma_radps / DEG_PER_H_RADPS
     if prior is None:
         messages.append("Gauss-Markov gyro drift sigma by REML on the joint "
                         f"{policy.formulation} fit: {sigma_dph:.3f} deg/h")
-        return drift_source
-    cal_kw["gyro_gm_tau_s"] = first_fit.gyro_gm_tau_s
+        return fit, drift_source
     messages.append(
         f"Gauss-Markov gyro drift by REML on the joint {policy.formulation} fit (grade "
         f"{o.gyro_gm_prior_sigma_dph:g} deg/h, {float(o.gyro_gm_tau_s):g} s as a weak prior): "
         f"{sigma_dph:.3f} deg/h, {first_fit.gyro_gm_tau_s:.0f} s ("
         + ("the flight rejects the grade's drift" if first_fit.gm_source == "flight"
            else "the flight does not reject the grade's drift: kept") + ")")
-    return first_fit.gm_source
+    return replace(fit, gyro_gm_tau_s=first_fit.gyro_gm_tau_s), first_fit.gm_source
 
 
 def gyro_bias_sigma_b_radps(chosen: Calibration, first: LegReplay) -> NDArray:
@@ -548,9 +552,7 @@ def with_null_covariance(run: CalibrationRun, null_dv: Sequence[Sequence[NDArray
     if chosen is None or len(null_dv) < MIN_NULL_REALISATIONS:
         return run
     ids = sorted(run.replays)
-    kw = dict(run.solve_kwargs)
-    transition = kw.pop("transition", chosen.transition)
-    kw["noise_cache"] = {}  # the realisations share the fixed noise's eigendecomposition
+    cache: dict = {}  # the realisations share the fixed noise's eigendecomposition
     fitted = [ids.index(i) for i in chosen.leg_ids]
     length = np.array([run.replays[i].t_s[-1] for i in chosen.leg_ids])
     f0 = flight_bias_b_radps(chosen, run.replays)
@@ -558,8 +560,8 @@ def with_null_covariance(run: CalibrationRun, null_dv: Sequence[Sequence[NDArray
     for r, real in enumerate(null_dv):
         reps = {i: replace(run.replays[i], dv_n_mps=run.replays[i].dv_n_mps + np.asarray(d))
                 for i, d in zip(ids, real, strict=True)}
-        cal = joint_calibration(reps, run.pairs, chosen.formulation, transition=transition,
-                                **kw)
+        cal = joint_calibration(reps, run.pairs, chosen.formulation, run.fit_options,
+                                noise_cache=cache, **run.fit_bases)
         if cal is not None and cal.names == chosen.names:
             dx.append(cal.x - chosen.x)
             if injected is not None:

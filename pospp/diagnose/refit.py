@@ -85,9 +85,7 @@ def refit_calibration(run: CalibrationRun, responses: Sequence[EffectResponse],
     if chosen is None or not responses:
         return None
     ids = sorted(run.replays)
-    kw = dict(run.solve_kwargs)
-    transition = kw.pop("transition", chosen.transition)
-    kw["noise_cache"] = {}
+    cache: dict = {}  # the refits share the fixed noise's eigendecomposition
 
     def fit(minus: list[NDArray]):
         reps = {}
@@ -95,8 +93,8 @@ def refit_calibration(run: CalibrationRun, responses: Sequence[EffectResponse],
             dv = run.replays[i].dv_n_mps.copy()
             dv[:, 0:2] -= m
             reps[i] = replace(run.replays[i], dv_n_mps=dv)
-        return joint_calibration(reps, run.pairs, chosen.formulation, transition=transition,
-                                 **kw)
+        return joint_calibration(reps, run.pairs, chosen.formulation, run.fit_options,
+                                 noise_cache=cache, **run.fit_bases)
 
     total = [np.sum([r.curves()[k] for r in responses], axis=0) for k in range(len(ids))]
     try:

@@ -66,7 +66,7 @@ from pospp.calib.noise_model import NoiseModel
 from pospp.calib.pairs import PairPolicy, heading_difference_rad
 from pospp.calib.replay import ImuSource, LegReplay, SolutionA
 from pospp.calib.segment import Leg
-from pospp.calib.solve import fit_calibration, fit_noise_model
+from pospp.calib.solve import FitOptions, fit_calibration, fit_noise_model
 from pospp.diagnose import effects as fx
 from pospp.diagnose._candidates import (
     family_trial,
@@ -406,7 +406,7 @@ def _problem(replays: Sequence[LegReplay], o: DiagnosisOptions,
         white_scale, arw = 1.0, 0.0
     elif o.noise == "gyro_rw":
         cal = fit_calibration(tuple(replays if whitening_replays is None else whitening_replays),
-                              "body", noise="gyro_rw", gyro_arw_radpsqrts=o.gyro_arw_radpsqrts)
+                              "body", FitOptions(gyro_arw_radpsqrts=o.gyro_arw_radpsqrts))
         white_scale, arw = cal.variance_factor, cal.gyro_arw_radpsqrts
     else:  # "full"
         model = noise_model if noise_model is not None else fit_noise_model(
@@ -431,8 +431,8 @@ def _null_calibration(prob: Problem, replays: Sequence[LegReplay], o: DiagnosisO
         shared: dict = {}  # the realisations' legs are the flight's: bases made once
 
         def whitening(reps: tuple[LegReplay, ...]) -> tuple[float, float]:
-            c = fit_calibration(reps, "body", noise="gyro_rw",
-                                gyro_arw_radpsqrts=o.gyro_arw_radpsqrts, noise_cache=shared)
+            c = fit_calibration(reps, "body", FitOptions(gyro_arw_radpsqrts=o.gyro_arw_radpsqrts),
+                                noise_cache=shared)
             return c.variance_factor, c.gyro_arw_radpsqrts
     return _NullCalibration(prob, null_dv, whitening, threads)
 

@@ -24,7 +24,7 @@ from pospp.calib.compensate import (
     prior_sigma_b_radps,
 )
 from pospp.calib.replay import ImuIncrements, ReplayOptions, solution_a_from_trajectory
-from pospp.calib.solve import fit_calibration
+from pospp.calib.solve import FitOptions, fit_calibration
 from pospp.calib.stage import CalibrationOptions, calibrate_flight
 from pospp.nav.filter import run_integrated_navigation
 from pospp.nav.strapdown import increments_from_rates
@@ -147,9 +147,9 @@ def run_once(kind: str, seed: int, folder: Path, *, estimate_gm_sigma: bool = Fa
     # prediction: calibrate on the first two legs only, compensate the last (not in the fit)
     ids = sorted(run.replays)
     pair = fit_calibration((run.replays[ids[0]], run.replays[ids[1]]), "body",
-                     gyro_arw_radpsqrts=tun.gyro_arw_dpsh * np.pi / 180.0 / 60.0,
-                     gyro_gm_sigma_radps=cal.gyro_gm_sigma_radps,
-                     gyro_gm_tau_s=tun.gyro_gm_tau_s)
+                           FitOptions(gyro_arw_radpsqrts=tun.gyro_arw_dpsh * np.pi / 180.0 / 60.0,
+                                      gyro_gm_sigma_radps=cal.gyro_gm_sigma_radps,
+                                      gyro_gm_tau_s=tun.gyro_gm_tau_s))
     last = {ids[-1]: run.replays[ids[-1]]}
     held = {k: compensate_legs(imu, a, last, pair, **kw, **opt)[1][0] for k, opt in (
         ("held_constant", {}), ("held_per_leg", {"per_leg_drift": True}),
@@ -227,9 +227,9 @@ def run_modes(kind: str, seed: int, folder: Path, *, gm_tau_s: float | None = No
         true_mean[lid] = bias[k0:k1].mean(axis=0)
     ids = sorted(run.replays)
     pair = fit_calibration((run.replays[ids[0]], run.replays[ids[1]]), "body",
-                     gyro_arw_radpsqrts=tun.gyro_arw_dpsh * np.pi / 180.0 / 60.0,
-                     gyro_gm_sigma_radps=cal.gyro_gm_sigma_radps,
-                     gyro_gm_tau_s=tun.gyro_gm_tau_s)
+                           FitOptions(gyro_arw_radpsqrts=tun.gyro_arw_dpsh * np.pi / 180.0 / 60.0,
+                                      gyro_gm_sigma_radps=cal.gyro_gm_sigma_radps,
+                                      gyro_gm_tau_s=tun.gyro_gm_tau_s))
     pair_sigma = np.array([pair.sigma_of("gyro_bias_x"), pair.sigma_of("gyro_bias_y"), np.inf])
     fits = {"in": (cal, run.replays, run.gyro_bias_b_radps, run.gyro_bias_sigma_b_radps),
             "held": (pair, {ids[-1]: run.replays[ids[-1]]}, pair.gyro_bias_b_radps(),

@@ -111,7 +111,7 @@ def gm_legs():
     (0.001 deg/h, 300 s given): what moves leg 1 is the white noise's leg mean."""
     from _synthetic import noisy_replays, survey_flight
 
-    from pospp.calib.solve import fit_calibration
+    from pospp.calib.solve import FitOptions, fit_calibration
 
     flight = survey_flight(headings_deg=(20.0, 200.0, 20.0), rate_hz=20.0)
     extra = 0.05 * DPH
@@ -125,8 +125,8 @@ def gm_legs():
     reps = {r.leg.leg_id: r for r in noisy_replays(flight, noisy, sigma_mps=0.005,
                                                     rng=np.random.default_rng(3))}
     cal = fit_calibration(tuple(reps.values()), "body",
-                          gyro_arw_radpsqrts=0.01 * np.pi / 180 / 60,
-                          gyro_gm_sigma_radps=0.001 * DPH, gyro_gm_tau_s=300.0)
+                          FitOptions(gyro_arw_radpsqrts=0.01 * np.pi / 180 / 60,
+                                     gyro_gm_sigma_radps=0.001 * DPH, gyro_gm_tau_s=300.0))
     return cal, reps, extra, noisy, flight.solution_a(0.005), bias
 
 

@@ -21,7 +21,7 @@ from pospp import rotation, units
 from pospp.calib.noise_model import gm_covariance, gm_noise_operator, noise_basis
 from pospp.calib.replay import ImuIncrements, replay_leg, solution_a_from_trajectory
 from pospp.calib.segment import Leg
-from pospp.calib.solve import fit_calibration
+from pospp.calib.solve import FitOptions, fit_calibration
 from pospp.calib.stage import CalibrationOptions, calibrate_flight
 from pospp.nav.error_model import BG
 from pospp.nav.strapdown import Trajectory
@@ -97,7 +97,7 @@ def test_drift_covariance_with_infinite_tau_is_a_random_constant():
 def test_validation_messages():
     reps = (_leg(0, 20.0, _bias), _leg(1, 200.0, _bias))
     with pytest.raises(ValueError, match="gyro_gm_tau_s: expected > 0 s"):
-        fit_calibration(reps, "body", gyro_gm_tau_s=0.0)
+        fit_calibration(reps, "body", FitOptions(gyro_gm_tau_s=0.0))
     with pytest.raises(ValueError, match="compensation"):
         calibrate_flight(ImuIncrements(np.zeros(2), np.zeros((1, 3)), np.zeros((1, 3))), None,
                          CalibrationOptions(compensation="per_leg"))
@@ -135,8 +135,8 @@ def test_shared_eigendecomposition_gives_the_cholesky_fit():
               gyro_gm_tau_s=300.0)
     cache: dict = {}
     for reps in draws:  # the second call reuses the first's decomposition and leg bases
-        plain = fit_calibration(reps, "body", **kw)
-        shared = fit_calibration(reps, "body", noise_cache=cache, **kw)
+        plain = fit_calibration(reps, "body", FitOptions(**kw))
+        shared = fit_calibration(reps, "body", FitOptions(**kw), noise_cache=cache)
         # one decomposition; each leg's noise basis and drift operator; the drift's S E S^T
         assert len([k for k in cache if k[0] not in ("basis", "gm_op", "gm_cov")]) == 1
         assert sorted(str(k[0]) for k in cache if isinstance(k[0], str)) == [
@@ -157,8 +157,8 @@ def test_shared_noise_bases_without_the_drift_give_the_same_fit():
         reps = tuple(replace(r, dv_n_mps=r.dv_n_mps + rng.normal(0.0, 0.01, r.dv_n_mps.shape))
                      for r in legs)
         kw = dict(noise="gyro_rw", gyro_arw_radpsqrts=np.radians(0.01) / 60.0)
-        plain = fit_calibration(reps, "body", **kw)
-        shared = fit_calibration(reps, "body", noise_cache=cache, **kw)
+        plain = fit_calibration(reps, "body", FitOptions(**kw))
+        shared = fit_calibration(reps, "body", FitOptions(**kw), noise_cache=cache)
         assert sorted(k[:2] for k in cache) == [("basis", 1), ("basis", 2)]
         assert shared.variance_factor == plain.variance_factor
         np.testing.assert_array_equal(shared.x, plain.x)

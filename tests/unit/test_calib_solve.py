@@ -18,7 +18,7 @@ from pospp import rotation, units
 from pospp.calib.design import leg_sensitivities
 from pospp.calib.replay import ImuIncrements, replay_leg, solution_a_from_trajectory
 from pospp.calib.segment import Leg
-from pospp.calib.solve import fit_calibration
+from pospp.calib.solve import FitOptions, fit_calibration
 from pospp.nav.strapdown import Trajectory
 
 DPH = units.DEG_PER_H_RADPS
@@ -116,8 +116,8 @@ def test_closed_form_and_numerical_transitions_agree_on_an_ideal_leg(reversal_pa
             scale = np.abs(a).max(axis=(0, 2), keepdims=True)  # per velocity component
             # the closed forms drop terms worth a few per cent over 300 s (closed_form docs)
             assert np.max(np.abs(a - b) / scale) < 0.05
-    c_num = fit_calibration((ra, rb), "body", transition="numerical")
-    c_cf = fit_calibration((ra, rb), "body", transition="closed_form")
+    c_num = fit_calibration((ra, rb), "body", FitOptions(transition="numerical"))
+    c_cf = fit_calibration((ra, rb), "body", FitOptions(transition="closed_form"))
     for ax in "xy":
         assert abs(c_num.value(f"gyro_bias_{ax}") - c_cf.value(f"gyro_bias_{ax}")) < 0.05 * DPH
 
@@ -127,7 +127,7 @@ def test_numerical_transition_beats_closed_form_on_a_weaving_leg():
     b = _leg(1, 200.0, phi_n_rad=PHI1, weave_amp_deg=8.0, accel=False)
     err = {}
     for tr in ("numerical", "closed_form"):
-        cal = fit_calibration((a[0], b[0]), "body", transition=tr, noise="white")
+        cal = fit_calibration((a[0], b[0]), "body", FitOptions(transition=tr, noise="white"))
         err[tr] = np.hypot(*(cal.gyro_bias_b_radps()[0:2] - BIAS_B[0:2])) / DPH
     assert err["numerical"] < 0.01  # deg/h, of a 0.64 deg/h bias
     assert err["numerical"] < 0.2 * err["closed_form"], err

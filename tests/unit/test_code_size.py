@@ -28,8 +28,6 @@ FUNCTION_EXCEPTIONS = {
     "calib/solve.py:fit_noise_model": "one REML fit over the noise models and the drift's tau "
                                       "profile: its steps share the whitened design and the "
                                       "candidate loop (to split next, issue 12's noise work)",
-    "calib/solve.py:fit_calibration": "the joint least squares with its covariance branches "
-                                      "(per-leg bases, full Gauss-Markov, null realisations)",
 }
 
 
@@ -75,13 +73,10 @@ def test_every_exception_names_a_function_that_exists(name: str) -> None:
 
 MAX_PARAMETERS = 12
 _KERNEL = "a numba-compiled kernel: arrays and scalars in, no Python objects in nopython mode"
-_OPTIONS = "the fit's options one by one: to become one options object (issue 36)"
 PARAMETER_EXCEPTIONS = {
     "nav/_filter_kernel.py:_update_epoch": _KERNEL,
     "nav/_filter_kernel.py:forward_kernel": _KERNEL,
     "calib/_drift_kernel.py:drift_filter_whiten": _KERNEL,
-    "calib/solve.py:fit_calibration": _OPTIONS,
-    "calib/reml.py:calibrate_gm": _OPTIONS,
     "sim/api.py:simulate_along": "the simulator's keyword API: one physical quantity each",
     "sim/api.py:_params": "the simulator's keyword API: one physical quantity each",
     "sim/api.py:_generate": "the simulator's keyword API: one physical quantity each",

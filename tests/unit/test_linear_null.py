@@ -29,7 +29,7 @@ from pospp import flight_stages, null_stage, pipeline
 from pospp.calib import _null_kernel as kernel
 from pospp.calib.design import design_matrix
 from pospp.calib.linear_null import NullNoise, linear_null
-from pospp.calib.solve import fit_calibration
+from pospp.calib.solve import FitOptions, fit_calibration
 from pospp.config import config_from_dict
 from pospp.nav._filter_kernel import fill_extended_f
 from pospp.nav.strapdown import interpolate_trajectory
@@ -352,7 +352,8 @@ def test_calibration_gain_is_the_fits_linear_map(flight, noise):
     legs = tuple(r for _, r in sorted(made.replays.items()))
     kw = {"gm": {"gyro_gm_sigma_radps": 0.5 * DPH, "gyro_gm_tau_s": 300.0},
           "gyro_rw": {}, "white": {"noise": "white"}}[noise]
-    cal = fit_calibration(legs, "body", gyro_arw_radpsqrts=NOISE.gyro_arw_radpsqrts, **kw)
+    cal = fit_calibration(legs, "body",
+                          FitOptions(gyro_arw_radpsqrts=NOISE.gyro_arw_radpsqrts, **kw))
     _, z, _, _ = design_matrix(legs, "body")
     assert cal.gain is not None and cal.gain.shape == (cal.x.size, z.size)
     assert np.allclose(cal.gain @ z, cal.x, rtol=1e-9, atol=1e-12 * np.max(np.abs(cal.x)))

@@ -24,7 +24,7 @@ from scipy.linalg import expm
 from pospp import earth, rotation, units
 from pospp.calib.replay import ImuIncrements, replay_leg, solution_a_from_trajectory
 from pospp.calib.segment import Leg
-from pospp.calib.solve import fit_calibration
+from pospp.calib.solve import FitOptions, fit_calibration
 from pospp.nav import closed_form as cf
 from pospp.nav.strapdown import Trajectory
 
@@ -64,7 +64,7 @@ def paper_pair():
 
 
 def test_paper_formulation_recovers_nav_frame_drift_and_misalignment(paper_pair):
-    paper = fit_calibration(paper_pair, "paper", noise="white")
+    paper = fit_calibration(paper_pair, "paper", FitOptions(noise="white"))
     x_paper = cf.xp_paper_from_ned(paper.x)  # [phi_x, phi_y, phi_z, eps_E, eps_N]
     phi_asec = x_paper[0:3] / ASEC
     eps_dph = x_paper[3:5] / DPH
@@ -78,7 +78,7 @@ def test_paper_formulation_recovers_nav_frame_drift_and_misalignment(paper_pair)
     assert paper.residual_rms_mps < 2e-5, paper.residual_rms_mps
     # the body formulation cannot (one body bias for two legs whose body biases differ):
     # residual 0.046 m/s measured, 30000x the paper's
-    body = fit_calibration(paper_pair, "body", noise="white")
+    body = fit_calibration(paper_pair, "body", FitOptions(noise="white"))
     assert body.residual_rms_mps > 1000 * paper.residual_rms_mps
 
 
