@@ -301,35 +301,72 @@ def fit_noise_model(
     (r(5 l) < 1e-3), and only the drift's within-leg part is modelled. Samples every
     ``noise_step_s`` seconds (shorter than the smallest l).
     """
-    h, z, _, _ = design_matrix(legs, formulation, transition=transition,
-                               estimate_gyro_z=estimate_gyro_z)
-    sizes = [2 * (r.t_s.size - 1) for r in legs]
-    edges = np.concatenate([[0], np.cumsum(sizes)])
-    rows, hs, zs, base = [], [], [], []
-    for i, rep in enumerate(legs):
-        smp = leg_rows(rep, noise_step_s)
-        rr = (2 * (smp - 1)[:, None] + np.arange(2)[None, :]).reshape(-1) + edges[i]
-        sq = rep.sigma_v_n_mps[smp, 0:2].reshape(-1)
-        rows.append(smp)
-        hs.append(h[rr] / sq[:, None])
-        zs.append(z[rr] / sq)
-        base.append((np.eye(sq.size), gyro_noise_covariance(rep, smp) / np.outer(sq, sq),
-                     accel_noise_covariance(rep, smp) / np.outer(sq, sq), sq))
-    q_fixed = None if gyro_arw_radpsqrts is None else float(gyro_arw_radpsqrts) ** 2
-    ops: list[tuple[NDArray, NDArray] | None] = [None] * len(legs)
-    if gyro_gm_taus_s:
-        ops = []
-        for rep, smp, (_, _, _, sq) in zip(legs, rows, base, strict=True):
-            s_op, tb = gm_noise_operator(rep, smp)
-            ops.append((s_op / sq[:, None], tb))
+    prob = _NoiseProblem.of(legs, formulation, transition, estimate_gyro_z, noise_step_s,
+                            gyro_arw_radpsqrts, with_drift=bool(gyro_gm_taus_s))
+    tau0 = gyro_gm_taus_s[len(gyro_gm_taus_s) // 2] if gyro_gm_taus_s else None
+    best = min((prob.fit(length, tau0, kind) for length in reference_lengths_s
+                for kind in reference_kinds), key=lambda x: x[0])
+    if len(gyro_gm_taus_s) > 1:
+        length, kind = best[1].reference_length_s, best[1].reference_kind
+        best = min([best] + [prob.fit(length, t, kind) for t in gyro_gm_taus_s if t != tau0],
+                   key=lambda x: x[0])
+    return best[1]
 
-    def fit(length: float, tau: float | None, kind: str) -> tuple[float, NoiseModel]:
+
+@dataclass(frozen=True)
+class _NoiseProblem:
+    """:func:`fit_noise_model`'s REML problem: per leg its samples (every ``noise_step_s``),
+    whitened design and data, the covariances' fixed parts (I, the gyro ARW's K, the
+    accelerometer's, A's sigmas) and the drift's operator (None without the drift)."""
+
+    legs: tuple[LegReplay, ...]
+    rows: list[NDArray]
+    hs: list[NDArray]
+    zs: list[NDArray]
+    base: list[tuple[NDArray, NDArray, NDArray, NDArray]]
+    ops: list[tuple[NDArray, NDArray] | None]
+    q_fixed: float | None
+
+    @classmethod
+    def of(cls, legs: tuple[LegReplay, ...], formulation: str, transition: str,
+           estimate_gyro_z: bool, noise_step_s: float, gyro_arw_radpsqrts: float | None,
+           with_drift: bool) -> _NoiseProblem:
+        h, z, _, _ = design_matrix(legs, formulation, transition=transition,
+                                   estimate_gyro_z=estimate_gyro_z)
+        sizes = [2 * (r.t_s.size - 1) for r in legs]
+        edges = np.concatenate([[0], np.cumsum(sizes)])
+        rows, hs, zs, base = [], [], [], []
+        for i, rep in enumerate(legs):
+            smp = leg_rows(rep, noise_step_s)
+            rr = (2 * (smp - 1)[:, None] + np.arange(2)[None, :]).reshape(-1) + edges[i]
+            sq = rep.sigma_v_n_mps[smp, 0:2].reshape(-1)
+            rows.append(smp)
+            hs.append(h[rr] / sq[:, None])
+            zs.append(z[rr] / sq)
+            base.append((np.eye(sq.size), gyro_noise_covariance(rep, smp) / np.outer(sq, sq),
+                         accel_noise_covariance(rep, smp) / np.outer(sq, sq), sq))
+        q_fixed = None if gyro_arw_radpsqrts is None else float(gyro_arw_radpsqrts) ** 2
+        ops: list[tuple[NDArray, NDArray] | None] = [None] * len(legs)
+        if with_drift:
+            ops = []
+            for rep, smp, (_, _, _, sq) in zip(legs, rows, base, strict=True):
+                s_op, tb = gm_noise_operator(rep, smp)
+                ops.append((s_op / sq[:, None], tb))
+        return cls(legs, rows, hs, zs, base, ops, q_fixed)
+
+    def fit(self, length: float, tau: float | None, kind: str) -> tuple[float, NoiseModel]:
+        """(restricted nll, model) at A's error correlation length ``length`` [s] of
+        ``kind`` and the drift's ``tau`` [s] (None: no drift): the variances by REML, a
+        coarse grid, then Powell (bounded, derivative-free) and Nelder-Mead from its end (the
+        likelihood is flat along components the data cannot see: one search alone stalls)."""
+        q_fixed = self.q_fixed
         mats = []
-        for rep, smp, (eye, k, ka, sq), op in zip(legs, rows, base, ops, strict=True):
+        for rep, smp, (eye, k, ka, sq), op in zip(self.legs, self.rows, self.base, self.ops,
+                                                  strict=True):
             g = reference_error_covariance(rep, length, smp, kind) / np.outer(sq, sq)
             m = [eye, k, ka, g]
             if tau is not None:
-                assert op is not None  # a tau only when gyro_gm_taus_s built the operators
+                assert op is not None  # a tau only with the drift's operators
                 m.append(gm_covariance([op], tau))
             mats.append(tuple(m))
         free_q = q_fixed is None
@@ -349,11 +386,9 @@ def fit_noise_model(
             return np.array(out)
 
         def nll(theta: NDArray) -> float:
-            return blocks_reml_nll(unpack(theta), mats, hs, zs)
+            return blocks_reml_nll(unpack(theta), mats, self.hs, self.zs)
 
         th0, _ = grid_argmin(nll, list(zip(lo, hi, strict=True)), 3)
-        # Powell (bounded, derivative-free), then Nelder-Mead from its end: the likelihood is
-        # flat along components that the data cannot see, and one search alone stalls there
         opt = optimize.minimize(nll, th0, method="Powell", bounds=list(zip(lo, hi, strict=True)),
                                 options={"xtol": 1e-3, "ftol": 1e-6, "maxfev": 3000})
         opt = optimize.minimize(nll, np.clip(opt.x, lo, hi), method="Nelder-Mead",
@@ -365,15 +400,6 @@ def fit_noise_model(
                            float(tau) if tau is not None else np.inf,
                            accel_vrw_mpsqrts=float(np.sqrt(v[2])), reference_kind=kind)
         return nll(th), model
-
-    tau0 = gyro_gm_taus_s[len(gyro_gm_taus_s) // 2] if gyro_gm_taus_s else None
-    best = min((fit(length, tau0, kind) for length in reference_lengths_s
-                for kind in reference_kinds), key=lambda x: x[0])
-    if len(gyro_gm_taus_s) > 1:
-        length, kind = best[1].reference_length_s, best[1].reference_kind
-        best = min([best] + [fit(length, t, kind) for t in gyro_gm_taus_s if t != tau0],
-                   key=lambda x: x[0])
-    return best[1]
 
 
 @dataclass(frozen=True)

@@ -25,9 +25,6 @@ FUNCTION_EXCEPTIONS = {
                                       "loop, and the steps share their mid-interval terms)",
     "nav/error_model.py:fill_f_matrix": "the 15x15 F written element by element, one "
                                         "equation of docs/filter.md per line",
-    "calib/solve.py:fit_noise_model": "one REML fit over the noise models and the drift's tau "
-                                      "profile: its steps share the whitened design and the "
-                                      "candidate loop (to split next, issue 12's noise work)",
 }
 
 
