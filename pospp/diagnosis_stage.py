@@ -69,6 +69,7 @@ from pospp.io import mcap_reader
 from pospp.nav import filter as nav_filter
 from pospp.null_stage import (
     leg_epochs_ns,
+    linear_gnss_signatures,
     linear_null_model,
     null_drift,
     null_needs_gains,
@@ -84,6 +85,10 @@ from pospp.sensor_stage import SensorFamilies, sensor_families, with_sensor_fami
 from pospp.units import DEG_PER_H_RADPS
 from pospp.units import G0_MPS2 as GRAVITY_MPS2
 
+LEVER_START_SIGMAS = 3.0
+"""Where A's gate is open, the lever arm's Gauss-Newton starts from A's estimate only when an
+axis of it is this many of its sigmas from the configured one (else A's linear response at the
+configuration, which its second-order terms do not move at that size)."""
 
 def rerun_base(log: mcap_reader.FlightLog | None, nav: nav_filter.FilterResult | None,
                calib_run: CalibrationRun, config: PipelineConfig
@@ -200,7 +205,8 @@ def _rerun_signatures_at_start(log: mcap_reader.FlightLog, nav: nav_filter.Filte
                                starts: dict[str, np.ndarray | None],
                                navigate_a: Any, threads: int = 1,
                                rerun: tuple[Any, CalibrationRun] | None = None,
-                               jacobians: Jacobians | None = None
+                               jacobians: Jacobians | None = None,
+                               made: Mapping[str, list[np.ndarray]] | None = None
                                ) -> tuple[dict[str, list[np.ndarray]], dict[str, np.ndarray]]:
     """The diagnosis's first A re-run signatures and the estimates they were made at
     (``jacobians``: their local derivatives, added in place: :func:`signature_at`).
@@ -209,13 +215,14 @@ def _rerun_signatures_at_start(log: mcap_reader.FlightLog, nav: nav_filter.Filte
     when None); ``starts``: :func:`signature_starts`. An effect with a start: Gauss-Newton
     from it (the lever arm: 1 + 1 A runs and 3 replays of the second's gains; the scale
     factor: the secant along it, 1 A run; the warm-up: 1 A run and 2 replays); else at the
-    configuration (the lever arm and the time offset: 1 A run each, the warm-up 2); the gyro
-    scale factor without a start keeps the library's signature."""
+    configuration (the lever arm and the time offset: 1 A run each, the warm-up 2) unless
+    ``made`` holds it (A's linear response: :func:`pospp.null_stage.linear_gnss_signatures`);
+    the gyro scale factor without a start keeps the library's signature."""
     log_r, run_r = (log, calib_run) if rerun is None else rerun
-    sigs = rerun_signatures(log_r, nav, run_r, config,
-                            [e for e in PIPELINE_RERUN if e != "gyro_scale_factor"
-                             and starts.get(e) is None], navigate=navigate_a,
-                            threads=threads)
+    sigs = {**(made or {}), **rerun_signatures(
+        log_r, nav, run_r, config, [e for e in PIPELINE_RERUN if e != "gyro_scale_factor"
+                                    and starts.get(e) is None and e not in (made or {})],
+        navigate=navigate_a, threads=threads)}
     at: dict[str, np.ndarray] = {}
     for eid, p in starts.items():
         if p is None:
@@ -306,9 +313,17 @@ def diagnosis_reruns(calib_run: CalibrationRun, config: PipelineConfig, *,
     if log is not None and log_r is not None and nav is not None:
         # lever arm, gyro scale factor, warm-up: Gauss-Newton from A's own estimates
         starts = signature_starts(log_r, nav, config, lever_estimate)
+        # A's gate open: the lever arm and the time offset from A's gains; the lever arm's
+        # Gauss-Newton only from an estimate A's own sigmas tell from the configured one
+        linear = linear_gnss_signatures(log, nav, calib_run, config)
+        p_lever = starts.get("lever_arm")
+        if p_lever is not None and linear and lever_estimate is not None and not np.any(
+                np.abs(p_lever) > LEVER_START_SIGMAS * lever_estimate.sigma_b_m):
+            starts = {**starts, "lever_arm": None}
+        linear = {e: s for e, s in linear.items() if starts.get(e) is None}
         sigs, at = _rerun_signatures_at_start(log, nav, calib_run, config, starts,
                                               a_as_configured, threads, (log_r, run_r),
-                                              jacobians)
+                                              jacobians, linear)
     return DiagnosisStart(log_r, run_r.replays, a_as_configured, sigs, at, jacobians)
 
 

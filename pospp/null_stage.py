@@ -24,6 +24,7 @@ from pospp.calib.segment import Leg
 from pospp.calib.stage import CalibrationRun, with_covariance, with_null_covariance
 from pospp.config import PipelineConfig
 from pospp.diagnose import null_model
+from pospp.diagnose.linear_signatures import linear_signatures
 from pospp.diagnose.rerun import gate_excess
 from pospp.flight_stages import imu_increments, imu_tuning, navigate, rerun_options
 from pospp.io import mcap_reader
@@ -137,6 +138,28 @@ def linear_null_model(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     return linear_null(gains, sol.trajectory, imu.t_s, imu.w_ib_b_radps, imu.f_ib_b_mps2,
                        [calib_run.replays[i] for i in sorted(calib_run.replays)], noise,
                        smoothed=which == "smoothed")
+
+
+def linear_gnss_signatures(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
+                           calib_run: CalibrationRun, config: PipelineConfig
+                           ) -> dict[str, list[np.ndarray]]:
+    """The lever arm's and the GNSS time offset's signatures on B minus A from A's own gains
+    (:mod:`pospp.diagnose.linear_signatures`: A's derivative at the configuration, its gate
+    decisions held), where that is A's response: the flight's A reset nothing and gated no
+    more GNSS records than its model allows (:func:`pospp.diagnose.rerun.gate_excess`), and
+    its linear system holds the legs (:func:`linear_null_model`). Else {} (the diagnosis
+    re-runs A), also when A's pass recorded no gains."""
+    if (nav.gain_replay is None or nav.resets
+            or gate_excess(nav, config.filter_options().gate_probability)):
+        return {}
+    try:
+        model = linear_null_model(log, nav, calib_run, config,
+                                  null_noise(log, nav, calib_run, config))
+    except ValueError:
+        return {}
+    which = nav_filter.reference_name(nav, config.replay.reference)
+    sol = nav.smoothed if which == "smoothed" and nav.smoothed is not None else nav.forward
+    return linear_signatures(model, sol.trajectory, config.gnss.lever_arm_m)
 
 
 def with_null_sigmas(calib_run: CalibrationRun, null_dv: list[list[np.ndarray]],

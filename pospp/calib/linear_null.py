@@ -41,7 +41,7 @@ noise on the trajectory the gains were made along. Measured against them: docs/d
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -125,6 +125,10 @@ class LinearNull:
     """Grid point of each leg's start (L,)."""
     psi: NDArray
     """B's transition's velocity rows from its leg's start (J, 3, 12)."""
+    record_t_s: NDArray
+    """Each record's epoch [s, A's time axis] (in :attr:`records`' order)."""
+    record_kind: NDArray
+    """Each record's kind (0 GNSS position, 1 GNSS velocity, else a ZUPT)."""
 
     @property
     def n_samples(self) -> int:
@@ -230,6 +234,40 @@ class LinearNull:
                                 ehat0)
         s0 = (eps0 - ehat0)[self.sample_leg]
         return eb_s + np.einsum("jab,jbr->jar", self.psi, s0) - (eps_s - ehat_s)
+
+    def response(self, record_v: NDArray) -> list[NDArray]:
+        """B minus A's response to deterministic errors of A's records, legs in id order,
+        each (M, 3, P) NED [m/s]: ``record_v`` (R, 3, P), per record (:attr:`record_t_s`'s
+        order) the error ``v`` of its measurement (measured minus what A's model predicts
+        from the true state; NED m for a position, m/s for a velocity) for each of P
+        columns. The same linear system as :meth:`draws` (A's gains held, its smoother, B
+        from each leg start; module docstring) with ``v`` in place of the GNSS noise and no
+        IMU noise: ``dx = K (H e_A - v)`` at each record."""
+        v = np.asarray(record_v, dtype=float)
+        start, k_rec, h_rec, sig = self.records
+        if v.shape[:2] != (sig.shape[0], 3):
+            raise ValueError(f"record_v: expected ({sig.shape[0]}, 3, P), got {v.shape}")
+        on = ((sig > 0.0) | np.any(v != 0.0, axis=2)).astype(float)
+        n_on = on.astype(np.int64)
+        g_node = self.events[0]
+        cnt = np.concatenate([[0], np.cumsum(n_on.sum(axis=1))]).astype(np.int64)
+        per_node = cnt[start[1:]] - cnt[start[:-1]]
+        rows = np.where(g_node >= 0, per_node[np.maximum(g_node, 0)], 0)
+        rows[1:] += kernel.N_NOISE
+        off = 6 + np.concatenate([[0], np.cumsum(rows)[:-1]])
+        g_of_node = np.full(start.size - 1, -1, dtype=np.int64)
+        g_of_node[g_node[g_node >= 0]] = np.flatnonzero(g_node >= 0)
+        node = np.searchsorted(start, np.arange(sig.shape[0]), side="right") - 1
+        g = g_of_node[node]
+        if np.any(g < 0):
+            raise ValueError("linear null: a record's node is not a grid point")
+        first = off[g] + np.where(g > 0, kernel.N_NOISE, 0) + cnt[:-1] - cnt[start[node]]
+        xi = np.zeros((6 + int(rows.sum()), v.shape[2]))
+        i_rec, axis = np.nonzero(on)
+        xi[first[i_rec] + np.cumsum(n_on, axis=1)[i_rec, axis] - 1] = v[i_rec, axis]
+        model = replace(self, records=(start, k_rec, h_rec, on))
+        d = model._draw_chunk(v.shape[2], np.random.default_rng(0), xi)
+        return np.split(d, np.cumsum(self.leg_sizes)[:-1])
 
     def fit_weights(self, leg_ids: Sequence[int], gain: NDArray) -> NDArray:
         """The weights (p, J, 3) of a fit's estimate ``x = gain @ z``, z per leg of
@@ -369,7 +407,7 @@ def linear_null(gains: GainReplay, trajectory: Trajectory, imu_t_s: NDArray, imu
                       _records(gains, noise), gains.smoother_gains if smoothed else None,
                       (s_node, s_alpha, l_node, l_alpha), sample_leg,
                       tuple(r.leg.leg_id for r in reps), tuple(sizes),
-                      g_of_j[first], psi)
+                      g_of_j[first], psi, *_record_epochs(gains))
 
 
 def event_grid(t_nodes: NDArray, samples: NDArray, max_step_s: float
@@ -437,12 +475,25 @@ def interval_means(grid_t: NDArray, trajectory: Trajectory, t_s: NDArray, w: NDA
     return np.ascontiguousarray(xs), means[0], means[1], dts
 
 
+def _used(gains: GainReplay) -> NDArray:
+    """Which of A's records the model holds: used (or used at a covariance reset) from its
+    first node on."""
+    st = np.asarray(gains.status)
+    return ((st == STATUS_USED) | (st == STATUS_RESET)) & (gains.meas_k >= gains.node_k[0])
+
+
+def _record_epochs(gains: GainReplay) -> tuple[NDArray, NDArray]:
+    """(epoch [s], kind) of each record the model holds, in its order."""
+    used = _used(gains)
+    return (np.asarray(gains.t_s, dtype=float)[np.asarray(gains.meas_k)[used]],
+            np.asarray(gains.meas_kind)[used])
+
+
 def _records(gains: GainReplay, noise: NullNoise
              ) -> tuple[NDArray, NDArray, NDArray, NDArray]:
     """A's records used from its first node on: (first record of each node, K, H, the
     injected noise's sigma per NED axis: GNSS position, velocity; none for a ZUPT)."""
-    st = np.asarray(gains.status)
-    used = ((st == STATUS_USED) | (st == STATUS_RESET)) & (gains.meas_k >= gains.node_k[0])
+    used = _used(gains)
     k = np.asarray(gains.meas_k)[used]
     node = np.searchsorted(gains.node_k, k)
     if np.any(node >= gains.node_k.size) or np.any(gains.node_k[np.minimum(

@@ -397,3 +397,24 @@ def test_null_stage_linear_by_default_reruns_on_request_and_its_fallbacks(flight
     cfg_r = dataclasses.replace(cfg, pairs=dataclasses.replace(cfg.pairs, null_reruns=True))
     assert null_stage.null_stage(log, nav, run, cfg_r, n=3).calibration.sigma_source \
         == "null_realisations"
+
+
+def test_response_to_record_errors_spans_the_gnss_noise_exactly(flight):
+    # B minus A's response to an error v at each record axis in turn (v = its sigma): the
+    # sum of their outer products is the null's covariance with the GNSS noise alone, made
+    # column by column from the draws' own normals (LinearNull.matrix with no IMU noise);
+    # a record error put in another record's place, or in an interval's, breaks the equality
+    nav, imu, reps, _, _ = flight
+    gnss_only = dataclasses.replace(NOISE, gyro_arw_radpsqrts=0.0, accel_vrw_mpspsqrts=0.0,
+                                    gyro_gm_sigma_radps=0.0, accel_gm_sigma_mps2=0.0)
+    model = linear_null(nav.gain_replay, nav.smoothed.trajectory, imu.t_s, imu.w_ib_b_radps,
+                        imu.f_ib_b_mps2, reps, gnss_only)
+    sig = model.records[3]
+    rec, axis = np.nonzero(sig > 0.0)
+    v = np.zeros((sig.shape[0], 3, rec.size))
+    v[rec, axis, np.arange(rec.size)] = sig[rec, axis]
+    cols = np.concatenate(model.response(v)).reshape(-1, rec.size)
+    ell = model.matrix()
+    np.testing.assert_allclose(cols @ cols.T, ell @ ell.T, rtol=1e-9,
+                               atol=1e-12 * np.max(np.abs(ell @ ell.T)))
+    assert np.count_nonzero(np.linalg.norm(cols, axis=0)) > 0.5 * rec.size

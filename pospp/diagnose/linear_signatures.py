@@ -1,0 +1,95 @@
+"""Signatures of the GNSS-side effects from A's own gains: B minus A's linear response.
+
+Frames and units: NED (n), body FRD (b), SI; signatures per leg (M, 2, P), d [dv_N, dv_E] /
+d p at the replay samples, as :mod:`pospp.diagnose.rerun` makes them by re-running A.
+
+A GNSS-side effect changes only what A's records say about the state. With A's gains held (its
+Kalman gains, measurement matrices and smoother gains as the flight's pass recorded them:
+:class:`pospp.calib.linear_null.LinearNull`), B minus A is linear in the records' errors ``v``
+(measured minus what A's model predicts from the true state), and its response is
+:meth:`LinearNull.response`. Per unit of each effect's parameter:
+
+``lever_arm`` (the configured lever arm moved by ``dl``, body FRD [m]): A predicts the antenna
+at ``r + C_nb l`` and its velocity as ``v + Cdot_nb l``; moved by ``dl`` the predictions move by
+``C_nb dl`` and ``Cdot_nb dl``, so ``v_pos = -C_nb e_j``, ``v_vel = -Cdot_nb e_j``.
+
+``time_offset`` (the GNSS records stamped ``tau`` earlier than they were taken [s], as
+:func:`pospp.diagnose.rerun.restamped`): a record taken at t is read at ``t - tau``, where A
+predicts the antenna's state at ``t - tau``: ``v_pos = v_ant(t)``, ``v_vel = a_ant(t)``
+(``v_ant = v + Cdot_nb l``, ``a_ant`` its rate).
+
+``Cdot_nb`` and ``a_ant`` by central differences of A's solution over +-:data:`DIFF_STEP_S`.
+This is A's derivative at the configuration with its gate decisions held: exact where A's
+gate is open (the flight gated no more than its model allows, no covariance reset) and the
+effect small; where A gated in excess, or at a large estimate, the diagnosis re-runs A
+(:mod:`pospp.diagnose.rerun`: secants through its non-linearity).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from pospp.calib.linear_null import LinearNull
+from pospp.nav.strapdown import Trajectory, interpolate_trajectory
+from pospp.rotation import dcm_from_quat
+
+DIFF_STEP_S = 0.05
+"""Half-width of the central differences of A's attitude and antenna velocity [s]."""
+LINEAR_EFFECTS = ("lever_arm", "time_offset")
+"""The effects whose signature :func:`linear_signatures` makes."""
+
+
+def _antenna(trajectory: Trajectory, t_s: NDArray, lever_b_m: NDArray
+             ) -> tuple[NDArray, NDArray]:
+    """(C_nb (R, 3, 3), antenna velocity (R, 3) NED [m/s]) of A's solution at ``t_s``."""
+    c = dcm_from_quat(interpolate_trajectory(trajectory, t_s).q_nb)
+    cp, cm = (dcm_from_quat(interpolate_trajectory(trajectory, t_s + d).q_nb)
+              for d in (DIFF_STEP_S, -DIFF_STEP_S))
+    v = interpolate_trajectory(trajectory, t_s).v_n_mps
+    return c, v + (cp - cm) @ lever_b_m / (2.0 * DIFF_STEP_S)
+
+
+def record_errors(model: LinearNull, trajectory: Trajectory, effect_id: str,
+                  lever_b_m: ArrayLike) -> NDArray:
+    """Per record of ``model`` the error of its measurement per unit of the effect's
+    parameter, (R, 3, P) (module docstring); ZUPTs none. ``lever_b_m``: the lever arm A was
+    configured with (body FRD [m])."""
+    t = np.asarray(model.record_t_s, dtype=float)
+    kind = np.asarray(model.record_kind)
+    lever = np.asarray(lever_b_m, dtype=float)
+    if effect_id == "lever_arm":
+        h = DIFF_STEP_S
+        c = dcm_from_quat(interpolate_trajectory(trajectory, t).q_nb)
+        cdot = (dcm_from_quat(interpolate_trajectory(trajectory, t + h).q_nb)
+                - dcm_from_quat(interpolate_trajectory(trajectory, t - h).q_nb)) / (2.0 * h)
+        v = np.zeros((t.size, 3, 3))
+        v[kind == 0] = -c[kind == 0]
+        v[kind == 1] = -cdot[kind == 1]
+        return v
+    if effect_id == "time_offset":
+        _, v_ant = _antenna(trajectory, t, lever)
+        a_ant = (_antenna(trajectory, t + DIFF_STEP_S, lever)[1]
+                 - _antenna(trajectory, t - DIFF_STEP_S, lever)[1]) / (2.0 * DIFF_STEP_S)
+        v = np.zeros((t.size, 3, 1))
+        v[kind == 0, :, 0] = v_ant[kind == 0]
+        v[kind == 1, :, 0] = a_ant[kind == 1]
+        return v
+    raise ValueError(f"{effect_id}: no linear signature (expected one of {LINEAR_EFFECTS})")
+
+
+def linear_signatures(model: LinearNull, trajectory: Trajectory, lever_b_m: ArrayLike,
+                      effect_ids: Sequence[str] = LINEAR_EFFECTS) -> dict[str, list[NDArray]]:
+    """Per effect, per leg (id order) the signature (M, 2, P) of B minus A from A's gains
+    (module docstring), all effects' columns in one pass of the linear system."""
+    errs = {e: record_errors(model, trajectory, e, lever_b_m) for e in effect_ids}
+    if not errs:
+        return {}
+    cols = model.response(np.concatenate(list(errs.values()), axis=2))
+    out, at = {}, 0
+    for e, v in errs.items():
+        out[e] = [np.ascontiguousarray(c[:, 0:2, at:at + v.shape[2]]) for c in cols]
+        at += v.shape[2]
+    return out
