@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
-from functools import partial
+from functools import cache, partial
 from typing import Any
 
 import numpy as np
@@ -25,7 +25,7 @@ from pospp.calib.compensate import (
     compensate_legs,
     joint_calibration,
 )
-from pospp.calib.replay import ImuSource, LegReplay, SolutionA
+from pospp.calib.replay import ImuSource, SolutionA
 from pospp.calib.solve import DriftPrior
 from pospp.calib.stage import CalibrationRun
 from pospp.config import PipelineConfig
@@ -69,7 +69,7 @@ from pospp.io import mcap_reader
 from pospp.nav import filter as nav_filter
 from pospp.null_stage import (
     leg_epochs_ns,
-    linear_gnss_signatures,
+    linear_effect_signatures,
     linear_null_model,
     null_drift,
     null_needs_gains,
@@ -115,10 +115,9 @@ def rerun_base(log: mcap_reader.FlightLog | None, nav: nav_filter.FilterResult |
     None with the flight's own log."""
     if log is None or nav is None:
         return log, calib_run, None
-    factor = rerun_decimation(log, config.pairs.rerun_imu_rate_hz)
-    if factor == 1 or gate_excess(nav, config.filter_options().gate_probability):
+    log_r = rerun_log(log, nav, calib_run, config)
+    if log_r is log:
         return log, calib_run, None
-    log_r = null_model.decimate_imu(log, factor, leg_epochs_ns(log, calib_run.legs))
     try:
         dv, gains = rerun_b_minus_a(log_r, nav, calib_run.legs, calib_run.replays, config,
                                     record=True)
@@ -130,6 +129,17 @@ def rerun_base(log: mcap_reader.FlightLog | None, nav: nav_filter.FilterResult |
            for i, rep in calib_run.replays.items()):  # B not on the flight's samples
         return log, calib_run, None
     return log_r, replace(calib_run, replays=replays), gains
+
+
+def rerun_log(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
+              calib_run: CalibrationRun, config: PipelineConfig) -> mcap_reader.FlightLog:
+    """The log the diagnosis re-runs A on (:func:`rerun_base`): its IMU summed down to
+    ``[pairs] rerun_imu_rate_hz`` keeping the legs' epochs, or the log itself where nothing
+    is summed or A gated in excess."""
+    factor = rerun_decimation(log, config.pairs.rerun_imu_rate_hz)
+    if factor == 1 or gate_excess(nav, config.filter_options().gate_probability):
+        return log
+    return null_model.decimate_imu(log, factor, leg_epochs_ns(log, calib_run.legs))
 
 
 def drift_under_alternative(calib_run: CalibrationRun, replays_minus_effect: list,
@@ -216,7 +226,7 @@ def _rerun_signatures_at_start(log: mcap_reader.FlightLog, nav: nav_filter.Filte
     from it (the lever arm: 1 + 1 A runs and 3 replays of the second's gains; the scale
     factor: the secant along it, 1 A run; the warm-up: 1 A run and 2 replays); else at the
     configuration (the lever arm and the time offset: 1 A run each, the warm-up 2) unless
-    ``made`` holds it (A's linear response: :func:`pospp.null_stage.linear_gnss_signatures`);
+    ``made`` holds it (A's linear response: :func:`pospp.null_stage.linear_effect_signatures`);
     the gyro scale factor without a start keeps the library's signature."""
     log_r, run_r = (log, calib_run) if rerun is None else rerun
     sigs = {**(made or {}), **rerun_signatures(
@@ -279,13 +289,10 @@ def _flights_null_kind(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
 class DiagnosisStart:
     """The diagnosis's A re-runs that do not need the null (:func:`diagnosis_reruns`)."""
 
-    log_r: Any
-    """The log the re-runs are made on (:func:`rerun_base`: summed down, or the flight's)."""
-    replays_r: Mapping[int, LegReplay]
-    """The calibration's replays with their B minus A on ``log_r`` (what the re-runs read of
-    the run: the diagnosis puts them in the run it is given, its null covariance in)."""
-    navigate_a: Any
-    """A as configured for the re-runs (with ``log_r``'s gains when it has them)."""
+    base: Callable[[], tuple[Any, CalibrationRun, Any]]
+    """The re-runs' base, made when first asked (:func:`rerun_base`): the log they are made on
+    (summed down, or the flight's), the run with its replays' B minus A on it, and A as
+    configured for them (with that log's gains when it has them)."""
     sigs: dict[str, list[np.ndarray]] | None
     """The first re-run signatures (None without the log and A)."""
     at: dict[str, np.ndarray]
@@ -303,28 +310,37 @@ def diagnosis_reruns(calib_run: CalibrationRun, config: PipelineConfig, *,
     """The diagnosis's base for its re-runs (:func:`rerun_base`) and its first re-run
     signatures (:func:`_rerun_signatures_at_start`) from A's first estimates
     (:func:`signature_starts`, its passes on the re-runs' log: the gyro scale factor is a
-    low-frequency error, which the summed-down samples carry as the flight's do)."""
-    log_r, run_r, gains = rerun_base(log, nav, calib_run, config)  # what re-runs are made on
-    a_as_configured = partial(navigate, config=config, options=rerun_options(config),
-                              replay=gains)  # the re-runs
+    low-frequency error, which the summed-down samples carry as the flight's do). Where A's
+    gate was open, the lever arm's, the time offset's and the warm-up's signatures at the
+    configuration are A's linear response (:func:`pospp.null_stage.linear_effect_signatures`)
+    and the base is made only when a re-run needs it."""
+    @cache
+    def base() -> tuple[Any, CalibrationRun, Any]:
+        log_r, run_r, gains = rerun_base(log, nav, calib_run, config)
+        return log_r, run_r, partial(navigate, config=config, options=rerun_options(config),
+                                     replay=gains)
+
     sigs: dict[str, list[np.ndarray]] | None = None
     at: dict[str, np.ndarray] = {}
     jacobians: Jacobians = {}
-    if log is not None and log_r is not None and nav is not None:
+    if log is not None and nav is not None:
         # lever arm, gyro scale factor, warm-up: Gauss-Newton from A's own estimates
-        starts = signature_starts(log_r, nav, config, lever_estimate)
-        # A's gate open: the lever arm and the time offset from A's gains; the lever arm's
+        starts = signature_starts(rerun_log(log, nav, calib_run, config), nav, config,
+                                  lever_estimate)
+        # A's gate open: A's linear response at the configuration; the lever arm's
         # Gauss-Newton only from an estimate A's own sigmas tell from the configured one
-        linear = linear_gnss_signatures(log, nav, calib_run, config)
+        linear = linear_effect_signatures(log, nav, calib_run, config)
         p_lever = starts.get("lever_arm")
         if p_lever is not None and linear and lever_estimate is not None and not np.any(
                 np.abs(p_lever) > LEVER_START_SIGMAS * lever_estimate.sigma_b_m):
             starts = {**starts, "lever_arm": None}
-        linear = {e: s for e, s in linear.items() if starts.get(e) is None}
-        sigs, at = _rerun_signatures_at_start(log, nav, calib_run, config, starts,
-                                              a_as_configured, threads, (log_r, run_r),
-                                              jacobians, linear)
-    return DiagnosisStart(log_r, run_r.replays, a_as_configured, sigs, at, jacobians)
+        sigs = {e: s for e, s in linear.items() if starts.get(e) is None}
+        if any(p is not None for p in starts.values()) or any(
+                e not in sigs for e in PIPELINE_RERUN if e != "gyro_scale_factor"):
+            log_r, run_r, a_run = base()
+            sigs, at = _rerun_signatures_at_start(log, nav, calib_run, config, starts, a_run,
+                                                  threads, (log_r, run_r), jacobians, sigs)
+    return DiagnosisStart(base, sigs, at, jacobians)
 
 
 def diagnose_calibration(calib_run: CalibrationRun, imu: ImuSource, solution_a: SolutionA,
@@ -371,8 +387,6 @@ def _diagnose_legs(calib_run: CalibrationRun, imu: ImuSource, solution_a: Soluti
     signatures it named its re-run effects with (None without the log)."""
     start = diagnosis_reruns(calib_run, config, log=log, nav=nav,
                              lever_estimate=lever_estimate, threads=threads)
-    log_r, a_as_configured = start.log_r, start.navigate_a
-    run_r = replace(calib_run, replays=start.replays_r)
     sigs, at, jacobians = start.sigs, dict(start.at), dict(start.jacobians)
     null_log, null_nav, null_dv, warm_note, null_cfg = _null_without_warmup(
         log, nav, at.get("accel_bias_change"), calib_run, config, null_dv, threads)
@@ -401,10 +415,12 @@ def _diagnose_legs(calib_run: CalibrationRun, imu: ImuSource, solution_a: Soluti
     for _ in range(REFINE_ITERATIONS if sigs else 0):
         assert sigs is not None  # the loop runs only with signatures
         # A is not linear in a GNSS-side effect: secants through the current estimates
-        refined, at = refine_signatures(log_r, nav, run_r, config, sigs,
-                                        first_estimates(d, config.pairs.diagnose_alpha), at,
-                                        navigate=a_as_configured, threads=threads,
-                                        jacobians=jacobians)
+        estimates = first_estimates(d, config.pairs.diagnose_alpha)
+        if not estimates:
+            break
+        log_r, run_r, a_run = start.base()
+        refined, at = refine_signatures(log_r, nav, run_r, config, sigs, estimates, at,
+                                        navigate=a_run, threads=threads, jacobians=jacobians)
         if all(refined[k] is sigs[k] for k in sigs):
             break
         d, sigs = diagnose_with(refined, white), refined

@@ -242,6 +242,17 @@ def warmup_estimate(log: mcap_reader.FlightLog, config: PipelineConfig, lever_b_
     return warmup_fit(b.t_s, b.accel_b_mps2, nav.alignment.t_s, settling_s)
 
 
+def static_alignment_window(nav: nav_filter.FilterResult, options: Any
+                            ) -> tuple[float, float] | None:
+    """The period (t0, t1] [s, A's time axis] whose means A's static alignment used (None:
+    it aligned in motion), as :func:`pospp.nav.alignment.align` takes it (``options``: A's
+    filter options)."""
+    al = nav.alignment
+    if al.method != "static" or al.static_end_s is None:
+        return None
+    return al.t_s, min(al.static_end_s, al.t_s + options.alignment.max_static_alignment_s)
+
+
 def imu_increments(log: mcap_reader.FlightLog) -> ImuRates:
     """The log's IMU for B on the run's time axis (t_s from the first IMU stamp): its rates,
     whose increments are made a leg at a time (:class:`pospp.calib.replay.ImuRates`)."""

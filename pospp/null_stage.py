@@ -24,11 +24,19 @@ from pospp.calib.segment import Leg
 from pospp.calib.stage import CalibrationRun, with_covariance, with_null_covariance
 from pospp.config import PipelineConfig
 from pospp.diagnose import null_model
-from pospp.diagnose.linear_signatures import linear_signatures
+from pospp.diagnose.effects import ACCEL_SETTLING_S
+from pospp.diagnose.linear_signatures import linear_signatures, warmup_signature
 from pospp.diagnose.rerun import gate_excess
-from pospp.flight_stages import imu_increments, imu_tuning, navigate, rerun_options
+from pospp.flight_stages import (
+    imu_increments,
+    imu_tuning,
+    navigate,
+    rerun_options,
+    static_alignment_window,
+)
 from pospp.io import mcap_reader
 from pospp.nav import filter as nav_filter
+from pospp.nav.alignment import static_attitude_jacobian
 from pospp.threads import first_kept
 from pospp.units import t_s_from_time_ns
 
@@ -140,15 +148,16 @@ def linear_null_model(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                        smoothed=which == "smoothed")
 
 
-def linear_gnss_signatures(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
-                           calib_run: CalibrationRun, config: PipelineConfig
-                           ) -> dict[str, list[np.ndarray]]:
-    """The lever arm's and the GNSS time offset's signatures on B minus A from A's own gains
-    (:mod:`pospp.diagnose.linear_signatures`: A's derivative at the configuration, its gate
-    decisions held), where that is A's response: the flight's A reset nothing and gated no
-    more GNSS records than its model allows (:func:`pospp.diagnose.rerun.gate_excess`), and
-    its linear system holds the legs (:func:`linear_null_model`). Else {} (the diagnosis
-    re-runs A), also when A's pass recorded no gains."""
+def linear_effect_signatures(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
+                             calib_run: CalibrationRun, config: PipelineConfig
+                             ) -> dict[str, list[np.ndarray]]:
+    """The lever arm's, the GNSS time offset's and the warm-up's signatures on B minus A from
+    A's own gains (:mod:`pospp.diagnose.linear_signatures`: A's derivative at the
+    configuration, its gate decisions held), where that is A's response: the flight's A reset
+    nothing and gated no more GNSS records than its model allows
+    (:func:`pospp.diagnose.rerun.gate_excess`), and its linear system holds the legs
+    (:func:`linear_null_model`). Else {} (the diagnosis re-runs A), also when A's pass
+    recorded no gains."""
     if (nav.gain_replay is None or nav.resets
             or gate_excess(nav, config.filter_options().gate_probability)):
         return {}
@@ -159,7 +168,16 @@ def linear_gnss_signatures(log: mcap_reader.FlightLog, nav: nav_filter.FilterRes
         return {}
     which = nav_filter.reference_name(nav, config.replay.reference)
     sol = nav.smoothed if which == "smoothed" and nav.smoothed is not None else nav.forward
-    return linear_signatures(model, sol.trajectory, config.gnss.lever_arm_m)
+    out = linear_signatures(model, sol.trajectory, config.gnss.lever_arm_m)
+    window = static_alignment_window(nav, config.filter_options())
+    alignment = None
+    if window is not None:  # the tilt A's static alignment takes from the warm-up
+        t_s = t_s_from_time_ns(log.imu.time_ns, int(log.imu.time_ns[0]))
+        sel = (t_s > window[0]) & (t_s <= window[1])
+        alignment = (static_attitude_jacobian(log.imu.w_ib_b_radps[sel].mean(axis=0),
+                                              log.imu.f_ib_b_mps2[sel].mean(axis=0)), *window)
+    out["accel_bias_change"] = warmup_signature(model, ACCEL_SETTLING_S, alignment)
+    return out
 
 
 def with_null_sigmas(calib_run: CalibrationRun, null_dv: list[list[np.ndarray]],

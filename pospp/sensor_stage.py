@@ -46,7 +46,7 @@ from pospp.diagnose.sensor_families import (
 from pospp.diagnose.shapes import basis_size, change_basis, knots_s, step_times_s
 from pospp.distributions import long_run_ratio
 from pospp.effects_catalog import catalog_entry
-from pospp.flight_stages import imu_tuning, navigate
+from pospp.flight_stages import imu_tuning, navigate, static_alignment_window
 from pospp.io import mcap_reader
 from pospp.nav.filter import STATUS_USED
 from pospp.null_stage import rerun_decimation
@@ -145,15 +145,6 @@ def _field_input(nav_b: Any, reference: tuple[float, float], extent_m: float) ->
     return field
 
 
-def _static_window(nav_a: Any, opts: Any) -> tuple[float, float] | None:
-    """The period (t0, t1] [s] whose means A's static alignment used (None: in motion), as
-    :func:`pospp.nav.alignment.align` takes it."""
-    al = nav_a.alignment
-    if al.method != "static" or al.static_end_s is None:
-        return None
-    return al.t_s, min(al.static_end_s, al.t_s + opts.alignment.max_static_alignment_s)
-
-
 def north_east_m(lat_rad: Any, lon_rad: Any, lat0_rad: float, lon0_rad: float,
                  height_m: float) -> np.ndarray:
     """North and east of (lat0, lon0) [m] (WGS-84 radii there), (N, 2)."""
@@ -200,7 +191,7 @@ def innovation_design(log: mcap_reader.FlightLog, config: PipelineConfig,
         dnu = innovation_responses(gains, base.forward.trajectory, t_run,
                                    log_r.imu.w_ib_b_radps, log_r.imu.f_ib_b_mps2,
                                    _column_input(fam, knots, field), breaks_s=breaks,
-                                   static_window_s=_static_window(base, opts))
+                                   static_window_s=static_alignment_window(base, opts))
         white = _whitened(chol, dnu, np.flatnonzero(used)).reshape(-1, dnu.shape[2])
         del dnu  # every record's columns: not held while the next family's pass runs
         responses[fam] = (white[:, :, None] if sensor_family(fam).sensor == "gravity" else

@@ -169,7 +169,7 @@ def _normals(xi, at, rows, n_draws, rng):
 
 
 @njit(cache=True)
-def forward_draws(grid, lay, inv_tau_a, inj, events, records, n_draws, rng, outs, xi):
+def forward_draws(grid, lay, inv_tau_a, inj, events, records, n_draws, rng, outs, xi, z0):
     """The forward sweep of ``n_draws`` realisations (:func:`pospp.calib.linear_null.
     LinearNull.draws`): z propagated over the grid, A's updates at its nodes with fixed gains,
     B reset at each leg start.
@@ -184,6 +184,7 @@ def forward_draws(grid, lay, inv_tau_a, inj, events, records, n_draws, rng, outs
     the standard normals to use instead, in the order drawn (6 at the start, :data:`N_NOISE`
     per interval, one per record axis with noise; no rows: the generator's): the
     realisations are then columns of the system's matrix (tests: ``xi`` the identity).
+    ``z0`` (n_z, R): a state added at the start (no rows: none).
     """
     xs, fms, wms, dts = grid
     g_node, g_leg, g_sample = events
@@ -198,6 +199,8 @@ def forward_draws(grid, lay, inv_tau_a, inj, events, records, n_draws, rng, outs
     initial_matrix(lay, inj, g0)
     at = np.zeros(1, dtype=np.int64)
     z = np.dot(g0, _normals(xi, at, 6, n_draws, rng))
+    if z0.shape[0] > 0:
+        z += z0
     tmp = np.empty((nz, n_draws))
     tot = np.empty(3)
     for g in range(xs.shape[0]):

@@ -129,6 +129,8 @@ class LinearNull:
     """Each record's epoch [s, A's time axis] (in :attr:`records`' order)."""
     record_kind: NDArray
     """Each record's kind (0 GNSS position, 1 GNSS velocity, else a ZUPT)."""
+    grid_t_s: NDArray
+    """The grid's times [s, A's time axis]."""
 
     @property
     def n_samples(self) -> int:
@@ -216,10 +218,11 @@ class LinearNull:
         g1 = g_of_j[np.cumsum(self.leg_sizes) - 1]
         return (cum[g1] - cum[g0]) / (t_cum[g1] - t_cum[g0])[:, None, None]
 
-    def _draw_chunk(self, n: int, rng: np.random.Generator, xi: NDArray | None = None
-                    ) -> NDArray:
+    def _draw_chunk(self, n: int, rng: np.random.Generator, xi: NDArray | None = None,
+                    z0: NDArray | None = None) -> NDArray:
         """(J, 3, n) realisations (:meth:`draws`) from ``rng``; ``xi``: the standard normals
-        to use instead (:func:`pospp.calib._null_kernel.forward_draws`)."""
+        to use instead, ``z0`` (n_z, n) a state added at the start
+        (:func:`pospp.calib._null_kernel.forward_draws`)."""
         n_k, n_a = self.records[0].shape[0] - 1, self.lay[0]
         n_j, n_l = self.n_samples, len(self.leg_ids)
         dx = np.empty((n_k, n_a, n))
@@ -227,7 +230,8 @@ class LinearNull:
         eps0 = np.empty((n_l, 12, n))
         kernel.forward_draws(self.grid, self.lay, self.inv_tau_a, self.inj, self.events,
                              self.records, n, rng, (dx, eps_s, eb_s, eps0),
-                             np.zeros((0, n)) if xi is None else np.ascontiguousarray(xi))
+                             np.zeros((0, n)) if xi is None else np.ascontiguousarray(xi),
+                             np.zeros((0, n)) if z0 is None else np.ascontiguousarray(z0))
         ehat_s, ehat0 = np.zeros_like(eps_s), np.zeros_like(eps0)
         if self.smoother_gains is not None:
             kernel.smooth_draws(self.smoother_gains, dx, self.interp, self.lay[1], ehat_s,
@@ -235,16 +239,24 @@ class LinearNull:
         s0 = (eps0 - ehat0)[self.sample_leg]
         return eb_s + np.einsum("jab,jbr->jar", self.psi, s0) - (eps_s - ehat_s)
 
-    def response(self, record_v: NDArray) -> list[NDArray]:
-        """B minus A's response to deterministic errors of A's records, legs in id order,
-        each (M, 3, P) NED [m/s]: ``record_v`` (R, 3, P), per record (:attr:`record_t_s`'s
-        order) the error ``v`` of its measurement (measured minus what A's model predicts
-        from the true state; NED m for a position, m/s for a velocity) for each of P
-        columns. The same linear system as :meth:`draws` (A's gains held, its smoother, B
-        from each leg start; module docstring) with ``v`` in place of the GNSS noise and no
-        IMU noise: ``dx = K (H e_A - v)`` at each record."""
-        v = np.asarray(record_v, dtype=float)
+    def response(self, record_v: NDArray | None = None, accel_b_mps2: NDArray | None = None,
+                 phi0_n_rad: NDArray | None = None) -> list[NDArray]:
+        """B minus A's response to deterministic errors, legs in id order, each (M, 3, P) NED
+        [m/s], for P columns of:
+
+        - ``record_v`` (R, 3, P): per record (:attr:`record_t_s`'s order) the error ``v`` of
+          its measurement (measured minus what A's model predicts from the true state; NED m
+          for a position, m/s for a velocity): ``dx = K (H e_A - v)`` at each record;
+        - ``accel_b_mps2`` (G, 3, P): an accelerometer error at each grid point
+          (:attr:`grid_t_s`; body FRD, the sensor reading true plus it), in A's and B's input
+          alike, trapezoid over each interval (as the draws' white noise enters);
+        - ``phi0_n_rad`` (3, P): A's attitude error at its first node (NED).
+
+        The same linear system as :meth:`draws` (A's gains held, its smoother, B from each
+        leg start; module docstring) with these in place of the noise."""
         start, k_rec, h_rec, sig = self.records
+        p = next(x.shape[-1] for x in (record_v, accel_b_mps2, phi0_n_rad) if x is not None)
+        v = np.zeros((sig.shape[0], 3, p)) if record_v is None else np.asarray(record_v, float)
         if v.shape[:2] != (sig.shape[0], 3):
             raise ValueError(f"record_v: expected ({sig.shape[0]}, 3, P), got {v.shape}")
         on = ((sig > 0.0) | np.any(v != 0.0, axis=2)).astype(float)
@@ -262,11 +274,24 @@ class LinearNull:
         if np.any(g < 0):
             raise ValueError("linear null: a record's node is not a grid point")
         first = off[g] + np.where(g > 0, kernel.N_NOISE, 0) + cnt[:-1] - cnt[start[node]]
-        xi = np.zeros((6 + int(rows.sum()), v.shape[2]))
+        xi = np.zeros((6 + int(rows.sum()), p))
         i_rec, axis = np.nonzero(on)
         xi[first[i_rec] + np.cumsum(n_on, axis=1)[i_rec, axis] - 1] = v[i_rec, axis]
-        model = replace(self, records=(start, k_rec, h_rec, on))
-        d = model._draw_chunk(v.shape[2], np.random.default_rng(0), xi)
+        inj = self.inj.copy()
+        if accel_b_mps2 is not None:
+            u = np.asarray(accel_b_mps2, dtype=float)
+            dt = np.asarray(self.grid[3], dtype=float)[1:, None, None]
+            scale = dt / (2.0 * np.sqrt(0.5 * dt))  # the trapezoid's half-interval, per s q
+            a_rows = off[1:, None] + 3 + np.arange(3)  # the interval's start (a) normals ...
+            xi[a_rows] = u[:-1] * scale
+            xi[a_rows + kernel.N_IN] = u[1:] * scale  # ... and its end's (b)
+            inj[5] = 1.0  # the accelerometer's white-noise scale: xi carries the input
+        z0 = None
+        if phi0_n_rad is not None:
+            z0 = np.zeros((self.lay[0] + 18, p))
+            z0[0:3] = np.asarray(phi0_n_rad, dtype=float)
+        model = replace(self, records=(start, k_rec, h_rec, on), inj=inj)
+        d = model._draw_chunk(p, np.random.default_rng(0), xi, z0)
         return np.split(d, np.cumsum(self.leg_sizes)[:-1])
 
     def fit_weights(self, leg_ids: Sequence[int], gain: NDArray) -> NDArray:
@@ -407,7 +432,7 @@ def linear_null(gains: GainReplay, trajectory: Trajectory, imu_t_s: NDArray, imu
                       _records(gains, noise), gains.smoother_gains if smoothed else None,
                       (s_node, s_alpha, l_node, l_alpha), sample_leg,
                       tuple(r.leg.leg_id for r in reps), tuple(sizes),
-                      g_of_j[first], psi, *_record_epochs(gains))
+                      g_of_j[first], psi, *_record_epochs(gains), grid_t)
 
 
 def event_grid(t_nodes: NDArray, samples: NDArray, max_step_s: float

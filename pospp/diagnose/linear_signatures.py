@@ -23,6 +23,13 @@ This is A's derivative at the configuration with its gate decisions held: exact 
 gate is open (the flight gated no more than its model allows, no covariance reset) and the
 effect small; where A gated in excess, or at a large estimate, the diagnosis re-runs A
 (:mod:`pospp.diagnose.rerun`: secants through its non-linearity).
+
+``accel_bias_change`` (the warm-up ``db exp(-t / T)`` on the x and y specific force, t from the
+first IMU stamp, :func:`pospp.diagnose.rerun.warmed`): an IMU-side error A and B both read,
+``u_j(t) = e_j exp(-t / T)``, and, where A aligned statically, the tilt its alignment took
+from the error's mean over its window: ``phi_0 = J [0; mean u_j]`` (J
+:func:`pospp.nav.alignment.static_attitude_jacobian` at the window's mean rate and specific
+force).
 """
 
 from __future__ import annotations
@@ -39,7 +46,7 @@ from pospp.rotation import dcm_from_quat
 DIFF_STEP_S = 0.05
 """Half-width of the central differences of A's attitude and antenna velocity [s]."""
 LINEAR_EFFECTS = ("lever_arm", "time_offset")
-"""The effects whose signature :func:`linear_signatures` makes."""
+"""The GNSS-side effects whose signature :func:`linear_signatures` makes."""
 
 
 def _antenna(trajectory: Trajectory, t_s: NDArray, lever_b_m: NDArray
@@ -93,3 +100,21 @@ def linear_signatures(model: LinearNull, trajectory: Trajectory, lever_b_m: Arra
         out[e] = [np.ascontiguousarray(c[:, 0:2, at:at + v.shape[2]]) for c in cols]
         at += v.shape[2]
     return out
+
+
+def warmup_signature(model: LinearNull, settling_s: float,
+                     alignment: tuple[NDArray, float, float] | None) -> list[NDArray]:
+    """Per leg (id order) the warm-up's signature (M, 2, 2) of B minus A from A's gains
+    (module docstring), per unit ``db`` [m/s^2] on x and y; ``settling_s`` T [s];
+    ``alignment``: (J (3, 6), t0, t1) of A's static alignment over (t0, t1] [s], None where
+    it aligned in motion."""
+    t = np.asarray(model.grid_t_s, dtype=float)
+    u = np.zeros((t.size, 3, 2))
+    u[:, 0, 0] = u[:, 1, 1] = np.exp(-t / settling_s)
+    phi0 = None
+    if alignment is not None:
+        jac, t0, t1 = alignment
+        mean = settling_s * (np.exp(-t0 / settling_s) - np.exp(-t1 / settling_s)) / (t1 - t0)
+        phi0 = np.asarray(jac, dtype=float)[:, 3:5] * mean
+    return [np.ascontiguousarray(c[:, 0:2, :])
+            for c in model.response(accel_b_mps2=u, phi0_n_rad=phi0)]

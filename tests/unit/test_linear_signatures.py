@@ -1,9 +1,10 @@
-"""The lever arm's and the GNSS time offset's signatures from A's own gains
-(pospp.diagnose.linear_signatures) against A re-run on the perturbed log, on the independent
-simulator's null flight (../shared/reference_cases/flight_null_200hz): the re-runs go through
-the whole non-linear filter, smoother and B, the linear system through A's recorded gains
-alone, so the agreement checks the records' errors (signs, frames, the lever arm's rotation
-and the antenna's velocity) and the response's layout together."""
+"""The lever arm's, the GNSS time offset's and the accelerometer warm-up's signatures from
+A's own gains (pospp.diagnose.linear_signatures) against A re-run on the perturbed log, on
+the independent simulator's null flight (../shared/reference_cases/flight_null_200hz): the
+re-runs go through the whole non-linear filter, smoother and B, the linear system through
+A's recorded gains alone, so the agreement checks the records' errors (signs, frames, the
+lever arm's rotation and the antenna's velocity), the warm-up's input and its alignment
+tilt, and the response's layout together."""
 
 from __future__ import annotations
 
@@ -14,9 +15,10 @@ import pytest
 from test_diagnose_null_reference import _flight
 
 from pospp import flight_stages as fs
+from pospp.diagnose.effects import ACCEL_SETTLING_S
 from pospp.diagnose.linear_signatures import linear_signatures
-from pospp.diagnose.rerun import _response, restamped
-from pospp.null_stage import linear_gnss_signatures, linear_null_model, null_noise
+from pospp.diagnose.rerun import _response, restamped, warmed
+from pospp.null_stage import linear_effect_signatures, linear_null_model, null_noise
 
 pytestmark = pytest.mark.reference
 
@@ -37,8 +39,8 @@ def _rel(sig: list, fd: list) -> float:
 def test_linear_signatures_are_a_rerun_derivatives(case):
     log, nav, run, cfg, model = case
     lin = linear_signatures(model, nav.smoothed.trajectory, cfg.gnss.lever_arm_m)
-    staged = linear_gnss_signatures(log, nav, run, cfg)  # what the diagnosis takes here
-    assert sorted(staged) == ["lever_arm", "time_offset"]
+    staged = linear_effect_signatures(log, nav, run, cfg)  # what the diagnosis takes here
+    assert sorted(staged) == ["accel_bias_change", "lever_arm", "time_offset"]
     assert all(np.array_equal(a, b) for e in lin for a, b in zip(lin[e], staged[e], strict=True))
     a_run = partial(fs.navigate, config=cfg, options=fs.rerun_options(cfg))
     lever0 = np.asarray(cfg.gnss.lever_arm_m, dtype=float)
@@ -52,3 +54,9 @@ def test_linear_signatures_are_a_rerun_derivatives(case):
         _response(restamped(log, tau), nav, run, cfg, a_run),
         _response(restamped(log, -tau), nav, run, cfg, a_run), strict=True)]
     assert _rel([s[:, :, 0] for s in lin["time_offset"]], fd) < 0.10  # measured 6.9 % at 2 ms
+    db = 20e-6 * 9.80665  # m/s^2: 20 ug, A's gate open
+    for j in range(2):
+        fd = [r / db for r in _response(warmed(log, db * np.eye(2)[j], ACCEL_SETTLING_S),
+                                        nav, run, cfg, a_run)]
+        # measured 3.2 and 1.3 %; without the alignment's tilt 18 and 41 %
+        assert _rel([s[:, :, j] for s in staged["accel_bias_change"]], fd) < 0.06, j
