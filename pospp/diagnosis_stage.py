@@ -1,12 +1,10 @@
 """The diagnosis stage of one flight: the model-discrepancy workflow over a calibrated run.
 
 :func:`diagnose_calibration` runs :func:`pospp.diagnose.workflow.diagnose_replays` on the run's
-B-minus-A replays with every test calibrated on B minus A's null realisations
-(:func:`pospp.null_stage.null_realisations`), the A re-run signatures
-(:mod:`pospp.diagnose.rerun`) made by Gauss-Newton from A's own estimates where the pipeline has
-them, the secant refinements, and the drift under the alternative
-(:func:`drift_under_alternative`).
-Nothing here touches files.
+B-minus-A replays with every test calibrated on B minus A's null realisations, the first
+signatures A's linear response where its gate was open (:mod:`pospp.diagnose.
+linear_signatures`) and A re-runs elsewhere (:mod:`pospp.diagnose.rerun`: Gauss-Newton from
+A's own estimates, secant refinements), and the drift under the alternative. No file I/O.
 """
 
 from __future__ import annotations
@@ -25,6 +23,7 @@ from pospp.calib.compensate import (
     compensate_legs,
     joint_calibration,
 )
+from pospp.calib.linear_null import LinearNull
 from pospp.calib.replay import ImuSource, SolutionA
 from pospp.calib.solve import DriftPrior
 from pospp.calib.stage import CalibrationRun
@@ -96,23 +95,18 @@ def rerun_base(log: mcap_reader.FlightLog | None, nav: nav_filter.FilterResult |
                           nav_filter.GainReplay | None]:
     """The log and calibration run the diagnosis's A re-run signatures are made against.
 
-    The log's IMU summed down to ``[pairs] rerun_imu_rate_hz`` (:func:`rerun_decimation`,
-    keeping the legs' epochs, :func:`leg_epochs_ns`), and the run with its replays' B minus
-    A replaced by the summed-down log's own (A run on it as configured): a re-run's response
-    is then B minus A at the lower rate less B minus A at the lower rate, the strapdown's
-    rate-dependent error cancelling as in the null realisations (docs/diagnose.md, "The null
-    at a lower IMU rate"; the signatures at 200 and 50 Hz agree to 2.5e-4 on
-    flight_null_200hz). Only where A on the flight gated no more GNSS records than its model
-    allows (:func:`pospp.diagnose.rerun.gate_excess`): where it gated more, a step flips
-    borderline gate decisions and the signatures are not smooth in the step at any rate
-    (flight_time_offset_200hz, 62 records gated where 4 are allowed: the four signatures
-    moved by 8-95 % between the rates). The log and run themselves when nothing is summed,
-    A gated in excess, A or B fails on the summed-down log, or B there is not on the flight's
-    samples (or without a log); A and B as the null realisations run them
-    (:func:`pospp.null_stage.rerun_b_minus_a`). The third element: A's gains on the
-    summed-down log, which the re-runs replay (:class:`pospp.nav.filter.GainReplay`, as the
-    null realisations do; a re-run whose records differ, the time offset's, runs in full);
-    None with the flight's own log."""
+    The log of :func:`rerun_log` (summed down to ``[pairs] rerun_imu_rate_hz``) and the run
+    with its replays' B minus A replaced by that log's own (A run on it as configured): a
+    re-run's response is then B minus A at the lower rate less B minus A at the lower rate,
+    the strapdown's rate-dependent error cancelling as in the null realisations
+    (docs/diagnose.md, "The null at a lower IMU rate"). The log and run themselves when
+    nothing is summed, A gated in excess (a step flips borderline gate decisions: the
+    signatures are not smooth in it at any rate), A or B fails on the summed-down log, or B
+    there is not on the flight's samples (or without a log); A and B as the null
+    realisations run them (:func:`pospp.null_stage.rerun_b_minus_a`). The third element: A's
+    gains on the summed-down log, which the re-runs replay (:class:`pospp.nav.filter.
+    GainReplay`; a re-run whose records differ, the time offset's, runs in full); None with
+    the flight's own log."""
     if log is None or nav is None:
         return log, calib_run, None
     log_r = rerun_log(log, nav, calib_run, config)
@@ -147,8 +141,7 @@ def drift_under_alternative(calib_run: CalibrationRun, replays_minus_effect: lis
     """The flight's gyro drift re-estimated with a candidate effect in the model, or None.
 
     The calibration reads the drift by REML on B minus A under the base model; an effect the
-    base model leaves out (a 12 ms GNSS offset: 0.28 deg/h at 100 s against
-    the grade's 0.05) is then read as drift, the null realisations inject it, and the
+    base model leaves out is then read as drift, the null realisations inject it, and the
     effect's test loses its power (docs/diagnose.md, "Power"). Here the same REML (the grade's
     drift the same weak prior, the joint fit over the same pairs) runs on
     ``replays_minus_effect`` (B minus A with the candidate's fitted response removed,
@@ -156,9 +149,7 @@ def drift_under_alternative(calib_run: CalibrationRun, replays_minus_effect: lis
     rejected the grade's drift under the base model (``drift_source`` "flight") as too small
     (the flight's sigma above the grade's) and with the effect removed either no longer does
     (the grade's drift; also when the re-estimate falls below it) or reads a smaller drift
-    than before, still above the grade's (that one: three 600 s legs read 0.071 deg/h of
-    drift for the grade's 0.05 with nothing hidden, 0.44 with a 1.1 deg/h vertical drift).
-    None otherwise (the null stays the base model's).
+    than before, still above the grade's. None otherwise (the null stays the base model's).
     """
     tuning = imu_tuning(config)
     grade_radps = tuning.gyro_gm_sigma_dph * DEG_PER_H_RADPS
@@ -270,12 +261,9 @@ def _flights_null_kind(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                        calib_run: CalibrationRun, config: PipelineConfig) -> PipelineConfig:
     """``config``, with ``[pairs] null_reruns`` set when the flight's own null is A re-runs
     (the linear null refuses the flight: :func:`pospp.null_stage.linear_null_model`): the null
-    of the log without A's warm-up estimate is made as the flight's. Its A may converge where
-    the flight's did not (measured: the warm-up mission's 2400 ug, seed 1, the flight's A
-    converged at 290 s, after leg 0; with the linear null of the log without the warm-up the
-    warm-up was not named within 20 %, with the re-runs it is, within 1 %; on the usual
-    flight, whose null is linear, a re-run null of that log named a 600 ug warm-up the legs
-    cannot show)."""
+    of the log without A's warm-up estimate is made as the flight's, though its A may converge
+    where the flight's did not (docs/decisions.md, "The null of the log without the
+    warm-up")."""
     if config.pairs.null_reruns:
         return config
     try:
@@ -306,7 +294,7 @@ def diagnosis_reruns(calib_run: CalibrationRun, config: PipelineConfig, *,
                      log: mcap_reader.FlightLog | None = None,
                      nav: nav_filter.FilterResult | None = None,
                      lever_estimate: nav_filter.LeverArmEstimate | None = None,
-                     threads: int = 1) -> DiagnosisStart:
+                     threads: int = 1, null_model: LinearNull | None = None) -> DiagnosisStart:
     """The diagnosis's base for its re-runs (:func:`rerun_base`) and its first re-run
     signatures (:func:`_rerun_signatures_at_start`) from A's first estimates
     (:func:`signature_starts`, its passes on the re-runs' log: the gyro scale factor is a
@@ -329,7 +317,7 @@ def diagnosis_reruns(calib_run: CalibrationRun, config: PipelineConfig, *,
                                   lever_estimate)
         # A's gate open: A's linear response at the configuration; the lever arm's
         # Gauss-Newton only from an estimate A's own sigmas tell from the configured one
-        linear = linear_effect_signatures(log, nav, calib_run, config)
+        linear = linear_effect_signatures(log, nav, calib_run, config, null_model)
         p_lever = starts.get("lever_arm")
         if p_lever is not None and linear and lever_estimate is not None and not np.any(
                 np.abs(p_lever) > LEVER_START_SIGMAS * lever_estimate.sigma_b_m):
@@ -347,6 +335,7 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuSource, solution_a: 
              config: PipelineConfig, *, log: mcap_reader.FlightLog | None = None,
              nav: nav_filter.FilterResult | None = None,
              null_dv: list[list[np.ndarray]] | None = None,
+             null_model: LinearNull | None = None,
              lever_estimate: nav_filter.LeverArmEstimate | None = None,
              threads: int = 1,
              joint: Callable[[], LeverTime | None] | None = None) -> Diagnosis:
@@ -355,7 +344,9 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuSource, solution_a: 
     Every test's null distribution is calibrated on ``null_dv`` (:func:`null_realisations`)
     when given, else on ``[pairs] null_realisations`` realisations made here when the log and
     A's result are given (seed 0: a run is reproducible). ``threads``: A re-runs made at once
-    (:func:`pospp.threads.map_in_threads`; the result does not depend on it).
+    (:func:`pospp.threads.map_in_threads`; the result does not depend on it). ``null_model``:
+    the null stage's linear system (:class:`pospp.null_stage.NullResult`), which the first
+    signatures share (None: made here where they are A's linear response).
 
     With the log, the sensor families (accelerometer and gyro bias changes over flight time,
     :mod:`pospp.sensor_stage`) are then fitted on A's innovations with the named GNSS-side
@@ -370,7 +361,8 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuSource, solution_a: 
         null_dv = null_realisations(log, nav, calib_run, config, n_null, threads=threads)
     replays = [calib_run.replays[i] for i in sorted(calib_run.replays)]
     d, sigs = _diagnose_legs(calib_run, imu, solution_a, config, replays, log=log, nav=nav,
-                             null_dv=null_dv, lever_estimate=lever_estimate, threads=threads)
+                             null_dv=null_dv, lever_estimate=lever_estimate, threads=threads,
+                             null_model=null_model)
     fams = (sensor_families(d, replays, log, config, solution_a, joint) if log is not None
             else None)
     d = with_sensor_families(d, fams)
@@ -381,12 +373,14 @@ def _diagnose_legs(calib_run: CalibrationRun, imu: ImuSource, solution_a: Soluti
                    config: PipelineConfig, replays: list, *,
                    log: mcap_reader.FlightLog | None, nav: nav_filter.FilterResult | None,
                    null_dv: list[list[np.ndarray]] | None,
-                   lever_estimate: nav_filter.LeverArmEstimate | None, threads: int
+                   lever_estimate: nav_filter.LeverArmEstimate | None, threads: int,
+                   null_model: LinearNull | None = None
                    ) -> tuple[Diagnosis, dict[str, list[np.ndarray]] | None]:
     """:func:`diagnose_calibration` on the legs (B minus A): the diagnosis and the A re-run
     signatures it named its re-run effects with (None without the log)."""
     start = diagnosis_reruns(calib_run, config, log=log, nav=nav,
-                             lever_estimate=lever_estimate, threads=threads)
+                             lever_estimate=lever_estimate, threads=threads,
+                             null_model=null_model)
     sigs, at, jacobians = start.sigs, dict(start.at), dict(start.jacobians)
     null_log, null_nav, null_dv, warm_note, null_cfg = _null_without_warmup(
         log, nav, at.get("accel_bias_change"), calib_run, config, null_dv, threads)

@@ -149,23 +149,25 @@ def linear_null_model(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
 
 
 def linear_effect_signatures(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
-                             calib_run: CalibrationRun, config: PipelineConfig
-                             ) -> dict[str, list[np.ndarray]]:
+                             calib_run: CalibrationRun, config: PipelineConfig,
+                             model: LinearNull | None = None) -> dict[str, list[np.ndarray]]:
     """The lever arm's, the GNSS time offset's and the warm-up's signatures on B minus A from
     A's own gains (:mod:`pospp.diagnose.linear_signatures`: A's derivative at the
     configuration, its gate decisions held), where that is A's response: the flight's A reset
     nothing and gated no more GNSS records than its model allows
     (:func:`pospp.diagnose.rerun.gate_excess`), and its linear system holds the legs
     (:func:`linear_null_model`). Else {} (the diagnosis re-runs A), also when A's pass
-    recorded no gains."""
+    recorded no gains. ``model``: the null stage's system (:class:`NullResult`), which the
+    signatures share (they do not depend on the noise's levels); None: made here."""
     if (nav.gain_replay is None or nav.resets
             or gate_excess(nav, config.filter_options().gate_probability)):
         return {}
-    try:
-        model = linear_null_model(log, nav, calib_run, config,
-                                  null_noise(log, nav, calib_run, config))
-    except ValueError:
-        return {}
+    if model is None:
+        try:
+            model = linear_null_model(log, nav, calib_run, config,
+                                      null_noise(log, nav, calib_run, config))
+        except ValueError:
+            return {}
     which = nav_filter.reference_name(nav, config.replay.reference)
     sol = nav.smoothed if which == "smoothed" and nav.smoothed is not None else nav.forward
     out = linear_signatures(model, sol.trajectory, config.gnss.lever_arm_m)
@@ -206,6 +208,9 @@ class NullResult(NamedTuple):
     """B minus A's null realisations (:func:`null_realisations`): the diagnosis's null."""
     calibration: CalibrationRun
     """The calibration with its covariance from the null (:func:`with_null_sigmas`)."""
+    model: LinearNull | None
+    """B minus A's linear system along the flight (:func:`linear_null_model`), None where the
+    null is A re-runs."""
 
 
 def null_stage(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
@@ -227,7 +232,7 @@ def null_stage(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     model = next((m for m in made if isinstance(m, LinearNull)), None)
     run = calib_run if model or not made else replace(
         calib_run, messages=calib_run.messages + (str(made[0]),))
-    return NullResult(dv, with_null_sigmas(run, dv, model, injected))
+    return NullResult(dv, with_null_sigmas(run, dv, model, injected), model)
 
 
 def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,

@@ -56,11 +56,7 @@ from pospp.io.run_lock import locked
 from pospp.lever_time_stage import lever_time_estimate, qc_passes
 from pospp.memory import release_free_heap, share_one_heap
 from pospp.nav import filter as nav_filter
-from pospp.null_stage import (
-    null_needs_gains,
-    null_realisations,
-    null_stage,
-)
+from pospp.null_stage import NullResult, null_needs_gains, null_realisations, null_stage
 from pospp.qc.check_record import Check, comparison_text
 from pospp.qc.lever_time import LeverTime
 from pospp.qc.stage import QualityReport, qc_columns, quality_checks, worst_status
@@ -288,10 +284,11 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
         book.note("warning", "calibrate", text)
     status = "ok" if calib_run.calibrated else "partial"
 
-    null_dv = None  # B minus A's null: the calibration's sigmas and the diagnosis's null
+    null = None  # B minus A's null: the calibration's sigmas and the diagnosis's null
     if calib_run.calibrated and config.pairs.null_realisations > 0 and calib_run.replays:
         book.stage("null_realisations")
-        null_dv, calib_run = null_stage(log, nav, calib_run, config, threads=threads)
+        null = null_stage(log, nav, calib_run, config, threads=threads)
+        calib_run = null.calibration
 
     book.stage("compensate")  # A re-run with the calibrated gyro bias
     if calib_run.calibrated and config.compensation.rerun_filter:
@@ -305,7 +302,7 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
     joint = cache(partial(lever_time_estimate, log, nav, config, lever[0]))
     diagnosis = None
     if calib_run.calibrated and config.outputs.diagnose:
-        diagnosis = _diagnose_stage(calib_run, imu, solution_a, config, log, nav, null_dv,
+        diagnosis = _diagnose_stage(calib_run, imu, solution_a, config, log, nav, null,
                                     lever[0], threads, book, joint)
         status = status if diagnosis is not None else "partial"
     # the refit with the named effects (the compensation uses it) and the model_fit check
@@ -322,7 +319,7 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
     _write_stage(run, log, nav, solutions, calib_run, fit, diagnosis, report, config, status)
     # the report reads the tables back: the run's arrays are let go first, so that it
     # reuses their memory instead of adding to the peak (1.5 h flight: 110 MiB)
-    del log, nav, imu, solution_a, calib_run, null_dv, diagnosis, solutions, fit, joint
+    del log, nav, imu, solution_a, calib_run, null, diagnosis, solutions, fit, joint
     return run.finish(status, report=config.outputs.report)
 
 
@@ -365,15 +362,18 @@ def _navigate_stage(log: mcap_reader.FlightLog, config: PipelineConfig, run: _Ru
 
 def _diagnose_stage(calib_run: CalibrationRun, imu: Any, solution_a: Any,
                     config: PipelineConfig, log: mcap_reader.FlightLog,
-                    nav: nav_filter.FilterResult, null_dv: Any,
+                    nav: nav_filter.FilterResult, null: NullResult | None,
                     lever_estimate: nav_filter.LeverArmEstimate | None, threads: int,
                     book: _Progress, joint: Callable[[], LeverTime | None]) -> Diagnosis | None:
-    """The diagnosis (:func:`pospp.diagnosis_stage.diagnose_calibration`), noted; None (the
-    run then partial) when it could not be made."""
+    """The diagnosis (:func:`pospp.diagnosis_stage.diagnose_calibration`) on the null stage's
+    realisations and linear system, noted; None (the run then partial) when it could not be
+    made."""
     try:
-        diagnosis = diagnose_calibration(calib_run, imu, solution_a, config, log=log, nav=nav,
-                                         null_dv=null_dv, lever_estimate=lever_estimate,
-                                         threads=threads, joint=joint)
+        diagnosis = diagnose_calibration(
+            calib_run, imu, solution_a, config, log=log, nav=nav,
+            null_dv=None if null is None else null.realisations,
+            null_model=None if null is None else null.model, lever_estimate=lever_estimate,
+            threads=threads, joint=joint)
     except ValueError as exc:
         book.note("warning", "diagnose", f"no diagnosis: {exc}")
         return None

@@ -214,7 +214,8 @@ def grid_flight(tau_s: float | None, seed: int, *, n_null: int = 10) -> dict[str
     result: dict[str, Any] = {"in": reach(run, ids), "held": reach(run_mid, [ids[0], ids[-1]])}
     if n_null == 0:
         return result
-    null, run = null_stage(log, nav, run, config, n=n_null, seed=seed)
+    stage = null_stage(log, nav, run, config, n=n_null, seed=seed)
+    null, run = stage.realisations, stage.calibration
     const = np.array(sim.params["imu_errors"]["gyro_bias_dph"]) * DEG_PER_H_RADPS
     err_rate = sim.imu.w_ib_b_radps - clean.imu.w_ib_b_radps
     epoch = int(sim.imu.time_ns[0])

@@ -18,7 +18,7 @@ from pospp.calib.innovation_response import innovation_responses
 from pospp.diagnose import null_model
 from pospp.diagnose.shapes import basis_size, change_basis, knots_s, step_times_s
 from pospp.effects_catalog import catalog_entry
-from pospp.flight_stages import navigate
+from pospp.flight_stages import navigate, static_alignment_window
 from pospp.nav.alignment import static_attitude_jacobian
 from pospp.nav.filter import STATUS_USED
 from pospp.null_stage import rerun_decimation
@@ -62,7 +62,7 @@ def ramp_design(reference_cases):
     dnu = {f: innovation_responses(base.gain_replay, sol.trajectory, t_run,
                                    log_r.imu.w_ib_b_radps, log_r.imu.f_ib_b_mps2,
                                    stage._column_input(f, knots, field), breaks_s=breaks,
-                                   static_window_s=stage._static_window(base, opts))
+                                   static_window_s=static_alignment_window(base, opts))
            for f in FAMS}
     return cfg, opts, log_r, base, t_run, knots, field, dnu
 
@@ -131,7 +131,7 @@ def test_the_grid_a_stretch_at_a_time_is_the_whole_grid_at_once(ramp_design, mon
     short = innovation_responses(base.gain_replay, base.forward.trajectory, t_run,
                                  log_r.imu.w_ib_b_radps, log_r.imu.f_ib_b_mps2,
                                  stage._column_input(fam, knots, field), breaks_s=breaks,
-                                 static_window_s=stage._static_window(base, opts))
+                                 static_window_s=static_alignment_window(base, opts))
     assert np.count_nonzero(np.any(dnu[fam] != 0.0, axis=(1, 2))) > 1000
     np.testing.assert_allclose(short, dnu[fam], rtol=1e-12, atol=1e-12 * np.abs(dnu[fam]).max())
 
