@@ -49,14 +49,21 @@ LINEAR_EFFECTS = ("lever_arm", "time_offset")
 """The GNSS-side effects whose signature :func:`linear_signatures` makes."""
 
 
-def _antenna(trajectory: Trajectory, t_s: NDArray, lever_b_m: NDArray
-             ) -> tuple[NDArray, NDArray]:
-    """(C_nb (R, 3, 3), antenna velocity (R, 3) NED [m/s]) of A's solution at ``t_s``."""
-    c = dcm_from_quat(interpolate_trajectory(trajectory, t_s).q_nb)
-    cp, cm = (dcm_from_quat(interpolate_trajectory(trajectory, t_s + d).q_nb)
-              for d in (DIFF_STEP_S, -DIFF_STEP_S))
-    v = interpolate_trajectory(trajectory, t_s).v_n_mps
-    return c, v + (cp - cm) @ lever_b_m / (2.0 * DIFF_STEP_S)
+def _c_nb(trajectory: Trajectory, t_s: NDArray) -> NDArray:
+    """A's C_nb (R, 3, 3) at ``t_s``."""
+    return dcm_from_quat(interpolate_trajectory(trajectory, t_s).q_nb)
+
+
+def _c_nb_rate(trajectory: Trajectory, t_s: NDArray) -> NDArray:
+    """Its rate Cdot_nb (R, 3, 3) [1/s], central differences over +-:data:`DIFF_STEP_S`."""
+    return (_c_nb(trajectory, t_s + DIFF_STEP_S)
+            - _c_nb(trajectory, t_s - DIFF_STEP_S)) / (2.0 * DIFF_STEP_S)
+
+
+def _antenna_velocity(trajectory: Trajectory, t_s: NDArray, lever_b_m: NDArray) -> NDArray:
+    """The antenna's velocity (R, 3) NED [m/s] on A's solution: ``v + Cdot_nb l``."""
+    return (interpolate_trajectory(trajectory, t_s).v_n_mps
+            + _c_nb_rate(trajectory, t_s) @ lever_b_m)
 
 
 def record_errors(model: LinearNull, trajectory: Trajectory, effect_id: str,
@@ -65,24 +72,19 @@ def record_errors(model: LinearNull, trajectory: Trajectory, effect_id: str,
     parameter, (R, 3, P) (module docstring); ZUPTs none. ``lever_b_m``: the lever arm A was
     configured with (body FRD [m])."""
     t = np.asarray(model.record_t_s, dtype=float)
-    kind = np.asarray(model.record_kind)
+    pos, vel = np.asarray(model.record_kind) == 0, np.asarray(model.record_kind) == 1
     lever = np.asarray(lever_b_m, dtype=float)
     if effect_id == "lever_arm":
-        h = DIFF_STEP_S
-        c = dcm_from_quat(interpolate_trajectory(trajectory, t).q_nb)
-        cdot = (dcm_from_quat(interpolate_trajectory(trajectory, t + h).q_nb)
-                - dcm_from_quat(interpolate_trajectory(trajectory, t - h).q_nb)) / (2.0 * h)
         v = np.zeros((t.size, 3, 3))
-        v[kind == 0] = -c[kind == 0]
-        v[kind == 1] = -cdot[kind == 1]
+        v[pos] = -_c_nb(trajectory, t[pos])
+        v[vel] = -_c_nb_rate(trajectory, t[vel])
         return v
     if effect_id == "time_offset":
-        _, v_ant = _antenna(trajectory, t, lever)
-        a_ant = (_antenna(trajectory, t + DIFF_STEP_S, lever)[1]
-                 - _antenna(trajectory, t - DIFF_STEP_S, lever)[1]) / (2.0 * DIFF_STEP_S)
         v = np.zeros((t.size, 3, 1))
-        v[kind == 0, :, 0] = v_ant[kind == 0]
-        v[kind == 1, :, 0] = a_ant[kind == 1]
+        v[pos, :, 0] = _antenna_velocity(trajectory, t[pos], lever)
+        v[vel, :, 0] = (_antenna_velocity(trajectory, t[vel] + DIFF_STEP_S, lever)
+                        - _antenna_velocity(trajectory, t[vel] - DIFF_STEP_S, lever)
+                        ) / (2.0 * DIFF_STEP_S)
         return v
     raise ValueError(f"{effect_id}: no linear signature (expected one of {LINEAR_EFFECTS})")
 
