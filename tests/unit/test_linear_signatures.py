@@ -67,3 +67,26 @@ def test_no_linear_signature_where_a_gated_in_excess(reference_cases):
     # allows 4; A is not linear there, and the diagnosis re-runs it
     log, nav, run, _, cfg = _flight(reference_cases, "flight_time_offset_200hz")
     assert linear_effect_signatures(log, nav, run, cfg) == {}
+
+
+def test_the_null_flights_diagnosis_starts_without_re_running_a(case, monkeypatch):
+    # the speed of the method, not a timing: where A's gate is open and its lever-arm estimate
+    # is within 3 of its sigmas of the configured one, the diagnosis's first signatures are
+    # all A's linear response and the re-runs' base is never made
+    import pospp.diagnose.rerun as rerun
+    from pospp import diagnosis_stage
+
+    log, nav, run, cfg, model = case
+    calls = []
+    real = rerun._response_and_gains
+    monkeypatch.setattr(rerun, "_response_and_gains",
+                        lambda *a, **k: calls.append("A re-run") or real(*a, **k))
+    real_base = diagnosis_stage.rerun_base
+    monkeypatch.setattr(diagnosis_stage, "rerun_base",
+                        lambda *a, **k: calls.append("base") or real_base(*a, **k))
+    est = fs.lever_arm_estimate(log, nav, cfg)
+    start = diagnosis_stage.diagnosis_reruns(run, cfg, log=log, nav=nav, lever_estimate=est,
+                                             null_model=model)
+    assert start.sigs is not None
+    assert sorted(start.sigs) == ["accel_bias_change", "lever_arm", "time_offset"]
+    assert calls == [] and start.at == {}
