@@ -258,6 +258,22 @@ QC benchmark with 2 cm GNSS and 6 m/s^2 of vibration (S 40 times the innovations
 their long-run variance ratio 10), which named an accelerometer and a gyro walk."""
 
 
+def _flexible_residual(design: InnovationDesign, variants: Sequence[Variant],
+                       families: Sequence[str]) -> tuple[NDArray, int]:
+    """The innovations' residual after every family's most flexible shape (``variants``, one
+    per family of ``families``) and the number of its columns, written into one array (not
+    held twice)."""
+    widths = [design.responses[f].shape[2] * v.weights.shape[1]
+              for f, v in zip(families, variants, strict=True)]
+    full = np.empty((design.y.size, sum(widths)))
+    at = 0
+    for f, v, w in zip(families, variants, widths, strict=True):
+        full[:, at:at + w] = _columns(design.responses[f], v.weights)
+        at += w
+    c, _, _, _ = np.linalg.lstsq(full, design.y, rcond=None)
+    return design.y - full @ c, full.shape[1]
+
+
 def fit_sensor_families(design: InnovationDesign, families: Sequence[str],
                         shapes: Mapping[str, Sequence[str]], alpha: float
                         ) -> tuple[list[FamilyFinding], list[FamilyFinding], float, bool]:
@@ -292,14 +308,11 @@ def fit_sensor_families(design: InnovationDesign, families: Sequence[str],
     tested: list[FamilyFinding] = []
     left = [f for f in families if f in design.responses]
     variants_of = {f: family_variants(f, shapes[f], design) for f in left}
-    flexible = [_columns(design.responses[f],
-                         max(variants_of[f], key=lambda v: v.weights.shape[1]).weights)
-                for f in left]
-    full = np.concatenate([base_x, *flexible], axis=1)
-    resid = design.y - full @ _fit(full, design.y)[0]
+    resid, k_full = _flexible_residual(
+        design, [max(variants_of[f], key=lambda v: v.weights.shape[1]) for f in left], left)
     spacing = (design.t_end_s - float(design.knots[0])) / design.knots.size
     ratio = long_run_ratio(resid, design.record_t_s, spacing)
-    scale = float(resid @ resid) / max(n - full.shape[1], 1)
+    scale = float(resid @ resid) / max(n - k_full, 1)
     holds = 1.0 / SCALE_BAND <= scale <= SCALE_BAND
     while left:
         trials = {}
