@@ -1,4 +1,4 @@
-"""Signatures of the GNSS-side effects from A's own gains: B minus A's linear response.
+"""The diagnosis's first signatures from A's own gains: B minus A's linear response.
 
 Frames and units: NED (n), body FRD (b), SI; signatures per leg (M, 2, P), d [dv_N, dv_E] /
 d p at the replay samples, as :mod:`pospp.diagnose.rerun` makes them by re-running A.
@@ -45,8 +45,6 @@ from pospp.rotation import dcm_from_quat
 
 DIFF_STEP_S = 0.05
 """Half-width of the central differences of A's attitude and antenna velocity [s]."""
-LINEAR_EFFECTS = ("lever_arm", "time_offset")
-"""The GNSS-side effects whose signature :func:`linear_signatures` makes."""
 
 
 def _c_nb(trajectory: Trajectory, t_s: NDArray) -> NDArray:
@@ -66,27 +64,42 @@ def _antenna_velocity(trajectory: Trajectory, t_s: NDArray, lever_b_m: NDArray) 
             + _c_nb_rate(trajectory, t_s) @ lever_b_m)
 
 
+def _lever_arm_errors(trajectory: Trajectory, t: NDArray, pos: NDArray, vel: NDArray,
+                      lever_b_m: NDArray) -> NDArray:
+    """Per metre of configured lever arm on each body axis (R, 3, 3): ``-C_nb``, ``-Cdot_nb``."""
+    v = np.zeros((t.size, 3, 3))
+    v[pos] = -_c_nb(trajectory, t[pos])
+    v[vel] = -_c_nb_rate(trajectory, t[vel])
+    return v
+
+
+def _time_offset_errors(trajectory: Trajectory, t: NDArray, pos: NDArray, vel: NDArray,
+                        lever_b_m: NDArray) -> NDArray:
+    """Per second of GNSS time offset (R, 3, 1): the antenna's velocity, its acceleration."""
+    v = np.zeros((t.size, 3, 1))
+    v[pos, :, 0] = _antenna_velocity(trajectory, t[pos], lever_b_m)
+    v[vel, :, 0] = (_antenna_velocity(trajectory, t[vel] + DIFF_STEP_S, lever_b_m)
+                    - _antenna_velocity(trajectory, t[vel] - DIFF_STEP_S, lever_b_m)
+                    ) / (2.0 * DIFF_STEP_S)
+    return v
+
+
+RECORD_ERRORS = {"lever_arm": _lever_arm_errors, "time_offset": _time_offset_errors}
+"""The GNSS-side effects :func:`linear_signatures` makes, each with its records' errors per
+unit parameter (module docstring)."""
+LINEAR_EFFECTS = tuple(RECORD_ERRORS)
+
+
 def record_errors(model: LinearNull, trajectory: Trajectory, effect_id: str,
                   lever_b_m: ArrayLike) -> NDArray:
     """Per record of ``model`` the error of its measurement per unit of the effect's
-    parameter, (R, 3, P) (module docstring); ZUPTs none. ``lever_b_m``: the lever arm A was
-    configured with (body FRD [m])."""
-    t = np.asarray(model.record_t_s, dtype=float)
-    pos, vel = np.asarray(model.record_kind) == 0, np.asarray(model.record_kind) == 1
-    lever = np.asarray(lever_b_m, dtype=float)
-    if effect_id == "lever_arm":
-        v = np.zeros((t.size, 3, 3))
-        v[pos] = -_c_nb(trajectory, t[pos])
-        v[vel] = -_c_nb_rate(trajectory, t[vel])
-        return v
-    if effect_id == "time_offset":
-        v = np.zeros((t.size, 3, 1))
-        v[pos, :, 0] = _antenna_velocity(trajectory, t[pos], lever)
-        v[vel, :, 0] = (_antenna_velocity(trajectory, t[vel] + DIFF_STEP_S, lever)
-                        - _antenna_velocity(trajectory, t[vel] - DIFF_STEP_S, lever)
-                        ) / (2.0 * DIFF_STEP_S)
-        return v
-    raise ValueError(f"{effect_id}: no linear signature (expected one of {LINEAR_EFFECTS})")
+    parameter, (R, 3, P) (:data:`RECORD_ERRORS`); ZUPTs none. ``lever_b_m``: the lever arm A
+    was configured with (body FRD [m])."""
+    if effect_id not in RECORD_ERRORS:
+        raise ValueError(f"{effect_id}: no linear signature (expected one of {LINEAR_EFFECTS})")
+    kind = np.asarray(model.record_kind)
+    return RECORD_ERRORS[effect_id](trajectory, np.asarray(model.record_t_s, dtype=float),
+                                    kind == 0, kind == 1, np.asarray(lever_b_m, dtype=float))
 
 
 def linear_signatures(model: LinearNull, trajectory: Trajectory, lever_b_m: ArrayLike,
