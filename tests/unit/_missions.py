@@ -49,6 +49,17 @@ def compare_sim_flight(seed: int, effect: str | None, *, noise_scale: float | No
     otherwise: one of the bench's ``SCALES``) with ``effect`` at 3 x its detection limit
     there: the log, its configuration and the bench module
     (its ``run`` and ``_reading`` count a comparison as the Monte Carlo does)."""
+    bench = compare_sim_bench()
+    scale = bench.SCALES[0] if noise_scale is None else noise_scale
+    if effect is None:
+        return bench.flight(seed, scale), bench.CONFIG, bench
+    size = 3.0 * bench.limit_at(effect, scale)
+    return bench.flight(seed, scale, effect, size), bench.CONFIG, bench
+
+
+def compare_sim_bench():
+    """The module tests/benchmarks/bench_compare_sim.py (its mission ``profile()``, IMU
+    ``truth_imu``, ``GNSS`` settings and ``LEVER_B_M``, its flights and effects)."""
     import importlib.util
     from pathlib import Path
 
@@ -57,8 +68,4 @@ def compare_sim_flight(seed: int, effect: str | None, *, noise_scale: float | No
     assert spec is not None and spec.loader is not None
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
-    scale = bench.SCALES[0] if noise_scale is None else noise_scale
-    if effect is None:
-        return bench.flight(seed, scale), bench.CONFIG, bench
-    size = 3.0 * bench.limit_at(effect, scale)
-    return bench.flight(seed, scale, effect, size), bench.CONFIG, bench
+    return bench

@@ -16,6 +16,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from _missions import compare_sim_bench
 from scipy import stats as sps
 from scipy.spatial.transform import Rotation
 
@@ -25,7 +26,6 @@ from pospp.config import config_from_dict
 from pospp.io.mcap_reader import FlightLog
 from pospp.sim.api import simulate, simulate_along
 from pospp.sim.gnss import GnssModel, simulate_gnss
-from pospp.sim.profile import parse_profile
 from pospp.sim.sensors import ImuErrorModel, imu_grade, imu_model_file
 from pospp.sim.trajectory import MotionSample
 from pospp.simcompare.compare import gaps
@@ -149,34 +149,20 @@ def test_mounting_matrix_is_the_rotation():
 
 def test_a_mounting_leaves_a_s_lever_arm_estimate_alone():
     """A mounting of 10320 arcsec in yaw simulated as the exact rotation
-    (:func:`mounting_sensor_errors`) on a short flight with one banked turn each way: A's
-    lever-arm states read the antenna's true lever arm within 6 cm on each axis (measured
-    2, 24 and 30 mm). The first-order matrix I - [rho x] it replaced carries a (1 - cos rho)
-    scale factor on x and y, which A read as 0.57 m of vertical lever arm (-2.07 m for the
-    true -1.5), and compare-sim named a lever arm beside the mounting
-    (docs/decisions.md, "A mounting misalignment simulated as the exact rotation")."""
-    lever = (0.3, 0.1, -1.5)
-    seg = [{"type": "static", "duration_s": 300.0},
-           {"type": "accelerate", "to_speed_mps": 50.0, "duration_s": 40.0},
-           {"type": "climb", "rate_mps": 5.0, "delta_m": 100.0},
-           {"type": "straight", "duration_s": 120.0},
-           {"type": "turn", "angle_deg": 180.0, "rate_dps": 3.0},
-           {"type": "straight", "duration_s": 120.0},
-           {"type": "turn", "angle_deg": -180.0, "rate_dps": 3.0},
-           {"type": "straight", "duration_s": 120.0}]
-    prof = parse_profile({"name": "mount", "start": {"lat_deg": 40.0, "lon_deg": 116.0,
-                                                     "height_m": 60.0, "heading_deg": 60.0},
-                          "options": {"turn_bank": "coordinated", "blend_s": 5.0},
-                          "segment": seg})
-    g = imu_grade("paper_flight")
+    (:func:`mounting_sensor_errors`) on compare-sim's benchmark flight (one banked turn each
+    way, the IMU's noise a third of the grade's): A's lever-arm states read the antenna's true
+    lever arm within 6 cm on each axis (measured 2, 24 and 30 mm). The first-order matrix
+    I - [rho x] it replaced carries a (1 - cos rho) scale factor on x and y, which A read as
+    0.57 m of vertical lever arm (-2.07 m for the true -1.5), and compare-sim named a lever
+    arm beside the mounting (docs/decisions.md, "A mounting misalignment simulated as the
+    exact rotation")."""
+    bench = compare_sim_bench()
     sf, m = mounting_sensor_errors(np.array([0.0, 0.0, np.radians(10320.0 / 3600.0)]))
-    imu = replace(g, gyro_arw_dpsh=tuple(np.divide(g.gyro_arw_dpsh, 3.0)),
-                  gyro_gm_sigma_dph=tuple(np.divide(g.gyro_gm_sigma_dph, 3.0)),
-                  gyro_misalign_arcsec=tuple(m), accel_misalign_arcsec=tuple(m),
-                  gyro_sf_ppm=tuple(sf), accel_sf_ppm=tuple(sf))
-    sim = simulate(prof, imu_grade=imu, gnss=GnssModel(
-        rate_hz=1.0, pos_noise_m=(0.05, 0.1), vel_noise_mps=(0.02, 0.03), lever_arm_b_m=lever),
-        seed=300, imu_rate_hz=100.0)
+    imu = replace(bench.truth_imu(1.0 / 3.0), gyro_misalign_arcsec=tuple(m),
+                  accel_misalign_arcsec=tuple(m), gyro_sf_ppm=tuple(sf), accel_sf_ppm=tuple(sf))
+    sim = simulate(bench.profile(), imu_grade=imu, gnss=GnssModel(**bench.GNSS), seed=300,
+                   imu_rate_hz=100.0)
+    lever = np.asarray(bench.LEVER_B_M)
     cfg = config_from_dict({"input": {"sensor_frame": "frd"}, "imu": {"grade": "flight"},
                             "gnss": {"lever_arm_m": list(lever), "estimate_lever_arm": True}})
     nav = flight_stages.navigate(FlightLog(sim.imu, sim.fix, sim.vel, "mount"), cfg)
