@@ -3,7 +3,12 @@
 Run on demand (not collected by pytest)::
 
     KFGINS_SRC=/path/to/KF-GINS python tests/benchmarks/bench_kfgins.py \
-        [--cases flight_null_200hz flight_time_offset_200hz] [--rounds 3]
+        [--cases flight_null_200hz flight_time_offset_200hz] [--rounds 3] \
+        [--base /tmp/pospp_bench/flight_90min_200hz]
+
+``--base``: any case written as the reference cases are (BASE.mcap, .truth.parquet,
+.params.json), e.g. the 1.5 h, 200 Hz flight of ``bench_pipeline.py --minutes 90`` (pospp's
+simulator: its lever arm under ``gnss.lever_arm_b_m``).
 
 The speed peer is KF-GINS (i2Nav's C++ 21-state forward EKF), built and run by
 ``../shared/tools/kfgins_anchor.py`` on a reference case of the independent simulator
@@ -34,7 +39,7 @@ SHARED = REPO.parent / "shared"
 sys.path.insert(0, str(REPO / "tests" / "benchmarks"))
 sys.path.insert(0, str(REPO / "tests" / "reference"))
 
-from _reach import cases_in, pipeline_kind, pipeline_text  # noqa: E402
+from _reach import pipeline_kind, pipeline_text  # noqa: E402
 from bench_pipeline import _CHILD  # noqa: E402
 
 
@@ -56,6 +61,8 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--cases", nargs="+", default=["flight_null_200hz"])
     ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--base", nargs="*", default=[],
+                    help="more cases by their path without suffix (BASE.mcap, .params.json)")
     args = ap.parse_args()
     anchor = _anchor()
     if anchor.ensure_binary() is None:
@@ -64,11 +71,13 @@ def main() -> None:
     env = {**os.environ, "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS", "1")}
     rows = []
     with tempfile.TemporaryDirectory(prefix="pospp_kfgins_") as tmp:
-        levers = {name: lever for name, _, lever in cases_in(SHARED / "reference_cases")}
-        for name in args.cases:
-            base = SHARED / "reference_cases" / name
+        bases = [SHARED / "reference_cases" / n for n in args.cases] + [Path(b) for b in args.base]
+        for base in bases:
+            name = base.name
+            gnss = json.loads(base.with_suffix(".params.json").read_text())["gnss"]
+            lever = gnss.get("lever_arm_m", gnss.get("lever_arm_b_m"))
             config = Path(tmp) / f"{name}.toml"
-            config.write_text(pipeline_text(pipeline_kind(name), levers[name]))
+            config.write_text(pipeline_text(pipeline_kind(name), lever))
             mcap, out = base.with_suffix(".mcap"), Path(tmp) / f"run_{name}"
             _pospp(mcap, config, out, env)  # numba's cache warm, the file in the page cache
             for k in range(args.rounds):
