@@ -191,13 +191,8 @@ class LinearNull:
 
         (q_g = sqrt(2 sigma^2 / tau); a_w, a_d the gyro's white and drift rows of a)."""
         dt = np.asarray(self.grid[3], dtype=float)
-        g_node, _, g_sample = self.events
-        rec_start, rec_sig = self.records[0], self.records[3]
-        cnt = np.concatenate([[0], np.cumsum(np.count_nonzero(rec_sig > 0.0, axis=1))])
-        per_node = cnt[rec_start[1:]] - cnt[rec_start[:-1]]
-        rows = np.where(g_node >= 0, per_node[np.maximum(g_node, 0)], 0)
-        rows[1:] += kernel.N_NOISE
-        off = 6 + np.concatenate([[0], np.cumsum(rows)[:-1]])
+        g_sample = self.events[2]
+        off, rows, _ = self._normal_rows(self.records[3] > 0.0)
         if 6 + rows.sum() != xi.shape[0]:
             raise ValueError(f"xi: expected {6 + rows.sum()} rows, got {xi.shape[0]}")
         inv, arw, qg = float(self.inj[0]), float(self.inj[4]), float(self.inj[6])
@@ -217,6 +212,19 @@ class LinearNull:
         g0 = np.asarray(self.leg_start_grid)
         g1 = g_of_j[np.cumsum(self.leg_sizes) - 1]
         return (cum[g1] - cum[g0]) / (t_cum[g1] - t_cum[g0])[:, None, None]
+
+    def _normal_rows(self, active: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+        """Where the kernel reads its normals (:func:`pospp.calib._null_kernel.forward_draws`:
+        6 at the start, then per grid point :data:`~pospp.calib._null_kernel.N_NOISE` for its
+        interval and one per ``active`` (R, 3) record axis of its node): (first row of each
+        grid point's block (G,), rows per block (G,), active axes before each record (R + 1,))."""
+        start = self.records[0]
+        g_node = self.events[0]
+        cnt = np.concatenate([[0], np.cumsum(np.count_nonzero(active, axis=1))]).astype(np.int64)
+        per_node = cnt[start[1:]] - cnt[start[:-1]]
+        rows = np.where(g_node >= 0, per_node[np.maximum(g_node, 0)], 0)
+        rows[1:] += kernel.N_NOISE
+        return 6 + np.concatenate([[0], np.cumsum(rows)[:-1]]), rows, cnt
 
     def _draw_chunk(self, n: int, rng: np.random.Generator, xi: NDArray | None = None,
                     z0: NDArray | None = None) -> NDArray:
@@ -262,11 +270,7 @@ class LinearNull:
         on = ((sig > 0.0) | np.any(v != 0.0, axis=2)).astype(float)
         n_on = on.astype(np.int64)
         g_node = self.events[0]
-        cnt = np.concatenate([[0], np.cumsum(n_on.sum(axis=1))]).astype(np.int64)
-        per_node = cnt[start[1:]] - cnt[start[:-1]]
-        rows = np.where(g_node >= 0, per_node[np.maximum(g_node, 0)], 0)
-        rows[1:] += kernel.N_NOISE
-        off = 6 + np.concatenate([[0], np.cumsum(rows)[:-1]])
+        off, rows, cnt = self._normal_rows(on > 0.0)
         g_of_node = np.full(start.size - 1, -1, dtype=np.int64)
         g_of_node[g_node[g_node >= 0]] = np.flatnonzero(g_node >= 0)
         node = np.searchsorted(start, np.arange(sig.shape[0]), side="right") - 1
@@ -281,7 +285,8 @@ class LinearNull:
         if accel_b_mps2 is not None:
             u = np.asarray(accel_b_mps2, dtype=float)
             dt = np.asarray(self.grid[3], dtype=float)[1:, None, None]
-            scale = dt / (2.0 * np.sqrt(0.5 * dt))  # the trapezoid's half-interval, per s q
+            # u dt / 2 at each end of the interval, over the sqrt(dt / 2) Gamma carries
+            scale = dt / (2.0 * np.sqrt(0.5 * dt))
             a_rows = off[1:, None] + 3 + np.arange(3)  # the interval's start (a) normals ...
             xi[a_rows] = u[:-1] * scale
             xi[a_rows + kernel.N_IN] = u[1:] * scale  # ... and its end's (b)
