@@ -319,7 +319,8 @@ class CalibrationOptions:
             noise=self.noise, noise_step_s=self.noise_step_s,
             gyro_arw_radpsqrts=(None if self.gyro_arw_dpsh is None
                                 else self.gyro_arw_dpsh * _DPSH_RADPSQRTS),
-            gyro_gm_tau_s=float(self.gyro_gm_tau_s) if on and self.gyro_gm_tau_s else None,
+            gyro_gm_tau_s=(float(self.gyro_gm_tau_s) if on and self.gyro_gm_tau_s is not None
+                           else None),
             gyro_gm_sigma_radps=(self.gyro_gm_sigma_dph * DEG_PER_H_RADPS
                                  if on and self.gyro_gm_sigma_dph is not None else None))
 
