@@ -34,6 +34,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
+from pospp import rotation
 from pospp.earth import EARTH_RATE_RADPS, gravity_gradient_formula, radii_formula
 from pospp.nav._kernels import dcm_from_quat_into
 
@@ -286,3 +287,29 @@ def transition_matrices(
         out,
     )
     return out
+
+
+def rpy_covariance(q_nb: NDArray, att_cov: NDArray) -> NDArray:
+    """Covariance of [roll, pitch, yaw] errors from the phi covariance (d rpy = -E^-1 phi).
+
+    E's columns are the roll, pitch and yaw axes in NED (``Rz Ry e_x``, ``Rz e_y``, ``e_z``),
+    so ``phi = E d rpy`` up to sign and, with det E = cos(pitch), in closed form::
+
+        E^-1 = [[ cz / cy,      sz / cy,      0],
+                [-sz,           cz,           0],
+                [ sy cz / cy,   sy sz / cy,   1]]
+
+    (c, s of yaw z and pitch y; singular at pitch +-90 deg, where roll and yaw merge).
+    """
+    rpy = rotation.euler_from_quat(q_nb)
+    cz, sz = np.cos(rpy[:, 2]), np.sin(rpy[:, 2])
+    cy, sy = np.cos(rpy[:, 1]), np.sin(rpy[:, 1])
+    e_inv = np.zeros((q_nb.shape[0], 3, 3))
+    e_inv[:, 0, 0] = cz / cy
+    e_inv[:, 0, 1] = sz / cy
+    e_inv[:, 1, 0] = -sz
+    e_inv[:, 1, 1] = cz
+    e_inv[:, 2, 0] = sy * e_inv[:, 0, 0]
+    e_inv[:, 2, 1] = sy * e_inv[:, 0, 1]
+    e_inv[:, 2, 2] = 1.0
+    return e_inv @ att_cov @ np.swapaxes(e_inv, 1, 2)

@@ -27,7 +27,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pospp import earth, rotation
-from pospp.nav.filter import NavSolution, rpy_covariance
+from pospp.nav.error_model import rpy_covariance
+from pospp.nav.filter import NavSolution
 from pospp.nav.smoother import interpolation_weights
 from pospp.nav.strapdown import interpolate_trajectory
 

@@ -63,7 +63,7 @@ from pospp import rotation
 from pospp.nav import filter_input, smoother
 from pospp.nav._filter_kernel import STATUS_GATED, STATUS_RESET, STATUS_USED
 from pospp.nav.alignment import AlignmentOptions, AlignmentResult, align
-from pospp.nav.error_model import DR, DV, PHI
+from pospp.nav.error_model import DR, DV, PHI, rpy_covariance
 from pospp.nav.filter_input import GnssRejection, MeasurementRecords
 from pospp.nav.filter_state import (
     ForwardArrays,
@@ -174,9 +174,13 @@ class FilterOptions:
 class NavSolution:
     """Navigation solution with its uncertainty at N output epochs (time-major arrays).
 
-    Position and attitude are those of the IMU. Attitude sigmas: ``att_sigma_ned_rad`` of the
-    misalignment phi (NED), and ``rpy_sigma_rad`` of [roll, pitch, yaw] mapped by
-    d(rpy) = -E^-1 phi, where E maps Euler angle rates to the NED rotation rate (z-y-x).
+    Position and attitude are those of the IMU. The covariances are the (N, 3, 3) blocks of
+    the filter's P for the position (NED, m^2), velocity (NED, m^2/s^2) and misalignment phi
+    (NED, rad^2) errors; the sigmas are read from them when asked (square roots of their
+    diagonals), not stored beside them. Attitude sigmas: ``att_sigma_ned_rad`` of phi, and
+    ``rpy_sigma_rad`` of [roll, pitch, yaw] mapped by d(rpy) = -E^-1 phi, where E maps Euler
+    angle rates to the NED rotation rate (z-y-x,
+    :func:`pospp.nav.error_model.rpy_covariance`).
     """
 
     time_ns: NDArray
@@ -186,16 +190,33 @@ class NavSolution:
     height_m: NDArray
     v_n_mps: NDArray
     q_nb: NDArray
-    pos_sigma_ned_m: NDArray
-    vel_sigma_ned_mps: NDArray
-    att_sigma_ned_rad: NDArray
-    rpy_sigma_rad: NDArray
     pos_cov_ned_m2: NDArray
     vel_cov_ned_m2ps2: NDArray
     att_cov_ned_rad2: NDArray
 
     def __len__(self) -> int:
         return self.t_s.shape[0]
+
+    @property
+    def pos_sigma_ned_m(self) -> NDArray:
+        """(N, 3) position sigmas, NED [m]: sqrt(diag P_rr)."""
+        return np.sqrt(np.diagonal(self.pos_cov_ned_m2, axis1=1, axis2=2))
+
+    @property
+    def vel_sigma_ned_mps(self) -> NDArray:
+        """(N, 3) velocity sigmas, NED [m/s]: sqrt(diag P_vv)."""
+        return np.sqrt(np.diagonal(self.vel_cov_ned_m2ps2, axis1=1, axis2=2))
+
+    @property
+    def att_sigma_ned_rad(self) -> NDArray:
+        """(N, 3) misalignment phi sigmas, NED [rad]: sqrt(diag P_phiphi)."""
+        return np.sqrt(np.diagonal(self.att_cov_ned_rad2, axis1=1, axis2=2))
+
+    @property
+    def rpy_sigma_rad(self) -> NDArray:
+        """(N, 3) [roll, pitch, yaw] sigmas [rad]: sqrt(diag(E^-1 P_phiphi E^-T))."""
+        rpy_cov = rpy_covariance(self.q_nb, self.att_cov_ned_rad2)
+        return np.sqrt(np.clip(np.diagonal(rpy_cov, axis1=1, axis2=2), 0.0, None))
 
     @property
     def rpy_rad(self) -> NDArray:
@@ -213,7 +234,8 @@ class NavSolution:
 class BiasHistory:
     """Sensor error estimates (body FRD, measured = (1 + s) true + b) with 1-sigma.
 
-    Scale factors are dimensionless (1e-6 = 1 ppm); zeros with zero sigma when not estimated.
+    Scale factors are dimensionless (1e-6 = 1 ppm); zeros with zero sigma when not estimated
+    (then read-only arrays that take no memory).
     """
 
     t_s: NDArray
@@ -282,54 +304,27 @@ class FilterResult:
     """The pass's gains when asked for (``record_gains``), for replays on noisier logs."""
 
 
-def rpy_covariance(q_nb: NDArray, att_cov: NDArray) -> NDArray:
-    """Covariance of [roll, pitch, yaw] errors from the phi covariance (d rpy = -E^-1 phi).
-
-    E's columns are the roll, pitch and yaw axes in NED (``Rz Ry e_x``, ``Rz e_y``, ``e_z``),
-    so ``phi = E d rpy`` up to sign and, with det E = cos(pitch), in closed form::
-
-        E^-1 = [[ cz / cy,      sz / cy,      0],
-                [-sz,           cz,           0],
-                [ sy cz / cy,   sy sz / cy,   1]]
-
-    (c, s of yaw z and pitch y; singular at pitch +-90 deg, where roll and yaw merge).
-    """
-    rpy = rotation.euler_from_quat(q_nb)
-    cz, sz = np.cos(rpy[:, 2]), np.sin(rpy[:, 2])
-    cy, sy = np.cos(rpy[:, 1]), np.sin(rpy[:, 1])
-    e_inv = np.zeros((q_nb.shape[0], 3, 3))
-    e_inv[:, 0, 0] = cz / cy
-    e_inv[:, 0, 1] = sz / cy
-    e_inv[:, 1, 0] = -sz
-    e_inv[:, 1, 1] = cz
-    e_inv[:, 2, 0] = sy * e_inv[:, 0, 0]
-    e_inv[:, 2, 1] = sy * e_inv[:, 0, 1]
-    e_inv[:, 2, 2] = 1.0
-    return e_inv @ att_cov @ np.swapaxes(e_inv, 1, 2)
-
-
 def _nan(shape: tuple[int, ...]) -> NDArray:
     """A read-only array of NaN that takes no memory (a broadcast scalar): the sigmas of a
     run with ``covariance_outputs`` False."""
     return np.broadcast_to(np.float64(np.nan), shape)
 
 
-def _solution(time_ns, t_s, states, diag, blocks) -> NavSolution:
-    """The states with their covariance; ``diag`` None: NaN (``covariance_outputs`` False)."""
-    q = states[:, 6:10]
-    if diag is None:
-        m = states.shape[0]
-        diag, rpy_cov = _nan((m, 9)), _nan((m, 3, 3))
-        blocks = [rpy_cov] * 3
-    else:
-        rpy_cov = rpy_covariance(q, blocks[0])
+def _zeros(shape: tuple[int, ...]) -> NDArray:
+    """A read-only array of zeros that takes no memory (a broadcast scalar): the scale
+    factors and their sigmas of a pass that does not estimate them."""
+    return np.broadcast_to(np.float64(0.0), shape)
+
+
+def _solution(time_ns, t_s, states, blocks) -> NavSolution:
+    """The states with P's [phi, dv, dr] blocks; ``blocks`` None: NaN (``covariance_outputs``
+    False)."""
+    if blocks is None:
+        blocks = [_nan((states.shape[0], 3, 3))] * 3
     att_cov, vel_cov, pos_cov = blocks
     return NavSolution(
         time_ns=time_ns, t_s=t_s, lat_rad=states[:, 0].copy(), lon_rad=states[:, 1].copy(),
-        height_m=states[:, 2].copy(), v_n_mps=states[:, 3:6].copy(), q_nb=q.copy(),
-        pos_sigma_ned_m=np.sqrt(diag[:, 6:9]), vel_sigma_ned_mps=np.sqrt(diag[:, 3:6]),
-        att_sigma_ned_rad=np.sqrt(diag[:, 0:3]),
-        rpy_sigma_rad=np.sqrt(np.clip(np.diagonal(rpy_cov, axis1=1, axis2=2), 0.0, None)),
+        height_m=states[:, 2].copy(), v_n_mps=states[:, 3:6].copy(), q_nb=states[:, 6:10].copy(),
         pos_cov_ned_m2=pos_cov, vel_cov_ned_m2ps2=vel_cov, att_cov_ned_rad2=att_cov,
     )
 
@@ -464,7 +459,7 @@ def _forward_results(t: NDArray, fw: ForwardArrays, lay: StateLayout, out_tns: N
     diag = fw.out_diag if with_cov else _nan((n_out, fw.out_diag.shape[1]))
     bvar = fw.out_bvar if with_cov else _nan((n_out, 6))
     blocks = [fw.out_blk[:, j].copy() for j in range(3)] if with_cov else None
-    fwd = _solution(out_tns, out_t, fw.out_x, diag if with_cov else None, blocks)
+    fwd = _solution(out_tns, out_t, fw.out_x, blocks)
     fwd_bias = _bias_history(out_t, fw.out_sens, bvar, diag, lay.i_sf)
     lever_sig = np.sqrt(diag[-1, lay.i_l:lay.i_l + 3]) if lay.i_l >= 0 else np.zeros(3)
     return fwd, fwd_bias, (fw.out_lever[-1].copy(), lever_sig)
@@ -518,8 +513,7 @@ def _smoothed(t: NDArray, fw: ForwardArrays, lay: StateLayout, out_tns: NDArray,
     forward outputs and :func:`_smoothed_errors` (``blocks_s`` None: every sigma NaN)."""
     out_t = t[fw.out_k]
     states_s = smoother.correct_states(fw.out_x, np.ascontiguousarray(err))
-    smoothed = _solution(out_tns, out_t, states_s, None if blocks_s is None else diag_s,
-                         blocks_s)
+    smoothed = _solution(out_tns, out_t, states_s, blocks_s)
     # total bias error (constant + Gauss-Markov) and its smoothed variance
     sens_s = fw.out_sens.copy()
     sens_s[:, :6] += err @ total_bias_map(lay).T
@@ -538,13 +532,14 @@ def _bias_history(t_s: NDArray, sens: NDArray, bias_var: NDArray, diag: NDArray,
     bsig = np.sqrt(np.clip(bias_var, 0.0, None))
     if i_sf >= 0:
         sf_sig = np.sqrt(np.clip(diag[:, i_sf:i_sf + 6], 0.0, None))
-    else:
-        sf_sig = np.zeros((t_s.shape[0], 6))
+        sf = [sens[:, 6:9].copy(), sf_sig[:, 0:3].copy(), sens[:, 9:12].copy(),
+              sf_sig[:, 3:6].copy()]
+    else:  # not estimated: zero (the kernel leaves them there), one zero, not one per epoch
+        sf = [_zeros((t_s.shape[0], 3))] * 4
     return BiasHistory(
         t_s=t_s, gyro_b_radps=sens[:, 0:3].copy(), gyro_sigma_b_radps=bsig[:, 0:3].copy(),
         accel_b_mps2=sens[:, 3:6].copy(), accel_sigma_b_mps2=bsig[:, 3:6].copy(),
-        gyro_sf=sens[:, 6:9].copy(), gyro_sf_sigma=sf_sig[:, 0:3].copy(),
-        accel_sf=sens[:, 9:12].copy(), accel_sf_sigma=sf_sig[:, 3:6].copy(),
+        gyro_sf=sf[0], gyro_sf_sigma=sf[1], accel_sf=sf[2], accel_sf_sigma=sf[3],
     )
 
 

@@ -30,8 +30,6 @@ def _solution(t_s, lat, lon, h, v_n, q_nb, *, sigma_scale=0.0) -> NavSolution:
     return NavSolution(
         time_ns=np.round(np.asarray(t_s) * 1e9).astype(np.int64), t_s=np.asarray(t_s, float),
         lat_rad=lat, lon_rad=lon, height_m=h, v_n_mps=v_n, q_nb=q_nb,
-        pos_sigma_ned_m=np.full((n, 3), sigma_scale), vel_sigma_ned_mps=np.zeros((n, 3)),
-        att_sigma_ned_rad=np.zeros((n, 3)), rpy_sigma_rad=np.zeros((n, 3)),
         pos_cov_ned_m2=eye * sigma_scale**2, vel_cov_ned_m2ps2=eye * 0.0,
         att_cov_ned_rad2=eye * (1e-3) ** 2)
 

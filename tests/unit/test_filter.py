@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 from pospp import earth, rotation
-from pospp.nav.filter import FilterOptions, rpy_covariance, run_integrated_navigation
+from pospp.nav.error_model import rpy_covariance
+from pospp.nav.filter import FilterOptions, run_integrated_navigation
 from pospp.nav.tuning import tuning_preset
 from pospp.types import GnssFixes, GnssVelocities, ImuSamples
 
@@ -341,3 +342,41 @@ def test_rpy_covariance_by_finite_differences_of_the_euler_angles():
         jac /= h
         np.testing.assert_allclose(got[k], jac @ att_cov[k] @ jac.T, rtol=1e-5,
                                    atol=1e-6 * np.abs(att_cov[k]).max())
+
+
+def _held_bytes(*objs) -> int:
+    """Bytes of the distinct buffers the arrays in the dataclasses ``objs`` keep alive."""
+    bases = {}
+    for obj in objs:
+        for f in dataclasses.fields(obj):
+            a = getattr(obj, f.name)
+            while isinstance(a, np.ndarray) and isinstance(a.base, np.ndarray):
+                a = a.base
+            if isinstance(a, np.ndarray):
+                bases[id(a)] = a.nbytes
+    return sum(bases.values())
+
+
+def test_a_keeps_each_quantity_once(clean):
+    """The sigmas are read from the covariance blocks (not stored beside them), and scale
+    factors a pass does not estimate take no memory: per output epoch a solution holds its
+    time (int64 ns and float s, 16 B), position, velocity (48 B), quaternion (32 B) and three
+    3x3 covariance blocks (216 B), a bias history its gyro and accelerometer biases and sigmas
+    (96 B; its times are the solution's)."""
+    for sol in (clean.forward, clean.smoothed):
+        names = {f.name for f in dataclasses.fields(sol)}
+        assert not names & {"pos_sigma_ned_m", "vel_sigma_ned_mps", "att_sigma_ned_rad",
+                            "rpy_sigma_rad"}
+        for sig, cov in ((sol.pos_sigma_ned_m, sol.pos_cov_ned_m2),
+                         (sol.vel_sigma_ned_mps, sol.vel_cov_ned_m2ps2),
+                         (sol.att_sigma_ned_rad, sol.att_cov_ned_rad2)):
+            np.testing.assert_array_equal(sig, np.sqrt(np.einsum("kii->ki", cov)))
+        rpy_cov = rpy_covariance(sol.q_nb, sol.att_cov_ned_rad2)
+        np.testing.assert_array_equal(sol.rpy_sigma_rad,
+                                      np.sqrt(np.clip(np.einsum("kii->ki", rpy_cov), 0, None)))
+    for b in (clean.forward_biases, clean.smoothed_biases):
+        for a in (b.gyro_sf, b.gyro_sf_sigma, b.accel_sf, b.accel_sf_sigma):
+            assert a.shape == (len(b.t_s), 3) and not a.any() and a.strides[0] == 0
+    n = len(clean.forward)
+    assert _held_bytes(clean.forward, clean.smoothed, clean.forward_biases,
+                       clean.smoothed_biases) <= n * (2 * 312 + 2 * 96) + 64

@@ -31,10 +31,6 @@ def _solution() -> NavSolution:
         time_ns=T0_NS + np.round(t * 1e9).astype(np.int64), t_s=t,
         lat_rad=np.full(N, lat0), lon_rad=lon0 + SPEED_MPS * t / ((r_n + 500.0) * np.cos(lat0)),
         height_m=np.full(N, 500.0), v_n_mps=np.tile([0.0, SPEED_MPS, 0.0], (N, 1)), q_nb=q,
-        pos_sigma_ned_m=np.tile([0.1, 0.2, 0.3], (N, 1)),
-        vel_sigma_ned_mps=np.tile([0.01, 0.02, 0.03], (N, 1)),
-        att_sigma_ned_rad=np.tile([1e-4, 2e-4, 3e-4], (N, 1)),
-        rpy_sigma_rad=np.tile([1e-4, 2e-4, 3e-4], (N, 1)),
         pos_cov_ned_m2=pos_cov, vel_cov_ned_m2ps2=vel_cov, att_cov_ned_rad2=att_cov)
 
 
