@@ -24,6 +24,7 @@ from pospp.io.run_lock import locked
 from pospp.lever_time_stage import lever_time_estimate
 from pospp.nav import filter as nav_filter
 from pospp.nav.alignment import AlignmentOptions, gnss_moving_windows
+from pospp.nav.solution import NavSolution
 from pospp.sim.api import Kinematics, along_motion, kinematics, sensors
 from pospp.sim.gnss import GnssModel
 from pospp.sim.sensors import ImuErrorModel, imu_grade
@@ -173,7 +174,7 @@ def flight_template(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
 
 
 def _with_static_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
-                       t_imu: np.ndarray, t_fix: np.ndarray, sol: nav_filter.NavSolution,
+                       t_imu: np.ndarray, t_fix: np.ndarray, sol: NavSolution,
                        options: AlignmentOptions):
     """A's smoothed trajectory (t [s], lat, lon [rad], height [m]) with the log's initial
     static period held at rest (2 Hz), so that the simulated flight has the same static start
@@ -216,7 +217,7 @@ def _with_static_start(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                                       for p, x in zip(pre, (lat, lon, hgt), strict=True)))
 
 
-def _wandered(nav: nav_filter.FilterResult, sol: nav_filter.NavSolution, until_s: float
+def _wandered(nav: nav_filter.FilterResult, sol: NavSolution, until_s: float
               ) -> bool:
     """Whether A left the rest before ``until_s`` [s]: a reset, or a smoothed speed of
     ``STATIC_SPEED_MPS`` or more."""
@@ -244,7 +245,7 @@ def _rest_end_s(log: mcap_reader.FlightLog, end_s: float, limit_s: float,
     return float(tv[n_rest - 1]) if n_rest > 0 else end_s
 
 
-def _residual_rms(log: mcap_reader.FlightLog, sol: nav_filter.NavSolution, epoch_ns: int
+def _residual_rms(log: mcap_reader.FlightLog, sol: NavSolution, epoch_ns: int
                   ) -> tuple[tuple[float, float], tuple[float, float]]:
     """RMS (horizontal per axis, vertical) of the GNSS records minus A's smoothed solution,
     position [m] and velocity [m/s] (inf when there are none in A's span)."""
@@ -258,7 +259,7 @@ def _residual_rms(log: mcap_reader.FlightLog, sol: nav_filter.NavSolution, epoch
     return rms(dp), rms(dv)
 
 
-def gnss_residuals(log: mcap_reader.FlightLog, sol: nav_filter.NavSolution, epoch_ns: int,
+def gnss_residuals(log: mcap_reader.FlightLog, sol: NavSolution, epoch_ns: int,
                    lever_b_m: Any) -> tuple[tuple[np.ndarray, np.ndarray],
                                             tuple[np.ndarray, np.ndarray]]:
     """The GNSS records minus A's smoothed solution in its span: (times [s from

@@ -21,14 +21,15 @@ if TYPE_CHECKING:
     from pospp.io.errors import IngestIssue
     from pospp.io.mcap_reader import FlightLog
     from pospp.nav.events import SensorPoses
-    from pospp.nav.filter import BiasHistory, NavSolution
+    from pospp.nav.filter import BiasHistory
     from pospp.nav.filter_input import GnssRejection
+    from pospp.nav.solution import NavSolution
 
 
 def trajectory_table(solutions: Mapping[str, NavSolution], epoch_ns: int) -> pd.DataFrame:
     """trajectory.parquet: one block of rows per solution ("forward", "smoothed", ...).
 
-    Each solution is a :class:`pospp.nav.filter.NavSolution` (NED, rad, SI).
+    Each solution is a :class:`pospp.nav.solution.NavSolution` (NED, rad, SI).
     """
     blocks = []
     for name, sol in solutions.items():

@@ -56,7 +56,7 @@ from pospp.calib.linear_null import NullNoise
 from pospp.distributions import f_sf, t_sf
 from pospp.earth import principal_radii_m
 from pospp.nav.events import sensor_poses
-from pospp.nav.filter import NavSolution
+from pospp.nav.solution import NavSolution
 
 POSITION_KIND, VELOCITY_KIND = 0, 1
 """Indices into ``pospp.nav.filter.MEAS_KINDS`` ("position", "velocity")."""

@@ -65,7 +65,7 @@ def _register(writer: Writer, topic: str, name: str, text: str) -> int:
 
 
 class SolutionLike(Protocol):
-    """What the writer reads of a navigation solution (``pospp.nav.filter.NavSolution`` is one;
+    """What the writer reads of a navigation solution (``pospp.nav.solution.NavSolution`` is one;
     io does not import nav): time-major arrays, NED, rad, SI."""
 
     @property

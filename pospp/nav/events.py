@@ -1,7 +1,7 @@
 """The imaging sensor's pose at trigger events (exterior orientation). No I/O.
 
 Frames: n (NED), b (body FRD, the IMU's), s (the sensor: camera or lidar, its own axes).
-Given the navigation solution of the IMU (:class:`pospp.nav.filter.NavSolution`), the sensor's
+Given the navigation solution of the IMU (:class:`pospp.nav.solution.NavSolution`), the sensor's
 lever arm ``lever_b`` (sensor origin in b, from the IMU) and its boresight rotation ``C_bs``
 (s -> b), at each event time t::
 
@@ -28,8 +28,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from pospp import earth, rotation
 from pospp.nav.error_model import rpy_covariance
-from pospp.nav.filter import NavSolution
 from pospp.nav.smoother import interpolation_weights
+from pospp.nav.solution import NavSolution
 from pospp.nav.strapdown import interpolate_trajectory
 
 __all__ = ["SensorPoses", "sensor_poses"]

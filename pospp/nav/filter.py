@@ -59,11 +59,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pospp import rotation
 from pospp.nav import filter_input, smoother
 from pospp.nav._filter_kernel import STATUS_GATED, STATUS_RESET, STATUS_USED
 from pospp.nav.alignment import AlignmentOptions, AlignmentResult, align
-from pospp.nav.error_model import DR, DV, PHI, rpy_covariance
+from pospp.nav.error_model import DR, DV, PHI
 from pospp.nav.filter_input import GnssRejection, MeasurementRecords
 from pospp.nav.filter_state import (
     ForwardArrays,
@@ -77,6 +76,7 @@ from pospp.nav.filter_state import (
     total_bias_map,
     total_bias_variance,
 )
+from pospp.nav.solution import NavSolution
 from pospp.nav.strapdown import Trajectory
 from pospp.nav.tuning import ImuTuning, NoiseParameters, tuning_preset
 from pospp.types import GnssFixes, GnssVelocities, ImuSamples
@@ -171,66 +171,6 @@ class FilterOptions:
 
 
 @dataclass(frozen=True)
-class NavSolution:
-    """Navigation solution with its uncertainty at N output epochs (time-major arrays).
-
-    Position and attitude are those of the IMU. The covariances are the (N, 3, 3) blocks of
-    the filter's P for the position (NED, m^2), velocity (NED, m^2/s^2) and misalignment phi
-    (NED, rad^2) errors; the sigmas are read from them when asked (square roots of their
-    diagonals), not stored beside them. Attitude sigmas: ``att_sigma_ned_rad`` of phi, and
-    ``rpy_sigma_rad`` of [roll, pitch, yaw] mapped by d(rpy) = -E^-1 phi, where E maps Euler
-    angle rates to the NED rotation rate (z-y-x,
-    :func:`pospp.nav.error_model.rpy_covariance`).
-    """
-
-    time_ns: NDArray
-    t_s: NDArray
-    lat_rad: NDArray
-    lon_rad: NDArray
-    height_m: NDArray
-    v_n_mps: NDArray
-    q_nb: NDArray
-    pos_cov_ned_m2: NDArray
-    vel_cov_ned_m2ps2: NDArray
-    att_cov_ned_rad2: NDArray
-
-    def __len__(self) -> int:
-        return self.t_s.shape[0]
-
-    @property
-    def pos_sigma_ned_m(self) -> NDArray:
-        """(N, 3) position sigmas, NED [m]: sqrt(diag P_rr)."""
-        return np.sqrt(np.diagonal(self.pos_cov_ned_m2, axis1=1, axis2=2))
-
-    @property
-    def vel_sigma_ned_mps(self) -> NDArray:
-        """(N, 3) velocity sigmas, NED [m/s]: sqrt(diag P_vv)."""
-        return np.sqrt(np.diagonal(self.vel_cov_ned_m2ps2, axis1=1, axis2=2))
-
-    @property
-    def att_sigma_ned_rad(self) -> NDArray:
-        """(N, 3) misalignment phi sigmas, NED [rad]: sqrt(diag P_phiphi)."""
-        return np.sqrt(np.diagonal(self.att_cov_ned_rad2, axis1=1, axis2=2))
-
-    @property
-    def rpy_sigma_rad(self) -> NDArray:
-        """(N, 3) [roll, pitch, yaw] sigmas [rad]: sqrt(diag(E^-1 P_phiphi E^-T))."""
-        rpy_cov = rpy_covariance(self.q_nb, self.att_cov_ned_rad2)
-        return np.sqrt(np.clip(np.diagonal(rpy_cov, axis1=1, axis2=2), 0.0, None))
-
-    @property
-    def rpy_rad(self) -> NDArray:
-        """[roll, pitch, yaw] (rad), yaw in [0, 2 pi)."""
-        return rotation.euler_from_quat(self.q_nb)
-
-    @property
-    def trajectory(self) -> Trajectory:
-        """The states as a :class:`pospp.nav.strapdown.Trajectory`."""
-        return Trajectory(self.t_s, self.lat_rad, self.lon_rad, self.height_m, self.v_n_mps,
-                          self.q_nb)
-
-
-@dataclass(frozen=True)
 class BiasHistory:
     """Sensor error estimates (body FRD, measured = (1 + s) true + b) with 1-sigma.
 
@@ -317,15 +257,16 @@ def _zeros(shape: tuple[int, ...]) -> NDArray:
 
 
 def _solution(time_ns, t_s, states, blocks) -> NavSolution:
-    """The states with P's [phi, dv, dr] blocks; ``blocks`` None: NaN (``covariance_outputs``
-    False)."""
+    """The states with P's [phi, dv, dr] blocks, packed ((N, 6) each); ``blocks`` None: NaN
+    (``covariance_outputs`` False)."""
     if blocks is None:
-        blocks = [_nan((states.shape[0], 3, 3))] * 3
+        blocks = [_nan((states.shape[0], 6))] * 3
     att_cov, vel_cov, pos_cov = blocks
     return NavSolution(
         time_ns=time_ns, t_s=t_s, lat_rad=states[:, 0].copy(), lon_rad=states[:, 1].copy(),
         height_m=states[:, 2].copy(), v_n_mps=states[:, 3:6].copy(), q_nb=states[:, 6:10].copy(),
-        pos_cov_ned_m2=pos_cov, vel_cov_ned_m2ps2=vel_cov, att_cov_ned_rad2=att_cov,
+        pos_cov_packed_ned_m2=pos_cov, vel_cov_packed_ned_m2ps2=vel_cov,
+        att_cov_packed_ned_rad2=att_cov,
     )
 
 
@@ -458,7 +399,7 @@ def _forward_results(t: NDArray, fw: ForwardArrays, lay: StateLayout, out_tns: N
     n_out = fw.out_x.shape[0]  # (without covariance outputs P's arrays may have no rows)
     diag = fw.out_diag if with_cov else _nan((n_out, fw.out_diag.shape[1]))
     bvar = fw.out_bvar if with_cov else _nan((n_out, 6))
-    blocks = [fw.out_blk[:, j].copy() for j in range(3)] if with_cov else None
+    blocks = [smoother.pack_symmetric(fw.out_blk[:, j]) for j in range(3)] if with_cov else None
     fwd = _solution(out_tns, out_t, fw.out_x, blocks)
     fwd_bias = _bias_history(out_t, fw.out_sens, bvar, diag, lay.i_sf)
     lever_sig = np.sqrt(diag[-1, lay.i_l:lay.i_l + 3]) if lay.i_l >= 0 else np.zeros(3)
@@ -582,6 +523,6 @@ def solution_a_fields(
 __all__ = [
     "STATUS_GATED", "STATUS_RESET", "STATUS_USED",
     "BiasHistory", "FilterOptions", "FilterResult", "GainReplay", "GnssRejection",
-    "InnovationRecord", "LeverArmEstimate", "NavSolution", "reference_name", "solution_a_fields",
+    "InnovationRecord", "LeverArmEstimate", "reference_name", "solution_a_fields",
     "run_integrated_navigation",
 ]

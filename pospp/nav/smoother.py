@@ -267,8 +267,9 @@ def interpolate_errors(
 def interpolate_covariance_blocks(
     node_t_s: NDArray, p_smooth: NDArray, t_s: NDArray, blocks: tuple[slice, ...], n: int
 ) -> tuple[NDArray, list[NDArray]]:
-    """Diagonal (N, n) and the requested diagonal blocks (N, b, b) of P^s (``p_smooth``
-    packed, (K, n (n + 1) / 2), :func:`pack_symmetric`) interpolated to t_s."""
+    """Diagonal (N, n) and the requested diagonal blocks of P^s (``p_smooth`` packed, (K, n (n +
+    1) / 2), :func:`pack_symmetric`) interpolated to t_s, each block packed likewise (N, b (b
+    + 1) / 2)."""
     i, a = interpolation_weights(node_t_s, t_s)
     nxt = np.minimum(i + 1, node_t_s.shape[0] - 1)
     idx = packed_index(n)
@@ -276,8 +277,8 @@ def interpolate_covariance_blocks(
     diag = (1.0 - a)[:, None] * diag_nodes[i] + a[:, None] * diag_nodes[nxt]
     out = []
     for s in blocks:
-        blk = p_smooth[:, idx[s, s]]
-        out.append((1.0 - a)[:, None, None] * blk[i] + a[:, None, None] * blk[nxt])
+        blk = p_smooth[:, idx[s, s][np.triu_indices(s.stop - s.start)]]
+        out.append((1.0 - a)[:, None] * blk[i] + a[:, None] * blk[nxt])
     return diag, out
 
 

@@ -31,7 +31,8 @@ from pospp.units import t_s_from_time_ns
 
 if TYPE_CHECKING:
     from pospp.io.mcap_reader import FlightLog
-    from pospp.nav.filter import FilterResult, LeverArmEstimate, NavSolution
+    from pospp.nav.filter import FilterResult, LeverArmEstimate
+    from pospp.nav.solution import NavSolution
     from pospp.qc.lever_time import LeverTime
 
 

@@ -15,7 +15,8 @@ from pospp.config import config_from_dict
 from pospp.io.mcap_reader import read_flight_log
 from pospp.io.simulation_files import write_simulation
 from pospp.nav.events import sensor_poses
-from pospp.nav.filter import NavSolution
+from pospp.nav.smoother import pack_symmetric
+from pospp.nav.solution import NavSolution
 from pospp.sim.api import simulate
 from pospp.sim.gnss import GnssModel
 
@@ -30,8 +31,9 @@ def _solution(t_s, lat, lon, h, v_n, q_nb, *, sigma_scale=0.0) -> NavSolution:
     return NavSolution(
         time_ns=np.round(np.asarray(t_s) * 1e9).astype(np.int64), t_s=np.asarray(t_s, float),
         lat_rad=lat, lon_rad=lon, height_m=h, v_n_mps=v_n, q_nb=q_nb,
-        pos_cov_ned_m2=eye * sigma_scale**2, vel_cov_ned_m2ps2=eye * 0.0,
-        att_cov_ned_rad2=eye * (1e-3) ** 2)
+        pos_cov_packed_ned_m2=pack_symmetric(eye * sigma_scale**2),
+        vel_cov_packed_ned_m2ps2=pack_symmetric(eye * 0.0),
+        att_cov_packed_ned_rad2=pack_symmetric(eye * (1e-3) ** 2))
 
 
 def test_lever_arm_and_boresight_closed_form():

@@ -358,15 +358,19 @@ def _held_bytes(*objs) -> int:
 
 
 def test_a_keeps_each_quantity_once(clean):
-    """The sigmas are read from the covariance blocks (not stored beside them), and scale
-    factors a pass does not estimate take no memory: per output epoch a solution holds its
-    time (int64 ns and float s, 16 B), position, velocity (48 B), quaternion (32 B) and three
-    3x3 covariance blocks (216 B), a bias history its gyro and accelerometer biases and sigmas
-    (96 B; its times are the solution's)."""
+    """The covariance blocks are stored as their upper triangles (P is exactly symmetric), the
+    sigmas read from them (not stored beside them), and scale factors a pass does not
+    estimate take no memory: per output epoch a solution holds its time (int64 ns and float
+    s, 16 B), position, velocity (48 B), quaternion (32 B) and three packed 3x3 covariance
+    blocks (144 B), a bias history its gyro and accelerometer biases and sigmas (96 B; its
+    times are the solution's)."""
     for sol in (clean.forward, clean.smoothed):
         names = {f.name for f in dataclasses.fields(sol)}
         assert not names & {"pos_sigma_ned_m", "vel_sigma_ned_mps", "att_sigma_ned_rad",
                             "rpy_sigma_rad"}
+        for cov in (sol.pos_cov_ned_m2, sol.vel_cov_ned_m2ps2, sol.att_cov_ned_rad2):
+            assert cov.shape == (len(sol), 3, 3)
+            np.testing.assert_array_equal(cov, np.swapaxes(cov, 1, 2))
         for sig, cov in ((sol.pos_sigma_ned_m, sol.pos_cov_ned_m2),
                          (sol.vel_sigma_ned_mps, sol.vel_cov_ned_m2ps2),
                          (sol.att_sigma_ned_rad, sol.att_cov_ned_rad2)):
@@ -379,4 +383,4 @@ def test_a_keeps_each_quantity_once(clean):
             assert a.shape == (len(b.t_s), 3) and not a.any() and a.strides[0] == 0
     n = len(clean.forward)
     assert _held_bytes(clean.forward, clean.smoothed, clean.forward_biases,
-                       clean.smoothed_biases) <= n * (2 * 312 + 2 * 96) + 64
+                       clean.smoothed_biases) <= n * (2 * 240 + 2 * 96) + 64

@@ -13,7 +13,8 @@ from mcap_ros2.reader import read_ros2_messages
 
 from pospp import rotation
 from pospp.io.trajectory_mcap import write_trajectory_mcap
-from pospp.nav.filter import NavSolution
+from pospp.nav.smoother import pack_symmetric
+from pospp.nav.solution import NavSolution
 
 T0_NS = 1_717_200_000_000_000_000
 N, RATE_HZ, SPEED_MPS = 600, 10.0, 50.0
@@ -31,7 +32,9 @@ def _solution() -> NavSolution:
         time_ns=T0_NS + np.round(t * 1e9).astype(np.int64), t_s=t,
         lat_rad=np.full(N, lat0), lon_rad=lon0 + SPEED_MPS * t / ((r_n + 500.0) * np.cos(lat0)),
         height_m=np.full(N, 500.0), v_n_mps=np.tile([0.0, SPEED_MPS, 0.0], (N, 1)), q_nb=q,
-        pos_cov_ned_m2=pos_cov, vel_cov_ned_m2ps2=vel_cov, att_cov_ned_rad2=att_cov)
+        pos_cov_packed_ned_m2=pack_symmetric(pos_cov),
+        vel_cov_packed_ned_m2ps2=pack_symmetric(vel_cov),
+        att_cov_packed_ned_rad2=pack_symmetric(att_cov))
 
 
 @pytest.fixture(scope="module")
