@@ -362,8 +362,8 @@ def run_integrated_navigation(
     outcome = record_outcomes(meas, fw, rejections)
     out_tns = imu_t_ns[fw.out_k]
     # before the smoother, which may write over the nodes' P
-    gains = gain_replay(fw, t, al.k_start, meas, options.smoother, lay, noise) \
-        if record_gains and replay is None else None
+    gains = gain_replay(fw, imu_t_ns, epoch_ns, al.k_start, meas, options.smoother, lay,
+                        noise) if record_gains and replay is None else None
     errors = None
     if options.smoother:
         node_t = t[fw.node_k]

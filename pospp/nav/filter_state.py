@@ -37,6 +37,7 @@ from pospp.nav.smoother import (
     unpack_symmetric,
 )
 from pospp.nav.tuning import NoiseParameters
+from pospp.units import t_s_from_time_ns
 
 if TYPE_CHECKING:
     from pospp.nav.filter import FilterOptions
@@ -178,8 +179,10 @@ class GainReplay:
 
     Attributes
     ----------
-    t_s : ndarray, (N,)
-        The pass's IMU epochs [s from its epoch]; a replay's must be the same.
+    time_ns : ndarray of int64, (N,)
+        The pass's IMU stamps (the log's own array: not a copy); a replay's must be the same.
+    epoch_ns : int
+        Its time origin: its epochs are ``t_s`` [s from ``epoch_ns``] (made when read).
     k_start : int
         The pass's first epoch (alignment).
     meas_k, meas_kind : ndarray of int, (M,)
@@ -207,7 +210,8 @@ class GainReplay:
     with fixed gains.
     """
 
-    t_s: NDArray
+    time_ns: NDArray
+    epoch_ns: int
     k_start: int
     meas_k: NDArray
     meas_kind: NDArray
@@ -220,6 +224,11 @@ class GainReplay:
     node_k: NDArray
     layout: StateLayout
     gm_inv_tau: NDArray
+
+    @property
+    def t_s(self) -> NDArray:
+        """(N,) the pass's IMU epochs [s from ``epoch_ns``]."""
+        return t_s_from_time_ns(self.time_ns, self.epoch_ns)
 
     def matches(self, t: NDArray, k_start: int, meas: MeasurementRecords, n: int) -> bool:
         """Whether a pass over epochs ``t`` from ``k_start`` with records ``meas`` and ``n``
@@ -240,12 +249,14 @@ def switch_epoch(fw: ForwardArrays, k_start: int) -> int:
     return int(fw.out_k[int(np.argmax(converged))])
 
 
-def gain_replay(fw: ForwardArrays, t: NDArray, k_start: int, meas: MeasurementRecords,
-                smoother_on: bool, lay: StateLayout, noise: NoiseParameters) -> GainReplay:
-    """The :class:`GainReplay` of a pass made with ``record_gains`` (before its smoother,
-    which may write over the nodes' P) with layout ``lay`` and IMU model ``noise``."""
-    return GainReplay(t, k_start, meas.k, meas.kind, fw.m_status.copy(), fw.m_gain,
-                      fw.m_sinv, smoother_gains(fw.node_pp, fw.node_pu, fw.node_phi)
+def gain_replay(fw: ForwardArrays, time_ns: NDArray, epoch_ns: int, k_start: int,
+                meas: MeasurementRecords, smoother_on: bool, lay: StateLayout,
+                noise: NoiseParameters) -> GainReplay:
+    """The :class:`GainReplay` of a pass made with ``record_gains`` over the IMU stamps
+    ``time_ns`` from ``epoch_ns`` (before its smoother, which may write over the nodes' P)
+    with layout ``lay`` and IMU model ``noise``."""
+    return GainReplay(time_ns, int(epoch_ns), k_start, meas.k, meas.kind, fw.m_status.copy(),
+                      fw.m_gain, fw.m_sinv, smoother_gains(fw.node_pp, fw.node_pu, fw.node_phi)
                       if smoother_on else None, switch_epoch(fw, k_start), fw.m_h,
                       fw.node_k.copy(), lay, _inv_tau(noise))
 

@@ -19,6 +19,7 @@ from pospp.nav.error_model import rpy_covariance
 from pospp.nav.filter import FilterOptions, run_integrated_navigation
 from pospp.nav.tuning import tuning_preset
 from pospp.types import GnssFixes, GnssVelocities, ImuSamples
+from pospp.units import t_s_from_time_ns
 
 LAT, LON, H = math.radians(45.0), math.radians(7.0), 300.0
 RPY = np.radians([1.5, -2.0, 130.0])
@@ -384,3 +385,17 @@ def test_a_keeps_each_quantity_once(clean):
     n = len(clean.forward)
     assert _held_bytes(clean.forward, clean.smoothed, clean.forward_biases,
                        clean.smoothed_biases) <= n * (2 * 240 + 2 * 96) + 64
+
+
+def test_recorded_gains_keep_the_logs_stamps_not_a_copy(record):
+    """A pass recording its gains keeps the log's IMU stamps by reference and makes its
+    epochs [s] from them when read (no (N,) float copy held with the gains)."""
+    imu = record[0]
+    gains = _run(*record, record_gains=True).gain_replay
+    assert gains.time_ns is imu.time_ns and gains.epoch_ns == EPOCH
+    np.testing.assert_array_equal(gains.t_s, t_s_from_time_ns(imu.time_ns, EPOCH))
+    n = imu.time_ns.shape[0]
+    held = [f.name for f in dataclasses.fields(gains) if isinstance(getattr(gains, f.name),
+                                                                     np.ndarray)
+            and getattr(gains, f.name).shape[0] == n and f.name != "time_ns"]
+    assert held == []
