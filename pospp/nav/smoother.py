@@ -168,14 +168,16 @@ def smoother_gains(p_pred, p_upd, phi):
 
 
 @njit(cache=True, nogil=True)
-def rts_backward_gains(a, dx, e_plus, e_minus):
-    """:func:`rts_backward_states` with given gains ``a`` (:func:`smoother_gains` of another
-    pass on the same schedule): ``e_k^+ = A_k e_{k+1}^-``, ``e_k^- = e_k^+ + dx_k``."""
+def rts_backward_gains(a_own, a, dx, e_plus, e_minus):
+    """:func:`rts_backward_states` with given gains: ``e_k^+ = A_k e_{k+1}^-``, ``e_k^- =
+    e_k^+ + dx_k``, A_k from ``a_own`` (the pass's own) for its nodes k < len(a_own), from
+    ``a`` (K, n, n; :func:`smoother_gains` of another pass on the same schedule) after."""
     k_last = a.shape[0] - 1
+    n_own = a_own.shape[0]
     e_plus[k_last, :] = 0.0
     e_minus[k_last, :] = dx[k_last]
     for k in range(k_last - 1, -1, -1):
-        e_plus[k] = np.dot(a[k], e_minus[k + 1])
+        e_plus[k] = np.dot(a_own[k] if k < n_own else a[k], e_minus[k + 1])
         for i in range(e_plus.shape[1]):
             e_minus[k, i] = e_plus[k, i] + dx[k, i]
 
@@ -228,12 +230,14 @@ def rts_smooth_replayed(gains: NDArray, p_pred: NDArray, p_upd: NDArray, phi: ND
         raise ValueError(f"gains: expected shape ({k}, {n}, {n}) (the replayed pass's nodes), "
                          f"got {gains.shape}")
     n_own = p_pred.shape[0]
-    if n_own > 1:
-        gains = gains.copy()
-        gains[:n_own - 1] = smoother_gains(p_pred, p_upd, phi)[:n_own - 1]
+    # its own A_k where it has the nodes' P (not node n_own - 1: A_k needs P at k + 1); the
+    # replayed ones are read in place, not copied
+    own = (smoother_gains(p_pred, p_upd, phi)[:n_own - 1] if n_own > 1
+           else np.zeros((0, n, n)))
     e_plus, e_minus = np.zeros((k, n)), np.zeros((k, n))
     if k:
-        rts_backward_gains(gains, np.ascontiguousarray(dx), e_plus, e_minus)
+        rts_backward_gains(own, np.ascontiguousarray(gains), np.ascontiguousarray(dx), e_plus,
+                           e_minus)
     return e_plus, e_minus, np.empty((0, packed_size(n)))
 
 

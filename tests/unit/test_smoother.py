@@ -8,6 +8,8 @@ problem solved by numpy), with the posterior covariance equal to the smoothed co
 
 from __future__ import annotations
 
+import tracemalloc
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -219,3 +221,32 @@ def test_packed_nodes_of_another_shape_are_refused():
     _, p_pred, p_upd, phis, dx = _closed_loop_forward(s)
     with pytest.raises(ValueError, match="p_pred: expected shape"):
         smoother.rts_smooth(smoother.unpack_symmetric(p_pred, s["n"]), p_upd, phis, dx)
+
+
+def test_replayed_gains_are_read_in_place():
+    """A replayed pass reads the other pass's (K, n, n) gains where they are: what it
+    allocates while smoothing is its errors ((K, n) twice) and its own gains over the nodes
+    it kept, not a copy of the gains; and e_k^+ = A_k e_{k+1}^-, e_k^- = e_k^+ + dx_k, its
+    own A_k (identity here: P = I, Phi = I) before its last kept node (a loop in numpy)."""
+    rng = np.random.default_rng(3)
+    k, n, n_own = 2000, 21, 5
+    gains = rng.normal(0.0, 0.2, (k, n, n))
+    dx = rng.normal(0.0, 1.0, (k, n))
+    p_own = np.tile(smoother.pack_symmetric(np.eye(n)[None]), (n_own, 1))
+    phi_own = np.tile(np.eye(n), (n_own, 1, 1))
+    args = (p_own, p_own.copy(), phi_own, dx)
+    smoother.rts_smooth_replayed(gains[:n_own], p_own, p_own, phi_own, dx[:n_own])  # loaded
+    tracemalloc.start()
+    try:
+        e_plus, e_minus, _ = smoother.rts_smooth_replayed(gains, *args)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < gains.nbytes / 4
+    ep, em = np.zeros((k, n)), np.zeros((k, n))
+    em[-1] = dx[-1]
+    for j in range(k - 2, -1, -1):
+        ep[j] = (np.eye(n) if j < n_own - 1 else gains[j]) @ em[j + 1]
+        em[j] = ep[j] + dx[j]
+    np.testing.assert_allclose(e_plus, ep, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(e_minus, em, rtol=1e-12, atol=1e-12)
