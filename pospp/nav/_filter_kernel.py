@@ -362,7 +362,10 @@ def store_node(i_node, k, p_upd, phi_acc, dx_tot, nodes):
     node_k, node_pp, node_pu, node_phi, node_dx = nodes
     node_k[i_node] = k
     smoother.pack_symmetric_into(p_upd, node_pu[i_node])  # P is exactly symmetric here
-    node_phi[i_node] = phi_acc
+    m = node_phi.shape[1] - 1  # Phi compact: its first m rows and its diagonal
+    node_phi[i_node, :m] = phi_acc[:m]
+    for a in range(phi_acc.shape[0]):
+        node_phi[i_node, m, a] = phi_acc[a, a]
     node_dx[i_node] = dx_tot
 
 

@@ -48,6 +48,9 @@ uses): misalignment phi_n, velocity error dv_n, position error dr_n (NED m), gyr
 bias."""
 PHI, DV, DR, BG, BA = (slice(i, i + 3) for i in (I_PHI, I_DV, I_DR, I_BG, I_BA))
 """Slices of the 15-state error vector."""
+N_NAV = I_BG
+"""The navigation errors (phi_n, dv_n, dr_n) come first: the states after them (biases,
+Gauss-Markov biases, scale factors, lever arm) have F rows holding their own decay alone."""
 
 
 @njit(cache=True)

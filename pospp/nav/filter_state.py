@@ -27,7 +27,7 @@ from pospp.nav._filter_kernel import (
     forward_kernel,
 )
 from pospp.nav.alignment import AlignmentResult
-from pospp.nav.error_model import BA, BG, DR, DV, I_BA, I_BG, N_STATES, PHI
+from pospp.nav.error_model import BA, BG, DR, DV, I_BA, I_BG, N_NAV, N_STATES, PHI
 from pospp.nav.filter_input import GnssRejection, MeasurementRecords, epoch_flags
 from pospp.nav.smoother import (
     packed_size,
@@ -138,6 +138,8 @@ class ForwardArrays:
     node_pu: NDArray
     """Their updated covariances, packed likewise."""
     node_phi: NDArray
+    """Phi from the node before, compact ((nodes, N_NAV + 1, n): its rows of the navigation
+    errors and its diagonal, :func:`pospp.nav.smoother.unpack_transition_into`)."""
     node_dx: NDArray
     m_gain: NDArray
     """Each used record's Kalman gain (records, n, 3) when the pass stored them, else no
@@ -302,7 +304,7 @@ def forward_pass(t: NDArray, w: NDArray, f: NDArray, al: AlignmentResult,
         out_blk=np.empty((n_pout, 3, 3, 3)), out_sens=np.empty((n_out, 12)),
         out_bvar=np.empty((n_pout, 6)), out_lever=np.empty((n_out, 3)),
         node_k=np.empty(n_kept, dtype=np.int64), node_pp=np.empty((n_cov, packed_size(n))),
-        node_pu=np.empty((n_cov, packed_size(n))), node_phi=np.empty((n_cov, n, n)),
+        node_pu=np.empty((n_cov, packed_size(n))), node_phi=np.empty((n_cov, N_NAV + 1, n)),
         node_dx=np.empty((n_kept, n)), m_gain=np.empty((m_rec, n, 3)),
         m_sinv=np.empty((m_rec, 3, 3)), m_h=np.empty((m_rec, 3, n)),
         replayed=replay is not None,

@@ -28,8 +28,11 @@ interpolated the same way (an approximation documented in docs/method.md).
 
 Memory: per node the two covariances packed (their upper triangles, n (n + 1) / 2 numbers
 each: :func:`pack_symmetric`; A's P is exactly symmetric wherever a node stores it, so the
-packing is exact: 35 MiB less on a 1.5 h flight's nodes) and Phi (n x n); never per
-IMU epoch.
+packing is exact: 35 MiB less on a 1.5 h flight's nodes) and Phi compact, its 9 rows of the
+navigation errors and its diagonal ((9 + 1) n numbers, :func:`unpack_transition_into`: the
+rows of the bias, scale-factor and lever-arm errors, whose F rows hold their own decay
+alone, are diagonal in every product of their steps, so the form is exact: 19 MiB less);
+never per IMU epoch.
 """
 
 from __future__ import annotations
@@ -93,6 +96,32 @@ def unpack_symmetric(packed: NDArray, n: int) -> NDArray:
 
 
 @njit(cache=True, nogil=True)
+def unpack_transition_into(compact, phi):
+    """The n x n transition matrix ``phi`` from its compact form ``compact`` ((m + 1, n)):
+    rows 0 .. m - 1 are Phi's first m rows, row m its diagonal, from which its other rows
+    are read (diagonal: the states after the m navigation errors are biases, scale factors
+    and lever arms, whose error dynamics are their own decay alone)."""
+    m, n = compact.shape[0] - 1, compact.shape[1]
+    for a in range(n):
+        for b in range(n):
+            phi[a, b] = compact[a, b] if a < m else (compact[m, a] if a == b else 0.0)
+
+
+def compact_transition(phi: NDArray, m: int) -> NDArray:
+    """(K, n, n) -> (K, m + 1, n): the compact form :func:`unpack_transition_into` reads;
+    ValueError when a row at or after m is not diagonal."""
+    k, n = phi.shape[0], phi.shape[-1]
+    lower = phi[:, m:, :].copy()
+    diag = np.einsum("kii->ki", phi)
+    lower[:, np.arange(n - m), np.arange(m, n)] = 0.0
+    if np.any(lower != 0.0):
+        raise ValueError(f"phi: rows {m} and after are not diagonal")
+    out = np.empty((k, m + 1, n))
+    out[:, :m], out[:, m] = phi[:, :m], diag
+    return out
+
+
+@njit(cache=True, nogil=True)
 def rts_backward(p_pred, p_upd, phi, dx, e_plus, e_minus, p_smooth):
     """Backward RTS pass over ``K`` nodes (see the module docstring).
 
@@ -100,8 +129,9 @@ def rts_backward(p_pred, p_upd, phi, dx, e_plus, e_minus, p_smooth):
     ----------
     p_pred, p_upd : float64[K, n (n + 1) / 2]
         Predicted and updated covariances, packed (:func:`pack_symmetric_into`).
-    phi : float64[K, n, n]
-        Phi[k] = transition from node k-1 to node k.
+    phi : float64[K, m + 1, n]
+        Phi[k] = transition from node k-1 to node k, compact (:func:`unpack_transition_into`:
+        its first m rows and its diagonal).
     dx : float64[K, n]
         Corrections fed back at each node.
     e_plus, e_minus : float64[K, n]
@@ -111,8 +141,8 @@ def rts_backward(p_pred, p_upd, phi, dx, e_plus, e_minus, p_smooth):
         last read before node k's smoothed one is written).
     """
     k_last = p_pred.shape[0] - 1
-    n = phi.shape[1]
-    pp, pu, ps_next = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
+    n = phi.shape[2]
+    pp, pu, ps_next, ph = np.empty((n, n)), np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
     e_plus[k_last, :] = 0.0
     e_minus[k_last, :] = dx[k_last]
     p_smooth[k_last] = p_upd[k_last]
@@ -120,7 +150,8 @@ def rts_backward(p_pred, p_upd, phi, dx, e_plus, e_minus, p_smooth):
     for k in range(k_last - 1, -1, -1):
         unpack_symmetric_into(p_upd[k], pu)
         unpack_symmetric_into(p_pred[k + 1], pp)
-        b = np.dot(phi[k + 1], pu)
+        unpack_transition_into(phi[k + 1], ph)
+        b = np.dot(ph, pu)
         a_t = np.linalg.solve(pp, b)  # = P_{k+1|k}^-1 Phi P_k|k = A^T
         a = np.ascontiguousarray(a_t.T)
         e_plus[k] = np.dot(a, e_minus[k + 1])
@@ -138,15 +169,16 @@ def rts_backward_states(p_pred, p_upd, phi, dx, e_plus, e_minus):
     solve with a vector, ``e_k^+ = P_k|k Phi_{k+1}^T (P_{k+1|k}^-1 e_{k+1}^-)`` (the same
     A_k e_{k+1}^-, associated the other way). Arguments as :func:`rts_backward`."""
     k_last = p_pred.shape[0] - 1
-    n = phi.shape[1]
-    pp, pu = np.empty((n, n)), np.empty((n, n))
+    n = phi.shape[2]
+    pp, pu, ph = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
     e_plus[k_last, :] = 0.0
     e_minus[k_last, :] = dx[k_last]
     for k in range(k_last - 1, -1, -1):
         unpack_symmetric_into(p_pred[k + 1], pp)
         unpack_symmetric_into(p_upd[k], pu)
+        unpack_transition_into(phi[k + 1], ph)
         y = np.linalg.solve(pp, e_minus[k + 1])
-        e_plus[k] = np.dot(pu, np.dot(phi[k + 1].T, y))
+        e_plus[k] = np.dot(pu, np.dot(ph.T, y))
         for i in range(e_plus.shape[1]):
             e_minus[k, i] = e_plus[k, i] + dx[k, i]
 
@@ -156,13 +188,14 @@ def smoother_gains(p_pred, p_upd, phi):
     """The backward pass's gains ``A_k = P_k|k Phi_{k+1}^T P_{k+1|k}^-1`` (K, n, n), row K - 1
     zero: what a replay of the same schedule (:func:`rts_backward_gains`) applies to its own
     errors. Arguments as :func:`rts_backward` (the covariances packed)."""
-    k_n, n = p_pred.shape[0], phi.shape[1]
-    pp, pu = np.empty((n, n)), np.empty((n, n))
+    k_n, n = p_pred.shape[0], phi.shape[2]
+    pp, pu, ph = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
     a = np.zeros((k_n, n, n))
     for k in range(k_n - 1):
         unpack_symmetric_into(p_upd[k], pu)
         unpack_symmetric_into(p_pred[k + 1], pp)
-        b = np.dot(phi[k + 1], pu)
+        unpack_transition_into(phi[k + 1], ph)
+        b = np.dot(ph, pu)
         a[k] = np.linalg.solve(pp, b).T  # (P^-1 Phi P_k|k)^T, as rts_backward
     return a
 
@@ -188,7 +221,7 @@ def rts_smooth(
 ) -> tuple[NDArray, NDArray, NDArray]:
     """Run the backward pass; returns (e_plus, e_minus, p_smooth), shapes (K, n), (K, n),
     (K, n (n + 1) / 2): ``p_pred``, ``p_upd`` and ``p_smooth`` packed (:func:`pack_symmetric`),
-    ``phi`` (K, n, n).
+    ``phi`` (K, m + 1, n) compact (:func:`unpack_transition_into`).
 
     ``overwrite_p_upd``: the smoothed covariances are written over ``p_upd`` (C-contiguous
     float64) and it is returned as p_smooth: node k's updated covariance is last read by step
@@ -243,9 +276,11 @@ def rts_smooth_replayed(gains: NDArray, p_pred: NDArray, p_upd: NDArray, phi: ND
 
 def _check_nodes(k: int, n: int, p_pred: NDArray, p_upd: NDArray, phi: NDArray) -> None:
     """ValueError unless the nodes' covariances are (k, n (n + 1) / 2) (packed) and Phi
-    (k, n, n)."""
+    compact (k, m + 1, n) with 1 <= m <= n (:func:`unpack_transition_into`)."""
+    m = phi.shape[1] - 1 if phi.ndim == 3 else -1
     for name, arr, shape in (("p_pred", p_pred, (k, packed_size(n))),
-                             ("p_upd", p_upd, (k, packed_size(n))), ("phi", phi, (k, n, n))):
+                             ("p_upd", p_upd, (k, packed_size(n))),
+                             ("phi", phi, (k, min(max(m, 1), n) + 1, n))):
         if arr.shape != shape:
             raise ValueError(f"{name}: expected shape {shape}, got {arr.shape}")
 

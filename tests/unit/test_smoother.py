@@ -65,7 +65,8 @@ def _closed_loop_forward(s):
             p = 0.5 * (p + p.T)
         p_upd[i] = p
         nominal[i] = x_hat
-    return (nominal, smoother.pack_symmetric(p_pred), smoother.pack_symmetric(p_upd), phis,
+    return (nominal, smoother.pack_symmetric(p_pred), smoother.pack_symmetric(p_upd),
+            smoother.compact_transition(phis, n),
             dx)
 
 
@@ -233,7 +234,7 @@ def test_replayed_gains_are_read_in_place():
     gains = rng.normal(0.0, 0.2, (k, n, n))
     dx = rng.normal(0.0, 1.0, (k, n))
     p_own = np.tile(smoother.pack_symmetric(np.eye(n)[None]), (n_own, 1))
-    phi_own = np.tile(np.eye(n), (n_own, 1, 1))
+    phi_own = smoother.compact_transition(np.tile(np.eye(n), (n_own, 1, 1)), n)
     args = (p_own, p_own.copy(), phi_own, dx)
     smoother.rts_smooth_replayed(gains[:n_own], p_own, p_own, phi_own, dx[:n_own])  # loaded
     tracemalloc.start()
@@ -250,3 +251,34 @@ def test_replayed_gains_are_read_in_place():
         em[j] = ep[j] + dx[j]
     np.testing.assert_allclose(e_plus, ep, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(e_minus, em, rtol=1e-12, atol=1e-12)
+
+
+def test_a_transition_is_exact_in_its_compact_form():
+    """A's Phi over many steps, with every optional state (Gauss-Markov biases, scale
+    factors, lever arm): the rows after the navigation errors are diagonal, so the nodes'
+    compact form (its 9 navigation rows and its diagonal) gives Phi back exactly; a Phi
+    whose later rows are not diagonal is refused."""
+    from pospp import rotation
+    from pospp.nav._filter_kernel import propagate_covariance
+    from pospp.nav.error_model import N_NAV
+    from pospp.nav.filter_state import state_layout
+
+    rng = np.random.default_rng(5)
+    lay = state_layout(True, True, True)
+    n = lay.n
+    x = np.concatenate([[0.8, 0.1, 500.0], [60.0, -20.0, 1.0],
+                        rotation.quat_from_euler(np.array([0.1, -0.05, 2.0]))])
+    p, phi = np.eye(n) * 1e-4, np.eye(n)
+    qc, inv_tau = np.diag(rng.uniform(1e-10, 1e-6, n)), np.array([1 / 3600.0, 1 / 600.0])
+    for _ in range(50):
+        fm, wm = rng.normal([0.0, 0.0, -9.8], 0.5), rng.normal(0.0, 0.05, 3)
+        p, phi = propagate_covariance(p, phi, x, fm, wm, 0.1, qc, lay.i_gm, lay.i_sf, inv_tau)
+    assert np.count_nonzero(phi[:N_NAV, N_NAV:]) > 0  # the nav rows do read the others
+    compact = smoother.compact_transition(phi[None], N_NAV)
+    assert compact.shape == (1, N_NAV + 1, n) and compact.size < phi.size / 2
+    back = np.empty((n, n))
+    smoother.unpack_transition_into(compact[0], back)
+    np.testing.assert_array_equal(back, phi)
+    phi[N_NAV + 1, 0] = 1e-9
+    with pytest.raises(ValueError, match="not diagonal"):
+        smoother.compact_transition(phi[None], N_NAV)
