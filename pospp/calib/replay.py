@@ -315,7 +315,7 @@ def replay_position_error(
 ) -> NDArray:
     """B minus A in position over one leg, NED [m], shape (M, 3): ``replay_leg(...).dr_n_m``
     (same arguments, samples and values) without the transition matrices (the smoothed
-    compensation's choice, :func:`pospp.calib.compensate.history_score_m`)."""
+    compensation's choice, :func:`pospp.calib.compensate.history_scores_m`)."""
     b_s, a_s = _b_and_a_samples(imu, solution_a, leg, gyro_bias_b_radps,
                                 attitude_correction_n_rad, accel_compensation, sample_rate_hz)
     return earth.llh_difference_ned_m(b_s.lat_rad, b_s.lon_rad, b_s.height_m,
