@@ -40,11 +40,11 @@ from pospp.calib.pairs import Pair
 from pospp.calib.replay import (
     ImuIncrements,
     ImuSource,
+    LegErrors,
     LegReplay,
     ReplayOptions,
     SolutionA,
-    replay_leg,
-    replay_position_error,
+    replay_errors,
 )
 from pospp.calib.solve import Calibration, FitOptions, fit_calibration
 from pospp.nav.error_model import DR, PHI
@@ -80,7 +80,8 @@ def joint_calibration(
     return fit_calibration(tuple(replays[i] for i in ids), formulation, options, **caches)
 
 
-def horizontal_error_at(rep: LegReplay, horizon_s: float) -> tuple[float, float, float]:
+def horizontal_error_at(rep: LegReplay | LegErrors, horizon_s: float
+                        ) -> tuple[float, float, float]:
     """(horizon actually used [s], |dv_h| [m/s], |dr_h| [m]) at min(horizon, leg end)."""
     k = int(np.searchsorted(rep.t_s, horizon_s - 1e-9))
     k = min(k, rep.t_s.size - 1)
@@ -182,8 +183,9 @@ def compensate_legs(
     gyro_bias_history: tuple[NDArray, NDArray] | None = None,
     history_hold: bool = True,
     threads: int = 1,
-) -> tuple[dict[int, LegReplay], tuple[LegImprovement, ...]]:
-    """Re-run B on every leg with the calibration applied; report the improvement.
+) -> tuple[dict[int, LegErrors], tuple[LegImprovement, ...]]:
+    """Re-run B on every leg with the calibration applied (B minus A, without B's error
+    model); report the improvement.
 
     Every leg gets the calibrated gyro bias (``paper``: the nav-frame drift rotated into the
     body by that leg's initial attitude); legs that took part in the fit also get their
@@ -218,7 +220,7 @@ def compensate_legs(
     """
     replay = replay if replay is not None else ReplayOptions()
 
-    def one(item: tuple[int, LegReplay]) -> tuple[LegReplay, LegImprovement]:
+    def one(item: tuple[int, LegReplay]) -> tuple[LegErrors, LegImprovement]:
         leg_id, rep = item
         in_fit = leg_id in cal.leg_ids
         phi = cal.misalignment_n_rad(leg_id) if in_fit else None
@@ -232,12 +234,9 @@ def compensate_legs(
             hist_t, hist_b = (np.asarray(a, dtype=float) for a in gyro_bias_history)
             leg_imu = _bias_removed(imu, rep, hist_t, hist_b, hold=history_hold)
             bg = np.zeros(3)
-        new = replay_leg(
+        new = replay_errors(
             leg_imu, solution_a, rep.leg, gyro_bias_b_radps=bg, attitude_correction_n_rad=phi,
-            accel_compensation=replay.accel_compensation,
-            transition_step=int(replay.transition_step), sample_rate_hz=replay.sample_rate_hz,
-            sigma_floor_mps=replay.sigma_floor_mps,
-        )
+            accel_compensation=replay.accel_compensation, sample_rate_hz=replay.sample_rate_hz)
         h, v0, p0 = horizontal_error_at(rep, replay.horizon_s)
         _, v1, p1 = horizontal_error_at(new, replay.horizon_s)
         return new, LegImprovement(leg_id, h, v0, v1, p0, p1, in_fit)
@@ -330,11 +329,11 @@ def history_scores_m(inputs: ModeInputs, candidates: Mapping[str, tuple[NDArray,
 
     def base(lid: int) -> NDArray:
         rep = inputs.replays[lid]
-        return replay_position_error(
+        return replay_errors(
             inputs.imu, inputs.solution_a, rep.leg,
             gyro_bias_b_radps=cal.gyro_bias_b_radps(rep.c_nb0),
             attitude_correction_n_rad=cal.misalignment_n_rad(lid),
-            accel_compensation=rc.accel_compensation, sample_rate_hz=rc.sample_rate_hz)
+            accel_compensation=rc.accel_compensation, sample_rate_hz=rc.sample_rate_hz).dr_n_m
 
     based = dict(zip(lids, map_in_threads(base, lids, inputs.threads), strict=True))
     scores = {}

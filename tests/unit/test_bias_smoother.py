@@ -133,7 +133,7 @@ def gm_legs():
 def _replayed_score_m(inputs, history) -> float:
     """The score :func:`history_scores_m` stands for, by replaying B on each fitted leg with
     the history removed from the gyro increments (interpolated at each interval's middle)."""
-    from pospp.calib.replay import ImuIncrements, replay_position_error
+    from pospp.calib.replay import ImuIncrements, replay_errors
 
     cal, rc, imu = inputs.cal, inputs.replay, inputs.imu
     mid = 0.5 * (imu.t_s[:-1] + imu.t_s[1:])
@@ -143,11 +143,10 @@ def _replayed_score_m(inputs, history) -> float:
     sq = []
     for lid in cal.leg_ids:
         rep = inputs.replays[lid]
-        dr = replay_position_error(removed, inputs.solution_a, rep.leg,
-                                   gyro_bias_b_radps=np.zeros(3),
-                                   attitude_correction_n_rad=cal.misalignment_n_rad(lid),
-                                   accel_compensation=rc.accel_compensation,
-                                   sample_rate_hz=rc.sample_rate_hz)
+        dr = replay_errors(removed, inputs.solution_a, rep.leg, gyro_bias_b_radps=np.zeros(3),
+                           attitude_correction_n_rad=cal.misalignment_n_rad(lid),
+                           accel_compensation=rc.accel_compensation,
+                           sample_rate_hz=rc.sample_rate_hz).dr_n_m
         k = int(np.searchsorted(rep.t_s, rc.horizon_s - 1e-9))
         sq.append(np.sum(np.square(dr[1:k + 1, 0:2]), axis=1))
     return float(np.sqrt(np.mean(np.concatenate(sq))))
