@@ -508,6 +508,19 @@ def _drift_penalty(th: NDArray, grade: Any, tau_s: float,
     return float(grade.penalty(_full_params(th, fixed)[2], tau_s))
 
 
+def variance_bounds(fixed: tuple[float | None, float | None]) -> list[tuple[float, float]]:
+    """The box of the variance search in theta: log a in [log 1e-6, log 1e4] (A's variance
+    scale [-]), then for each free one of (q, s2) (None in ``fixed``) log q in
+    [log 1e-22, log 1e-6] (ARW PSD [rad^2/s]) and log s2 in [log 1e-17, log 1e-8] (drift
+    variance [rad^2/s^2])."""
+    bounds = [(np.log(1e-6), np.log(1e4))]
+    if fixed[0] is None:
+        bounds.append((np.log(1e-22), np.log(1e-6)))
+    if fixed[1] is None:
+        bounds.append((np.log(1e-17), np.log(1e-8)))
+    return bounds
+
+
 def _fit_variances(nll: Callable[[NDArray], float], fixed: tuple[float | None, float | None],
                    penalty=None, start: NDArray | None = None) -> tuple[NDArray, float]:
     """REML (plus an optional penalty of theta) of log a and the logs of the free ones of
@@ -520,11 +533,7 @@ def _fit_variances(nll: Callable[[NDArray], float], fixed: tuple[float | None, f
     of its value, and holds at its bound a variance the data drive to zero. Returns (theta,
     objective at theta).
     """
-    bounds = [(np.log(1e-6), np.log(1e4))]
-    if fixed[0] is None:
-        bounds.append((np.log(1e-22), np.log(1e-6)))
-    if fixed[1] is None:
-        bounds.append((np.log(1e-17), np.log(1e-8)))
+    bounds = variance_bounds(fixed)
 
     def obj(th: NDArray) -> float:
         v = nll(th)
