@@ -40,13 +40,14 @@ from pospp.calib.pairs import Pair
 from pospp.calib.replay import (
     ImuIncrements,
     ImuSource,
+    LegErrors,
     LegReplay,
     ReplayOptions,
     SolutionA,
-    replay_leg,
-    replay_position_error,
+    replay_errors,
 )
 from pospp.calib.solve import Calibration, FitOptions, fit_calibration
+from pospp.nav.error_model import DR, PHI
 from pospp.threads import map_in_threads
 
 
@@ -79,7 +80,8 @@ def joint_calibration(
     return fit_calibration(tuple(replays[i] for i in ids), formulation, options, **caches)
 
 
-def horizontal_error_at(rep: LegReplay, horizon_s: float) -> tuple[float, float, float]:
+def horizontal_error_at(rep: LegReplay | LegErrors, horizon_s: float
+                        ) -> tuple[float, float, float]:
     """(horizon actually used [s], |dv_h| [m/s], |dr_h| [m]) at min(horizon, leg end)."""
     k = int(np.searchsorted(rep.t_s, horizon_s - 1e-9))
     k = min(k, rep.t_s.size - 1)
@@ -181,8 +183,9 @@ def compensate_legs(
     gyro_bias_history: tuple[NDArray, NDArray] | None = None,
     history_hold: bool = True,
     threads: int = 1,
-) -> tuple[dict[int, LegReplay], tuple[LegImprovement, ...]]:
-    """Re-run B on every leg with the calibration applied; report the improvement.
+) -> tuple[dict[int, LegErrors], tuple[LegImprovement, ...]]:
+    """Re-run B on every leg with the calibration applied (B minus A, without B's error
+    model); report the improvement.
 
     Every leg gets the calibrated gyro bias (``paper``: the nav-frame drift rotated into the
     body by that leg's initial attitude); legs that took part in the fit also get their
@@ -217,7 +220,7 @@ def compensate_legs(
     """
     replay = replay if replay is not None else ReplayOptions()
 
-    def one(item: tuple[int, LegReplay]) -> tuple[LegReplay, LegImprovement]:
+    def one(item: tuple[int, LegReplay]) -> tuple[LegErrors, LegImprovement]:
         leg_id, rep = item
         in_fit = leg_id in cal.leg_ids
         phi = cal.misalignment_n_rad(leg_id) if in_fit else None
@@ -231,12 +234,9 @@ def compensate_legs(
             hist_t, hist_b = (np.asarray(a, dtype=float) for a in gyro_bias_history)
             leg_imu = _bias_removed(imu, rep, hist_t, hist_b, hold=history_hold)
             bg = np.zeros(3)
-        new = replay_leg(
+        new = replay_errors(
             leg_imu, solution_a, rep.leg, gyro_bias_b_radps=bg, attitude_correction_n_rad=phi,
-            accel_compensation=replay.accel_compensation,
-            transition_step=int(replay.transition_step), sample_rate_hz=replay.sample_rate_hz,
-            sigma_floor_mps=replay.sigma_floor_mps,
-        )
+            accel_compensation=replay.accel_compensation, sample_rate_hz=replay.sample_rate_hz)
         h, v0, p0 = horizontal_error_at(rep, replay.horizon_s)
         _, v1, p1 = horizontal_error_at(new, replay.horizon_s)
         return new, LegImprovement(leg_id, h, v0, v1, p0, p1, in_fit)
@@ -299,35 +299,62 @@ class ModeChoice:
     source: str
 
 
-def history_score_m(inputs: ModeInputs, history: tuple[NDArray, NDArray] | None) -> float:
-    """RMS of B minus A's horizontal position [m] over the samples of the fitted legs up to
-    the horizon (B's reach), B compensated as :func:`compensate_legs` does it (the leg's
-    calibrated tilt, and the ``history`` interpolated, or the constant bias when None)."""
+def history_response_n_m(rep: LegReplay, dbias_b_radps: NDArray) -> NDArray:
+    """B's NED position change [m] (M, 3) at the leg's samples when ``dbias_b_radps`` (M, 3)
+    [rad/s, body] more gyro bias is removed from its rates: B's rate input changes by ``-db``,
+    so ``phi' = C_nb db`` (B's error model, :mod:`pospp.nav.error_model`) and
+    ``dr(t) = Phi_r(t, t0) int_0^t Phi(tau, t0)^-1 G(tau) dtau``, the integrand trapezoidal on
+    the samples; zero at the leg start."""
+    g = np.zeros((rep.t_s.size, 15, 1))
+    g[:, PHI, 0] = np.einsum("kij,kj->ki", rep.c_nb, dbias_b_radps)
+    integrand = np.linalg.solve(rep.phi, g)
+    steps = 0.5 * (integrand[1:] + integrand[:-1]) * np.diff(rep.t_s)[:, None, None]
+    cum = np.concatenate([np.zeros_like(integrand[:1]), np.cumsum(steps, axis=0)])
+    return (rep.phi[:, DR, :] @ cum)[:, :, 0]
+
+
+def history_scores_m(inputs: ModeInputs, candidates: Mapping[str, tuple[NDArray, NDArray]]
+                     ) -> dict[str, float]:
+    """Per candidate history (t [s], b [rad/s] body), the RMS of B minus A's horizontal
+    position [m] over the samples of the fitted legs up to the horizon (B's reach), B
+    compensated as :func:`compensate_legs` does it (the leg's calibrated tilt, the history
+    interpolated).
+
+    B is replayed once per leg with the calibrated constant bias ``b_g``; a history's B is that
+    replay plus B's linear response to ``b(t) - b_g`` (:func:`history_response_n_m`). B is
+    linear in a gyro bias of this size to far below the scores' differences: its attitude
+    error is what the bias integrates, 1 deg/h over 300 s is 0.08 deg."""
     cal, rc = inputs.cal, inputs.replay
+    lids = [i for i in cal.leg_ids if i in inputs.replays]
 
-    def one(lid: int) -> NDArray:
+    def base(lid: int) -> NDArray:
         rep = inputs.replays[lid]
-        imu: ImuSource = inputs.imu
-        bg = cal.gyro_bias_b_radps(rep.c_nb0)
-        if history is not None:
-            imu = _bias_removed(inputs.imu, rep, history[0], history[1], hold=False)
-            bg = np.zeros(3)
-        dr = replay_position_error(
-            imu, inputs.solution_a, rep.leg, gyro_bias_b_radps=bg,
+        return replay_errors(
+            inputs.imu, inputs.solution_a, rep.leg,
+            gyro_bias_b_radps=cal.gyro_bias_b_radps(rep.c_nb0),
             attitude_correction_n_rad=cal.misalignment_n_rad(lid),
-            accel_compensation=rc.accel_compensation, sample_rate_hz=rc.sample_rate_hz)
-        k = int(np.searchsorted(rep.t_s, rc.horizon_s - 1e-9))
-        return np.sum(np.square(dr[1:k + 1, 0:2]), axis=1)
+            accel_compensation=rc.accel_compensation, sample_rate_hz=rc.sample_rate_hz).dr_n_m
 
-    sq = map_in_threads(one, [i for i in cal.leg_ids if i in inputs.replays], inputs.threads)
-    return float(np.sqrt(np.mean(np.concatenate(sq))))
+    based = dict(zip(lids, map_in_threads(base, lids, inputs.threads), strict=True))
+    scores = {}
+    for name, (t_s, b_radps) in candidates.items():
+        sq = []
+        for lid in lids:
+            rep = inputs.replays[lid]
+            at = rep.t0_s + rep.t_s
+            db = np.stack([np.interp(at, t_s, b_radps[:, c]) for c in range(3)], axis=1)
+            dr = based[lid] + history_response_n_m(rep, db - cal.gyro_bias_b_radps(rep.c_nb0))
+            k = int(np.searchsorted(rep.t_s, rc.horizon_s - 1e-9))
+            sq.append(np.sum(np.square(dr[1:k + 1, 0:2]), axis=1))
+        scores[name] = float(np.sqrt(np.mean(np.concatenate(sq))))
+    return scores
 
 
 def choose_bias_history(inputs: ModeInputs,
                         candidates: Mapping[str, tuple[NDArray, NDArray]],
                         off_fit: Sequence[str]) -> ModeChoice:
     """The history under which B, compensated, best matches A over the fitted legs
-    (:func:`history_score_m`, least), spliced: on the fitted legs the best of
+    (:func:`history_scores_m`, least), spliced: on the fitted legs the best of
     ``candidates``, elsewhere the best of those named in ``off_fit``.
 
     The candidates share one time grid. The fitted legs' B minus A is not what the smoother
@@ -338,7 +365,7 @@ def choose_bias_history(inputs: ModeInputs,
     that read A (``off_fit``): a candidate that wins on the fitted legs by their own
     residuals says nothing about A's weight elsewhere.
     """
-    scores = {name: history_score_m(inputs, h) for name, h in candidates.items()}
+    scores = history_scores_m(inputs, candidates)
     best = min(scores, key=lambda n: scores[n])
     other = min(off_fit, key=lambda n: scores[n])
     t, b = candidates[other]

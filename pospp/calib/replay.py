@@ -303,7 +303,23 @@ def replay_velocity_error(
     return b_s.v_n_mps - a_s.v_n_mps
 
 
-def replay_position_error(
+@dataclass(frozen=True)
+class LegErrors:
+    """B minus A over one leg without B's error model: what a compensated replay reports
+    (:func:`replay_errors`)."""
+
+    leg: Leg
+    t0_s: float
+    """B's start [s run time], the first IMU epoch at or after the leg's start."""
+    t_s: NDArray
+    """(M,) seconds since ``t0_s``."""
+    dv_n_mps: NDArray
+    """(M, 3) B minus A in velocity, NED [m/s]."""
+    dr_n_m: NDArray
+    """(M, 3) B minus A in position, NED [m]."""
+
+
+def replay_errors(
     imu: ImuSource,
     solution_a: SolutionA,
     leg: Leg,
@@ -312,14 +328,18 @@ def replay_position_error(
     attitude_correction_n_rad: NDArray | None = None,
     accel_compensation: str = "filter",
     sample_rate_hz: float = 1.0,
-) -> NDArray:
-    """B minus A in position over one leg, NED [m], shape (M, 3): ``replay_leg(...).dr_n_m``
-    (same arguments, samples and values) without the transition matrices (the smoothed
-    compensation's choice, :func:`pospp.calib.compensate.history_score_m`)."""
-    b_s, a_s = _b_and_a_samples(imu, solution_a, leg, gyro_bias_b_radps,
-                                attitude_correction_n_rad, accel_compensation, sample_rate_hz)
-    return earth.llh_difference_ned_m(b_s.lat_rad, b_s.lon_rad, b_s.height_m,
-                                      a_s.lat_rad, a_s.lon_rad, a_s.height_m)
+) -> LegErrors:
+    """B minus A in velocity and position over one leg: ``replay_leg(...)``'s ``t_s``,
+    ``dv_n_mps`` and ``dr_n_m`` (same arguments, samples and values) without the transition
+    matrices, which cost most of a replay and which a compensated replay and the smoothed
+    compensation's choice (:func:`pospp.calib.compensate.history_scores_m`) do not use."""
+    b, _, _, _, (k0, k1), _ = _b_over_leg(imu, solution_a, leg, gyro_bias_b_radps,
+                                       attitude_correction_n_rad, accel_compensation)
+    t0, ts, b_s, a_s = _samples(b, solution_a.trajectory, imu.t_s[k0], imu.t_s[k1],
+                                sample_rate_hz)
+    return LegErrors(leg, t0, ts, b_s.v_n_mps - a_s.v_n_mps,
+                     earth.llh_difference_ned_m(b_s.lat_rad, b_s.lon_rad, b_s.height_m,
+                                                a_s.lat_rad, a_s.lon_rad, a_s.height_m))
 
 
 def _b_and_a_samples(imu: ImuSource, solution_a: SolutionA, leg: Leg,

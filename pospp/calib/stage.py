@@ -32,6 +32,7 @@ from pospp.calib.noise_model import gm_noise_operator, noise_basis
 from pospp.calib.pairs import Pair, PairPolicy, evaluate_pairs
 from pospp.calib.replay import (
     ImuSource,
+    LegErrors,
     LegReplay,
     ReplayOptions,
     SolutionA,
@@ -73,7 +74,7 @@ class CalibrationRun:
         One fit per formulation over all legs of the used pairs (empty if none).
     chosen : Calibration or None
         The joint fit of the compensation formulation (``PairsConfig.formulation``).
-    replays_after : Mapping of int to LegReplay
+    replays_after : Mapping of int to LegErrors
         B re-run with ``chosen`` applied (empty if no calibration).
     improvements : tuple of LegImprovement
         B's horizontal error at the horizon (300 s or the leg end) before and after.
@@ -113,7 +114,7 @@ class CalibrationRun:
     pairs: tuple[Pair, ...]
     joint: tuple[Calibration, ...]
     chosen: Calibration | None
-    replays_after: Mapping[int, LegReplay]
+    replays_after: Mapping[int, LegErrors]
     improvements: tuple[LegImprovement, ...]
     gyro_bias_b_radps: NDArray
     gyro_bias_sigma_b_radps: NDArray

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from pospp.calib.pairs import Pair
-from pospp.calib.replay import LegReplay
+from pospp.calib.replay import LegErrors, LegReplay
 from pospp.calib.segment import Leg
 from pospp.calib.solve import Calibration
 from pospp.nav.closed_form import PAPER_FROM_NED
@@ -120,11 +120,12 @@ def calibration_table(pairs: tuple[Pair, ...], joint: tuple[Calibration, ...],
     return out
 
 
-def leg_errors_table(before: Mapping[int, LegReplay], after: Mapping[int, LegReplay]
+def leg_errors_table(before: Mapping[int, LegReplay], after: Mapping[int, LegErrors]
                       ) -> dict[str, Any]:
     """leg_errors.parquet's columns: B minus A per leg before and after compensation."""
-    parts = [(lid, stage, rep) for stage, reps in (("before", before), ("after", after))
-             for lid, rep in sorted(reps.items())]
+    stages: tuple[tuple[str, Mapping[int, LegReplay | LegErrors]], ...] = (
+        ("before", before), ("after", after))
+    parts = [(lid, stage, rep) for stage, reps in stages for lid, rep in sorted(reps.items())]
     if not parts:
         return {"leg_id": np.zeros(0, np.int64), "stage": [], "t_s": np.zeros(0),
                 "dvn_mps": np.zeros(0), "dve_mps": np.zeros(0), "dpn_m": np.zeros(0),

@@ -137,16 +137,42 @@ class FamilyFinding:
     """(A q, A q): their covariance."""
 
 
-def _fit(x: NDArray, y: NDArray) -> tuple[NDArray, float, int, NDArray]:
-    """Least squares: (coefficients, RSS, rank, (X^T X)^+)."""
-    c, _, rank, _ = np.linalg.lstsq(x, y, rcond=None)
-    r = y - x @ c
-    return c, float(r @ r), int(rank), np.linalg.pinv(x.T @ x)
-
-
 def _columns(resp: NDArray, w: NDArray) -> NDArray:
-    """The shape's columns on both axes: (n, 2 q), axis-major."""
+    """The shape's columns on both axes: (n, A q), axis-major."""
     return np.concatenate([resp[:, :, a] @ w for a in range(resp.shape[2])], axis=1)
+
+
+@dataclass(frozen=True)
+class _Step:
+    """The model before a step in the form its candidates are fitted in: each family's
+    responses ``J`` (n, A K) projected off the model's columns ``X``, ``r = (I - Q Q^T) J``
+    (``Q`` an orthonormal basis of ``X``), kept as ``r^T r`` and ``r^T y``.
+
+    By Frisch-Waugh-Lovell, a candidate's columns ``J M`` (``M = (I_A kron W) k``: the
+    shape's weights, its kept directions) added to ``X`` fit with the coefficients
+    ``c = G^-1 M^T r^T y``, ``G = M^T r^T r M``, whose block of ``(X_1^T X_1)^-1`` is
+    ``G^-1``, and ``RSS_1 = RSS_0 - c^T M^T r^T y``: a candidate costs small matrices, not a
+    pass over the n innovations."""
+
+    rss: float
+    k: int
+    gram: Mapping[str, NDArray]
+    """Per family, ``r^T r`` (A K, A K), axis-major (body x's K coefficients, then y's)."""
+    rty: Mapping[str, NDArray]
+    """Per family, ``r^T y`` (A K,)."""
+
+    @classmethod
+    def of(cls, design: InnovationDesign, families: Sequence[str], base_x: NDArray,
+           rss: float, k: int) -> _Step:
+        q = np.linalg.qr(base_x)[0] if base_x.shape[1] else base_x
+        gram, rty = {}, {}
+        for fam in families:
+            resp = design.responses[fam]
+            r = resp.transpose(0, 2, 1).reshape(resp.shape[0], -1)
+            if q.shape[1]:
+                r = r - q @ (q.T @ r)
+            gram[fam], rty[fam] = r.T @ r, r.T @ design.y
+        return cls(rss, k, gram, rty)
 
 
 def _bic(rss: float, n: int, k: int) -> float:
@@ -179,23 +205,26 @@ DEGENERATE = 1e-9
 largest (numerically null ones dropped; weak ones kept: the F-test counts them)."""
 
 
-def _candidate(design: InnovationDesign, fam: str, v: Variant, base_x: NDArray,
-               rss0: float, k0: int, ratio: float = 1.0, screened: bool = True
-               ) -> dict | None:
-    """One variant fitted: its observable directions (``screened``: those in which a plausible
-    coefficient stands 2 noise sigmas above what the model before it fits, the workflow's
-    screen; else every direction not numerically null), the nested F-test and the BIC; None
-    when it keeps no direction."""
-    cols = _columns(design.responses[fam], v.weights)
-    proj = cols - base_x @ np.linalg.lstsq(base_x, cols, rcond=None)[0] if base_x.shape[1] \
-        else cols
-    lam, vec = np.linalg.eigh(proj.T @ proj * _plausible(fam, v) ** 2)
+def _candidate(design: InnovationDesign, step: _Step, fam: str, v: Variant,
+               ratio: float = 1.0, screened: bool = True) -> dict | None:
+    """One variant fitted on the model before ``step``: its observable directions
+    (``screened``: those in which a plausible coefficient stands 2 noise sigmas above what
+    the model before it fits, the workflow's screen; else every direction not numerically
+    null), the nested F-test and the BIC (:class:`_Step`'s equations); None when it keeps no
+    direction."""
+    n_ax = design.responses[fam].shape[2]
+    w = np.kron(np.eye(n_ax), v.weights)  # (A K, A q): the shape's columns, axis-major
+    lam, vec = np.linalg.eigh(w.T @ step.gram[fam] @ w * _plausible(fam, v) ** 2)
     bar = SCREEN_EIGENVALUE if screened else DEGENERATE * max(float(lam[-1]), 0.0)
     keep = vec[:, lam > bar] if lam[-1] > 0 else vec[:, :0]
     if not keep.shape[1]:
         return None
-    x1 = np.concatenate([base_x, cols @ keep], axis=1)
-    c, rss1, k1, inv = _fit(x1, design.y)
+    m = w @ keep
+    inv = np.linalg.pinv(m.T @ step.gram[fam] @ m)
+    mty = m.T @ step.rty[fam]
+    c = inv @ mty
+    rss0, k0 = step.rss, step.k
+    rss1, k1 = max(rss0 - float(c @ mty), 0.0), k0 + keep.shape[1]
     n = design.y.size
     f, _ = f_test(rss0, rss1, k1 - k0, n - k1)
     f = f / ratio  # the residual's correlation (long-run variance)
@@ -203,9 +232,8 @@ def _candidate(design: InnovationDesign, fam: str, v: Variant, base_x: NDArray,
     # a shape's non-linear parameter (the step's time, the settling's T: searched on a grid)
     # counts in its BIC: a settling of T well beyond the span is a ramp, and the ramp wins
     nonlinear = int(np.isfinite(v.parameter))
-    b = base_x.shape[1]
-    return dict(v=v, c=keep @ c[b:], inv=keep @ inv[b:, b:] @ keep.T, rss=rss1, k=k1, f=f,
-                p=p, bic=_bic(rss1, n, k1 + nonlinear), cols=x1[:, b:])
+    return dict(v=v, c=keep @ c, inv=keep @ inv @ keep.T, rss=rss1, k=k1, f=f, p=p,
+                bic=_bic(rss1, n, k1 + nonlinear), m=m)
 
 
 def _finding(design: InnovationDesign, fam: str, best: dict, walk: dict, rss0: float,
@@ -316,16 +344,17 @@ def fit_sensor_families(design: InnovationDesign, families: Sequence[str],
     holds = 1.0 / SCALE_BAND <= scale <= SCALE_BAND
     while left:
         trials = {}
+        step = _Step.of(design, left, base_x, rss0, k0)
         for fam in left:
             variants = variants_of[fam]
             cands = [c for v in variants
-                     if (c := _candidate(design, fam, v, base_x, rss0, k0, ratio)) is not None]
+                     if (c := _candidate(design, step, fam, v, ratio)) is not None]
             if not cands:  # these data cannot reveal the family
                 continue
             screened = min(cands, key=lambda c: c["bic"])
             walk = next((c for c in cands if c["v"].shape == "walk"), screened)
             few = [c for v in variants if v.weights.shape[1] == 1 and (c := _candidate(
-                design, fam, v, base_x, rss0, k0, ratio, screened=False)) is not None]
+                design, step, fam, v, ratio, screened=False)) is not None]
             best = min([c for c in cands if c["v"].weights.shape[1] > 1] + few,
                        key=lambda c: c["bic"])
             p_adj = min(1.0, max(screened["p"] * len(cands), best["p"]))
@@ -339,7 +368,9 @@ def fit_sensor_families(design: InnovationDesign, families: Sequence[str],
         fam = max(good, key=lambda f: trials[f][1].statistic)
         best, fnd = trials[fam]
         named.append(fnd)
-        base_x = np.concatenate([base_x, best["cols"]], axis=1)
+        resp = design.responses[fam]
+        cols = resp.transpose(0, 2, 1).reshape(resp.shape[0], -1) @ best["m"]
+        base_x = np.concatenate([base_x, cols], axis=1)
         rss0, k0 = best["rss"], best["k"]
         left.remove(fam)
     return named, tested, ratio, holds

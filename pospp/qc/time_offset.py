@@ -107,8 +107,13 @@ def estimate_time_offset(imu_t_s: ArrayLike, w_d_radps: ArrayLike, vel_t_s: Arra
         return dchi[keep] - (np.interp(t1[keep] - tau, t, psi) - np.interp(t0[keep] - tau, t,
                                                                             psi))
 
+    made: dict[tuple[float, int], NDArray] = {}  # the refit without outliers reuses them
+
     def best_of(grid: NDArray, keep: NDArray) -> tuple[int, NDArray]:
-        cost = _grid_costs(grid, t, psi, t0[keep], t1[keep], dchi[keep])
+        key = (float(grid[0]), grid.shape[0])
+        if key not in made:
+            made[key] = _grid_squares(grid, t, psi, t0, t1, dchi)
+        cost = np.array([np.sum(row[keep]) for row in made[key]])
         return int(np.clip(np.argmin(cost), 1, grid.shape[0] - 2)), cost
 
     def fit(keep: NDArray) -> float:
@@ -140,22 +145,22 @@ def estimate_time_offset(imu_t_s: ArrayLike, w_d_radps: ArrayLike, vel_t_s: Arra
     return TimeOffsetEstimate(tau, sigma, int(keep.sum()), rms, explained)
 
 
-def _grid_costs(grid: NDArray, t: NDArray, psi: NDArray, t0: NDArray, t1: NDArray,
-                dchi: NDArray, chunk: int = 64) -> NDArray:
-    """``sum((dchi - (Psi(t1 - tau) - Psi(t0 - tau)))^2)`` for every ``tau`` of ``grid``: the
-    numbers of one ``np.interp`` and one sum per tau, bit for bit, with the queries laid out
-    record by record, tau descending (each record's queries then increase a few IMU samples
-    apart, and ``np.interp`` finds each next to the last one found instead of bisecting the
-    whole flight; ``chunk`` taus at a time)."""
-    cost = np.empty(grid.shape[0])
+def _grid_squares(grid: NDArray, t: NDArray, psi: NDArray, t0: NDArray, t1: NDArray,
+                  dchi: NDArray, chunk: int = 64) -> NDArray:
+    """``(dchi - (Psi(t1 - tau) - Psi(t0 - tau)))^2`` per ``tau`` of ``grid`` (rows) and record
+    (columns): a row's sum over any records is the misfit of those records at that tau, bit
+    for bit as if only they had been interpolated. The queries are laid out record by record,
+    tau descending (each record's queries then increase a few IMU samples apart, and
+    ``np.interp`` finds each next to the last one found instead of bisecting the whole
+    flight; ``chunk`` taus at a time)."""
+    out = np.empty((grid.shape[0], t1.shape[0]))
     for c in range(0, grid.shape[0], chunk):
         taus = grid[c:c + chunk][::-1]
         psi1 = np.interp((t1[:, None] - taus[None, :]).ravel(), t, psi)
         psi0 = np.interp((t0[:, None] - taus[None, :]).ravel(), t, psi)
         r = dchi[:, None] - (psi1 - psi0).reshape(t1.shape[0], taus.shape[0])
-        r = np.ascontiguousarray(r[:, ::-1].T)  # a row per tau, as grid's
-        cost[c:c + taus.shape[0]] = [np.sum(row ** 2) for row in r]
-    return cost
+        out[c:c + taus.shape[0]] = (r[:, ::-1].T) ** 2  # a row per tau, as grid's
+    return out
 
 
 def clock_slip(tau_s: float, sigma_s: float) -> str:

@@ -130,13 +130,36 @@ def gm_legs():
     return cal, reps, extra, noisy, flight.solution_a(0.005), bias
 
 
+def _replayed_score_m(inputs, history) -> float:
+    """The score :func:`history_scores_m` stands for, by replaying B on each fitted leg with
+    the history removed from the gyro increments (interpolated at each interval's middle)."""
+    from pospp.calib.replay import ImuIncrements, replay_errors
+
+    cal, rc, imu = inputs.cal, inputs.replay, inputs.imu
+    mid = 0.5 * (imu.t_s[:-1] + imu.t_s[1:])
+    bias = np.stack([np.interp(mid, history[0], history[1][:, c]) for c in range(3)], axis=1)
+    removed = ImuIncrements(imu.t_s, imu.dtheta_b_rad - bias * np.diff(imu.t_s)[:, None],
+                            imu.dv_b_mps)
+    sq = []
+    for lid in cal.leg_ids:
+        rep = inputs.replays[lid]
+        dr = replay_errors(removed, inputs.solution_a, rep.leg, gyro_bias_b_radps=np.zeros(3),
+                           attitude_correction_n_rad=cal.misalignment_n_rad(lid),
+                           accel_compensation=rc.accel_compensation,
+                           sample_rate_hz=rc.sample_rate_hz).dr_n_m
+        k = int(np.searchsorted(rep.t_s, rc.horizon_s - 1e-9))
+        sq.append(np.sum(np.square(dr[1:k + 1, 0:2]), axis=1))
+    return float(np.sqrt(np.mean(np.concatenate(sq))))
+
+
 def test_the_history_chosen_is_the_one_b_matches_best(gm_legs):
     """Among the constant, the fit's history (which holds leg 1's offset) and the injected
     bias 1 deg/h off, the fitted legs take the fit's (B's position error over the legs 1.6 m
     RMS against 2.5 m with the constant); time outside the fitted legs takes the best of the
     candidates named for it (the constant over the off one). Without the fit's, the constant
-    everywhere."""
-    from pospp.calib.compensate import ModeInputs, choose_bias_history, history_score_m
+    everywhere. The scores (one replay per leg and B's linear response to each history) are
+    B replayed with each history removed, to 1e-4 of the score."""
+    from pospp.calib.compensate import ModeInputs, choose_bias_history, history_scores_m
     from pospp.calib.replay import ReplayOptions
 
     cal, reps, _, imu, sol, bias = gm_legs
@@ -157,9 +180,10 @@ def test_the_history_chosen_is_the_one_b_matches_best(gm_legs):
     del made["fit"]
     pick = choose_bias_history(inputs, made, ("constant", "off"))
     assert pick.source == "constant"
-    assert history_score_m(inputs, fit_h) < history_score_m(inputs, const_h) < \
-        history_score_m(inputs, off_h)
-    assert history_score_m(inputs, None) == pytest.approx(history_score_m(inputs, const_h))
+    scores = history_scores_m(inputs, {"fit": fit_h, "constant": const_h, "off": off_h})
+    assert scores["fit"] < scores["constant"] < scores["off"]
+    for name, h in (("fit", fit_h), ("constant", const_h), ("off", off_h)):
+        assert scores[name] == pytest.approx(_replayed_score_m(inputs, h), rel=1e-4), name
 
 
 def test_two_sigmas_from_null_realisations(gm_legs):

@@ -217,9 +217,10 @@ def test_causal_compensation_removes_a_known_changing_bias_and_uses_no_later_dat
 
 
 def test_replay_velocity_error_is_replay_legs_dv():
-    """replay_velocity_error (no transition matrices) gives replay_leg's B minus A exactly,
-    with and without a gyro bias, an attitude correction and A's accelerometer bias."""
-    from pospp.calib.replay import replay_leg, replay_velocity_error
+    """replay_velocity_error and replay_errors (no transition matrices) give replay_leg's B
+    minus A exactly, with and without a gyro bias, an attitude correction and A's
+    accelerometer bias."""
+    from pospp.calib.replay import replay_errors, replay_leg, replay_velocity_error
 
     tr = rhumb_line(LAT, 1000.0, 60.0, 0.5, 10.0, 200.0)
     imu_true, ref = _flight(tr, tr.t_s.size)
@@ -230,7 +231,11 @@ def test_replay_velocity_error_is_replay_legs_dv():
                     "accel_compensation": "none", "sample_rate_hz": 2.0}):
         dv = replay_velocity_error(imu, ref, leg, **kw)
         assert np.abs(dv).max() > 1e-3  # the injected bias shows
-        np.testing.assert_array_equal(dv, replay_leg(imu, ref, leg, **kw).dv_n_mps)
+        full = replay_leg(imu, ref, leg, **kw)
+        np.testing.assert_array_equal(dv, full.dv_n_mps)
+        errors = replay_errors(imu, ref, leg, **kw)
+        for name in ("t0_s", "t_s", "dv_n_mps", "dr_n_m"):
+            np.testing.assert_array_equal(getattr(errors, name), getattr(full, name))
 
 
 def test_rates_give_the_whole_logs_increments_and_replays_bit_for_bit():

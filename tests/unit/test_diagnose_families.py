@@ -127,6 +127,32 @@ def test_the_family_fit_names_nothing_on_noise_at_its_level():
     assert named <= 2  # level 0.05 family-wise, Bonferroni over the variants: conservative
 
 
+def test_a_candidate_on_the_step_s_gram_matrix_is_the_direct_least_squares():
+    """Each candidate is fitted from the step's projected Gram matrix (Frisch-Waugh-Lovell):
+    its coefficients, their covariance block and the RSS equal the direct least squares of
+    the innovations on the model's columns plus the candidate's, with a model already
+    holding another family's columns (the second step of the naming)."""
+    from pospp.diagnose.sensor_families import _candidate, _columns, _Step
+
+    knots = knots_s(600.0, 2700.0)
+    rng = np.random.default_rng(5)
+    d = _design(rng, rng.normal(scale=0.05, size=(basis_size(knots), 2)), knots)
+    (ramp,) = time_shape("ramp").variants(knots, 2700.0)
+    base_x = _columns(d.responses["gyro_bias_change"], ramp.weights)
+    c0, rss0, k0, _ = np.linalg.lstsq(base_x, d.y, rcond=None)
+    step = _Step.of(d, FAMS, base_x, float(rss0[0]), int(k0))
+    for v in time_shape("settling").variants(knots, 2700.0)[:3] + [ramp]:
+        got = _candidate(d, step, "accel_bias_change", v, screened=False)
+        assert got is not None
+        x1 = np.concatenate([base_x, _columns(d.responses["accel_bias_change"], v.weights)],
+                            axis=1)
+        c, rss, k1, _ = np.linalg.lstsq(x1, d.y, rcond=None)
+        inv = np.linalg.inv(x1.T @ x1)
+        np.testing.assert_allclose(got["c"], c[2:], rtol=1e-8, atol=1e-12)
+        np.testing.assert_allclose(got["inv"], inv[2:, 2:], rtol=1e-7)
+        assert got["rss"] == pytest.approx(float(rss[0]), rel=1e-10) and got["k"] == k1 == 4
+
+
 @pytest.fixture(scope="module")
 def flight():
     return survey_flight(headings_deg=(0.0, 180.0), leg_duration_s=240.0, rate_hz=50.0,

@@ -206,8 +206,9 @@ def test_time_offset_not_applicable_without_turns_or_when_flying_sideways():
 
 
 def test_time_offset_grid_costs_are_one_interp_and_one_sum_per_tau_bit_for_bit():
-    """The grid's costs laid out record by record (np.interp then finds each query next to
-    the last) are the per-tau evaluation's numbers exactly: uneven IMU stamps, records
+    """The grid's squared misfits laid out record by record (np.interp then finds each query
+    next to the last), summed over any subset of the records (the refit without outliers),
+    are the per-tau evaluation of that subset's numbers exactly: uneven IMU stamps, records
     inside and at the ends, chunks that do not divide the grid."""
     rng = np.random.default_rng(11)
     t = np.cumsum(rng.uniform(0.004, 0.006, 20000))
@@ -216,11 +217,14 @@ def test_time_offset_grid_costs_are_one_interp_and_one_sum_per_tau_bit_for_bit()
     t1 = t0 + rng.uniform(0.5, 1.0, t0.shape[0])
     dchi = rng.normal(0.0, 0.01, t0.shape[0])
     grid = np.arange(-5.0, 5.0 + 1e-9, 0.02)
-    ref = np.array([np.sum((dchi - (np.interp(t1 - g, t, psi) - np.interp(t0 - g, t, psi)))
-                           ** 2) for g in grid])
-    for chunk in (1, 64, 500, 1000):
-        np.testing.assert_array_equal(
-            time_offset._grid_costs(grid, t, psi, t0, t1, dchi, chunk=chunk), ref)
+    keep = rng.uniform(size=t0.shape[0]) > 0.1
+    for k in (np.ones_like(keep), keep):
+        ref = np.array([np.sum((dchi[k] - (np.interp(t1[k] - g, t, psi)
+                                           - np.interp(t0[k] - g, t, psi))) ** 2)
+                        for g in grid])
+        for chunk in (1, 64, 500, 1000):
+            sq = time_offset._grid_squares(grid, t, psi, t0, t1, dchi, chunk=chunk)
+            np.testing.assert_array_equal([np.sum(row[k]) for row in sq], ref)
 
 
 def test_gnss_jump_of_5km_is_found_with_its_time():
