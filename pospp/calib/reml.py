@@ -457,23 +457,9 @@ def calibrate_gm(legs, h, z, edges, options: FitOptions, tau_s: float, bases=Non
         filt = dlegs.at_tau(tau)
         return lambda th: filt.reml_nll(*_full_params(th, fixed))
 
-    def penalty(tau: float) -> Callable[[NDArray], float] | None:
-        return None if grade is None else partial(_drift_penalty, grade=grade, tau_s=tau,
-                                                  fixed=fixed)
-
     taus = grade.candidates_s() if grade is not None else (float(tau_s),)
-    profile: list[tuple[float, float, NDArray, Callable[[NDArray], float]]] = []
-    for tau in taus:  # each candidate from the previous one's optimum (the profile is smooth)
-        nll = likelihood(tau, fixed)
-        th, val = _fit_variances(nll, fixed, penalty(tau), profile[-1][2] if profile else None)
-        profile.append((float(tau), val, th, nll))
-    i_best = min(range(len(profile)), key=lambda i: profile[i][1])
-    if len(profile) > 1:  # the chosen candidate also from the grid: the lower optimum kept
-        tau, val, _, nll = profile[i_best]
-        th, val_grid = _fit_variances(nll, fixed, penalty(tau))
-        if val_grid < val:
-            profile[i_best] = (tau, val_grid, th, nll)
-    tau_best, _, th, nll = profile[i_best]
+    profile = _tau_profile(likelihood, taus, fixed, grade)
+    tau_best, _, th, nll = min(profile, key=lambda p: p[1])
     source = ""
     if grade is not None:
         source = "flight"
@@ -499,6 +485,32 @@ def calibrate_gm(legs, h, z, edges, options: FitOptions, tau_s: float, bases=Non
     tau_profile = tuple((t, v) for t, v, _, _ in profile) if grade is not None else ()
     return (x, cov, deficient, a, float(np.sqrt(q)), float(np.sqrt(s2)), white, drift,
             tau_profile, source, gain)
+
+
+def _tau_profile(likelihood: Callable[[float, tuple], Callable[[NDArray], float]],
+                 taus: tuple[float, ...], fixed: tuple[float | None, float | None],
+                 grade: Any) -> list[tuple[float, float, NDArray, Callable[[NDArray], float]]]:
+    """(tau [s], objective, theta, nll of theta) per candidate tau: the variances by
+    :func:`_fit_variances` of ``likelihood(tau, fixed)`` plus the grade's prior
+    (:class:`pospp.calib.solve.DriftPrior`, None: no prior). The first candidate is searched
+    from the grid, each next from the previous one's optimum (the profile over tau is
+    smooth), and the lowest once more from the grid, the lower of its two optima kept."""
+    def penalty(tau: float) -> Callable[[NDArray], float] | None:
+        return None if grade is None else partial(_drift_penalty, grade=grade, tau_s=tau,
+                                                  fixed=fixed)
+
+    profile: list[tuple[float, float, NDArray, Callable[[NDArray], float]]] = []
+    for tau in taus:
+        nll = likelihood(tau, fixed)
+        th, val = _fit_variances(nll, fixed, penalty(tau), profile[-1][2] if profile else None)
+        profile.append((float(tau), val, th, nll))
+    i_best = min(range(len(profile)), key=lambda i: profile[i][1])
+    if len(profile) > 1:
+        tau, val, _, nll = profile[i_best]
+        th, val_grid = _fit_variances(nll, fixed, penalty(tau))
+        if val_grid < val:
+            profile[i_best] = (tau, val_grid, th, nll)
+    return profile
 
 
 def _drift_penalty(th: NDArray, grade: Any, tau_s: float,
