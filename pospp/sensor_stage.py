@@ -32,6 +32,7 @@ from pospp.calib.replay import SolutionA
 from pospp.config import PipelineConfig
 from pospp.diagnose import null_model
 from pospp.diagnose.effects import ACCEL_SETTLING_S, field_gradient, signature
+from pospp.diagnose.linear_signatures import gnss_record_errors
 from pospp.diagnose.locate import horizon_worth
 from pospp.diagnose.rerun import restamped, warmed, with_rates
 from pospp.diagnose.results import CandidateTest, Diagnosis, DiagnosisStep, EffectResponse
@@ -84,10 +85,6 @@ def _removed(log: Any, config: PipelineConfig, d: Diagnosis
     return log, lever, tuple(done)
 
 
-READ_TIME_OFFSET_S = 1e-3
-"""The GNSS time offset A is replayed at for its innovations' response [s], which reads an
-offset left in the log (:func:`_without_time_offset`; linear well beyond it: 60 m/s x 1 ms
-= 6 cm against A's gate)."""
 NOISE_BAND = 3.0
 """The IMU white noise read from the samples may exceed A's configured angle and velocity
 random walk by at most this factor for the families to be fitted: the likelihood is A's, and
@@ -197,12 +194,21 @@ def innovation_design(log: mcap_reader.FlightLog, config: PipelineConfig,
         responses[fam] = (white[:, :, None] if sensor_family(fam).sensor == "gravity" else
                           white.reshape(-1, 2, basis_size(knots)).transpose(0, 2, 1))
     white_y = np.einsum("kji,kj->ki", chol, nu0[used]).reshape(-1)
-    shifted = navigate(restamped(log_r, READ_TIME_OFFSET_S), config, options=opts,
-                       lever_arm_b_m=lever_b_m, replay=gains).innovations
-    assert shifted is not None  # A always records its innovations
-    offset = np.einsum("kji,kj->ki", chol, shifted.dz_ned[used] - nu0[used]).reshape(-1)
+    # a GNSS time offset changes only what the records say: A's response to its record
+    # errors through the same gains (pospp.diagnose.linear_signatures)
+    lever = config.gnss.lever_arm_m if lever_b_m is None else lever_b_m
+    v = gnss_record_errors("time_offset", base.forward.trajectory, rec.t_s, gains.meas_kind,
+                           lever)
+    dnu = innovation_responses(gains, base.forward.trajectory, t_run, log_r.imu.w_ib_b_radps,
+                               log_r.imu.f_ib_b_mps2, _no_input, record_v=v)
+    offset = np.einsum("kji,kj->ki", chol, dnu[used, :, 0]).reshape(-1)
     return InnovationDesign(white_y, responses, knots, float(t_run[-1]), rec.t_s[used], extent,
-                            offset / READ_TIME_OFFSET_S)
+                            offset)
+
+
+def _no_input(t_s: np.ndarray, c_nb: np.ndarray) -> np.ndarray:
+    """One column that changes no IMU sample (a GNSS-side column's)."""
+    return np.zeros((np.size(t_s), 6, 1))
 
 
 def _whitened(chol: np.ndarray, dnu: np.ndarray, rows: np.ndarray, chunk: int = 1024
@@ -220,17 +226,18 @@ def _whitened(chol: np.ndarray, dnu: np.ndarray, rows: np.ndarray, chunk: int = 
 TIME_OFFSET_FLOOR_S = 5e-3
 """A GNSS time offset A's innovations read is removed before the families are fitted when
 it is beyond this and :data:`TIME_OFFSET_SIGMAS` ... (the sample flight, without an offset,
-reads 3.3 ms: its innovations' offset column is not a column of the families' fit, where
-with an accelerometer ramp it explained what neither does alone, 297 +- 71 ug/h, p 0.005)."""
+reads 1.5 +- 0.3 ms: its innovations' offset column is not a column of the families' fit,
+where with an accelerometer ramp it explained what neither does alone, 297 +- 71 ug/h, p
+0.005)."""
 TIME_OFFSET_SIGMAS = 5.0
 """... of its sigma (the least squares', times the residual's long-run variance ratio)."""
 TIME_OFFSET_WINDOW_S = 60.0
 """The window of the long-run variance ratio that widens the offset's sigma [s] (the offset's
 response lives in the turns, a minute or so each)."""
 TIME_OFFSET_ITERATIONS = 4
-"""At most this many removals: A gates the records an offset spoils in turns, so its
-innovations read less than the whole offset at first (flight_time_offset_200hz: 7.1 of
-15 ms), and each pass on the log with the last reading removed reads the rest."""
+"""At most this many removals: where A gated records an offset spoils in turns its
+innovations read part of the offset, and each pass on the log with the last reading removed
+reads the rest (flight_time_offset_200hz reads 15.6 of its 15 ms at the first)."""
 
 
 def _offset_reading(design: InnovationDesign) -> tuple[float, float, bool]:

@@ -80,13 +80,14 @@ def propagate_columns(grid, i_gm, i_sf, inv_tau, g_node, records, e0, d0, d1, dn
     """The forward pass of the m columns (module docstring). ``grid = (xs (G, 10), fm (G, 3),
     wm (G, 3), dt (G,))`` (:func:`pospp.calib.linear_null.interval_means`); ``g_node`` (G,)
     the record epoch at each grid point (-1 none); ``records = (rec_start (E + 1,), K (R,
-    n_a, 3), H (R, 3, n_a), row (R,))`` the records of each epoch in order and their rows in
-    ``dnu``; ``e0`` (n_a, m) the error at the first point; ``d0``, ``d1`` (G, 6, m) the
-    input's integrals over the interval ending at each point (row 0 unused); ``dnu`` (., 3,
-    m) receives each record's innovation change in its row. Returns the error after the
-    last point's records (n_a, m): the next stretch of the grid continues from it."""
+    n_a, 3), H (R, 3, n_a), row (R,), v (R or 0, 3, m))`` the records of each epoch in
+    order, their rows in ``dnu`` and the change of what each measures (none: zero); ``e0``
+    (n_a, m) the error at the first point; ``d0``, ``d1`` (G, 6, m) the input's integrals
+    over the interval ending at each point (row 0 unused); ``dnu`` (., 3, m) receives each
+    record's innovation change in its row. Returns the error after the last point's records
+    (n_a, m): the next stretch of the grid continues from it."""
     xs, fms, wms, dts = grid
-    rec_start, rec_k, rec_h, rec_row = records
+    rec_start, rec_k, rec_h, rec_row, rec_v = records
     n_a = rec_k.shape[1]
     e = e0.copy()
     fa, ft, phi = np.empty((n_a, n_a)), np.empty((n_a, n_a)), np.empty((n_a, n_a))
@@ -105,6 +106,8 @@ def propagate_columns(grid, i_gm, i_sf, inv_tau, g_node, records, e0, d0, d1, dn
         if node >= 0:
             for i in range(rec_start[node], rec_start[node + 1]):
                 nu = np.dot(rec_h[i], e)
+                if rec_v.shape[0]:
+                    nu -= rec_v[i]
                 dnu[rec_row[i]] = nu
                 e -= np.dot(rec_k[i], nu)
     return e
@@ -114,7 +117,8 @@ def innovation_responses(gains: GainReplay, trajectory: Trajectory, imu_t_s: NDA
                          imu_w_b_radps: NDArray, imu_f_b_mps2: NDArray, body_input: BodyInput,
                          *, breaks_s: NDArray | None = None,
                          static_window_s: tuple[float, float] | None = None,
-                         max_step_s: float = MAX_STEP_S) -> NDArray:
+                         max_step_s: float = MAX_STEP_S,
+                         record_v: NDArray | None = None) -> NDArray:
     """The change of each of A's innovations per unit of each input column (module
     docstring).
 
@@ -139,6 +143,11 @@ def innovation_responses(gains: GainReplay, trajectory: Trajectory, imu_t_s: NDA
         alignment, which the IMU does not move.
     max_step_s : float
         Longest grid interval [s].
+    record_v : ndarray, (M, 3, m), optional
+        Per record of ``gains``, the change of what it measures per SI coefficient of each
+        column (measured minus A's prediction from the true state, NED [m] or [m/s]): its
+        innovation moves by ``-v`` besides ``H e`` (a GNSS-side change: a time offset, a lever
+        arm), and A's feedback carries it on.
 
     Returns
     -------
@@ -160,10 +169,12 @@ def innovation_responses(gains: GainReplay, trajectory: Trajectory, imu_t_s: NDA
     xs[1:] = _kernel_states(trajectory, 0.5 * (grid_t[1:] + grid_t[:-1]))
     node_of_rec = np.searchsorted(t_nodes, t_rec)
     rec_start = np.searchsorted(node_of_rec, np.arange(t_nodes.size + 1)).astype(np.int64)
-    records = (rec_start, np.ascontiguousarray(gains.gains[applied]),
-               np.ascontiguousarray(gains.h[applied]), applied.astype(np.int64))
     lay = gains.layout
     m = np.shape(body_input(grid_t[:1], np.eye(3)[None]))[2]
+    records = (rec_start, np.ascontiguousarray(gains.gains[applied]),
+               np.ascontiguousarray(gains.h[applied]), applied.astype(np.int64),
+               np.zeros((0, 3, m)) if record_v is None
+               else np.ascontiguousarray(np.asarray(record_v, dtype=float)[applied]))
     out = np.zeros((st.size, 3, m))  # zero for the records A did not use
     e = np.zeros((lay.n, m))
     if static_window_s is not None:

@@ -90,16 +90,23 @@ unit parameter (module docstring)."""
 LINEAR_EFFECTS = tuple(RECORD_ERRORS)
 
 
-def record_errors(model: LinearNull, trajectory: Trajectory, effect_id: str,
-                  lever_b_m: ArrayLike) -> NDArray:
-    """Per record of ``model`` the error of its measurement per unit of the effect's
-    parameter, (R, 3, P) (:data:`RECORD_ERRORS`); ZUPTs none. ``lever_b_m``: the lever arm A
-    was configured with (body FRD [m])."""
+def gnss_record_errors(effect_id: str, trajectory: Trajectory, record_t_s: ArrayLike,
+                       record_kind: ArrayLike, lever_b_m: ArrayLike) -> NDArray:
+    """Per record (its time [s] and kind: 0 position, 1 velocity, else none) the error of its
+    measurement per unit of the effect's parameter, (R, 3, P) (:data:`RECORD_ERRORS`), on A's
+    ``trajectory``. ``lever_b_m``: the lever arm A was configured with (body FRD [m])."""
     if effect_id not in RECORD_ERRORS:
         raise ValueError(f"{effect_id}: no linear signature (expected one of {LINEAR_EFFECTS})")
-    kind = np.asarray(model.record_kind)
-    return RECORD_ERRORS[effect_id](trajectory, np.asarray(model.record_t_s, dtype=float),
+    kind = np.asarray(record_kind)
+    return RECORD_ERRORS[effect_id](trajectory, np.asarray(record_t_s, dtype=float),
                                     kind == 0, kind == 1, np.asarray(lever_b_m, dtype=float))
+
+
+def record_errors(model: LinearNull, trajectory: Trajectory, effect_id: str,
+                  lever_b_m: ArrayLike) -> NDArray:
+    """:func:`gnss_record_errors` of every record of ``model``."""
+    return gnss_record_errors(effect_id, trajectory, model.record_t_s, model.record_kind,
+                              lever_b_m)
 
 
 def linear_signatures(model: LinearNull, trajectory: Trajectory, lever_b_m: ArrayLike,

@@ -136,6 +136,23 @@ def test_the_grid_a_stretch_at_a_time_is_the_whole_grid_at_once(ramp_design, mon
     np.testing.assert_allclose(short, dnu[fam], rtol=1e-12, atol=1e-12 * np.abs(dnu[fam]).max())
 
 
+@pytest.mark.reference
+def test_the_time_offset_column_reads_the_whole_offset_at_once(reference_cases):
+    # A's response to a GNSS time offset through its own gains (its records' errors, the
+    # antenna's velocity and acceleration per second: pospp.diagnose.linear_signatures)
+    # reads flight_time_offset_200hz's true 15 ms in one pass (measured 15.6 +- 0.3 ms); the
+    # column made by replaying A on the log restamped by 1 ms read 7.1 ms: a restamped record
+    # moves by a whole IMU interval in the replay, not by the millisecond
+    name = "flight_time_offset_200hz"
+    cfg, params = case_config(reference_cases, name)
+    log = pipeline.ingest(reference_cases / f"{name}.mcap", cfg)
+    design = stage.innovation_design(log, cfg, ("accel_bias_change",))
+    late_s, sigma_s, significant = stage._offset_reading(design)  # GNSS stamped c s early
+    truth_s = params["gnss"]["time_offset_s"]  # GNSS stamps minus true time
+    assert significant and sigma_s < 1e-3
+    assert -late_s == pytest.approx(truth_s, abs=1.5e-3)
+
+
 def test_the_records_are_whitened_in_place_as_all_at_once():
     # sensor_stage._whitened writes L_k^T dnu_k over dnu's first rows, a chunk at a time
     rng = np.random.default_rng(3)
