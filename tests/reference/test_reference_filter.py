@@ -280,8 +280,8 @@ def test_velocity_records_between_imu_epochs_are_predicted_at_their_time(case):
     # with the antenna's velocity, a velocity with the epoch's last interval's mean
     # acceleration. Summed to 50 Hz every 1 Hz record of this case sits midway between two
     # epochs (10 ms off): A's whitened velocity innovations are then what they are at the
-    # full rate (measured 1.008 and 1.008 on flight_accel_ramp_100hz; 1.021 at 50 Hz when a
-    # velocity was compared at the epoch)
+    # full rate (measured 0.987 and 0.987; 1.015 at 50 Hz when a velocity was compared at
+    # the epoch)
     from pospp.diagnose.null_model import decimate_imu
     from pospp.nav.filter import STATUS_USED
 
