@@ -36,6 +36,11 @@ GM_REJECT_DNLL = 0.5 * 5.991
 """The flight's drift replaces the grade's only when the grade's (sigma, tau) is rejected by a
 likelihood-ratio test at 5 % (chi-square, 2 degrees of freedom: 2 dnll > 5.991)."""
 
+_FD_STEP_LOG = 1e-3
+"""The variance search's finite-difference step in the log-parameters [-]: the restricted
+likelihood's rounding (~1e-6 on a 1.5 h flight's ten legs) over it is 1e-3 in the gradient,
+and its forward-difference bias moves the optimum by half of it (0.05 % in a variance)."""
+
 
 def blocks_reml_nll(params: NDArray, mats: list[tuple], hs: list[NDArray],
                      zs: list[NDArray]) -> float:
@@ -453,13 +458,7 @@ def calibrate_gm(legs, h, z, edges, options: FitOptions, tau_s: float, bases=Non
         return lambda th: filt.reml_nll(*_full_params(th, fixed))
 
     taus = grade.candidates_s() if grade is not None else (float(tau_s),)
-    profile = []
-    for tau in taus:
-        pen = ((lambda th, tau=tau, g=grade: g.penalty(_full_params(th, fixed)[2], tau))
-               if grade is not None else None)
-        nll = likelihood(tau, fixed)
-        th, val = _fit_variances(nll, fixed, pen)
-        profile.append((float(tau), val, th, nll))
+    profile = _tau_profile(likelihood, taus, fixed, grade)
     tau_best, _, th, nll = min(profile, key=lambda p: p[1])
     source = ""
     if grade is not None:
@@ -488,33 +487,73 @@ def calibrate_gm(legs, h, z, edges, options: FitOptions, tau_s: float, bases=Non
             tau_profile, source, gain)
 
 
-def _fit_variances(nll: Callable[[NDArray], float], fixed: tuple[float | None, float | None],
-                   penalty=None) -> tuple[NDArray, float]:
-    """REML (plus an optional penalty of theta) of log a and the logs of the free ones of
-    (q, s2) (None in ``fixed``), the negative restricted likelihood ``nll`` of theta given.
+def _tau_profile(likelihood: Callable[[float, tuple], Callable[[NDArray], float]],
+                 taus: tuple[float, ...], fixed: tuple[float | None, float | None],
+                 grade: Any) -> list[tuple[float, float, NDArray, Callable[[NDArray], float]]]:
+    """(tau [s], objective, theta, nll of theta) per candidate tau: the variances by
+    :func:`_fit_variances` of ``likelihood(tau, fixed)`` plus the grade's prior
+    (:class:`pospp.calib.solve.DriftPrior`, None: no prior). The first candidate is searched
+    from the grid, each next from the previous one's optimum (the profile over tau is
+    smooth), and the lowest once more from the grid, the lower of its two optima kept."""
+    def penalty(tau: float) -> Callable[[NDArray], float] | None:
+        return None if grade is None else partial(_drift_penalty, grade=grade, tau_s=tau,
+                                                  fixed=fixed)
 
-    A coarse grid, then bounded Brent (only a free) or Nelder-Mead. Returns (theta,
-    objective at theta).
-    """
+    profile: list[tuple[float, float, NDArray, Callable[[NDArray], float]]] = []
+    for tau in taus:
+        nll = likelihood(tau, fixed)
+        th, val = _fit_variances(nll, fixed, penalty(tau), profile[-1][2] if profile else None)
+        profile.append((float(tau), val, th, nll))
+    i_best = min(range(len(profile)), key=lambda i: profile[i][1])
+    if len(profile) > 1:
+        tau, val, _, nll = profile[i_best]
+        th, val_grid = _fit_variances(nll, fixed, penalty(tau))
+        if val_grid < val:
+            profile[i_best] = (tau, val_grid, th, nll)
+    return profile
+
+
+def _drift_penalty(th: NDArray, grade: Any, tau_s: float,
+                   fixed: tuple[float | None, float | None]) -> float:
+    """The grade's prior (:meth:`pospp.calib.solve.DriftPrior.penalty`) of theta's drift
+    variance at the correlation time ``tau_s`` [s]."""
+    return float(grade.penalty(_full_params(th, fixed)[2], tau_s))
+
+
+def variance_bounds(fixed: tuple[float | None, float | None]) -> list[tuple[float, float]]:
+    """The box of the variance search in theta: log a in [log 1e-6, log 1e4] (A's variance
+    scale [-]), then for each free one of (q, s2) (None in ``fixed``) log q in
+    [log 1e-22, log 1e-6] (ARW PSD [rad^2/s]) and log s2 in [log 1e-17, log 1e-8] (drift
+    variance [rad^2/s^2])."""
     bounds = [(np.log(1e-6), np.log(1e4))]
     if fixed[0] is None:
         bounds.append((np.log(1e-22), np.log(1e-6)))
     if fixed[1] is None:
         bounds.append((np.log(1e-17), np.log(1e-8)))
+    return bounds
+
+
+def _fit_variances(nll: Callable[[NDArray], float], fixed: tuple[float | None, float | None],
+                   penalty=None, start: NDArray | None = None) -> tuple[NDArray, float]:
+    """REML (plus an optional penalty of theta) of log a and the logs of the free ones of
+    (q, s2) (None in ``fixed``), the negative restricted likelihood ``nll`` of theta given.
+
+    From ``start`` (a nearby optimum: the previous tau candidate's) or else the best point
+    of a coarse grid over the bounds, a bounded quasi-Newton search (L-BFGS-B) on the
+    log-parameters with forward-difference gradients (step :data:`_FD_STEP_LOG`); it stops
+    when the projected gradient is under 1e-3 or a step lowers the objective by under 1e-8
+    of its value, and holds at its bound a variance the data drive to zero. Returns (theta,
+    objective at theta).
+    """
+    bounds = variance_bounds(fixed)
 
     def obj(th: NDArray) -> float:
         v = nll(th)
         return v if penalty is None else v + penalty(th)
 
-    best, axes = grid_argmin(obj, bounds, 9 if len(bounds) == 1 else 6)
-    if len(bounds) == 1:  # only A's scale: bounded Brent around the best grid point
-        step = axes[0][1] - axes[0][0]
-        opt = optimize.minimize_scalar(
-            lambda v: obj(np.array([v])), method="bounded",
-            bounds=(best[0] - step, best[0] + step), options={"xatol": 1e-3})
-        th = np.clip(np.array([opt.x]), bounds[0][0], bounds[0][1])
-    else:
-        opt = optimize.minimize(obj, best, method="Nelder-Mead",
-                                options={"xatol": 1e-2, "fatol": 1e-3, "maxiter": 300})
-        th = np.clip(opt.x, [b[0] for b in bounds], [b[1] for b in bounds])
-    return th, obj(th)
+    if start is None:
+        start, _ = grid_argmin(obj, bounds, 9 if len(bounds) == 1 else 6)
+    opt = optimize.minimize(obj, np.asarray(start, dtype=float), method="L-BFGS-B",
+                            bounds=bounds, options={"ftol": 1e-8, "gtol": 1e-3,
+                                                    "maxiter": 100, "eps": _FD_STEP_LOG})
+    return np.clip(opt.x, [b[0] for b in bounds], [b[1] for b in bounds]), float(opt.fun)

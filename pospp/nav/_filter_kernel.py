@@ -373,7 +373,10 @@ def store_node(i_node, k, p_upd, phi_acc, dx_tot, nodes):
 def _update_epoch(k, im, t, x, xp, p, sens, lever, w_b, meas, meas_out, gate, reset_after_s,
                   t_ok, i_gm, i_sf, i_l, dx_tot, gains, replay, record, n_gated):
     """All measurement records of epoch ``k`` from index ``im``: model, gate (or reset),
-    update, feedback. Returns the new P and the index after the epoch's records.
+    update, feedback. Returns the new P and the index after the epoch's records. A velocity
+    record ``dt`` off its epoch is predicted there with the mean acceleration over the
+    epoch's last interval, ``dz += (v_k - v_k-1) dt / (t_k - t_k-1)`` (a position record with
+    the antenna's velocity: :func:`measurement_model`).
 
     ``gains = (K, S^-1, H)``, (records, n, 3), (records, 3, 3) and (records, 3, n).
     ``record``: each used record's K, S^-1 and H are stored in them. ``replay``: they are
@@ -397,6 +400,12 @@ def _update_epoch(k, im, t, x, xp, p, sens, lever, w_b, meas, meas_out, gate, re
     while im < m_k.shape[0] and m_k[im] == k:
         kind = m_type[im]
         measurement_model(kind, x, lever, w_b, m_z[im], m_dt[im], i_gm, i_sf, i_l, h_mat, dz)
+        if kind == MEAS_VELOCITY and m_dt[im] != 0.0 and k > 0:
+            # the record is m_dt off its epoch: the velocity there, with the epoch's last
+            # interval's mean acceleration (x - xp: the strapdown's increment over it)
+            rate = m_dt[im] / (t[k] - t[k - 1])
+            for a in range(3):
+                dz[a] += (x[X_VEL + a] - xp[X_VEL + a]) * rate
         if replay:
             for a in range(3):
                 m_dz[im, a] = dz[a]

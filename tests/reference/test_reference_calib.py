@@ -8,16 +8,19 @@ docs/calibration.md). The injected errors (params.json) are a constant body-fram
 
 from __future__ import annotations
 
+import itertools
 import json
 
 import numpy as np
 import pytest
 
 from pospp import rotation, units
+from pospp.calib import reml
 from pospp.calib.compensate import compensate_legs
 from pospp.calib.pairs import PairPolicy
+from pospp.calib.reml import variance_bounds
 from pospp.calib.replay import ImuIncrements, replay_leg, solution_a_from_trajectory
-from pospp.calib.solve import fit_calibration
+from pospp.calib.solve import DriftPrior, FitOptions, fit_calibration
 from pospp.calib.stage import CalibrationOptions, calibrate_flight
 from pospp.io.mcap_reader import read_flight_log
 from pospp.io.parquet_tables import read_reference_trajectory, write_table
@@ -173,3 +176,60 @@ def test_all_pairs_mode_and_closed_form_transition(case):
     assert cal.transition == "closed_form" and cal.leg_ids == (0, 1, 2)
     for i, ax in enumerate("xy"):
         assert abs(cal.value(f"gyro_bias_{ax}") - bias[i]) < 0.05 * abs(bias[i])
+
+
+def _brute_force_min(obj, bounds, n=30):
+    """Argmin of ``obj`` by exhaustion: an n-per-axis grid over ``bounds``, then twice a 21-
+    point-per-axis grid of a tenth of the previous spacing around the best point (clipped to
+    the bounds): a resolution of 1e-2 of the coarse spacing. Returns (theta, obj(theta))."""
+    lo, hi = np.array(bounds).T
+    step = (hi - lo) / (n - 1)
+    axes = [np.linspace(b0, b1, n) for b0, b1 in bounds]
+    for _ in range(3):
+        pts = [np.array(p) for p in itertools.product(*axes)]
+        vals = [obj(p) for p in pts]
+        best = pts[int(np.argmin(vals))]
+        step = step / 10.0
+        axes = [np.unique(np.clip(c + s * np.arange(-10, 11), b0, b1))
+                for c, s, b0, b1 in zip(best, step, lo, hi, strict=True)]
+    return best, float(min(vals))
+
+
+def test_drift_variance_search_finds_the_brute_force_optimum(case, monkeypatch):
+    # the joint fit with the drift's sigma and tau by REML under the grade's prior (the
+    # pipeline's first drift fit): every tau candidate's (a, s2) optimum, each searched from
+    # the previous candidate's, and the grade's refit of a, against exhaustion of the same
+    # objective within the search's tolerance (1e-3 in the objective, 1e-2 in log variance)
+    params, _, _, _, run = case
+    fits = []
+
+    def recording(nll, fixed, penalty=None, start=None):
+        th, val = fit_variances(nll, fixed, penalty, start)
+        fits.append((nll, fixed, penalty, th, val))
+        return th, val
+
+    fit_variances = reml._fit_variances
+    monkeypatch.setattr(reml, "_fit_variances", recording)
+    arw = params["imu_errors"]["gyro_arw_dpsh"][0] * np.pi / 180 / 60
+    options = FitOptions(gyro_arw_radpsqrts=arw, gyro_gm_tau_s=300.0,
+                         gm_prior=DriftPrior(0.5 * DPH, 300.0))
+    cal = fit_calibration(tuple(run.replays[i] for i in sorted(run.replays)), "body", options)
+    assert len(cal.gm_tau_profile) == len(fits) - 2 >= 10  # candidates, the chosen's grid
+    assert {len(variance_bounds(f[1])) for f in fits} == {1, 2}  # refit, (a, s2) searches
+
+    def objective(fit):
+        nll, penalty = fit[0], fit[2]
+        return (lambda th: nll(th) + penalty(th)) if penalty is not None else nll
+
+    brute = [_brute_force_min(objective(f), variance_bounds(f[1])) for f in fits]
+
+    def agrees(i, th):
+        th_bf, val_bf = brute[i]
+        return objective(fits[i])(th) <= val_bf + 1e-3 and np.all(np.abs(th - th_bf) < 1e-2)
+
+    for i, fit in enumerate(fits):
+        assert fit[4] == pytest.approx(objective(fit)(fit[3]), abs=1e-9)
+        assert agrees(i, fit[3]), (fit[1], fit[3], fit[4], brute[i])
+    # the check bites: a profile whose candidates stay at their predecessor's optimum
+    # (a search that does not move) is refused
+    assert not all(agrees(i, fits[i - 1][3]) for i in range(1, len(fits) - 2))
