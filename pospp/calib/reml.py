@@ -464,7 +464,7 @@ def calibrate_gm(legs, h, z, edges, options: FitOptions, tau_s: float, bases=Non
     if grade is not None:
         source = "flight"
         g_fixed = (q_fixed, float(grade.sigma_radps) ** 2)
-        g_th, g_nll = _fit_variances(likelihood(float(grade.tau_s), g_fixed), g_fixed)
+        g_th, g_nll = fit_variances(likelihood(float(grade.tau_s), g_fixed), g_fixed)
         if g_nll - nll(th) < GM_REJECT_DNLL:  # the flight does not reject the grade
             source, tau_best, fixed, th = "grade", float(grade.tau_s), g_fixed, g_th
     a, q, s2 = _full_params(th, fixed)
@@ -491,7 +491,7 @@ def _tau_profile(likelihood: Callable[[float, tuple], Callable[[NDArray], float]
                  taus: tuple[float, ...], fixed: tuple[float | None, float | None],
                  grade: Any) -> list[tuple[float, float, NDArray, Callable[[NDArray], float]]]:
     """(tau [s], objective, theta, nll of theta) per candidate tau: the variances by
-    :func:`_fit_variances` of ``likelihood(tau, fixed)`` plus the grade's prior
+    :func:`fit_variances` of ``likelihood(tau, fixed)`` plus the grade's prior
     (:class:`pospp.calib.solve.DriftPrior`, None: no prior). The first candidate is searched
     from the grid, each next from the previous one's optimum (the profile over tau is
     smooth), and the lowest once more from the grid, the lower of its two optima kept."""
@@ -502,12 +502,12 @@ def _tau_profile(likelihood: Callable[[float, tuple], Callable[[NDArray], float]
     profile: list[tuple[float, float, NDArray, Callable[[NDArray], float]]] = []
     for tau in taus:
         nll = likelihood(tau, fixed)
-        th, val = _fit_variances(nll, fixed, penalty(tau), profile[-1][2] if profile else None)
+        th, val = fit_variances(nll, fixed, penalty(tau), profile[-1][2] if profile else None)
         profile.append((float(tau), val, th, nll))
     i_best = min(range(len(profile)), key=lambda i: profile[i][1])
     if len(profile) > 1:
         tau, val, _, nll = profile[i_best]
-        th, val_grid = _fit_variances(nll, fixed, penalty(tau))
+        th, val_grid = fit_variances(nll, fixed, penalty(tau))
         if val_grid < val:
             profile[i_best] = (tau, val_grid, th, nll)
     return profile
@@ -533,7 +533,7 @@ def variance_bounds(fixed: tuple[float | None, float | None]) -> list[tuple[floa
     return bounds
 
 
-def _fit_variances(nll: Callable[[NDArray], float], fixed: tuple[float | None, float | None],
+def fit_variances(nll: Callable[[NDArray], float], fixed: tuple[float | None, float | None],
                    penalty=None, start: NDArray | None = None) -> tuple[NDArray, float]:
     """REML (plus an optional penalty of theta) of log a and the logs of the free ones of
     (q, s2) (None in ``fixed``), the negative restricted likelihood ``nll`` of theta given.

@@ -82,6 +82,7 @@ from pospp.calib.reml import (
     autocorr_inflation,
     blocks_reml_nll,
     calibrate_gm,
+    fit_variances,
     gls_gain,
     grid_argmin,
     lag1_autocorrelation,
@@ -568,25 +569,18 @@ def _fit_gyro_rw(legs: tuple[LegReplay, ...], h: NDArray, z: NDArray, edges: NDA
                  o: FitOptions, bases: Mapping[int, NoiseBasis] | None,
                  noise_cache: dict | None) -> tuple:
     """GLS with ``Cov = a D + q K`` per leg (``noise="gyro_rw"``, no drift), a and q (q fixed
-    when the ARW is given) by REML: a coarse grid (the likelihood is flat in q where a is
-    large), then Nelder-Mead. Returns (x, cov, deficient, vf, arw, whitened residuals per
-    leg, gain)."""
+    when the ARW is given) by REML (:func:`pospp.calib.reml.fit_variances`: a coarse grid,
+    the likelihood being flat in q where a is large, then a bounded quasi-Newton). Returns
+    (x, cov, deficient, vf, arw, whitened residuals per leg, gain)."""
     blocks, rows_all = [], []
     for i, rep in enumerate(legs):
         basis = leg_noise_basis(rep, o.noise_step_s, bases, noise_cache)
         r = basis.rows + edges[i]
         rows_all.append(r)
         blocks.append(LegNoise(basis, h[r], z[r]))
-    if o.gyro_arw_radpsqrts is None:
-        bounds = [(np.log(1e-6), np.log(1e4)), (np.log(1e-22), np.log(1e-6))]
-        q_fixed = None
-    else:
-        bounds = [(np.log(1e-6), np.log(1e4))]
-        q_fixed = float(o.gyro_arw_radpsqrts) ** 2
-    theta0, _ = grid_argmin(lambda th: reml_nll(th, blocks, q_fixed), bounds, 11)
-    opt = optimize.minimize(reml_nll, theta0, args=(blocks, q_fixed), method="Nelder-Mead",
-                            options={"xatol": 1e-3, "fatol": 1e-4, "maxiter": 400})
-    th = np.clip(opt.x, [b[0] for b in bounds], [b[1] for b in bounds])
+    q_fixed = None if o.gyro_arw_radpsqrts is None else float(o.gyro_arw_radpsqrts) ** 2
+    # no drift: its variance is not a parameter (0 here only keeps it out of theta)
+    th, _ = fit_variances(lambda th: reml_nll(th, blocks, q_fixed), (q_fixed, 0.0))
     vf = float(np.exp(th[0]))
     q = q_fixed if q_fixed is not None else float(np.exp(th[1]))
     hw, zw, _ = stack_whitened(blocks, vf, q)

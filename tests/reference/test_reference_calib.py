@@ -208,8 +208,8 @@ def test_drift_variance_search_finds_the_brute_force_optimum(case, monkeypatch):
         fits.append((nll, fixed, penalty, th, val))
         return th, val
 
-    fit_variances = reml._fit_variances
-    monkeypatch.setattr(reml, "_fit_variances", recording)
+    fit_variances = reml.fit_variances
+    monkeypatch.setattr(reml, "fit_variances", recording)
     arw = params["imu_errors"]["gyro_arw_dpsh"][0] * np.pi / 180 / 60
     options = FitOptions(gyro_arw_radpsqrts=arw, gyro_gm_tau_s=300.0,
                          gm_prior=DriftPrior(0.5 * DPH, 300.0))
