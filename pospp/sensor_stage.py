@@ -153,15 +153,19 @@ def north_east_m(lat_rad: Any, lon_rad: Any, lat0_rad: float, lon0_rad: float,
 
 def innovation_design(log: mcap_reader.FlightLog, config: PipelineConfig,
                       families: Sequence[str], *, lever_b_m: Any = None,
-                      reference: tuple[float, float] | None = None) -> InnovationDesign:
+                      reference: tuple[float, float] | None = None,
+                      base: Any = None) -> InnovationDesign:
     """A's whitened innovations on ``log`` and their responses to each family's coefficients
     (module docstring); the gravity family's only with ``reference`` (lat, lon [rad]: the
     field's origin, the legs' mean start), its extent the farthest point of A's track after
-    its alignment (at least 1 km). Raises ValueError when A fails."""
-    factor = rerun_decimation(log, config.pairs.rerun_imu_rate_hz)
-    log_r = null_model.decimate_imu(log, factor)
+    its alignment (at least 1 km). ``base``: A as configured on ``log`` with its gains
+    recorded (the run's own pass, :class:`pospp.nav.filter.FilterResult`); None: A is run on
+    the log summed down to ``[pairs] rerun_imu_rate_hz``. Raises ValueError when A fails."""
     opts = replace(config.filter_options(), smoother=False, covariance_outputs=False)
-    base = navigate(log_r, config, options=opts, lever_arm_b_m=lever_b_m, record_gains=True)
+    if base is None:
+        log = null_model.decimate_imu(log, rerun_decimation(log,
+                                                            config.pairs.rerun_imu_rate_hz))
+        base = navigate(log, config, options=opts, lever_arm_b_m=lever_b_m, record_gains=True)
     gains, rec = base.gain_replay, base.innovations
     if gains is None or rec is None:
         raise ValueError("A recorded no gains")
@@ -170,7 +174,7 @@ def innovation_design(log: mcap_reader.FlightLog, config: PipelineConfig,
     used = (gains.status == STATUS_USED) & (rec.status == STATUS_USED) & \
         np.all(np.isfinite(nu0), axis=1) & (rec.t_s >= t_from)
     chol = np.linalg.cholesky(gains.s_inv[used])  # S^-1 = L L^T: L^T nu is white
-    t_run = t_s_from_time_ns(log_r.imu.time_ns, int(log_r.imu.time_ns[0]))
+    t_run = t_s_from_time_ns(log.imu.time_ns, int(log.imu.time_ns[0]))
     knots = knots_s(t_from, float(t_run[-1]))
     extent = float("nan")
     fams = [f for f in families if reference is not None or sensor_family(f).sensor != "gravity"]
@@ -186,7 +190,7 @@ def innovation_design(log: mcap_reader.FlightLog, config: PipelineConfig,
     responses = {}
     for fam in fams:  # a pass per family: its columns' inputs and integrals are in memory
         dnu = innovation_responses(gains, base.forward.trajectory, t_run,
-                                   log_r.imu.w_ib_b_radps, log_r.imu.f_ib_b_mps2,
+                                   log.imu.w_ib_b_radps, log.imu.f_ib_b_mps2,
                                    _column_input(fam, knots, field), breaks_s=breaks,
                                    static_window_s=static_alignment_window(base, opts))
         white = _whitened(chol, dnu, np.flatnonzero(used)).reshape(-1, dnu.shape[2])
@@ -199,8 +203,8 @@ def innovation_design(log: mcap_reader.FlightLog, config: PipelineConfig,
     lever = config.gnss.lever_arm_m if lever_b_m is None else lever_b_m
     v = gnss_record_errors("time_offset", base.forward.trajectory, rec.t_s, gains.meas_kind,
                            lever)
-    dnu = innovation_responses(gains, base.forward.trajectory, t_run, log_r.imu.w_ib_b_radps,
-                               log_r.imu.f_ib_b_mps2, _no_input, record_v=v)
+    dnu = innovation_responses(gains, base.forward.trajectory, t_run, log.imu.w_ib_b_radps,
+                               log.imu.f_ib_b_mps2, _no_input, record_v=v)
     offset = np.einsum("kji,kj->ki", chol, dnu[used, :, 0]).reshape(-1)
     return InnovationDesign(white_y, responses, knots, float(t_run[-1]), rec.t_s[used], extent,
                             offset)
@@ -263,8 +267,8 @@ def _offset_significant(offset_s: float, sigma_s: float) -> bool:
 
 def _without_time_offset(log: Any, config: PipelineConfig, families: Sequence[str],
                          lever: Any, reference: tuple[float, float] | None,
-                         joint: Callable[[], LeverTime | None] | None = None
-                         ) -> tuple[InnovationDesign, Any, float]:
+                         joint: Callable[[], LeverTime | None] | None = None,
+                         base: Any = None) -> tuple[InnovationDesign, Any, float]:
     """(design, log, offset [s]): the design on ``log`` with the GNSS time offset its
     innovations read removed (GNSS stamps minus true time; 0 when none is significant,
     :data:`TIME_OFFSET_FLOOR_S`). Left in, a 15 ms offset was named as a 143-223 ug
@@ -275,9 +279,12 @@ def _without_time_offset(log: Any, config: PipelineConfig, families: Sequence[st
     (``joint()``, :func:`pospp.lever_time_stage.lever_time_estimate`, the one the QC stage
     reads; nothing when it determines the offset and finds none beyond five of its sigmas
     and the floor). Without it, or where it cannot determine the offset, the innovations'
-    own reading is removed, by at most :data:`TIME_OFFSET_ITERATIONS` passes."""
+    own reading is removed, by at most :data:`TIME_OFFSET_ITERATIONS` passes. ``base``: A
+    on ``log`` as :func:`innovation_design` takes it (the first design's; a restamped log's
+    are A's passes on it)."""
     total = 0.0
-    design = innovation_design(log, config, families, lever_b_m=lever, reference=reference)
+    design = innovation_design(log, config, families, lever_b_m=lever, reference=reference,
+                               base=base)
     for k in range(TIME_OFFSET_ITERATIONS):
         c, _, significant = _offset_reading(design)
         if not significant:
@@ -325,8 +332,8 @@ class SensorFamilies:
 
 def sensor_families(d: Diagnosis, replays: list, log: mcap_reader.FlightLog,
                     config: PipelineConfig, solution_a: SolutionA | None = None,
-                    joint: Callable[[], LeverTime | None] | None = None
-                    ) -> SensorFamilies | None:
+                    joint: Callable[[], LeverTime | None] | None = None,
+                    nav: Any = None) -> SensorFamilies | None:
     """Fit the families on A's innovations of ``log`` with ``d``'s named GNSS-side effects
     removed; families ``d`` named on the legs are not fitted again, the gravity field only
     with A's solution (its origin: the legs' mean start). None when no family is left;
@@ -334,7 +341,8 @@ def sensor_families(d: Diagnosis, replays: list, log: mcap_reader.FlightLog,
     hold (:func:`imu_noise_holds`, the innovations' scale) or A fails on the log with the
     named effects removed. ``joint``: the joint lever-arm / time-offset estimate, made when
     first asked (:func:`_without_time_offset`; the legs' named offset, when they name one,
-    is removed instead)."""
+    is removed instead). ``nav``: the run's A on ``log`` (its gains recorded), whose
+    innovations the families read where nothing is removed from the log."""
     families = [f.effect_id for f in SENSOR_FAMILIES if f.effect_id not in d.named
                 and (solution_a is not None or sensor_family(f.effect_id).sensor != "gravity")]
     if not families:
@@ -345,9 +353,10 @@ def sensor_families(d: Diagnosis, replays: list, log: mcap_reader.FlightLog,
     log_s, lever, removed = _removed(log, config, d)
     ref = _legs_reference(replays, solution_a)
     try:
+        own = nav if not removed and getattr(nav, "gain_replay", None) is not None else None
         design, log_s, offset_s = _without_time_offset(
             log_s, config, families, lever, ref,
-            None if "time_offset" in removed else joint)
+            None if "time_offset" in removed else joint, own)
     except (ValueError, np.linalg.LinAlgError):  # A failed on the log with the effects removed
         return SensorFamilies(tuple(families), (), (), np.zeros(0), {}, removed, float("nan"),
                               False)
