@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from pospp import earth
-from pospp.calib.innovation_response import innovation_responses
+from pospp.calib.innovation_response import ResponseSystem
 from pospp.calib.replay import SolutionA
 from pospp.config import PipelineConfig
 from pospp.diagnose import null_model
@@ -187,12 +187,12 @@ def innovation_design(log: mcap_reader.FlightLog, config: PipelineConfig,
         field = _field_input(base, reference, extent)
     # where a column is not smooth (a step on a knot is one break)
     breaks = np.unique(np.round(np.concatenate([knots, step_times_s(knots)]), 6))
+    system = ResponseSystem.of(gains, base.forward.trajectory, t_run, log.imu.w_ib_b_radps,
+                               log.imu.f_ib_b_mps2, breaks_s=breaks)
     responses = {}
     for fam in fams:  # a pass per family: its columns' inputs and integrals are in memory
-        dnu = innovation_responses(gains, base.forward.trajectory, t_run,
-                                   log.imu.w_ib_b_radps, log.imu.f_ib_b_mps2,
-                                   _column_input(fam, knots, field), breaks_s=breaks,
-                                   static_window_s=static_alignment_window(base, opts))
+        dnu = system.responses(_column_input(fam, knots, field),
+                               static_window_s=static_alignment_window(base, opts))
         white = _whitened(chol, dnu, np.flatnonzero(used)).reshape(-1, dnu.shape[2])
         del dnu  # every record's columns: not held while the next family's pass runs
         responses[fam] = (white[:, :, None] if sensor_family(fam).sensor == "gravity" else
@@ -203,8 +203,7 @@ def innovation_design(log: mcap_reader.FlightLog, config: PipelineConfig,
     lever = config.gnss.lever_arm_m if lever_b_m is None else lever_b_m
     v = gnss_record_errors("time_offset", base.forward.trajectory, rec.t_s, gains.meas_kind,
                            lever)
-    dnu = innovation_responses(gains, base.forward.trajectory, t_run, log.imu.w_ib_b_radps,
-                               log.imu.f_ib_b_mps2, _no_input, record_v=v)
+    dnu = system.responses(_no_input, record_v=v)
     offset = np.einsum("kji,kj->ki", chol, dnu[used, :, 0]).reshape(-1)
     return InnovationDesign(white_y, responses, knots, float(t_run[-1]), rec.t_s[used], extent,
                             offset)

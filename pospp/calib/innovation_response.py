@@ -56,6 +56,7 @@ plausible size the replays' columns move by 0.03 % of their norm for the hinges,
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
@@ -156,42 +157,83 @@ def innovation_responses(gains: GainReplay, trajectory: Trajectory, imu_t_s: NDA
         record, [m/s] for a velocity one) per SI coefficient of each column; zero for the
         records A did not use.
     """
-    st = np.asarray(gains.status)
-    applied = np.flatnonzero(((st == STATUS_USED) | (st == STATUS_RESET))
-                             & (gains.meas_k >= gains.k_start))
-    t0 = float(gains.t_s[gains.k_start])
-    t_rec = np.asarray(gains.t_s)[gains.meas_k[applied]]
-    t_nodes = np.unique(np.concatenate([[t0], t_rec]))
-    breaks = np.zeros(0) if breaks_s is None else np.asarray(breaks_s, dtype=float)
-    breaks = np.unique(breaks[(breaks > t0) & (breaks < t_nodes[-1])])
-    grid_t, g_node, _ = event_grid(t_nodes, breaks, max_step_s)
-    xs, fm, wm, dts = interval_means(grid_t, trajectory, imu_t_s, imu_w_b_radps, imu_f_b_mps2)
-    xs[1:] = _kernel_states(trajectory, 0.5 * (grid_t[1:] + grid_t[:-1]))
-    node_of_rec = np.searchsorted(t_nodes, t_rec)
-    rec_start = np.searchsorted(node_of_rec, np.arange(t_nodes.size + 1)).astype(np.int64)
-    lay = gains.layout
-    m = np.shape(body_input(grid_t[:1], np.eye(3)[None]))[2]
-    records = (rec_start, np.ascontiguousarray(gains.gains[applied]),
-               np.ascontiguousarray(gains.h[applied]), applied.astype(np.int64),
-               np.zeros((0, 3, m)) if record_v is None
-               else np.ascontiguousarray(np.asarray(record_v, dtype=float)[applied]))
-    out = np.zeros((st.size, 3, m))  # zero for the records A did not use
-    e = np.zeros((lay.n, m))
-    if static_window_s is not None:
-        e[:3] = _alignment_response(static_window_s, imu_t_s, imu_w_b_radps, imu_f_b_mps2,
-                                    trajectory, body_input, breaks, max_step_s)
-    # the grid a stretch at a time, each stretch's input integrals made for it alone (the
-    # whole grid's are (G, 6, m) twice: 108 MiB on a 1.5 h flight, m = 210); a stretch
-    # starts at the last one's end point, whose records the last one applied
-    for a in range(0, max(grid_t.size - 1, 1), _STRETCH):
-        b = min(a + 1 + _STRETCH, grid_t.size)
-        d0, d1 = _input_integrals(grid_t[a:b], trajectory, body_input)
-        nodes = g_node[a:b].copy()
-        nodes[0] = nodes[0] if a == 0 else -1
-        e = propagate_columns((xs[a:b], fm[a:b], wm[a:b], dts[a:b]), lay.i_gm, lay.i_sf,
-                              np.asarray(gains.gm_inv_tau, dtype=float), nodes, records, e,
-                              d0, d1, out)
-    return out
+    return ResponseSystem.of(gains, trajectory, imu_t_s, imu_w_b_radps, imu_f_b_mps2,
+                             breaks_s=breaks_s, max_step_s=max_step_s).responses(
+        body_input, static_window_s=static_window_s, record_v=record_v)
+
+
+@dataclass(frozen=True)
+class ResponseSystem:
+    """A's closed-loop error system along its pass on the event grid (:func:`innovation_
+    responses`' arguments but the columns'): made once, it gives the responses to any
+    columns on the same breaks (each family's, a GNSS-side column's)."""
+
+    gains: GainReplay
+    trajectory: Trajectory
+    imu: tuple[NDArray, NDArray, NDArray]
+    """The IMU's epochs [s], mean rate [rad/s] and specific force [m/s^2], body FRD."""
+    breaks_s: NDArray
+    max_step_s: float
+    grid_t: NDArray
+    g_node: NDArray
+    means: tuple[NDArray, NDArray, NDArray, NDArray]
+    """Per grid point A's kernel state at the interval's middle, the mean specific force and
+    rate over it and its length (:func:`pospp.calib.linear_null.interval_means`)."""
+    applied: NDArray
+    """The records A used or reset with from its first epoch (indices into ``gains``)."""
+    rec_start: NDArray
+
+    @classmethod
+    def of(cls, gains: GainReplay, trajectory: Trajectory, imu_t_s: NDArray,
+           imu_w_b_radps: NDArray, imu_f_b_mps2: NDArray, *,
+           breaks_s: NDArray | None = None, max_step_s: float = MAX_STEP_S
+           ) -> ResponseSystem:
+        st = np.asarray(gains.status)
+        applied = np.flatnonzero(((st == STATUS_USED) | (st == STATUS_RESET))
+                                 & (gains.meas_k >= gains.k_start))
+        t0 = float(gains.t_s[gains.k_start])
+        t_rec = np.asarray(gains.t_s)[gains.meas_k[applied]]
+        t_nodes = np.unique(np.concatenate([[t0], t_rec]))
+        breaks = np.zeros(0) if breaks_s is None else np.asarray(breaks_s, dtype=float)
+        breaks = np.unique(breaks[(breaks > t0) & (breaks < t_nodes[-1])])
+        grid_t, g_node, _ = event_grid(t_nodes, breaks, max_step_s)
+        xs, fm, wm, dts = interval_means(grid_t, trajectory, imu_t_s, imu_w_b_radps,
+                                         imu_f_b_mps2)
+        xs[1:] = _kernel_states(trajectory, 0.5 * (grid_t[1:] + grid_t[:-1]))
+        node_of_rec = np.searchsorted(t_nodes, t_rec)
+        rec_start = np.searchsorted(node_of_rec, np.arange(t_nodes.size + 1)).astype(np.int64)
+        return cls(gains, trajectory, (imu_t_s, imu_w_b_radps, imu_f_b_mps2), breaks,
+                   max_step_s, grid_t, g_node, (xs, fm, wm, dts), applied, rec_start)
+
+    def responses(self, body_input: BodyInput, *,
+                  static_window_s: tuple[float, float] | None = None,
+                  record_v: NDArray | None = None) -> NDArray:
+        """:func:`innovation_responses` of the columns ``body_input`` (and ``record_v``)."""
+        gains, applied, grid_t = self.gains, self.applied, self.grid_t
+        lay = gains.layout
+        m = np.shape(body_input(grid_t[:1], np.eye(3)[None]))[2]
+        records = (self.rec_start, np.ascontiguousarray(gains.gains[applied]),
+                   np.ascontiguousarray(gains.h[applied]), applied.astype(np.int64),
+                   np.zeros((0, 3, m)) if record_v is None
+                   else np.ascontiguousarray(np.asarray(record_v, dtype=float)[applied]))
+        out = np.zeros((np.size(gains.status), 3, m))  # zero for the records A did not use
+        e = np.zeros((lay.n, m))
+        if static_window_s is not None:
+            e[:3] = _alignment_response(static_window_s, *self.imu, self.trajectory,
+                                        body_input, self.breaks_s, self.max_step_s)
+        xs, fm, wm, dts = self.means
+        # the grid a stretch at a time, each stretch's input integrals made for it alone (the
+        # whole grid's are (G, 6, m) twice: 108 MiB on a 1.5 h flight, m = 210); a stretch
+        # starts at the last one's end point, whose records the last one applied
+        for a in range(0, max(grid_t.size - 1, 1), _STRETCH):
+            b = min(a + 1 + _STRETCH, grid_t.size)
+            d0, d1 = _input_integrals(grid_t[a:b], self.trajectory, body_input)
+            nodes = self.g_node[a:b].copy()
+            nodes[0] = nodes[0] if a == 0 else -1
+            e = propagate_columns((xs[a:b], fm[a:b], wm[a:b], dts[a:b]), lay.i_gm, lay.i_sf,
+                                  np.asarray(gains.gm_inv_tau, dtype=float), nodes, records,
+                                  e, d0, d1, out)
+        return out
 
 
 def _alignment_response(window_s: tuple[float, float], imu_t_s: NDArray, imu_w: NDArray,
