@@ -1,21 +1,23 @@
 """The sensor families of the diagnosis: A's innovations and their responses.
 
-:func:`innovation_design` runs algorithm A as configured on the log (summed down to ``[pairs]
-rerun_imu_rate_hz``, the named GNSS-side effects removed) recording its gains, and
-propagates every column of each family (a basis function of
-:func:`pospp.diagnose.shapes.change_basis` per body axis x, y and sensor; a term of the
-gravity field's potential) through A's closed-loop error dynamics with those gains in one
-linear pass per family (:func:`pospp.calib.innovation_response.innovation_responses`): the
-innovations' linear responses of :mod:`pospp.diagnose.sensor_families`; a gain replay with
-the GNSS stamped 1 ms earlier gives the GNSS time offset's, with which
-:func:`_without_time_offset` reads an offset left in the log and removes it.
-:func:`sensor_families` names the families and :func:`with_sensor_families` returns them as
-diagnosis rows with what each does to B (its worth at the horizon). Nothing here touches
-files.
+:func:`innovation_design` reads algorithm A as configured on the log with its gains recorded
+(the run's own pass where nothing is removed from the log; else A run on the log summed down
+to ``[pairs] rerun_imu_rate_hz`` with the named GNSS-side effects removed) and propagates
+every column of each family (a basis function of :func:`pospp.diagnose.shapes.change_basis`
+per body axis x, y and sensor; a term of the gravity field's potential) through A's
+closed-loop error dynamics with those gains in one linear pass per family
+(:class:`pospp.calib.innovation_response.ResponseSystem`): the innovations' linear responses
+of :mod:`pospp.diagnose.sensor_families`. The same pass of the records' errors per second of
+a GNSS time offset (:func:`pospp.diagnose.linear_signatures.gnss_record_errors`) gives the
+offset's column, with which :func:`_without_time_offset` reads an offset left in the log and
+removes it. :func:`sensor_families` names the families and :func:`with_sensor_families`
+returns them as diagnosis rows with what each does to B (its worth at the horizon). Nothing
+here touches files.
 
-Cost: per design one forward pass of A with its gains recorded, one replay and a linear pass
-per family (a 15 x m matrix over a grid of A's records, the knots and the step times, at most
-1 s apart; m = 2 (K + S), K <= 10 hinges, S <= 60 steps, or 12 field terms).
+Cost: per design a linear pass per family and one for the offset (a 15 x m matrix over a
+grid of A's records, the knots and the step times, at most 1 s apart; m = 2 (K + S), K <= 10
+hinges, S <= 60 steps, or 12 field terms), and A's forward pass with its gains where the
+log's own cannot serve.
 """
 
 from __future__ import annotations
