@@ -44,6 +44,7 @@ from pospp.calib.replay import (
     LegReplay,
     ReplayOptions,
     SolutionA,
+    forced_response,
     replay_errors,
 )
 from pospp.calib.solve import Calibration, FitOptions, fit_calibration
@@ -299,20 +300,6 @@ class ModeChoice:
     source: str
 
 
-def history_response_n_m(rep: LegReplay, dbias_b_radps: NDArray) -> NDArray:
-    """B's NED position change [m] (M, 3) at the leg's samples when ``dbias_b_radps`` (M, 3)
-    [rad/s, body] more gyro bias is removed from its rates: B's rate input changes by ``-db``,
-    so ``phi' = C_nb db`` (B's error model, :mod:`pospp.nav.error_model`) and
-    ``dr(t) = Phi_r(t, t0) int_0^t Phi(tau, t0)^-1 G(tau) dtau``, the integrand trapezoidal on
-    the samples; zero at the leg start."""
-    g = np.zeros((rep.t_s.size, 15, 1))
-    g[:, PHI, 0] = np.einsum("kij,kj->ki", rep.c_nb, dbias_b_radps)
-    integrand = np.linalg.solve(rep.phi, g)
-    steps = 0.5 * (integrand[1:] + integrand[:-1]) * np.diff(rep.t_s)[:, None, None]
-    cum = np.concatenate([np.zeros_like(integrand[:1]), np.cumsum(steps, axis=0)])
-    return (rep.phi[:, DR, :] @ cum)[:, :, 0]
-
-
 def history_scores_m(inputs: ModeInputs, candidates: Mapping[str, tuple[NDArray, NDArray]]
                      ) -> dict[str, float]:
     """Per candidate history (t [s], b [rad/s] body), the RMS of B minus A's horizontal
@@ -321,9 +308,12 @@ def history_scores_m(inputs: ModeInputs, candidates: Mapping[str, tuple[NDArray,
     interpolated).
 
     B is replayed once per leg with the calibrated constant bias ``b_g``; a history's B is that
-    replay plus B's linear response to ``b(t) - b_g`` (:func:`history_response_n_m`). B is
-    linear in a gyro bias of this size to far below the scores' differences: its attitude
-    error is what the bias integrates, 1 deg/h over 300 s is 0.08 deg."""
+    replay plus B's linear response to ``db = b(t) - b_g`` more bias removed from its rates:
+    its rate input changes by ``-db``, so ``phi' = C_nb db`` (:mod:`pospp.nav.error_model`),
+    the position rows of :func:`pospp.calib.replay.forced_response`, every candidate in one
+    pass per leg. B is linear in a gyro bias of this size to far below the scores'
+    differences: its attitude error is what the bias integrates, 1 deg/h over 300 s is
+    0.08 deg."""
     cal, rc = inputs.cal, inputs.replay
     lids = [i for i in cal.leg_ids if i in inputs.replays]
 
@@ -335,19 +325,20 @@ def history_scores_m(inputs: ModeInputs, candidates: Mapping[str, tuple[NDArray,
             attitude_correction_n_rad=cal.misalignment_n_rad(lid),
             accel_compensation=rc.accel_compensation, sample_rate_hz=rc.sample_rate_hz).dr_n_m
 
-    based = dict(zip(lids, map_in_threads(base, lids, inputs.threads), strict=True))
-    scores = {}
-    for name, (t_s, b_radps) in candidates.items():
-        sq = []
-        for lid in lids:
-            rep = inputs.replays[lid]
-            at = rep.t0_s + rep.t_s
-            db = np.stack([np.interp(at, t_s, b_radps[:, c]) for c in range(3)], axis=1)
-            dr = based[lid] + history_response_n_m(rep, db - cal.gyro_bias_b_radps(rep.c_nb0))
-            k = int(np.searchsorted(rep.t_s, rc.horizon_s - 1e-9))
-            sq.append(np.sum(np.square(dr[1:k + 1, 0:2]), axis=1))
-        scores[name] = float(np.sqrt(np.mean(np.concatenate(sq))))
-    return scores
+    names = list(candidates)
+    sq: list[NDArray] = []  # per leg, (its samples up to the horizon, candidates)
+    for lid, dr0 in zip(lids, map_in_threads(base, lids, inputs.threads), strict=True):
+        rep = inputs.replays[lid]
+        at = rep.t0_s + rep.t_s
+        db = np.stack([np.stack([np.interp(at, t_s, b[:, c]) for c in range(3)], axis=1)
+                       for t_s, b in candidates.values()], axis=2)  # (M, 3, P)
+        g = np.zeros((rep.t_s.size, 15, len(names)))
+        g[:, PHI, :] = rep.c_nb @ (db - cal.gyro_bias_b_radps(rep.c_nb0)[:, None])
+        dr = dr0[:, :, None] + forced_response(rep, g, rows=DR)
+        k = int(np.searchsorted(rep.t_s, rc.horizon_s - 1e-9))
+        sq.append(np.sum(np.square(dr[1:k + 1, 0:2]), axis=1))
+    rms = np.sqrt(np.mean(np.concatenate(sq), axis=0))
+    return {name: float(v) for name, v in zip(names, rms, strict=True)}
 
 
 def choose_bias_history(inputs: ModeInputs,

@@ -285,6 +285,32 @@ def replay_legs(imu: ImuSource, solution_a: SolutionA, legs: Sequence[Leg],
              if isinstance(r, LegReplay)}, tuple(r for r in made if isinstance(r, str)))
 
 
+def forced_response(rep: LegReplay, g: NDArray, rows: slice = slice(3, 5)) -> NDArray:
+    """B's error along a leg from a forcing, ``dx(t) = Phi(t, t0) int_0^t Phi(tau, t0)^-1 G u
+    dtau``, the integrand trapezoidal on the leg's samples.
+
+    Parameters
+    ----------
+    rep : LegReplay
+        The leg (its transition matrices Phi(t_s, t0) and samples t_s).
+    g : ndarray, shape (M, 15, P)
+        ``G(tau) u(tau)`` at the samples for each of P unit parameters (error-state
+        derivative, 15-state layout of :mod:`pospp.nav.error_model`).
+    rows : slice
+        The error states returned: [dv_N, dv_E] [m/s] by default, ``DR`` for the NED position
+        error [m].
+
+    Returns
+    -------
+    ndarray, shape (M, R, P)
+        Those rows at the samples per unit parameter; zero at t = 0.
+    """
+    integrand = np.linalg.solve(rep.phi, g)  # (M, 15, P)
+    steps = 0.5 * (integrand[1:] + integrand[:-1]) * np.diff(rep.t_s)[:, None, None]
+    cum = np.concatenate([np.zeros_like(integrand[:1]), np.cumsum(steps, axis=0)])
+    return rep.phi[:, rows, :] @ cum
+
+
 def replay_velocity_error(
     imu: ImuSource,
     solution_a: SolutionA,

@@ -18,11 +18,12 @@ order). Three ways, picked per effect:
 
       dx(t) = Phi(t, t0) int_t0^t Phi(tau, t0)^-1 G(tau) u(tau) dtau
 
-  evaluated by the trapezoidal rule on the leg's sample grid (:func:`forced_response`).
+  evaluated by the trapezoidal rule on the leg's sample grid
+  (:func:`pospp.calib.replay.forced_response`).
 * A perturbation of algorithm A (lever arm): B minus A changes by B's propagated initial error
   minus A's own error.
-* Finite differences of B re-run on perturbed IMU increments (time offset, gyro scale
-  factor): the one strapdown kernel, through :func:`pospp.calib.replay.replay_velocity_error`.
+* Finite differences of B re-run on perturbed IMU increments (time offset): the one
+  strapdown kernel, through :func:`pospp.calib.replay.replay_velocity_error`.
 
 Effects (stable identifiers)
 ----------------------------
@@ -85,6 +86,7 @@ from pospp.calib.replay import (
     ImuSource,
     LegReplay,
     SolutionA,
+    forced_response,
     replay_velocity_error,
 )
 from pospp.effects_catalog import catalog_entry, row_named
@@ -202,30 +204,6 @@ def _catalogued(effect_id: str, signatures: dict[str, Signature],
 
 # --------------------------------------------------------------------------------------------
 # building blocks
-
-
-def forced_response(rep: LegReplay, g: NDArray) -> NDArray:
-    """Horizontal velocity error of a forcing, ``Phi(t) int Phi(tau)^-1 G u dtau``.
-
-    Parameters
-    ----------
-    rep : LegReplay
-        The leg (its transition matrices Phi(t_s, t0) and samples t_s).
-    g : ndarray, shape (M, 15, P)
-        ``G(tau) u(tau)`` at the samples for each of P unit parameters (error-state
-        derivative, 15-state layout of :mod:`pospp.nav.error_model`).
-
-    Returns
-    -------
-    ndarray, shape (M, 2, P)
-        [dv_N, dv_E] at the samples [m/s per unit parameter]; zero at t = 0.
-    """
-    inv = np.linalg.inv(rep.phi)
-    integrand = inv @ g  # (M, 15, P)
-    dt = np.diff(rep.t_s)[:, None, None]
-    steps = 0.5 * (integrand[1:] + integrand[:-1]) * dt
-    cum = np.concatenate([np.zeros_like(integrand[:1]), np.cumsum(steps, axis=0)])
-    return rep.phi[:, 3:5, :] @ cum
 
 
 def body_rate_nb_radps(rep: LegReplay) -> NDArray:

@@ -57,6 +57,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from pospp.calib.replay import forced_response
 from pospp.diagnose._candidates import FIELD_PARAMETERS
 from pospp.diagnose._linear import f_test
 from pospp.diagnose.shapes import Variant, all_variants, change_at, shape_values
@@ -380,11 +381,6 @@ def fit_sensor_families(design: InnovationDesign, families: Sequence[str],
 # what a named change does to B minus A (the calibration's data)
 
 
-def _forced(rep, g: NDArray) -> NDArray:
-    from pospp.diagnose.effects import forced_response
-    return forced_response(rep, g)
-
-
 def accel_response_along_b(rep, change_b: NDArray, change_b0: NDArray) -> NDArray:
     """B's horizontal velocity error (M, 2) [m/s] from an accelerometer bias change
     ``change_b`` (M, 2) [m/s^2] at the leg's samples, body x and y: B starts on A, whose tilt
@@ -393,7 +389,7 @@ def accel_response_along_b(rep, change_b: NDArray, change_b0: NDArray) -> NDArra
     within 0.6-3.2 mm/s RMS per leg of this, the true gyro bias and the tilts)."""
     g = np.zeros((rep.t_s.size, 15, 1))
     g[:, 3:6, 0] = np.einsum("kij,kj->ki", rep.c_nb[:, :, 0:2], change_b - change_b0)
-    return _forced(rep, g)[:, :, 0]
+    return forced_response(rep, g)[:, :, 0]
 
 
 def gyro_response_along_b(rep, change_b: NDArray, change_b0: NDArray) -> NDArray:
@@ -403,7 +399,7 @@ def gyro_response_along_b(rep, change_b: NDArray, change_b0: NDArray) -> NDArray
     leg start is A's)."""
     g = np.zeros((rep.t_s.size, 15, 1))
     g[:, 0:3, 0] = -np.einsum("kij,kj->ki", rep.c_nb[:, :, 0:2], change_b)
-    return _forced(rep, g)[:, :, 0]
+    return forced_response(rep, g)[:, :, 0]
 
 
 def gravity_response_along_b(rep, field_change: NDArray, field_change0: NDArray) -> NDArray:
@@ -412,7 +408,7 @@ def gravity_response_along_b(rep, field_change: NDArray, field_change0: NDArray)
     (:mod:`pospp.diagnose.effects`, the ``field`` shape)."""
     g = np.zeros((rep.t_s.size, 15, 1))
     g[:, 3:5, 0] = -(field_change - field_change0)
-    return _forced(rep, g)[:, :, 0]
+    return forced_response(rep, g)[:, :, 0]
 
 
 @dataclass(frozen=True)

@@ -19,7 +19,12 @@ import pytest
 from _truth_imu import weaving_flight, weaving_truth_state
 
 from pospp import earth, rotation
-from pospp.calib.replay import ImuIncrements, replay_leg, solution_a_from_trajectory
+from pospp.calib.replay import (
+    ImuIncrements,
+    forced_response,
+    replay_leg,
+    solution_a_from_trajectory,
+)
 from pospp.calib.segment import Leg
 from pospp.diagnose import effects as fx
 from pospp.nav import strapdown
@@ -107,7 +112,7 @@ def test_forced_response_of_constant_gyro_bias_equals_phi_column(flight):
     for r in reps:
         g = np.zeros((r.t_s.size, 15, 3))
         g[:, 0:3, :] = -r.c_nb
-        got = fx.forced_response(r, g)
+        got = forced_response(r, g)
         want = r.phi[:, 3:5, BG]
         assert np.abs(got - want).max() < 2e-3 * np.abs(want).max()
 
