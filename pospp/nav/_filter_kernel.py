@@ -189,11 +189,15 @@ def propagate_covariance_into(p, phi_acc, x, fm, wm, t_acc, qc, i_gm, i_sf, inv_
 
 
 @njit(cache=True)
-def measurement_model(kind, x, lever, w_b, z, dt_meas, i_gm, i_sf, i_l, h_mat, dz):
+def measurement_model(kind, x, lever, w_b, a_n, z, dt_meas, i_gm, i_sf, i_l, h_mat, dz):
     """Innovation ``dz`` (predicted minus measured) and ``H`` (zeroed here) of one record.
 
+    The record is ``dt_meas`` after its epoch: it is predicted there, a position with the
+    antenna's velocity ``v_a``, a velocity with the mean acceleration ``a_n`` over the epoch's
+    last interval (NED m/s^2).
     Position: ``dz = r + C l + v_a dt_meas - z`` (NED m), ``H = [[(C l) x], 0, I, 0, 0 ...
-    (, C)]``. Velocity and ZUPT (z = 0): ``dz = v + C (w x l) - w_in x (C l) - z``, ``H =
+    (, C)]``. Velocity: ``dz = v + C (w x l) - w_in x (C l) + a_n dt_meas - z``; ZUPT
+    (z = 0): the same without ``a_n dt_meas``; ``H =
     [[(C (w x l)) x], I, 0, -C [l x], 0 (, -C [l x], 0) (, -C [l x] diag(w), 0) (, C [w x] -
     [w_in x] C)]`` (module docstring of :mod:`pospp.nav.filter`).
     """
@@ -227,8 +231,9 @@ def measurement_model(kind, x, lever, w_b, z, dt_meas, i_gm, i_sf, i_l, h_mat, d
                 for b in range(3):
                     h_mat[a, i_l + b] = c_nb[a, b]
         return
+    ahead = dt_meas if kind == MEAS_VELOCITY else 0.0
     for a in range(3):
-        dz[a] = v_ant[a] - z[a]
+        dz[a] = v_ant[a] + a_n[a] * ahead - z[a]
     _skew_into(cwl, h_mat, 0, I_PHI, 1.0)
     for a in range(3):
         h_mat[a, I_DV + a] = 1.0
@@ -373,10 +378,10 @@ def store_node(i_node, k, p_upd, phi_acc, dx_tot, nodes):
 def _update_epoch(k, im, t, x, xp, p, sens, lever, w_b, meas, meas_out, gate, reset_after_s,
                   t_ok, i_gm, i_sf, i_l, dx_tot, gains, replay, record, n_gated):
     """All measurement records of epoch ``k`` from index ``im``: model, gate (or reset),
-    update, feedback. Returns the new P and the index after the epoch's records. A velocity
-    record ``dt`` off its epoch is predicted there with the mean acceleration over the
-    epoch's last interval, ``dz += (v_k - v_k-1) dt / (t_k - t_k-1)`` (a position record with
-    the antenna's velocity: :func:`measurement_model`).
+    update, feedback. Returns the new P and the index after the epoch's records. The mean
+    acceleration over the epoch's last interval, ``(v_k - v_k-1) / (t_k - t_k-1)`` (the
+    strapdown's increment), predicts a velocity record off its epoch
+    (:func:`measurement_model`).
 
     ``gains = (K, S^-1, H)``, (records, n, 3), (records, 3, 3) and (records, 3, n).
     ``record``: each used record's K, S^-1 and H are stored in them. ``replay``: they are
@@ -397,15 +402,14 @@ def _update_epoch(k, im, t, x, xp, p, sens, lever, w_b, meas, meas_out, gate, re
     h_mat = np.zeros((3, n))
     dz = np.empty(3)
     s_inv = np.empty((3, 3))
+    a_n = np.zeros(3)
+    if k > 0:
+        for a in range(3):
+            a_n[a] = (x[X_VEL + a] - xp[X_VEL + a]) / (t[k] - t[k - 1])
     while im < m_k.shape[0] and m_k[im] == k:
         kind = m_type[im]
-        measurement_model(kind, x, lever, w_b, m_z[im], m_dt[im], i_gm, i_sf, i_l, h_mat, dz)
-        if kind == MEAS_VELOCITY and m_dt[im] != 0.0 and k > 0:
-            # the record is m_dt off its epoch: the velocity there, with the epoch's last
-            # interval's mean acceleration (x - xp: the strapdown's increment over it)
-            rate = m_dt[im] / (t[k] - t[k - 1])
-            for a in range(3):
-                dz[a] += (x[X_VEL + a] - xp[X_VEL + a]) * rate
+        measurement_model(kind, x, lever, w_b, a_n, m_z[im], m_dt[im], i_gm, i_sf, i_l, h_mat,
+                          dz)
         if replay:
             for a in range(3):
                 m_dz[im, a] = dz[a]
