@@ -71,10 +71,14 @@ def test_propagate_covariance_matches_numpy():
     np.testing.assert_allclose(phi_new, phi @ phi_acc, rtol=1e-12, atol=1e-15)
 
 
+A_N = np.array([0.8, -1.5, 0.1])
+"""The epoch's last interval's mean acceleration, NED [m/s^2] (a turn's)."""
+
+
 def _model(kind: int, z: np.ndarray, dt_meas: float = 0.0):
     x, lever, w_b = _state(), np.array([0.5, -0.2, -1.1]), np.array([0.02, -0.01, 0.05])
     h_mat, dz = np.full((3, N), np.nan), np.empty(3)
-    fk.measurement_model(kind, x, lever, w_b, z, dt_meas, I_GM, I_SF, I_L, h_mat, dz)
+    fk.measurement_model(kind, x, lever, w_b, A_N, z, dt_meas, I_GM, I_SF, I_L, h_mat, dz)
     return x, lever, w_b, h_mat, dz
 
 
@@ -105,11 +109,12 @@ def test_position_model_matches_numpy():
 
 def test_velocity_model_matches_numpy():
     z = np.array([19.9, -5.1, 0.3])
-    x, lever, w_b, h_mat, dz = _model(fk.MEAS_VELOCITY, z)
+    # a record 0.02 s after its epoch: the velocity there, with the epoch's mean acceleration
+    x, lever, w_b, h_mat, dz = _model(fk.MEAS_VELOCITY, z, dt_meas=0.02)
     c_nb = rotation.dcm_from_quat(x[6:10])
     w_in = _nav_rates(x)
     cwl = c_nb @ np.cross(w_b, lever)
-    np.testing.assert_allclose(dz, x[3:6] + cwl - np.cross(w_in, c_nb @ lever) - z,
+    np.testing.assert_allclose(dz, x[3:6] + cwl - np.cross(w_in, c_nb @ lever) + A_N * 0.02 - z,
                                rtol=1e-12, atol=1e-12)
     want = np.zeros((3, N))
     want[:, I_PHI:I_PHI + 3] = _skew(cwl)
