@@ -25,7 +25,7 @@ from pospp.calib.stage import CalibrationRun, with_covariance, with_null_covaria
 from pospp.config import PipelineConfig
 from pospp.diagnose import null_model
 from pospp.diagnose.effects import ACCEL_SETTLING_S
-from pospp.diagnose.linear_signatures import linear_signatures, warmup_signature
+from pospp.diagnose.linear_signatures import linear_signatures
 from pospp.diagnose.rerun import gate_excess
 from pospp.flight_stages import (
     imu_increments,
@@ -170,7 +170,6 @@ def linear_effect_signatures(log: mcap_reader.FlightLog, nav: nav_filter.FilterR
             return {}
     which = nav_filter.reference_name(nav, config.replay.reference)
     sol = nav.smoothed if which == "smoothed" and nav.smoothed is not None else nav.forward
-    out = linear_signatures(model, sol.trajectory, config.gnss.lever_arm_m)
     window = static_alignment_window(nav, config.filter_options())
     alignment = None
     if window is not None:  # the tilt A's static alignment takes from the warm-up
@@ -178,8 +177,8 @@ def linear_effect_signatures(log: mcap_reader.FlightLog, nav: nav_filter.FilterR
         sel = (t_s > window[0]) & (t_s <= window[1])
         alignment = (static_attitude_jacobian(log.imu.w_ib_b_radps[sel].mean(axis=0),
                                               log.imu.f_ib_b_mps2[sel].mean(axis=0)), *window)
-    out["accel_bias_change"] = warmup_signature(model, ACCEL_SETTLING_S, alignment)
-    return out
+    return linear_signatures(model, sol.trajectory, config.gnss.lever_arm_m,
+                             warmup=(ACCEL_SETTLING_S, alignment))
 
 
 def with_null_sigmas(calib_run: CalibrationRun, null_dv: list[list[np.ndarray]],

@@ -110,26 +110,49 @@ def record_errors(model: LinearNull, trajectory: Trajectory, effect_id: str,
 
 
 def linear_signatures(model: LinearNull, trajectory: Trajectory, lever_b_m: ArrayLike,
-                      effect_ids: Sequence[str] = LINEAR_EFFECTS) -> dict[str, list[NDArray]]:
+                      effect_ids: Sequence[str] = LINEAR_EFFECTS, *,
+                      warmup: tuple[float, tuple[NDArray, float, float] | None] | None = None
+                      ) -> dict[str, list[NDArray]]:
     """Per effect, per leg (id order) the signature (M, 2, P) of B minus A from A's gains
-    (module docstring), all effects' columns in one pass of the linear system."""
+    (module docstring), all effects' columns in one pass of the linear system (its
+    per-interval matrices are most of a pass's time).
+
+    ``warmup``: (T [s], alignment) adds ``accel_bias_change``, the warm-up's (M, 2, 2) per
+    unit ``db`` [m/s^2] on x and y; ``alignment`` (J (3, 6), t0, t1) of A's static alignment
+    over (t0, t1] [s], None where it aligned in motion."""
     errs = {e: record_errors(model, trajectory, e, lever_b_m) for e in effect_ids}
-    if not errs:
+    p_rec = sum(v.shape[2] for v in errs.values())
+    if warmup is None and not errs:
         return {}
-    cols = model.response(np.concatenate(list(errs.values()), axis=2))
+    n_rec = model.records[3].shape[0]
+    record_v = np.zeros((n_rec, 3, p_rec + (2 if warmup is not None else 0)))
+    if errs:
+        record_v[:, :, :p_rec] = np.concatenate(list(errs.values()), axis=2)
+    accel = phi0 = None
+    if warmup is not None:
+        u, phi_w = _warmup_input(model, *warmup)
+        accel = np.zeros((u.shape[0], 3, record_v.shape[2]))
+        accel[:, :, p_rec:] = u
+        if phi_w is not None:
+            phi0 = np.zeros((3, record_v.shape[2]))
+            phi0[:, p_rec:] = phi_w
+    cols = model.response(record_v, accel_b_mps2=accel, phi0_n_rad=phi0)
     out, at = {}, 0
     for e, v in errs.items():
         out[e] = [np.ascontiguousarray(c[:, 0:2, at:at + v.shape[2]]) for c in cols]
         at += v.shape[2]
+    if warmup is not None:
+        out["accel_bias_change"] = [np.ascontiguousarray(c[:, 0:2, p_rec:]) for c in cols]
     return out
 
 
-def warmup_signature(model: LinearNull, settling_s: float,
-                     alignment: tuple[NDArray, float, float] | None) -> list[NDArray]:
-    """Per leg (id order) the warm-up's signature (M, 2, 2) of B minus A from A's gains
-    (module docstring), per unit ``db`` [m/s^2] on x and y; ``settling_s`` T [s];
-    ``alignment``: (J (3, 6), t0, t1) of A's static alignment over (t0, t1] [s], None where
-    it aligned in motion."""
+def _warmup_input(model: LinearNull, settling_s: float,
+                  alignment: tuple[NDArray, float, float] | None
+                  ) -> tuple[NDArray, NDArray | None]:
+    """The warm-up's columns (x, y) as :meth:`LinearNull.response` takes them: the
+    accelerometer error ``e_j exp(-t / T)`` at each grid point (G, 3, 2) [m/s^2 per unit],
+    and the attitude error A's static alignment took from it (3, 2) [rad] (None where A
+    aligned in motion)."""
     t = np.asarray(model.grid_t_s, dtype=float)
     u = np.zeros((t.size, 3, 2))
     u[:, 0, 0] = u[:, 1, 1] = np.exp(-t / settling_s)
@@ -138,5 +161,4 @@ def warmup_signature(model: LinearNull, settling_s: float,
         jac, t0, t1 = alignment
         mean = settling_s * (np.exp(-t0 / settling_s) - np.exp(-t1 / settling_s)) / (t1 - t0)
         phi0 = np.asarray(jac, dtype=float)[:, 3:5] * mean
-    return [np.ascontiguousarray(c[:, 0:2, :])
-            for c in model.response(accel_b_mps2=u, phi0_n_rad=phi0)]
+    return u, phi0
