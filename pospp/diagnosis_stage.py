@@ -363,7 +363,7 @@ def diagnose_calibration(calib_run: CalibrationRun, imu: ImuSource, solution_a: 
     d, sigs = _diagnose_legs(calib_run, imu, solution_a, config, replays, log=log, nav=nav,
                              null_dv=null_dv, lever_estimate=lever_estimate, threads=threads,
                              null_model=null_model)
-    fams = (sensor_families(d, replays, log, config, solution_a, joint, nav)
+    fams = (sensor_families(d, replays, log, config, solution_a, joint, nav, threads)
             if log is not None else None)
     d = with_sensor_families(d, fams)
     return replace(d, responses=named_responses(d, replays, sigs, fams, solution_a))

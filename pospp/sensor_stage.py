@@ -54,6 +54,7 @@ from pospp.io import mcap_reader
 from pospp.nav.filter import STATUS_USED
 from pospp.null_stage import rerun_decimation
 from pospp.qc.lever_time import LeverTime
+from pospp.threads import map_in_threads
 from pospp.units import t_s_from_time_ns
 
 CRITERION = "innovation_F_bonferroni_shapes"
@@ -156,13 +157,15 @@ def north_east_m(lat_rad: Any, lon_rad: Any, lat0_rad: float, lon0_rad: float,
 def innovation_design(log: mcap_reader.FlightLog, config: PipelineConfig,
                       families: Sequence[str], *, lever_b_m: Any = None,
                       reference: tuple[float, float] | None = None,
-                      base: Any = None) -> InnovationDesign:
+                      base: Any = None, threads: int = 1) -> InnovationDesign:
     """A's whitened innovations on ``log`` and their responses to each family's coefficients
     (module docstring); the gravity family's only with ``reference`` (lat, lon [rad]: the
     field's origin, the legs' mean start), its extent the farthest point of A's track after
     its alignment (at least 1 km). ``base``: A as configured on ``log`` with its gains
     recorded (the run's own pass, :class:`pospp.nav.filter.FilterResult`); None: A is run on
-    the log summed down to ``[pairs] rerun_imu_rate_hz``. Raises ValueError when A fails."""
+    the log summed down to ``[pairs] rerun_imu_rate_hz``. ``threads``: families' passes made
+    at once (:func:`pospp.threads.map_in_threads`; the result does not depend on it). Raises
+    ValueError when A fails."""
     opts = replace(config.filter_options(), smoother=False, covariance_outputs=False)
     if base is None:
         log = null_model.decimate_imu(log, rerun_decimation(log,
@@ -191,14 +194,16 @@ def innovation_design(log: mcap_reader.FlightLog, config: PipelineConfig,
     breaks = np.unique(np.round(np.concatenate([knots, step_times_s(knots)]), 6))
     system = ResponseSystem.of(gains, base.forward.trajectory, t_run, log.imu.w_ib_b_radps,
                                log.imu.f_ib_b_mps2, breaks_s=breaks)
-    responses = {}
-    for fam in fams:  # a pass per family: its columns' inputs and integrals are in memory
-        dnu = system.responses(_column_input(fam, knots, field),
-                               static_window_s=static_alignment_window(base, opts))
+    window = static_alignment_window(base, opts)
+
+    def whitened_response(fam: str) -> np.ndarray:
+        # a pass per family (its columns' inputs and integrals in memory), whitened in place
+        dnu = system.responses(_column_input(fam, knots, field), static_window_s=window)
         white = _whitened(chol, dnu, np.flatnonzero(used)).reshape(-1, dnu.shape[2])
-        del dnu  # every record's columns: not held while the next family's pass runs
-        responses[fam] = (white[:, :, None] if sensor_family(fam).sensor == "gravity" else
-                          white.reshape(-1, 2, basis_size(knots)).transpose(0, 2, 1))
+        return (white[:, :, None] if sensor_family(fam).sensor == "gravity" else
+                white.reshape(-1, 2, basis_size(knots)).transpose(0, 2, 1))
+
+    responses = dict(zip(fams, map_in_threads(whitened_response, fams, threads), strict=True))
     white_y = np.einsum("kji,kj->ki", chol, nu0[used]).reshape(-1)
     # a GNSS time offset changes only what the records say: A's response to its record
     # errors through the same gains (pospp.diagnose.linear_signatures)
@@ -269,7 +274,8 @@ def _offset_significant(offset_s: float, sigma_s: float) -> bool:
 def _without_time_offset(log: Any, config: PipelineConfig, families: Sequence[str],
                          lever: Any, reference: tuple[float, float] | None,
                          joint: Callable[[], LeverTime | None] | None = None,
-                         base: Any = None) -> tuple[InnovationDesign, Any, float]:
+                         base: Any = None, threads: int = 1
+                         ) -> tuple[InnovationDesign, Any, float]:
     """(design, log, offset [s]): the design on ``log`` with the GNSS time offset its
     innovations read removed (GNSS stamps minus true time; 0 when none is significant,
     :data:`TIME_OFFSET_FLOOR_S`). Left in, a 15 ms offset was named as a 143-223 ug
@@ -282,10 +288,13 @@ def _without_time_offset(log: Any, config: PipelineConfig, families: Sequence[st
     and the floor). Without it, or where it cannot determine the offset, the innovations'
     own reading is removed, by at most :data:`TIME_OFFSET_ITERATIONS` passes. ``base``: A
     on ``log`` as :func:`innovation_design` takes it (the first design's; a restamped log's
-    are A's passes on it)."""
+    are A's passes on it). ``threads``: as :func:`innovation_design`'s."""
+    def design_on(log: Any, base: Any = None) -> InnovationDesign:
+        return innovation_design(log, config, families, lever_b_m=lever, reference=reference,
+                                 base=base, threads=threads)
+
     total = 0.0
-    design = innovation_design(log, config, families, lever_b_m=lever, reference=reference,
-                               base=base)
+    design = design_on(log, base)
     for k in range(TIME_OFFSET_ITERATIONS):
         c, _, significant = _offset_reading(design)
         if not significant:
@@ -296,13 +305,11 @@ def _without_time_offset(log: Any, config: PipelineConfig, families: Sequence[st
                 break
             del design
             log = restamped(log, lt.tau_s)
-            return (innovation_design(log, config, families, lever_b_m=lever,
-                                      reference=reference), log, lt.tau_s)
+            return design_on(log), log, lt.tau_s
         log = restamped(log, -c)  # the column is GNSS stamped 1 s earlier: c late
         total += c
         del design  # not held while the next one is made
-        design = innovation_design(log, config, families, lever_b_m=lever,
-                                   reference=reference)
+        design = design_on(log)
     return design, log, -total
 
 
@@ -334,7 +341,7 @@ class SensorFamilies:
 def sensor_families(d: Diagnosis, replays: list, log: mcap_reader.FlightLog,
                     config: PipelineConfig, solution_a: SolutionA | None = None,
                     joint: Callable[[], LeverTime | None] | None = None,
-                    nav: Any = None) -> SensorFamilies | None:
+                    nav: Any = None, threads: int = 1) -> SensorFamilies | None:
     """Fit the families on A's innovations of ``log`` with ``d``'s named GNSS-side effects
     removed; families ``d`` named on the legs are not fitted again, the gravity field only
     with A's solution (its origin: the legs' mean start). None when no family is left;
@@ -343,7 +350,8 @@ def sensor_families(d: Diagnosis, replays: list, log: mcap_reader.FlightLog,
     named effects removed. ``joint``: the joint lever-arm / time-offset estimate, made when
     first asked (:func:`_without_time_offset`; the legs' named offset, when they name one,
     is removed instead). ``nav``: the run's A on ``log`` (its gains recorded), whose
-    innovations the families read where nothing is removed from the log."""
+    innovations the families read where nothing is removed from the log. ``threads``: the
+    families' passes made at once (:func:`innovation_design`)."""
     families = [f.effect_id for f in SENSOR_FAMILIES if f.effect_id not in d.named
                 and (solution_a is not None or sensor_family(f.effect_id).sensor != "gravity")]
     if not families:
@@ -357,7 +365,7 @@ def sensor_families(d: Diagnosis, replays: list, log: mcap_reader.FlightLog,
         own = nav if not removed and getattr(nav, "gain_replay", None) is not None else None
         design, log_s, offset_s = _without_time_offset(
             log_s, config, families, lever, ref,
-            None if "time_offset" in removed else joint, own)
+            None if "time_offset" in removed else joint, own, threads)
     except (ValueError, np.linalg.LinAlgError):  # A failed on the log with the effects removed
         return SensorFamilies(tuple(families), (), (), np.zeros(0), {}, removed, float("nan"),
                               False)

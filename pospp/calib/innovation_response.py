@@ -76,7 +76,7 @@ BodyInput = Callable[[NDArray, NDArray], NDArray]
 times ``t_s`` [s, A's time axis] where A's attitude is ``C_nb``."""
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def propagate_columns(grid, i_gm, i_sf, inv_tau, g_node, records, e0, d0, d1, dnu):
     """The forward pass of the m columns (module docstring). ``grid = (xs (G, 10), fm (G, 3),
     wm (G, 3), dt (G,))`` (:func:`pospp.calib.linear_null.interval_means`); ``g_node`` (G,)
