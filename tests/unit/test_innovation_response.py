@@ -164,3 +164,19 @@ def test_the_records_are_whitened_in_place_as_all_at_once():
     got = stage._whitened(chol, dnu, rows, chunk=4)
     np.testing.assert_allclose(got, expected, rtol=1e-14, atol=1e-14)
     assert np.shares_memory(got, dnu)  # no second array of every column
+
+
+@pytest.mark.reference
+def test_the_families_passes_on_two_threads_are_those_on_one(reference_cases):
+    # innovation_design's families run one per thread (each an independent pass over the same
+    # grid): the design is the same bit for bit
+    name = "flight_accel_ramp_100hz"
+    cfg, _ = case_config(reference_cases, name)
+    log = pipeline.ingest(reference_cases / f"{name}.mcap", cfg)
+    fams = ("accel_bias_change", "gyro_bias_change")
+    one = stage.innovation_design(log, cfg, fams, threads=1)
+    two = stage.innovation_design(log, cfg, fams, threads=2)
+    for fam in fams:
+        assert np.count_nonzero(one.responses[fam]) > 1000
+        np.testing.assert_array_equal(two.responses[fam], one.responses[fam])
+    np.testing.assert_array_equal(two.y, one.y)
