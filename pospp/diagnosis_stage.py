@@ -60,6 +60,7 @@ from pospp.flight_stages import (
     imu_tuning,
     lever_arm_and_start,
     navigate,
+    rerun_decimation,
     rerun_options,
     scale_factor_start,
     warmup_start,
@@ -75,7 +76,6 @@ from pospp.null_stage import (
     null_noise,
     null_realisations,
     rerun_b_minus_a,
-    rerun_decimation,
 )
 from pospp.qc.check_record import Check
 from pospp.qc.checks import model_fit

@@ -28,6 +28,7 @@ from pospp.calib.replay import (
 from pospp.calib.segment import Leg, find_legs
 from pospp.calib.stage import CalibrationOptions, CalibrationRun, calibrate_flight
 from pospp.config import PipelineConfig
+from pospp.diagnose import null_model
 from pospp.diagnose.effects import ACCEL_SETTLING_S, effect_by_id
 from pospp.diagnose.rerun import REFINE_FRACTION, gate_excess, warmed, warmup_fit
 from pospp.io import mcap_reader
@@ -134,6 +135,45 @@ LEVER_ARM_PASS_STEP_M = 0.1
 """Another pass when the estimate moved more than this from where its pass started [m]."""
 
 
+ESTIMATE_STEP_S = 0.5
+"""Covariance step and output interval [s] of A's passes whose last estimate alone is read
+(:func:`estimate_pass`): on four flights of the independent simulator and the 1.5 h flight,
+the lever arm and the gyro scale factors read within 0.07 sigma of the 0.1 s step's, their
+sigmas within 0.3 % (docs/decisions.md)."""
+
+
+def estimate_pass(config: PipelineConfig, **option_changes: Any
+                  ) -> tuple[PipelineConfig, nav_filter.FilterOptions]:
+    """(config, options) of A's passes whose last estimate alone is read (the lever-arm and
+    scale-factor passes): no smoother, the covariance stepped and the states output every
+    :data:`ESTIMATE_STEP_S` (or the configuration's, where coarser); ``option_changes`` to
+    the options."""
+    opts = config.filter_options()
+    step_s = max(ESTIMATE_STEP_S, opts.propagation_interval_s)
+    rate_hz = min(1.0 / ESTIMATE_STEP_S, config.filter.output_rate_hz)
+    return (replace(config, filter=replace(config.filter, output_rate_hz=rate_hz)),
+            replace(opts, smoother=False, propagation_interval_s=step_s, **option_changes))
+
+
+def rerun_decimation(log: mcap_reader.FlightLog, rate_hz: float) -> int:
+    """IMU samples summed per null-realisation sample: the largest whole factor keeping the
+    rate at or above ``rate_hz`` (``[pairs] rerun_imu_rate_hz``; 0: 1, the flight's rate)."""
+    t = np.asarray(log.imu.time_ns, dtype=np.int64)
+    if rate_hz <= 0.0 or t.size < 2:
+        return 1
+    flight_hz = 1e9 / float(np.median(np.diff(t)))
+    return max(1, int(flight_hz / rate_hz + 1e-6))
+
+
+def summed_down(log: mcap_reader.FlightLog, config: PipelineConfig) -> mcap_reader.FlightLog:
+    """The log with its IMU samples summed down to ``[pairs] rerun_imu_rate_hz``
+    (:func:`rerun_decimation`, :func:`pospp.diagnose.null_model.decimate_imu`: each kept
+    sample the mean over the flight's samples since the last, the increments summed exactly),
+    for A's passes that read only slow quantities (the lever arm, the families' bias
+    changes); the log itself at or below that rate."""
+    return null_model.decimate_imu(log, rerun_decimation(log, config.pairs.rerun_imu_rate_hz))
+
+
 def lever_arm_seen(nav: nav_filter.FilterResult) -> np.ndarray:
     """The lever-arm axes (FRD, (3,) bool) A's attitude history reveals
     (:func:`pospp.qc.checks.lever_arm_observable` of its smoothed attitude, else its forward
@@ -158,18 +198,22 @@ def lever_arm_passes(log: mcap_reader.FlightLog, seen: np.ndarray,
     states (no smoother; a second and third pass from the previous estimate while it moves
     by more than :data:`LEVER_ARM_PASS_STEP_M` and differs from the configured value by as
     much) and a :data:`QC_LEVER_ARM_SIGMA_M` prior
-    sigma (the QC stage's, and the diagnosis's starting point for ``lever_arm``). The axes
+    sigma (the QC stage's, and the diagnosis's starting point for ``lever_arm``), on the log
+    summed down to ``[pairs] rerun_imu_rate_hz`` (:func:`summed_down`: the lever arm is read
+    from the turns, which the summed increments carry as the flight's samples do) with the
+    covariance stepped every :data:`ESTIMATE_STEP_S` (:func:`estimate_pass`). The axes
     A's attitude history reveals (``seen``: :func:`lever_arm_seen`) start from
     zero, so that the configured value does not pull them; the others start from the
     configured value, where they stay instead of floating and leaking into the revealed ones
     (all from zero, a 1.5 m down lever that one banked turn cannot reveal bent the forward
     estimate by 0.3 m at 14 sigma: 2 false alarms in 100 clean flights, docs/qc.md). Raises
     ValueError when A fails."""
-    rerun = replace(config, gnss=replace(config.gnss, estimate_lever_arm=True))
-    opts = replace(config.filter_options(), smoother=False,
-                   lever_arm_sigma_m=QC_LEVER_ARM_SIGMA_M)
+    rerun, opts = estimate_pass(replace(config, gnss=replace(config.gnss,
+                                                             estimate_lever_arm=True)),
+                                lever_arm_sigma_m=QC_LEVER_ARM_SIGMA_M)
     seen = np.asarray(seen, dtype=bool)
     configured = np.asarray(config.gnss.lever_arm_m, dtype=float)
+    log = summed_down(log, config)
     start = np.where(seen, 0.0, configured)
     est = navigate(log, rerun, lever_arm_b_m=start, options=opts).lever_arm
     # A is not linear in a large lever-arm error (its gate rejects the shifted fixes, its
@@ -201,16 +245,16 @@ def scale_factor_estimate(log: mcap_reader.FlightLog, config: PipelineConfig,
                           lever_b_m: Any = None) -> tuple[np.ndarray, np.ndarray]:
     """The gyro scale factors (body FRD, measured = (1 + s) true, dimensionless) and their
     sigmas from one forward pass of A with scale-factor states (prior
-    :data:`GYRO_SF_PRIOR_PPM`, no smoother), the antenna at ``lever_b_m`` (A's own lever-arm
-    estimate: measured on the power flights, seeds 1-2, a 1 m lever arm the configuration
+    :data:`GYRO_SF_PRIOR_PPM`, :func:`estimate_pass`), the antenna at ``lever_b_m`` (A's own
+    lever-arm estimate: measured on the power flights, seeds 1-2, a 1 m lever arm the configuration
     does not know reads 360-670 ppm of scale factor on x and y at 17-39 ppm sigma with the
     configured 0, at most 21 ppm with A's estimate; a 24 ms GNSS offset -160 to -250 ppm on
     y and z, and at most 15 ppm with the estimate, which reads the offset as 1.4 m along x).
     A 600 ppm z scale factor read 574 and 605 ppm at 24 ppm sigma (docs/diagnose.md
     "Power"). Raises ValueError when A fails."""
     tuning = replace(imu_tuning(config), gyro_sf_sigma_ppm=GYRO_SF_PRIOR_PPM)
-    opts = replace(config.filter_options(), smoother=False)
-    nav = navigate(log, config, lever_arm_b_m=lever_b_m, options=opts, tuning=tuning,
+    cfg, opts = estimate_pass(config)
+    nav = navigate(log, cfg, lever_arm_b_m=lever_b_m, options=opts, tuning=tuning,
                    estimate_scale_factors=True)
     b = nav.forward_biases
     return np.asarray(b.gyro_sf[-1], dtype=float), np.asarray(b.gyro_sf_sigma[-1], dtype=float)

@@ -31,6 +31,7 @@ from pospp.flight_stages import (
     imu_increments,
     imu_tuning,
     navigate,
+    rerun_decimation,
     rerun_options,
     static_alignment_window,
 )
@@ -373,16 +374,6 @@ def rerun_b_minus_a(log_r: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
                                   accel_compensation=rc.accel_compensation,
                                   sample_rate_hz=rc.sample_rate_hz)
             for i in sorted(replays)], gains
-
-
-def rerun_decimation(log: mcap_reader.FlightLog, rate_hz: float) -> int:
-    """IMU samples summed per null-realisation sample: the largest whole factor keeping the
-    rate at or above ``rate_hz`` (``[pairs] rerun_imu_rate_hz``; 0: 1, the flight's rate)."""
-    t = np.asarray(log.imu.time_ns, dtype=np.int64)
-    if rate_hz <= 0.0 or t.size < 2:
-        return 1
-    flight_hz = 1e9 / float(np.median(np.diff(t)))
-    return max(1, int(flight_hz / rate_hz + 1e-6))
 
 
 def leg_epochs_ns(log: mcap_reader.FlightLog, legs: Sequence[Leg]) -> np.ndarray:

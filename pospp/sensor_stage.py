@@ -49,10 +49,9 @@ from pospp.diagnose.sensor_families import (
 from pospp.diagnose.shapes import basis_size, change_basis, knots_s, step_times_s
 from pospp.distributions import long_run_ratio
 from pospp.effects_catalog import catalog_entry
-from pospp.flight_stages import imu_tuning, navigate, static_alignment_window
+from pospp.flight_stages import imu_tuning, navigate, static_alignment_window, summed_down
 from pospp.io import mcap_reader
 from pospp.nav.filter import STATUS_USED
-from pospp.null_stage import rerun_decimation
 from pospp.qc.lever_time import LeverTime
 from pospp.threads import map_in_threads
 from pospp.units import t_s_from_time_ns
@@ -168,8 +167,7 @@ def innovation_design(log: mcap_reader.FlightLog, config: PipelineConfig,
     ValueError when A fails."""
     opts = replace(config.filter_options(), smoother=False, covariance_outputs=False)
     if base is None:
-        log = null_model.decimate_imu(log, rerun_decimation(log,
-                                                            config.pairs.rerun_imu_rate_hz))
+        log = summed_down(log, config)
         base = navigate(log, config, options=opts, lever_arm_b_m=lever_b_m, record_gains=True)
     gains, rec = base.gain_replay, base.innovations
     if gains is None or rec is None:

@@ -185,7 +185,7 @@ def test_null_realisation_summed_down_on_an_independent_flight(reference_cases):
                                  float(sigma), float(tau))
     t_align_ns = int(log.imu.time_ns[0]) + round(nav.alignment.t_s * 1e9)
     pert = null_model.perturb_log(base, noise, np.random.default_rng(3), from_time_ns=t_align_ns)
-    factor = null_stage.rerun_decimation(log, cfg.pairs.rerun_imu_rate_hz)
+    factor = flight_stages.rerun_decimation(log, cfg.pairs.rerun_imu_rate_hz)
     keep = null_stage.leg_epochs_ns(log, run.legs)
     assert factor == 4
     full = [a - b for a, b in zip(b_minus_a(pert), b_minus_a(base), strict=True)]

@@ -18,10 +18,9 @@ from pospp.calib.innovation_response import innovation_responses
 from pospp.diagnose import null_model
 from pospp.diagnose.shapes import basis_size, change_basis, knots_s, step_times_s
 from pospp.effects_catalog import catalog_entry
-from pospp.flight_stages import navigate, static_alignment_window
+from pospp.flight_stages import navigate, rerun_decimation, static_alignment_window
 from pospp.nav.alignment import static_attitude_jacobian
 from pospp.nav.filter import STATUS_USED
-from pospp.null_stage import rerun_decimation
 from pospp.units import t_s_from_time_ns
 
 NAME = "flight_accel_ramp_100hz"
