@@ -19,9 +19,10 @@ import numpy as np
 
 from pospp.calib.bias_smoother import span_means
 from pospp.calib.linear_null import LinearNull, NullNoise, linear_null
+from pospp.calib.null_covariance import with_covariance, with_null_covariance
 from pospp.calib.replay import LegReplay, SolutionA, replay_velocity_error
 from pospp.calib.segment import Leg
-from pospp.calib.stage import CalibrationRun, with_covariance, with_null_covariance
+from pospp.calib.stage import CalibrationRun
 from pospp.config import PipelineConfig
 from pospp.diagnose import null_model
 from pospp.diagnose.effects import ACCEL_SETTLING_S
@@ -184,14 +185,16 @@ def linear_effect_signatures(log: mcap_reader.FlightLog, nav: nav_filter.FilterR
 
 def with_null_sigmas(calib_run: CalibrationRun, null_dv: list[list[np.ndarray]],
                      model: LinearNull | None,
-                     injected: Sequence[np.ndarray] | None = None) -> CalibrationRun:
+                     injected: Sequence[np.ndarray] | None = None, threads: int = 1
+                     ) -> CalibrationRun:
     """The calibration with its covariance from the null: exactly from the linear null's
     ``model`` (:meth:`pospp.calib.linear_null.LinearNull.calibration_covariance`), else from
-    refits on the realisations ``null_dv`` (:func:`pospp.calib.stage.with_null_covariance`).
-    The flight's gyro bias sigma from refits on ``null_dv`` against their injected truths
-    ``injected`` either way (the turn-on constant's without them)."""
+    refits on the realisations ``null_dv``
+    (:func:`pospp.calib.null_covariance.with_null_covariance`). The flight's gyro bias sigma
+    from refits on ``null_dv`` against their injected truths ``injected`` either way (the
+    turn-on constant's without them). ``threads``: the refits made at once."""
     chosen = calib_run.chosen
-    refits = with_null_covariance(calib_run, null_dv, injected or None)
+    refits = with_null_covariance(calib_run, null_dv, injected or None, threads)
     if model is None or chosen is None or chosen.gain is None:
         return refits
     flight = (refits.flight_gyro_bias_sigma_b_radps if injected
@@ -232,7 +235,7 @@ def null_stage(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     model = next((m for m in made if isinstance(m, LinearNull)), None)
     run = calib_run if model or not made else replace(
         calib_run, messages=calib_run.messages + (str(made[0]),))
-    return NullResult(dv, with_null_sigmas(run, dv, model, injected), model)
+    return NullResult(dv, with_null_sigmas(run, dv, model, injected, threads), model)
 
 
 def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
@@ -260,7 +263,7 @@ def null_realisations(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     realisations made at once (the result does not depend on it). ``injected_out``: when a
     list, each realisation appends the mean over each leg (id order, the replays' span; (L,
     3), body FRD [rad/s]) of the gyro error it injected (white noise and drift): the truth its
-    flight bias is measured against (:func:`pospp.calib.stage.with_null_covariance`).
+    flight bias is measured against (:func:`pospp.calib.null_covariance.with_null_covariance`).
     """
     if not config.pairs.null_reruns:
         try:

@@ -488,7 +488,7 @@ def fit_calibration(
         and the drift's sigma given): the eigendecomposition of the fixed part of the
         covariance, ``q K + s2 G``, made once, after which each evaluation of the restricted
         likelihood scales ``V^T [H z]`` instead of factoring the covariance (the null
-        realisations' refits, :func:`pospp.calib.stage.with_null_covariance`; the same
+        realisations' refits, :func:`pospp.calib.null_covariance.with_null_covariance`; the same
         likelihood to rounding: docs/decisions.md). It also keeps each leg's
         :func:`noise_basis` and drift operator (by leg id; neither reads B minus A, only
         the leg's samples, sigmas and transition), where ``bases`` / ``gm_ops`` lack them.

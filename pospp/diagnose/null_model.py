@@ -31,7 +31,7 @@ The workflow (:func:`pospp.diagnose.workflow.diagnose_replays`, ``null_dv``) com
 statistic it uses (lack-of-fit F, each candidate's nested F) on the R realisations with the same
 design (the whitening re-estimated on each), and turns the flight's statistic into a p-value by
 the predictive Student t of log F (:func:`calibrated_p_value`). The calibration re-runs its
-least squares on each (:func:`pospp.calib.stage.with_null_covariance`) for its covariance.
+least squares on each (:func:`pospp.calib.null_covariance.with_null_covariance`) for its covariance.
 
 Assumed: the injected levels are the flight's (a drift the null carries and the data do not
 hold makes it conservative, one they hold and the null lacks makes it cry wolf; a drift slower

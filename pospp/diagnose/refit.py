@@ -5,11 +5,12 @@ ramp forces B like a horizontal gyro bias of ``r / g`` (0.05 deg/h), and the cal
 bias of flight_accel_ramp_100hz moved from the true (0.4, -0.3) to (0.368, -0.350) deg/h. The
 refit removes each named effect's response from B minus A (``columns @ p``,
 :class:`pospp.diagnose.results.EffectResponse`) and re-runs the joint least squares unchanged
-(the same pairs, formulation and noise settings: :func:`pospp.calib.stage.with_null_covariance`
-re-runs it the same way). Its covariance is the calibration's (null-calibrated: the estimator
-is the same linear map of the data, so the null realisations spread it the same way) plus the
-effects' own uncertainty carried through the refit (delta method along the principal
-directions of each effect's covariance)::
+(the same pairs, formulation and noise settings:
+:func:`pospp.calib.null_covariance.with_null_covariance` re-runs it the same way). Its
+covariance is the calibration's (null-calibrated: the estimator is the same linear map of
+the data, so the null realisations spread it the same way) plus the effects' own uncertainty
+carried through the refit (delta method along the principal directions of each effect's
+covariance)::
 
     cov_refit = cov + sum_e sum_i dx_ei dx_ei^T,
     dx_ei = x(dv - R - C_e sqrt(l_ei) u_ei) - x(dv - R)

@@ -48,8 +48,8 @@ import test_diagnose_power as tp  # noqa: E402
 from _missions import SimLog  # noqa: E402
 
 from pospp import earth, pipeline, rotation  # noqa: E402
+from pospp.calib.null_covariance import with_null_covariance  # noqa: E402
 from pospp.calib.replay import forced_response  # noqa: E402
-from pospp.calib.stage import with_null_covariance  # noqa: E402
 from pospp.diagnose.refit import refit_calibration  # noqa: E402
 from pospp.diagnose.sensor_families import sensor_family  # noqa: E402
 from pospp.sim.api import simulate  # noqa: E402

@@ -32,7 +32,7 @@ if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
 from pospp import pipeline  # noqa: E402
-from pospp.calib.stage import with_null_covariance  # noqa: E402
+from pospp.calib.null_covariance import with_null_covariance  # noqa: E402
 from pospp.config import PipelineConfig, config_from_dict  # noqa: E402
 from pospp.io.mcap_reader import FlightLog  # noqa: E402
 from pospp.sim.api import simulate  # noqa: E402

@@ -329,7 +329,7 @@ def test_exact_covariance_against_a_brute_force_monte_carlo(flight, ell):
     stat_m = n * (np.trace(mm) - np.linalg.slogdet(mm)[1] - p)
     assert stats.chi2.sf(stat_m, p * (p + 1) / 2) > 1e-3, stat_m
     # the gyro error each draw injected, averaged over each leg (the truth the flight's bias
-    # is measured against: pospp.calib.stage.with_null_covariance), jointly with B minus A
+    # is measured against: pospp.calib.null_covariance.with_null_covariance), jointly with B minus A
     m_inj = _injected_matrix(model)
     big = np.vstack([np.einsum("pja,jan->pn", w, ell.reshape(model.n_samples, 3, -1)), m_inj])
     g = np.hstack([f, inj.reshape(n, -1)])
