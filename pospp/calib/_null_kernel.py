@@ -368,3 +368,28 @@ def filter_adjoint(grid, lay, inv_tau_a, inj, events, records, wj, u_a, mu_dx, m
     initial_matrix(lay, inj, g0)
     lg = np.dot(lam, g0)
     meat += np.dot(lg, lg.T)
+
+
+@njit(cache=True)
+def injected_gyro_integrals(xi, off, dt, beta0, inv_tau, arw, q_g):
+    """The running integral (G, 3, R) of the gyro error ``beta_g + n_g`` (body FRD [rad]) the
+    standard normals ``xi`` (rows, R) inject, from the first grid point, as the forward
+    sweep discretises it (:meth:`pospp.calib.linear_null.LinearNull.injected_leg_means`'
+    equations); ``off`` (G,) each grid point's first normal, ``dt`` (G,) its interval [s],
+    ``beta0`` (3, R) the drift at the start [rad/s], ``inv_tau`` its 1/tau [1/s] (0: a random
+    walk), ``arw`` [rad/s^0.5], ``q_g`` its driving density [rad/s^1.5]."""
+    n_g, n_r = dt.shape[0], xi.shape[1]
+    cum = np.zeros((n_g, 3, n_r))
+    beta = beta0.copy()
+    for g in range(1, n_g):
+        s = math.sqrt(0.5 * dt[g])
+        phi = math.exp(-inv_tau * dt[g])
+        c = dt[g] if inv_tau == 0.0 else (1.0 - phi) / inv_tau
+        o = off[g]
+        for a in range(3):
+            for r in range(n_r):
+                start = beta[a, r] + s * q_g * xi[o + 6 + a, r]
+                cum[g, a, r] = (cum[g - 1, a, r] + c * start
+                                + s * arw * (xi[o + a, r] + xi[o + N_IN + a, r]))
+                beta[a, r] = phi * start + s * q_g * xi[o + N_IN + 6 + a, r]
+    return cum

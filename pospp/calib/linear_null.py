@@ -195,17 +195,10 @@ class LinearNull:
         off, rows, _ = self._normal_rows(self.records[3] > 0.0)
         if 6 + rows.sum() != xi.shape[0]:
             raise ValueError(f"xi: expected {6 + rows.sum()} rows, got {xi.shape[0]}")
-        inv, arw, qg = float(self.inj[0]), float(self.inj[4]), float(self.inj[6])
-        beta = self.inj[8] * xi[0:3]
-        cum = np.zeros((dt.size, 3, xi.shape[1]))
-        for g in range(1, dt.size):
-            a = xi[off[g]:off[g] + kernel.N_IN]
-            b = xi[off[g] + kernel.N_IN:off[g] + kernel.N_NOISE]
-            s, phi = np.sqrt(0.5 * dt[g]), np.exp(-inv * dt[g])
-            c = dt[g] if inv == 0.0 else (1.0 - phi) / inv
-            start = beta + s * qg * a[6:9]
-            cum[g] = cum[g - 1] + c * start + s * arw * (a[0:3] + b[0:3])
-            beta = phi * start + s * qg * b[6:9]
+        cum = kernel.injected_gyro_integrals(
+            np.ascontiguousarray(xi, dtype=float), off.astype(np.int64), dt,
+            np.ascontiguousarray(self.inj[8] * xi[0:3]), float(self.inj[0]),
+            float(self.inj[4]), float(self.inj[6]))
         t_cum = np.concatenate([[0.0], np.cumsum(dt[1:])])
         g_of_j = np.empty(self.n_samples, dtype=np.int64)
         g_of_j[g_sample[g_sample >= 0]] = np.flatnonzero(g_sample >= 0)
