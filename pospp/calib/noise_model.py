@@ -341,6 +341,25 @@ class DriftSmoother:
                    / self.tau_s)
         return self.sigma2 * (e @ self.u)
 
+    def mean_over_b_radps(self, t_s: NDArray) -> NDArray:
+        """The mean of E[x(t) | r] over the run times ``t_s`` (body FRD, rad/s), shape (3,):
+        ``mean_b_radps(t_s).mean(axis=0)``, with each bin outside [t_min, t_max] factored out
+        of the sum, ``exp(-(t - tau_j) / tau) = exp(-(t_min - tau_j) / tau) exp(-(t - t_min)
+        / tau)`` for tau_j <= t_min (mirrored after t_max): a leg's mean reads its own bins
+        at every sample, the other legs' once."""
+        t = np.asarray(t_s, dtype=float)
+        t0, t1, tb = float(t.min()), float(t.max()), self.tau_bin_s
+        before, after = tb <= t0, tb >= t1
+        inside = ~(before | after)
+        w = np.empty(tb.size)
+        w[before] = np.exp(-(t0 - tb[before]) / self.tau_s) * np.mean(
+            np.exp(-(t - t0) / self.tau_s))
+        w[after] = np.exp(-(tb[after] - t1) / self.tau_s) * np.mean(
+            np.exp(-(t1 - t) / self.tau_s))
+        w[inside] = np.mean(np.exp(-np.abs(t[:, None] - tb[None, inside]) / self.tau_s),
+                            axis=0)
+        return self.sigma2 * (w @ self.u)
+
 
 def gm_noise_operator(rep: LegReplay, rows: NDArray | None = None, *, bin_s: float = 5.0
                       ) -> tuple[NDArray, NDArray]:

@@ -233,7 +233,9 @@ class Calibration:
         Works for any leg, in the fit or not (a held-out leg gets the prediction from the
         drift's correlation with the fitted legs).
         """
-        return self.drift_b_radps(rep.t0_s + rep.t_s).mean(axis=0)
+        if self.drift is None:
+            return np.zeros(3)
+        return self.drift.mean_over_b_radps(rep.t0_s + rep.t_s)
 
     @property
     def sigma(self) -> NDArray:

@@ -140,3 +140,19 @@ def test_full_model_closes_none_on_data_drawn_from_it(replays):
             reps, DiagnosisOptions(noise="white", effects=effects)).conclusion)
     assert closing == ["none"] * 3
     assert closing_white.count("unexplained") >= 2
+
+
+@pytest.mark.parametrize("tau_s", [30.0, 300.0, 3000.0, np.inf])
+def test_the_drift_s_mean_over_a_leg_is_the_mean_of_its_samples(tau_s):
+    # DriftSmoother.mean_over_b_radps factors the bins outside the leg out of the sum: the
+    # same mean as the samples' drift averaged, before, across and after the bins
+    from pospp.calib.noise_model import DriftSmoother
+
+    rng = np.random.default_rng(2)
+    drift = DriftSmoother(np.sort(rng.uniform(0.0, 5000.0, 600)),
+                          rng.standard_normal((600, 3)), 1e-10, tau_s)
+    for t0 in (-350.0, 1000.0, 4990.0):
+        t = t0 + np.arange(0.0, 300.0, 0.1)
+        expected = drift.mean_b_radps(t).mean(axis=0)
+        np.testing.assert_allclose(drift.mean_over_b_radps(t), expected, rtol=1e-12,
+                                   atol=1e-12 * np.abs(expected).max())
