@@ -68,14 +68,12 @@ def null_white_noise(log: mcap_reader.FlightLog, config: PipelineConfig
                      ) -> tuple[float, float]:
     """The IMU white noise the null realisations add: (gyro ARW [rad/s^0.5], accelerometer
     VRW [m/s^1.5]), read from the log's samples (``[pairs] null_imu_noise`` "measured",
-    :func:`pospp.diagnose.null_model.imu_white_noise_from_samples`) or the configured grade's
+    :attr:`pospp.types.ImuSamples.white_noise`) or the configured grade's
     ("grade"). It needs the log alone: a run on two threads makes it while A runs."""
     if config.pairs.null_imu_noise == "grade":
         si = imu_tuning(config).noise()
         return float(si.gyro_arw_radpsqrts), float(si.accel_vrw_mpspsqrts)
-    arw, vrw = null_model.imu_white_noise_from_samples(
-        log.imu.time_ns, log.imu.w_ib_b_radps, log.imu.f_ib_b_mps2)
-    return float(arw), float(vrw)
+    return log.imu.white_noise
 
 
 def null_noise(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,

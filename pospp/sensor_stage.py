@@ -32,7 +32,6 @@ from pospp import earth
 from pospp.calib.innovation_response import ResponseSystem
 from pospp.calib.replay import SolutionA
 from pospp.config import PipelineConfig
-from pospp.diagnose import null_model
 from pospp.diagnose.effects import ACCEL_SETTLING_S, field_gradient, signature
 from pospp.diagnose.linear_signatures import gnss_record_errors
 from pospp.diagnose.locate import horizon_worth
@@ -98,10 +97,9 @@ sensor's 60 s means do not show (they wander by 300 ug)."""
 
 def imu_noise_holds(log: Any, config: PipelineConfig) -> bool:
     """Whether the IMU white noise read from the log's samples
-    (:func:`pospp.diagnose.null_model.imu_white_noise_from_samples`) is within
+    (:attr:`pospp.types.ImuSamples.white_noise`) is within
     :data:`NOISE_BAND` of A's configured ARW and VRW."""
-    arw, vrw = null_model.imu_white_noise_from_samples(log.imu.time_ns, log.imu.w_ib_b_radps,
-                                                       log.imu.f_ib_b_mps2)
+    arw, vrw = log.imu.white_noise
     si = imu_tuning(config).noise()
     return bool(arw <= NOISE_BAND * si.gyro_arw_radpsqrts
                 and vrw <= NOISE_BAND * si.accel_vrw_mpspsqrts)

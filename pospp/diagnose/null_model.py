@@ -11,7 +11,7 @@ realisations of it made with pospp's own A (a parametric bootstrap by perturbati
    response to it is not linear (its gate and resets): the null statistics then collapse.
 2. Add to the base, from A's alignment point on (the alignment is a decision, not a
    response), white gyro and accelerometer noise at the density read from the samples
-   (:func:`imu_white_noise_from_samples`) or the grade's, the Gauss-Markov gyro drift the
+   (:attr:`pospp.types.ImuSamples.white_noise`) or the grade's, the Gauss-Markov gyro drift the
    calibration estimated on the flight (level and tau by REML, the grade a weak prior; the
    configured one when it did not) and the configured accelerometer drift
    (:func:`gauss_markov_path`), and GNSS white noise at the level of
@@ -354,33 +354,3 @@ def few_parameter_p_value(statistic: float, null_statistics: NDArray) -> float:
     if not statistic > 0:
         return 1.0
     return f_sf(statistic / float(np.mean(s)), 1, s.size)
-
-
-def imu_white_noise_from_samples(time_ns: NDArray, w_ib_b_radps: NDArray, f_ib_b_mps2: NDArray
-                                 ) -> tuple[float, float]:
-    """The IMU's white noise density (gyro ARW, accelerometer VRW) read from its own samples.
-
-    Second differences of the samples remove smooth motion; for white noise of per-sample
-    sigma s they have variance 6 s^2. Robustly (median absolute deviation, per axis, the
-    median over the three axes)::
-
-        s = 1.4826 MAD(w_k+1 - 2 w_k + w_k-1) / sqrt(6),   ARW = s sqrt(dt)
-
-    Vibration and quantisation above the motion's bandwidth count as noise here, so on real
-    data the level reads high (a conservative null).
-
-    Returns
-    -------
-    gyro_arw_radpsqrts, accel_vrw_mpspsqrts : float
-    """
-    t = np.asarray(time_ns, dtype=np.int64)
-    dt = float(np.median(np.diff(t))) * 1e-9 if t.size > 1 else 1.0
-    out = []
-    for a in (w_ib_b_radps, f_ib_b_mps2):
-        d2 = np.diff(np.asarray(a, dtype=float), n=2, axis=0)
-        if d2.shape[0] < 10:
-            out.append(float("nan"))
-            continue
-        mad = np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0)
-        out.append(float(np.median(1.4826 * mad / np.sqrt(6.0)) * np.sqrt(dt)))
-    return out[0], out[1]

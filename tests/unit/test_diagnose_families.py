@@ -262,6 +262,7 @@ def test_the_families_need_imu_noise_within_a_model_band():
     from pospp.config import config_from_dict
     from pospp.flight_stages import imu_tuning
     from pospp.sensor_stage import NOISE_BAND, imu_noise_holds
+    from pospp.types import ImuSamples
 
     cfg = config_from_dict({"imu": {"grade": "vehicle"}})
     si = imu_tuning(cfg).noise()
@@ -273,8 +274,7 @@ def test_the_families_need_imu_noise_within_a_model_band():
         w = rng.normal(size=(n, 3)) * scale * si.gyro_arw_radpsqrts / np.sqrt(dt)
         f = rng.normal(size=(n, 3)) * scale * si.accel_vrw_mpspsqrts / np.sqrt(dt)
         f[:, 2] -= 9.8
-        return SimpleNamespace(imu=SimpleNamespace(time_ns=t_ns, w_ib_b_radps=w,
-                                                   f_ib_b_mps2=f))
+        return SimpleNamespace(imu=ImuSamples(t_ns, w, f))
 
     assert imu_noise_holds(log(1.0), cfg)
     assert not imu_noise_holds(log(2.0 * NOISE_BAND), cfg)

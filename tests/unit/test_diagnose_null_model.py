@@ -26,6 +26,7 @@ from pospp.calib.noise_model import NoiseModel
 from pospp.calib.replay import replay_leg
 from pospp.diagnose import null_model
 from pospp.diagnose.workflow import DiagnosisOptions, diagnose_replays
+from pospp.types import ImuSamples
 
 
 def test_calibrated_p_value_is_exact_for_a_normal_log_statistic():
@@ -86,9 +87,14 @@ def test_imu_white_noise_density_from_second_differences():
     motion_f = np.array([0.0, 0.0, -9.8]) + 0.5 * np.cos(2 * np.pi * t / 40.0)[:, None]
     w = motion_w + rng.standard_normal((t.size, 3)) * arw / np.sqrt(dt)
     f = motion_f + rng.standard_normal((t.size, 3)) * vrw / np.sqrt(dt)
-    a, v = null_model.imu_white_noise_from_samples((t * 1e9).astype(np.int64), w, f)
+    samples = ImuSamples((t * 1e9).astype(np.int64), w, f)
+    a, v = samples.white_noise
     assert a == pytest.approx(arw, rel=0.02)
     assert v == pytest.approx(vrw, rel=0.02)
+    # read once per samples object; samples made from it (summed down, scaled) read their own
+    assert samples.white_noise is samples.white_noise
+    doubled = dataclasses.replace(samples, w_ib_b_radps=2.0 * w)
+    assert doubled.white_noise[0] == pytest.approx(2.0 * a, rel=1e-12)
 
 
 def test_gnss_noise_from_residuals_robust_rms():

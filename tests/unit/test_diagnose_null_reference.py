@@ -178,8 +178,7 @@ def test_null_realisation_summed_down_on_an_independent_flight(reference_cases):
 
     base = null_model.gnss_on_solution(log, nav.smoothed, int(log.imu.time_ns[0]),
                                        nav.lever_arm.lever_b_m)
-    arw, vrw = null_model.imu_white_noise_from_samples(log.imu.time_ns, log.imu.w_ib_b_radps,
-                                                       log.imu.f_ib_b_mps2)
+    arw, vrw = log.imu.white_noise
     sigma, tau, _ = null_stage.null_drift(run, cfg)
     noise = null_model.NullNoise(float(arw), float(vrw), np.full(3, 0.05), np.full(3, 0.02),
                                  float(sigma), float(tau))
