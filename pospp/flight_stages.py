@@ -156,8 +156,9 @@ def estimate_pass(config: PipelineConfig, **option_changes: Any
 
 
 def rerun_decimation(log: mcap_reader.FlightLog, rate_hz: float) -> int:
-    """IMU samples summed per null-realisation sample: the largest whole factor keeping the
-    rate at or above ``rate_hz`` (``[pairs] rerun_imu_rate_hz``; 0: 1, the flight's rate)."""
+    """IMU samples summed per sample of a summed-down log (the null's, the diagnosis's
+    re-runs', :func:`summed_down`'s): the largest whole factor keeping the rate at or above
+    ``rate_hz`` (``[pairs] rerun_imu_rate_hz``; 0: 1, the flight's rate)."""
     t = np.asarray(log.imu.time_ns, dtype=np.int64)
     if rate_hz <= 0.0 or t.size < 2:
         return 1

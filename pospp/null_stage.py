@@ -68,8 +68,8 @@ def null_white_noise(log: mcap_reader.FlightLog, config: PipelineConfig
                      ) -> tuple[float, float]:
     """The IMU white noise the null realisations add: (gyro ARW [rad/s^0.5], accelerometer
     VRW [m/s^1.5]), read from the log's samples (``[pairs] null_imu_noise`` "measured",
-    :attr:`pospp.types.ImuSamples.white_noise`) or the configured grade's
-    ("grade"). It needs the log alone: a run on two threads makes it while A runs."""
+    :attr:`pospp.types.ImuSamples.white_noise`, read once per log) or the configured
+    grade's ("grade")."""
     if config.pairs.null_imu_noise == "grade":
         si = imu_tuning(config).noise()
         return float(si.gyro_arw_radpsqrts), float(si.accel_vrw_mpspsqrts)
