@@ -39,7 +39,7 @@ from pospp.flight_stages import (
 from pospp.io import mcap_reader
 from pospp.nav import filter as nav_filter
 from pospp.nav.alignment import static_attitude_jacobian
-from pospp.threads import first_kept
+from pospp.threads import first_kept, map_in_threads
 from pospp.units import t_s_from_time_ns
 
 
@@ -190,14 +190,19 @@ def with_null_sigmas(calib_run: CalibrationRun, null_dv: list[list[np.ndarray]],
     refits on the realisations ``null_dv``
     (:func:`pospp.calib.null_covariance.with_null_covariance`). The flight's gyro bias sigma
     from refits on ``null_dv`` against their injected truths ``injected`` either way (the
-    turn-on constant's without them). ``threads``: the refits made at once."""
+    turn-on constant's without them). ``threads``: with ``model``, the exact covariance made
+    on a second thread beside the refits; without, the refits made at once (the result does
+    not depend on it)."""
     chosen = calib_run.chosen
-    refits = with_null_covariance(calib_run, null_dv, injected or None, threads)
     if model is None or chosen is None or chosen.gain is None:
-        return refits
+        return with_null_covariance(calib_run, null_dv, injected or None, threads)
+    # the exact covariance (compiled, releasing the GIL) beside the refits, which then hold it
+    refits, exact = map_in_threads(lambda job: job(), [
+        lambda: with_null_covariance(calib_run, null_dv, injected or None),
+        lambda: model.calibration_covariance(chosen)], threads)
     flight = (refits.flight_gyro_bias_sigma_b_radps if injected
               and refits.sigma_source == "null_realisations" else None)
-    return with_covariance(calib_run, model.calibration_covariance(chosen), "linear_null",
+    return with_covariance(calib_run, exact, "linear_null",
                            "calibration sigmas from the linear null of B minus A (A's gains: "
                            "the least squares' exact covariance)", flight)
 

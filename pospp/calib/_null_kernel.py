@@ -294,7 +294,7 @@ def psi_blocks(grid, lay, inv_tau_a, inj, g_leg, g_sample, leg_end, psi):
             psi[j] = p[3:6]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def smoother_adjoint(a_gains, sources, wj, u_a, mu_dx):
     """The adjoint of :func:`smooth_draws`, forward over the nodes: the sensitivity of the
     p functionals to each node's feedback, ``mu_dx`` (K, p, n_a), from their sources on the
@@ -321,7 +321,7 @@ def smoother_adjoint(a_gains, sources, wj, u_a, mu_dx):
         mu_plus = g_plus + mu_minus
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def filter_adjoint(grid, lay, inv_tau_a, inj, events, records, wj, u_a, mu_dx, meat):
     """The adjoint of :func:`forward_draws`, backward over the grid, accumulating the
     covariance of p linear functionals of the realisation: ``meat += (lam Gamma)(lam

@@ -372,6 +372,11 @@ def test_null_stage_linear_by_default_reruns_on_request_and_its_fallbacks(flight
                                          null_stage.null_noise(log, nav, run, cfg))
     cov = model.calibration_covariance(run.chosen)
     assert np.allclose(stage.calibration.chosen.cov, cov, rtol=1e-12, atol=0.0)
+    # on two threads (the exact covariance beside the refits): the same calibration
+    two = null_stage.null_stage(log, nav, run, cfg, n=4, seed=1, threads=2).calibration
+    np.testing.assert_array_equal(two.chosen.cov, stage.calibration.chosen.cov)
+    np.testing.assert_array_equal(two.flight_gyro_bias_sigma_b_radps,
+                                  stage.calibration.flight_gyro_bias_sigma_b_radps)
     # A without recorded gains: run again to record them, the same system to rounding
     again = null_stage.linear_null_model(log, dataclasses.replace(nav, gain_replay=None), run,
                                          cfg, model_noise := null_stage.null_noise(
