@@ -447,7 +447,7 @@ def quality_control(log: mcap_reader.FlightLog, nav: nav_filter.FilterResult,
     """The QC stage (pospp.qc): every check, with the lever arm re-estimated by A.
 
     Unless A already estimated it, the lever arm is estimated by one more forward pass of A
-    with lever-arm states (:func:`lever_arm_estimate`; about a third of A's time). Failed
+    with lever-arm states (:func:`lever_arm_estimate`; about a fifth of A's time). Failed
     checks are noted in ``book`` (stage "qc"). ``lever``: that estimate and why it failed, when
     already made (:func:`lever_re_estimate`); None: made here. ``also``: later stages' checks.
     ``joint()``: the joint estimate the diagnosis shares (None: made here when needed).
