@@ -323,10 +323,12 @@ def replay_velocity_error(
 ) -> NDArray:
     """B minus A in velocity over one leg, NED [m/s], shape (M, 3): ``replay_leg(...).dv_n_mps``
     (same arguments, samples and values) without the transition matrices, which cost most of
-    a replay and which the null realisations and the re-run signatures do not use."""
-    b_s, a_s = _b_and_a_samples(imu, solution_a, leg, gyro_bias_b_radps,
-                                attitude_correction_n_rad, accel_compensation, sample_rate_hz)
-    return b_s.v_n_mps - a_s.v_n_mps
+    a replay and which the null realisations and the re-run signatures do not use
+    (:func:`replay_errors`' velocity)."""
+    return replay_errors(imu, solution_a, leg, gyro_bias_b_radps=gyro_bias_b_radps,
+                         attitude_correction_n_rad=attitude_correction_n_rad,
+                         accel_compensation=accel_compensation,
+                         sample_rate_hz=sample_rate_hz).dv_n_mps
 
 
 @dataclass(frozen=True)
@@ -366,19 +368,6 @@ def replay_errors(
     return LegErrors(leg, t0, ts, b_s.v_n_mps - a_s.v_n_mps,
                      earth.llh_difference_ned_m(b_s.lat_rad, b_s.lon_rad, b_s.height_m,
                                                 a_s.lat_rad, a_s.lon_rad, a_s.height_m))
-
-
-def _b_and_a_samples(imu: ImuSource, solution_a: SolutionA, leg: Leg,
-                     gyro_bias_b_radps: NDArray | None,
-                     attitude_correction_n_rad: NDArray | None, accel_compensation: str,
-                     sample_rate_hz: float) -> tuple[strapdown.Trajectory,
-                                                     strapdown.Trajectory]:
-    """B over the leg (:func:`_b_over_leg`) and A, both at B's samples (:func:`_samples`)."""
-    b, _, _, _, (k0, k1), _ = _b_over_leg(imu, solution_a, leg, gyro_bias_b_radps,
-                                       attitude_correction_n_rad, accel_compensation)
-    _, _, b_s, a_s = _samples(b, solution_a.trajectory, imu.t_s[k0], imu.t_s[k1],
-                              sample_rate_hz)
-    return b_s, a_s
 
 
 def _b_over_leg(imu: ImuSource, solution_a: SolutionA, leg: Leg,
