@@ -190,12 +190,11 @@ def with_null_sigmas(calib_run: CalibrationRun, null_dv: list[list[np.ndarray]],
     refits on the realisations ``null_dv``
     (:func:`pospp.calib.null_covariance.with_null_covariance`). The flight's gyro bias sigma
     from refits on ``null_dv`` against their injected truths ``injected`` either way (the
-    turn-on constant's without them). ``threads``: with ``model``, the exact covariance made
-    on a second thread beside the refits; without, the refits made at once (the result does
-    not depend on it)."""
+    turn-on constant's without them). ``threads``: above 1, the exact covariance is made on a
+    second thread beside the refits (the result does not depend on it)."""
     chosen = calib_run.chosen
     if model is None or chosen is None or chosen.gain is None:
-        return with_null_covariance(calib_run, null_dv, injected or None, threads)
+        return with_null_covariance(calib_run, null_dv, injected or None)
     # the exact covariance (compiled, releasing the GIL) beside the refits, which then hold it
     refits, exact = map_in_threads(lambda job: job(), [
         lambda: with_null_covariance(calib_run, null_dv, injected or None),

@@ -17,15 +17,13 @@ from numpy.typing import NDArray
 from pospp.calib.bias_smoother import flight_bias_b_radps
 from pospp.calib.compensate import joint_calibration
 from pospp.calib.stage import CalibrationRun, gyro_bias_sigma_b_radps
-from pospp.threads import map_in_threads
 
 MIN_NULL_REALISATIONS = 3
 """Fewest null realisations :func:`with_null_covariance` turns into a covariance."""
 
 
 def with_null_covariance(run: CalibrationRun, null_dv: Sequence[Sequence[NDArray]],
-                         injected: Sequence[NDArray] | None = None, threads: int = 1
-                         ) -> CalibrationRun:
+                         injected: Sequence[NDArray] | None = None) -> CalibrationRun:
     """The chosen calibration's covariance from B minus A's null realisations.
 
     Each realisation ``d_r`` (one (M, 3) array per leg in id order, the replays' rows:
@@ -52,8 +50,6 @@ def with_null_covariance(run: CalibrationRun, null_dv: Sequence[Sequence[NDArray
     realisations, or no calibration, the run is returned unchanged.
 
     The compensation already applied is not redone (it reads the fit, not its sigma).
-    ``threads``: refits made at once (:func:`pospp.threads.map_in_threads`; the result does
-    not depend on it).
     """
     chosen = run.chosen
     if chosen is None or len(null_dv) < MIN_NULL_REALISATIONS:
@@ -63,23 +59,17 @@ def with_null_covariance(run: CalibrationRun, null_dv: Sequence[Sequence[NDArray
     fitted = [ids.index(i) for i in chosen.leg_ids]
     length = np.array([run.replays[i].t_s[-1] for i in chosen.leg_ids])
     f0 = flight_bias_b_radps(chosen, run.replays)
-
-    def refit(r: int) -> tuple[NDArray, NDArray | None] | None:
+    dx, df = [], []
+    for r, real in enumerate(null_dv):
         reps = {i: replace(run.replays[i], dv_n_mps=run.replays[i].dv_n_mps + np.asarray(d))
-                for i, d in zip(ids, null_dv[r], strict=True)}
+                for i, d in zip(ids, real, strict=True)}
         cal = joint_calibration(reps, run.pairs, chosen.formulation, run.fit_options,
                                 noise_cache=cache, **run.fit_bases)
-        if cal is None or cal.names != chosen.names:
-            return None
-        if injected is None:
-            return cal.x - chosen.x, None
-        truth = length @ np.asarray(injected[r])[fitted] / length.sum()
-        return cal.x - chosen.x, flight_bias_b_radps(cal, reps) - f0 - truth
-
-    # the first refit fills the shared cache, the others read it on the run's threads
-    made = [refit(0)] + map_in_threads(refit, range(1, len(null_dv)), threads)
-    dx = [m[0] for m in made if m is not None]
-    df = [m[1] for m in made if m is not None and m[1] is not None]
+        if cal is not None and cal.names == chosen.names:
+            dx.append(cal.x - chosen.x)
+            if injected is not None:
+                truth = length @ np.asarray(injected[r])[fitted] / length.sum()
+                df.append(flight_bias_b_radps(cal, reps) - f0 - truth)
     if len(dx) < MIN_NULL_REALISATIONS:
         return run
     d = np.asarray(dx)
