@@ -38,21 +38,22 @@ from pospp.diagnose.locate import horizon_worth
 from pospp.diagnose.rerun import restamped, warmed, with_rates
 from pospp.diagnose.results import CandidateTest, Diagnosis, DiagnosisStep, EffectResponse
 from pospp.diagnose.sensor_families import (
+    AXES,
     SENSOR_FAMILIES,
+    DesignSums,
     FamilyFinding,
     InnovationDesign,
     fit_sensor_families,
     response_along_b,
     sensor_family,
 )
-from pospp.diagnose.shapes import basis_size, change_basis, knots_s, step_times_s
+from pospp.diagnose.shapes import change_basis, knots_s, step_times_s
 from pospp.distributions import long_run_ratio
 from pospp.effects_catalog import catalog_entry
 from pospp.flight_stages import imu_tuning, navigate, static_alignment_window, summed_down
 from pospp.io import mcap_reader
 from pospp.nav.filter import STATUS_USED
 from pospp.qc.lever_time import LeverTime
-from pospp.threads import map_in_threads
 from pospp.units import t_s_from_time_ns
 
 CRITERION = "innovation_F_bonferroni_shapes"
@@ -160,9 +161,10 @@ def innovation_design(log: mcap_reader.FlightLog, config: PipelineConfig,
     field's origin, the legs' mean start), its extent the farthest point of A's track after
     its alignment (at least 1 km). ``base``: A as configured on ``log`` with its gains
     recorded (the run's own pass, :class:`pospp.nav.filter.FilterResult`); None: A is run on
-    the log summed down to ``[pairs] rerun_imu_rate_hz``. ``threads``: families' passes made
-    at once (:func:`pospp.threads.map_in_threads`; the result does not depend on it). Raises
-    ValueError when A fails."""
+    the log summed down to ``[pairs] rerun_imu_rate_hz``. ``threads``: the families' passes
+    over each stretch of A's pass made at once (:meth:`pospp.calib.innovation_response.
+    ResponseSystem.blocks`; the result does not depend on it). Raises ValueError when A
+    fails."""
     opts = replace(config.filter_options(), smoother=False, covariance_outputs=False)
     if base is None:
         log = summed_down(log, config)
@@ -191,16 +193,19 @@ def innovation_design(log: mcap_reader.FlightLog, config: PipelineConfig,
     system = ResponseSystem.of(gains, base.forward.trajectory, t_run, log.imu.w_ib_b_radps,
                                log.imu.f_ib_b_mps2, breaks_s=breaks)
     window = static_alignment_window(base, opts)
-
-    def whitened_response(fam: str) -> np.ndarray:
-        # a pass per family (its columns' inputs and integrals in memory), whitened in place
-        dnu = system.responses(_column_input(fam, knots, field), static_window_s=window)
-        white = _whitened(chol, dnu, np.flatnonzero(used)).reshape(-1, dnu.shape[2])
-        return (white[:, :, None] if sensor_family(fam).sensor == "gravity" else
-                white.reshape(-1, 2, basis_size(knots)).transpose(0, 2, 1))
-
-    responses = dict(zip(fams, map_in_threads(whitened_response, fams, threads), strict=True))
+    rows = np.flatnonzero(used)
     white_y = np.einsum("kji,kj->ki", chol, nu0[used]).reshape(-1)
+    inputs = [_column_input(f, knots, field) for f in fams]
+    widths = [np.shape(u(t_run[:1], np.eye(3)[None]))[2] for u in inputs]
+    sums = DesignSums(white_y, {f: (m // _family_axes(f), _family_axes(f))
+                                for f, m in zip(fams, widths, strict=True)},
+                      knots, float(t_run[-1]), extent)
+    # the families' passes a stretch at a time, one per thread, each stretch's records
+    # whitened and summed into the Gram matrix (the responses are never held whole)
+    for row, dnu in system.blocks(inputs, static_window_s=window, threads=threads):
+        lo, hi = np.searchsorted(rows, [row, row + dnu.shape[0]])
+        white = np.einsum("kji,kjm->kim", chol[lo:hi], dnu[rows[lo:hi] - row])
+        sums.add(3 * lo, white.reshape(-1, white.shape[2]))
     # a GNSS time offset changes only what the records say: A's response to its record
     # errors through the same gains (pospp.diagnose.linear_signatures)
     lever = config.gnss.lever_arm_m if lever_b_m is None else lever_b_m
@@ -208,25 +213,17 @@ def innovation_design(log: mcap_reader.FlightLog, config: PipelineConfig,
                            lever)
     dnu = system.responses(_no_input, record_v=v)
     offset = np.einsum("kji,kj->ki", chol, dnu[used, :, 0]).reshape(-1)
-    return InnovationDesign(white_y, responses, knots, float(t_run[-1]), rec.t_s[used], extent,
-                            offset)
+    return sums.design(rec.t_s[used], offset)
+
+
+def _family_axes(fam: str) -> int:
+    """A family's axes: the gravity field's one column per term, a sensor's x and y."""
+    return 1 if sensor_family(fam).sensor == "gravity" else len(AXES)
 
 
 def _no_input(t_s: np.ndarray, c_nb: np.ndarray) -> np.ndarray:
     """One column that changes no IMU sample (a GNSS-side column's)."""
     return np.zeros((np.size(t_s), 6, 1))
-
-
-def _whitened(chol: np.ndarray, dnu: np.ndarray, rows: np.ndarray, chunk: int = 1024
-              ) -> np.ndarray:
-    """``L_k^T dnu_k`` (K, 3, m) for the records ``rows`` (increasing) of ``dnu`` (M, 3, m),
-    ``chol`` (K, 3, 3) their S^-1 = L L^T factors: written over ``dnu``'s first K rows,
-    ``chunk`` records at a time (row k is written after rows[k] >= k is read; another array
-    of every column would be 52 MiB on a 1.5 h flight), which are returned (a view)."""
-    for a in range(0, rows.size, chunk):
-        b = min(a + chunk, rows.size)
-        dnu[a:b] = np.einsum("kji,kjm->kim", chol[a:b], dnu[rows[a:b]])
-    return dnu[:rows.size]
 
 
 TIME_OFFSET_FLOOR_S = 5e-3

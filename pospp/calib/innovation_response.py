@@ -55,8 +55,9 @@ plausible size the replays' columns move by 0.03 % of their norm for the hinges,
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numba import njit
@@ -69,6 +70,7 @@ from pospp.nav._filter_kernel import STATUS_RESET, STATUS_USED, fill_extended_f
 from pospp.nav.alignment import static_attitude_jacobian
 from pospp.nav.filter_state import GainReplay
 from pospp.nav.strapdown import Trajectory, interpolate_trajectory
+from pospp.threads import map_in_threads
 
 BodyInput = Callable[[NDArray, NDArray], NDArray]
 """``(t_s (T,), C_nb (T, 3, 3)) -> (T, 6, m)``: the m columns' gyro change (rows 0-2,
@@ -209,31 +211,69 @@ class ResponseSystem:
                   static_window_s: tuple[float, float] | None = None,
                   record_v: NDArray | None = None) -> NDArray:
         """:func:`innovation_responses` of the columns ``body_input`` (and ``record_v``)."""
+        m = np.shape(body_input(self.grid_t[:1], np.eye(3)[None]))[2]
+        out = np.zeros((np.size(self.gains.status), 3, m))  # zero for the records A did not use
+        for row, dnu in self.blocks((body_input,), static_window_s=static_window_s,
+                                    record_v=record_v):
+            out[row:row + dnu.shape[0]] = dnu
+        return out
+
+    def blocks(self, body_inputs: Sequence[BodyInput], *,
+               static_window_s: tuple[float, float] | None = None,
+               record_v: NDArray | None = None, threads: int = 1
+               ) -> Iterator[tuple[int, NDArray]]:
+        """:func:`innovation_responses` of every input's columns side by side, a stretch of
+        the grid at a time: per stretch ``(row, dnu)``, the changes (R, 3, m) of the records in
+        rows ``row .. row + R`` of ``gains`` (zero for those A did not use; m the inputs'
+        columns together, in their order). Each stretch's input integrals are made for it
+        alone (the whole grid's are (G, 6, m) twice), and what a caller keeps of the changes
+        is its choice (:func:`pospp.sensor_stage.innovation_design` keeps their Gram matrix).
+        ``threads``: the inputs' passes over a stretch made at once (each its own columns;
+        the result does not depend on it). ``record_v``: :func:`innovation_responses`', with
+        one input."""
         gains, applied, grid_t = self.gains, self.applied, self.grid_t
         lay = gains.layout
-        m = np.shape(body_input(grid_t[:1], np.eye(3)[None]))[2]
-        records = (self.rec_start, np.ascontiguousarray(gains.gains[applied]),
-                   np.ascontiguousarray(gains.h[applied]), applied.astype(np.int64),
-                   np.zeros((0, 3, m)) if record_v is None
-                   else np.ascontiguousarray(np.asarray(record_v, dtype=float)[applied]))
-        out = np.zeros((np.size(gains.status), 3, m))  # zero for the records A did not use
-        e = np.zeros((lay.n, m))
-        if static_window_s is not None:
-            e[:3] = _alignment_response(static_window_s, *self.imu, self.trajectory,
-                                        body_input, self.breaks_s, self.max_step_s)
+        k_app, h_app = self.applied_gains
+        v = (np.zeros((0, 3, 0)) if record_v is None
+             else np.ascontiguousarray(np.asarray(record_v, dtype=float)[applied]))
+        states = []
+        for body_input in body_inputs:
+            e = np.zeros((lay.n, np.shape(body_input(grid_t[:1], np.eye(3)[None]))[2]))
+            if static_window_s is not None:
+                e[:3] = _alignment_response(static_window_s, *self.imu, self.trajectory,
+                                            body_input, self.breaks_s, self.max_step_s)
+            states.append(e)
         xs, fm, wm, dts = self.means
-        # the grid a stretch at a time, each stretch's input integrals made for it alone (the
-        # whole grid's are (G, 6, m) twice: 108 MiB on a 1.5 h flight, m = 210); a stretch
-        # starts at the last one's end point, whose records the last one applied
+        inv_tau = np.asarray(gains.gm_inv_tau, dtype=float)
+        # a stretch starts at the last one's end point, whose records the last one applied
         for a in range(0, max(grid_t.size - 1, 1), _STRETCH):
             b = min(a + 1 + _STRETCH, grid_t.size)
-            d0, d1 = _input_integrals(grid_t[a:b], self.trajectory, body_input)
             nodes = self.g_node[a:b].copy()
             nodes[0] = nodes[0] if a == 0 else -1
-            e = propagate_columns((xs[a:b], fm[a:b], wm[a:b], dts[a:b]), lay.i_gm, lay.i_sf,
-                                  np.asarray(gains.gm_inv_tau, dtype=float), nodes, records,
-                                  e, d0, d1, out)
-        return out
+            at = nodes[nodes >= 0]
+            first, last = ((self.rec_start[at[0]], self.rec_start[at[-1] + 1]) if at.size
+                           else (0, 0))
+            row = int(applied[first]) if last > first else 0
+            n_rows = int(applied[last - 1]) + 1 - row if last > first else 0
+            records = (self.rec_start, k_app, h_app, applied - row, v)
+
+            def stretch(j: int, a: int = a, b: int = b, nodes: NDArray = nodes,
+                        records: tuple = records, n_rows: int = n_rows) -> NDArray:
+                d0, d1 = _input_integrals(grid_t[a:b], self.trajectory, body_inputs[j])
+                dnu = np.zeros((n_rows, 3, states[j].shape[1]))
+                states[j] = propagate_columns((xs[a:b], fm[a:b], wm[a:b], dts[a:b]),
+                                              lay.i_gm, lay.i_sf, inv_tau, nodes, records,
+                                              states[j], d0, d1, dnu)
+                return dnu
+
+            parts = map_in_threads(stretch, range(len(body_inputs)), threads)
+            yield row, parts[0] if len(parts) == 1 else np.concatenate(parts, axis=2)
+
+    @cached_property
+    def applied_gains(self) -> tuple[NDArray, NDArray]:
+        """The recorded K (R, n_a, 3) and H (R, 3, n_a) of the records A applied."""
+        return (np.ascontiguousarray(self.gains.gains[self.applied]),
+                np.ascontiguousarray(self.gains.h[self.applied]))
 
 
 def _alignment_response(window_s: tuple[float, float], imu_t_s: NDArray, imu_w: NDArray,

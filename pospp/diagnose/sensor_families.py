@@ -71,16 +71,30 @@ bias and B's horizontal error see)."""
 
 @dataclass(frozen=True)
 class InnovationDesign:
-    """A's whitened innovations and their responses to each family's basis coefficients.
+    """A's whitened innovations and what the fits read of their responses to each family's
+    basis coefficients: the responses' Gram matrix, never the responses themselves.
+
+    With ``J`` (n, p) every family's responses side by side, ``L^T J`` per SI basis
+    coefficient (:func:`pospp.diagnose.shapes.change_basis`: a slope change of one SI unit
+    per hour at knot k, a step of one SI unit at step time s; a sensor family's on body axis
+    x and then y, the gravity field's per potential term), every least-squares fit of the
+    workflow is a function of ``J^T J`` and ``J^T y`` (:class:`_Step`) but the flexible fit
+    whose residual series gives the long-run variance ratio: that fit's columns are kept.
 
     Attributes
     ----------
     y : ndarray (n,)
         ``L^T nu`` over the records A used (whitened by its own ``S^-1``).
-    responses : mapping str -> ndarray (n, K + S, 2)
-        Per family, ``L^T J`` per SI basis coefficient (:func:`pospp.diagnose.shapes.
-        change_basis`: a slope change of one SI unit per hour at knot k, a step of one SI
-        unit at step time s) on body axis x and y.
+    gram : ndarray (p, p)
+        ``J^T J``.
+    jty : ndarray (p,)
+        ``J^T y``.
+    columns : mapping str -> (slice, int)
+        Per family, its columns in ``J`` and its axes A (2 for a sensor family, 1 for the
+        gravity field): A K columns, axis-major.
+    flexible : mapping str -> ndarray (n, A q)
+        Per family, the columns of its most flexible catalogue shape (:func:`flexible_variant`,
+        ``J W`` per axis).
     knots : ndarray (K,)
         The hinge knots [s run time].
     t_end_s : float
@@ -97,12 +111,66 @@ class InnovationDesign:
     """
 
     y: NDArray
-    responses: Mapping[str, NDArray]
+    gram: NDArray
+    jty: NDArray
+    columns: Mapping[str, tuple[slice, int]]
+    flexible: Mapping[str, NDArray]
     knots: NDArray
     t_end_s: float
     record_t_s: NDArray
     field_extent_m: float = float("nan")
     time_offset_response: NDArray | None = None
+
+    @classmethod
+    def of_responses(cls, y: NDArray, responses: Mapping[str, NDArray], knots: NDArray,
+                     t_end_s: float, record_t_s: NDArray, field_extent_m: float = float("nan"),
+                     time_offset_response: NDArray | None = None) -> InnovationDesign:
+        """The design of whole responses (per family (n, K, A), ``L^T J`` on each axis)."""
+        sums = DesignSums(y, {f: r.shape[1:] for f, r in responses.items()}, knots, t_end_s,
+                          field_extent_m)
+        sums.add(0, np.concatenate([r.transpose(0, 2, 1).reshape(r.shape[0], -1)
+                                    for r in responses.values()], axis=1))
+        return sums.design(record_t_s, time_offset_response)
+
+
+class DesignSums:
+    """:class:`InnovationDesign` accumulated from its responses' rows a block at a time
+    (:meth:`add`), so that no family's responses are held whole (on a 1.5 h flight two
+    sensor families' are 108 MiB)."""
+
+    def __init__(self, y: NDArray, shapes: Mapping[str, tuple[int, int]], knots: NDArray,
+                 t_end_s: float, field_extent_m: float = float("nan")) -> None:
+        """``shapes``: per family (K, A), its basis coefficients and axes, in the columns'
+        order."""
+        self.y, self.knots, self.t_end_s, self.extent = y, knots, t_end_s, field_extent_m
+        self.columns: dict[str, tuple[slice, int]] = {}
+        self.weights: dict[str, NDArray] = {}
+        at = 0
+        for fam, (k, n_ax) in shapes.items():
+            self.columns[fam] = (slice(at, at + k * n_ax), n_ax)
+            at += k * n_ax
+            self.weights[fam] = flexible_variant(fam, catalog_entry(fam).shapes, knots, t_end_s,
+                                                 k, field_extent_m).weights
+        self.gram, self.jty = np.zeros((at, at)), np.zeros(at)
+        self.flexible = {f: np.empty((y.size, n_ax * self.weights[f].shape[1]))
+                         for f, (_, n_ax) in self.columns.items()}
+
+    def add(self, row: int, white: NDArray) -> None:
+        """Rows ``row .. row + R`` of ``J`` (R, p)."""
+        rows = slice(row, row + white.shape[0])
+        self.gram += white.T @ white
+        self.jty += white.T @ self.y[rows]
+        for fam, (sl, n_ax) in self.columns.items():
+            blk = white[:, sl].reshape(white.shape[0], n_ax, -1)
+            self.flexible[fam][rows] = np.concatenate(
+                [blk[:, a] @ self.weights[fam] for a in range(n_ax)], axis=1)
+
+    def design(self, record_t_s: NDArray, time_offset_response: NDArray | None = None
+               ) -> InnovationDesign:
+        """The design once every row was added."""
+        return InnovationDesign(self.y, self.gram, self.jty, self.columns, self.flexible,
+                                self.knots, self.t_end_s, record_t_s, self.extent,
+                                time_offset_response)
 
 
 @dataclass(frozen=True)
@@ -138,16 +206,11 @@ class FamilyFinding:
     """(A q, A q): their covariance."""
 
 
-def _columns(resp: NDArray, w: NDArray) -> NDArray:
-    """The shape's columns on both axes: (n, A q), axis-major."""
-    return np.concatenate([resp[:, :, a] @ w for a in range(resp.shape[2])], axis=1)
-
-
 @dataclass(frozen=True)
 class _Step:
     """The model before a step in the form its candidates are fitted in: each family's
-    responses ``J`` (n, A K) projected off the model's columns ``X``, ``r = (I - Q Q^T) J``
-    (``Q`` an orthonormal basis of ``X``), kept as ``r^T r`` and ``r^T y``.
+    responses ``J_f`` (n, A K) projected off the model's columns ``X``, ``r = (I - X (X^T
+    X)^+ X^T) J_f``, kept as ``r^T r`` and ``r^T y`` (made from the design's Gram matrix).
 
     By Frisch-Waugh-Lovell, a candidate's columns ``J M`` (``M = (I_A kron W) k``: the
     shape's weights, its kept directions) added to ``X`` fit with the coefficients
@@ -163,16 +226,20 @@ class _Step:
     """Per family, ``r^T y`` (A K,)."""
 
     @classmethod
-    def of(cls, design: InnovationDesign, families: Sequence[str], base_x: NDArray,
+    def of(cls, design: InnovationDesign, families: Sequence[str], base: NDArray,
            rss: float, k: int) -> _Step:
-        q = np.linalg.qr(base_x)[0] if base_x.shape[1] else base_x
+        """``base`` (p, k): the model's columns as combinations of ``J``'s, ``X = J B``:
+        ``r^T r = J_f^T J_f - J_f^T X (X^T X)^+ X^T J_f`` and ``r^T y`` alike, from the
+        design's Gram matrix."""
+        g, jty = design.gram, design.jty
+        gx = g @ base
+        inv = np.linalg.pinv(base.T @ gx, hermitian=True)
+        xty = inv @ (base.T @ jty)
         gram, rty = {}, {}
         for fam in families:
-            resp = design.responses[fam]
-            r = resp.transpose(0, 2, 1).reshape(resp.shape[0], -1)
-            if q.shape[1]:
-                r = r - q @ (q.T @ r)
-            gram[fam], rty[fam] = r.T @ r, r.T @ design.y
+            sl = design.columns[fam][0]
+            gram[fam] = g[sl, sl] - gx[sl] @ inv @ gx[sl].T
+            rty[fam] = jty[sl] - gx[sl] @ xty
         return cls(rss, k, gram, rty)
 
 
@@ -213,7 +280,7 @@ def _candidate(design: InnovationDesign, step: _Step, fam: str, v: Variant,
     the model before it fits, the workflow's screen; else every direction not numerically
     null), the nested F-test and the BIC (:class:`_Step`'s equations); None when it keeps no
     direction."""
-    n_ax = design.responses[fam].shape[2]
+    n_ax = design.columns[fam][1]
     w = np.kron(np.eye(n_ax), v.weights)  # (A K, A q): the shape's columns, axis-major
     lam, vec = np.linalg.eigh(w.T @ step.gram[fam] @ w * _plausible(fam, v) ** 2)
     bar = SCREEN_EIGENVALUE if screened else DEGENERATE * max(float(lam[-1]), 0.0)
@@ -245,7 +312,7 @@ def _finding(design: InnovationDesign, fam: str, best: dict, walk: dict, rss0: f
     entry = catalog_entry(fam)
     unit_name, unit_si = shape_unit(fam, v.shape)
     q = v.weights.shape[1]
-    n_ax = design.responses[fam].shape[2]
+    n_ax = design.columns[fam][1]
     c = best["c"].reshape(n_ax, q)  # axis-major
     cov = best["inv"] * s2
     # the reported values are linear in c: their covariance through the same map (a walk's
@@ -287,18 +354,11 @@ QC benchmark with 2 cm GNSS and 6 m/s^2 of vibration (S 40 times the innovations
 their long-run variance ratio 10), which named an accelerometer and a gyro walk."""
 
 
-def _flexible_residual(design: InnovationDesign, variants: Sequence[Variant],
-                       families: Sequence[str]) -> tuple[NDArray, int]:
-    """The innovations' residual after every family's most flexible shape (``variants``, one
-    per family of ``families``) and the number of its columns, written into one array (not
-    held twice)."""
-    widths = [design.responses[f].shape[2] * v.weights.shape[1]
-              for f, v in zip(families, variants, strict=True)]
-    full = np.empty((design.y.size, sum(widths)))
-    at = 0
-    for f, v, w in zip(families, variants, widths, strict=True):
-        full[:, at:at + w] = _columns(design.responses[f], v.weights)
-        at += w
+def _flexible_residual(design: InnovationDesign, families: Sequence[str]
+                       ) -> tuple[NDArray, int]:
+    """The innovations' residual after every family's most flexible shape (the design's
+    ``flexible`` columns of ``families``) and the number of its columns."""
+    full = np.concatenate([design.flexible[f] for f in families], axis=1)
     c, _, _, _ = np.linalg.lstsq(full, design.y, rcond=None)
     return design.y - full @ c, full.shape[1]
 
@@ -331,21 +391,22 @@ def fit_sensor_families(design: InnovationDesign, families: Sequence[str],
         False).
     """
     n = design.y.size
-    base_x = np.zeros((n, 0))
+    base = np.zeros((design.jty.size, 0))  # the model's columns, X = J B
     rss0, k0 = float(design.y @ design.y), 0
     named: list[FamilyFinding] = []
     tested: list[FamilyFinding] = []
-    left = [f for f in families if f in design.responses]
-    variants_of = {f: family_variants(f, shapes[f], design) for f in left}
-    resid, k_full = _flexible_residual(
-        design, [max(variants_of[f], key=lambda v: v.weights.shape[1]) for f in left], left)
+    left = [f for f in families if f in design.columns]
+    variants_of = {f: family_variants(f, shapes[f], design.knots, design.t_end_s,
+                                      design.columns[f][0].stop - design.columns[f][0].start,
+                                      design.field_extent_m) for f in left}
+    resid, k_full = _flexible_residual(design, left)
     spacing = (design.t_end_s - float(design.knots[0])) / design.knots.size
     ratio = long_run_ratio(resid, design.record_t_s, spacing)
     scale = float(resid @ resid) / max(n - k_full, 1)
     holds = 1.0 / SCALE_BAND <= scale <= SCALE_BAND
     while left:
         trials = {}
-        step = _Step.of(design, left, base_x, rss0, k0)
+        step = _Step.of(design, left, base, rss0, k0)
         for fam in left:
             variants = variants_of[fam]
             cands = [c for v in variants
@@ -369,9 +430,9 @@ def fit_sensor_families(design: InnovationDesign, families: Sequence[str],
         fam = max(good, key=lambda f: trials[f][1].statistic)
         best, fnd = trials[fam]
         named.append(fnd)
-        resp = design.responses[fam]
-        cols = resp.transpose(0, 2, 1).reshape(resp.shape[0], -1) @ best["m"]
-        base_x = np.concatenate([base_x, cols], axis=1)
+        cols = np.zeros((base.shape[0], best["m"].shape[1]))
+        cols[design.columns[fam][0]] = best["m"]
+        base = np.concatenate([base, cols], axis=1)
         rss0, k0 = best["rss"], best["k"]
         left.remove(fam)
     return named, tested, ratio, holds
@@ -434,17 +495,24 @@ competes with the sensor changes: a deflection wave along the track reads, alone
 accelerometer and a gyro change (docs/diagnose.md, "Power on shapes")."""
 
 
-def family_variants(effect_id: str, shapes: Sequence[str], design: InnovationDesign
-                    ) -> list[Variant]:
+def family_variants(effect_id: str, shapes: Sequence[str], knots: NDArray, t_end_s: float,
+                    n_columns: int, field_extent_m: float = float("nan")) -> list[Variant]:
     """The variants a family is fitted in: a sensor change's every shape and grid value on the
     hinge basis (:func:`pospp.diagnose.shapes.all_variants`), the gravity field's one (all
-    its potential's terms)."""
+    its potential's ``n_columns`` terms, written over ``field_extent_m``)."""
     if sensor_family(effect_id).sensor == "gravity":
-        p = design.responses[effect_id].shape[1]
-        return [Variant("field", np.eye(p),
-                        parameter_text=f"over {design.field_extent_m / 1000.0:.0f} km")]
+        return [Variant("field", np.eye(n_columns),
+                        parameter_text=f"over {field_extent_m / 1000.0:.0f} km")]
     return all_variants([s for s in shapes if s not in ("gradient", "field", "deflection")],
-                        design.knots, design.t_end_s)
+                        knots, t_end_s)
+
+
+def flexible_variant(effect_id: str, shapes: Sequence[str], knots: NDArray, t_end_s: float,
+                     n_columns: int, field_extent_m: float = float("nan")) -> Variant:
+    """The family's variant of the most coefficients (:func:`family_variants`' arguments):
+    the fit whose residual gives the long-run variance ratio."""
+    return max(family_variants(effect_id, shapes, knots, t_end_s, n_columns, field_extent_m),
+               key=lambda v: v.weights.shape[1])
 
 
 def sensor_family(effect_id: str) -> SensorFamily:

@@ -76,9 +76,24 @@ SCALE = {"accel_bias_change": 1e-3, "gyro_bias_change": 2.4e-7}
 plausible sizes, 100 ug and 0.05 deg/h: the observability screen keeps them)."""
 
 
+def _columns(resp: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """A shape's columns (n, A q) of whole responses (n, K, A), axis-major."""
+    return np.concatenate([resp[:, :, a] @ w for a in range(resp.shape[2])], axis=1)
+
+
+def _of(y: np.ndarray, resp: dict, knots) -> InnovationDesign:
+    return InnovationDesign.of_responses(y, resp, knots, 2700.0,
+                                         np.linspace(600.0, 2700.0, y.size // 3))
+
+
 def _design(rng, a_true: np.ndarray, knots, n: int = 3000) -> InnovationDesign:
-    """Whitened 'innovations' y = J a + N(0, 1) with smooth random responses J; ``a_true``
-    (K + S, 2) the accelerometer's basis coefficients in units of SCALE."""
+    return _of(*_responses(rng, a_true, knots, n), knots)
+
+
+def _responses(rng, a_true: np.ndarray, knots, n: int = 3000) -> tuple[np.ndarray, dict]:
+    """Whitened 'innovations' y = J a + N(0, 1) with smooth random responses J (per family
+    (n, K + S, 2)); ``a_true`` (K + S, 2) the accelerometer's basis coefficients in units of
+    SCALE."""
     k = basis_size(knots)
     tt = np.linspace(0.0, 1.0, n)
     base = np.stack([np.sin(2 * np.pi * (j + 1) * tt + rng.uniform(0, 6)) for j in range(4 * k)],
@@ -87,7 +102,7 @@ def _design(rng, a_true: np.ndarray, knots, n: int = 3000) -> InnovationDesign:
     j = (base @ mix).reshape(n, k, 2, 2)  # (n, K, axes, families)
     resp = {f: j[..., i] / SCALE[f] for i, f in enumerate(SCALE)}
     y = np.einsum("nka,ka->n", j[..., 0], a_true) + rng.normal(size=n)
-    return InnovationDesign(y, resp, knots, 2700.0, np.linspace(600.0, 2700.0, n // 3))
+    return y, resp
 
 
 FAMS = ("accel_bias_change", "gyro_bias_change")
@@ -132,20 +147,22 @@ def test_a_candidate_on_the_step_s_gram_matrix_is_the_direct_least_squares():
     its coefficients, their covariance block and the RSS equal the direct least squares of
     the innovations on the model's columns plus the candidate's, with a model already
     holding another family's columns (the second step of the naming)."""
-    from pospp.diagnose.sensor_families import _candidate, _columns, _Step
+    from pospp.diagnose.sensor_families import _candidate, _Step
 
     knots = knots_s(600.0, 2700.0)
     rng = np.random.default_rng(5)
-    d = _design(rng, rng.normal(scale=0.05, size=(basis_size(knots), 2)), knots)
+    y, resp = _responses(rng, rng.normal(scale=0.05, size=(basis_size(knots), 2)), knots)
+    d = _of(y, resp, knots)
     (ramp,) = time_shape("ramp").variants(knots, 2700.0)
-    base_x = _columns(d.responses["gyro_bias_change"], ramp.weights)
+    base_x = _columns(resp["gyro_bias_change"], ramp.weights)
     c0, rss0, k0, _ = np.linalg.lstsq(base_x, d.y, rcond=None)
-    step = _Step.of(d, FAMS, base_x, float(rss0[0]), int(k0))
+    base = np.zeros((d.jty.size, 2))  # the gyro's ramp as combinations of the design's columns
+    base[d.columns["gyro_bias_change"][0]] = np.kron(np.eye(2), ramp.weights)
+    step = _Step.of(d, FAMS, base, float(rss0[0]), int(k0))
     for v in time_shape("settling").variants(knots, 2700.0)[:3] + [ramp]:
         got = _candidate(d, step, "accel_bias_change", v, screened=False)
         assert got is not None
-        x1 = np.concatenate([base_x, _columns(d.responses["accel_bias_change"], v.weights)],
-                            axis=1)
+        x1 = np.concatenate([base_x, _columns(resp["accel_bias_change"], v.weights)], axis=1)
         c, rss, k1, _ = np.linalg.lstsq(x1, d.y, rcond=None)
         inv = np.linalg.inv(x1.T @ x1)
         np.testing.assert_allclose(got["c"], c[2:], rtol=1e-8, atol=1e-12)
@@ -232,24 +249,24 @@ def test_correlated_innovations_are_corrected_and_a_wrong_scale_names_nothing():
     # smooth residuals (each component an AR(1) over the records, rho 0.95, unit variance):
     # the F tests alone would name a walk, divided by the long-run variance ratio they do not
     knots = knots_s(600.0, 2700.0)
-    d = _design(np.random.default_rng(9), np.zeros((basis_size(knots), 2)), knots)
-    e = np.random.default_rng(10).normal(size=(d.y.size // 3, 3))
+    y0, resp0 = _responses(np.random.default_rng(9), np.zeros((basis_size(knots), 2)), knots)
+    e = np.random.default_rng(10).normal(size=(y0.size // 3, 3))
     x = np.zeros_like(e)
     for k in range(1, e.shape[0]):
         x[k] = 0.95 * x[k - 1] + np.sqrt(1 - 0.95**2) * e[k]
-    named, tested, ratio, holds = fit_sensor_families(dataclasses.replace(d, y=x.ravel()),
-                                                      FAMS, SHAPE_NAMES, 0.05)
+    named, tested, ratio, holds = fit_sensor_families(_of(x.ravel(), resp0, knots), FAMS,
+                                                      SHAPE_NAMES, 0.05)
     assert holds and ratio > 20 and not named  # (1 + rho) / (1 - rho) = 39, Bartlett 300 s: 34
     assert any(f.statistic * ratio > 10 for f in tested)  # uncorrected: far beyond the level
     # A's S ten times the innovations' variance (its model does not hold): a ramp that would
     # be named at unit scale is not
     v = time_shape("ramp").variants(knots, 2700.0)[0]
     a = v.weights @ np.array([[0.06, -0.04]])
-    strong = _design(np.random.default_rng(7), a, knots)
-    assert fit_sensor_families(strong, FAMS, SHAPE_NAMES, 0.05)[0]
-    resp = strong.responses["accel_bias_change"] * SCALE["accel_bias_change"]
-    y = strong.y - np.einsum("nka,ka->n", resp, a)
-    quiet = dataclasses.replace(strong, y=0.3 * y + np.einsum("nka,ka->n", resp, a))
+    y, resps = _responses(np.random.default_rng(7), a, knots)
+    assert fit_sensor_families(_of(y, resps, knots), FAMS, SHAPE_NAMES, 0.05)[0]
+    resp = resps["accel_bias_change"] * SCALE["accel_bias_change"]
+    y = y - np.einsum("nka,ka->n", resp, a)
+    quiet = _of(0.3 * y + np.einsum("nka,ka->n", resp, a), resps, knots)
     named, _, _, holds = fit_sensor_families(quiet, FAMS, SHAPE_NAMES, 0.05)
     assert not holds and not named
 
@@ -285,10 +302,9 @@ def test_a_family_the_innovations_cannot_reveal_is_not_tested():
     # not stand 2 noise sigmas out are dropped (a gravity field over a flight along one line
     # read 3900 +- 2900 arcsec and moved the refit by 4.3 sigma before it)
     knots = knots_s(600.0, 2700.0)
-    d = _design(np.random.default_rng(3), np.zeros((basis_size(knots), 2)), knots)
-    weak = {**d.responses, "accel_bias_change": d.responses["accel_bias_change"] * 1e-6}
-    named, tested, *_ = fit_sensor_families(dataclasses.replace(d, responses=weak), FAMS,
-                                            SHAPE_NAMES, 0.05)
+    y, resp = _responses(np.random.default_rng(3), np.zeros((basis_size(knots), 2)), knots)
+    weak = {**resp, "accel_bias_change": resp["accel_bias_change"] * 1e-6}
+    named, tested, *_ = fit_sensor_families(_of(y, weak, knots), FAMS, SHAPE_NAMES, 0.05)
     assert {f.effect for f in tested} == {"gyro_bias_change"}
 
 
@@ -299,26 +315,25 @@ def test_a_large_ramp_below_the_screen_at_its_plausible_rate_is_named_a_ramp():
     < 4) while the walk's many knot coefficients pass it, and the flight holds a ramp 30
     times the plausible rate: named `ramp` with its rate (before, the screen kept the walk
     alone and the family was named `walk` whatever the shape)."""
-    from pospp.diagnose.sensor_families import SCREEN_EIGENVALUE, _columns, _plausible
+    from pospp.diagnose.sensor_families import SCREEN_EIGENVALUE, _plausible
 
     knots = knots_s(600.0, 2700.0)
     fam = "accel_bias_change"
-    d = _design(np.random.default_rng(11), np.zeros((basis_size(knots), 2)), knots)
+    y0, resps = _responses(np.random.default_rng(11), np.zeros((basis_size(knots), 2)), knots)
     ramp, walk = (time_shape(s).variants(knots, 2700.0)[0] for s in ("ramp", "walk"))
 
     def lam_max(resp, v):
         cols = _columns(resp, v.weights)
         return float(np.linalg.eigvalsh(cols.T @ cols).max()) * _plausible(fam, v) ** 2
 
-    resp = d.responses[fam]
+    resp = resps[fam]
     scale = np.sqrt(SCREEN_EIGENVALUE / np.sqrt(lam_max(resp, ramp) * lam_max(resp, walk)))
     resp = resp * scale
     assert lam_max(resp, ramp) < SCREEN_EIGENVALUE <= lam_max(resp, walk)
     c_si = 30.0 * _plausible(fam, ramp) * np.array([1.0, -0.5])  # per hinge unit, x and y
-    y = _columns(resp, ramp.weights) @ c_si + np.random.default_rng(12).normal(size=d.y.size)
-    named, *_ = fit_sensor_families(
-        dataclasses.replace(d, y=y, responses={**d.responses, fam: resp}), FAMS,
-        SHAPE_NAMES, 0.05)
+    y = _columns(resp, ramp.weights) @ c_si + np.random.default_rng(12).normal(size=y0.size)
+    named, *_ = fit_sensor_families(_of(y, {**resps, fam: resp}, knots), FAMS, SHAPE_NAMES,
+                                    0.05)
     assert [f.effect for f in named] == [fam]
     assert named[0].shape == "ramp"
     unit = shape_unit(fam, "ramp")[1]

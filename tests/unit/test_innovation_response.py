@@ -152,30 +152,50 @@ def test_the_time_offset_column_reads_the_whole_offset_at_once(reference_cases):
     assert -late_s == pytest.approx(truth_s, abs=1.5e-3)
 
 
-def test_the_records_are_whitened_in_place_as_all_at_once():
-    # sensor_stage._whitened writes L_k^T dnu_k over dnu's first rows, a chunk at a time
-    rng = np.random.default_rng(3)
-    dnu = rng.standard_normal((50, 3, 4))
-    rows = np.sort(rng.choice(50, size=31, replace=False))
-    a = rng.standard_normal((31, 3, 3))
-    chol = np.linalg.cholesky(a @ a.transpose(0, 2, 1) + 3.0 * np.eye(3))
-    expected = np.einsum("kji,kjm->kim", chol, dnu[rows])
-    got = stage._whitened(chol, dnu, rows, chunk=4)
-    np.testing.assert_allclose(got, expected, rtol=1e-14, atol=1e-14)
-    assert np.shares_memory(got, dnu)  # no second array of every column
+@pytest.mark.reference
+def test_the_design_summed_a_stretch_at_a_time_is_that_of_the_whole_responses(ramp_design,
+                                                                              monkeypatch):
+    # innovation_design whitens each stretch's records and sums them into the Gram matrix,
+    # J^T y and the flexible shapes' columns (no family's responses held whole): the same as
+    # whitening the whole responses (innovation_responses) and summing them at once
+    from pospp.diagnose.sensor_families import InnovationDesign
+
+    cfg, opts, log_r, base, t_run, knots, field, dnu = ramp_design
+    monkeypatch.setattr(innovation_response, "_STRETCH", 97)
+    monkeypatch.setattr(stage, "summed_down", lambda log, config: log_r)
+    monkeypatch.setattr(stage, "navigate", lambda *a, **k: base)
+    fams = ("accel_bias_change", "gyro_bias_change")  # without a reference: no gravity
+    got = stage.innovation_design(log_r, cfg, fams)
+    gains, rec = base.gain_replay, base.innovations
+    used = (gains.status == STATUS_USED) & (rec.status == STATUS_USED) & \
+        np.all(np.isfinite(rec.dz_ned), axis=1) & (rec.t_s >= base.alignment.t_s)
+    chol = np.linalg.cholesky(gains.s_inv[used])
+    whole = {f: np.einsum("kji,kjm->kim", chol, dnu[f][used]).reshape(-1, 2, dnu[f].shape[2] // 2)
+             .transpose(0, 2, 1) for f in fams}
+    want = InnovationDesign.of_responses(got.y, whole, knots, got.t_end_s, got.record_t_s)
+    assert got.gram.shape == (4 * basis_size(knots),) * 2 and np.count_nonzero(got.gram) > 1000
+    scale = np.abs(want.gram).max()
+    np.testing.assert_allclose(got.gram, want.gram, rtol=1e-10, atol=1e-12 * scale)
+    np.testing.assert_allclose(got.jty, want.jty, rtol=1e-10,
+                               atol=1e-12 * np.abs(want.jty).max())
+    for f in fams:
+        np.testing.assert_allclose(got.flexible[f], want.flexible[f], rtol=1e-10,
+                                   atol=1e-12 * np.abs(want.flexible[f]).max())
 
 
 @pytest.mark.reference
 def test_the_families_passes_on_two_threads_are_those_on_one(reference_cases):
-    # innovation_design's families run one per thread (each an independent pass over the same
-    # grid): the design is the same bit for bit
+    # innovation_design's families run one per thread over each stretch (each an independent
+    # pass over the same grid): the design is the same bit for bit
     name = "flight_accel_ramp_100hz"
     cfg, _ = case_config(reference_cases, name)
     log = pipeline.ingest(reference_cases / f"{name}.mcap", cfg)
     fams = ("accel_bias_change", "gyro_bias_change")
     one = stage.innovation_design(log, cfg, fams, threads=1)
     two = stage.innovation_design(log, cfg, fams, threads=2)
+    assert np.count_nonzero(one.gram) > 1000
+    np.testing.assert_array_equal(two.gram, one.gram)
+    np.testing.assert_array_equal(two.jty, one.jty)
     for fam in fams:
-        assert np.count_nonzero(one.responses[fam]) > 1000
-        np.testing.assert_array_equal(two.responses[fam], one.responses[fam])
+        np.testing.assert_array_equal(two.flexible[fam], one.flexible[fam])
     np.testing.assert_array_equal(two.y, one.y)
