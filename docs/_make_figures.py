@@ -268,8 +268,9 @@ def write(run_dir: Path) -> list[str]:
 
 def sample_run(out: Path) -> Path:
     """Run the sample into ``out`` and evaluate it (the README's two commands)."""
+    from pospp.api.studies import evaluate_run
     from pospp.config import load_config
-    from pospp.pipeline import evaluate_run, process_flight
+    from pospp.pipeline import process_flight
 
     process_flight(SAMPLE, load_config(PIPELINE), out, force=True)
     evaluate_run(out, TRUTH, skip_s=SKIP_S)
@@ -278,7 +279,7 @@ def sample_run(out: Path) -> Path:
 
 def evaluated(run_dir: Path) -> Path:
     """``run_dir`` with the README's evaluation (made when it has none with this skip)."""
-    from pospp.pipeline import evaluate_run
+    from pospp.api.studies import evaluate_run
 
     ev = run_dir / "evaluation.parquet"
     if not ev.is_file() or not (pd.read_parquet(ev).skip_s == SKIP_S).all():

@@ -25,6 +25,7 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from pospp import flight_stages, pipeline  # noqa: E402
+from pospp.api.studies import evaluate_run  # noqa: E402
 from pospp.calib import stage as calib_stage  # noqa: E402
 from pospp.calib.noise_model import noise_basis  # noqa: E402
 from pospp.calib.replay import ImuIncrements, SolutionA  # noqa: E402
@@ -295,8 +296,7 @@ def main(out: Path) -> None:
                   if (run_dir / f"{k}.parquet").is_file()}
         if ref is not None:
             skip = 300.0 if name.startswith("kfgins") else 0.0
-            tables["evaluation"] = pipeline.evaluate_run(run_dir, out / f"{ref}.parquet",
-                                                         skip_s=skip)
+            tables["evaluation"] = evaluate_run(run_dir, out / f"{ref}.parquet", skip_s=skip)
             shutil.copyfile(run_dir / "evaluation.png", IMG / f"results_{stem}_evaluation.png")
         results[name] = (outcome, tables)
         print(f"\n## {name}: status {outcome.status}")

@@ -56,6 +56,7 @@ from pospp.diagnose.rerun import (
 from pospp.diagnose.results import Diagnosis, EffectResponse
 from pospp.diagnose.workflow import HELDOUT_WHITENED, DiagnosisOptions, diagnose_replays
 from pospp.flight_stages import (
+    compensated,
     forward_bias_record,
     imu_tuning,
     lever_arm_and_start,
@@ -594,6 +595,5 @@ def refit_and_check(log: mcap_reader.FlightLog, calib_run: CalibrationRun,
     refit = refit_stage(calib_run, diagnosis, imu, solution_a, config, threads, nav)
     sols: dict[str, Any] = {}
     if refit is not None and compensate:
-        comp = navigate(log, config, gyro_bias_correction_b_radps=refit.bias_b_radps)
-        sols["compensated"] = comp.smoothed if comp.smoothed is not None else comp.forward
+        sols["compensated"] = compensated(log, config, refit.bias_b_radps)
     return RefitOutcome(refit, sols, (model_fit_check(diagnosis, refit, calib_run, config),))

@@ -118,6 +118,18 @@ def navigate(
     )
 
 
+def compensated(log: mcap_reader.FlightLog, config: PipelineConfig,
+                gyro_bias_b_radps: Any) -> nav_filter.NavSolution:
+    """A re-run with a calibrated gyro bias (body FRD [rad/s]) removed from its samples: its
+    smoothed solution (its forward one without the smoother), the run's "compensated"
+    solution. P at the forward outputs is kept only where the forward solution is the one
+    returned (``FilterOptions.forward_covariance``)."""
+    opts = config.filter_options()
+    comp = navigate(log, config, gyro_bias_correction_b_radps=gyro_bias_b_radps,
+                    options=replace(opts, forward_covariance=not opts.smoother))
+    return comp.smoothed if comp.smoothed is not None else comp.forward
+
+
 def rerun_options(config: PipelineConfig) -> nav_filter.FilterOptions:
     """A's options for its re-runs, whose states alone are read (the null realisations, the
     diagnosis's re-run signatures and their base, the warm-up's check): the configured ones

@@ -12,12 +12,13 @@ from collections.abc import Iterable, Mapping
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from pospp.units import DEG_PER_H_RADPS, NS_PER_S, UG_MPS2, time_ns_from_t_s
 
 if TYPE_CHECKING:
+    import pandas as pd
+
     from pospp.io.errors import IngestIssue
     from pospp.io.mcap_reader import FlightLog
     from pospp.nav.events import SensorPoses
@@ -26,38 +27,47 @@ if TYPE_CHECKING:
     from pospp.nav.solution import NavSolution
 
 
-def trajectory_table(solutions: Mapping[str, NavSolution], epoch_ns: int) -> pd.DataFrame:
-    """trajectory.parquet: one block of rows per solution ("forward", "smoothed", ...).
+def trajectory_table(solutions: Mapping[str, NavSolution], epoch_ns: int
+                     ) -> dict[str, NDArray]:
+    """trajectory.parquet's columns: one block of rows per solution ("forward", "smoothed",
+    ...), each a :class:`pospp.nav.solution.NavSolution` (NED, rad, SI). Written into one
+    array per column, a solution at a time (not a table per solution joined after)."""
+    sizes = [len(sol.t_s) for sol in solutions.values()]
+    cols: dict[str, NDArray] = {
+        "time_ns": np.empty(sum(sizes), dtype=np.int64),
+        "solution": np.repeat(np.array(list(solutions), dtype=object), sizes)}
+    at = 0
+    for sol, n in zip(solutions.values(), sizes, strict=True):
+        for name, values in _trajectory_columns(sol, epoch_ns).items():
+            cols.setdefault(name, np.empty(sum(sizes)))[at:at + n] = values
+        at += n
+    return cols
 
-    Each solution is a :class:`pospp.nav.solution.NavSolution` (NED, rad, SI).
-    """
-    blocks = []
-    for name, sol in solutions.items():
-        rpy = np.degrees(sol.rpy_rad)
-        rpy_sig = np.degrees(sol.rpy_sigma_rad)
-        blocks.append(pd.DataFrame({
-            "time_ns": time_ns_from_t_s(sol.t_s, epoch_ns),
-            "solution": name,
-            "lat_deg": np.degrees(sol.lat_rad),
-            "lon_deg": np.degrees(sol.lon_rad),
-            "height_m": sol.height_m,
-            "vn_mps": sol.v_n_mps[:, 0],
-            "ve_mps": sol.v_n_mps[:, 1],
-            "vd_mps": sol.v_n_mps[:, 2],
-            "roll_deg": rpy[:, 0],
-            "pitch_deg": rpy[:, 1],
-            "yaw_deg": np.mod(rpy[:, 2], 360.0),
-            "north_sigma_m": sol.pos_sigma_ned_m[:, 0],
-            "east_sigma_m": sol.pos_sigma_ned_m[:, 1],
-            "down_sigma_m": sol.pos_sigma_ned_m[:, 2],
-            "vn_sigma_mps": sol.vel_sigma_ned_mps[:, 0],
-            "ve_sigma_mps": sol.vel_sigma_ned_mps[:, 1],
-            "vd_sigma_mps": sol.vel_sigma_ned_mps[:, 2],
-            "roll_sigma_deg": rpy_sig[:, 0],
-            "pitch_sigma_deg": rpy_sig[:, 1],
-            "yaw_sigma_deg": rpy_sig[:, 2],
-        }))
-    return pd.concat(blocks, ignore_index=True)
+
+def _trajectory_columns(sol: NavSolution, epoch_ns: int) -> dict[str, NDArray]:
+    rpy = np.degrees(sol.rpy_rad)
+    rpy_sig = np.degrees(sol.rpy_sigma_rad)
+    return {
+        "time_ns": time_ns_from_t_s(sol.t_s, epoch_ns),
+        "lat_deg": np.degrees(sol.lat_rad),
+        "lon_deg": np.degrees(sol.lon_rad),
+        "height_m": sol.height_m,
+        "vn_mps": sol.v_n_mps[:, 0],
+        "ve_mps": sol.v_n_mps[:, 1],
+        "vd_mps": sol.v_n_mps[:, 2],
+        "roll_deg": rpy[:, 0],
+        "pitch_deg": rpy[:, 1],
+        "yaw_deg": np.mod(rpy[:, 2], 360.0),
+        "north_sigma_m": sol.pos_sigma_ned_m[:, 0],
+        "east_sigma_m": sol.pos_sigma_ned_m[:, 1],
+        "down_sigma_m": sol.pos_sigma_ned_m[:, 2],
+        "vn_sigma_mps": sol.vel_sigma_ned_mps[:, 0],
+        "ve_sigma_mps": sol.vel_sigma_ned_mps[:, 1],
+        "vd_sigma_mps": sol.vel_sigma_ned_mps[:, 2],
+        "roll_sigma_deg": rpy_sig[:, 0],
+        "pitch_sigma_deg": rpy_sig[:, 1],
+        "yaw_sigma_deg": rpy_sig[:, 2],
+    }
 
 
 def bias_table(histories: Mapping[str, BiasHistory | None], epoch_ns: int, *, rate_hz: float = 1.0
@@ -70,6 +80,8 @@ def bias_table(histories: Mapping[str, BiasHistory | None], epoch_ns: int, *, ra
     sigmas zero). Thinned to about ``rate_hz`` (every k-th epoch; the estimates change over
     minutes).
     """
+    import pandas as pd  # imported where a table is made: the stages before run without it
+
     blocks = []
     for name, hist in histories.items():
         if hist is None:
@@ -122,6 +134,8 @@ def events_table(poses: SensorPoses, events_ns: ArrayLike, solution: str) -> pd.
 
     ``poses`` is a :class:`pospp.nav.events.SensorPoses` at the stamps ``events_ns``.
     """
+    import pandas as pd
+
     rpy = np.degrees(poses.rpy_rad)
     rpy_sig = np.degrees(poses.rpy_sigma_rad)
     cols: dict[str, Any] = {
@@ -241,6 +255,8 @@ def filter_event_messages(resets: Iterable[tuple[float, str]],
 
 def messages_table(messages: list[dict[str, Any]]) -> pd.DataFrame:
     """messages.parquet from rows (optional columns may be absent in a row)."""
+    import pandas as pd
+
     cols = ["severity", "stage", "time_ns", "text", "topic", "index", "byte_offset",
             "log_time_ns"]
     df = pd.DataFrame(messages, columns=cols)

@@ -27,21 +27,19 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from functools import cache, partial
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 
 from pospp import outputs
-from pospp.calib.observability import observability_table
 from pospp.calib.stage import CalibrationRun
 from pospp.config import PipelineConfig, config_from_dict
 from pospp.diagnose.results import Diagnosis
 from pospp.diagnose.tables import diagnosis_columns, residual_curve_columns
 from pospp.diagnosis_stage import diagnose_calibration, refit_and_check
-from pospp.evaluate import evaluation_rows, solution_errors
 from pospp.flight_stages import (
     calibrate_from_a,
+    compensated,
     imu_increments,
     ingest,
     lever_arm_passes,
@@ -60,9 +58,10 @@ from pospp.null_stage import NullResult, null_needs_gains, null_realisations, nu
 from pospp.qc.check_record import Check, comparison_text
 from pospp.qc.lever_time import LeverTime
 from pospp.qc.stage import QualityReport, qc_columns, quality_checks, worst_status
-from pospp.report import figures
-from pospp.report.html import render_report
 from pospp.threads import available_cores
+
+if TYPE_CHECKING:  # pandas and the report are imported where the run writes its tables
+    import pandas as pd
 
 ProgressFn = Callable[[str, float], None]
 """Progress callback: (stage name, fraction of the whole run done in [0, 1])."""
@@ -246,6 +245,8 @@ class _RunTables:
         summary, book = self.summary, self.book
         summary["status"] = status
         summary.update(book.timings())
+        import pandas as pd
+
         msgs = pd.DataFrame(book.rows(), columns=["severity", "stage", "time_ns", "text"])
         self.write("messages", outputs.messages_table(book.rows()))
         self.write("summary", summary)
@@ -292,9 +293,7 @@ def _run_stages(mcap_path: str | Path, sha: str, config: PipelineConfig, out: Pa
 
     book.stage("compensate")  # A re-run with the calibrated gyro bias
     if calib_run.calibrated and config.compensation.rerun_filter:
-        comp = navigate(log, config, gyro_bias_correction_b_radps=calib_run.gyro_bias_b_radps)
-        solutions["compensated"] = comp.smoothed if comp.smoothed is not None else comp.forward
-        del comp  # the rest of the second A pass (forward, biases, innovations) is not used
+        solutions["compensated"] = compensated(log, config, calib_run.gyro_bias_b_radps)
 
     book.stage("diagnose")
     # A's lever-arm estimate and the joint estimate from it, each made once: diagnosis and QC
@@ -395,7 +394,9 @@ def _write_stage(run: _RunTables, log: mcap_reader.FlightLog, nav: nav_filter.Fi
     epoch_ns = int(log.imu.time_ns[0])
     best_name = next(k for k in ("compensated", "smoothed", "forward") if k in solutions)
     calib_tables = {**calib_run.tables(epoch_ns), **fit.tables(epoch_ns)}
-    tables: dict[str, Any] = {"trajectory": outputs.trajectory_table(solutions, epoch_ns)}
+    # the largest table written first and let go before the others are made
+    run.write("trajectory", outputs.trajectory_table(solutions, epoch_ns))
+    tables: dict[str, Any] = {}
     tables["biases"] = outputs.bias_table(
         {"forward": nav.forward_biases, "smoothed": nav.smoothed_biases}, epoch_ns)
     tables["qc"] = qc_columns(report, epoch_ns)
@@ -479,63 +480,13 @@ def write_report(run_dir: str | Path) -> Path:
 def report_from_tables(run_dir: Path) -> Path:
     """Write RUN_DIR/report.html from the run's tables; return its path. Takes no lock:
     the caller holds the run's (``process_flight``, ``pospp report``, ``pospp compare-sim``)."""
+    from pospp.report.html import render_report
+
     tables = report_files.read_run_tables(run_dir)
     title = f"pospp run report: {Path(str(tables['summary'].input_file.iloc[0])).name}" \
         if "summary" in tables else "pospp run report"
     return report_files.write_text(Path(run_dir) / "report.html",
                                    render_report(tables, title=title))
-
-
-@locked("pospp evaluate")
-def evaluate_run(run_dir: str | Path, truth_file: str | Path, *, skip_s: float = 0.0
-                 ) -> pd.DataFrame:
-    """``pospp evaluate``: every solution of a run against a reference trajectory.
-
-    Writes RUN_DIR/evaluation.parquet (long form) and RUN_DIR/evaluation.png; returns the
-    table.
-    """
-    run = run_folder.require_run_folder(run_dir)
-    if not (run / "trajectory.parquet").is_file():
-        raise FileNotFoundError(f"{run}: the run has no trajectory.parquet (it failed)")
-    traj = parquet_tables.read_table(run / "trajectory.parquet")
-    ref = parquet_tables.read_reference_trajectory(truth_file)
-    errors = {}
-    for name, g in traj.groupby("solution", sort=False):
-        errors[str(name)] = solution_errors(
-            g.time_ns.to_numpy(np.int64), np.radians(g.lat_deg.to_numpy()),
-            np.radians(g.lon_deg.to_numpy()), g.height_m.to_numpy(),
-            g[["vn_mps", "ve_mps", "vd_mps"]].to_numpy(),
-            np.radians(g[["roll_deg", "pitch_deg", "yaw_deg"]].to_numpy()),
-            ref_time_ns=ref.time_ns, ref_lat_rad=ref.lat_rad, ref_lon_rad=ref.lon_rad,
-            ref_height_m=ref.height_m, ref_v_n_mps=ref.v_n_mps, ref_rpy_rad=ref.rpy_rad,
-        )
-    cols = evaluation_rows(errors, skip_s=skip_s)
-    cols["reference_file"] = [str(truth_file)] * len(cols["solution"])
-    table = pd.DataFrame(cols)
-    meta = {"run_dir": str(run), "reference_file": str(truth_file)}
-    parquet_tables.write_table(run / "evaluation.parquet", table, "evaluation", metadata=meta)
-    report_files.write_figure(run / "evaluation.png",
-                              figures.evaluation_errors(errors, skip_s=skip_s))
-    return table
-
-
-def observability_study(out_dir: str | Path, *, speed_mps: float = 60.0,
-                        duration_s: float = 300.0, lat_deg: float = 40.0,
-                        transition: str = "closed_form") -> pd.DataFrame:
-    """``pospp observability``: paper Fig. 4 and 5 as observability.parquet and a figure."""
-    out = Path(out_dir)
-    cols = observability_table(speed_mps=speed_mps, duration_s=duration_s,
-                               lat_rad=np.radians(lat_deg), transition=transition)
-    n = len(cols["formulation"])
-    cols.update({"speed_mps": np.full(n, speed_mps), "duration_s": np.full(n, duration_s),
-                 "lat_deg": np.full(n, lat_deg)})
-    table = pd.DataFrame(cols)
-    meta = {"speed_mps": speed_mps, "duration_s": duration_s, "lat_deg": lat_deg,
-            "transition": transition}
-    parquet_tables.write_table(out / "observability.parquet", table, "observability",
-                               metadata=meta)
-    report_files.write_figure(out / "observability.png", figures.observability_curves(table))
-    return table
 
 
 def reopen_run(run_dir: str | Path) -> tuple[Path, dict[str, Any], Path, PipelineConfig]:

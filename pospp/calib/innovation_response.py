@@ -57,7 +57,6 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
-from functools import cached_property
 
 import numpy as np
 from numba import njit
@@ -82,15 +81,16 @@ times ``t_s`` [s, A's time axis] where A's attitude is ``C_nb``."""
 def propagate_columns(grid, i_gm, i_sf, inv_tau, g_node, records, e0, d0, d1, dnu):
     """The forward pass of the m columns (module docstring). ``grid = (xs (G, 10), fm (G, 3),
     wm (G, 3), dt (G,))`` (:func:`pospp.calib.linear_null.interval_means`); ``g_node`` (G,)
-    the record epoch at each grid point (-1 none); ``records = (rec_start (E + 1,), K (R,
-    n_a, 3), H (R, 3, n_a), row (R,), v (R or 0, 3, m))`` the records of each epoch in
-    order, their rows in ``dnu`` and the change of what each measures (none: zero); ``e0``
+    the record epoch at each grid point (-1 none); ``records = (rec_start (E + 1,), K (M,
+    n_a, 3), H (M, 3, n_a), at (R,), row0, v (R or 0, 3, m))`` the R records of each epoch
+    in order as indices ``at`` into A's M records' K and H, their rows ``at - row0`` in
+    ``dnu``, and the change of what each measures (none: zero); ``e0``
     (n_a, m) the error at the first point; ``d0``, ``d1`` (G, 6, m) the input's integrals
     over the interval ending at each point (row 0 unused); ``dnu`` (., 3, m) receives each
     record's innovation change in its row. Returns the error after the last point's records
     (n_a, m): the next stretch of the grid continues from it."""
     xs, fms, wms, dts = grid
-    rec_start, rec_k, rec_h, rec_row, rec_v = records
+    rec_start, rec_k, rec_h, rec_at, row0, rec_v = records
     n_a = rec_k.shape[1]
     e = e0.copy()
     fa, ft, phi = np.empty((n_a, n_a)), np.empty((n_a, n_a)), np.empty((n_a, n_a))
@@ -108,11 +108,12 @@ def propagate_columns(grid, i_gm, i_sf, inv_tau, g_node, records, e0, d0, d1, dn
         node = g_node[g]
         if node >= 0:
             for i in range(rec_start[node], rec_start[node + 1]):
-                nu = np.dot(rec_h[i], e)
+                j = rec_at[i]
+                nu = np.dot(rec_h[j], e)
                 if rec_v.shape[0]:
                     nu -= rec_v[i]
-                dnu[rec_row[i]] = nu
-                e -= np.dot(rec_k[i], nu)
+                dnu[j - row0] = nu
+                e -= np.dot(rec_k[j], nu)
     return e
 
 
@@ -233,7 +234,8 @@ class ResponseSystem:
         one input."""
         gains, applied, grid_t = self.gains, self.applied, self.grid_t
         lay = gains.layout
-        k_app, h_app = self.applied_gains
+        k_all, h_all = (np.ascontiguousarray(gains.gains, dtype=float),
+                        np.ascontiguousarray(gains.h, dtype=float))
         v = (np.zeros((0, 3, 0)) if record_v is None
              else np.ascontiguousarray(np.asarray(record_v, dtype=float)[applied]))
         states = []
@@ -255,7 +257,7 @@ class ResponseSystem:
                            else (0, 0))
             row = int(applied[first]) if last > first else 0
             n_rows = int(applied[last - 1]) + 1 - row if last > first else 0
-            records = (self.rec_start, k_app, h_app, applied - row, v)
+            records = (self.rec_start, k_all, h_all, applied, row, v)
 
             def stretch(j: int, a: int = a, b: int = b, nodes: NDArray = nodes,
                         records: tuple = records, n_rows: int = n_rows) -> NDArray:
@@ -268,12 +270,6 @@ class ResponseSystem:
 
             parts = map_in_threads(stretch, range(len(body_inputs)), threads)
             yield row, parts[0] if len(parts) == 1 else np.concatenate(parts, axis=2)
-
-    @cached_property
-    def applied_gains(self) -> tuple[NDArray, NDArray]:
-        """The recorded K (R, n_a, 3) and H (R, 3, n_a) of the records A applied."""
-        return (np.ascontiguousarray(self.gains.gains[self.applied]),
-                np.ascontiguousarray(self.gains.h[self.applied]))
 
 
 def _alignment_response(window_s: tuple[float, float], imu_t_s: NDArray, imu_w: NDArray,
@@ -299,10 +295,10 @@ def _kernel_states(trajectory: Trajectory, t_s: NDArray) -> NDArray:
     return np.column_stack([tr.lat_rad, tr.lon_rad, tr.height_m, tr.v_n_mps, tr.q_nb])
 
 
-_STRETCH = 256
-"""Grid intervals propagated at once, their input integrals in memory (256 x 6 x m doubles
-twice, and the inputs at three points per interval while they are made: 5 and 8 MiB at
-m = 210, a 1.5 h flight's hinges on two axes)."""
+_STRETCH = 128
+"""Grid intervals propagated at once, their input integrals in memory (128 x 6 x m doubles
+twice, and the inputs at three points per interval while they are made: 1.2 and 3.7 MiB per
+family at m = 198, a 1.5 h flight's hinges on two axes; a family per thread)."""
 _CHUNK = 512
 """Grid intervals whose input integrals are made at once (their inputs at three points each:
 512 x 3 x 6 x m doubles, 10 MB at m = 140)."""
@@ -328,14 +324,23 @@ def _input_integrals(grid_t: NDArray, trajectory: Trajectory, body_input: BodyIn
         t_all = np.concatenate([t0 + _INSIDE_S, t1 - _INSIDE_S, 0.5 * (t0 + t1)])
         c_nb = rotation.dcm_from_quat(interpolate_trajectory(trajectory, t_all).q_nb)
         u = np.asarray(body_input(t_all, c_nb), dtype=float)
-        b = np.concatenate([-np.einsum("tij,tjm->tim", c_nb, u[:, 0:3]),
-                            np.einsum("tij,tjm->tim", c_nb, u[:, 3:6])], axis=1)
+        b = np.empty((t_all.size, 6, u.shape[2]))  # in place: each temporary is as large as u
+        np.einsum("tij,tjm->tim", c_nb, u[:, 0:3], out=b[:, 0:3])
+        np.negative(b[:, 0:3], out=b[:, 0:3])
+        np.einsum("tij,tjm->tim", c_nb, u[:, 3:6], out=b[:, 3:6])
+        del u
         if not d0.shape[2]:
-            d0 = np.zeros((g, 6, b.shape[2]))
+            d0 = np.zeros((g, 6, np.shape(b)[2]))
             d1 = np.zeros_like(d0)
         k = t1.size
         h = (t1 - t0)[:, None, None]
         b0, b1, bm = b[:k], b[k:2 * k], b[2 * k:]
-        d0[a + 1:a + 1 + k] = h / 6.0 * (b0 + 4.0 * bm + b1)
-        d1[a + 1:a + 1 + k] = h * h / 6.0 * (b0 + 2.0 * bm)
+        s0, s1 = d0[a + 1:a + 1 + k], d1[a + 1:a + 1 + k]
+        np.multiply(bm, 4.0, out=s0)  # h / 6 (b0 + 4 bm + b1)
+        s0 += b0
+        s0 += b1
+        s0 *= h / 6.0
+        np.multiply(bm, 2.0, out=s1)  # h^2 / 6 (b0 + 2 bm)
+        s1 += b0
+        s1 *= h * h / 6.0
     return d0, d1

@@ -480,15 +480,9 @@ def interval_means(grid_t: NDArray, trajectory: Trajectory, t_s: NDArray, w: NDA
     xs = np.column_stack([traj.lat_rad, traj.lon_rad, traj.height_m, traj.v_n_mps,
                           traj.q_nb])
     t_s = np.asarray(t_s, dtype=float)
-    dt_imu = np.diff(t_s)
     means = []
     for rate in (f, w):
-        cum = np.empty((t_s.size, 3))  # the increments' running sum, in place (one array)
-        cum[0] = 0.0
-        np.multiply(np.asarray(rate)[1:], dt_imu[:, None], out=cum[1:])
-        np.cumsum(cum, axis=0, out=cum)
-        at = np.column_stack([np.interp(grid_t, t_s, cum[:, a]) for a in range(3)])
-        del cum
+        at = _running_integrals(grid_t, t_s, np.asarray(rate))
         dt = np.diff(grid_t)
         m = np.empty((grid_t.size, 3))
         m[1:] = np.diff(at, axis=0) / dt[:, None]
@@ -496,6 +490,28 @@ def interval_means(grid_t: NDArray, trajectory: Trajectory, t_s: NDArray, w: NDA
         means.append(np.ascontiguousarray(m))
     dts = np.concatenate([[0.0], np.diff(grid_t)])
     return np.ascontiguousarray(xs), means[0], means[1], dts
+
+
+def _running_integrals(grid_t: NDArray, t_s: NDArray, rate: NDArray,
+                       block: int = 65536) -> NDArray:
+    """The integral (G, 3) of ``rate`` (N, 3), constant over each interval ending at its
+    sample, from ``t_s[0]`` to each of ``grid_t`` (linear between the samples, held beyond
+    them): the samples' running sum interpolated, ``block`` samples at a time (the whole
+    sum is an (N, 3) array: 26 MB on a 1.5 h flight at 200 Hz). Each block starts from the
+    last one's end, so the sums are those of one running sum, bit for bit."""
+    out = np.empty((grid_t.size, 3))
+    n, g0, carry = t_s.size, 0, np.zeros(3)
+    for s in range(0, n, block):
+        e, a = min(s + block, n), max(s - 1, 0)  # new samples s .. e - 1 after sample a
+        cum = np.empty((e - a, 3))
+        cum[0] = carry
+        np.multiply(rate[a + 1:e], np.diff(t_s[a:e])[:, None], out=cum[1:])
+        np.cumsum(cum, axis=0, out=cum)
+        g1 = grid_t.size if e == n else int(np.searchsorted(grid_t, t_s[e - 1], side="right"))
+        for c in range(3):
+            out[g0:g1, c] = np.interp(grid_t[g0:g1], t_s[a:e], cum[:, c])
+        g0, carry = g1, cum[-1]
+    return out
 
 
 def _used(gains: GainReplay) -> NDArray:

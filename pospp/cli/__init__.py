@@ -445,8 +445,8 @@ def evaluate(run_dir: str, truth_file: str, skip_s: float) -> None:
     Calls pospp.evaluate.solution_errors for every solution in RUN_DIR/trajectory.parquet.
     """
     with _imports_for_the_process():
+        from pospp.api.studies import evaluate_run
         from pospp.evaluate import TruthMismatchError
-        from pospp.pipeline import evaluate_run
 
     try:
         table = evaluate_run(run_dir, truth_file, skip_s=skip_s)
@@ -474,7 +474,7 @@ def observability(out_dir: str, speed_mps: float, duration_s: float, lat_deg: fl
     (pospp.calib.observability.observability_table).
     """
     with _imports_for_the_process():
-        from pospp.pipeline import observability_study
+        from pospp.api.studies import observability_study
 
     table = observability_study(out_dir, speed_mps=speed_mps, duration_s=duration_s,
                                 lat_deg=lat_deg, transition=transition)

@@ -191,6 +191,10 @@ def _noisy_rates(rate, white, white_sigma, path, a, q, g0, mask):
     return out
 
 
+_GROUPS = 16384
+"""Groups of samples :func:`decimate_imu` sums at once."""
+
+
 def decimate_imu(log: Any, factor: int, keep_time_ns: NDArray | None = None) -> Any:
     """The log with its IMU samples summed in groups of ``factor`` (the null's lower rate).
 
@@ -212,14 +216,19 @@ def decimate_imu(log: Any, factor: int, keep_time_ns: NDArray | None = None) -> 
         at = np.searchsorted(t, np.asarray(keep_time_ns, dtype=np.int64))
         kept[at[at < t.size]] = True
     keep = np.flatnonzero(kept)
-    dt = np.diff(t).astype(float) * 1e-9
 
     def mean_over_groups(rate: NDArray) -> NDArray:
-        inc = np.asarray(rate)[1:] * dt[:, None]  # increment of interval (t[j-1], t[j]]
-        sums = np.add.reduceat(inc[: keep[-1]], keep[:-1], axis=0)
         out = np.empty((keep.size, 3))
         out[0] = rate[0]
-        out[1:] = sums / ((t[keep[1:]] - t[keep[:-1]]) * 1e-9)[:, None]
+        # _GROUPS groups at a time (the increments of every sample are an (N, 3) array)
+        for i0 in range(0, keep.size - 1, _GROUPS):
+            i1 = min(i0 + _GROUPS, keep.size - 1)
+            a, b = keep[i0], keep[i1]
+            # the increment of each interval (t[j-1], t[j]] of the groups' samples
+            inc = np.asarray(rate)[a + 1:b + 1] * (np.diff(t[a:b + 1]).astype(float)
+                                                   * 1e-9)[:, None]
+            out[i0 + 1:i1 + 1] = np.add.reduceat(inc, keep[i0:i1] - a, axis=0) / (
+                (t[keep[i0 + 1:i1 + 1]] - t[keep[i0:i1]]) * 1e-9)[:, None]
         return out
 
     return replace(log, imu=replace(imu, time_ns=t[keep],

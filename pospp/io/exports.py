@@ -34,15 +34,17 @@ import xml.etree.ElementTree as ET
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 from numpy.typing import ArrayLike
 
 from pospp.io import parquet_tables, run_folder
 from pospp.io.files import atomic_path
 from pospp.io.run_lock import locked
+
+if TYPE_CHECKING:  # pandas where an export is made: a run reads DEFAULT_NAMES, not pandas
+    import pandas as pd
 
 __all__ = ["EXPORT_FORMATS", "FORMATS", "LEAP_SECONDS", "SBET_FIELDS", "ExportFormat",
            "export_run", "gps_week_seconds", "sbet_records", "write_csv", "write_geojson",
@@ -110,6 +112,8 @@ def write_sbet(path: str | Path, table: pd.DataFrame) -> Path:
 
 
 def _with_gps_time(table: pd.DataFrame) -> pd.DataFrame:
+    import pandas as pd
+
     t = table["time_ns"].to_numpy(np.int64)
     week, sow = gps_week_seconds(t)
     utc = pd.to_datetime(t, unit="ns", utc=True).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
@@ -126,6 +130,8 @@ def write_csv(path: str | Path, table: pd.DataFrame) -> Path:
 
 
 def _utc_text(ns: int) -> str:
+    import pandas as pd
+
     return pd.Timestamp(int(ns), unit="ns", tz="UTC").strftime("%Y-%m-%dT%H:%M:%S.%fZ")
 
 

@@ -19,10 +19,9 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
@@ -31,6 +30,9 @@ from pospp.io.columns import BOOL, FLOAT, INT, TEXT, Column, optional
 from pospp.io.files import atomic_path
 from pospp.io.root_tables import DIFF_COLUMNS, MANIFEST_COLUMNS
 from pospp.types import ReferenceTrajectory
+
+if TYPE_CHECKING:  # pandas is loaded by pyarrow when a table is read (read_table)
+    import pandas as pd
 
 __all__ = [
     "EXTENSIBLE_TABLES",
@@ -424,7 +426,7 @@ def schema(name: str) -> pa.Schema:
 
 
 def _columns_of(data: pd.DataFrame | Mapping[str, Any]) -> dict[str, Any]:
-    if isinstance(data, pd.DataFrame):
+    if not isinstance(data, Mapping):  # a DataFrame
         return {str(c): data[c] for c in data.columns}
     cols = dict(data)
     if cols and all(np.ndim(v) == 0 for v in cols.values()):  # a dict of scalars = one row
@@ -433,14 +435,13 @@ def _columns_of(data: pd.DataFrame | Mapping[str, Any]) -> dict[str, Any]:
 
 
 def _to_array(name: str, values: Any, typ: pa.DataType | None) -> pa.Array:
-    if isinstance(values, pd.Series):
+    if not isinstance(values, np.ndarray | list) and hasattr(values, "to_numpy"):  # a Series
         values = values.to_numpy(dtype=object if values.dtype == object else None)
     try:
         if typ is None:
             return pa.array(values, from_pandas=True)
-        if isinstance(values, np.ndarray) and values.dtype.kind in "fc" and pa.types.is_integer(
-            typ
-        ):
+        if isinstance(values, np.ndarray) and values.dtype.kind in "fc" \
+                and pa.types.is_integer(typ):
             if not np.all(np.isnan(values) | (values == np.round(values))):
                 raise ValueError("non-integral values")
             values = [None if np.isnan(v) else int(v) for v in values]

@@ -5,12 +5,11 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import pandas as pd
-
 from pospp.io.files import atomic_path
 from pospp.io.parquet_tables import TABLES, read_table
 
 if TYPE_CHECKING:
+    import pandas as pd
     from matplotlib.figure import Figure
 
 __all__ = ["read_run_tables", "write_figure", "write_text"]

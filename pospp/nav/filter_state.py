@@ -296,7 +296,7 @@ def forward_pass(t: NDArray, w: NDArray, f: NDArray, al: AlignmentResult,
     status = np.full(n_meas, -1, dtype=np.int64) if replay is None else replay.status.copy()
     m_rec = n_meas if record_gains and replay is None else 0
     # P at the outputs: for the solutions' sigmas, and a recording pass's switch_epoch
-    n_pout = n_out if options.covariance_outputs or m_rec else 0
+    n_pout = n_out if (options.covariance_outputs and options.forward_covariance) or m_rec else 0
     fw = ForwardArrays(
         gate=gate, out_k=out_k, m_status=status,
         m_nis=np.full(n_meas, np.nan), m_dz=np.full((n_meas, 3), np.nan),

@@ -348,14 +348,10 @@ def test_a_failed_compensation_pass_fails_the_run_in_its_stage(small_config, tmp
 
     from pospp import pipeline
 
-    real = pipeline.navigate
-
     def broken(*args, **kwargs):
-        if "gyro_bias_correction_b_radps" in kwargs:
-            raise RuntimeError("injected: the compensated pass broke")
-        return real(*args, **kwargs)
+        raise RuntimeError("injected: the compensated pass broke")
 
-    monkeypatch.setattr(pipeline, "navigate", broken)
+    monkeypatch.setattr(pipeline, "compensated", broken)
     before = threading.active_count()
     with pytest.raises(RuntimeError, match="injected"):
         pipeline.process_flight(SAMPLE, small_config, tmp_path / "out", threads=2)

@@ -19,6 +19,7 @@ import pandas as pd
 import pytest
 
 from pospp import pipeline
+from pospp.api.studies import evaluate_run
 from pospp.config import (
     LEG_DURATION_TOLERANCE_BY_GRADE_S,
     LEG_MIN_DURATION_BY_GRADE_S,
@@ -158,7 +159,7 @@ def test_comma_against_the_fused_reference(real_data, out_dir):
     convert(real_data / "comma2k19_example1", out_dir / "comma.mcap")
     outcome, run_dir = _run(out_dir, "comma", "comma2k19_example1")
     assert outcome.summary["n_legs"] == 0  # the car accelerates from 8 to 20 m/s
-    ev = pipeline.evaluate_run(run_dir, out_dir / "comma.reference.parquet")
+    ev = evaluate_run(run_dir, out_dir / "comma.reference.parquet")
     m = _metrics(ev, "smoothed")
     # measured: 2.16 m (mostly a north offset of the u-blox fixes), 0.034 m/s, 1.0 deg heading
     assert m["horizontal_rms"] < 3.0
@@ -182,7 +183,7 @@ def test_quadrotor_against_the_dji_solution(real_data, out_dir):
     assert legs.duration_s.min() >= 10.0 and legs.duration_s.max() <= 16.0
     assert not pairs.used.iloc[0] and "heading change" in pairs.reason.iloc[0]
     assert outcome.summary["calibration_reason"].startswith("no calibration: no pair passed")
-    ev = pipeline.evaluate_run(run_dir, out_dir / "quad.reference.parquet")
+    ev = evaluate_run(run_dir, out_dir / "quad.reference.parquet")
     m, f = _metrics(ev, "smoothed"), _metrics(ev, "forward")
     # measured (smoothed / forward): 0.13 / 0.11 m, 0.16 / 0.18 m/s, heading 1.06 / 1.42 deg,
     # roll-pitch 0.87 / 1.19 deg. With the converter's 0.05 m position sigma the gate locked
@@ -228,6 +229,6 @@ def test_kfgins_synthetic_tactical_recovers_the_injected_gyro_bias(real_data, ou
     # compensation shrinks B's error at the leg end (measured 0.139 -> 0.028 m/s)
     assert s["dv_after_mps"] < 0.5 * s["dv_before_mps"]
     assert s["dp_after_m"] < 0.5 * s["dp_before_m"]
-    ev = pipeline.evaluate_run(run_dir, out_dir / "kfgins_tactical.truth.parquet", skip_s=300)
+    ev = evaluate_run(run_dir, out_dir / "kfgins_tactical.truth.parquet", skip_s=300)
     m = _metrics(ev, "smoothed")
     assert m["horizontal_rms"] < 0.05 and m["heading_rms"] < 150.0

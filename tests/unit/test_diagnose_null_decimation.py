@@ -133,6 +133,14 @@ def test_decimated_increments_are_the_flights_summed():
     inc_d = np.concatenate([np.zeros((1, 3)), np.cumsum(
         dec.w_ib_b_radps[1:] * (np.diff(dec.time_ns) * 1e-9)[:, None], axis=0)])
     np.testing.assert_allclose(inc_d, inc, rtol=0, atol=1e-12)
+    # summed a few groups at a time (memory): bit for bit the sums over the whole log
+    whole = null_model.decimate_imu(log, 4, keep).imu
+    for groups in (1, 7, 1000):
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(null_model, "_GROUPS", groups)
+            part = null_model.decimate_imu(log, 4, keep).imu
+        np.testing.assert_array_equal(part.w_ib_b_radps, whole.w_ib_b_radps)
+        np.testing.assert_array_equal(part.f_ib_b_mps2, whole.f_ib_b_mps2)
 
 
 def test_gain_replay_response_is_the_full_response(flight):

@@ -253,6 +253,21 @@ def test_states_only_run_has_the_same_states_and_nan_sigmas(record, clean, lever
     assert np.isnan(res.lever_arm.sigma_b_m).all() == lever_states
 
 
+def test_a_pass_without_forward_covariance_has_the_same_smoothed_solution(record, clean):
+    # FilterOptions.forward_covariance=False (the compensation's pass, whose smoothed solution
+    # alone is read): the smoothed solution and its sigmas bit for bit, the forward states the
+    # same, the forward sigmas NaN
+    imu, fixes, vels = record
+    res = _run(imu, fixes, vels, options=FilterOptions(forward_covariance=False))
+    for name in ("time_ns", "lat_rad", "lon_rad", "height_m", "v_n_mps", "q_nb",
+                 "pos_sigma_ned_m", "vel_sigma_ned_mps", "att_cov_ned_rad2"):
+        np.testing.assert_array_equal(getattr(res.smoothed, name),
+                                      getattr(clean.smoothed, name))
+    np.testing.assert_array_equal(res.forward.q_nb, clean.forward.q_nb)
+    assert np.isnan(res.forward.pos_sigma_ned_m).all()
+    assert np.isfinite(clean.forward.pos_sigma_ned_m).all()
+
+
 @pytest.mark.slow
 def test_paper_flight_mission_from_pospp_sim_meets_the_issue_targets():
     """The whole "flight" mission of pospp.sim (2.3 h at 200 Hz: static, climb, transit,

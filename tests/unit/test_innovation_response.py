@@ -199,3 +199,22 @@ def test_the_families_passes_on_two_threads_are_those_on_one(reference_cases):
     for fam in fams:
         np.testing.assert_array_equal(two.flexible[fam], one.flexible[fam])
     np.testing.assert_array_equal(two.y, one.y)
+
+
+def test_the_running_integrals_a_block_at_a_time_are_one_running_sum():
+    # linear_null._running_integrals sums the IMU's increments a block at a time (memory):
+    # bit for bit the one running sum over every sample, interpolated, at grid points before,
+    # between, on and after the samples
+    from pospp.calib.linear_null import _running_integrals
+
+    rng = np.random.default_rng(4)
+    t = np.cumsum(rng.uniform(0.004, 0.006, 1000))
+    rate = rng.normal(size=(1000, 3))
+    grid = np.sort(np.concatenate([rng.uniform(t[0] - 0.1, t[-1] + 0.1, 300), t[::97],
+                                   [t[0], t[-1]]]))
+    cum = np.zeros((1000, 3))
+    cum[1:] = rate[1:] * np.diff(t)[:, None]
+    np.cumsum(cum, axis=0, out=cum)
+    whole = np.column_stack([np.interp(grid, t, cum[:, c]) for c in range(3)])
+    for block in (7, 64, 999, 1000, 5000):
+        np.testing.assert_array_equal(_running_integrals(grid, t, rate, block=block), whole)
