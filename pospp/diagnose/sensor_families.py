@@ -383,8 +383,9 @@ def fit_sensor_families(design: InnovationDesign, families: Sequence[str],
     -------
     (named, tested, ratio, holds)
         The families named, in order, every family's chosen shape at every step, and the
-        long-run variance ratio of the residual after every family's most flexible shape
-        (:func:`long_run_ratio`, over the knot spacing): each F is divided by it (an
+        long-run variance ratio of the residual after every family's most flexible catalogue
+        shape (the design's ``flexible`` columns; :func:`long_run_ratio`, over the knot
+        spacing): each F is divided by it (an
         unmodelled random walk leaves a rough residual the knots cannot follow). Nothing is
         named when that residual's variance per scalar
         is outside :data:`SCALE_BAND` (A's S does not describe its innovations: ``holds``
