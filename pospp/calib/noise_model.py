@@ -308,6 +308,10 @@ def leg_noise_basis(rep: LegReplay, noise_step_s: float, bases: Mapping | None =
     return basis
 
 
+DRIFT_ROWS = 512
+"""Times at which :meth:`DriftSmoother.mean_b_radps` evaluates the drift at once."""
+
+
 @dataclass(frozen=True)
 class DriftSmoother:
     """Conditional mean of the Gauss-Markov gyro drift given a fit's residuals (BLUP).
@@ -336,10 +340,16 @@ class DriftSmoother:
     tau_s: float
 
     def mean_b_radps(self, t_s: NDArray) -> NDArray:
-        """E[x(t) | r] at run times ``t_s`` (body FRD, rad/s), shape (N, 3)."""
-        e = np.exp(-np.abs(np.asarray(t_s, dtype=float)[:, None] - self.tau_bin_s[None, :])
-                   / self.tau_s)
-        return self.sigma2 * (e @ self.u)
+        """E[x(t) | r] at run times ``t_s`` (body FRD, rad/s), shape (N, 3): the kernel
+        matrix exp(-|t - tau_j| / tau) made :data:`DRIFT_ROWS` times at a time (the whole
+        one is (N, J))."""
+        t = np.asarray(t_s, dtype=float)
+        out = np.empty((t.size, 3))
+        for a in range(0, t.size, DRIFT_ROWS):
+            e = np.exp(-np.abs(t[a:a + DRIFT_ROWS, None] - self.tau_bin_s[None, :])
+                       / self.tau_s)
+            out[a:a + DRIFT_ROWS] = self.sigma2 * (e @ self.u)
+        return out
 
     def mean_over_b_radps(self, t_s: NDArray) -> NDArray:
         """The mean of E[x(t) | r] over the run times ``t_s`` (body FRD, rad/s), shape (3,):

@@ -156,3 +156,22 @@ def test_the_drift_s_mean_over_a_leg_is_the_mean_of_its_samples(tau_s):
         expected = drift.mean_b_radps(t).mean(axis=0)
         np.testing.assert_allclose(drift.mean_over_b_radps(t), expected, rtol=1e-12,
                                    atol=1e-12 * np.abs(expected).max())
+
+
+def test_the_drift_at_many_times_is_made_a_block_at_a_time_as_at_once(monkeypatch):
+    # DriftSmoother.mean_b_radps makes its (N, J) kernel matrix DRIFT_ROWS times at a time
+    # (a 1.5 h flight's 1 s grid against its 1100 bins is 50 MB): the same values as the
+    # whole matrix at once, whatever the block
+    from pospp.calib import noise_model
+    from pospp.calib.noise_model import DriftSmoother
+
+    rng = np.random.default_rng(3)
+    drift = DriftSmoother(np.sort(rng.uniform(0.0, 5000.0, 300)),
+                          rng.standard_normal((300, 3)), 1e-10, 300.0)
+    t = np.arange(-100.0, 5400.0, 1.0)
+    whole = drift.sigma2 * (np.exp(-np.abs(t[:, None] - drift.tau_bin_s[None, :])
+                                   / drift.tau_s) @ drift.u)
+    for rows in (1, 7, 512, 10**6):
+        monkeypatch.setattr(noise_model, "DRIFT_ROWS", rows)
+        np.testing.assert_allclose(drift.mean_b_radps(t), whole, rtol=1e-13,
+                                   atol=1e-13 * np.abs(whole).max())
