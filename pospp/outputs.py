@@ -33,13 +33,14 @@ def trajectory_table(solutions: Mapping[str, NavSolution], epoch_ns: int
     ...), each a :class:`pospp.nav.solution.NavSolution` (NED, rad, SI). Written into one
     array per column, a solution at a time (not a table per solution joined after)."""
     sizes = [len(sol.t_s) for sol in solutions.values()]
-    cols: dict[str, NDArray] = {
-        "time_ns": np.empty(sum(sizes), dtype=np.int64),
-        "solution": np.repeat(np.array(list(solutions), dtype=object), sizes)}
+    cols: dict[str, NDArray] = {"solution": np.repeat(np.array(list(solutions), dtype=object),
+                                                      sizes)}
     at = 0
     for sol, n in zip(solutions.values(), sizes, strict=True):
         for name, values in _trajectory_columns(sol, epoch_ns).items():
-            cols.setdefault(name, np.empty(sum(sizes)))[at:at + n] = values
+            if name not in cols:
+                cols[name] = np.empty(sum(sizes), dtype=np.asarray(values).dtype)
+            cols[name][at:at + n] = values
         at += n
     return cols
 

@@ -496,9 +496,9 @@ def _running_integrals(grid_t: NDArray, t_s: NDArray, rate: NDArray,
                        block: int = 65536) -> NDArray:
     """The integral (G, 3) of ``rate`` (N, 3), constant over each interval ending at its
     sample, from ``t_s[0]`` to each of ``grid_t`` (linear between the samples, held beyond
-    them): the samples' running sum interpolated, ``block`` samples at a time (the whole
-    sum is an (N, 3) array: 26 MB on a 1.5 h flight at 200 Hz). Each block starts from the
-    last one's end, so the sums are those of one running sum, bit for bit."""
+    them): the samples' running sum interpolated, ``block`` samples at a time (not the whole
+    (N, 3) sum at once). Each block starts from the last one's end, so the sums are those of
+    one running sum, bit for bit."""
     out = np.empty((grid_t.size, 3))
     n, g0, carry = t_s.size, 0, np.zeros(3)
     for s in range(0, n, block):

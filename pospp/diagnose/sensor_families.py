@@ -135,8 +135,8 @@ class InnovationDesign:
 
 class DesignSums:
     """:class:`InnovationDesign` accumulated from its responses' rows a block at a time
-    (:meth:`add`), so that no family's responses are held whole (on a 1.5 h flight two
-    sensor families' are 108 MiB)."""
+    (:meth:`add`), so that no family's responses are held whole (a row never added reads as
+    a zero response)."""
 
     def __init__(self, y: NDArray, shapes: Mapping[str, tuple[int, int]], knots: NDArray,
                  t_end_s: float, field_extent_m: float = float("nan")) -> None:
@@ -152,7 +152,7 @@ class DesignSums:
             self.weights[fam] = flexible_variant(fam, catalog_entry(fam).shapes, knots, t_end_s,
                                                  k, field_extent_m).weights
         self.gram, self.jty = np.zeros((at, at)), np.zeros(at)
-        self.flexible = {f: np.empty((y.size, n_ax * self.weights[f].shape[1]))
+        self.flexible = {f: np.zeros((y.size, n_ax * self.weights[f].shape[1]))
                          for f, (_, n_ax) in self.columns.items()}
 
     def add(self, row: int, white: NDArray) -> None:

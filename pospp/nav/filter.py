@@ -130,8 +130,8 @@ class FilterOptions:
     forward_covariance : bool
         Keep P at the forward pass's outputs (the forward solution's and biases' sigmas).
         False (a pass whose smoothed solution alone is read: the compensation's): those
-        sigmas are NaN and the smoothed solution is the same; 23 MiB less on a 1.5 h flight
-        at 10 Hz outputs.
+        sigmas are NaN, the smoothed solution is the same, and P's (N, n) and (N, 3, 3, 3)
+        output arrays are not made.
     alignment : AlignmentOptions
     """
 
